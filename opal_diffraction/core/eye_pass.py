@@ -1,0 +1,278 @@
+"""The eye pass: camera rays, direct light at diffuse hits, specular recursion, dispersion.
+
+The source paper's eye pass (physics.md section 4.2) as a wavefront tracer: all rays of a tile
+advance one bounce at a time, in NumPy arrays, with no Python loop per ray or per pixel.
+
+Rays live in two populations:
+- *white* rays carry the whole spectrum, a weight array (B, n);
+- *mono* rays carry one wavelength sample, a scalar weight (B,) and its index (B,).
+A white ray stays white until it meets a dispersive dielectric; there it becomes mono rays:
+``SPLIT`` makes one child per wavelength sample with the parent's weight at that wavelength (the
+children's weights sum to the parent's: energy is conserved exactly), ``SAMPLE`` makes one child
+with wavelength k drawn with probability p_k proportional to the parent's weight and weight
+w_k / p_k (an unbiased one-sample estimator of the SPLIT sum, pbrt-v4's TerminateSecondary idea).
+Children inherit the parent's hit, so the split costs no extra ray cast.
+
+At a dielectric the reflect / refract choice is sampled with probability equal to the Fresnel
+reflectance, so the weight is unchanged (for mono rays the index is the one at their wavelength,
+so total internal reflection differs per wavelength). Diffuse surfaces are two-sided Lambertian;
+they receive direct light by shadow rays (caustics come from the light pass, not from here).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .lights import sample_light
+from .materials import DIELECTRIC, DIFFUSE, MIRROR
+from .optics import fresnel_dielectric, reflect, refract
+
+__all__ = ["EyePass", "TileResult"]
+
+
+@dataclass
+class _Rays:
+    o: np.ndarray      # (B, 3) float32 origins
+    d: np.ndarray      # (B, 3) float32 unit directions
+    pix: np.ndarray    # (B,) int64 pixel index within the tile
+    w: np.ndarray      # (B, n) white or (B,) mono, float32
+    lam: np.ndarray | None  # (B,) int wavelength index for mono rays, None for white
+    depth: np.ndarray  # (B,) int specular bounces so far
+    u_lam: np.ndarray  # (B,) float: the sample's stratified number for choosing a wavelength
+
+    def __len__(self):
+        return len(self.pix)
+
+    def take(self, mask) -> "_Rays":
+        return _Rays(self.o[mask], self.d[mask], self.pix[mask], self.w[mask],
+                     None if self.lam is None else self.lam[mask], self.depth[mask], self.u_lam[mask])
+
+    @staticmethod
+    def concat(a: "_Rays", b: "_Rays") -> "_Rays":
+        return _Rays(*(None if x is None else np.concatenate([x, y]) for x, y in
+                       zip((a.o, a.d, a.pix, a.w, a.lam, a.depth, a.u_lam),
+                           (b.o, b.d, b.pix, b.w, b.lam, b.depth, b.u_lam))))
+
+
+@dataclass
+class _Hit:
+    p: np.ndarray     # (B, 3) float32 hit points
+    ng: np.ndarray    # (B, 3) float32 geometric normal facing the incoming ray
+    cos_i: np.ndarray  # (B,) cosine between -d and ng (>= 0)
+    front: np.ndarray  # (B,) bool: the ray arrived on the side the triangle's normal points to
+    mat: np.ndarray   # (B,) material index
+
+    def take(self, mask) -> "_Hit":
+        return _Hit(self.p[mask], self.ng[mask], self.cos_i[mask], self.front[mask], self.mat[mask])
+
+    @staticmethod
+    def concat(a: "_Hit", b: "_Hit") -> "_Hit":
+        return _Hit(*(np.concatenate([x, y]) for x, y in
+                      zip((a.p, a.ng, a.cos_i, a.front, a.mat), (b.p, b.ng, b.cos_i, b.front, b.mat))))
+
+
+@dataclass
+class TileResult:
+    film: np.ndarray  # (P, n) float64 sum of sample contributions per pixel
+    rays: int         # rays cast (camera, secondary and shadow)
+
+
+class EyePass:
+    """Traces tiles of camera samples through a prepared scene (see render.RenderContext).
+
+    Stateless between calls, so several threads may trace tiles at once.
+    """
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+
+    def trace(self, origins, directions, pix, n_pixels: int, rng: np.random.Generator,
+              u_lambda: np.ndarray | None = None) -> TileResult:
+        """Trace camera rays (one per sample) and return the per-pixel sum of their radiance.
+
+        ``u_lambda`` (B,) in [0, 1): stratified numbers for the SAMPLE wavelength choice
+        (uniform random if omitted).
+        """
+        if u_lambda is None:
+            u_lambda = rng.random(len(pix))
+        return _TileTrace(self.ctx, n_pixels, rng).run(origins, directions, pix, u_lambda)
+
+
+class _TileTrace:
+    """The state of one tile's trace: its film accumulator and ray count."""
+
+    def __init__(self, ctx, n_pixels: int, rng: np.random.Generator):
+        self.ctx = ctx
+        self.n = ctx.grid.n
+        self.rng = rng
+        self._film = np.zeros(n_pixels * self.n, np.float64)
+        self._n_pixels = n_pixels
+        self._rays = 0
+
+    def run(self, origins, directions, pix, u_lambda) -> TileResult:
+        n, b, rng = self.n, len(pix), self.rng
+        rays = _Rays(origins, directions, pix.astype(np.int64), np.ones((b, n), np.float32), None,
+                     np.zeros(b, np.int32), np.asarray(u_lambda, np.float64))
+        mono = _Rays(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32), np.zeros(0, np.int64),
+                     np.zeros(0, np.float32), np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0))
+        while len(rays) or len(mono):
+            rays, children, child_hits = self._step(rays, None, rng)
+            mono, _, _ = self._step(mono, (children, child_hits), rng)
+        return TileResult(self._film.reshape(self._n_pixels, n), self._rays)
+
+    # ----------------------------------------------------------------- one bounce
+    def _step(self, rays: _Rays, pending, rng):
+        """Advance a population by one interaction; returns (continuing rays, mono children, their hits)."""
+        ctx = self.ctx
+        hit = None
+        if len(rays):
+            h = ctx.accel.intersect(rays.o, rays.d)
+            self._rays += len(rays)
+            missed = h.prim < 0
+            if missed.any():
+                self._add_background(rays.take(missed))
+            keep = ~missed
+            rays = rays.take(keep)
+            hit = self._hit_info(rays, h.t[keep], h.prim[keep])
+        if pending is not None and pending[0] is not None and len(pending[0]):
+            if hit is None:
+                rays, hit = pending
+            else:
+                rays, hit = _Rays.concat(rays, pending[0]), _Hit.concat(hit, pending[1])
+        if hit is None or len(rays) == 0:
+            return rays.take(np.zeros(len(rays), bool)), None, None
+
+        kind = ctx.materials.kind[hit.mat]
+        diffuse = kind == DIFFUSE
+        if diffuse.any():
+            self._direct_light(rays.take(diffuse), hit.take(diffuse), rng)
+
+        can_bounce = rays.depth < ctx.settings.max_bounces
+        children = child_hits = None
+        out = []
+        mirror = (kind == MIRROR) & can_bounce
+        if mirror.any():
+            out.append(self._mirror(rays.take(mirror), hit.take(mirror)))
+        diel = (kind == DIELECTRIC) & can_bounce
+        if diel.any():
+            if rays.lam is None:
+                disp = diel & ctx.materials.dispersive[hit.mat]
+                if disp.any():
+                    children, child_hits = self._split(rays.take(disp), hit.take(disp), rng)
+                diel = diel & ~disp
+            if diel.any():
+                out.append(self._dielectric(rays.take(diel), hit.take(diel), rng))
+        if not out:
+            return rays.take(np.zeros(len(rays), bool)), children, child_hits
+        nxt = out[0]
+        for r in out[1:]:
+            nxt = _Rays.concat(nxt, r)
+        return nxt, children, child_hits
+
+    def _hit_info(self, rays: _Rays, t, prim) -> _Hit:
+        ctx = self.ctx
+        p = rays.o + t[:, None] * rays.d
+        ng = ctx.tri_normal[prim]
+        cos = -np.sum(rays.d * ng, axis=1)
+        front = cos > 0
+        ng = np.where(front[:, None], ng, -ng)
+        return _Hit(p.astype(np.float32), ng, np.abs(cos), front, ctx.tri_material[prim])
+
+    # ----------------------------------------------------------------- spectra helpers
+    @staticmethod
+    def _per_ray(table, rows, lam):
+        """table[rows] (B, n) for white rays, table[rows, lam] (B,) for mono rays."""
+        return table[rows] if lam is None else table[rows, lam]
+
+    def _accumulate(self, rays: _Rays, contrib):
+        n = self.n
+        if rays.lam is None:
+            idx = (rays.pix[:, None] * n + np.arange(n)).ravel()
+            self._film += np.bincount(idx, weights=contrib.ravel(), minlength=len(self._film))
+        else:
+            self._film += np.bincount(rays.pix * n + rays.lam, weights=contrib, minlength=len(self._film))
+
+    def _add_background(self, rays: _Rays):
+        bg = self.ctx.world_spectrum
+        if not bg.any():
+            return
+        contrib = rays.w * (bg[None, :] if rays.lam is None else bg[rays.lam])
+        self._accumulate(rays, contrib)
+
+    # ----------------------------------------------------------------- interactions
+    def _direct_light(self, rays: _Rays, hit: _Hit, rng):
+        ctx = self.ctx
+        lights = ctx.lights
+        nl, b = len(lights), len(rays)
+        if nl == 0 or b == 0:
+            return
+        # One sample per light per ray; all shadow rays in a single any-hit call.
+        factors = np.zeros((b, nl), np.float32)
+        origins, dirs, tmax, idx = [], [], [], []
+        for li in range(nl):  # loop over lights (a handful), not rays
+            wi, dist, g = sample_light(lights, li, hit.p, rng)
+            cos_s = np.sum(wi * hit.ng, axis=1)
+            f = np.where(cos_s > 0, g * cos_s, 0.0)
+            live = np.flatnonzero(f > 0)
+            if live.size == 0:
+                continue
+            eps = ctx.offset(hit.p[live])
+            origins.append(hit.p[live] + eps[:, None] * hit.ng[live])
+            dirs.append(wi[live])
+            tmax.append(np.where(np.isinf(dist[live]), np.inf, dist[live] - 2 * eps))
+            idx.append(live * nl + li)
+            factors.reshape(-1)[live * nl + li] = f[live]
+        if not idx:
+            return
+        occ = ctx.accel.occluded(np.concatenate(origins).astype(np.float32),
+                                 np.concatenate(dirs).astype(np.float32),
+                                 np.concatenate(tmax).astype(np.float32))
+        self._rays += len(occ)
+        factors.reshape(-1)[np.concatenate(idx)[occ]] = 0.0
+        brdf = self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam) * np.float32(1 / np.pi)
+        if rays.lam is None:
+            irradiance = factors @ lights.spectrum          # (B, L) @ (L, n)
+        else:
+            irradiance = np.sum(factors * lights.spectrum[:, rays.lam].T, axis=1)
+        self._accumulate(rays, rays.w * brdf * irradiance)
+
+    def _mirror(self, rays: _Rays, hit: _Hit) -> _Rays:
+        ctx = self.ctx
+        d = reflect(rays.d, hit.ng)
+        o = hit.p + ctx.offset(hit.p)[:, None] * hit.ng
+        w = rays.w * self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam)
+        return _Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
+
+    def _dielectric(self, rays: _Rays, hit: _Hit, rng) -> _Rays:
+        ctx = self.ctx
+        lam0 = np.zeros(len(rays), np.int64) if rays.lam is None else rays.lam
+        n = ctx.materials.ior[hit.mat, lam0]  # constant over the grid for white rays
+        eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
+        fr = fresnel_dielectric(hit.cos_i, eta)
+        refl = rng.random(len(rays)) < fr
+        t_dir, _ = refract(rays.d, hit.ng, eta)
+        d = np.where(refl[:, None], reflect(rays.d, hit.ng), t_dir)
+        side = np.where(refl, 1.0, -1.0).astype(np.float32)
+        o = hit.p + (ctx.offset(hit.p) * side)[:, None] * hit.ng
+        w = rays.w * self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam)
+        return _Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
+
+    def _split(self, rays: _Rays, hit: _Hit, rng):
+        """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit."""
+        n, b = self.n, len(rays)
+        if self.ctx.settings.dispersion_sampling == "SPLIT":
+            parent, lam = np.nonzero(rays.w > 0)
+            w = rays.w[parent, lam]
+        else:
+            total = rays.w.sum(axis=1, dtype=np.float64)
+            live = total > 0
+            cdf = np.cumsum(rays.w[live], axis=1, dtype=np.float64)
+            u = rays.u_lam[live] * total[live]  # stratified per pixel
+            lam = np.minimum((cdf < u[:, None]).sum(axis=1), n - 1)
+            parent = np.flatnonzero(live)
+            w = total[live].astype(np.float32)  # w_k / p_k with p_k = w_k / total
+        children = _Rays(rays.o[parent], rays.d[parent], rays.pix[parent], w.astype(np.float32),
+                         lam.astype(np.int64), rays.depth[parent], rays.u_lam[parent])
+        return children, hit.take(parent)

@@ -1,0 +1,82 @@
+"""Image output: float RGB EXR, spectral EXR (JCGT 2021 layout) and an 8-bit PNG preview.
+
+The spectral layout is Fichet, Pacanowski & Wilkie (2021), "An OpenEXR Layout for Spectral
+Images", JCGT 10(3): one channel per wavelength named ``S0.<nm with a comma>nm`` (emissive
+Stokes component 0), the header attributes ``spectralLayoutVersion`` and ``emissiveUnits``, plus
+R, G, B for ordinary viewers. Channels are passed contiguous: OpenEXR 3.5's binding silently
+writes wrong pixels from strided views (architecture.md, "Facts checked here that bite").
+Every file is written to a temporary name in the same folder and renamed, so an interrupted
+write never leaves a truncated image behind.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+
+import numpy as np
+
+__all__ = ["write_rgb_exr", "write_spectral_exr", "write_png", "read_exr", "spectral_channel_name"]
+
+
+def spectral_channel_name(wavelength_nm: float) -> str:
+    return "S0." + f"{wavelength_nm:.6f}".replace(".", ",") + "nm"
+
+
+def _atomic_write(path, write):
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".tmp_", suffix=os.path.splitext(path)[1], dir=folder)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _exr(path, channels: dict, extra_header: dict | None = None):
+    import OpenEXR
+
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    header.update(extra_header or {})
+    chans = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in channels.items()}
+    _atomic_write(path, lambda tmp: OpenEXR.File(header, chans).write(tmp))
+
+
+def write_rgb_exr(path, rgb: np.ndarray) -> None:
+    """(H, W, 3) linear RGB, row 0 at the top, as float32 R, G, B channels."""
+    rgb = np.asarray(rgb, np.float32)
+    _exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
+
+
+def write_spectral_exr(path, spectral: np.ndarray, wavelengths_nm: np.ndarray, rgb: np.ndarray) -> None:
+    """(H, W, n) spectral radiance plus its RGB, in the JCGT 2021 spectral layout."""
+    chans = {spectral_channel_name(wl): spectral[..., i] for i, wl in enumerate(wavelengths_nm)}
+    chans.update({"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
+    _exr(path, chans, {"spectralLayoutVersion": "1.0", "emissiveUnits": "W.m^-2.sr^-1"})
+
+
+def read_exr(path) -> dict[str, np.ndarray]:
+    """All channels of an EXR file by name (for tests and tools)."""
+    import OpenEXR
+
+    with OpenEXR.File(os.fspath(path), separate_channels=True) as f:
+        return {name: np.array(ch.pixels) for name, ch in f.channels().items()}
+
+
+def srgb_encode(linear: np.ndarray) -> np.ndarray:
+    """The sRGB transfer function (IEC 61966-2-1) on values clipped to [0, 1]."""
+    x = np.clip(linear, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def write_png(path, rgb: np.ndarray, exposure: float = 0.0) -> None:
+    """An 8-bit sRGB preview of linear RGB (clipped; ``exposure`` in stops)."""
+    from PIL import Image
+
+    img = (srgb_encode(np.asarray(rgb, np.float64) * 2.0**exposure) * 255 + 0.5).astype(np.uint8)
+    _atomic_write(path, lambda tmp: Image.fromarray(img, "RGB").save(tmp, format="PNG"))

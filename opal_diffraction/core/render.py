@@ -1,0 +1,177 @@
+"""One render: validate, prepare, plan the passes, run them over tiles, and return the film.
+
+The image is split into tiles and the samples into progressive rounds. Every (round, tile) batch
+draws its random numbers from its own stream, ``SeedSequence([seed, pass, round, tile])``, and
+writes only its own pixels, so the image is identical whatever the number of threads (and,
+later, machines); rounds make time limits, cancellation and partial previews cheap.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .accel import build_accelerator
+from .camera import FilterSampler, generate_rays, pixel_samples
+from .eye_pass import EyePass
+from .lights import prepare_lights
+from .materials import prepare_materials
+from .plan import RenderPlan, plan_render
+from .scene import Scene
+from .settings import RenderSettings
+from .spectrum import SpectralConverter
+
+__all__ = ["RenderContext", "RenderResult", "render"]
+
+EYE_PASS_STREAM = 1  # stream ids keep the passes' random numbers independent
+
+
+@dataclass
+class RenderContext:
+    """A validated scene prepared for tracing: acceleration structure, spectra, offsets."""
+
+    scene: Scene
+    settings: RenderSettings
+    conv: SpectralConverter
+    accel: object
+    materials: object
+    lights: object
+    tri_normal: np.ndarray
+    tri_material: np.ndarray
+    world_spectrum: np.ndarray
+    offset_base: float
+
+    @property
+    def grid(self):
+        return self.conv.grid
+
+    def offset(self, p: np.ndarray) -> np.ndarray:
+        """Self-intersection offset (B,) at points p: scene-scaled plus float32 rounding of |p|."""
+        return (self.offset_base + 4e-7 * np.max(np.abs(p), axis=1)).astype(np.float32)
+
+    @classmethod
+    def prepare(cls, scene: Scene, settings: RenderSettings, conv: SpectralConverter | None = None) -> "RenderContext":
+        conv = conv or SpectralConverter(settings.grid())
+        v = np.asarray(scene.vertices, np.float32)
+        t = np.asarray(scene.triangles, np.int32)
+        p = v[t].astype(np.float64)
+        nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) if len(t) else np.zeros((0, 3))
+        nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
+        extent = float(np.max(np.ptp(v, axis=0))) if len(v) else 1.0
+        return cls(
+            scene=scene,
+            settings=settings,
+            conv=conv,
+            accel=build_accelerator(v, t, settings.backend),
+            materials=prepare_materials(scene.materials, conv),
+            lights=prepare_lights(scene.lights, conv),
+            tri_normal=nrm.astype(np.float32),
+            tri_material=np.asarray(scene.tri_material, np.int32),
+            world_spectrum=conv.illuminant_from_rgb(np.asarray(scene.world_color, np.float64)).astype(np.float32),
+            offset_base=1e-5 * max(extent, 1e-3),
+        )
+
+
+@dataclass
+class RenderResult:
+    spectral: np.ndarray          # (H, W, n) float32 mean spectral radiance, row 0 at the top
+    rgb: np.ndarray               # (H, W, 3) float32 linear Rec.709
+    wavelengths: np.ndarray       # (n,) nm
+    samples: int                  # samples per pixel actually taken
+    cancelled: bool
+    plan: RenderPlan
+    warnings: list[str] = field(default_factory=list)
+    stats: dict = field(default_factory=dict)
+
+
+def _tiles(width: int, height: int, size: int):
+    return [(x0, y0, min(x0 + size, width), min(y0 + size, height))
+            for y0 in range(0, height, size) for x0 in range(0, width, size)]
+
+
+def render(
+    scene: Scene,
+    settings: RenderSettings | None = None,
+    progress: Callable[[float, str], None] | None = None,
+    should_cancel: Callable[[], bool] | None = None,
+    on_round: Callable[[RenderResult], None] | None = None,
+) -> RenderResult:
+    """Render ``scene``; raises SceneError (a readable message) for unrenderable input.
+
+    ``progress(fraction, message)`` is called after every tile; ``should_cancel()`` is polled
+    between tiles and stops the render early (the result holds the finished rounds);
+    ``on_round(result)`` receives the partial image after every round.
+    """
+    settings = settings or RenderSettings()
+    settings.validate()
+    t_start = time.perf_counter()
+    scene, warnings = scene.validated()
+    ctx = RenderContext.prepare(scene, settings)
+    plan = plan_render(ctx)
+    warnings += plan.warnings
+    cam = scene.camera
+    w, h, nl = int(cam.width), int(cam.height), ctx.grid.n
+    film = np.zeros((h, w, nl), np.float64)
+    t_prep = time.perf_counter() - t_start
+
+    spp = int(settings.samples)
+    rounds = [min(settings.round_samples, spp - s) for s in range(0, spp, settings.round_samples)]
+    tiles = _tiles(w, h, int(settings.tile_size))
+    filt = FilterSampler(settings.filter_width)
+    eye = EyePass(ctx)
+    threads = settings.threads or os.cpu_count() or 1
+    stats = {"rays": 0, "prepare_s": t_prep, "backend": ctx.accel.name, "triangles": len(scene.triangles)}
+    done_samples, cancelled = 0, False
+    total_work = len(rounds) * len(tiles)
+
+    def run_tile(r_index, r_spp, t_index):
+        x0, y0, x1, y1 = tiles[t_index]
+        rng = np.random.default_rng(np.random.SeedSequence([int(settings.seed), EYE_PASS_STREAM, r_index, t_index]))
+        ys, xs = np.mgrid[y0:y1, x0:x1]
+        sx, sy, sl, pidx = pixel_samples(xs.ravel().astype(np.float64), ys.ravel().astype(np.float64), r_spp, rng, filt)
+        o, d = generate_rays(cam, sx, sy)
+        res = eye.trace(o, d, pidx, (y1 - y0) * (x1 - x0), rng, u_lambda=sl)
+        return t_index, res
+
+    def finish(samples):
+        spectral = (film / max(samples, 1)).astype(np.float32)
+        return RenderResult(spectral, ctx.conv.to_rgb(spectral), ctx.grid.wavelengths.copy(), samples,
+                            cancelled, plan, warnings, dict(stats))
+
+    work_done = 0
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for r_index, r_spp in enumerate(rounds):
+            round_film = np.zeros_like(film)
+            if plan.eye_pass:
+                pending = [pool.submit(run_tile, r_index, r_spp, ti) for ti in range(len(tiles))]
+                for fut in pending:
+                    if cancelled:
+                        fut.cancel()
+                        continue
+                    t_index, res = fut.result()
+                    x0, y0, x1, y1 = tiles[t_index]
+                    round_film[y0:y1, x0:x1] += res.film.reshape(y1 - y0, x1 - x0, nl)
+                    stats["rays"] += res.rays
+                    work_done += 1
+                    if progress:
+                        progress(work_done / total_work, f"eye pass: round {r_index + 1}/{len(rounds)}, "
+                                 f"{stats['rays'] / 1e6:.1f} M rays")
+                    if should_cancel and should_cancel():
+                        cancelled = True
+                if cancelled:
+                    break  # a partly finished round is discarded: its tiles have fewer samples
+            film += round_film
+            done_samples += r_spp
+            if on_round:
+                on_round(finish(done_samples))
+            if settings.time_limit and time.perf_counter() - t_start > settings.time_limit and r_index + 1 < len(rounds):
+                warnings.append(f"time limit reached after {done_samples} of {spp} samples per pixel")
+                break
+    stats["render_s"] = time.perf_counter() - t_start
+    stats["mrays_per_s"] = stats["rays"] / max(stats["render_s"] - t_prep, 1e-9) / 1e6
+    return finish(done_samples)

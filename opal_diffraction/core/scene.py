@@ -1,0 +1,389 @@
+"""The scene model: flat NumPy arrays, one ``.npz`` file, and validation with readable errors.
+
+A scene holds geometry (vertices, triangles, per-triangle material index), a material table, a
+light table and a camera, all in world space (Blender's convention: metres, Z up; the camera
+looks down its local -Z axis with +Y up). Colours are linear Rec.709 RGB; they become spectra at
+render time, because the wavelength grid is a render setting.
+
+Enumerations are stored as integer codes with fixed values so saved files keep loading when
+entries are added (the same rule Blender's EnumProperty items follow).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+from .optics import DISPERSION_MODELS
+
+__all__ = [
+    "SceneError",
+    "MATERIAL_KINDS",
+    "LIGHT_KINDS",
+    "Materials",
+    "Lights",
+    "Camera",
+    "Scene",
+    "FORMAT_VERSION",
+]
+
+FORMAT_VERSION = 1
+
+#: Material kinds (stable codes).
+MATERIAL_KINDS = {"DIFFUSE": 0, "MIRROR": 1, "DIELECTRIC": 2}
+#: Light kinds (stable codes).
+LIGHT_KINDS = {"POINT": 0, "SPOT": 1, "SUN": 2, "AREA_RECT": 3, "AREA_DISK": 4}
+
+
+class SceneError(ValueError):
+    """A scene that cannot be rendered; the message names the problem for the user."""
+
+
+@dataclass
+class Materials:
+    """Material table, one row per material.
+
+    kind: MATERIAL_KINDS code. color: base colour (diffuse albedo, mirror tint, or dielectric
+    tint applied to transmission and reflection alike). ior: index of refraction at the d line
+    (used by 'NONE' and 'ABBE' dispersion). dispersion: DISPERSION_MODELS code. abbe: Abbe number V_d.
+    """
+
+    kind: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    color: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    ior: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    dispersion: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    abbe: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    name: np.ndarray = field(default_factory=lambda: np.zeros(0, "<U64"))
+
+    def __len__(self):
+        return len(self.kind)
+
+    @classmethod
+    def from_list(cls, rows: list[dict]) -> "Materials":
+        """Build from dicts like {'kind': 'DIELECTRIC', 'color': (1,1,1), 'ior': 1.5, 'dispersion': 'BK7'}."""
+        kinds, cols, iors, disp, abbes, names = [], [], [], [], [], []
+        for i, r in enumerate(rows):
+            k = r.get("kind", "DIFFUSE")
+            if k not in MATERIAL_KINDS:
+                raise SceneError(f"material {i}: unknown kind {k!r}; expected one of {sorted(MATERIAL_KINDS)}")
+            d = r.get("dispersion", "NONE")
+            if d not in DISPERSION_MODELS:
+                raise SceneError(f"material {i}: unknown dispersion {d!r}; expected one of {sorted(DISPERSION_MODELS)}")
+            kinds.append(MATERIAL_KINDS[k])
+            cols.append(r.get("color", (0.8, 0.8, 0.8)))
+            iors.append(r.get("ior", 1.5))
+            disp.append(DISPERSION_MODELS[d])
+            abbes.append(r.get("abbe", 0.0))
+            names.append(r.get("name", f"material_{i}"))
+        return cls(
+            np.array(kinds, np.int32),
+            np.array(cols, np.float32).reshape(-1, 3),
+            np.array(iors, np.float32),
+            np.array(disp, np.int32),
+            np.array(abbes, np.float32),
+            np.array(names, "<U64"),
+        )
+
+
+@dataclass
+class Lights:
+    """Light table, one row per light, with Cycles' units.
+
+    POINT / SPOT: ``power`` in watts; a white light has radiant intensity power / (4 pi) W/sr in
+    every direction (a spot masks that by its cone: ``spot_size`` full angle in radians,
+    ``spot_blend`` in [0, 1]).
+    SUN: ``power`` is the strength, the irradiance in W/m^2 on a surface facing the sun;
+    ``direction`` is the direction the light travels.
+    AREA_RECT / AREA_DISK: ``power`` in watts, emitted one-sided along ``direction`` as a Lambertian
+    emitter of radiance power / (pi * area); ``axis_u`` is the local X axis, ``size_u`` / ``size_v``
+    the side lengths (disk: diameters).
+    ``color`` is linear RGB; ``temperature`` > 0 (kelvin) uses a blackbody spectrum instead
+    (scaled to the same luminance as a white light of the same power).
+    """
+
+    kind: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    position: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float64))
+    direction: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float64))
+    axis_u: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float64))
+    color: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    power: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
+    temperature: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
+    spot_size: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
+    spot_blend: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
+    size_u: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
+    size_v: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
+
+    def __len__(self):
+        return len(self.kind)
+
+    @classmethod
+    def from_list(cls, rows: list[dict]) -> "Lights":
+        """Build from dicts like {'kind': 'POINT', 'position': (0, 0, 2), 'power': 100}."""
+        cols = {f.name: [] for f in fields(cls)}
+        for i, r in enumerate(rows):
+            k = r.get("kind", "POINT")
+            if k not in LIGHT_KINDS:
+                raise SceneError(f"light {i}: unknown kind {k!r}; expected one of {sorted(LIGHT_KINDS)}")
+            d = np.asarray(r.get("direction", (0.0, 0.0, -1.0)), np.float64)
+            au = np.asarray(r.get("axis_u", _any_perpendicular(d)), np.float64)
+            vals = {
+                "kind": LIGHT_KINDS[k],
+                "position": r.get("position", (0.0, 0.0, 0.0)),
+                "direction": d,
+                "axis_u": au,
+                "color": r.get("color", (1.0, 1.0, 1.0)),
+                "power": r.get("power", 1000.0 if k != "SUN" else 1.0),
+                "temperature": r.get("temperature", 0.0),
+                "spot_size": r.get("spot_size", np.radians(45.0)),
+                "spot_blend": r.get("spot_blend", 0.15),
+                "size_u": r.get("size_u", 1.0),
+                "size_v": r.get("size_v", r.get("size_u", 1.0)),
+            }
+            for name, v in vals.items():
+                cols[name].append(v)
+        out = cls()
+        for f in fields(cls):
+            proto = getattr(out, f.name)
+            setattr(out, f.name, np.array(cols[f.name], proto.dtype).reshape((-1,) + proto.shape[1:]))
+        return out
+
+
+def _any_perpendicular(d) -> np.ndarray:
+    d = np.asarray(d, np.float64)
+    a = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(d, a)
+    return u / max(np.linalg.norm(u), 1e-30)
+
+
+@dataclass
+class Camera:
+    """A pinhole perspective or orthographic camera with Blender's conventions.
+
+    ``matrix``: 4x4 camera-to-world (local -Z is the view direction, +Y up). ``lens`` focal length
+    and ``sensor_width`` / ``sensor_height`` in mm; ``sensor_fit`` 'AUTO' (the sensor width spans
+    the larger image dimension), 'HORIZONTAL' (sensor_width spans the width) or 'VERTICAL'
+    (sensor_height spans the height). ``ortho_scale`` spans the fitted dimension in metres.
+    ``shift_x`` / ``shift_y`` are fractions of the fitted dimension, as in Blender.
+    """
+
+    matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
+    kind: str = "PERSP"
+    lens: float = 50.0
+    sensor_width: float = 36.0
+    sensor_height: float = 24.0
+    sensor_fit: str = "AUTO"
+    ortho_scale: float = 6.0
+    shift_x: float = 0.0
+    shift_y: float = 0.0
+    width: int = 640
+    height: int = 480
+
+    @staticmethod
+    def look_at(eye, target, up=(0.0, 0.0, 1.0), **kw) -> "Camera":
+        """A camera at ``eye`` looking at ``target`` with ``up`` roughly up."""
+        eye, target, up = (np.asarray(v, np.float64) for v in (eye, target, up))
+        back = eye - target
+        back /= np.linalg.norm(back)
+        right = np.cross(up, back)
+        if np.linalg.norm(right) < 1e-9:
+            right = _any_perpendicular(back)
+        right /= np.linalg.norm(right)
+        upv = np.cross(back, right)
+        m = np.eye(4)
+        m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = right, upv, back, eye
+        return Camera(matrix=m, **kw)
+
+
+@dataclass
+class Scene:
+    """Flat arrays describing everything a render needs."""
+
+    vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int32))
+    tri_material: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    materials: Materials = field(default_factory=Materials)
+    lights: Lights = field(default_factory=Lights)
+    camera: Camera | None = None
+    world_color: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
+
+    # ------------------------------------------------------------------ building
+    def add_mesh(self, vertices, triangles, material: int) -> None:
+        """Append a mesh (its own vertex numbering) with one material for all its triangles."""
+        v = np.asarray(vertices, np.float32).reshape(-1, 3)
+        t = np.asarray(triangles, np.int64).reshape(-1, 3) + len(self.vertices)
+        self.vertices = np.concatenate([self.vertices, v])
+        self.triangles = np.concatenate([self.triangles, t.astype(np.int32)])
+        self.tri_material = np.concatenate(
+            [self.tri_material, np.full(len(t), material, np.int32)]
+        )
+
+    # ------------------------------------------------------------------ validation
+    def validated(self) -> tuple["Scene", list[str]]:
+        """Return (a clean copy, warnings); raise SceneError naming what makes it unrenderable.
+
+        Errors: non-finite coordinates, indices out of range, no camera, bad camera or light
+        numbers. Dropped with a warning: zero-area triangles. Warned: nothing to render, no light.
+        """
+        warns: list[str] = []
+        if self.camera is None:
+            raise SceneError("the scene has no camera: add one and make it the active camera")
+        _validate_camera(self.camera)
+        v = np.asarray(self.vertices, np.float32)
+        t = np.asarray(self.triangles)
+        if v.ndim != 2 or v.shape[1] != 3:
+            raise SceneError(f"vertices must have shape (V, 3), got {v.shape}")
+        if t.ndim != 2 or t.shape[1] != 3:
+            raise SceneError(f"triangles must have shape (T, 3), got {t.shape}")
+        bad = ~np.isfinite(np.asarray(self.vertices, np.float64)).all(axis=1)
+        if bad.any():
+            raise SceneError(
+                f"{int(bad.sum())} vertex coordinate(s) are NaN or infinite (first: vertex {int(np.argmax(bad))})"
+            )
+        if len(t):
+            if t.min() < 0 or t.max() >= len(v):
+                i = int(np.argmax((t < 0).any(1) | (t >= len(v)).any(1)))
+                raise SceneError(
+                    f"triangle {i} uses vertex index {t[i].tolist()} but the scene has {len(v)} vertices"
+                )
+        tm = np.asarray(self.tri_material)
+        if tm.shape != (len(t),):
+            raise SceneError(f"tri_material must have one entry per triangle ({len(t)}), got shape {tm.shape}")
+        nm = len(self.materials)
+        if len(tm) and (tm.min() < 0 or tm.max() >= nm):
+            i = int(np.argmax((tm < 0) | (tm >= nm)))
+            raise SceneError(f"triangle {i} uses material {int(tm[i])} but the scene has {nm} materials")
+        _validate_materials(self.materials)
+        _validate_lights(self.lights)
+        if not np.isfinite(np.asarray(self.world_color, np.float64)).all():
+            raise SceneError("world colour is NaN or infinite")
+
+        t = t.astype(np.int32)
+        if len(t):
+            p = v.astype(np.float64)[t]
+            area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+            degenerate = area2 <= 0.0
+            if degenerate.any():
+                warns.append(f"dropped {int(degenerate.sum())} degenerate (zero-area) triangle(s)")
+                t, tm = t[~degenerate], tm[~degenerate]
+        if len(t) == 0:
+            warns.append("the scene has no geometry: the image shows only the background")
+        if len(self.lights) == 0:
+            warns.append("the scene has no lights: only the background is lit")
+        clean = replace(self, vertices=v, triangles=t, tri_material=tm.astype(np.int32))
+        return clean, warns
+
+    # ------------------------------------------------------------------ .npz
+    def save(self, path) -> None:
+        """Write the scene to one ``.npz`` file (no pickles)."""
+        d: dict[str, np.ndarray] = {
+            "format_version": np.array(FORMAT_VERSION),
+            "vertices": np.asarray(self.vertices, np.float32),
+            "triangles": np.asarray(self.triangles, np.int32),
+            "tri_material": np.asarray(self.tri_material, np.int32),
+            "world_color": np.asarray(self.world_color, np.float32),
+        }
+        for f in fields(Materials):
+            d["material_" + f.name] = getattr(self.materials, f.name)
+        for f in fields(Lights):
+            d["light_" + f.name] = getattr(self.lights, f.name)
+        if self.camera is not None:
+            for f in fields(Camera):
+                d["camera_" + f.name] = np.asarray(getattr(self.camera, f.name))
+        np.savez_compressed(path, **d)
+
+    @classmethod
+    def load(cls, path) -> "Scene":
+        """Read a scene written by :meth:`save`; a clear SceneError if it is not one."""
+        try:
+            z = np.load(path, allow_pickle=False)
+        except FileNotFoundError:
+            raise SceneError(f"scene file not found: {path}") from None
+        except Exception as e:  # not a zip, truncated, ...
+            raise SceneError(f"cannot read scene file {path}: {e}") from None
+        with z:
+            if "format_version" not in z:
+                raise SceneError(f"{path} is not an opal_diffraction scene (no format_version)")
+            ver = int(z["format_version"])
+            if ver > FORMAT_VERSION:
+                raise SceneError(f"{path} was written by a newer version (format {ver} > {FORMAT_VERSION})")
+            mats = Materials(**{f.name: z["material_" + f.name] for f in fields(Materials) if "material_" + f.name in z})
+            lights = Lights(**{f.name: z["light_" + f.name] for f in fields(Lights) if "light_" + f.name in z})
+            cam = None
+            if "camera_matrix" in z:
+                kw = {}
+                for f in fields(Camera):
+                    if "camera_" + f.name in z:
+                        val = z["camera_" + f.name]
+                        kw[f.name] = val.item() if val.ndim == 0 else val
+                cam = Camera(**kw)
+            return cls(
+                vertices=z["vertices"],
+                triangles=z["triangles"],
+                tri_material=z["tri_material"],
+                materials=mats,
+                lights=lights,
+                camera=cam,
+                world_color=z["world_color"],
+            )
+
+
+def _validate_camera(c: Camera) -> None:
+    m = np.asarray(c.matrix, np.float64)
+    if m.shape != (4, 4) or not np.isfinite(m).all():
+        raise SceneError("camera matrix must be a finite 4x4 matrix")
+    if abs(np.linalg.det(m[:3, :3])) < 1e-12:
+        raise SceneError("camera matrix is singular (zero scale?)")
+    if c.kind not in ("PERSP", "ORTHO"):
+        raise SceneError(f"camera type {c.kind!r} is not supported (PERSP or ORTHO)")
+    if c.sensor_fit not in ("AUTO", "HORIZONTAL", "VERTICAL"):
+        raise SceneError(f"camera sensor fit {c.sensor_fit!r} is not AUTO, HORIZONTAL or VERTICAL")
+    if int(c.width) < 1 or int(c.height) < 1:
+        raise SceneError(f"image resolution must be at least 1x1, got {c.width}x{c.height}")
+    for name in ("lens", "sensor_width", "sensor_height", "ortho_scale"):
+        val = float(getattr(c, name))
+        if not np.isfinite(val) or val <= 0:
+            raise SceneError(f"camera {name} must be > 0, got {val}")
+
+
+def _validate_materials(m: Materials) -> None:
+    n = len(m.kind)
+    for f in fields(Materials):
+        if len(getattr(m, f.name)) != n:
+            raise SceneError(f"material table column {f.name!r} has {len(getattr(m, f.name))} rows, expected {n}")
+    if n == 0:
+        return
+    if not np.isin(m.kind, list(MATERIAL_KINDS.values())).all():
+        raise SceneError(f"material kind codes must be in {sorted(MATERIAL_KINDS.values())}")
+    if not np.isin(m.dispersion, list(DISPERSION_MODELS.values())).all():
+        raise SceneError(f"dispersion codes must be in {sorted(DISPERSION_MODELS.values())}")
+    if not np.isfinite(m.color).all():
+        raise SceneError("a material colour is NaN or infinite")
+    diel = m.kind == MATERIAL_KINDS["DIELECTRIC"]
+    bad_ior = diel & ~(np.isfinite(m.ior) & (m.ior >= 1.0))
+    if bad_ior.any():
+        i = int(np.argmax(bad_ior))
+        raise SceneError(f"material {m.name[i]!r}: IOR must be >= 1, got {float(m.ior[i])}")
+    abbe = diel & (m.dispersion == DISPERSION_MODELS["ABBE"]) & ~(m.abbe > 0)
+    if abbe.any():
+        i = int(np.argmax(abbe))
+        raise SceneError(f"material {m.name[i]!r}: Abbe dispersion needs an Abbe number > 0")
+
+
+def _validate_lights(lt: Lights) -> None:
+    n = len(lt.kind)
+    for f in fields(Lights):
+        if len(getattr(lt, f.name)) != n:
+            raise SceneError(f"light table column {f.name!r} has {len(getattr(lt, f.name))} rows, expected {n}")
+    if n == 0:
+        return
+    for name in ("position", "direction", "axis_u", "color", "power", "spot_size", "size_u", "size_v"):
+        if not np.isfinite(np.asarray(getattr(lt, name), np.float64)).all():
+            raise SceneError(f"a light's {name} is NaN or infinite")
+    if (lt.power < 0).any():
+        raise SceneError(f"light {int(np.argmax(lt.power < 0))}: power must be >= 0")
+    if (np.linalg.norm(lt.direction, axis=1) < 1e-12).any():
+        raise SceneError("a light has a zero direction vector")
+    area = np.isin(lt.kind, [LIGHT_KINDS["AREA_RECT"], LIGHT_KINDS["AREA_DISK"]])
+    if (area & ((lt.size_u <= 0) | (lt.size_v <= 0))).any():
+        raise SceneError("an area light has a zero or negative size")
