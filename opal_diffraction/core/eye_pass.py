@@ -99,6 +99,30 @@ class EyePass:
             u_lambda = rng.random(len(pix))
         return _TileTrace(self.ctx, n_pixels, rng).run(origins, directions, pix, u_lambda)
 
+    def trace_escapes(self, origins, directions, rng: np.random.Generator, wavelength_index=None) -> dict:
+        """Follow rays through the scene's specular surfaces and report the ones that leave it.
+
+        With ``wavelength_index`` (B,) the rays start monochromatic at those grid indices,
+        otherwise white. Returns a dict of arrays over escaping rays: 'origin' (last surface
+        point), 'direction', 'weight' ((E, n) white or (E,) mono), 'lam' (or None), 'depth'
+        (specular bounces) and 'ray' (index of the starting ray). For tests and tools: the
+        directions leaving a prism, a lens, a mirror.
+        """
+        b = len(origins)
+        tr = _TileTrace(self.ctx, b, rng)
+        tr.escapes = []
+        tr.run(np.asarray(origins, np.float32), np.asarray(directions, np.float32), np.arange(b),
+               rng.random(b), wavelength_index)
+        e = tr.escapes
+        if not e:
+            return {"origin": np.zeros((0, 3)), "direction": np.zeros((0, 3)), "weight": np.zeros(0),
+                    "lam": None, "depth": np.zeros(0, int), "ray": np.zeros(0, int)}
+        cat = lambda k: np.concatenate([x[k] for x in e])  # noqa: E731
+        mono = [x for x in e if x["lam"] is not None]
+        return {"origin": cat("origin"), "direction": cat("direction"),
+                "weight": cat("weight") if len(mono) in (0, len(e)) else None,
+                "lam": cat("lam") if len(mono) == len(e) else None, "depth": cat("depth"), "ray": cat("ray")}
+
 
 class _TileTrace:
     """The state of one tile's trace: its film accumulator and ray count."""
@@ -110,13 +134,18 @@ class _TileTrace:
         self._film = np.zeros(n_pixels * self.n, np.float64)
         self._n_pixels = n_pixels
         self._rays = 0
+        self.escapes = None  # a list to record rays leaving the scene (trace_escapes)
 
-    def run(self, origins, directions, pix, u_lambda) -> TileResult:
+    def run(self, origins, directions, pix, u_lambda, wavelength_index=None) -> TileResult:
         n, b, rng = self.n, len(pix), self.rng
         rays = _Rays(origins, directions, pix.astype(np.int64), np.ones((b, n), np.float32), None,
                      np.zeros(b, np.int32), np.asarray(u_lambda, np.float64))
         mono = _Rays(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32), np.zeros(0, np.int64),
                      np.zeros(0, np.float32), np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0))
+        if wavelength_index is not None:  # start monochromatic (tools and tests)
+            lam = np.broadcast_to(np.asarray(wavelength_index, np.int64), (b,)).copy()
+            mono = _Rays(rays.o, rays.d, rays.pix, np.ones(b, np.float32), lam, rays.depth, rays.u_lam)
+            rays = rays.take(np.zeros(b, bool))
         while len(rays) or len(mono):
             rays, children, child_hits = self._step(rays, None, rng)
             mono, _, _ = self._step(mono, (children, child_hits), rng)
@@ -133,6 +162,10 @@ class _TileTrace:
             missed = h.prim < 0
             if missed.any():
                 self._add_background(rays.take(missed))
+                if self.escapes is not None:
+                    r = rays.take(missed)
+                    self.escapes.append({"origin": r.o, "direction": r.d, "weight": r.w, "lam": r.lam,
+                                         "depth": r.depth, "ray": r.pix})
             keep = ~missed
             rays = rays.take(keep)
             hit = self._hit_info(rays, h.t[keep], h.prim[keep])

@@ -1,0 +1,116 @@
+"""Render behaviour: reproducibility, cancellation, progress, SPLIT vs SAMPLE, the CLI."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from opal_diffraction.core import primitives
+from opal_diffraction.core.output import read_exr, spectral_channel_name
+from opal_diffraction.core.render import render
+from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+from opal_diffraction.core.settings import RenderSettings
+
+ROOT = os.path.join(os.path.dirname(__file__), "..")
+
+
+def prism_and_stripes(pixels=32):
+    """Horizontal stripes seen through a dispersive prism (the prism bends the view up)."""
+    mats = Materials.from_list([
+        {"kind": "DIFFUSE", "color": (0.9, 0.9, 0.9)}, {"kind": "DIFFUSE", "color": (0.05, 0.05, 0.05)},
+        {"kind": "DIELECTRIC", "ior": 1.72, "dispersion": "ABBE", "abbe": 29.0},
+    ])
+    s = Scene(materials=mats)
+    for i in range(8):
+        s.add_mesh(*primitives.quad((0, 3.0, i + 0.5), (10, 0, 0), (0, 0, 1.0)), material=i % 2)
+    s.add_mesh(*primitives.prism((0, 0, 0.75), side=1.2, length=2.4, axis="X", rotation_deg=180), material=2)
+    s.lights = Lights.from_list([{"kind": "SUN", "direction": (0, 1, -0.3), "power": 3.0}])
+    s.camera = Camera.look_at((0, -5.5, 3.6), (0, 0.2, 0.8), lens=120, width=pixels, height=pixels)
+    return s
+
+
+def test_same_seed_same_image_whatever_the_threads():
+    s = prism_and_stripes()
+    a = render(s, RenderSettings(samples=4, seed=7, threads=1, tile_size=8)).spectral
+    b = render(s, RenderSettings(samples=4, seed=7, threads=2, tile_size=8)).spectral
+    np.testing.assert_array_equal(a, b)
+    c = render(s, RenderSettings(samples=4, seed=8, threads=2, tile_size=8)).spectral
+    assert not np.array_equal(a, c)
+
+
+def test_split_and_sample_agree_in_expectation():
+    """Compare 4x4-pixel block means with a tolerance from the blocks' own sample spread."""
+    s = prism_and_stripes(pixels=32)
+    split = render(s, RenderSettings(samples=16, seed=1, dispersion_sampling="SPLIT")).rgb
+    sample = render(s, RenderSettings(samples=64, seed=2, dispersion_sampling="SAMPLE")).rgb
+    def blocks(img):
+        b = img.reshape(8, 4, 8, 4, 3).transpose(0, 2, 1, 3, 4).reshape(64, 16, 3)
+        return b.mean(axis=1), b.var(axis=1, ddof=1) / 16
+    m1, v1 = blocks(split)
+    m2, v2 = blocks(sample)
+    # pixel-to-pixel variance inside a block includes real image structure, so this bound is
+    # conservative; it still catches a biased estimator (a wrong weight shows as a colour shift)
+    z = np.abs(m1 - m2) / np.sqrt(v1 + v2 + 1e-8)
+    assert np.mean(z < 3) > 0.97
+    np.testing.assert_allclose(split.mean(axis=(0, 1)), sample.mean(axis=(0, 1)), rtol=0.02)
+    # the prism really disperses: through it the image is coloured (not grey)
+    assert np.abs(split[..., 0] - split[..., 2]).max() > 0.05
+
+
+def test_cancel_stops_early_without_an_exception():
+    s = prism_and_stripes()
+    calls = []
+    res = render(s, RenderSettings(samples=64, round_samples=4, tile_size=8),
+                 should_cancel=lambda: len(calls) > 20, progress=lambda f, m: calls.append(f))
+    assert res.cancelled
+    assert res.samples < 64
+    assert len(calls) < 64  # 16 tiles x 16 rounds if it had not stopped
+
+
+def test_progress_reaches_one_and_partial_results_arrive_per_round():
+    s = prism_and_stripes(pixels=16)
+    fractions, partial = [], []
+    res = render(s, RenderSettings(samples=8, round_samples=2), progress=lambda f, m: fractions.append(f),
+                 on_round=lambda r: partial.append(r.samples))
+    assert fractions[-1] == pytest.approx(1.0) and np.all(np.diff(fractions) > 0)
+    assert partial == [2, 4, 6, 8] and res.samples == 8 and not res.cancelled
+
+
+def test_cli_renders_exr_png_and_spectral_exr(tmp_path):
+    s = prism_and_stripes(pixels=12)
+    s.save(tmp_path / "scene.npz")
+    out = tmp_path / "out.exr"
+    spec = tmp_path / "spec.exr"
+    cmd = [sys.executable, "-m", "opal_diffraction", "render", str(tmp_path / "scene.npz"), "-o", str(out),
+           "--spp", "2", "--seed", "3", "--wavelength-step", "10", "--spectral-exr", str(spec)]
+    p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert out.exists() and (tmp_path / "out.png").exists()
+    rgb = read_exr(out)
+    assert rgb["R"].shape == (12, 12) and rgb["G"].max() > 0
+    ch = read_exr(spec)
+    assert spectral_channel_name(550.0) == "S0.550,000000nm" and "S0.550,000000nm" in ch
+    assert len([k for k in ch if k.startswith("S0.")]) == 31
+    # the RGB stored with the spectra is the spectra's colour
+    from opal_diffraction.core.spectrum import SpectralConverter, WavelengthGrid
+    conv = SpectralConverter(WavelengthGrid(400, 700, 10))
+    cube = np.stack([ch[spectral_channel_name(w)] for w in conv.grid.wavelengths], axis=-1)
+    np.testing.assert_allclose(conv.to_rgb(cube)[..., 1], ch["G"], rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(ch["G"], rgb["G"], rtol=1e-6)
+    # same seed, same image
+    again = tmp_path / "again.exr"
+    p2 = subprocess.run(cmd[:6] + [str(again)] + cmd[7:-2], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert p2.returncode == 0, p2.stderr
+    np.testing.assert_array_equal(read_exr(again)["R"], rgb["R"])
+
+
+def test_cli_reports_bad_input_without_a_traceback(tmp_path):
+    s = prism_and_stripes(pixels=8)
+    s.vertices[0, 0] = np.inf
+    s.save(tmp_path / "bad.npz")
+    p = subprocess.run([sys.executable, "-m", "opal_diffraction", "render", str(tmp_path / "bad.npz"), "-o",
+                        str(tmp_path / "o.exr")], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2
+    assert "error:" in p.stderr and "NaN or infinite" in p.stderr and "Traceback" not in p.stderr
