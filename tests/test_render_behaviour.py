@@ -114,3 +114,15 @@ def test_cli_reports_bad_input_without_a_traceback(tmp_path):
                         str(tmp_path / "o.exr")], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert p.returncode == 2
     assert "error:" in p.stderr and "NaN or infinite" in p.stderr and "Traceback" not in p.stderr
+
+
+def test_passes_split_direct_light_from_the_world():
+    from scenes import glass_in_uniform_world, plane_under_light
+
+    lit = render(plane_under_light({"kind": "POINT", "position": (0, 0, 2), "power": 100.0}, pixels=8),
+                 RenderSettings(samples=2))
+    np.testing.assert_allclose(lit.passes["Direct"], lit.rgb, rtol=1e-6)
+    assert not lit.passes["Caustics"].any() and not lit.passes["Diffraction"].any()
+    world = render(glass_in_uniform_world({"kind": "DIELECTRIC", "ior": 1.5}, pixels=8), RenderSettings(samples=2))
+    np.testing.assert_allclose(world.passes["Direct"], 0.0, atol=1e-5)
+    assert set(lit.passes) == {"Direct", "Caustics", "Diffraction"}

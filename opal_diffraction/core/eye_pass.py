@@ -21,7 +21,7 @@ they receive direct light by shadow rays (caustics come from the light pass, not
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -37,7 +37,7 @@ class _Rays:
     o: np.ndarray      # (B, 3) float32 origins
     d: np.ndarray      # (B, 3) float32 unit directions
     pix: np.ndarray    # (B,) int64 pixel index within the tile
-    w: np.ndarray      # (B, n) white or (B,) mono, float32
+    w: np.ndarray | None  # (B, n) white or (B,) mono, float32; None: white and all ones (camera rays)
     lam: np.ndarray | None  # (B,) int wavelength index for mono rays, None for white
     depth: np.ndarray  # (B,) int specular bounces so far
     u_lam: np.ndarray  # (B,) float: the sample's stratified number for choosing a wavelength
@@ -46,11 +46,21 @@ class _Rays:
         return len(self.pix)
 
     def take(self, mask) -> "_Rays":
-        return _Rays(self.o[mask], self.d[mask], self.pix[mask], self.w[mask],
+        return _Rays(self.o[mask], self.d[mask], self.pix[mask], None if self.w is None else self.w[mask],
                      None if self.lam is None else self.lam[mask], self.depth[mask], self.u_lam[mask])
+
+    def weighted(self, x):
+        """The ray weight times x (x itself for unit-weight camera rays)."""
+        return x if self.w is None else self.w * x
+
+    def dense_w(self, n: int) -> np.ndarray:
+        return np.ones((len(self), n), np.float32) if self.w is None else self.w
 
     @staticmethod
     def concat(a: "_Rays", b: "_Rays") -> "_Rays":
+        if (a.w is None) != (b.w is None):  # one side has implicit unit weights: make them explicit
+            n = (a.w if a.w is not None else b.w).shape[1]
+            a, b = replace(a, w=a.dense_w(n)), replace(b, w=b.dense_w(n))
         return _Rays(*(None if x is None else np.concatenate([x, y]) for x, y in
                        zip((a.o, a.d, a.pix, a.w, a.lam, a.depth, a.u_lam),
                            (b.o, b.d, b.pix, b.w, b.lam, b.depth, b.u_lam))))
@@ -75,7 +85,8 @@ class _Hit:
 
 @dataclass
 class TileResult:
-    film: np.ndarray  # (P, n) float64 sum of sample contributions per pixel
+    film: np.ndarray  # (P, n) float64 sum of sample contributions per pixel (everything)
+    background: np.ndarray  # (P, n) the part of film that is the world's light (not the Direct pass)
     rays: int         # rays cast (camera, secondary and shadow)
 
 
@@ -132,13 +143,14 @@ class _TileTrace:
         self.n = ctx.grid.n
         self.rng = rng
         self._film = np.zeros(n_pixels * self.n, np.float64)
+        self._background = np.zeros(n_pixels * self.n, np.float64)  # world seen directly or through glass
         self._n_pixels = n_pixels
         self._rays = 0
         self.escapes = None  # a list to record rays leaving the scene (trace_escapes)
 
     def run(self, origins, directions, pix, u_lambda, wavelength_index=None) -> TileResult:
         n, b, rng = self.n, len(pix), self.rng
-        rays = _Rays(origins, directions, pix.astype(np.int64), np.ones((b, n), np.float32), None,
+        rays = _Rays(origins, directions, pix.astype(np.int64), None, None,
                      np.zeros(b, np.int32), np.asarray(u_lambda, np.float64))
         mono = _Rays(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32), np.zeros(0, np.int64),
                      np.zeros(0, np.float32), np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0))
@@ -149,7 +161,8 @@ class _TileTrace:
         while len(rays) or len(mono):
             rays, children, child_hits = self._step(rays, None, rng)
             mono, _, _ = self._step(mono, (children, child_hits), rng)
-        return TileResult(self._film.reshape(self._n_pixels, n), self._rays)
+        return TileResult(self._film.reshape(self._n_pixels, n) + self._background.reshape(self._n_pixels, n),
+                          self._background.reshape(self._n_pixels, n), self._rays)
 
     # ----------------------------------------------------------------- one bounce
     def _step(self, rays: _Rays, pending, rng):
@@ -164,7 +177,7 @@ class _TileTrace:
                 self._add_background(rays.take(missed))
                 if self.escapes is not None:
                     r = rays.take(missed)
-                    self.escapes.append({"origin": r.o, "direction": r.d, "weight": r.w, "lam": r.lam,
+                    self.escapes.append({"origin": r.o, "direction": r.d, "weight": r.dense_w(self.n), "lam": r.lam,
                                          "depth": r.depth, "ray": r.pix})
             keep = ~missed
             rays = rays.take(keep)
@@ -219,20 +232,55 @@ class _TileTrace:
         """table[rows] (B, n) for white rays, table[rows, lam] (B,) for mono rays."""
         return table[rows] if lam is None else table[rows, lam]
 
-    def _accumulate(self, rays: _Rays, contrib):
+    def _accumulate(self, rays: _Rays, contrib, film=None):
+        """Add per-ray contributions to their pixels: (B, n) for white rays, (B,) for mono."""
         n = self.n
-        if rays.lam is None:
-            idx = (rays.pix[:, None] * n + np.arange(n)).ravel()
-            self._film += np.bincount(idx, weights=contrib.ravel(), minlength=len(self._film))
-        else:
-            self._film += np.bincount(rays.pix * n + rays.lam, weights=contrib, minlength=len(self._film))
+        film = self._film if film is None else film
+        if rays.lam is not None:
+            np.add.at(film, rays.pix * n + rays.lam, contrib)
+            return
+        pix = rays.pix
+        if len(pix) > 1 and np.any(pix[1:] < pix[:-1]):
+            order = np.argsort(pix, kind="stable")
+            pix, contrib = pix[order], contrib[order]
+        # rays of a pixel are contiguous: sum each run once, then add the (few) runs to the film
+        starts = np.flatnonzero(np.concatenate([[True], pix[1:] != pix[:-1]]))
+        sums = np.add.reduceat(contrib, starts, axis=0)
+        film.reshape(self._n_pixels, n)[pix[starts]] += sums
+
+    def _accumulate_factored(self, pix, mat, factors) -> bool:
+        """Direct light of unit-weight white rays without a per-ray spectrum.
+
+        Each such ray adds factor_l * albedo[mat] * light_l(lambda) / pi, a sum over a few
+        (material, light) spectra. Sum the scalar factors per pixel and combination first, then
+        expand to spectra once per pixel: O(B L + P U n) instead of O(B n). Returns False (and
+        does nothing) when the tile holds too many combinations for this to pay off.
+        """
+        ctx = self.ctx
+        b, nl = factors.shape
+        ray, light = np.nonzero(factors)
+        if ray.size == 0:
+            return True
+        combo = mat[ray].astype(np.int64) * nl + light
+        uniq, u = np.unique(combo, return_inverse=True)
+        if len(uniq) * self._n_pixels > b * nl:
+            return False
+        g = np.bincount(pix[ray] * len(uniq) + u, weights=factors[ray, light],
+                        minlength=self._n_pixels * len(uniq)).reshape(self._n_pixels, len(uniq))
+        spectra = ctx.materials.reflectance[uniq // nl] * ctx.lights.spectrum[uniq % nl] * np.float32(1 / np.pi)
+        self._film += (g @ spectra).ravel()
+        return True
 
     def _add_background(self, rays: _Rays):
         bg = self.ctx.world_spectrum
         if not bg.any():
             return
-        contrib = rays.w * (bg[None, :] if rays.lam is None else bg[rays.lam])
-        self._accumulate(rays, contrib)
+        if rays.lam is None and rays.w is None:  # unit weights: count rays per pixel
+            counts = np.bincount(rays.pix, minlength=self._n_pixels).astype(np.float32)
+            self._background += (counts[:, None] * bg[None, :]).ravel()
+            return
+        contrib = rays.weighted(np.broadcast_to(bg, (len(rays), self.n)) if rays.lam is None else bg[rays.lam])
+        self._accumulate(rays, contrib, self._background)
 
     # ----------------------------------------------------------------- interactions
     def _direct_light(self, rays: _Rays, hit: _Hit, rng):
@@ -264,18 +312,20 @@ class _TileTrace:
                                  np.concatenate(tmax).astype(np.float32))
         self._rays += len(occ)
         factors.reshape(-1)[np.concatenate(idx)[occ]] = 0.0
+        if rays.lam is None and rays.w is None and self._accumulate_factored(rays.pix, hit.mat, factors):
+            return
         brdf = self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam) * np.float32(1 / np.pi)
         if rays.lam is None:
             irradiance = factors @ lights.spectrum          # (B, L) @ (L, n)
         else:
             irradiance = np.sum(factors * lights.spectrum[:, rays.lam].T, axis=1)
-        self._accumulate(rays, rays.w * brdf * irradiance)
+        self._accumulate(rays, rays.weighted(brdf * irradiance))
 
     def _mirror(self, rays: _Rays, hit: _Hit) -> _Rays:
         ctx = self.ctx
         d = reflect(rays.d, hit.ng)
         o = hit.p + ctx.offset(hit.p)[:, None] * hit.ng
-        w = rays.w * self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam)
+        w = rays.weighted(self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam))
         return _Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
 
     def _dielectric(self, rays: _Rays, hit: _Hit, rng) -> _Rays:
@@ -289,13 +339,22 @@ class _TileTrace:
         d = np.where(refl[:, None], reflect(rays.d, hit.ng), t_dir)
         side = np.where(refl, 1.0, -1.0).astype(np.float32)
         o = hit.p + (ctx.offset(hit.p) * side)[:, None] * hit.ng
-        w = rays.w * self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam)
+        w = rays.weighted(self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam))
         return _Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
 
     def _split(self, rays: _Rays, hit: _Hit, rng):
         """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit."""
         n, b = self.n, len(rays)
-        if self.ctx.settings.dispersion_sampling == "SPLIT":
+        split = self.ctx.settings.dispersion_sampling == "SPLIT"
+        if rays.w is None:  # unit weights: every wavelength alike
+            if split:
+                parent, lam = np.repeat(np.arange(b), n), np.tile(np.arange(n), b)
+                w = np.ones(b * n, np.float32)
+            else:
+                parent = np.arange(b)
+                lam = np.minimum((rays.u_lam * n).astype(np.int64), n - 1)
+                w = np.full(b, n, np.float32)
+        elif split:
             parent, lam = np.nonzero(rays.w > 0)
             w = rays.w[parent, lam]
         else:

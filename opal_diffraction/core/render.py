@@ -87,6 +87,24 @@ class RenderResult:
     plan: RenderPlan
     warnings: list[str] = field(default_factory=list)
     stats: dict = field(default_factory=dict)
+    # AOVs for the compositor, (H, W, 3) linear RGB: Direct (light reaching diffuse surfaces by
+    # shadow rays, also seen through mirrors and glass), Caustics (the light pass; zero until it
+    # lands), Diffraction (gratings; zero until they land). Combined = Direct + Caustics +
+    # Diffraction + the world seen directly or through glass.
+    passes: dict = field(default_factory=dict)
+
+
+class _Inline:
+    """A future-like wrapper that runs its call lazily in the calling thread."""
+
+    def __init__(self, fn, *args):
+        self.fn, self.args = fn, args
+
+    def result(self):
+        return self.fn(*self.args)
+
+    def cancel(self):
+        pass
 
 
 def _tiles(width: int, height: int, size: int):
@@ -116,7 +134,8 @@ def render(
     warnings += plan.warnings
     cam = scene.camera
     w, h, nl = int(cam.width), int(cam.height), ctx.grid.n
-    film = np.zeros((h, w, nl), np.float64)
+    film = np.zeros((h, w, nl), np.float32)
+    background_rgb = np.zeros((h, w, 3), np.float32)  # for the Direct pass: Combined minus the world
     t_prep = time.perf_counter() - t_start
 
     spp = int(settings.samples)
@@ -139,16 +158,24 @@ def render(
         return t_index, res
 
     def finish(samples):
-        spectral = (film / max(samples, 1)).astype(np.float32)
-        return RenderResult(spectral, ctx.conv.to_rgb(spectral), ctx.grid.wavelengths.copy(), samples,
-                            cancelled, plan, warnings, dict(stats))
+        scale = np.float32(1.0 / max(samples, 1))
+        spectral = film * scale
+        rgb = ctx.conv.to_rgb(spectral)
+        zeros = np.zeros_like(rgb)
+        passes = {"Direct": rgb - background_rgb * scale, "Caustics": zeros, "Diffraction": zeros.copy()}
+        return RenderResult(spectral, rgb, ctx.grid.wavelengths.copy(), samples,
+                            cancelled, plan, warnings, dict(stats), passes)
 
     work_done = 0
     with ThreadPoolExecutor(max_workers=threads) as pool:
         for r_index, r_spp in enumerate(rounds):
             round_film = np.zeros_like(film)
+            round_bg = np.zeros_like(background_rgb)
             if plan.eye_pass:
-                pending = [pool.submit(run_tile, r_index, r_spp, ti) for ti in range(len(tiles))]
+                if threads > 1:
+                    pending = [pool.submit(run_tile, r_index, r_spp, ti) for ti in range(len(tiles))]
+                else:  # in the calling thread: simpler to profile and debug
+                    pending = [_Inline(run_tile, r_index, r_spp, ti) for ti in range(len(tiles))]
                 for fut in pending:
                     if cancelled:
                         fut.cancel()
@@ -156,6 +183,8 @@ def render(
                     t_index, res = fut.result()
                     x0, y0, x1, y1 = tiles[t_index]
                     round_film[y0:y1, x0:x1] += res.film.reshape(y1 - y0, x1 - x0, nl)
+                    if res.background.any():
+                        round_bg[y0:y1, x0:x1] += ctx.conv.to_rgb(res.background).reshape(y1 - y0, x1 - x0, 3)
                     stats["rays"] += res.rays
                     work_done += 1
                     if progress:
@@ -166,6 +195,7 @@ def render(
                 if cancelled:
                     break  # a partly finished round is discarded: its tiles have fewer samples
             film += round_film
+            background_rgb += round_bg
             done_samples += r_spp
             if on_round:
                 on_round(finish(done_samples))
