@@ -126,3 +126,28 @@ def test_passes_split_direct_light_from_the_world():
     world = render(glass_in_uniform_world({"kind": "DIELECTRIC", "ior": 1.5}, pixels=8), RenderSettings(samples=2))
     np.testing.assert_allclose(world.passes["Direct"], 0.0, atol=1e-5)
     assert set(lit.passes) == {"Direct", "Caustics", "Diffraction"}
+
+
+def test_region_renders_the_same_pixels_as_the_full_image():
+    s = prism_and_stripes(pixels=32)
+    full = render(s, RenderSettings(samples=2, seed=4, tile_size=8)).rgb
+    part = render(s, RenderSettings(samples=2, seed=4, tile_size=8), region=(8, 16, 24, 32)).rgb
+    assert part.shape == (16, 16, 3)
+    # aligned to the tile grid: the same random streams, so exactly the same pixels
+    np.testing.assert_array_equal(part, full[16:32, 8:24])
+    odd = render(s, RenderSettings(samples=2, seed=4, tile_size=8), region=(5, 3, 20, 30)).rgb
+    assert odd.shape == (27, 15, 3)
+    from opal_diffraction.core.scene import SceneError
+    with pytest.raises(SceneError, match="outside"):
+        render(s, RenderSettings(samples=1), region=(0, 0, 64, 8))
+
+
+def test_emissive_surface_is_seen_with_its_radiance():
+    from opal_diffraction.core import primitives as prim
+    from scenes import top_down_camera
+    sc = Scene(materials=Materials.from_list([{"kind": "DIFFUSE", "color": (0, 0, 0), "emission": (2.0, 1.0, 0.5)}]))
+    sc.add_mesh(*prim.quad((0, 0, 0), (10, 0, 0), (0, 10, 0)), material=0)
+    sc.camera = top_down_camera(1.0, 4)
+    res = render(sc, RenderSettings(samples=1))
+    np.testing.assert_allclose(res.rgb.reshape(-1, 3), np.tile([2.0, 1.0, 0.5], (16, 1)), rtol=5e-3)
+    np.testing.assert_allclose(res.passes["Direct"], 0.0, atol=1e-5)

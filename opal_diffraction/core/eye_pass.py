@@ -86,7 +86,7 @@ class _Hit:
 @dataclass
 class TileResult:
     film: np.ndarray  # (P, n) float64 sum of sample contributions per pixel (everything)
-    background: np.ndarray  # (P, n) the part of film that is the world's light (not the Direct pass)
+    background: np.ndarray  # (P, n) the part of film that is emitted light seen (world, emitters), not Direct
     rays: int         # rays cast (camera, secondary and shadow)
 
 
@@ -143,7 +143,7 @@ class _TileTrace:
         self.n = ctx.grid.n
         self.rng = rng
         self._film = np.zeros(n_pixels * self.n, np.float64)
-        self._background = np.zeros(n_pixels * self.n, np.float64)  # world seen directly or through glass
+        self._background = np.zeros(n_pixels * self.n, np.float64)  # emitted light: world and emissive surfaces
         self._n_pixels = n_pixels
         self._rays = 0
         self.escapes = None  # a list to record rays leaving the scene (trace_escapes)
@@ -190,6 +190,12 @@ class _TileTrace:
         if hit is None or len(rays) == 0:
             return rays.take(np.zeros(len(rays), bool)), None, None
 
+        emits = ctx.materials.emissive[hit.mat]
+        if emits.any():
+            r = rays.take(emits)
+            em = ctx.materials.emission[hit.mat[emits]]
+            self._accumulate(r, r.weighted(em) if r.lam is None else r.w * em[np.arange(len(r)), r.lam],
+                             self._background)
         kind = ctx.materials.kind[hit.mat]
         diffuse = kind == DIFFUSE
         if diffuse.any():

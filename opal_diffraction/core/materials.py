@@ -28,6 +28,8 @@ class PreparedMaterials:
     reflectance: np.ndarray  # (M, n) float32: albedo / tint spectrum
     ior: np.ndarray          # (M, n) float32: refractive index per wavelength (1 for non-dielectrics)
     dispersive: np.ndarray   # (M,) bool: index varies over the grid
+    emission: np.ndarray     # (M, n) float32 emitted spectral radiance (zero for most)
+    emissive: np.ndarray     # (M,) bool
 
     @property
     def has_dispersion(self) -> bool:
@@ -42,4 +44,6 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
     for i in np.flatnonzero(kind == DIELECTRIC):  # one row per material, not per ray
         ior[i] = ior_spectrum(wl, _MODEL_NAMES[int(m.dispersion[i])], float(m.ior[i]), float(m.abbe[i]))
     dispersive = (kind == DIELECTRIC) & (np.ptp(ior, axis=1) > 0) if len(kind) else np.zeros(0, bool)
-    return PreparedMaterials(kind, refl.astype(np.float32), ior.astype(np.float32), dispersive)
+    emission = conv.illuminant_from_rgb(np.asarray(m.emission, np.float64).reshape(-1, 3)).astype(np.float32)
+    return PreparedMaterials(kind, refl.astype(np.float32), ior.astype(np.float32), dispersive,
+                             emission, emission.any(axis=1))

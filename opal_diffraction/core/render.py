@@ -22,7 +22,7 @@ from .eye_pass import EyePass
 from .lights import prepare_lights
 from .materials import prepare_materials
 from .plan import RenderPlan, plan_render
-from .scene import Scene
+from .scene import Scene, SceneError
 from .settings import RenderSettings
 from .spectrum import SpectralConverter
 
@@ -90,7 +90,7 @@ class RenderResult:
     # AOVs for the compositor, (H, W, 3) linear RGB: Direct (light reaching diffuse surfaces by
     # shadow rays, also seen through mirrors and glass), Caustics (the light pass; zero until it
     # lands), Diffraction (gratings; zero until they land). Combined = Direct + Caustics +
-    # Diffraction + the world seen directly or through glass.
+    # Diffraction + emitted light seen (the world and emissive surfaces, directly or via specular).
     passes: dict = field(default_factory=dict)
 
 
@@ -107,9 +107,19 @@ class _Inline:
         pass
 
 
-def _tiles(width: int, height: int, size: int):
-    return [(x0, y0, min(x0 + size, width), min(y0 + size, height))
-            for y0 in range(0, height, size) for x0 in range(0, width, size)]
+def _tiles(width: int, height: int, size: int, region):
+    """Tiles of the full image's grid that meet ``region``, clipped to it, in region coordinates,
+    each with its stream id (its index in the full grid, so a region render aligned to tile
+    boundaries reproduces the full render's pixels exactly)."""
+    rx0, ry0, rx1, ry1 = region
+    per_row = -(-width // size)
+    out = []
+    for ty in range(ry0 // size, -(-ry1 // size)):
+        for tx in range(rx0 // size, -(-rx1 // size)):
+            x0, y0 = max(tx * size, rx0), max(ty * size, ry0)
+            x1, y1 = min((tx + 1) * size, rx1), min((ty + 1) * size, ry1)
+            out.append((x0 - rx0, y0 - ry0, x1 - rx0, y1 - ry0, ty * per_row + tx))
+    return out
 
 
 def render(
@@ -118,12 +128,15 @@ def render(
     progress: Callable[[float, str], None] | None = None,
     should_cancel: Callable[[], bool] | None = None,
     on_round: Callable[[RenderResult], None] | None = None,
+    region: tuple[int, int, int, int] | None = None,
 ) -> RenderResult:
     """Render ``scene``; raises SceneError (a readable message) for unrenderable input.
 
     ``progress(fraction, message)`` is called after every tile; ``should_cancel()`` is polled
     between tiles and stops the render early (the result holds the finished rounds);
-    ``on_round(result)`` receives the partial image after every round.
+    ``on_round(result)`` receives the partial image after every round. ``region`` = (x0, y0, x1,
+    y1) renders only those pixels of the camera's image (a border render; rows from the top); the
+    result then has shape (y1 - y0, x1 - x0).
     """
     settings = settings or RenderSettings()
     settings.validate()
@@ -133,14 +146,17 @@ def render(
     plan = plan_render(ctx)
     warnings += plan.warnings
     cam = scene.camera
-    w, h, nl = int(cam.width), int(cam.height), ctx.grid.n
+    rx0, ry0, rx1, ry1 = region if region is not None else (0, 0, int(cam.width), int(cam.height))
+    if not (0 <= rx0 < rx1 <= int(cam.width) and 0 <= ry0 < ry1 <= int(cam.height)):
+        raise SceneError(f"render region {region} is outside the {cam.width}x{cam.height} image")
+    w, h, nl = rx1 - rx0, ry1 - ry0, ctx.grid.n
     film = np.zeros((h, w, nl), np.float32)
     background_rgb = np.zeros((h, w, 3), np.float32)  # for the Direct pass: Combined minus the world
     t_prep = time.perf_counter() - t_start
 
     spp = int(settings.samples)
     rounds = [min(settings.round_samples, spp - s) for s in range(0, spp, settings.round_samples)]
-    tiles = _tiles(w, h, int(settings.tile_size))
+    tiles = _tiles(int(cam.width), int(cam.height), int(settings.tile_size), (rx0, ry0, rx1, ry1))
     filt = FilterSampler(settings.filter_width)
     eye = EyePass(ctx)
     threads = settings.threads or os.cpu_count() or 1
@@ -149,9 +165,9 @@ def render(
     total_work = len(rounds) * len(tiles)
 
     def run_tile(r_index, r_spp, t_index):
-        x0, y0, x1, y1 = tiles[t_index]
-        rng = np.random.default_rng(np.random.SeedSequence([int(settings.seed), EYE_PASS_STREAM, r_index, t_index]))
-        ys, xs = np.mgrid[y0:y1, x0:x1]
+        x0, y0, x1, y1, stream = tiles[t_index]
+        rng = np.random.default_rng(np.random.SeedSequence([int(settings.seed), EYE_PASS_STREAM, r_index, stream]))
+        ys, xs = np.mgrid[y0 + ry0:y1 + ry0, x0 + rx0:x1 + rx0]
         sx, sy, sl, pidx = pixel_samples(xs.ravel().astype(np.float64), ys.ravel().astype(np.float64), r_spp, rng, filt)
         o, d = generate_rays(cam, sx, sy)
         res = eye.trace(o, d, pidx, (y1 - y0) * (x1 - x0), rng, u_lambda=sl)
@@ -181,7 +197,7 @@ def render(
                         fut.cancel()
                         continue
                     t_index, res = fut.result()
-                    x0, y0, x1, y1 = tiles[t_index]
+                    x0, y0, x1, y1, _ = tiles[t_index]
                     round_film[y0:y1, x0:x1] += res.film.reshape(y1 - y0, x1 - x0, nl)
                     if res.background.any():
                         round_bg[y0:y1, x0:x1] += ctx.conv.to_rgb(res.background).reshape(y1 - y0, x1 - x0, 3)

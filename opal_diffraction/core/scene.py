@@ -47,6 +47,8 @@ class Materials:
     kind: MATERIAL_KINDS code. color: base colour (diffuse albedo, mirror tint, or dielectric
     tint applied to transmission and reflection alike). ior: index of refraction at the d line
     (used by 'NONE' and 'ABBE' dispersion). dispersion: DISPERSION_MODELS code. abbe: Abbe number V_d.
+    emission: emitted radiance as linear RGB (Cycles' units: Emission colour x strength; a white
+    emitter of strength 1 has the radiance of the world colour (1, 1, 1)), both sides, any kind.
     """
 
     kind: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
@@ -55,6 +57,7 @@ class Materials:
     dispersion: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     abbe: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     name: np.ndarray = field(default_factory=lambda: np.zeros(0, "<U64"))
+    emission: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
 
     def __len__(self):
         return len(self.kind)
@@ -62,7 +65,7 @@ class Materials:
     @classmethod
     def from_list(cls, rows: list[dict]) -> "Materials":
         """Build from dicts like {'kind': 'DIELECTRIC', 'color': (1,1,1), 'ior': 1.5, 'dispersion': 'BK7'}."""
-        kinds, cols, iors, disp, abbes, names = [], [], [], [], [], []
+        kinds, cols, iors, disp, abbes, names, emits = [], [], [], [], [], [], []
         for i, r in enumerate(rows):
             k = r.get("kind", "DIFFUSE")
             if k not in MATERIAL_KINDS:
@@ -76,6 +79,7 @@ class Materials:
             disp.append(DISPERSION_MODELS[d])
             abbes.append(r.get("abbe", 0.0))
             names.append(r.get("name", f"material_{i}"))
+            emits.append(r.get("emission", (0.0, 0.0, 0.0)))
         return cls(
             np.array(kinds, np.int32),
             np.array(cols, np.float32).reshape(-1, 3),
@@ -83,6 +87,7 @@ class Materials:
             np.array(disp, np.int32),
             np.array(abbes, np.float32),
             np.array(names, "<U64"),
+            np.array(emits, np.float32).reshape(-1, 3),
         )
 
 
@@ -308,6 +313,8 @@ class Scene:
             if ver > FORMAT_VERSION:
                 raise SceneError(f"{path} was written by a newer version (format {ver} > {FORMAT_VERSION})")
             mats = Materials(**{f.name: z["material_" + f.name] for f in fields(Materials) if "material_" + f.name in z})
+            if "material_emission" not in z:  # optional column
+                mats.emission = np.zeros((len(mats.kind), 3), np.float32)
             lights = Lights(**{f.name: z["light_" + f.name] for f in fields(Lights) if "light_" + f.name in z})
             cam = None
             if "camera_matrix" in z:
@@ -359,6 +366,8 @@ def _validate_materials(m: Materials) -> None:
         raise SceneError(f"dispersion codes must be in {sorted(DISPERSION_MODELS.values())}")
     if not np.isfinite(m.color).all():
         raise SceneError("a material colour is NaN or infinite")
+    if not np.isfinite(m.emission).all() or (m.emission < 0).any():
+        raise SceneError("a material emission is negative, NaN or infinite")
     diel = m.kind == MATERIAL_KINDS["DIELECTRIC"]
     bad_ior = diel & ~(np.isfinite(m.ior) & (m.ior >= 1.0))
     if bad_ior.any():
