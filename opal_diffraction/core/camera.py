@@ -82,10 +82,11 @@ def pixel_samples(
     p = len(pixel_x)
     strata = np.arange(spp, dtype=np.float64)[None, :]
     # N-rooks: x strata in order, y strata in a random permutation per pixel.
-    perm = np.argsort(rng.random((p, spp)), axis=1).astype(np.float64)
+    strata_rows = np.broadcast_to(np.arange(spp, dtype=np.float64), (p, spp))
+    perm = rng.permuted(strata_rows, axis=1)
     ux = (strata + rng.random((p, spp))) / spp
     uy = (perm + rng.random((p, spp))) / spp
-    perm_l = np.argsort(rng.random((p, spp)), axis=1).astype(np.float64)
+    perm_l = rng.permuted(strata_rows, axis=1)
     ul = (perm_l + rng.random((p, spp))) / spp
     x = pixel_x[:, None] + 0.5 + filt.offsets(ux)
     y = pixel_y[:, None] + 0.5 + filt.offsets(uy)

@@ -46,6 +46,8 @@ class _Rays:
         return len(self.pix)
 
     def take(self, mask) -> "_Rays":
+        if mask.dtype == bool and len(mask) and mask.all():
+            return self
         return _Rays(self.o[mask], self.d[mask], self.pix[mask], None if self.w is None else self.w[mask],
                      None if self.lam is None else self.lam[mask], self.depth[mask], self.u_lam[mask])
 
@@ -73,14 +75,17 @@ class _Hit:
     cos_i: np.ndarray  # (B,) cosine between -d and ng (>= 0)
     front: np.ndarray  # (B,) bool: the ray arrived on the side the triangle's normal points to
     mat: np.ndarray   # (B,) material index
+    eps: np.ndarray   # (B,) float32 self-intersection offset at the hit
 
     def take(self, mask) -> "_Hit":
-        return _Hit(self.p[mask], self.ng[mask], self.cos_i[mask], self.front[mask], self.mat[mask])
+        if mask.dtype == bool and len(mask) and mask.all():
+            return self
+        return _Hit(self.p[mask], self.ng[mask], self.cos_i[mask], self.front[mask], self.mat[mask], self.eps[mask])
 
     @staticmethod
     def concat(a: "_Hit", b: "_Hit") -> "_Hit":
         return _Hit(*(np.concatenate([x, y]) for x, y in
-                      zip((a.p, a.ng, a.cos_i, a.front, a.mat), (b.p, b.ng, b.cos_i, b.front, b.mat))))
+                      zip((a.p, a.ng, a.cos_i, a.front, a.mat, a.eps), (b.p, b.ng, b.cos_i, b.front, b.mat, b.eps))))
 
 
 @dataclass
@@ -142,8 +147,8 @@ class _TileTrace:
         self.ctx = ctx
         self.n = ctx.grid.n
         self.rng = rng
-        self._film = np.zeros(n_pixels * self.n, np.float64)
-        self._background = np.zeros(n_pixels * self.n, np.float64)  # emitted light: world and emissive surfaces
+        self._film = np.zeros(n_pixels * self.n, np.float32)
+        self._background = np.zeros(n_pixels * self.n, np.float32)  # emitted light: world and emissive surfaces
         self._n_pixels = n_pixels
         self._rays = 0
         self.escapes = None  # a list to record rays leaving the scene (trace_escapes)
@@ -227,10 +232,11 @@ class _TileTrace:
         ctx = self.ctx
         p = rays.o + t[:, None] * rays.d
         ng = ctx.tri_normal[prim]
-        cos = -np.sum(rays.d * ng, axis=1)
+        cos = -np.einsum("ij,ij->i", rays.d, ng)
         front = cos > 0
         ng = np.where(front[:, None], ng, -ng)
-        return _Hit(p.astype(np.float32), ng, np.abs(cos), front, ctx.tri_material[prim])
+        return _Hit(p.astype(np.float32, copy=False), ng, np.abs(cos), front, ctx.tri_material[prim],
+                    ctx.tri_offset[prim])
 
     # ----------------------------------------------------------------- spectra helpers
     @staticmethod
@@ -268,7 +274,9 @@ class _TileTrace:
         if ray.size == 0:
             return True
         combo = mat[ray].astype(np.int64) * nl + light
-        uniq, u = np.unique(combo, return_inverse=True)
+        present = np.bincount(combo, minlength=len(ctx.materials.kind) * nl) > 0  # O(B), no sort
+        uniq = np.flatnonzero(present)
+        u = (np.cumsum(present) - 1)[combo]
         if len(uniq) * self._n_pixels > b * nl:
             return False
         g = np.bincount(pix[ray] * len(uniq) + u, weights=factors[ray, light],
@@ -300,12 +308,12 @@ class _TileTrace:
         origins, dirs, tmax, idx = [], [], [], []
         for li in range(nl):  # loop over lights (a handful), not rays
             wi, dist, g = sample_light(lights, li, hit.p, rng)
-            cos_s = np.sum(wi * hit.ng, axis=1)
-            f = np.where(cos_s > 0, g * cos_s, 0.0)
+            cos_s = np.einsum("ij,ij->i", wi, hit.ng)
+            f = np.where(cos_s > 0, g * cos_s, np.float32(0.0))
             live = np.flatnonzero(f > 0)
             if live.size == 0:
                 continue
-            eps = ctx.offset(hit.p[live])
+            eps = hit.eps[live]
             origins.append(hit.p[live] + eps[:, None] * hit.ng[live])
             dirs.append(wi[live])
             tmax.append(np.where(np.isinf(dist[live]), np.inf, dist[live] - 2 * eps))
@@ -330,7 +338,7 @@ class _TileTrace:
     def _mirror(self, rays: _Rays, hit: _Hit) -> _Rays:
         ctx = self.ctx
         d = reflect(rays.d, hit.ng)
-        o = hit.p + ctx.offset(hit.p)[:, None] * hit.ng
+        o = hit.p + hit.eps[:, None] * hit.ng
         w = rays.weighted(self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam))
         return _Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
 
@@ -344,7 +352,7 @@ class _TileTrace:
         t_dir, _ = refract(rays.d, hit.ng, eta)
         d = np.where(refl[:, None], reflect(rays.d, hit.ng), t_dir)
         side = np.where(refl, 1.0, -1.0).astype(np.float32)
-        o = hit.p + (ctx.offset(hit.p) * side)[:, None] * hit.ng
+        o = hit.p + (hit.eps * side)[:, None] * hit.ng
         w = rays.weighted(self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam))
         return _Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
 

@@ -102,33 +102,34 @@ def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.G
     """
     k = int(pl.kind[index])
     b = len(p)
+    f32 = np.float32
     if k == SUN:
-        wi = np.broadcast_to(-pl.direction[index], (b, 3)).astype(np.float64)
-        return wi, np.full(b, np.inf), np.ones(b)
+        wi = np.broadcast_to(-pl.direction[index].astype(f32), (b, 3))
+        return wi, np.full(b, np.inf, f32), np.ones(b, f32)
     if k in (POINT, SPOT):
-        target = np.broadcast_to(pl.position[index], (b, 3))
+        target = pl.position[index].astype(f32)
     else:
-        r1, r2 = rng.random(b), rng.random(b)
+        r1, r2 = rng.random(b, f32), rng.random(b, f32)
         if k == AREA_RECT:
             a, c = (r1 - 0.5) * pl.size_u[index], (r2 - 0.5) * pl.size_v[index]
         else:  # uniform on an ellipse: concentric-free polar mapping is fine for uniform density
             rad, phi = np.sqrt(r1), 2 * np.pi * r2
             a, c = 0.5 * pl.size_u[index] * rad * np.cos(phi), 0.5 * pl.size_v[index] * rad * np.sin(phi)
-        target = pl.position[index] + a[:, None] * pl.axis_u[index] + c[:, None] * pl.axis_v[index]
+        target = (pl.position[index] + a[:, None] * pl.axis_u[index] + c[:, None] * pl.axis_v[index]).astype(f32)
     to_light = target - p
-    d2 = np.maximum(np.sum(to_light * to_light, axis=1), 1e-30)
+    d2 = np.maximum(np.einsum("ij,ij->i", to_light, to_light), f32(1e-30))
     dist = np.sqrt(d2)
     wi = to_light / dist[:, None]
     if k in (POINT, SPOT):
-        g = 1.0 / d2
+        g = f32(1.0) / d2
         if k == SPOT:
-            cos_axis = -(wi @ pl.direction[index])
+            cos_axis = -(wi @ pl.direction[index].astype(f32))
             ch, sm = pl.cos_half_spot[index], pl.spot_smooth[index]
             cone = np.where(cos_axis > ch, 1.0, 0.0)
             if sm > 0:
                 cone = cone * _smoothstep((cos_axis - ch) / sm)
             g = g * cone
         return wi, dist, g
-    cos_l = -(wi @ pl.direction[index])
-    g = np.where(cos_l > 0, cos_l * pl.area[index] / d2, 0.0)
+    cos_l = -(wi @ pl.direction[index].astype(f32))
+    g = np.where(cos_l > 0, cos_l * f32(pl.area[index]) / d2, f32(0.0))
     return wi, dist, g

@@ -42,6 +42,7 @@ class RenderContext:
     materials: object
     lights: object
     tri_normal: np.ndarray
+    tri_offset: np.ndarray  # (T,) float32 self-intersection offset per triangle
     tri_material: np.ndarray
     world_spectrum: np.ndarray
     offset_base: float
@@ -54,6 +55,13 @@ class RenderContext:
         """Self-intersection offset (B,) at points p: scene-scaled plus float32 rounding of |p|."""
         return (self.offset_base + 4e-7 * np.max(np.abs(p), axis=1)).astype(np.float32)
 
+    @staticmethod
+    def triangle_offsets(v: np.ndarray, t: np.ndarray, base: float) -> np.ndarray:
+        """offset() bounded over each triangle (its largest |coordinate|), looked up per hit."""
+        if len(t) == 0:
+            return np.zeros(0, np.float32)
+        return (base + 4e-7 * np.abs(v[t]).max(axis=(1, 2))).astype(np.float32)
+
     @classmethod
     def prepare(cls, scene: Scene, settings: RenderSettings, conv: SpectralConverter | None = None) -> "RenderContext":
         conv = conv or SpectralConverter(settings.grid())
@@ -63,6 +71,7 @@ class RenderContext:
         nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) if len(t) else np.zeros((0, 3))
         nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
         extent = float(np.max(np.ptp(v, axis=0))) if len(v) else 1.0
+        base = 1e-5 * max(extent, 1e-3)
         return cls(
             scene=scene,
             settings=settings,
@@ -71,9 +80,10 @@ class RenderContext:
             materials=prepare_materials(scene.materials, conv),
             lights=prepare_lights(scene.lights, conv),
             tri_normal=nrm.astype(np.float32),
+            tri_offset=cls.triangle_offsets(v, t, base),
             tri_material=np.asarray(scene.tri_material, np.int32),
             world_spectrum=conv.illuminant_from_rgb(np.asarray(scene.world_color, np.float64)).astype(np.float32),
-            offset_base=1e-5 * max(extent, 1e-3),
+            offset_base=base,
         )
 
 
@@ -151,7 +161,8 @@ def render(
         raise SceneError(f"render region {region} is outside the {cam.width}x{cam.height} image")
     w, h, nl = rx1 - rx0, ry1 - ry0, ctx.grid.n
     film = np.zeros((h, w, nl), np.float32)
-    background_rgb = np.zeros((h, w, 3), np.float32)  # for the Direct pass: Combined minus the world
+    background_rgb = np.zeros((h, w, 3), np.float32)  # for the Direct pass: Combined minus emitted light
+    counts = np.zeros((h, w), np.float32)  # samples per pixel so far (tiles may differ after a cancel)
     t_prep = time.perf_counter() - t_start
 
     spp = int(settings.samples)
@@ -173,20 +184,18 @@ def render(
         res = eye.trace(o, d, pidx, (y1 - y0) * (x1 - x0), rng, u_lambda=sl)
         return t_index, res
 
-    def finish(samples):
-        scale = np.float32(1.0 / max(samples, 1))
+    def finish():
+        scale = (1.0 / np.maximum(counts, 1.0))[..., None]
         spectral = film * scale
         rgb = ctx.conv.to_rgb(spectral)
         zeros = np.zeros_like(rgb)
         passes = {"Direct": rgb - background_rgb * scale, "Caustics": zeros, "Diffraction": zeros.copy()}
-        return RenderResult(spectral, rgb, ctx.grid.wavelengths.copy(), samples,
+        return RenderResult(spectral, rgb, ctx.grid.wavelengths.copy(), int(counts.min()) if counts.size else 0,
                             cancelled, plan, warnings, dict(stats), passes)
 
     work_done = 0
     with ThreadPoolExecutor(max_workers=threads) as pool:
         for r_index, r_spp in enumerate(rounds):
-            round_film = np.zeros_like(film)
-            round_bg = np.zeros_like(background_rgb)
             if plan.eye_pass:
                 if threads > 1:
                     pending = [pool.submit(run_tile, r_index, r_spp, ti) for ti in range(len(tiles))]
@@ -198,9 +207,10 @@ def render(
                         continue
                     t_index, res = fut.result()
                     x0, y0, x1, y1, _ = tiles[t_index]
-                    round_film[y0:y1, x0:x1] += res.film.reshape(y1 - y0, x1 - x0, nl)
+                    film[y0:y1, x0:x1] += res.film.reshape(y1 - y0, x1 - x0, nl)
                     if res.background.any():
-                        round_bg[y0:y1, x0:x1] += ctx.conv.to_rgb(res.background).reshape(y1 - y0, x1 - x0, 3)
+                        background_rgb[y0:y1, x0:x1] += ctx.conv.to_rgb(res.background).reshape(y1 - y0, x1 - x0, 3)
+                    counts[y0:y1, x0:x1] += r_spp
                     stats["rays"] += res.rays
                     work_done += 1
                     if progress:
@@ -209,15 +219,13 @@ def render(
                     if should_cancel and should_cancel():
                         cancelled = True
                 if cancelled:
-                    break  # a partly finished round is discarded: its tiles have fewer samples
-            film += round_film
-            background_rgb += round_bg
+                    break  # tiles finished in this round keep their extra samples (counts say so)
             done_samples += r_spp
             if on_round:
-                on_round(finish(done_samples))
+                on_round(finish())
             if settings.time_limit and time.perf_counter() - t_start > settings.time_limit and r_index + 1 < len(rounds):
                 warnings.append(f"time limit reached after {done_samples} of {spp} samples per pixel")
                 break
     stats["render_s"] = time.perf_counter() - t_start
     stats["mrays_per_s"] = stats["rays"] / max(stats["render_s"] - t_prep, 1e-9) / 1e6
-    return finish(done_samples)
+    return finish()
