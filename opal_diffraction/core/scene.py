@@ -19,6 +19,9 @@ from .optics import DISPERSION_MODELS
 
 __all__ = [
     "SceneError",
+    "GRATING_TYPES",
+    "LATTICES",
+    "GRATING_DIRECTIONS",
     "MATERIAL_KINDS",
     "LIGHT_KINDS",
     "Materials",
@@ -40,6 +43,41 @@ class SceneError(ValueError):
     """A scene that cannot be rendered; the message names the problem for the user."""
 
 
+#: Grating enumerations (stable codes).
+GRATING_TYPES = {"REFLECTION": 0, "TRANSMISSION": 1}
+LATTICES = {"LINES": 0, "HEXAGONAL": 1}
+GRATING_DIRECTIONS = {"UV": 0, "OBJECT_X": 1, "ATTRIBUTE": 2}
+
+# column name -> (dtype, per-row shape, default, enumeration or None)
+_MATERIAL_COLUMNS = {
+    "kind": (np.int32, (), "DIFFUSE", MATERIAL_KINDS),
+    "color": (np.float32, (3,), (0.8, 0.8, 0.8), None),
+    "ior": (np.float32, (), 1.5, None),
+    "dispersion": (np.int32, (), "NONE", DISPERSION_MODELS),
+    "abbe": (np.float32, (), 0.0, None),
+    "name": ("<U64", (), None, None),
+    "emission": (np.float32, (3,), (0.0, 0.0, 0.0), None),
+    "grating": (np.int32, (), 0, None),
+    "grating_type": (np.int32, (), "REFLECTION", GRATING_TYPES),
+    "lattice": (np.int32, (), "LINES", LATTICES),
+    "period": (np.float32, (), 1600.0, None),
+    "slit_width": (np.float32, (), 800.0, None),
+    "slit_count": (np.int32, (), 1000, None),
+    "coherence_length": (np.float32, (), 10.0, None),
+    "grating_direction": (np.int32, (), "UV", GRATING_DIRECTIONS),
+    "rotation": (np.float32, (), 0.0, None),
+}
+
+
+def _material_column_default(name, rows):
+    dtype, tail, default, enum = _MATERIAL_COLUMNS[name]
+    if name == "name":
+        return np.array([f"material_{i}" for i in range(rows)], dtype)
+    if enum is not None:
+        default = enum[default]
+    return np.array([default] * rows, dtype).reshape((rows,) + tail)
+
+
 @dataclass
 class Materials:
     """Material table, one row per material.
@@ -49,46 +87,63 @@ class Materials:
     (used by 'NONE' and 'ABBE' dispersion). dispersion: DISPERSION_MODELS code. abbe: Abbe number V_d.
     emission: emitted radiance as linear RGB (Cycles' units: Emission colour x strength; a white
     emitter of strength 1 has the radiance of the world colour (1, 1, 1)), both sides, any kind.
+
+    Grating layer (physics.md section 3), on top of the base kind: grating (0/1), grating_type
+    (GRATING_TYPES), lattice (LATTICES), period D (nm), slit_width a (nm), slit_count N,
+    coherence_length L (um, the slits' length), grating_direction (GRATING_DIRECTIONS: how the
+    exporter found the per-triangle tangent in ``Scene.tri_tangent``), rotation (radians, about
+    the normal).
     """
 
-    kind: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
-    color: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
-    ior: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
-    dispersion: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
-    abbe: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
-    name: np.ndarray = field(default_factory=lambda: np.zeros(0, "<U64"))
-    emission: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    kind: np.ndarray = field(default_factory=lambda: _material_column_default("kind", 0))
+    color: np.ndarray = field(default_factory=lambda: _material_column_default("color", 0))
+    ior: np.ndarray = field(default_factory=lambda: _material_column_default("ior", 0))
+    dispersion: np.ndarray = field(default_factory=lambda: _material_column_default("dispersion", 0))
+    abbe: np.ndarray = field(default_factory=lambda: _material_column_default("abbe", 0))
+    name: np.ndarray = field(default_factory=lambda: _material_column_default("name", 0))
+    emission: np.ndarray = field(default_factory=lambda: _material_column_default("emission", 0))
+    grating: np.ndarray = field(default_factory=lambda: _material_column_default("grating", 0))
+    grating_type: np.ndarray = field(default_factory=lambda: _material_column_default("grating_type", 0))
+    lattice: np.ndarray = field(default_factory=lambda: _material_column_default("lattice", 0))
+    period: np.ndarray = field(default_factory=lambda: _material_column_default("period", 0))
+    slit_width: np.ndarray = field(default_factory=lambda: _material_column_default("slit_width", 0))
+    slit_count: np.ndarray = field(default_factory=lambda: _material_column_default("slit_count", 0))
+    coherence_length: np.ndarray = field(default_factory=lambda: _material_column_default("coherence_length", 0))
+    grating_direction: np.ndarray = field(default_factory=lambda: _material_column_default("grating_direction", 0))
+    rotation: np.ndarray = field(default_factory=lambda: _material_column_default("rotation", 0))
 
     def __len__(self):
         return len(self.kind)
 
     @classmethod
     def from_list(cls, rows: list[dict]) -> "Materials":
-        """Build from dicts like {'kind': 'DIELECTRIC', 'color': (1,1,1), 'ior': 1.5, 'dispersion': 'BK7'}."""
-        kinds, cols, iors, disp, abbes, names, emits = [], [], [], [], [], [], []
-        for i, r in enumerate(rows):
-            k = r.get("kind", "DIFFUSE")
-            if k not in MATERIAL_KINDS:
-                raise SceneError(f"material {i}: unknown kind {k!r}; expected one of {sorted(MATERIAL_KINDS)}")
-            d = r.get("dispersion", "NONE")
-            if d not in DISPERSION_MODELS:
-                raise SceneError(f"material {i}: unknown dispersion {d!r}; expected one of {sorted(DISPERSION_MODELS)}")
-            kinds.append(MATERIAL_KINDS[k])
-            cols.append(r.get("color", (0.8, 0.8, 0.8)))
-            iors.append(r.get("ior", 1.5))
-            disp.append(DISPERSION_MODELS[d])
-            abbes.append(r.get("abbe", 0.0))
-            names.append(r.get("name", f"material_{i}"))
-            emits.append(r.get("emission", (0.0, 0.0, 0.0)))
-        return cls(
-            np.array(kinds, np.int32),
-            np.array(cols, np.float32).reshape(-1, 3),
-            np.array(iors, np.float32),
-            np.array(disp, np.int32),
-            np.array(abbes, np.float32),
-            np.array(names, "<U64"),
-            np.array(emits, np.float32).reshape(-1, 3),
-        )
+        """Build from dicts like {'kind': 'DIELECTRIC', 'color': (1,1,1), 'ior': 1.5, 'dispersion': 'BK7'}.
+
+        Missing keys take their defaults; enumerations are given by name ('BK7', 'REFLECTION', ...).
+        """
+        out = {}
+        for name, (dtype, tail, default, enum) in _MATERIAL_COLUMNS.items():
+            col = _material_column_default(name, len(rows))
+            for i, r in enumerate(rows):
+                unknown = set(r) - set(_MATERIAL_COLUMNS)
+                if unknown:
+                    raise SceneError(f"material {i}: unknown setting(s) {sorted(unknown)}")
+                if name not in r:
+                    continue
+                val = r[name]
+                if enum is not None:
+                    if val not in enum:
+                        raise SceneError(f"material {i}: unknown {name} {val!r}; expected one of {sorted(enum)}")
+                    val = enum[val]
+                col[i] = val
+            out[name] = col
+        return cls(**out)
+
+    @classmethod
+    def from_columns(cls, columns: dict, rows: int) -> "Materials":
+        """Build from stored columns, filling columns an older file lacks with their defaults."""
+        return cls(**{name: np.asarray(columns[name]) if name in columns else _material_column_default(name, rows)
+                      for name in _MATERIAL_COLUMNS})
 
 
 @dataclass
@@ -202,7 +257,13 @@ class Camera:
 
 @dataclass
 class Scene:
-    """Flat arrays describing everything a render needs."""
+    """Flat arrays describing everything a render needs.
+
+    Optional per-triangle grating data (empty arrays mean "not given"): ``tri_tangent`` (T, 3),
+    the grating vector t-hat in world space (projected onto each triangle's plane at render
+    time; zero rows fall back to the world X axis), and ``tri_period`` (T,), a period in nm that
+    overrides the material's (0: use the material's), as the opal domain tools write them.
+    """
 
     vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int32))
@@ -211,17 +272,34 @@ class Scene:
     lights: Lights = field(default_factory=Lights)
     camera: Camera | None = None
     world_color: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
+    tri_tangent: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    tri_period: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
 
     # ------------------------------------------------------------------ building
-    def add_mesh(self, vertices, triangles, material: int) -> None:
-        """Append a mesh (its own vertex numbering) with one material for all its triangles."""
+    def add_mesh(self, vertices, triangles, material: int, tangent=None, period=None) -> None:
+        """Append a mesh (its own vertex numbering) with one material for all its triangles.
+
+        ``tangent``: a grating direction (3,) for all its triangles or (T, 3) per triangle;
+        ``period``: a period override in nm, scalar or (T,).
+        """
         v = np.asarray(vertices, np.float32).reshape(-1, 3)
         t = np.asarray(triangles, np.int64).reshape(-1, 3) + len(self.vertices)
+        n_old = len(self.triangles)
         self.vertices = np.concatenate([self.vertices, v])
         self.triangles = np.concatenate([self.triangles, t.astype(np.int32)])
         self.tri_material = np.concatenate(
             [self.tri_material, np.full(len(t), material, np.int32)]
         )
+        if tangent is not None or len(self.tri_tangent):
+            old = self.tri_tangent if len(self.tri_tangent) else np.zeros((n_old, 3), np.float32)
+            new = np.zeros((len(t), 3), np.float32) if tangent is None else np.broadcast_to(
+                np.asarray(tangent, np.float32), (len(t), 3))
+            self.tri_tangent = np.concatenate([old, new])
+        if period is not None or len(self.tri_period):
+            old = self.tri_period if len(self.tri_period) else np.zeros(n_old, np.float32)
+            new = np.zeros(len(t), np.float32) if period is None else np.broadcast_to(
+                np.asarray(period, np.float32), (len(t),))
+            self.tri_period = np.concatenate([old, new])
 
     # ------------------------------------------------------------------ validation
     def validated(self) -> tuple["Scene", list[str]]:
@@ -263,6 +341,12 @@ class Scene:
         if not np.isfinite(np.asarray(self.world_color, np.float64)).all():
             raise SceneError("world colour is NaN or infinite")
 
+        tt = np.asarray(self.tri_tangent, np.float32).reshape(-1, 3)
+        tp = np.asarray(self.tri_period, np.float32).reshape(-1)
+        if len(tt) not in (0, len(t)) or len(tp) not in (0, len(t)):
+            raise SceneError(f"tri_tangent / tri_period must have one entry per triangle ({len(t)}) or none")
+        if not np.isfinite(tt).all() or not np.isfinite(tp).all() or (tp < 0).any():
+            raise SceneError("a per-triangle grating direction or period is NaN, infinite or negative")
         t = t.astype(np.int32)
         if len(t):
             p = v.astype(np.float64)[t]
@@ -270,12 +354,15 @@ class Scene:
             degenerate = area2 <= 0.0
             if degenerate.any():
                 warns.append(f"dropped {int(degenerate.sum())} degenerate (zero-area) triangle(s)")
-                t, tm = t[~degenerate], tm[~degenerate]
+                keep = ~degenerate
+                t, tm = t[keep], tm[keep]
+                tt = tt[keep] if len(tt) else tt
+                tp = tp[keep] if len(tp) else tp
         if len(t) == 0:
             warns.append("the scene has no geometry: the image shows only the background")
         if len(self.lights) == 0:
             warns.append("the scene has no lights: only the background is lit")
-        clean = replace(self, vertices=v, triangles=t, tri_material=tm.astype(np.int32))
+        clean = replace(self, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp)
         return clean, warns
 
     # ------------------------------------------------------------------ .npz
@@ -287,6 +374,8 @@ class Scene:
             "triangles": np.asarray(self.triangles, np.int32),
             "tri_material": np.asarray(self.tri_material, np.int32),
             "world_color": np.asarray(self.world_color, np.float32),
+            "tri_tangent": np.asarray(self.tri_tangent, np.float32).reshape(-1, 3),
+            "tri_period": np.asarray(self.tri_period, np.float32).reshape(-1),
         }
         for f in fields(Materials):
             d["material_" + f.name] = getattr(self.materials, f.name)
@@ -312,9 +401,8 @@ class Scene:
             ver = int(z["format_version"])
             if ver > FORMAT_VERSION:
                 raise SceneError(f"{path} was written by a newer version (format {ver} > {FORMAT_VERSION})")
-            mats = Materials(**{f.name: z["material_" + f.name] for f in fields(Materials) if "material_" + f.name in z})
-            if "material_emission" not in z:  # optional column
-                mats.emission = np.zeros((len(mats.kind), 3), np.float32)
+            cols = {f.name: z["material_" + f.name] for f in fields(Materials) if "material_" + f.name in z}
+            mats = Materials.from_columns(cols, len(cols.get("kind", ())))
             lights = Lights(**{f.name: z["light_" + f.name] for f in fields(Lights) if "light_" + f.name in z})
             cam = None
             if "camera_matrix" in z:
@@ -332,6 +420,8 @@ class Scene:
                 lights=lights,
                 camera=cam,
                 world_color=z["world_color"],
+                tri_tangent=z["tri_tangent"] if "tri_tangent" in z else np.zeros((0, 3), np.float32),
+                tri_period=z["tri_period"] if "tri_period" in z else np.zeros(0, np.float32),
             )
 
 
@@ -377,6 +467,20 @@ def _validate_materials(m: Materials) -> None:
     if abbe.any():
         i = int(np.argmax(abbe))
         raise SceneError(f"material {m.name[i]!r}: Abbe dispersion needs an Abbe number > 0")
+    g = np.asarray(m.grating) != 0
+    for col, what in (("period", "period"), ("slit_width", "slit width"), ("coherence_length", "coherence length")):
+        bad = g & ~(np.isfinite(getattr(m, col)) & (getattr(m, col) > 0))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"material {m.name[i]!r}: grating {what} must be > 0, got {float(getattr(m, col)[i])}")
+    bad = g & (m.slit_width > m.period)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"material {m.name[i]!r}: grating slit width {float(m.slit_width[i])} nm is larger "
+                         f"than the period {float(m.period[i])} nm")
+    bad = g & (m.slit_count < 1)
+    if bad.any():
+        raise SceneError(f"material {m.name[int(np.argmax(bad))]!r}: grating slit count must be >= 1")
 
 
 def _validate_lights(lt: Lights) -> None:
