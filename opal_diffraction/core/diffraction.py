@@ -150,7 +150,7 @@ def fraunhofer_pattern(u, v, wavelength, a, d, n, length) -> np.ndarray:
     return sinc2(np.pi * a * u / lam) * multislit(np.pi * d * u / lam, n) * sinc2(np.pi * length * v / lam)
 
 
-def fraunhofer_pattern_binned(u, v, edges, a, d, n, length, subdivisions: int = 4) -> np.ndarray:
+def fraunhofer_pattern_binned(u, v, edges, a, d, n, length, subdivisions: int = 4, lam_power: int = 0) -> np.ndarray:
     """The mean of P over each wavelength bin [edges[k], edges[k+1]], for every (u, v).
 
     u, v: (B,); edges: (K+1,) in the unit of a, d, length. Returns (B, K). Each bin is split into
@@ -158,6 +158,8 @@ def fraunhofer_pattern_binned(u, v, edges, a, d, n, length, subdivisions: int = 
     closed form over their argument (both are proportional to 1/lambda) and the slowly varying
     slit envelope is taken at the part's centre; the parts are averaged with weights equal to
     their width in lambda. The error against fine quadrature is bounded in the tests.
+    ``lam_power`` multiplies each part by lambda^lam_power (the radiance factor's 1/lambda^2 is
+    averaged with the pattern this way). a and d may be scalars or (B, 1) arrays.
     """
     u = np.asarray(u, np.float64)[:, None]
     v = np.asarray(v, np.float64)[:, None]
@@ -172,7 +174,10 @@ def fraunhofer_pattern_binned(u, v, edges, a, d, n, length, subdivisions: int = 
     ms = multislit_mean(np.pi * d * u * lo, np.pi * d * u * hi, n)
     zf = sinc2_mean(np.pi * length * v * lo, np.pi * length * v * hi)
     env = sinc2(np.pi * a * u / mid_lam)
-    parts = (env * ms * zf).reshape(-1, k, subdivisions)
+    parts = env * ms * zf
+    if lam_power:
+        parts = parts * mid_lam**lam_power
+    parts = parts.reshape(-1, k, subdivisions)
     return parts.mean(axis=2)
 
 

@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .gratings import diffracted_radiance, grating_frame
 from .lights import sample_light
 from .materials import DIELECTRIC, DIFFUSE, MIRROR
 from .optics import fresnel_dielectric, reflect, refract
@@ -76,22 +77,26 @@ class _Hit:
     front: np.ndarray  # (B,) bool: the ray arrived on the side the triangle's normal points to
     mat: np.ndarray   # (B,) material index
     eps: np.ndarray   # (B,) float32 self-intersection offset at the hit
+    prim: np.ndarray  # (B,) triangle index
 
     def take(self, mask) -> "_Hit":
         if mask.dtype == bool and len(mask) and mask.all():
             return self
-        return _Hit(self.p[mask], self.ng[mask], self.cos_i[mask], self.front[mask], self.mat[mask], self.eps[mask])
+        return _Hit(self.p[mask], self.ng[mask], self.cos_i[mask], self.front[mask], self.mat[mask], self.eps[mask],
+                    self.prim[mask])
 
     @staticmethod
     def concat(a: "_Hit", b: "_Hit") -> "_Hit":
         return _Hit(*(np.concatenate([x, y]) for x, y in
-                      zip((a.p, a.ng, a.cos_i, a.front, a.mat, a.eps), (b.p, b.ng, b.cos_i, b.front, b.mat, b.eps))))
+                      zip((a.p, a.ng, a.cos_i, a.front, a.mat, a.eps, a.prim),
+                          (b.p, b.ng, b.cos_i, b.front, b.mat, b.eps, b.prim))))
 
 
 @dataclass
 class TileResult:
     film: np.ndarray  # (P, n) float64 sum of sample contributions per pixel (everything)
     background: np.ndarray  # (P, n) the part of film that is emitted light seen (world, emitters), not Direct
+    diffraction: np.ndarray  # (P, n) the part of film diffracted by gratings
     rays: int         # rays cast (camera, secondary and shadow)
 
 
@@ -148,7 +153,8 @@ class _TileTrace:
         self.n = ctx.grid.n
         self.rng = rng
         self._film = np.zeros(n_pixels * self.n, np.float32)
-        self._background = np.zeros(n_pixels * self.n, np.float32)  # emitted light: world and emissive surfaces
+        self._background = np.zeros(n_pixels * self.n, np.float32)
+        self._diffraction = np.zeros(n_pixels * self.n, np.float32)  # emitted light: world and emissive surfaces
         self._n_pixels = n_pixels
         self._rays = 0
         self.escapes = None  # a list to record rays leaving the scene (trace_escapes)
@@ -166,8 +172,9 @@ class _TileTrace:
         while len(rays) or len(mono):
             rays, children, child_hits = self._step(rays, None, rng)
             mono, _, _ = self._step(mono, (children, child_hits), rng)
-        return TileResult(self._film.reshape(self._n_pixels, n) + self._background.reshape(self._n_pixels, n),
-                          self._background.reshape(self._n_pixels, n), self._rays)
+        shape = (self._n_pixels, n)
+        return TileResult((self._film + self._background + self._diffraction).reshape(shape),
+                          self._background.reshape(shape), self._diffraction.reshape(shape), self._rays)
 
     # ----------------------------------------------------------------- one bounce
     def _step(self, rays: _Rays, pending, rng):
@@ -201,6 +208,10 @@ class _TileTrace:
             em = ctx.materials.emission[hit.mat[emits]]
             self._accumulate(r, r.weighted(em) if r.lam is None else r.w * em[np.arange(len(r)), r.lam],
                              self._background)
+        if ctx.gratings.any:
+            on_grating = ctx.gratings.enabled[hit.mat]
+            if on_grating.any():
+                self._grating_light(rays.take(on_grating), hit.take(on_grating), rng)
         kind = ctx.materials.kind[hit.mat]
         diffuse = kind == DIFFUSE
         if diffuse.any():
@@ -236,7 +247,7 @@ class _TileTrace:
         front = cos > 0
         ng = np.where(front[:, None], ng, -ng)
         return _Hit(p.astype(np.float32, copy=False), ng, np.abs(cos), front, ctx.tri_material[prim],
-                    ctx.tri_offset[prim])
+                    ctx.tri_offset[prim], prim)
 
     # ----------------------------------------------------------------- spectra helpers
     @staticmethod
@@ -334,6 +345,44 @@ class _TileTrace:
         else:
             irradiance = np.sum(factors * lights.spectrum[:, rays.lam].T, axis=1)
         self._accumulate(rays, rays.weighted(brdf * irradiance))
+
+    def _grating_light(self, rays: _Rays, hit: _Hit, rng):
+        """Light of every light diffracted by the grating layer towards the viewer (exact w_i by
+        shadow ray, so no noise from the light side), into the Diffraction part of the film."""
+        ctx = self.ctx
+        g, lights = ctx.gratings, ctx.lights
+        edges = ctx.grid.bin_edges
+        for m in np.unique(hit.mat):  # loop over grating materials present (a few)
+            sel = hit.mat == m
+            r, h = rays.take(sel), hit.take(sel)
+            b = len(r)
+            t, s = grating_frame(ctx.tri_grating_tangent[h.prim], h.ng, np.full(b, g.cos_rot[m]), np.full(b, g.sin_rot[m]))
+            over = ctx.tri_period[h.prim] if len(ctx.tri_period) else np.zeros(b, np.float32)
+            period = np.where(over > 0, over, g.period[m])
+            w_o = -r.d
+            for li in range(len(lights)):  # loop over lights, not rays
+                wi, dist, gfac = sample_light(lights, li, h.p, rng)
+                cos_l = np.einsum("ij,ij->i", wi, h.ng)
+                valid = (cos_l < 0) if g.transmission[m] else (cos_l > 0)
+                valid &= gfac > 0
+                idx = np.flatnonzero(valid)
+                if idx.size == 0:
+                    continue
+                side = np.float32(-1.0 if g.transmission[m] else 1.0)
+                eps = h.eps[idx]
+                o = h.p[idx] + (side * eps)[:, None] * h.ng[idx]
+                tmax = np.where(np.isinf(dist[idx]), np.inf, dist[idx] - 2 * eps).astype(np.float32)
+                occ = ctx.accel.occluded(o.astype(np.float32), np.ascontiguousarray(wi[idx], np.float32), tmax)
+                self._rays += len(occ)
+                idx = idx[~occ]
+                if idx.size == 0:
+                    continue
+                rad = diffracted_radiance(g, m, w_o[idx], wi[idx], t[idx], s[idx], h.ng[idx], period[idx], edges, rng)
+                e = (gfac[idx] * np.abs(cos_l[idx])).astype(np.float32)
+                spec = rad * e[:, None] * lights.spectrum[li][None, :]
+                sub = r.take(idx)
+                contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(idx)), sub.lam]
+                self._accumulate(sub, contrib, self._diffraction)
 
     def _mirror(self, rays: _Rays, hit: _Hit) -> _Rays:
         ctx = self.ctx

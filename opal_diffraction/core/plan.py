@@ -44,5 +44,10 @@ def plan_render(ctx) -> RenderPlan:
     else:
         # The light pass (caustics, grating records) is a later milestone; say so rather than hide it.
         plan.notes.append("light pass not available yet: caustics are not rendered")
-    plan.notes.append("gratings: none in the scene")
+    n_gratings = int(ctx.gratings.enabled[used].sum()) if len(used) else 0
+    plan.gratings = n_gratings > 0
+    if plan.gratings:
+        plan.notes.append(f"gratings: {n_gratings} material(s), direct light diffracted in the eye pass")
+    else:
+        plan.notes.append("gratings: none in the scene, no grating work")
     return plan

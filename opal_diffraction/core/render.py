@@ -19,6 +19,7 @@ import numpy as np
 from .accel import build_accelerator
 from .camera import FilterSampler, generate_rays, pixel_samples
 from .eye_pass import EyePass
+from .gratings import prepare_gratings, triangle_tangents
 from .lights import prepare_lights
 from .materials import prepare_materials
 from .plan import RenderPlan, plan_render
@@ -44,6 +45,9 @@ class RenderContext:
     tri_normal: np.ndarray
     tri_offset: np.ndarray  # (T,) float32 self-intersection offset per triangle
     tri_material: np.ndarray
+    gratings: object              # gratings.PreparedGratings
+    tri_grating_tangent: np.ndarray  # (T, 3) unit grating vectors in each triangle's plane
+    tri_period: np.ndarray        # (T,) nm per-triangle period override (0: the material's), or empty
     world_spectrum: np.ndarray
     offset_base: float
 
@@ -82,6 +86,9 @@ class RenderContext:
             tri_normal=nrm.astype(np.float32),
             tri_offset=cls.triangle_offsets(v, t, base),
             tri_material=np.asarray(scene.tri_material, np.int32),
+            gratings=prepare_gratings(scene.materials),
+            tri_grating_tangent=triangle_tangents(nrm, scene.tri_tangent),
+            tri_period=np.asarray(scene.tri_period, np.float32).reshape(-1),
             world_spectrum=conv.illuminant_from_rgb(np.asarray(scene.world_color, np.float64)).astype(np.float32),
             offset_base=base,
         )
@@ -162,6 +169,7 @@ def render(
     w, h, nl = rx1 - rx0, ry1 - ry0, ctx.grid.n
     film = np.zeros((h, w, nl), np.float32)
     background_rgb = np.zeros((h, w, 3), np.float32)  # for the Direct pass: Combined minus emitted light
+    diffraction_rgb = np.zeros((h, w, 3), np.float32)  # the Diffraction pass
     counts = np.zeros((h, w), np.float32)  # samples per pixel so far (tiles may differ after a cancel)
     t_prep = time.perf_counter() - t_start
 
@@ -189,7 +197,8 @@ def render(
         spectral = film * scale
         rgb = ctx.conv.to_rgb(spectral)
         zeros = np.zeros_like(rgb)
-        passes = {"Direct": rgb - background_rgb * scale, "Caustics": zeros, "Diffraction": zeros.copy()}
+        diffraction = diffraction_rgb * scale
+        passes = {"Direct": rgb - background_rgb * scale - diffraction, "Caustics": zeros, "Diffraction": diffraction}
         return RenderResult(spectral, rgb, ctx.grid.wavelengths.copy(), int(counts.min()) if counts.size else 0,
                             cancelled, plan, warnings, dict(stats), passes)
 
@@ -208,6 +217,8 @@ def render(
                     t_index, res = fut.result()
                     x0, y0, x1, y1, _ = tiles[t_index]
                     film[y0:y1, x0:x1] += res.film.reshape(y1 - y0, x1 - x0, nl)
+                    if res.diffraction.any():
+                        diffraction_rgb[y0:y1, x0:x1] += ctx.conv.to_rgb(res.diffraction).reshape(y1 - y0, x1 - x0, 3)
                     if res.background.any():
                         background_rgb[y0:y1, x0:x1] += ctx.conv.to_rgb(res.background).reshape(y1 - y0, x1 - x0, 3)
                     counts[y0:y1, x0:x1] += r_spp
