@@ -82,14 +82,42 @@ def _remainder_exact(er: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+_FAR = 30.0  # beyond |x| = 30 the asymptotic series of Si replaces scipy's sici (error < 1e-12)
+
+
+def _sinc2_cumulative(x: np.ndarray) -> np.ndarray:
+    """S(x) = int_0^x (sin t / t)^2 dt = Si(2x) - sin^2(x) / x, odd in x.
+
+    Near 0 through scipy's sici; for |x| > 30 from the asymptotic expansion
+    Si(z) = pi/2 - f(z) cos z - g(z) sin z (Abramowitz & Stegun 5.2.8, 5.2.34-35), which with
+    sin^2(x)/x = (1 - cos z)/z, z = 2x, gives S = pi/2 - 1/z + (1/z - f) cos z - g sin z.
+    """
+    x = np.asarray(x, np.float64)
+    out = np.empty_like(x)
+    ax = np.abs(x)
+    far = ax > _FAR
+    near = ~far
+    if near.any():
+        xn = x[near]
+        tiny = np.abs(xn) < 1e-8
+        safe = np.where(tiny, 1.0, xn)
+        out[near] = np.where(tiny, xn, sici(2 * xn)[0] - np.sin(xn) ** 2 / safe)
+    if far.any():
+        z = 2 * ax[far]
+        iz2 = 1.0 / (z * z)
+        one_minus_f = iz2 / z * (2.0 - 24.0 * iz2 + 720.0 * iz2 * iz2)  # 1/z - f(z)
+        g = iz2 * (1.0 - 6.0 * iz2 + 120.0 * iz2 * iz2)
+        val = np.pi / 2 - 1.0 / z + one_minus_f * np.cos(z) - g * np.sin(z)
+        out[far] = np.sign(x[far]) * val
+    return out
+
+
 def _remainder_asymptotic(er: np.ndarray, n: float) -> np.ndarray:
     """The periodic part of C for large N: C(eta_r) - N eta_r, from the asymptotic form."""
     x = n * er
     tiny = np.abs(er) < 1e-12
     safe_er = np.where(tiny, 1.0, er)
-    safe_x = np.where(tiny, 1.0, x)
-    si = sici(2 * x)[0]
-    main = n * (si - np.sin(x) ** 2 / safe_x)
+    main = n * _sinc2_cumulative(x)
     # (1/e - cot e) / 2 = e/6 + e^3/90 + ... : use the series near 0 to avoid cancellation
     corr = np.where(np.abs(er) < 1e-3, er / 6 + er**3 / 90, 0.5 * (1 / safe_er - 1 / np.tan(safe_er)))
     return np.where(tiny, 0.0, main + corr - x)
@@ -121,15 +149,16 @@ def multislit_mean(eta0, eta1, n) -> np.ndarray:
 
 def sinc2(x) -> np.ndarray:
     """(sin x / x)^2 with the removable singularity at 0 handled."""
-    return np.sinc(np.asarray(x, np.float64) / np.pi) ** 2
+    x = np.asarray(x, np.float64)
+    small = np.abs(x) < 1e-4
+    safe = np.where(small, 1.0, x)
+    r = np.where(small, 1.0 - x * x / 6.0, np.sin(safe) / safe)
+    return r * r
 
 
 def sinc2_integral(x) -> np.ndarray:
     """int_0^x (sin t / t)^2 dt = Si(2x) - sin^2(x) / x (odd in x)."""
-    x = np.asarray(x, np.float64)
-    tiny = np.abs(x) < 1e-8
-    safe = np.where(tiny, 1.0, x)
-    return np.where(tiny, x, sici(2 * x)[0] - np.sin(x) ** 2 / safe)
+    return _sinc2_cumulative(x)
 
 
 def sinc2_mean(x0, x1) -> np.ndarray:
@@ -150,7 +179,7 @@ def fraunhofer_pattern(u, v, wavelength, a, d, n, length) -> np.ndarray:
     return sinc2(np.pi * a * u / lam) * multislit(np.pi * d * u / lam, n) * sinc2(np.pi * length * v / lam)
 
 
-def fraunhofer_pattern_binned(u, v, edges, a, d, n, length, subdivisions: int = 4, lam_power: int = 0) -> np.ndarray:
+def fraunhofer_pattern_binned(u, v, edges, a, d, n, length, subdivisions: int = 2, lam_power: int = 0) -> np.ndarray:
     """The mean of P over each wavelength bin [edges[k], edges[k+1]], for every (u, v).
 
     u, v: (B,); edges: (K+1,) in the unit of a, d, length. Returns (B, K). Each bin is split into
@@ -166,19 +195,34 @@ def fraunhofer_pattern_binned(u, v, edges, a, d, n, length, subdivisions: int = 
     e = np.asarray(edges, np.float64)
     k = len(e) - 1
     t = np.linspace(0.0, 1.0, subdivisions + 1)
-    sub = (e[:-1, None] + (e[1:] - e[:-1])[:, None] * t[None, :]).ravel()  # (K*(S+1),)
-    inv = 1.0 / sub
-    lo = inv.reshape(k, subdivisions + 1)[:, :-1].ravel()  # 1/lambda at each part's start
-    hi = inv.reshape(k, subdivisions + 1)[:, 1:].ravel()
-    mid_lam = 2.0 / (lo + hi)  # harmonic centre: the centre of the part in 1/lambda
-    ms = multislit_mean(np.pi * d * u * lo, np.pi * d * u * hi, n)
-    zf = sinc2_mean(np.pi * length * v * lo, np.pi * length * v * hi)
-    env = sinc2(np.pi * a * u / mid_lam)
+    # all part boundaries once (neighbouring parts share them): K * S + 1 points
+    bounds = np.concatenate([(e[:-1, None] + (e[1:] - e[:-1])[:, None] * t[None, :-1]).ravel(), e[-1:]])
+    inv = 1.0 / bounds
+    mid_lam = 2.0 / (inv[:-1] + inv[1:])  # each part's centre in 1/lambda
+    n_f = float(int(n))
+    # N-slit factor: cumulative integral at the boundaries, differenced
+    eta = np.pi * d * u * inv[None, :]
+    c = multislit_integral(eta, n)
+    width = np.diff(eta, axis=1)
+    narrow = np.abs(width) * n_f < _MIDPOINT_NETA
+    ms = np.diff(c, axis=1) / (n_f * n_f * np.where(narrow, 1.0, width))
+    if narrow.any():  # tiny intervals (near u = 0): the midpoint value, computed only there
+        ms[narrow] = multislit(0.5 * (eta[:, 1:] + eta[:, :-1])[narrow], n_f)
+    ms = np.clip(ms, 0.0, 1.0)
+    # slit-length factor sinc^2(zeta), likewise
+    zeta = np.pi * length * v * inv[None, :]
+    zw = np.diff(zeta, axis=1)
+    zc = sinc2_integral(zeta)
+    znarrow = np.abs(zw) < 1e-6
+    zf = np.diff(zc, axis=1) / np.where(znarrow, 1.0, zw)
+    if znarrow.any():
+        zf[znarrow] = sinc2(0.5 * (zeta[:, 1:] + zeta[:, :-1])[znarrow])
+    zf = np.clip(zf, 0.0, 1.0)
+    env = sinc2(np.pi * a * u / mid_lam[None, :])
     parts = env * ms * zf
     if lam_power:
-        parts = parts * mid_lam**lam_power
-    parts = parts.reshape(-1, k, subdivisions)
-    return parts.mean(axis=2)
+        parts = parts * mid_lam[None, :] ** lam_power
+    return parts.reshape(len(u), k, subdivisions).mean(axis=2)
 
 
 def grating_radiance_factor(wavelength, a, d, n, length, cos_theta_o) -> np.ndarray:
