@@ -113,3 +113,59 @@ def test_loading_a_non_scene_file_is_a_clear_error(tmp_path):
         Scene.load(tmp_path / "junk.npz")
     with pytest.raises(SceneError, match="not found"):
         Scene.load(tmp_path / "missing.npz")
+
+
+def test_grating_settings_are_validated():
+    s = small_scene()
+    s.materials = Materials.from_list([{"kind": "DIFFUSE"}, {"kind": "DIFFUSE", "grating": 1, "period": 0.0, "name": "cd"}])
+    with pytest.raises(SceneError, match="'cd': grating period must be > 0"):
+        s.validated()
+    s.materials = Materials.from_list([{"kind": "DIFFUSE"}, {"kind": "DIFFUSE", "grating": 1, "period": 500.0,
+                                                              "slit_width": 800.0}])
+    with pytest.raises(SceneError, match="slit width 800.0 nm is larger than the period"):
+        s.validated()
+    with pytest.raises(SceneError, match="unknown lattice"):
+        Materials.from_list([{"grating": 1, "lattice": "CUBIC"}])
+    with pytest.raises(SceneError, match="unknown setting"):
+        Materials.from_list([{"colour": (1, 0, 0)}])
+
+
+def test_grating_data_round_trips_and_follows_dropped_triangles(tmp_path):
+    s = Scene(materials=Materials.from_list([{"grating": 1, "lattice": "HEXAGONAL", "period": 300.0, "slit_width": 200.0}]),
+              camera=Camera(width=4, height=4))
+    s.add_mesh(*primitives.quad((0, 0, 0), (1, 0, 0), (0, 1, 0)), material=0, tangent=(1, 0, 0), period=[250.0, 260.0])
+    s.add_mesh([[0, 0, 0], [1, 1, 1], [2, 2, 2]], [[0, 1, 2]], material=0, tangent=(0, 1, 0), period=0.0)
+    s.save(tmp_path / "g.npz")
+    t = Scene.load(tmp_path / "g.npz")
+    np.testing.assert_array_equal(t.tri_period, [250, 260, 0])
+    assert int(t.materials.lattice[0]) == 1
+    clean, _ = t.validated()
+    np.testing.assert_array_equal(clean.tri_period, [250, 260])
+    assert clean.tri_tangent.shape == (2, 3)
+
+
+def test_grating_tangents_lie_in_the_plane_and_agree_across_shared_edges():
+    from opal_diffraction.core.gratings import triangle_tangents
+    v, t = primitives.icosphere((0, 0, 0), 1.0, 2)
+    p = v[t]
+    nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    given = np.tile([0.3, 0.9, 0.1], (len(t), 1))  # e.g. an object axis
+    tan = triangle_tangents(nrm, given)
+    assert np.allclose(np.linalg.norm(tan, axis=1), 1, atol=1e-6)
+    assert np.abs(np.sum(tan * nrm, axis=1)).max() < 1e-6
+    # neighbours (sharing an edge) have nearly the same tangent: no flips between triangles
+    edges = {}
+    for i, tri in enumerate(t):
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            edges.setdefault(tuple(sorted((tri[a], tri[b]))), []).append(i)
+    pairs = np.array([f for f in edges.values() if len(f) == 2])
+    # (away from where the axis is along the normal: no tangent field is smooth there, hairy ball)
+    axis = given[0] / np.linalg.norm(given[0])
+    regular = np.all(np.abs(nrm[pairs] @ axis) < 0.9, axis=1)
+    assert regular.mean() > 0.8
+    assert np.min(np.sum(tan[pairs[regular, 0]] * tan[pairs[regular, 1]], axis=1)) > 0.8
+    # a plane's two triangles: identical
+    qv, qt = primitives.quad((0, 0, 0), (1, 0, 0), (0, 1, 0))
+    qn = np.tile([0, 0, 1.0], (2, 1))
+    np.testing.assert_allclose(triangle_tangents(qn, np.zeros((2, 3))), [[1, 0, 0], [1, 0, 0]])
