@@ -1,95 +1,25 @@
-"""The eye pass: camera rays, direct light at diffuse hits, specular recursion, dispersion.
+"""The eye pass: camera rays, direct light at diffuse hits, caustics and diffraction, specular
+recursion and dispersion (the transport itself is transport.SpecularWalker).
 
-The source paper's eye pass (physics.md section 4.2) as a wavefront tracer: all rays of a tile
-advance one bounce at a time, in NumPy arrays, with no Python loop per ray or per pixel.
-
-Rays live in two populations:
-- *white* rays carry the whole spectrum, a weight array (B, n);
-- *mono* rays carry one wavelength sample, a scalar weight (B,) and its index (B,).
-A white ray stays white until it meets a dispersive dielectric; there it becomes mono rays:
-``SPLIT`` makes one child per wavelength sample with the parent's weight at that wavelength (the
-children's weights sum to the parent's: energy is conserved exactly), ``SAMPLE`` makes one child
-with wavelength k drawn with probability p_k proportional to the parent's weight and weight
-w_k / p_k (an unbiased one-sample estimator of the SPLIT sum, pbrt-v4's TerminateSecondary idea).
-Children inherit the parent's hit, so the split costs no extra ray cast.
-
-At a dielectric the reflect / refract choice is sampled with probability equal to the Fresnel
-reflectance, so the weight is unchanged (for mono rays the index is the one at their wavelength,
-so total internal reflection differs per wavelength). Diffuse surfaces are two-sided Lambertian;
-they receive direct light by shadow rays (caustics come from the light pass, not from here).
+The source paper's eye pass (physics.md section 4.2). At a diffuse (two-sided Lambertian) hit:
+direct light by shadow rays plus the caustic irradiance of the light pass's illumination map;
+at a grating, the diffraction of every light that reaches it (gratings.py); at an emitter, its
+radiance; at mirrors and glass the path goes on. Every tile writes three films: what diffuse
+surfaces reflect (Direct and Caustics), emitted light seen (world, emitters), and diffraction.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from .gratings import diffracted_radiance, grating_frame
 from .lights import sample_light
-from .materials import DIELECTRIC, DIFFUSE, MIRROR
-from .optics import fresnel_dielectric, reflect, refract
+from .materials import DIFFUSE
+from .transport import Hit, Rays, SpecularWalker
 
 __all__ = ["EyePass", "TileResult"]
-
-
-@dataclass
-class _Rays:
-    o: np.ndarray      # (B, 3) float32 origins
-    d: np.ndarray      # (B, 3) float32 unit directions
-    pix: np.ndarray    # (B,) int64 pixel index within the tile
-    w: np.ndarray | None  # (B, n) white or (B,) mono, float32; None: white and all ones (camera rays)
-    lam: np.ndarray | None  # (B,) int wavelength index for mono rays, None for white
-    depth: np.ndarray  # (B,) int specular bounces so far
-    u_lam: np.ndarray  # (B,) float: the sample's stratified number for choosing a wavelength
-
-    def __len__(self):
-        return len(self.pix)
-
-    def take(self, mask) -> "_Rays":
-        if mask.dtype == bool and len(mask) and mask.all():
-            return self
-        return _Rays(self.o[mask], self.d[mask], self.pix[mask], None if self.w is None else self.w[mask],
-                     None if self.lam is None else self.lam[mask], self.depth[mask], self.u_lam[mask])
-
-    def weighted(self, x):
-        """The ray weight times x (x itself for unit-weight camera rays)."""
-        return x if self.w is None else self.w * x
-
-    def dense_w(self, n: int) -> np.ndarray:
-        return np.ones((len(self), n), np.float32) if self.w is None else self.w
-
-    @staticmethod
-    def concat(a: "_Rays", b: "_Rays") -> "_Rays":
-        if (a.w is None) != (b.w is None):  # one side has implicit unit weights: make them explicit
-            n = (a.w if a.w is not None else b.w).shape[1]
-            a, b = replace(a, w=a.dense_w(n)), replace(b, w=b.dense_w(n))
-        return _Rays(*(None if x is None else np.concatenate([x, y]) for x, y in
-                       zip((a.o, a.d, a.pix, a.w, a.lam, a.depth, a.u_lam),
-                           (b.o, b.d, b.pix, b.w, b.lam, b.depth, b.u_lam))))
-
-
-@dataclass
-class _Hit:
-    p: np.ndarray     # (B, 3) float32 hit points
-    ng: np.ndarray    # (B, 3) float32 geometric normal facing the incoming ray
-    cos_i: np.ndarray  # (B,) cosine between -d and ng (>= 0)
-    front: np.ndarray  # (B,) bool: the ray arrived on the side the triangle's normal points to
-    mat: np.ndarray   # (B,) material index
-    eps: np.ndarray   # (B,) float32 self-intersection offset at the hit
-    prim: np.ndarray  # (B,) triangle index
-
-    def take(self, mask) -> "_Hit":
-        if mask.dtype == bool and len(mask) and mask.all():
-            return self
-        return _Hit(self.p[mask], self.ng[mask], self.cos_i[mask], self.front[mask], self.mat[mask], self.eps[mask],
-                    self.prim[mask])
-
-    @staticmethod
-    def concat(a: "_Hit", b: "_Hit") -> "_Hit":
-        return _Hit(*(np.concatenate([x, y]) for x, y in
-                      zip((a.p, a.ng, a.cos_i, a.front, a.mat, a.eps, a.prim),
-                          (b.p, b.ng, b.cos_i, b.front, b.mat, b.eps, b.prim))))
 
 
 @dataclass
@@ -145,63 +75,40 @@ class EyePass:
                 "lam": cat("lam") if len(mono) == len(e) else None, "depth": cat("depth"), "ray": cat("ray")}
 
 
-class _TileTrace:
-    """The state of one tile's trace: its film accumulator and ray count."""
+class _TileTrace(SpecularWalker):
+    """The state of one tile's trace: its film accumulators and ray count."""
 
     def __init__(self, ctx, n_pixels: int, rng: np.random.Generator):
-        self.ctx = ctx
-        self.n = ctx.grid.n
-        self.rng = rng
+        super().__init__(ctx, rng)
         self._film = np.zeros(n_pixels * self.n, np.float32)
         self._background = np.zeros(n_pixels * self.n, np.float32)
         self._diffraction = np.zeros(n_pixels * self.n, np.float32)  # emitted light: world and emissive surfaces
         self._n_pixels = n_pixels
-        self._rays = 0
         self.escapes = None  # a list to record rays leaving the scene (trace_escapes)
 
     def run(self, origins, directions, pix, u_lambda, wavelength_index=None) -> TileResult:
         n, b, rng = self.n, len(pix), self.rng
-        rays = _Rays(origins, directions, pix.astype(np.int64), None, None,
+        rays = Rays(origins, directions, pix.astype(np.int64), None, None,
                      np.zeros(b, np.int32), np.asarray(u_lambda, np.float64))
-        mono = _Rays(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32), np.zeros(0, np.int64),
-                     np.zeros(0, np.float32), np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0))
+        mono = self.empty_mono()
         if wavelength_index is not None:  # start monochromatic (tools and tests)
             lam = np.broadcast_to(np.asarray(wavelength_index, np.int64), (b,)).copy()
-            mono = _Rays(rays.o, rays.d, rays.pix, np.ones(b, np.float32), lam, rays.depth, rays.u_lam)
+            mono = Rays(rays.o, rays.d, rays.pix, np.ones(b, np.float32), lam, rays.depth, rays.u_lam)
             rays = rays.take(np.zeros(b, bool))
-        while len(rays) or len(mono):
-            rays, children, child_hits = self._step(rays, None, rng)
-            mono, _, _ = self._step(mono, (children, child_hits), rng)
+        self.walk(rays, mono)
         shape = (self._n_pixels, n)
         return TileResult((self._film + self._background + self._diffraction).reshape(shape),
                           self._background.reshape(shape), self._diffraction.reshape(shape), self._rays)
 
-    # ----------------------------------------------------------------- one bounce
-    def _step(self, rays: _Rays, pending, rng):
-        """Advance a population by one interaction; returns (continuing rays, mono children, their hits)."""
-        ctx = self.ctx
-        hit = None
-        if len(rays):
-            h = ctx.accel.intersect(rays.o, rays.d)
-            self._rays += len(rays)
-            missed = h.prim < 0
-            if missed.any():
-                self._add_background(rays.take(missed))
-                if self.escapes is not None:
-                    r = rays.take(missed)
-                    self.escapes.append({"origin": r.o, "direction": r.d, "weight": r.dense_w(self.n), "lam": r.lam,
-                                         "depth": r.depth, "ray": r.pix})
-            keep = ~missed
-            rays = rays.take(keep)
-            hit = self._hit_info(rays, h.t[keep], h.prim[keep])
-        if pending is not None and pending[0] is not None and len(pending[0]):
-            if hit is None:
-                rays, hit = pending
-            else:
-                rays, hit = _Rays.concat(rays, pending[0]), _Hit.concat(hit, pending[1])
-        if hit is None or len(rays) == 0:
-            return rays.take(np.zeros(len(rays), bool)), None, None
+    # ----------------------------------------------------------------- hooks
+    def on_miss(self, rays: Rays) -> None:
+        self._add_background(rays)
+        if self.escapes is not None:
+            self.escapes.append({"origin": rays.o, "direction": rays.d, "weight": rays.dense_w(self.n),
+                                 "lam": rays.lam, "depth": rays.depth, "ray": rays.pix})
 
+    def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
+        ctx = self.ctx
         emits = ctx.materials.emissive[hit.mat]
         if emits.any():
             r = rays.take(emits)
@@ -212,50 +119,12 @@ class _TileTrace:
             on_grating = ctx.gratings.enabled[hit.mat]
             if on_grating.any():
                 self._grating_light(rays.take(on_grating), hit.take(on_grating), rng)
-        kind = ctx.materials.kind[hit.mat]
         diffuse = kind == DIFFUSE
         if diffuse.any():
             self._direct_light(rays.take(diffuse), hit.take(diffuse), rng)
 
-        can_bounce = rays.depth < ctx.settings.max_bounces
-        children = child_hits = None
-        out = []
-        mirror = (kind == MIRROR) & can_bounce
-        if mirror.any():
-            out.append(self._mirror(rays.take(mirror), hit.take(mirror)))
-        diel = (kind == DIELECTRIC) & can_bounce
-        if diel.any():
-            if rays.lam is None:
-                disp = diel & ctx.materials.dispersive[hit.mat]
-                if disp.any():
-                    children, child_hits = self._split(rays.take(disp), hit.take(disp), rng)
-                diel = diel & ~disp
-            if diel.any():
-                out.append(self._dielectric(rays.take(diel), hit.take(diel), rng))
-        if not out:
-            return rays.take(np.zeros(len(rays), bool)), children, child_hits
-        nxt = out[0]
-        for r in out[1:]:
-            nxt = _Rays.concat(nxt, r)
-        return nxt, children, child_hits
-
-    def _hit_info(self, rays: _Rays, t, prim) -> _Hit:
-        ctx = self.ctx
-        p = rays.o + t[:, None] * rays.d
-        ng = ctx.tri_normal[prim]
-        cos = -np.einsum("ij,ij->i", rays.d, ng)
-        front = cos > 0
-        ng = np.where(front[:, None], ng, -ng)
-        return _Hit(p.astype(np.float32, copy=False), ng, np.abs(cos), front, ctx.tri_material[prim],
-                    ctx.tri_offset[prim], prim)
-
-    # ----------------------------------------------------------------- spectra helpers
-    @staticmethod
-    def _per_ray(table, rows, lam):
-        """table[rows] (B, n) for white rays, table[rows, lam] (B,) for mono rays."""
-        return table[rows] if lam is None else table[rows, lam]
-
-    def _accumulate(self, rays: _Rays, contrib, film=None):
+    # ----------------------------------------------------------------- films
+    def _accumulate(self, rays: Rays, contrib, film=None):
         """Add per-ray contributions to their pixels: (B, n) for white rays, (B,) for mono."""
         n = self.n
         film = self._film if film is None else film
@@ -296,7 +165,7 @@ class _TileTrace:
         self._film += (g @ spectra).ravel()
         return True
 
-    def _add_background(self, rays: _Rays):
+    def _add_background(self, rays: Rays):
         bg = self.ctx.world_spectrum
         if not bg.any():
             return
@@ -308,7 +177,7 @@ class _TileTrace:
         self._accumulate(rays, contrib, self._background)
 
     # ----------------------------------------------------------------- interactions
-    def _direct_light(self, rays: _Rays, hit: _Hit, rng):
+    def _direct_light(self, rays: Rays, hit: Hit, rng):
         ctx = self.ctx
         lights = ctx.lights
         nl, b = len(lights), len(rays)
@@ -346,7 +215,7 @@ class _TileTrace:
             irradiance = np.sum(factors * lights.spectrum[:, rays.lam].T, axis=1)
         self._accumulate(rays, rays.weighted(brdf * irradiance))
 
-    def _grating_light(self, rays: _Rays, hit: _Hit, rng):
+    def _grating_light(self, rays: Rays, hit: Hit, rng):
         """Light of every light diffracted by the grating layer towards the viewer (exact w_i by
         shadow ray, so no noise from the light side), into the Diffraction part of the film."""
         ctx = self.ctx
@@ -384,50 +253,3 @@ class _TileTrace:
                 contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(idx)), sub.lam]
                 self._accumulate(sub, contrib, self._diffraction)
 
-    def _mirror(self, rays: _Rays, hit: _Hit) -> _Rays:
-        ctx = self.ctx
-        d = reflect(rays.d, hit.ng)
-        o = hit.p + hit.eps[:, None] * hit.ng
-        w = rays.weighted(self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam))
-        return _Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
-
-    def _dielectric(self, rays: _Rays, hit: _Hit, rng) -> _Rays:
-        ctx = self.ctx
-        lam0 = np.zeros(len(rays), np.int64) if rays.lam is None else rays.lam
-        n = ctx.materials.ior[hit.mat, lam0]  # constant over the grid for white rays
-        eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
-        fr = fresnel_dielectric(hit.cos_i, eta)
-        refl = rng.random(len(rays)) < fr
-        t_dir, _ = refract(rays.d, hit.ng, eta)
-        d = np.where(refl[:, None], reflect(rays.d, hit.ng), t_dir)
-        side = np.where(refl, 1.0, -1.0).astype(np.float32)
-        o = hit.p + (hit.eps * side)[:, None] * hit.ng
-        w = rays.weighted(self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam))
-        return _Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
-
-    def _split(self, rays: _Rays, hit: _Hit, rng):
-        """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit."""
-        n, b = self.n, len(rays)
-        split = self.ctx.settings.dispersion_sampling == "SPLIT"
-        if rays.w is None:  # unit weights: every wavelength alike
-            if split:
-                parent, lam = np.repeat(np.arange(b), n), np.tile(np.arange(n), b)
-                w = np.ones(b * n, np.float32)
-            else:
-                parent = np.arange(b)
-                lam = np.minimum((rays.u_lam * n).astype(np.int64), n - 1)
-                w = np.full(b, n, np.float32)
-        elif split:
-            parent, lam = np.nonzero(rays.w > 0)
-            w = rays.w[parent, lam]
-        else:
-            total = rays.w.sum(axis=1, dtype=np.float64)
-            live = total > 0
-            cdf = np.cumsum(rays.w[live], axis=1, dtype=np.float64)
-            u = rays.u_lam[live] * total[live]  # stratified per pixel
-            lam = np.minimum((cdf < u[:, None]).sum(axis=1), n - 1)
-            parent = np.flatnonzero(live)
-            w = total[live].astype(np.float32)  # w_k / p_k with p_k = w_k / total
-        children = _Rays(rays.o[parent], rays.d[parent], rays.pix[parent], w.astype(np.float32),
-                         lam.astype(np.int64), rays.depth[parent], rays.u_lam[parent])
-        return children, hit.take(parent)

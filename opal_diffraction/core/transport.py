@@ -1,0 +1,238 @@
+"""Specular transport shared by the eye pass and the light pass: ray populations, hits, and one
+bounce of mirror reflection, Fresnel-sampled refraction and dispersion.
+
+A wavefront tracer: all rays of a batch advance one interaction at a time, in NumPy arrays, with
+no Python loop per ray. Rays live in two populations:
+- *white* rays carry the whole spectrum, a weight array (B, n) (``None``: all ones);
+- *mono* rays carry one wavelength sample, a scalar weight (B,) and its index (B,).
+A white ray stays white until it meets a dispersive dielectric; there it becomes mono rays:
+``SPLIT`` makes one child per wavelength sample with the parent's weight at that wavelength (the
+children's weights sum to the parent's: energy is conserved exactly), ``SAMPLE`` makes one child
+with wavelength k drawn with probability p_k proportional to the parent's weight and weight
+w_k / p_k (an unbiased one-sample estimator of the SPLIT sum, pbrt-v4's TerminateSecondary idea).
+Children inherit the parent's hit, so the split costs no extra ray cast.
+
+At a dielectric the reflect / refract choice is sampled with probability equal to the Fresnel
+reflectance, so the weight is unchanged (for mono rays the index is the one at their wavelength,
+so total internal reflection differs per wavelength). Geometry is assumed closed with outward
+normals (entering vs leaving a dielectric is read from the side of the hit).
+
+Subclasses say what happens where a path leaves the scene (``on_miss``) and at every surface it
+hits (``on_hit``: direct light for the eye pass, deposits for the light pass), and whether a
+path goes on (``survives``: bounce limit, Russian roulette).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .materials import DIELECTRIC, MIRROR
+from .optics import fresnel_dielectric, reflect, refract
+
+__all__ = ["Rays", "Hit", "SpecularWalker"]
+
+
+@dataclass
+class Rays:
+    o: np.ndarray      # (B, 3) float32 origins
+    d: np.ndarray      # (B, 3) float32 unit directions
+    pix: np.ndarray    # (B,) int64 pixel index within the tile
+    w: np.ndarray | None  # (B, n) white or (B,) mono, float32; None: white and all ones (camera rays)
+    lam: np.ndarray | None  # (B,) int wavelength index for mono rays, None for white
+    depth: np.ndarray  # (B,) int specular bounces so far
+    u_lam: np.ndarray  # (B,) float: the sample's stratified number for choosing a wavelength
+
+    def __len__(self):
+        return len(self.pix)
+
+    def take(self, mask) -> "Rays":
+        if mask.dtype == bool and len(mask) and mask.all():
+            return self
+        return Rays(self.o[mask], self.d[mask], self.pix[mask], None if self.w is None else self.w[mask],
+                     None if self.lam is None else self.lam[mask], self.depth[mask], self.u_lam[mask])
+
+    def weighted(self, x):
+        """The ray weight times x (x itself for unit-weight camera rays)."""
+        return x if self.w is None else self.w * x
+
+    def dense_w(self, n: int) -> np.ndarray:
+        return np.ones((len(self), n), np.float32) if self.w is None else self.w
+
+    @staticmethod
+    def concat(a: "Rays", b: "Rays") -> "Rays":
+        if (a.w is None) != (b.w is None):  # one side has implicit unit weights: make them explicit
+            n = (a.w if a.w is not None else b.w).shape[1]
+            a, b = replace(a, w=a.dense_w(n)), replace(b, w=b.dense_w(n))
+        return Rays(*(None if x is None else np.concatenate([x, y]) for x, y in
+                       zip((a.o, a.d, a.pix, a.w, a.lam, a.depth, a.u_lam),
+                           (b.o, b.d, b.pix, b.w, b.lam, b.depth, b.u_lam))))
+
+
+@dataclass
+class Hit:
+    p: np.ndarray     # (B, 3) float32 hit points
+    ng: np.ndarray    # (B, 3) float32 geometric normal facing the incoming ray
+    cos_i: np.ndarray  # (B,) cosine between -d and ng (>= 0)
+    front: np.ndarray  # (B,) bool: the ray arrived on the side the triangle's normal points to
+    mat: np.ndarray   # (B,) material index
+    eps: np.ndarray   # (B,) float32 self-intersection offset at the hit
+    prim: np.ndarray  # (B,) triangle index
+    bu: np.ndarray    # (B,) barycentric u (hit = (1-u-v) v0 + u v1 + v v2)
+    bv: np.ndarray    # (B,) barycentric v
+
+    _FIELDS = ("p", "ng", "cos_i", "front", "mat", "eps", "prim", "bu", "bv")
+
+    def take(self, mask) -> "Hit":
+        if mask.dtype == bool and len(mask) and mask.all():
+            return self
+        return Hit(*(getattr(self, f)[mask] for f in self._FIELDS))
+
+    @staticmethod
+    def concat(a: "Hit", b: "Hit") -> "Hit":
+        return Hit(*(np.concatenate([getattr(a, f), getattr(b, f)]) for f in Hit._FIELDS))
+
+
+class SpecularWalker:
+    """Advances ray populations through specular interactions; subclasses add the shading."""
+
+    def __init__(self, ctx, rng: np.random.Generator):
+        self.ctx = ctx
+        self.n = ctx.grid.n
+        self.rng = rng
+        self._rays = 0  # rays cast
+
+    # hooks ----------------------------------------------------------------------------------
+    def on_miss(self, rays: Rays) -> None:
+        """Rays that left the scene."""
+
+    def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
+        """Every surface hit, before the specular bounce (kind: material kind per ray)."""
+
+    def survives(self, rays: Rays, rng) -> np.ndarray:
+        """Which rays may bounce again (default: the bounce limit)."""
+        return rays.depth < self.ctx.settings.max_bounces
+
+    # the loop -------------------------------------------------------------------------------
+    @staticmethod
+    def empty_mono() -> Rays:
+        return Rays(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32), np.zeros(0, np.int64),
+                    np.zeros(0, np.float32), np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0))
+
+    def walk(self, rays: Rays, mono: Rays) -> None:
+        """Follow both populations until every path has ended."""
+        rng = self.rng
+        while len(rays) or len(mono):
+            rays, children, child_hits = self._step(rays, None, rng)
+            mono, _, _ = self._step(mono, (children, child_hits), rng)
+
+    # ----------------------------------------------------------------- one bounce
+    def _step(self, rays: Rays, pending, rng):
+        """Advance a population by one interaction; returns (continuing rays, mono children, their hits)."""
+        ctx = self.ctx
+        hit = None
+        if len(rays):
+            h = ctx.accel.intersect(rays.o, rays.d)
+            self._rays += len(rays)
+            missed = h.prim < 0
+            if missed.any():
+                self.on_miss(rays.take(missed))
+            keep = ~missed
+            rays = rays.take(keep)
+            hit = self._hit_info(rays, h.t[keep], h.prim[keep], h.u[keep], h.v[keep])
+        if pending is not None and pending[0] is not None and len(pending[0]):
+            if hit is None:
+                rays, hit = pending
+            else:
+                rays, hit = Rays.concat(rays, pending[0]), Hit.concat(hit, pending[1])
+        if hit is None or len(rays) == 0:
+            return rays.take(np.zeros(len(rays), bool)), None, None
+
+        kind = ctx.materials.kind[hit.mat]
+        self.on_hit(rays, hit, kind, rng)
+
+        can_bounce = self.survives(rays, rng)
+        children = child_hits = None
+        out = []
+        mirror = (kind == MIRROR) & can_bounce
+        if mirror.any():
+            out.append(self._mirror(rays.take(mirror), hit.take(mirror)))
+        diel = (kind == DIELECTRIC) & can_bounce
+        if diel.any():
+            if rays.lam is None:
+                disp = diel & ctx.materials.dispersive[hit.mat]
+                if disp.any():
+                    children, child_hits = self._split(rays.take(disp), hit.take(disp), rng)
+                diel = diel & ~disp
+            if diel.any():
+                out.append(self._dielectric(rays.take(diel), hit.take(diel), rng))
+        if not out:
+            return rays.take(np.zeros(len(rays), bool)), children, child_hits
+        nxt = out[0]
+        for r in out[1:]:
+            nxt = Rays.concat(nxt, r)
+        return nxt, children, child_hits
+
+    def _hit_info(self, rays: Rays, t, prim, bu, bv) -> Hit:
+        ctx = self.ctx
+        p = rays.o + t[:, None] * rays.d
+        ng = ctx.tri_normal[prim]
+        cos = -np.einsum("ij,ij->i", rays.d, ng)
+        front = cos > 0
+        ng = np.where(front[:, None], ng, -ng)
+        return Hit(p.astype(np.float32, copy=False), ng, np.abs(cos), front, ctx.tri_material[prim],
+                   ctx.tri_offset[prim], prim, bu, bv)
+
+    @staticmethod
+    def _per_ray(table, rows, lam):
+        """table[rows] (B, n) for white rays, table[rows, lam] (B,) for mono rays."""
+        return table[rows] if lam is None else table[rows, lam]
+
+    def _mirror(self, rays: Rays, hit: Hit) -> Rays:
+        ctx = self.ctx
+        d = reflect(rays.d, hit.ng)
+        o = hit.p + hit.eps[:, None] * hit.ng
+        w = rays.weighted(self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam))
+        return Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
+
+    def _dielectric(self, rays: Rays, hit: Hit, rng) -> Rays:
+        ctx = self.ctx
+        lam0 = np.zeros(len(rays), np.int64) if rays.lam is None else rays.lam
+        n = ctx.materials.ior[hit.mat, lam0]  # constant over the grid for white rays
+        eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
+        fr = fresnel_dielectric(hit.cos_i, eta)
+        refl = rng.random(len(rays)) < fr
+        t_dir, _ = refract(rays.d, hit.ng, eta)
+        d = np.where(refl[:, None], reflect(rays.d, hit.ng), t_dir)
+        side = np.where(refl, 1.0, -1.0).astype(np.float32)
+        o = hit.p + (hit.eps * side)[:, None] * hit.ng
+        w = rays.weighted(self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam))
+        return Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
+
+    def _split(self, rays: Rays, hit: Hit, rng):
+        """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit."""
+        n, b = self.n, len(rays)
+        split = self.ctx.settings.dispersion_sampling == "SPLIT"
+        if rays.w is None:  # unit weights: every wavelength alike
+            if split:
+                parent, lam = np.repeat(np.arange(b), n), np.tile(np.arange(n), b)
+                w = np.ones(b * n, np.float32)
+            else:
+                parent = np.arange(b)
+                lam = np.minimum((rays.u_lam * n).astype(np.int64), n - 1)
+                w = np.full(b, n, np.float32)
+        elif split:
+            parent, lam = np.nonzero(rays.w > 0)
+            w = rays.w[parent, lam]
+        else:
+            total = rays.w.sum(axis=1, dtype=np.float64)
+            live = total > 0
+            cdf = np.cumsum(rays.w[live], axis=1, dtype=np.float64)
+            u = rays.u_lam[live] * total[live]  # stratified per pixel
+            lam = np.minimum((cdf < u[:, None]).sum(axis=1), n - 1)
+            parent = np.flatnonzero(live)
+            w = total[live].astype(np.float32)  # w_k / p_k with p_k = w_k / total
+        children = Rays(rays.o[parent], rays.d[parent], rays.pix[parent], w.astype(np.float32),
+                         lam.astype(np.int64), rays.depth[parent], rays.u_lam[parent])
+        return children, hit.take(parent)
