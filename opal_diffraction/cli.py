@@ -47,6 +47,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--wavelength-max", type=float, default=700.0)
     r.add_argument("--wavelength-step", type=float, default=5.0)
     r.add_argument("--max-bounces", type=int, default=8)
+    r.add_argument("--light-paths", type=int, default=1_000_000, help="light-pass paths for caustics (0: off)")
     r.add_argument("--dispersion-sampling", choices=["SPLIT", "SAMPLE"], default="SAMPLE")
     r.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"), help="override the camera's resolution")
     r.add_argument("--spectral-exr", default="", help="also write a spectral EXR (JCGT 2021 layout) here")
@@ -74,7 +75,7 @@ def main(argv=None) -> int:
         settings = RenderSettings(
             samples=args.spp, seed=args.seed, wavelength_min=args.wavelength_min,
             wavelength_max=args.wavelength_max, wavelength_step=args.wavelength_step,
-            max_bounces=args.max_bounces, dispersion_sampling=args.dispersion_sampling,
+            max_bounces=args.max_bounces, dispersion_sampling=args.dispersion_sampling, light_paths=args.light_paths,
             spectral_exr=args.spectral_exr, time_limit=args.time_limit, threads=args.threads,
             backend=args.backend,
         )

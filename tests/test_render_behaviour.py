@@ -33,18 +33,18 @@ def prism_and_stripes(pixels=32):
 
 def test_same_seed_same_image_whatever_the_threads():
     s = prism_and_stripes()
-    a = render(s, RenderSettings(samples=4, seed=7, threads=1, tile_size=8)).spectral
-    b = render(s, RenderSettings(samples=4, seed=7, threads=2, tile_size=8)).spectral
+    a = render(s, RenderSettings(light_paths=0, samples=4, seed=7, threads=1, tile_size=8)).spectral
+    b = render(s, RenderSettings(light_paths=0, samples=4, seed=7, threads=2, tile_size=8)).spectral
     np.testing.assert_array_equal(a, b)
-    c = render(s, RenderSettings(samples=4, seed=8, threads=2, tile_size=8)).spectral
+    c = render(s, RenderSettings(light_paths=0, samples=4, seed=8, threads=2, tile_size=8)).spectral
     assert not np.array_equal(a, c)
 
 
 def test_split_and_sample_agree_in_expectation():
     """Compare 4x4-pixel block means with a tolerance from the blocks' own sample spread."""
     s = prism_and_stripes(pixels=32)
-    split = render(s, RenderSettings(samples=16, seed=1, dispersion_sampling="SPLIT")).rgb
-    sample = render(s, RenderSettings(samples=64, seed=2, dispersion_sampling="SAMPLE")).rgb
+    split = render(s, RenderSettings(light_paths=0, samples=16, seed=1, dispersion_sampling="SPLIT")).rgb
+    sample = render(s, RenderSettings(light_paths=0, samples=64, seed=2, dispersion_sampling="SAMPLE")).rgb
     def blocks(img):
         b = img.reshape(8, 4, 8, 4, 3).transpose(0, 2, 1, 3, 4).reshape(64, 16, 3)
         return b.mean(axis=1), b.var(axis=1, ddof=1) / 16
@@ -62,7 +62,7 @@ def test_split_and_sample_agree_in_expectation():
 def test_cancel_stops_early_without_an_exception():
     s = prism_and_stripes()
     calls = []
-    res = render(s, RenderSettings(samples=64, round_samples=4, tile_size=8),
+    res = render(s, RenderSettings(light_paths=0, samples=64, round_samples=4, tile_size=8),
                  should_cancel=lambda: len(calls) > 20, progress=lambda f, m: calls.append(f))
     assert res.cancelled
     assert res.samples < 64
@@ -72,7 +72,7 @@ def test_cancel_stops_early_without_an_exception():
 def test_progress_reaches_one_and_partial_results_arrive_per_round():
     s = prism_and_stripes(pixels=16)
     fractions, partial = [], []
-    res = render(s, RenderSettings(samples=8, round_samples=2), progress=lambda f, m: fractions.append(f),
+    res = render(s, RenderSettings(light_paths=0, samples=8, round_samples=2), progress=lambda f, m: fractions.append(f),
                  on_round=lambda r: partial.append(r.samples))
     assert fractions[-1] == pytest.approx(1.0) and np.all(np.diff(fractions) > 0)
     assert partial == [2, 4, 6, 8] and res.samples == 8 and not res.cancelled
@@ -84,7 +84,7 @@ def test_cli_renders_exr_png_and_spectral_exr(tmp_path):
     out = tmp_path / "out.exr"
     spec = tmp_path / "spec.exr"
     cmd = [sys.executable, "-m", "opal_diffraction", "render", str(tmp_path / "scene.npz"), "-o", str(out),
-           "--spp", "2", "--seed", "3", "--wavelength-step", "10", "--spectral-exr", str(spec)]
+           "--spp", "2", "--seed", "3", "--wavelength-step", "10", "--light-paths", "20000", "--spectral-exr", str(spec)]
     p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     assert out.exists() and (tmp_path / "out.png").exists()
@@ -130,16 +130,16 @@ def test_passes_split_direct_light_from_the_world():
 
 def test_region_renders_the_same_pixels_as_the_full_image():
     s = prism_and_stripes(pixels=32)
-    full = render(s, RenderSettings(samples=2, seed=4, tile_size=8)).rgb
-    part = render(s, RenderSettings(samples=2, seed=4, tile_size=8), region=(8, 16, 24, 32)).rgb
+    full = render(s, RenderSettings(light_paths=0, samples=2, seed=4, tile_size=8)).rgb
+    part = render(s, RenderSettings(light_paths=0, samples=2, seed=4, tile_size=8), region=(8, 16, 24, 32)).rgb
     assert part.shape == (16, 16, 3)
     # aligned to the tile grid: the same random streams, so exactly the same pixels
     np.testing.assert_array_equal(part, full[16:32, 8:24])
-    odd = render(s, RenderSettings(samples=2, seed=4, tile_size=8), region=(5, 3, 20, 30)).rgb
+    odd = render(s, RenderSettings(light_paths=0, samples=2, seed=4, tile_size=8), region=(5, 3, 20, 30)).rgb
     assert odd.shape == (27, 15, 3)
     from opal_diffraction.core.scene import SceneError
     with pytest.raises(SceneError, match="outside"):
-        render(s, RenderSettings(samples=1), region=(0, 0, 64, 8))
+        render(s, RenderSettings(light_paths=0, samples=1), region=(0, 0, 64, 8))
 
 
 def test_emissive_surface_is_seen_with_its_radiance():

@@ -33,8 +33,8 @@ def test_npz_round_trip(tmp_path):
     np.testing.assert_array_equal(t.camera.matrix, s.camera.matrix)
     assert t.camera.kind == "ORTHO" and t.camera.width == 8
     np.testing.assert_array_equal(t.world_color, s.world_color)
-    a = render(s, RenderSettings(samples=1, threads=1)).rgb
-    b = render(t, RenderSettings(samples=1, threads=1)).rgb
+    a = render(s, RenderSettings(samples=1, threads=1, light_paths=20000)).rgb
+    b = render(t, RenderSettings(samples=1, threads=1, light_paths=20000)).rgb
     np.testing.assert_array_equal(a, b)
 
 

@@ -27,6 +27,7 @@ class TileResult:
     film: np.ndarray  # (P, n) float64 sum of sample contributions per pixel (everything)
     background: np.ndarray  # (P, n) the part of film that is emitted light seen (world, emitters), not Direct
     diffraction: np.ndarray  # (P, n) the part of film diffracted by gratings
+    caustics: np.ndarray  # (P, n) the part of film that is caustic light from the light pass
     rays: int         # rays cast (camera, secondary and shadow)
 
 
@@ -82,7 +83,8 @@ class _TileTrace(SpecularWalker):
         super().__init__(ctx, rng)
         self._film = np.zeros(n_pixels * self.n, np.float32)
         self._background = np.zeros(n_pixels * self.n, np.float32)
-        self._diffraction = np.zeros(n_pixels * self.n, np.float32)  # emitted light: world and emissive surfaces
+        self._diffraction = np.zeros(n_pixels * self.n, np.float32)
+        self._caustics = np.zeros(n_pixels * self.n, np.float32)  # emitted light: world and emissive surfaces
         self._n_pixels = n_pixels
         self.escapes = None  # a list to record rays leaving the scene (trace_escapes)
 
@@ -97,8 +99,9 @@ class _TileTrace(SpecularWalker):
             rays = rays.take(np.zeros(b, bool))
         self.walk(rays, mono)
         shape = (self._n_pixels, n)
-        return TileResult((self._film + self._background + self._diffraction).reshape(shape),
-                          self._background.reshape(shape), self._diffraction.reshape(shape), self._rays)
+        return TileResult((self._film + self._background + self._diffraction + self._caustics).reshape(shape),
+                          self._background.reshape(shape), self._diffraction.reshape(shape),
+                          self._caustics.reshape(shape), self._rays)
 
     # ----------------------------------------------------------------- hooks
     def on_miss(self, rays: Rays) -> None:
@@ -121,7 +124,10 @@ class _TileTrace(SpecularWalker):
                 self._grating_light(rays.take(on_grating), hit.take(on_grating), rng)
         diffuse = kind == DIFFUSE
         if diffuse.any():
-            self._direct_light(rays.take(diffuse), hit.take(diffuse), rng)
+            r, h = rays.take(diffuse), hit.take(diffuse)
+            self._direct_light(r, h, rng)
+            if ctx.caustics is not None:
+                self._caustic_light(r, h)
 
     # ----------------------------------------------------------------- films
     def _accumulate(self, rays: Rays, contrib, film=None):
@@ -214,6 +220,15 @@ class _TileTrace(SpecularWalker):
         else:
             irradiance = np.sum(factors * lights.spectrum[:, rays.lam].T, axis=1)
         self._accumulate(rays, rays.weighted(brdf * irradiance))
+
+    def _caustic_light(self, rays: Rays, hit: Hit):
+        """Caustic radiance at diffuse hits: the illumination map's irradiance * albedo / pi."""
+        ctx = self.ctx
+        irr = ctx.caustics.irradiance(hit.prim, hit.bu, hit.bv, hit.front)
+        brdf = ctx.materials.reflectance[hit.mat] * np.float32(1 / np.pi)
+        radiance = irr * brdf
+        contrib = rays.weighted(radiance) if rays.lam is None else rays.w * radiance[np.arange(len(rays)), rays.lam]
+        self._accumulate(rays, contrib, self._caustics)
 
     def _grating_light(self, rays: Rays, hit: Hit, rng):
         """Light of every light diffracted by the grating layer towards the viewer (exact w_i by

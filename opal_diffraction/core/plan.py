@@ -28,7 +28,9 @@ class RenderPlan:
         return "; ".join(self.notes)
 
 
-def plan_render(ctx) -> RenderPlan:
+def plan_render(ctx, light_pass=None) -> RenderPlan:
+    """What this scene needs. ``light_pass``: a light_pass.LightPass, which knows whether any
+    light reaches a mirror or glass object (and a diffuse surface to receive caustics)."""
     plan = RenderPlan()
     used = np.unique(ctx.tri_material) if len(ctx.tri_material) else np.zeros(0, np.int64)
     kinds = ctx.materials.kind[used] if len(used) else np.zeros(0, np.int32)
@@ -41,9 +43,14 @@ def plan_render(ctx) -> RenderPlan:
         plan.notes.append("light pass skipped: no mirror or glass in the scene")
     elif len(ctx.lights) == 0:
         plan.notes.append("light pass skipped: no lights")
+    elif light_pass is None or not light_pass.needed:
+        plan.notes.append("light pass skipped: no light reaches a mirror or glass object")
+    elif ctx.settings.light_paths <= 0:
+        plan.notes.append("light pass skipped: light paths set to 0")
     else:
-        # The light pass (caustics, grating records) is a later milestone; say so rather than hide it.
-        plan.notes.append("light pass not available yet: caustics are not rendered")
+        plan.light_pass = True
+        plan.notes.append(f"light pass: {ctx.settings.light_paths / 1e6:.2f} M paths aimed at "
+                          f"{len(light_pass.objects)} mirror/glass object(s)")
     n_gratings = int(ctx.gratings.enabled[used].sum()) if len(used) else 0
     plan.gratings = n_gratings > 0
     if plan.gratings:

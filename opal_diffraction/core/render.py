@@ -22,6 +22,7 @@ from .eye_pass import EyePass
 from .gratings import prepare_gratings, triangle_tangents
 from .lights import prepare_lights
 from .materials import prepare_materials
+from .light_pass import LightPass
 from .plan import RenderPlan, plan_render
 from .scene import Scene, SceneError
 from .settings import RenderSettings
@@ -30,6 +31,7 @@ from .spectrum import SpectralConverter
 __all__ = ["RenderContext", "RenderResult", "render"]
 
 EYE_PASS_STREAM = 1  # stream ids keep the passes' random numbers independent
+LIGHT_PASS_SHARE = 0.25  # of the progress bar, when the light pass runs
 
 
 @dataclass
@@ -50,6 +52,7 @@ class RenderContext:
     tri_period: np.ndarray        # (T,) nm per-triangle period override (0: the material's), or empty
     world_spectrum: np.ndarray
     offset_base: float
+    caustics: object = None  # elements.IlluminationMap from the light pass, or None
 
     @property
     def grid(self):
@@ -160,7 +163,8 @@ def render(
     t_start = time.perf_counter()
     scene, warnings = scene.validated()
     ctx = RenderContext.prepare(scene, settings)
-    plan = plan_render(ctx)
+    light_pass = LightPass(ctx)
+    plan = plan_render(ctx, light_pass)
     warnings += plan.warnings
     cam = scene.camera
     rx0, ry0, rx1, ry1 = region if region is not None else (0, 0, int(cam.width), int(cam.height))
@@ -170,6 +174,7 @@ def render(
     film = np.zeros((h, w, nl), np.float32)
     background_rgb = np.zeros((h, w, 3), np.float32)  # for the Direct pass: Combined minus emitted light
     diffraction_rgb = np.zeros((h, w, 3), np.float32)  # the Diffraction pass
+    caustics_rgb = np.zeros((h, w, 3), np.float32)  # the Caustics pass
     counts = np.zeros((h, w), np.float32)  # samples per pixel so far (tiles may differ after a cancel)
     t_prep = time.perf_counter() - t_start
 
@@ -180,6 +185,13 @@ def render(
     eye = EyePass(ctx)
     threads = settings.threads or os.cpu_count() or 1
     stats = {"rays": 0, "prepare_s": t_prep, "backend": ctx.accel.name, "triangles": len(scene.triangles)}
+    if plan.light_pass:
+        t0 = time.perf_counter()
+        lp_progress = (lambda f, m: progress(LIGHT_PASS_SHARE * f, m)) if progress else None
+        ctx.caustics, lp_stats = light_pass.run(int(settings.light_paths), lp_progress, should_cancel)
+        stats.update(lp_stats)
+        stats["rays"] += lp_stats["light_rays"]
+        stats["light_pass_s"] = time.perf_counter() - t0
     done_samples, cancelled = 0, False
     total_work = len(rounds) * len(tiles)
 
@@ -196,9 +208,10 @@ def render(
         scale = (1.0 / np.maximum(counts, 1.0))[..., None]
         spectral = film * scale
         rgb = ctx.conv.to_rgb(spectral)
-        zeros = np.zeros_like(rgb)
         diffraction = diffraction_rgb * scale
-        passes = {"Direct": rgb - background_rgb * scale - diffraction, "Caustics": zeros, "Diffraction": diffraction}
+        caustics = caustics_rgb * scale
+        passes = {"Direct": rgb - background_rgb * scale - diffraction - caustics, "Caustics": caustics,
+                  "Diffraction": diffraction}
         return RenderResult(spectral, rgb, ctx.grid.wavelengths.copy(), int(counts.min()) if counts.size else 0,
                             cancelled, plan, warnings, dict(stats), passes)
 
@@ -217,6 +230,8 @@ def render(
                     t_index, res = fut.result()
                     x0, y0, x1, y1, _ = tiles[t_index]
                     film[y0:y1, x0:x1] += res.film.reshape(y1 - y0, x1 - x0, nl)
+                    if res.caustics.any():
+                        caustics_rgb[y0:y1, x0:x1] += ctx.conv.to_rgb(res.caustics).reshape(y1 - y0, x1 - x0, 3)
                     if res.diffraction.any():
                         diffraction_rgb[y0:y1, x0:x1] += ctx.conv.to_rgb(res.diffraction).reshape(y1 - y0, x1 - x0, 3)
                     if res.background.any():
@@ -225,8 +240,9 @@ def render(
                     stats["rays"] += res.rays
                     work_done += 1
                     if progress:
-                        progress(work_done / total_work, f"eye pass: round {r_index + 1}/{len(rounds)}, "
-                                 f"{stats['rays'] / 1e6:.1f} M rays")
+                        base = LIGHT_PASS_SHARE if plan.light_pass else 0.0
+                        progress(base + (1 - base) * work_done / total_work,
+                                 f"eye pass: round {r_index + 1}/{len(rounds)}, {stats['rays'] / 1e6:.1f} M rays")
                     if should_cancel and should_cancel():
                         cancelled = True
                 if cancelled:

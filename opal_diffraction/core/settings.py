@@ -19,7 +19,8 @@ DISPERSION_SAMPLING = ("SPLIT", "SAMPLE")
 @dataclass
 class RenderSettings:
     samples: int = 16                 # eye samples per pixel
-    light_paths: int = 1_000_000      # light-pass paths (used by the light pass)
+    light_paths: int = 1_000_000      # light-pass paths (caustics)
+    element_size: float = 0.0         # illumination-map element edge (m); 0: automatic from the paths
     wavelength_min: float = 400.0     # nm
     wavelength_max: float = 700.0     # nm
     wavelength_step: float = 5.0      # nm
@@ -44,6 +45,8 @@ class RenderSettings:
         """Raise SceneError with a readable message for settings that cannot work."""
         if int(self.samples) < 1:
             raise SceneError(f"samples must be at least 1, got {self.samples}")
+        if int(self.light_paths) < 0 or self.element_size < 0:
+            raise SceneError("light paths and element size must be >= 0")
         if int(self.max_bounces) < 0:
             raise SceneError(f"max bounces must be >= 0, got {self.max_bounces}")
         if self.dispersion_sampling not in DISPERSION_SAMPLING:

@@ -30,7 +30,7 @@ import numpy as np
 from . import Hits, _as_rays, _as_tmax, _empty_hits
 
 _CHUNK = 1 << 16       # rays per embree call
-_NUDGE = 2.0 ** -20     # relative (to max |origin coordinate|) start offset, see module doc
+_NUDGE = 2.0 ** -21     # relative (to max |origin coordinate|) start offset (~4 float32 ulps)
 
 
 def default_threads() -> int:

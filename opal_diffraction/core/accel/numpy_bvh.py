@@ -8,21 +8,23 @@ Build (vectorised, level by level over all nodes of a level at once, no per-node
 2. collapsed into a ``width``-wide BVH (each wide node adopts up to ``width`` binary
    descendants, always opening the child with the largest surface area first).
 
-Storage is float32 and gather-friendly: one gather fetches everything a step needs.
+Storage is float32 and gather-friendly: ``np.take(a, ids, axis=1)`` fetches everything a
+step needs as K-float chunks.
 
-- ``_nodes``: (W, 7, K) float32; rows 0-2 child box minima (x, y, z), rows 3-5 maxima,
+- ``_nodes``: (7, W, K) float32; rows 0-2 child box minima (x, y, z), rows 3-5 maxima,
   row 6 the child reference as int32 bits (>= 0: wide node, < 0: ``~leaf``); unused
-  slots have NaN boxes (never hit).  Boxes are padded outward by a few ulps.
-- ``_tris``: (L, 12, leaf_size) float32; rows v0, v1, v2, geometric normal, columns the
-  leaf's triangles (NaN padding for unused columns); ``_leaf_prim`` maps back to input ids.
+  slots have NaN boxes (never hit).  Boxes are rounded outward and padded by a few ulps.
+- ``_tris``: (12, L, leaf_size) float32; rows v0, v1, v2, unit geometric normal, columns
+  the leaf's triangles (NaN padding for unused columns); ``_leaf_prim`` maps back to input ids.
 
-Traversal is a per-ray depth-first stack traversal, vectorised across a *pool* of
-``pool`` rays: every step each live ray processes one node (box tests of all K
-children, nearest child visited next, the others pushed far-to-near with their entry
-distance) or one leaf (all its triangles).  Entries further than the closest hit so
-far are culled when popped.  Finished rays are replaced from the (sorted) ray queue,
-so the arrays stay full until the end of the batch.  Rays are sorted by direction
-octant and a Morton code of origin and direction for coherent gathers.
+Traversal is a per-ray depth-first traversal, vectorised across a *pool* of ``pool`` live
+rays (per thread): every step each live ray processes one node (slab tests of its K child
+boxes; the nearest hit child is visited next, the other hit children are pushed as ONE
+compressed stack entry: their slots near-to-far, their count, the node id and the nearest
+one's entry distance) or one leaf (all its triangles).  A popped entry whose entry
+distance is beyond the closest hit so far is dropped with all its children.  Finished rays
+are replaced from a queue of rays sorted by direction octant and a Morton code of origin
+and direction (coherent gathers), shared by the worker threads.
 
 Triangle test: Embree's robust "Pluecker" test in float32 (vertices translated to the
 ray origin, edge functions U, V, W computed from the *shared* edge vertices so the two
@@ -46,6 +48,8 @@ _INT_MAX = np.int32(np.iinfo(np.int32).max)
 _BOX_LO = _F32(1 - 4e-6)   # slack on the slab test: accept boxes whose entry is a few
 _BOX_HI = _F32(1 + 4e-6)   # ulps beyond their exit (flat boxes, grazing rays)
 _MIN_DIR = 1e-30           # |direction component| floor for the reciprocal
+_MIN_COS = _F32(1e-6)      # |cos(ray, triangle normal)| below which a ray counts as in-plane
+_MAX_BATCH = 1 << 21       # rays sorted and traced per batch (bounds memory for huge calls)
 
 
 def default_threads() -> int:
@@ -67,22 +71,25 @@ def _half_area(lo, hi):
 
 
 def _build_binary(lo, hi, leaf_size, bins):
-    """Binary BVH, binned SAH, level by level.  lo/hi: (T,3) float64 triangle boxes.
+    """Binary BVH, binned SAH, level by level.  lo/hi: (T,3) triangle boxes.
 
     Returns perm (T,) and node arrays: left child id (-1 for a leaf; right = left + 1),
-    start, count (range in perm), box lo/hi (float64).
+    start, count (range in perm), box lo/hi (n,3) float64.  Internally structure-of-arrays
+    float32 (reductions along the last axis are much faster in NumPy).
     """
     T = len(lo)
-    cen = 0.5 * (lo + hi)
+    lo = np.ascontiguousarray(np.asarray(lo, np.float32).T)     # (3, T)
+    hi = np.ascontiguousarray(np.asarray(hi, np.float32).T)
+    cen = (lo + hi) * np.float32(0.5)
     cap = 2 * T + 1
     left = np.full(cap, -1, np.int64)
     start = np.zeros(cap, np.int64)
     count = np.zeros(cap, np.int64)
-    nlo = np.zeros((cap, 3))
-    nhi = np.zeros((cap, 3))
+    nlo = np.zeros((3, cap), np.float32)
+    nhi = np.zeros((3, cap), np.float32)
     perm = np.arange(T)
     start[0], count[0] = 0, T
-    nlo[0], nhi[0] = lo.min(axis=0), hi.max(axis=0)
+    nlo[:, 0], nhi[:, 0] = lo.min(axis=1), hi.max(axis=1)
     n_nodes = 1
     active = np.array([0])
     while active.size:
@@ -97,39 +104,40 @@ def _build_binary(lo, hi, leaf_size, bins):
         rank = np.arange(total) - offs[seg]
         pos = st[seg] + rank
         tris = perm[pos]
-        c = cen[tris]
-        tl = lo[tris]
-        th = hi[tris]
-        cmin = np.minimum.reduceat(c, offs, axis=0)
-        cmax = np.maximum.reduceat(c, offs, axis=0)
+        c = np.take(cen, tris, axis=1)
+        tl = np.take(lo, tris, axis=1)
+        th = np.take(hi, tris, axis=1)
+        cmin = np.minimum.reduceat(c, offs, axis=1)
+        cmax = np.maximum.reduceat(c, offs, axis=1)
         ext = cmax - cmin
         with np.errstate(divide="ignore", invalid="ignore"):
-            scale = np.where(ext > 0, bins / np.where(ext > 0, ext, 1.0), 0.0)
-        b = ((c - cmin[seg]) * scale[seg]).astype(np.int64)
+            scale = np.where(ext > 0, np.float32(bins) / np.where(ext > 0, ext, 1), 0).astype(np.float32)
+        b = ((c - np.take(cmin, seg, axis=1)) * np.take(scale, seg, axis=1)).astype(np.int64)
         np.clip(b, 0, bins - 1, out=b)
-        best_cost = np.full(M, np.inf)
+        best_cost = np.full(M, np.inf, np.float32)
         best_axis = np.zeros(M, np.int64)
         best_split = np.zeros(M, np.int64)
         rows = np.arange(M)
+        segb = seg * bins
         for a in range(3):
-            key = seg * bins + b[:, a]
+            key = segb + b[a]
             order = np.argsort(key, kind="stable")
             ks = key[order]
             run = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
-            blo = np.full((M * bins, 3), np.inf)
-            bhi = np.full((M * bins, 3), -np.inf)
-            blo[ks[run]] = np.minimum.reduceat(tl[order], run, axis=0)
-            bhi[ks[run]] = np.maximum.reduceat(th[order], run, axis=0)
-            bcnt = np.bincount(key, minlength=M * bins).reshape(M, bins)
-            blo = blo.reshape(M, bins, 3)
-            bhi = bhi.reshape(M, bins, 3)
-            l_lo = np.minimum.accumulate(blo, axis=1)[:, :-1]
-            l_hi = np.maximum.accumulate(bhi, axis=1)[:, :-1]
-            r_lo = np.minimum.accumulate(blo[:, ::-1], axis=1)[:, ::-1][:, 1:]
-            r_hi = np.maximum.accumulate(bhi[:, ::-1], axis=1)[:, ::-1][:, 1:]
+            blo = np.full((3, M * bins), np.inf, np.float32)
+            bhi = np.full((3, M * bins), -np.inf, np.float32)
+            blo[:, ks[run]] = np.minimum.reduceat(np.take(tl, order, axis=1), run, axis=1)
+            bhi[:, ks[run]] = np.maximum.reduceat(np.take(th, order, axis=1), run, axis=1)
+            bcnt = np.bincount(key, minlength=M * bins).reshape(M, bins).astype(np.float32)
+            blo = blo.reshape(3, M, bins)
+            bhi = bhi.reshape(3, M, bins)
+            l_lo = np.minimum.accumulate(blo, axis=2)[:, :, :-1]
+            l_hi = np.maximum.accumulate(bhi, axis=2)[:, :, :-1]
+            r_lo = np.minimum.accumulate(blo[:, :, ::-1], axis=2)[:, :, ::-1][:, :, 1:]
+            r_hi = np.maximum.accumulate(bhi[:, :, ::-1], axis=2)[:, :, ::-1][:, :, 1:]
             l_n = np.cumsum(bcnt, axis=1)[:, :-1]
             r_n = np.cumsum(bcnt[:, ::-1], axis=1)[:, ::-1][:, 1:]
-            cost = _half_area(l_lo, l_hi) * l_n + _half_area(r_lo, r_hi) * r_n
+            cost = _half_area_soa(l_lo, l_hi) * l_n + _half_area_soa(r_lo, r_hi) * r_n
             cost[(l_n == 0) | (r_n == 0)] = np.inf
             i = np.argmin(cost, axis=1)
             ci = cost[rows, i]
@@ -137,7 +145,7 @@ def _build_binary(lo, hi, leaf_size, bins):
             best_cost[better] = ci[better]
             best_axis[better] = a
             best_split[better] = i[better]
-        go_left = b[np.arange(total), best_axis[seg]] <= best_split[seg]
+        go_left = b[best_axis[seg], np.arange(total)] <= best_split[seg]
         fallback = ~np.isfinite(best_cost)
         if fallback.any():
             fb = fallback[seg]
@@ -152,13 +160,18 @@ def _build_binary(lo, hi, leaf_size, bins):
         start[L], count[L] = st, n_left
         start[R], count[R] = st + n_left, ct - n_left
         bounds = np.stack([offs, offs + n_left], axis=1).ravel()
-        tl_o, th_o = tl[order], th[order]
-        clo = np.minimum.reduceat(tl_o, bounds, axis=0)
-        chi = np.maximum.reduceat(th_o, bounds, axis=0)
-        nlo[L], nlo[R] = clo[0::2], clo[1::2]
-        nhi[L], nhi[R] = chi[0::2], chi[1::2]
+        clo = np.minimum.reduceat(np.take(tl, order, axis=1), bounds, axis=1)
+        chi = np.maximum.reduceat(np.take(th, order, axis=1), bounds, axis=1)
+        nlo[:, L], nlo[:, R] = clo[:, 0::2], clo[:, 1::2]
+        nhi[:, L], nhi[:, R] = chi[:, 0::2], chi[:, 1::2]
         active = np.concatenate([L, R])
-    return (perm, left[:n_nodes], start[:n_nodes], count[:n_nodes], nlo[:n_nodes], nhi[:n_nodes])
+    return (perm, left[:n_nodes], start[:n_nodes], count[:n_nodes],
+            nlo[:, :n_nodes].T.astype(np.float64), nhi[:, :n_nodes].T.astype(np.float64))
+
+
+def _half_area_soa(lo, hi):
+    e = np.maximum(hi - lo, 0)
+    return e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
 
 
 def _pad_box(lo, hi):
@@ -219,7 +232,7 @@ class NumpyBVH:
     name = "numpy"
 
     def __init__(self, vertices, triangles, width: int = 4, leaf_size: int = 4, bins: int = 16,
-                 threads: int | None = None, pool: int = 1 << 15, sort_rays: bool = True):
+                 threads: int | None = None, pool: int = 1 << 16, sort_rays: bool = True):
         if width not in (2, 4):
             raise ValueError("width must be 2 or 4")
         self.width = K = int(width)
@@ -228,6 +241,7 @@ class NumpyBVH:
         self.pool = int(pool)
         self.sort_rays = bool(sort_rays)
         self._executor = None
+        self._executor_n = 0
         self.stats = None
         v = np.asarray(vertices, np.float32)
         tri_idx = np.asarray(triangles, np.int64).reshape(-1, 3)
@@ -288,7 +302,9 @@ class NumpyBVH:
         prim = perm
         tris = np.full((nL, 12, Lw), np.nan, np.float32)
         p_tv = tv[prim]                                   # (T,3,3)
-        ng = np.cross(tv64[prim, 1] - tv64[prim, 0], tv64[prim, 2] - tv64[prim, 0]).astype(np.float32)
+        ng = np.cross(tv64[prim, 1] - tv64[prim, 0], tv64[prim, 2] - tv64[prim, 0])
+        ng_len = np.linalg.norm(ng, axis=1, keepdims=True)
+        ng = np.where(ng_len > 0, ng / np.where(ng_len > 0, ng_len, 1), 0).astype(np.float32)  # t is scale free
         data = np.concatenate([p_tv.reshape(T, 9), ng], axis=1)   # (T,12)
         tris[lidx, :, slot] = data
         self._tris = np.ascontiguousarray(tris.transpose(1, 0, 2))   # (12, nL, Lw)
@@ -321,12 +337,13 @@ class NumpyBVH:
         return np.argsort(key)
 
     # -- traversal ----------------------------------------------------------------------------
-    def _trace(self, o, d, tinit, any_hit, queue, out):  # o, d: (3, N) SoA
-        """Trace the rays handed out by ``queue`` and write results into ``out``."""
+    def _trace(self, ray_oi, ray_od, tinit, any_hit, queue, out):
+        """Trace the rays handed out by ``queue`` and write results into ``out``.
+        ray_oi / ray_od: (6, N) origin + 1/direction, origin + direction, in queue order."""
         with np.errstate(all="ignore"):   # errstate is per thread
-            self._trace_impl(o, d, tinit, any_hit, queue, out)
+            self._trace_impl(ray_oi, ray_od, tinit, any_hit, queue, out)
 
-    def _trace_impl(self, o, d, tinit, any_hit, queue, out):
+    def _trace_impl(self, ray_oi, ray_od, tinit, any_hit, queue, out):
         # NumPy notes: boolean-mask indexing a[m] is several times slower than np.compress(m, a)
         # for random masks; a[:, idx] returns a transposed (slow to compute on) layout, so we
         # use np.take(..., axis=1, mode="clip") (indices are valid by construction).
@@ -338,6 +355,7 @@ class NumpyBVH:
         kmask = np.int32(~(K - 1))
         kslot = np.arange(K, dtype=np.int32)[:, None]
         net = _SORT_NET[K]
+        order = queue.order
         stats = self.stats     # optional counters (set self.stats = collections.Counter())
         take, compress, flatnonzero = np.take, np.compress, np.flatnonzero
 
@@ -363,20 +381,15 @@ class NumpyBVH:
             # ---- refill free slots from the queue
             if P - n_alive >= P // 4 or n_alive == 0:
                 free = flatnonzero(~alive)
-                ids = queue.take(len(free))
-                k = len(ids)
+                q0, q1 = queue.take(len(free))
+                k = q1 - q0
                 if k:
                     free = free[:k]
-                    ray_id[free] = ids
-                    for ax in range(3):
-                        oa = take(o[ax], ids)
-                        da = take(d[ax], ids)
-                        rdi[ax][free] = oa
-                        rdl[ax][free] = oa
-                        rdl[3 + ax][free] = da
-                        da = np.where(np.abs(da) < _MIN_DIR, np.where(da < 0, -_MIN_DIR, _MIN_DIR), da)
-                        rdi[3 + ax][free] = 1.0 / da
-                    best[free] = take(tinit, ids)
+                    ray_id[free] = order[q0:q1]
+                    for row in range(6):
+                        rdi[row][free] = ray_oi[row, q0:q1]
+                        rdl[row][free] = ray_od[row, q0:q1]
+                    best[free] = tinit[q0:q1]
                     cur[free] = 0
                     sp[free] = 0
                     bleaf[free] = -1
@@ -497,6 +510,9 @@ class NumpyBVH:
                 ok = tt > 0
                 ok &= inside
                 ok &= tt < bl
+                # rays (numerically) inside the triangle's plane: U, V, W and t are rounding
+                # noise there (Embree has the same blind spot), so grazing hits are ignored
+                ok &= np.abs(den) >= _MIN_COS
                 if any_hit:
                     occ = ok.any(axis=0)
                     fin = compress(occ, sl)
@@ -531,7 +547,7 @@ class NumpyBVH:
 
             # ---- pop: take the next child of the top entry; an entry whose (nearest) entry
             # distance is beyond the best hit is dropped with all its children
-            p = np.concatenate(pops) if len(pops) > 1 else pops[0]
+            p = np.concatenate(pops) if len(pops) > 1 else (pops[0] if pops else act[:0])
             fins = []
             while len(p):
                 spp = take(sp, p)
@@ -589,24 +605,43 @@ class NumpyBVH:
             out = (np.full(n, np.inf, np.float32), np.full(n, -1, np.int32),
                    np.zeros(n, np.float32), np.zeros(n, np.float32))
             tinit = np.nextafter(tm, _F32(np.inf))   # accept t == tmax
-        order = self._ray_order(o, d) if (self.sort_rays and n > 4096) else np.arange(n)
-        nthreads = min(self.threads, max(1, n // 16384))
-        queue = _Queue(order, nthreads)
-        o = np.ascontiguousarray(o.T)
-        d = np.ascontiguousarray(d.T)
-        if nthreads <= 1:
-            self._trace(o, d, tinit, any_hit, queue, out)
-        else:
-            # every thread runs its own ray pool and refills it from the shared queue
-            if self._executor is None or self._executor._max_workers != nthreads:
-                self._executor = ThreadPoolExecutor(nthreads, thread_name_prefix="opal-bvh")
-            futs = [self._executor.submit(self._trace, o, d, tinit, any_hit, queue, out)
-                    for _ in range(nthreads)]
-            for f in futs:
-                f.result()
+        for s0 in range(0, n, _MAX_BATCH):       # bound the per-call memory (~100 bytes/ray)
+            sl = slice(s0, min(n, s0 + _MAX_BATCH))
+            part = out[sl] if any_hit else tuple(a[sl] for a in out)
+            self._run_batch(o[sl], d[sl], tinit[sl], any_hit, part)
         if any_hit:
             return out
         return Hits(*out)
+
+    def _run_batch(self, o, d, tinit, any_hit, out):
+        n = len(o)
+        order = self._ray_order(o, d) if (self.sort_rays and n > 4096) else np.arange(n)
+        nthreads = min(self.threads, max(1, n // 16384))
+        queue = _Queue(order, nthreads)
+        # per-ray data in queue order, structure of arrays
+        ray_od = np.empty((6, n), np.float32)
+        ray_od[0:3] = o[order].T
+        ray_od[3:6] = d[order].T
+        ray_oi = np.empty((6, n), np.float32)
+        ray_oi[0:3] = ray_od[0:3]
+        dd = ray_od[3:6]
+        with np.errstate(all="ignore"):
+            np.divide(1.0, np.where(np.abs(dd) < _MIN_DIR, np.where(dd < 0, -_MIN_DIR, _MIN_DIR), dd),
+                      out=ray_oi[3:6])
+        tinit = tinit[order]
+        if nthreads <= 1:
+            self._trace(ray_oi, ray_od, tinit, any_hit, queue, out)
+        else:
+            # every thread runs its own ray pool and refills it from the shared queue
+            if self._executor is None or self._executor_n != nthreads:
+                if self._executor is not None:
+                    self._executor.shutdown(wait=False)
+                self._executor = ThreadPoolExecutor(nthreads, thread_name_prefix="opal-bvh")
+                self._executor_n = nthreads
+            futs = [self._executor.submit(self._trace, ray_oi, ray_od, tinit, any_hit, queue, out)
+                    for _ in range(nthreads)]
+            for f in futs:
+                f.result()
 
     def intersect(self, origins, directions, tmax=None) -> Hits:
         return self._run(origins, directions, tmax, any_hit=False)
@@ -640,10 +675,11 @@ class _Queue:
         self.lock = threading.Lock()
 
     def take(self, k):
+        """Reserve the next k rays: returns the range [start, stop) of queue positions."""
         with self.lock:
             s = self.pos
             self.pos = min(len(self.order), s + k)
-            return self.order[s:self.pos]
+            return s, self.pos
 
 
 # sorting networks (compare-exchange pairs) for the K child keys

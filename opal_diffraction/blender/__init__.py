@@ -1,0 +1,26 @@
+"""The Blender layer: everything that touches bpy (the core never imports it).
+
+    properties  scene.opal and material.opal (the Blender-facing contract)
+    export      depsgraph -> core Scene
+    engine      the OPAL_DIFFRACTION render engine
+    operators   export to .npz, dispersion presets
+    ui          panels, and Blender's own panels enabled for the engine
+"""
+
+from __future__ import annotations
+
+from . import engine, operators, properties, ui
+
+__all__ = ["register", "unregister"]
+
+_modules = (properties, engine, operators, ui)
+
+
+def register():
+    for m in _modules:
+        m.register()
+
+
+def unregister():
+    for m in reversed(_modules):
+        m.unregister()

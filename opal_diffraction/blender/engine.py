@@ -1,0 +1,246 @@
+"""The render engine ``OPAL_DIFFRACTION``: F12, ``bpy.ops.render.render`` and ``blender -b -f``.
+
+One render: export the evaluated depsgraph (polling Esc), hand the scene to the core's
+``render`` with callbacks for progress, cancellation and partial results, and copy the film into
+Blender's render result with ``foreach_set`` on float32 arrays (rows flipped: the core's row 0
+is the top of the image, Blender's the bottom). Combined is in the blend file's linear working
+space, so Blender's colour management (view transform, look, exposure) applies as for Cycles.
+Direct, Caustics and Diffraction are registered as passes for the compositor.
+
+Errors in the scene are reported with ``report({'ERROR'}, message)`` and ``error_set``: the
+operator fails with the message, no traceback, no image written.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+import time
+import traceback
+
+import bpy
+import numpy as np
+
+from ..core.output import write_spectral_exr
+from ..core.render import render as core_render
+from ..core.scene import SceneError
+from ..core.settings import RenderSettings
+from .export import ExportCancelled, export_scene, rec709_to_working_space, render_region
+
+__all__ = ["OpalRenderEngine", "AOV_PASSES", "render_settings", "output_path", "last_render", "register",
+           "unregister"]
+
+ENGINE_ID = "OPAL_DIFFRACTION"
+#: Passes besides Combined, in the order the core fills them.
+AOV_PASSES = ("Direct", "Caustics", "Diffraction")
+
+#: What the last render did, for scripts and tests (Blender's Render Result image cannot be read
+#: back in background mode): status 'FINISHED' | 'CANCELLED' | 'ERROR', message, warnings,
+#: stats, and the pixels (rgb (H, W, 3) linear Rec.709, row 0 at the top; passes likewise).
+last_render: dict = {}
+
+
+def render_settings(opal, scene, spectral_path: str = "") -> RenderSettings:
+    """Core RenderSettings from ``scene.opal`` (names copied one to one) and Blender's threads."""
+    seed = int(opal.seed) + (int(scene.frame_current) if opal.use_animated_seed else 0)
+    return RenderSettings(
+        samples=int(opal.samples), light_paths=int(opal.light_paths), wavelength_min=float(opal.wavelength_min),
+        wavelength_max=float(opal.wavelength_max), wavelength_step=float(opal.wavelength_step),
+        max_bounces=int(opal.max_bounces), seed=max(seed, 0), dispersion_sampling=opal.dispersion_sampling,
+        spectral_exr=spectral_path, time_limit=float(opal.time_limit), threads=int(scene.render.threads),
+        backend=opal.backend.lower(), tile_size=int(opal.tile_size), round_samples=int(opal.round_samples),
+        filter_width=float(opal.filter_width),
+    )
+
+
+def output_path(path: str, frame: int, ext: str = ".exr", what: str = "spectral EXR") -> str:
+    """Absolute output path: '//' relative to the .blend, '#'s replaced by the frame number,
+    ``ext`` added when the name has no extension; "" for an empty path.
+
+    Raises SceneError when a '//' path cannot be resolved because the .blend was never saved.
+    """
+    if not path:
+        return ""
+    if path.startswith("//") and not bpy.data.filepath:
+        raise SceneError(f"the {what} path '{path}' is relative to the .blend file, which has not been saved: "
+                         "save the file or use an absolute path")
+    out = bpy.path.abspath(path)
+    out = re.sub(r"#+", lambda m: f"{frame:0{len(m.group(0))}d}", out)
+    if not os.path.splitext(out)[1]:
+        out += ext
+    return os.path.normpath(out)
+
+
+class OpalRenderEngine(bpy.types.RenderEngine):
+    """Spectral rendering of dispersion and diffraction."""
+
+    bl_idname = ENGINE_ID
+    bl_label = "Opal Diffraction"
+    bl_use_preview = False
+    bl_use_postprocess = True
+    bl_use_eevee_viewport = True  # Material Preview shading uses EEVEE
+    bl_use_shading_nodes_custom = False  # our materials are Blender's own shader nodes
+
+    # ---------------------------------------------------------------- passes
+    def update_render_passes(self, scene=None, renderlayer=None):
+        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
+        for name in AOV_PASSES:
+            self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
+
+    # ---------------------------------------------------------------- render
+    def render(self, depsgraph):
+        last_render.clear()
+        last_render.update(status="RUNNING", message="", warnings=[], stats={}, progress=[], stats_log=[])
+        try:
+            self._render(depsgraph)
+        except ExportCancelled:
+            last_render.update(status="CANCELLED", message="cancelled while exporting the scene")
+            self._status("Cancelled")
+        except SceneError as e:
+            self._fail(str(e))
+        except MemoryError:
+            self._fail("out of memory: lower the resolution, the samples or the wavelength count")
+        except Exception as e:  # a bug: tell the user plainly, keep the details for the console
+            traceback.print_exc(file=sys.stderr)
+            self._fail(f"internal error ({type(e).__name__}: {e}); details are in the system console")
+
+    # The seams below are plain Python methods so scripts and tests can observe or drive them
+    # (RNA functions such as test_break cannot be overridden from Python).
+    def _should_stop(self) -> bool:
+        """Esc pressed (Blender's test_break): polled between export batches and render tiles."""
+        return bool(self.test_break())
+
+    def _status(self, message: str) -> None:
+        log = last_render.setdefault("stats_log", [])
+        if len(log) < 10000:
+            log.append(message)
+        self.update_stats("", message)
+
+    def _progress(self, fraction: float) -> None:
+        log = last_render.setdefault("progress", [])
+        if len(log) < 10000:
+            log.append(float(fraction))
+        self.update_progress(float(fraction))
+
+    def _fail(self, message: str) -> None:
+        last_render.update(status="ERROR", message=message)
+        self._status(f"Error: {message}")
+        self.error_set(message)
+        self.report({"ERROR"}, f"Opal Diffraction: {message}")
+
+    def _render(self, depsgraph):
+        t0 = time.perf_counter()
+        scene = depsgraph.scene
+        opal = scene.opal
+        width, height = int(self.resolution_x), int(self.resolution_y)
+        spectral_path = output_path(opal.spectral_exr, scene.frame_current)
+        npz_path = output_path(opal.scene_npz, scene.frame_current, ".npz", "scene file")
+        settings = render_settings(opal, scene, spectral_path)
+        settings.validate()  # bad settings fail before the export, with a clear message
+
+        self._status("Exporting scene")
+        exported = export_scene(
+            depsgraph, width=width, height=height, camera=self.camera_override,
+            test_break=self._should_stop, progress=lambda msg: self._status(msg.capitalize()),
+        )
+        warnings = list(exported.warnings)
+        last_render["export"] = dict(exported.stats)
+        if npz_path:
+            exported.scene.validated()  # do not write a file the command line cannot render
+            try:
+                os.makedirs(os.path.dirname(npz_path), exist_ok=True)
+                exported.scene.save(npz_path)
+            except OSError as e:
+                warnings.append(f"could not write the scene file '{npz_path}': {e}")
+
+        # border render: Blender counts rows from the bottom, the core from the top
+        region_b = render_region(scene, width, height)
+        if region_b is not None:
+            x0, y0, x1, y1 = region_b
+            region = (x0, height - y1, x1, height - y0)
+        else:
+            x0, y0, x1, y1 = 0, 0, width, height
+            region = None
+        rw, rh = x1 - x0, y1 - y0
+
+        to_working = rec709_to_working_space()
+        result = self.begin_result(0, 0, rw, rh, layer=depsgraph.view_layer.name)
+        if result is None:
+            raise SceneError(f"Blender refused a {rw}x{rh} render result")
+        state = {"round": 0}
+
+        def progress(fraction, message):
+            self._progress(fraction)
+            self._status(f"{message} | {time.perf_counter() - t0:.1f} s")
+
+        def on_round(partial):
+            state["round"] += 1
+            self._fill(result, partial, to_working)
+            self.update_result(result)
+
+        try:
+            rr = core_render(exported.scene, settings, progress=progress, should_cancel=self._should_stop,
+                             on_round=on_round, region=region)
+        except BaseException:
+            self.end_result(result, cancel=True)
+            raise
+        self._fill(result, rr, to_working)
+        self.end_result(result)
+
+        warnings += [w for w in rr.warnings if w not in warnings]
+        if (np.asarray(exported.scene.materials.grating) != 0).any() and not getattr(rr.plan, "gratings", False):
+            warnings.append("diffraction gratings are not rendered yet: surfaces with a grating render without it")
+        stats = dict(rr.stats, **{"export_" + k: v for k, v in exported.stats.items()})
+        stats["total_s"] = time.perf_counter() - t0
+        if spectral_path and rr.samples > 0:
+            try:
+                write_spectral_exr(spectral_path, rr.spectral, rr.wavelengths, rr.rgb)
+                stats["spectral_exr"] = spectral_path
+            except Exception as e:  # the image itself is fine: keep it, say what failed
+                warnings.append(f"could not write the spectral EXR '{spectral_path}': {e}")
+        for w in warnings:
+            self.report({"WARNING"}, f"Opal Diffraction: {w}")
+        summary = (f"{rr.samples} samples | {stats.get('rays', 0) / 1e6:.1f} M rays | "
+                   f"{exported.stats['triangles']} triangles | {stats['total_s']:.1f} s")
+        if rr.cancelled:
+            summary = "Cancelled | " + summary
+        if warnings:
+            summary += f" | {len(warnings)} warning(s): {warnings[0]}"
+        self._status(summary)
+        last_render.update(
+            status="CANCELLED" if rr.cancelled else "FINISHED", warnings=warnings, stats=stats,
+            samples=rr.samples, rgb=rr.rgb, passes=rr.passes, plan=rr.plan.summary(), region=region,
+            spectral_exr=stats.get("spectral_exr", ""), partial_updates=state["round"],
+            plan_gratings=bool(getattr(rr.plan, "gratings", False)),
+        )
+
+    @staticmethod
+    def _fill(result, rr, to_working) -> None:
+        """Copy a core RenderResult into Blender's result passes (bottom row first, float32)."""
+        layer = result.layers[0]
+        last_render["result_passes"] = [p.name for p in layer.passes]
+        h, w = rr.rgb.shape[:2]
+        rgb = rr.rgb if to_working is None else rr.rgb @ to_working.T.astype(np.float32)
+        combined = np.empty((h, w, 4), np.float32)
+        combined[..., :3] = rgb[::-1]
+        combined[..., 3] = 1.0
+        layer.passes["Combined"].rect.foreach_set(combined.ravel())
+        for name in AOV_PASSES:
+            try:
+                rp = layer.passes[name]
+            except KeyError:
+                continue
+            img = rr.passes.get(name)
+            if img is None:
+                continue
+            img = img if to_working is None else img @ to_working.T.astype(np.float32)
+            rp.rect.foreach_set(np.ascontiguousarray(img[::-1], np.float32).ravel())
+
+
+def register():
+    bpy.utils.register_class(OpalRenderEngine)
+
+
+def unregister():
+    bpy.utils.unregister_class(OpalRenderEngine)

@@ -1,0 +1,271 @@
+"""Render and material settings: ``scene.opal`` and ``material.opal``.
+
+The names are the Blender-facing contract (architecture.md, "Blender-facing contract"): users'
+scripts and saved .blend files rely on them, so they never change. Every EnumProperty item has
+an explicit, stable index, so a file saved today still loads after items are added (the values
+are stored as those numbers). Dispersion indices equal the core's ``DISPERSION_MODELS`` codes.
+
+Base colour, metallic, roughness, transmission and IOR are not duplicated here: they come from
+the material's shader nodes (Principled, Diffuse, Glossy, Glass BSDF, Emission), so existing
+scenes render without conversion. ``material.opal`` holds only what Blender has no slot for:
+dispersion and the diffraction grating.
+"""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.types import PropertyGroup
+
+from ..core.optics import DISPERSION_MODELS
+
+__all__ = [
+    "OpalRenderSettings",
+    "OpalMaterialSettings",
+    "DISPERSION_ITEMS",
+    "DISPERSION_PRESETS",
+    "register",
+    "unregister",
+]
+
+# A wavelength-valued float shows "nm" where this Blender has the subtype (4.x does).
+_SUBTYPES = bpy.types.FloatProperty.bl_rna.properties["subtype"].enum_items.keys()
+_NM = "WAVELENGTH" if "WAVELENGTH" in _SUBTYPES else "NONE"
+# Output paths accept '//' (relative to the .blend) where this Blender asks paths to say so.
+_PATH_OPTIONS = ({"PATH_SUPPORTS_BLEND_RELATIVE"}
+                 if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties else set())
+
+# ---------------------------------------------------------------------------- enum items
+#: (identifier, name, description, stable index); the index is what a .blend stores.
+DISPERSION_ITEMS = [
+    ("NONE", "None", "Constant index of refraction: the IOR of the material's BSDF node", DISPERSION_MODELS["NONE"]),
+    ("ABBE", "IOR + Abbe Number",
+     "Cauchy fit n = A + B/lambda^2 to the node's IOR (at 587.6 nm, the d line) and the Abbe number below; "
+     "a lower Abbe number spreads colours more", DISPERSION_MODELS["ABBE"]),
+    ("BK7", "Crown Glass (N-BK7)", "Sellmeier data of SCHOTT N-BK7 (n_d 1.5168, V_d 64.2); the node's IOR is ignored",
+     DISPERSION_MODELS["BK7"]),
+    ("FUSED_SILICA", "Fused Silica", "Sellmeier data of Malitson 1965 (n_d 1.4585, V_d 67.8); the node's IOR is ignored",
+     DISPERSION_MODELS["FUSED_SILICA"]),
+    ("DIAMOND", "Diamond", "Sellmeier data of Peter 1923 (n_d 2.4175, V_d 55.3); the node's IOR is ignored",
+     DISPERSION_MODELS["DIAMOND"]),
+]
+
+DISPERSION_SAMPLING_ITEMS = [
+    ("SAMPLE", "Sample", "At a dispersive surface a ray continues with one wavelength picked at random "
+     "(hero-wavelength style): cheap per ray, converges with samples", 0),
+    ("SPLIT", "Split", "At a dispersive surface a ray splits into one ray per wavelength (the source paper's "
+     "method): no colour noise from dispersion, more rays", 1),
+]
+
+BACKEND_ITEMS = [
+    ("AUTO", "Automatic", "Embree where its wheel is installed, otherwise the NumPy BVH", 0),
+    ("EMBREE", "Embree", "Intel Embree through embreex (fastest; x86-64 only)", 1),
+    ("NUMPY", "NumPy", "The vectorised NumPy BVH (works everywhere)", 2),
+]
+
+GRATING_TYPE_ITEMS = [
+    ("REFLECTION", "Reflection", "Light diffracts back off the surface (CDs, opal, beetle shells)", 0),
+    ("TRANSMISSION", "Transmission", "Light diffracts through the surface (grating film, slide gratings)", 1),
+]
+
+LATTICE_ITEMS = [
+    ("LINES", "Lines", "Parallel slits (a 1D ruled grating)", 0),
+    ("HEXAGONAL", "Hexagonal", "A 2D hexagonal lattice of scatterers (opal's close-packed spheres)", 1),
+]
+
+GRATING_DIRECTION_ITEMS = [
+    ("UV", "UV Map", "Across the slits along the active UV map's U direction; the object's local X axis "
+     "where the mesh has no UV map", 0),
+    ("OBJECT_X", "Object X Axis", "Across the slits along the object's local X axis", 1),
+    ("ATTRIBUTE", "Face Attribute", "The per-face direction attribute written by the opal tools", 2),
+]
+
+#: Named glasses: (identifier, name, dispersion model, n_d, V_d). Applying one sets
+#: ``material.opal.dispersion`` / ``abbe_number`` and the IOR of the material's BSDF node to n_d,
+#: so Cycles and EEVEE previews bend light the same way on average.
+DISPERSION_PRESETS = [
+    ("BK7", "Crown Glass N-BK7", "BK7", 1.5168, 64.17),
+    ("FUSED_SILICA", "Fused Silica", "FUSED_SILICA", 1.4585, 67.82),
+    ("DIAMOND", "Diamond", "DIAMOND", 2.4175, 55.3),
+    ("WATER", "Water (20 C)", "ABBE", 1.333, 55.7),
+    ("ACRYLIC", "Acrylic (PMMA)", "ABBE", 1.4914, 57.4),
+    ("POLYCARBONATE", "Polycarbonate", "ABBE", 1.585, 30.0),
+    ("FLINT_F2", "Flint Glass F2", "ABBE", 1.62004, 36.37),
+    ("DENSE_FLINT", "Dense Flint (1.72, V 29)", "ABBE", 1.72, 29.0),
+    ("SF11", "Dense Flint N-SF11", "ABBE", 1.78472, 25.68),
+    ("SAPPHIRE", "Sapphire", "ABBE", 1.768, 72.2),
+]
+
+
+# ---------------------------------------------------------------------------- scene.opal
+class OpalRenderSettings(PropertyGroup):
+    """``scene.opal``: the settings of one render (names copied one to one into core RenderSettings)."""
+
+    samples: IntProperty(
+        name="Samples", description="Eye samples per pixel: more samples, less noise", default=16, min=1,
+        max=1 << 24, soft_max=4096,
+    )
+    light_paths: IntProperty(
+        name="Light Paths", description="Paths traced from the lights in the light pass (caustics and light "
+        "reaching gratings through glass); the light pass is skipped when the scene needs none",
+        default=1_000_000, min=0, soft_max=100_000_000,
+    )
+    wavelength_min: FloatProperty(
+        name="Wavelength Min", description="Shortest wavelength simulated (the CIE observer covers 360-830 nm)",
+        default=400.0, min=360.0, max=830.0, subtype=_NM, precision=1,
+    )
+    wavelength_max: FloatProperty(
+        name="Wavelength Max", description="Longest wavelength simulated (the CIE observer covers 360-830 nm)",
+        default=700.0, min=360.0, max=830.0, subtype=_NM, precision=1,
+    )
+    wavelength_step: FloatProperty(
+        name="Wavelength Step", description="Spacing of the wavelength samples: 5 nm is the reference, 10 or "
+        "20 nm render faster with a small colour error", default=5.0, min=0.5, max=100.0, subtype=_NM, precision=1,
+    )
+    max_bounces: IntProperty(
+        name="Max Bounces", description="Specular bounces (mirror reflections and refractions) followed along "
+        "an eye path", default=8, min=0, max=1024, soft_max=64,
+    )
+    seed: IntProperty(
+        name="Seed", description="Seed of the random numbers: the same seed gives the same image whatever "
+        "the number of threads", default=0, min=0,
+    )
+    use_animated_seed: BoolProperty(
+        name="Animated Seed", description="Add the frame number to the seed so the noise changes between frames",
+        default=False,
+    )
+    dispersion_sampling: EnumProperty(
+        name="Dispersion Sampling", description="How a ray continues at a dispersive surface",
+        items=DISPERSION_SAMPLING_ITEMS, default="SAMPLE",
+    )
+    spectral_exr: StringProperty(
+        name="Spectral EXR", description="Also write the spectral image here (OpenEXR, the JCGT 2021 spectral "
+        "layout with one channel per wavelength, plus R, G, B); '#' is replaced by the frame number, '//' is "
+        "relative to the .blend file. Empty: off", default="", subtype="FILE_PATH", options=_PATH_OPTIONS,
+    )
+    scene_npz: StringProperty(
+        name="Scene File", description="Also save the exported scene here at render time (.npz, with the "
+        "render's modifier levels), so the command line re-renders it without Blender; '#' is replaced by the "
+        "frame number, '//' is relative to the .blend file. Empty: off", default="", subtype="FILE_PATH",
+        options=_PATH_OPTIONS,
+    )
+    time_limit: FloatProperty(
+        name="Time Limit", description="Stop after this many seconds (at the end of a progressive round); "
+        "0: no limit", default=0.0, min=0.0, step=100.0, unit="TIME_ABSOLUTE",
+    )
+    backend: EnumProperty(
+        name="Ray Casting", description="Ray casting backend", items=BACKEND_ITEMS, default="AUTO",
+    )
+    tile_size: IntProperty(
+        name="Tile Size", description="Side of the square tiles the image is split into (pixels); cancel "
+        "requests are honoured between tiles", default=64, min=8, max=1024, subtype="PIXEL",
+    )
+    round_samples: IntProperty(
+        name="Samples per Round", description="Samples per pixel added by each progressive round: the image "
+        "updates after every round", default=8, min=1, max=4096,
+    )
+    filter_width: FloatProperty(
+        name="Filter Width", description="Width of the Blackman-Harris pixel filter, as in Cycles",
+        default=1.5, min=0.0, max=10.0, subtype="PIXEL",
+    )
+
+    @classmethod
+    def register(cls):
+        bpy.types.Scene.opal = PointerProperty(
+            name="Opal Diffraction Settings", description="Opal Diffraction render settings", type=cls,
+        )
+
+    @classmethod
+    def unregister(cls):
+        del bpy.types.Scene.opal
+
+
+# ---------------------------------------------------------------------------- material.opal
+class OpalMaterialSettings(PropertyGroup):
+    """``material.opal``: dispersion and the diffraction grating of a material."""
+
+    dispersion: EnumProperty(
+        name="Dispersion", description="How the index of refraction of glass-like materials (Glass BSDF, or "
+        "Principled BSDF with transmission) varies with wavelength", items=DISPERSION_ITEMS, default="NONE",
+    )
+    abbe_number: FloatProperty(
+        name="Abbe Number", description="V_d = (n_d - 1) / (n_F - n_C): low values (flint glass, ~30) spread "
+        "colours strongly, high values (crown glass, ~60) weakly", default=40.0, min=1.0, max=200.0,
+        soft_min=10.0, soft_max=100.0, precision=2,
+    )
+
+    grating: BoolProperty(
+        name="Diffraction Grating", description="The surface diffracts light like a grating (opal, CD, "
+        "holographic foil)", default=False,
+    )
+    grating_type: EnumProperty(
+        name="Type", description="Whether diffracted light leaves on the incident side or passes through",
+        items=GRATING_TYPE_ITEMS, default="REFLECTION",
+    )
+    lattice: EnumProperty(
+        name="Lattice", description="Arrangement of the diffracting elements", items=LATTICE_ITEMS, default="LINES",
+    )
+    period: FloatProperty(
+        name="Period", description="Distance between neighbouring slits (grating pitch): a CD is 1600 nm, a "
+        "DVD 740 nm; orders appear at sin(theta) = m lambda / period", default=1600.0, min=0.0,
+        soft_min=100.0, soft_max=10000.0, subtype=_NM, precision=1,
+    )
+    slit_width: FloatProperty(
+        name="Slit Width", description="Width of one slit or ridge: at most the period; half the period "
+        "suppresses the even orders", default=800.0, min=0.0, soft_min=10.0, soft_max=10000.0,
+        subtype=_NM, precision=1,
+    )
+    slit_count: IntProperty(
+        name="Slit Count", description="Slits that diffract coherently together: more slits, sharper "
+        "orders (peaks are lambda / (N period) wide)", default=1000, min=1, soft_max=100000,
+    )
+    coherence_length: FloatProperty(
+        name="Coherence Length", description="Length along the slits that diffracts coherently, in "
+        "micrometres: shorter lengths smear the orders across the slit direction", default=10.0, min=0.0,
+        soft_min=0.1, soft_max=1000.0, precision=2,
+    )
+    grating_direction: EnumProperty(
+        name="Direction", description="How the direction across the slits is found on the surface",
+        items=GRATING_DIRECTION_ITEMS, default="UV",
+    )
+    rotation: FloatProperty(
+        name="Rotation", description="Rotation of the slits about the surface normal, added to the direction "
+        "above", default=0.0, subtype="ANGLE",
+    )
+
+    def grating_problems(self) -> list[str]:
+        """Readable reasons why the grating settings cannot work (empty when they can)."""
+        problems = []
+        if not self.period > 0.0:
+            problems.append(f"grating period must be > 0 nm (got {self.period:g} nm)")
+        if not self.slit_width > 0.0:
+            problems.append(f"grating slit width must be > 0 nm (got {self.slit_width:g} nm)")
+        elif self.period > 0.0 and self.slit_width > self.period:
+            problems.append(f"grating slit width ({self.slit_width:g} nm) is larger than its period "
+                            f"({self.period:g} nm)")
+        if not self.coherence_length > 0.0:
+            problems.append(f"grating coherence length must be > 0 um (got {self.coherence_length:g} um)")
+        return problems
+
+    @classmethod
+    def register(cls):
+        bpy.types.Material.opal = PointerProperty(
+            name="Opal Diffraction Material", description="Opal Diffraction material settings", type=cls,
+        )
+
+    @classmethod
+    def unregister(cls):
+        del bpy.types.Material.opal
+
+
+classes = (OpalRenderSettings, OpalMaterialSettings)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,320 @@
+"""Panels: Render, Material and World tabs for OPAL_DIFFRACTION, and Blender's own panels.
+
+Our panels show only when the engine is selected (``context.engine`` in ``COMPAT_ENGINES``).
+Blender's built-in panels that apply unchanged (output, format, frame range, colour management,
+camera, light, material slots, ...) are enabled by adding the engine id to their
+``COMPAT_ENGINES`` on register, as Cycles does; unregister removes it from exactly the panels it
+was added to.
+"""
+
+from __future__ import annotations
+
+import bpy
+from bpy.types import Menu, Panel
+
+from .engine import ENGINE_ID
+from .operators import OPAL_OT_dispersion_preset, OPAL_OT_export_scene
+from .properties import DISPERSION_PRESETS
+
+__all__ = ["register", "unregister", "builtin_panels", "classes"]
+
+
+class OpalButtonsPanel:
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    COMPAT_ENGINES = {ENGINE_ID}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+
+# ============================================================================ render tab
+class OPAL_RENDER_PT_sampling(OpalButtonsPanel, Panel):
+    bl_label = "Sampling"
+    bl_context = "render"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        opal = context.scene.opal
+        col = layout.column(align=True)
+        col.prop(opal, "samples")
+        col.prop(opal, "round_samples")
+        col = layout.column(align=True)
+        col.prop(opal, "time_limit")
+        row = layout.row(align=True)
+        row.prop(opal, "seed")
+        row.prop(opal, "use_animated_seed", text="", icon="TIME")
+
+
+class OPAL_RENDER_PT_spectrum(OpalButtonsPanel, Panel):
+    bl_label = "Spectrum"
+    bl_context = "render"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        opal = context.scene.opal
+        col = layout.column(align=True)
+        col.prop(opal, "wavelength_min", text="Wavelength Min")
+        col.prop(opal, "wavelength_max", text="Max")
+        col.prop(opal, "wavelength_step", text="Step")
+        if opal.wavelength_min >= opal.wavelength_max:
+            layout.label(text="Min must be below Max", icon="ERROR")
+        else:
+            n = int((opal.wavelength_max - opal.wavelength_min) / opal.wavelength_step + 1e-9) + 1
+            layout.label(text=f"{n} wavelengths", icon="INFO")
+        layout.prop(opal, "dispersion_sampling")
+
+
+class OPAL_RENDER_PT_light_paths(OpalButtonsPanel, Panel):
+    bl_label = "Light Paths"
+    bl_context = "render"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        opal = context.scene.opal
+        layout.prop(opal, "max_bounces")
+        layout.prop(opal, "light_paths")
+
+
+class OPAL_RENDER_PT_film(OpalButtonsPanel, Panel):
+    bl_label = "Film"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(context.scene.opal, "filter_width")
+
+
+class OPAL_RENDER_PT_output(OpalButtonsPanel, Panel):
+    bl_label = "Spectral Output"
+    bl_context = "render"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        opal = context.scene.opal
+        layout.prop(opal, "spectral_exr")
+        layout.prop(opal, "scene_npz")
+        layout.operator(OPAL_OT_export_scene.bl_idname, icon="EXPORT")
+
+
+class OPAL_RENDER_PT_performance(OpalButtonsPanel, Panel):
+    bl_label = "Performance"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        rd, opal = context.scene.render, context.scene.opal
+        col = layout.column(align=True)
+        col.prop(rd, "threads_mode")
+        sub = col.column(align=True)
+        sub.enabled = rd.threads_mode == "FIXED"
+        sub.prop(rd, "threads")
+        layout.prop(opal, "backend")
+        layout.prop(opal, "tile_size")
+
+
+# ============================================================================ material tab
+def _material_poll(cls, context):
+    mat = getattr(context, "material", None)
+    return mat is not None and not getattr(mat, "grease_pencil", None) and context.engine in cls.COMPAT_ENGINES
+
+
+def _draw_node_input(layout, id_data, input_name: str) -> bool:
+    """Draw the node tree feeding the output node's ``input_name`` (as Cycles' panels do)."""
+    ntree = getattr(id_data, "node_tree", None)
+    if ntree is None:
+        return False
+    node = ntree.get_output_node("CYCLES") or ntree.get_output_node("ALL")
+    if node is None:
+        layout.label(text="No output node")
+        return True
+    sock = node.inputs.get(input_name)
+    if sock is None:
+        layout.label(text="Incompatible output node")
+        return True
+    layout.template_node_view(ntree, node, sock)
+    return True
+
+
+class OPAL_MATERIAL_PT_surface(OpalButtonsPanel, Panel):
+    bl_label = "Surface"
+    bl_context = "material"
+
+    @classmethod
+    def poll(cls, context):
+        return _material_poll(cls, context)
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        mat = context.material
+        if not _draw_node_input(layout, mat, "Surface"):
+            layout.prop(mat, "diffuse_color")
+
+
+class OPAL_MT_dispersion_presets(Menu):
+    bl_label = "Dispersion Presets"
+    bl_idname = "OPAL_MT_dispersion_presets"
+
+    def draw(self, context):
+        layout = self.layout
+        for ident, name, _model, n_d, abbe in DISPERSION_PRESETS:
+            op = layout.operator(OPAL_OT_dispersion_preset.bl_idname, text=f"{name}  (n {n_d:g}, V {abbe:g})")
+            op.preset = ident
+
+
+class OPAL_MATERIAL_PT_dispersion(OpalButtonsPanel, Panel):
+    bl_label = "Dispersion"
+    bl_context = "material"
+
+    @classmethod
+    def poll(cls, context):
+        return _material_poll(cls, context)
+
+    def draw_header_preset(self, context):
+        self.layout.menu(OPAL_MT_dispersion_presets.bl_idname, text="", icon="PRESET")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        opal = context.material.opal
+        layout.prop(opal, "dispersion")
+        row = layout.row()
+        row.active = opal.dispersion == "ABBE"
+        row.prop(opal, "abbe_number")
+        if opal.dispersion in ("BK7", "FUSED_SILICA", "DIAMOND"):
+            layout.label(text="The glass's own index replaces the node's IOR", icon="INFO")
+        elif opal.dispersion != "NONE":
+            layout.label(text="Applies to Glass BSDF or transmissive Principled BSDF", icon="INFO")
+
+
+class OPAL_MATERIAL_PT_grating(OpalButtonsPanel, Panel):
+    bl_label = "Diffraction Grating"
+    bl_context = "material"
+
+    @classmethod
+    def poll(cls, context):
+        return _material_poll(cls, context)
+
+    def draw_header(self, context):
+        self.layout.prop(context.material.opal, "grating", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        opal = context.material.opal
+        layout.active = opal.grating
+        layout.prop(opal, "grating_type")
+        layout.prop(opal, "lattice")
+        col = layout.column(align=True)
+        col.prop(opal, "period")
+        col.prop(opal, "slit_width")
+        col.prop(opal, "slit_count")
+        layout.prop(opal, "coherence_length", text="Coherence Length (um)")
+        col = layout.column(align=True)
+        col.prop(opal, "grating_direction")
+        col.prop(opal, "rotation")
+        if opal.grating:
+            for problem in opal.grating_problems():
+                box = layout.box()
+                box.alert = True
+                box.label(text=problem[0].upper() + problem[1:], icon="ERROR")
+            layout.label(text="Gratings are not rendered yet: the surface renders without one", icon="INFO")
+
+
+# ============================================================================ world tab
+class OPAL_WORLD_PT_surface(OpalButtonsPanel, Panel):
+    bl_label = "Surface"
+    bl_context = "world"
+
+    @classmethod
+    def poll(cls, context):
+        return getattr(context, "world", None) is not None and context.engine in cls.COMPAT_ENGINES
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        world = context.world
+        if not _draw_node_input(layout, world, "Surface"):
+            layout.prop(world, "color")
+        layout.label(text="Rendered as a uniform background colour", icon="INFO")
+
+
+classes = (
+    OPAL_RENDER_PT_sampling,
+    OPAL_RENDER_PT_spectrum,
+    OPAL_RENDER_PT_light_paths,
+    OPAL_RENDER_PT_film,
+    OPAL_RENDER_PT_output,
+    OPAL_RENDER_PT_performance,
+    OPAL_MT_dispersion_presets,
+    OPAL_MATERIAL_PT_surface,
+    OPAL_MATERIAL_PT_dispersion,
+    OPAL_MATERIAL_PT_grating,
+    OPAL_WORLD_PT_surface,
+)
+
+# ============================================================================ built-in panels
+#: Built-in panels made for Blender's own engines that do not apply to ours.
+_EXCLUDE = {
+    "DATA_PT_light",  # draws only the light type; DATA_PT_EEVEE_light below draws all we use
+    "DATA_PT_preview",
+    "MATERIAL_PT_preview",
+    "VIEWLAYER_PT_filter",
+    "VIEWLAYER_PT_layer_passes",
+    "EEVEE_MATERIAL_PT_viewport_settings",
+}
+#: Built-in panels outside the 'BLENDER_RENDER' group that show settings we read.
+_EXTRA = {
+    "DATA_PT_EEVEE_light",  # type, colour, temperature, power, exposure, normalize, radius, shape, size
+    "DATA_PT_spot",  # spot size and blend (a child of DATA_PT_EEVEE_light)
+    "EEVEE_MATERIAL_PT_context_material",  # material slots
+}
+
+_added: list = []
+
+
+def builtin_panels() -> list:
+    """Blender's panels we enable for the engine (those made for any engine, plus a few)."""
+    out = []
+    for panel in bpy.types.Panel.__subclasses__():
+        engines = getattr(panel, "COMPAT_ENGINES", None)
+        if not isinstance(engines, set) or panel.__name__ in _EXCLUDE:
+            continue
+        if "BLENDER_RENDER" in engines or panel.__name__ in _EXTRA:
+            out.append(panel)
+    return out
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    for panel in builtin_panels():
+        if ENGINE_ID not in panel.COMPAT_ENGINES:
+            panel.COMPAT_ENGINES.add(ENGINE_ID)
+            _added.append(panel)
+
+
+def unregister():
+    while _added:
+        panel = _added.pop()
+        panel.COMPAT_ENGINES.discard(ENGINE_ID)
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,94 @@
+"""Surface elements and the illumination map: where the light pass leaves caustic flux.
+
+Every receiving triangle is cut into k x k equal sub-triangles (k from a target element area),
+and each sub-triangle has two elements, one per side, since surfaces are two-sided. The
+element a hit falls in follows in O(1) from the triangle id and barycentrics (u, v):
+i = floor(k u), j = floor(k v), the cell's upper half when frac(k u) + frac(k v) > 1, and
+row i of the triangle holds 2 (k - i) - 1 cells starting at 2 k i - i^2. No per-element Python
+objects: the map is one (E, n) array of spectral flux that partial maps simply add to.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["ElementLayout", "IlluminationMap", "MAX_SUBDIVISION"]
+
+MAX_SUBDIVISION = 1024  # k per triangle at most
+
+
+@dataclass
+class ElementLayout:
+    k: np.ndarray             # (T,) int64 subdivisions per edge (0: the triangle receives no flux)
+    offset: np.ndarray        # (T,) int64 index of the triangle's first element
+    element_area: np.ndarray  # (T,) float64 area of one element of the triangle (m^2)
+    total: int                # number of elements
+
+    @classmethod
+    def build(cls, vertices, triangles, receivers: np.ndarray, target_area: float) -> "ElementLayout":
+        """Elements of about ``target_area`` m^2 on the triangles where ``receivers`` is True."""
+        v = np.asarray(vertices, np.float64)
+        t = np.asarray(triangles, np.int64)
+        p = v[t] if len(t) else np.zeros((0, 3, 3))
+        area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+        k = np.ceil(np.sqrt(area / max(float(target_area), 1e-30))).astype(np.int64)
+        k = np.where(np.asarray(receivers, bool), np.clip(k, 1, MAX_SUBDIVISION), 0)
+        count = 2 * k * k
+        offset = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64) if len(k) else np.zeros(0, np.int64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            element_area = np.where(k > 0, area / np.maximum(k * k, 1), 0.0)
+        return cls(k, offset, element_area, int(count.sum()))
+
+    def index(self, prim, bu, bv, front) -> tuple[np.ndarray, np.ndarray]:
+        """(element index, valid) for hits on triangles ``prim`` at barycentrics (bu, bv)."""
+        prim = np.asarray(prim, np.int64)
+        k = self.k[prim]
+        valid = k > 0
+        kf = k.astype(np.float64)
+        x = np.clip(np.asarray(bu, np.float64), 0, 1) * kf
+        y = np.clip(np.asarray(bv, np.float64), 0, 1) * kf
+        i = np.clip(np.floor(x).astype(np.int64), 0, np.maximum(k - 1, 0))
+        j = np.clip(np.floor(y).astype(np.int64), 0, np.maximum(k - 1 - i, 0))
+        upper = ((x - i) + (y - j) > 1.0) & (j < k - 1 - i)
+        local = 2 * k * i - i * i + 2 * j + upper
+        side = np.where(np.asarray(front, bool), 0, 1)
+        return self.offset[prim] + 2 * local + side, valid
+
+
+@dataclass
+class IlluminationMap:
+    """Spectral flux (W per wavelength sample) deposited on each element by the light pass."""
+
+    layout: ElementLayout
+    flux: np.ndarray  # (E, n) float32
+
+    @classmethod
+    def empty(cls, layout: ElementLayout, n: int) -> "IlluminationMap":
+        return cls(layout, np.zeros((layout.total, n), np.float32))
+
+    def deposit(self, elements: np.ndarray, flux: np.ndarray, lam: np.ndarray | None = None) -> None:
+        """Add flux (B, n) white or (B,) at wavelengths ``lam`` to the elements (B,)."""
+        if len(elements) == 0:
+            return
+        if lam is not None:
+            np.add.at(self.flux, (elements, lam), flux)
+            return
+        order = np.argsort(elements, kind="stable")
+        e, f = elements[order], flux[order]
+        starts = np.flatnonzero(np.concatenate([[True], e[1:] != e[:-1]]))
+        self.flux[e[starts]] += np.add.reduceat(f, starts, axis=0)
+
+    def irradiance(self, prim, bu, bv, front) -> np.ndarray:
+        """Spectral irradiance (B, n) at hits: the element's flux over its area (0 off the map)."""
+        idx, valid = self.layout.index(prim, bu, bv, front)
+        out = np.zeros((len(idx), self.flux.shape[1]), np.float32)
+        if valid.any():
+            area = self.layout.element_area[np.asarray(prim)[valid]]
+            out[valid] = self.flux[idx[valid]] / area[:, None].astype(np.float32)
+        return out
+
+    def __iadd__(self, other: "IlluminationMap") -> "IlluminationMap":
+        self.flux += other.flux
+        return self

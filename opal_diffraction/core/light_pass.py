@@ -1,0 +1,313 @@
+"""The light pass: paths from the lights through mirrors and glass, deposited as caustics.
+
+The source paper's bidirectional half (physics.md section 4.1): light paths carry the whole
+spectrum from each light, are aimed at the objects that can bend light (mirrors and dielectrics:
+the *casters*), follow specular reflection and refraction with Fresnel, dispersion and Russian
+roulette (transport.SpecularWalker), and where a path that has been specular at least once lands
+on a diffuse surface its spectral flux is added to that surface element of the illumination map
+(elements.py). Direct light stays the eye pass's job, so a path that reaches a diffuse surface
+first deposits nothing: no double counting.
+
+Aiming (unbiased): casters are grouped into connected objects with bounding spheres. From a
+point or spot light, or a point sampled on an area light, a direction is drawn in the cone that
+subtends one object's sphere, the object chosen in proportion to its cone's solid angle; the pdf
+of a direction is the mixture sum_c P_c [w in cone c] / Omega_c, so overlapping cones are
+accounted for. A sun draws a point on the disk one object's sphere casts across its beam, with
+the matching mixture pdf per unit area. Paths start with weight (emitted radiometric quantity /
+pdf / paths of that light), so the map holds flux in W per wavelength sample; lights share the
+path budget in proportion to the power they send towards casters.
+
+Every batch of paths draws its random numbers from its own stream (seed, light pass, light,
+batch), and batches add into the map, so the map does not depend on how the work is split.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .elements import ElementLayout, IlluminationMap
+from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
+from .materials import DIELECTRIC, DIFFUSE, MIRROR
+from .transport import Hit, Rays, SpecularWalker
+
+__all__ = ["CasterObjects", "caster_objects", "LightPass", "LIGHT_PASS_STREAM", "BATCH_PATHS"]
+
+LIGHT_PASS_STREAM = 2
+BATCH_PATHS = 1 << 15
+MAX_OBJECTS = 64
+RR_START_DEPTH = 3
+RR_SURVIVAL = 0.8
+
+
+@dataclass
+class CasterObjects:
+    centre: np.ndarray  # (C, 3)
+    radius: np.ndarray  # (C,)
+
+    def __len__(self):
+        return len(self.radius)
+
+
+def caster_objects(vertices, triangles, mask) -> CasterObjects:
+    """Bounding spheres of the connected groups of caster triangles (welded by position).
+
+    More than MAX_OBJECTS groups are merged on a coarse spatial grid so the mixture stays cheap.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    t = np.asarray(triangles)[np.asarray(mask, bool)]
+    if len(t) == 0:
+        return CasterObjects(np.zeros((0, 3)), np.zeros(0))
+    v = np.asarray(vertices, np.float64)
+    pts = v[t]  # (T, 3, 3)
+    extent = max(float(np.ptp(pts.reshape(-1, 3), axis=0).max()), 1e-9)
+    # weld: vertices that share a position (to 1e-6 of the extent) are one node
+    keys = np.round(pts.reshape(-1, 3) / (extent * 1e-6)).astype(np.int64)
+    _, node = np.unique(keys, axis=0, return_inverse=True)
+    node = node.reshape(-1, 3)
+    n_nodes = int(node.max()) + 1
+    rows = np.concatenate([node[:, 0], node[:, 1]])
+    cols = np.concatenate([node[:, 1], node[:, 2]])
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_nodes, n_nodes))
+    n_comp, label = connected_components(graph, directed=False)
+    tri_label = label[node[:, 0]]
+    if n_comp > MAX_OBJECTS:  # many separate pieces: group them by a spatial grid instead
+        cent = pts.mean(axis=1)
+        cells = np.floor((cent - cent.min(axis=0)) / (extent / 4 + 1e-12)).astype(np.int64)
+        _, tri_label = np.unique(cells, axis=0, return_inverse=True)
+        tri_label = tri_label.ravel()
+        n_comp = int(tri_label.max()) + 1
+    centre = np.zeros((n_comp, 3))
+    radius = np.zeros(n_comp)
+    for c in range(n_comp):  # loop over objects (<= 64), not triangles
+        p = pts[tri_label == c].reshape(-1, 3)
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        centre[c] = 0.5 * (lo + hi)
+        radius[c] = np.sqrt(np.max(np.sum((p - centre[c]) ** 2, axis=1))) * (1 + 1e-6) + 1e-9
+    return CasterObjects(centre, radius)
+
+
+def _basis(axis: np.ndarray):
+    """Orthonormal (u, v) perpendicular to unit vectors ``axis`` (..., 3)."""
+    a = np.where(np.abs(axis[..., :1]) < 0.9, np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
+    u = np.cross(axis, a)
+    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    return u, np.cross(axis, u)
+
+
+def _cones(origin: np.ndarray, objects: CasterObjects):
+    """Per (origin, object): unit axis, cos of the half angle, solid angle. origin (B, 3)."""
+    to_c = objects.centre[None, :, :] - origin[:, None, :]
+    dist = np.linalg.norm(to_c, axis=2)
+    inside = dist <= objects.radius[None, :]
+    axis = to_c / np.maximum(dist, 1e-30)[..., None]
+    sin2 = np.clip((objects.radius[None, :] / np.maximum(dist, 1e-30)) ** 2, 0, 1)
+    cos_max = np.where(inside, -1.0, np.sqrt(1 - sin2))
+    omega = 2 * np.pi * (1 - cos_max)
+    return axis, cos_max, omega
+
+
+def _sample_cones(origin, weights, axis, cos_max, omega, rng):
+    """Directions from ``origin`` (B, 3): choose object c with probability weights (B, C)
+    (normalised per row), then uniformly in its cone. Returns (dirs, pdf) with the mixture pdf."""
+    b, c = weights.shape
+    prob = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-300)
+    cdf = np.cumsum(prob, axis=1)
+    pick = np.minimum((rng.random((b, 1)) > cdf).sum(axis=1), c - 1)
+    rows = np.arange(b)
+    ax, cm = axis[rows, pick], cos_max[rows, pick]
+    cos_t = 1 - rng.random(b) * (1 - cm)
+    sin_t = np.sqrt(np.maximum(0, 1 - cos_t * cos_t))
+    phi = 2 * np.pi * rng.random(b)
+    u, v = _basis(ax)
+    d = cos_t[:, None] * ax + (sin_t * np.cos(phi))[:, None] * u + (sin_t * np.sin(phi))[:, None] * v
+    inside = np.einsum("bcj,bj->bc", axis, d) >= cos_max - 1e-12
+    pdf = np.sum(np.where(inside, prob / np.maximum(omega, 1e-300), 0.0), axis=1)
+    return d, pdf
+
+
+class _LightTrace(SpecularWalker):
+    """Light paths: deposit at diffuse surfaces after a specular bounce, Russian roulette."""
+
+    def __init__(self, ctx, rng, illum: IlluminationMap):
+        super().__init__(ctx, rng)
+        self.illum = illum
+        self.deposited = 0
+
+    def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
+        land = (kind == DIFFUSE) & (rays.depth >= 1)
+        if not land.any():
+            return
+        r, h = rays.take(land), hit.take(land)
+        idx, valid = self.illum.layout.index(h.prim, h.bu, h.bv, h.front)
+        if not valid.any():
+            return
+        self.deposited += int(valid.sum())
+        if r.lam is None:
+            self.illum.deposit(idx[valid], r.dense_w(self.n)[valid])
+        else:
+            self.illum.deposit(idx[valid], r.w[valid], r.lam[valid])
+
+    def survives(self, rays: Rays, rng) -> np.ndarray:
+        ok = rays.depth < self.ctx.settings.max_bounces
+        deep = ok & (rays.depth >= RR_START_DEPTH)
+        if deep.any():
+            # Russian roulette: survivors carry 1 / survival more, so the expectation is unchanged
+            killed = deep & (rng.random(len(rays)) >= RR_SURVIVAL)
+            ok &= ~killed
+            if rays.w is not None:
+                rays.w[deep & ~killed] /= np.float32(RR_SURVIVAL)
+        return ok
+
+
+class LightPass:
+    """Plans and runs the light pass for a prepared scene (render.RenderContext)."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        mk = ctx.materials.kind[ctx.tri_material] if len(ctx.tri_material) else np.zeros(0, np.int32)
+        self.caster_mask = np.isin(mk, [MIRROR, DIELECTRIC])
+        self.receiver_mask = mk == DIFFUSE
+        self.objects = caster_objects(ctx.scene.vertices, ctx.scene.triangles, self.caster_mask)
+        self.budget = self._light_budget()
+
+    # ---------------------------------------------------------------- planning
+    def _light_budget(self) -> np.ndarray:
+        """Estimated luminous power each light sends towards the casters (0: none)."""
+        lights, obj = self.ctx.lights, self.objects
+        out = np.zeros(len(lights))
+        if len(obj) == 0:
+            return out
+        lum = self.ctx.lights.spectrum @ self.ctx.conv.cmf_weights[:, 1].astype(np.float32)
+        for li in range(len(lights)):  # loop over lights
+            k = int(lights.kind[li])
+            if k == SUN:
+                out[li] = lum[li] * np.sum(np.pi * obj.radius**2)
+                continue
+            axis, cos_max, omega = _cones(lights.position[li][None, :], obj)
+            omega = omega[0]
+            if k == SPOT:  # objects entirely outside the spot's cone get nothing
+                ang = np.arccos(np.clip(axis[0] @ lights.direction[li], -1, 1))
+                half = np.arccos(np.clip(cos_max, -1, 1))
+                omega = np.where(ang - half > np.arccos(lights.cos_half_spot[li]), 0.0, omega)
+            if k in (AREA_RECT, AREA_DISK):
+                front = (obj.centre - lights.position[li]) @ lights.direction[li] > -obj.radius
+                extent = np.hypot(lights.size_u[li], lights.size_v[li])
+                omega = np.where(front, omega, 0.0)
+                out[li] = lum[li] * lights.area[li] * np.sum(omega) / np.pi if extent > 0 else 0.0
+                continue
+            out[li] = lum[li] * np.sum(omega)
+        return out
+
+    @property
+    def needed(self) -> bool:
+        return bool(np.any(self.budget > 0)) and bool(self.receiver_mask.any())
+
+    def layout(self, n_paths: int) -> ElementLayout:
+        """Elements sized for the path budget: about 64 deposits per element over the area the
+        casters can light, capped so the map stays under ~64 M floats."""
+        ctx = self.ctx
+        v, t = ctx.scene.vertices, ctx.scene.triangles
+        size = float(getattr(ctx.settings, "element_size", 0.0) or 0.0)
+        if size > 0:
+            target = size * size
+        else:
+            p = np.asarray(v, np.float64)[np.asarray(t)[self.receiver_mask]]
+            area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
+            target = area / max(n_paths / 64.0, 1.0)
+        cap = 64_000_000 // max(ctx.grid.n, 1) // 2
+        while True:
+            lay = ElementLayout.build(v, t, self.receiver_mask, target)
+            if lay.total <= cap:
+                return lay
+            target *= 2.0
+
+    # ---------------------------------------------------------------- running
+    def run(self, n_paths: int, progress=None, should_cancel=None) -> tuple[IlluminationMap, dict]:
+        ctx = self.ctx
+        illum = IlluminationMap.empty(self.layout(n_paths), ctx.grid.n)
+        stats = {"light_paths": 0, "light_deposits": 0, "light_rays": 0, "elements": illum.layout.total}
+        share = self.budget / max(self.budget.sum(), 1e-300)
+        paths_per_light = np.floor(share * n_paths).astype(np.int64)
+        total = int(paths_per_light.sum())
+        done = 0
+        for li, n_l in enumerate(paths_per_light):  # loop over lights
+            for bi, start in enumerate(range(0, int(n_l), BATCH_PATHS)):  # bounded memory: fixed batches
+                if should_cancel and should_cancel():
+                    stats["cancelled"] = True
+                    return illum, stats
+                b = min(BATCH_PATHS, int(n_l) - start)
+                rng = np.random.default_rng(np.random.SeedSequence(
+                    [int(ctx.settings.seed), LIGHT_PASS_STREAM, li, bi]))
+                o, d, weight = self._emit(li, b, rng)
+                live = weight > 0
+                w = (weight[live, None] / float(n_l)).astype(np.float32) * ctx.lights.spectrum[li][None, :]
+                rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(int(live.sum()), np.int64),
+                            w, None, np.zeros(int(live.sum()), np.int32), rng.random(int(live.sum())))
+                tr = _LightTrace(ctx, rng, illum)
+                tr.walk(rays, tr.empty_mono())
+                done += b
+                stats["light_paths"] += b
+                stats["light_deposits"] += tr.deposited
+                stats["light_rays"] += tr._rays
+                if progress:
+                    progress(done / max(total, 1), f"light pass: {done / 1e6:.2f} M of {total / 1e6:.2f} M paths")
+        return illum, stats
+
+    def _emit(self, li: int, b: int, rng):
+        """b path starts from light li: origins, unit directions, scalar weights (1 / pdf, times
+        the geometric terms; the light's spectrum is applied by the caller)."""
+        lights, obj = self.ctx.lights, self.objects
+        k = int(lights.kind[li])
+        if k == SUN:
+            d = lights.direction[li]
+            u, v = _basis(d[None, :])
+            u, v = u[0], v[0]
+            area = np.pi * obj.radius**2
+            prob = area / area.sum()
+            pick = np.minimum((rng.random((b, 1)) > np.cumsum(prob)[None, :]).sum(axis=1), len(obj) - 1)
+            r = obj.radius[pick] * np.sqrt(rng.random(b))
+            phi = 2 * np.pi * rng.random(b)
+            c = obj.centre[pick]
+            c_plane = c - (c @ d)[:, None] * d  # project centres on the plane through 0 normal to d
+            pts = c_plane + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
+            # mixture pdf per unit area over the disks of all objects
+            cp = obj.centre - (obj.centre @ d)[:, None] * d
+            dist2 = np.sum((pts[:, None, :] - cp[None, :, :]) ** 2, axis=2)
+            pdf = np.sum(np.where(dist2 <= obj.radius**2, prob / area, 0.0), axis=1)
+            far = 4.0 * (np.max(np.abs(self.ctx.scene.vertices)) + 1.0)
+            o = pts - far * d
+            return o, np.broadcast_to(d, (b, 3)).copy(), np.where(pdf > 0, 1.0 / np.maximum(pdf, 1e-300), 0.0)
+        if k in (POINT, SPOT):
+            origin = np.broadcast_to(lights.position[li], (b, 3))
+            axis, cos_max, omega = _cones(lights.position[li][None, :], obj)
+            axis, cos_max, omega = (np.broadcast_to(x, (b,) + x.shape[1:]) for x in (axis, cos_max, omega))
+            d, pdf = _sample_cones(origin, omega, axis, cos_max, omega, rng)
+            weight = 1.0 / np.maximum(pdf, 1e-300)  # intensity (in the spectrum) / pdf
+            if k == SPOT:
+                from .lights import _smoothstep
+
+                cos_axis = d @ lights.direction[li]
+                ch, sm = lights.cos_half_spot[li], lights.spot_smooth[li]
+                cone = (cos_axis > ch).astype(np.float64)
+                if sm > 0:
+                    cone = cone * _smoothstep((cos_axis - ch) / sm)
+                weight = weight * cone
+            return np.array(origin), d, weight
+        # area lights: a uniform point on the emitter, then a direction towards an object
+        r1, r2 = rng.random(b), rng.random(b)
+        if k == AREA_RECT:
+            a, c = (r1 - 0.5) * lights.size_u[li], (r2 - 0.5) * lights.size_v[li]
+        else:
+            rad, phi = np.sqrt(r1), 2 * np.pi * r2
+            a, c = 0.5 * lights.size_u[li] * rad * np.cos(phi), 0.5 * lights.size_v[li] * rad * np.sin(phi)
+        origin = lights.position[li] + a[:, None] * lights.axis_u[li] + c[:, None] * lights.axis_v[li]
+        axis, cos_max, omega = _cones(origin, obj)
+        d, pdf = _sample_cones(origin, omega, axis, cos_max, omega, rng)
+        cos_l = d @ lights.direction[li]
+        # radiance (in the spectrum) * cos * area / pdf(direction)   (pdf of the point: 1 / area)
+        weight = np.where(cos_l > 0, cos_l * lights.area[li] / np.maximum(pdf, 1e-300), 0.0)
+        return origin + 1e-7 * d, d, weight
