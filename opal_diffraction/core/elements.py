@@ -41,6 +41,33 @@ class ElementLayout:
             element_area = np.where(k > 0, area / np.maximum(k * k, 1), 0.0)
         return cls(k, offset, element_area, int(count.sum()))
 
+    def barycentric_centres(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(triangle, u, v) of every element's centre, in element order (for tools and tests)."""
+        tri = np.zeros(self.total, np.int64)
+        bu = np.zeros(self.total)
+        bv = np.zeros(self.total)
+        for k in np.unique(self.k[self.k > 0]):  # loop over distinct subdivision levels
+            tris = np.flatnonzero(self.k == k)
+            i, j = np.meshgrid(np.arange(k), np.arange(k), indexing="ij")
+            keep = i + j <= k - 1
+            i, j = i[keep], j[keep]
+            cells = []
+            for upper in (0, 1):
+                ok = (j < k - 1 - i) if upper else np.ones_like(i, bool)
+                ii, jj = i[ok], j[ok]
+                local = 2 * k * ii - ii * ii + 2 * jj + upper
+                off = (1 + upper) / 3.0
+                cells.append((local, (ii + off) / k, (jj + off) / k))
+            local = np.concatenate([c[0] for c in cells])
+            cu = np.concatenate([c[1] for c in cells])
+            cv = np.concatenate([c[2] for c in cells])
+            for side in (0, 1):
+                idx = self.offset[tris][:, None] + 2 * local[None, :] + side
+                tri[idx] = tris[:, None]
+                bu[idx] = cu[None, :]
+                bv[idx] = cv[None, :]
+        return tri, bu, bv
+
     def index(self, prim, bu, bv, front) -> tuple[np.ndarray, np.ndarray]:
         """(element index, valid) for hits on triangles ``prim`` at barycentrics (bu, bv)."""
         prim = np.asarray(prim, np.int64)

@@ -119,7 +119,8 @@ class Materials:
     def from_list(cls, rows: list[dict]) -> "Materials":
         """Build from dicts like {'kind': 'DIELECTRIC', 'color': (1,1,1), 'ior': 1.5, 'dispersion': 'BK7'}.
 
-        Missing keys take their defaults; enumerations are given by name ('BK7', 'REFLECTION', ...).
+        Missing keys take their defaults (a dielectric's colour defaults to clear, 1); enumerations
+        are given by name ('BK7', 'REFLECTION', ...).
         """
         out = {}
         for name, (dtype, tail, default, enum) in _MATERIAL_COLUMNS.items():
@@ -137,6 +138,10 @@ class Materials:
                     val = enum[val]
                 col[i] = val
             out[name] = col
+        # clear glass by default: a dielectric without a colour is untinted
+        for i, r in enumerate(rows):
+            if "color" not in r and out["kind"][i] == MATERIAL_KINDS["DIELECTRIC"]:
+                out["color"][i] = 1.0
         return cls(**out)
 
     @classmethod

@@ -283,7 +283,7 @@ def test_unsupported_nodes_warn_and_render(last_render):
 def test_render_example_runs_headless(tmp_path):
     out = tmp_path / "example"
     res = subprocess.run([sys.executable, os.path.join(ROOT, "examples", "render_example.py"), "--spp", "1",
-                          "--resolution", "48", "30", "--out", str(out)], capture_output=True, text=True,
+                          "--resolution", "48", "30", "--light-paths", "20000", "--out", str(out)], capture_output=True, text=True,
                          timeout=600)
     assert res.returncode == 0, res.stdout + res.stderr
     assert os.path.exists(str(out) + ".png") and os.path.exists(str(out) + ".blend")

@@ -361,7 +361,7 @@ class NumpyBVH:
 
         ray_id = np.zeros(P, np.int64)
         rdi = np.zeros((6, P), np.float32)       # origin, 1/direction (SoA) for box tests
-        rdl = np.zeros((6, P), np.float32)       # origin, direction for triangle tests
+        rdl = np.zeros((12, P), np.float32)      # origin, direction, shear rows for triangle tests
         cur = np.zeros(P, np.int64)              # node to visit: >= 0 wide node, < 0 ~leaf
         sp = np.zeros(P, np.int64)
         stack = np.zeros(P * S, np.int64)        # compressed entries, see the push below
@@ -388,6 +388,7 @@ class NumpyBVH:
                     ray_id[free] = order[q0:q1]
                     for row in range(6):
                         rdi[row][free] = ray_oi[row, q0:q1]
+                    for row in range(12):
                         rdl[row][free] = ray_od[row, q0:q1]
                     best[free] = tinit[q0:q1]
                     cur[free] = 0
@@ -479,32 +480,48 @@ class NumpyBVH:
                 tr = take(tris, lf, axis=1, mode="clip").transpose(0, 2, 1)   # (12, Lw, nl) view
                 r = take(rdl, sl, axis=1, mode="clip")
                 o3 = r[0:3, None, :]
-                a = np.subtract(tr[0:3], o3, out=np.empty((3, Lw, nl), np.float32))
-                b = np.subtract(tr[3:6], o3, out=np.empty((3, Lw, nl), np.float32))
-                cc = np.subtract(tr[6:9], o3, out=np.empty((3, Lw, nl), np.float32))
-                dx, dy, dz = r[3], r[4], r[5]
-                U = _triple(cc - a, cc + a, dx, dy, dz)
-                V = _triple(a - b, a + b, dx, dy, dz)
-                Wf = _triple(b - cc, b + cc, dx, dy, dz)
+                # watertight test (Woop, Benthin, Wald 2013): vertices relative to the origin,
+                # sheared/projected into the ray's frame.  The per-ray coefficient rows mx, my
+                # hold 1 and -S at the permuted axes and exact zeros elsewhere, so each projected
+                # vertex is bit-identical for every triangle sharing it: shared edges get exactly
+                # opposite edge functions and vertex fans stay consistent (no slip-through).
+                mx0, mx1, mx2, my0, my1, my2 = r[6], r[7], r[8], r[9], r[10], r[11]
+                proj = []
+                for k in range(3):
+                    a = np.subtract(tr[3 * k:3 * k + 3], o3, out=np.empty((3, Lw, nl), np.float32))
+                    px = a[0] * mx0
+                    px += a[1] * mx1
+                    px += a[2] * mx2
+                    py = a[0] * my0
+                    py += a[1] * my1
+                    py += a[2] * my2
+                    proj.append((px, py))
+                    if k == 0:
+                        a0 = a
+                (ax, ay), (bx, by), (cx, cy) = proj
+                U = cx * by
+                U -= cy * bx                      # edge v1-v2: weight of v0
+                V = ax * cy
+                V -= ay * cx                      # edge v2-v0: weight of v1
+                Wf = bx * ay
+                Wf -= by * ax                     # edge v0-v1: weight of v2
                 uvw = U + V
                 uvw += Wf
-                eps = np.abs(uvw)
-                eps *= _EPS32
                 mn = np.minimum(U, V)
                 np.minimum(mn, Wf, out=mn)
                 mx = np.maximum(U, V)
                 np.maximum(mx, Wf, out=mx)
-                mx -= eps
-                eps += mn
-                inside = eps >= 0                 # min(U,V,W) >= -eps
-                inside |= mx <= 0                 # or max(U,V,W) <= eps
+                inside = mn >= 0                  # edges inclusive
+                inside |= mx <= 0
+                # distance from the plane equation (unit normal), independent of the shear
+                dx, dy, dz = r[3], r[4], r[5]
                 ngx, ngy, ngz = tr[9], tr[10], tr[11]
                 den = ngx * dx
                 den += ngy * dy
                 den += ngz * dz
-                tt = a[0] * ngx
-                tt += a[1] * ngy
-                tt += a[2] * ngz
+                tt = a0[0] * ngx
+                tt += a0[1] * ngy
+                tt += a0[2] * ngz
                 tt /= den
                 bl = take(best, sl)
                 ok = tt > 0
@@ -541,8 +558,8 @@ class NumpyBVH:
                         bleaf[sb] = take(lf, cb)
                         bslot[sb] = jb
                         inv = 1.0 / uvw[jb, cb]
-                        bu[sb] = U[jb, cb] * inv
-                        bv[sb] = V[jb, cb] * inv
+                        bu[sb] = V[jb, cb] * inv      # Embree's u, v: weights of v1, v2
+                        bv[sb] = Wf[jb, cb] * inv
                     pops.append(sl)
 
             # ---- pop: take the next child of the top entry; an entry whose (nearest) entry
@@ -619,15 +636,27 @@ class NumpyBVH:
         nthreads = min(self.threads, max(1, n // 16384))
         queue = _Queue(order, nthreads)
         # per-ray data in queue order, structure of arrays
-        ray_od = np.empty((6, n), np.float32)
+        ray_od = np.empty((12, n), np.float32)
         ray_od[0:3] = o[order].T
         ray_od[3:6] = d[order].T
+        dd = ray_od[3:6]
         ray_oi = np.empty((6, n), np.float32)
         ray_oi[0:3] = ray_od[0:3]
-        dd = ray_od[3:6]
         with np.errstate(all="ignore"):
             np.divide(1.0, np.where(np.abs(dd) < _MIN_DIR, np.where(dd < 0, -_MIN_DIR, _MIN_DIR), dd),
                       out=ray_oi[3:6])
+            # shear rows of the watertight test: x' = a.mx, y' = a.my with
+            # mx = e_kx - (d_kx/d_kz) e_kz, my = e_ky - (d_ky/d_kz) e_kz, kz = argmax |d|
+            kz = np.argmax(np.abs(dd), axis=0)
+            kx = (kz + 1) % 3
+            ky = (kz + 2) % 3
+            cols = np.arange(n)
+            dkz = dd[kz, cols]
+            ray_od[6:12] = 0
+            ray_od[6 + kx, cols] = 1
+            ray_od[6 + kz, cols] = -(dd[kx, cols] / dkz)
+            ray_od[9 + ky, cols] = 1
+            ray_od[9 + kz, cols] = -(dd[ky, cols] / dkz)
         tinit = tinit[order]
         if nthreads <= 1:
             self._trace(ray_oi, ray_od, tinit, any_hit, queue, out)
