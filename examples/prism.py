@@ -34,7 +34,7 @@ def build_scene(width=640, height=400) -> Scene:
     s.add_mesh(*primitives.quad((0, 0, 0), (12, 0, 0), (0, 12, 0)), material=0)
     # a wall of horizontal stripes 3 m behind the prism: the prism bends light vertically, so
     # through it the stripes' edges fan out into spectra
-    n_stripes, height_m = 8, 8.0
+    n_stripes, height_m = 16, 8.0
     for i in range(n_stripes):
         z = (i + 0.5) * height_m / n_stripes
         s.add_mesh(*primitives.quad((0.0, 3.0, z), (10.0, 0, 0), (0, 0, height_m / n_stripes)), material=1 + i % 2)
