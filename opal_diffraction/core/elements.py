@@ -90,15 +90,24 @@ class IlluminationMap:
 
     layout: ElementLayout
     flux: np.ndarray  # (E, n) float32
+    # grating records also keep where the light came from: the flux-weighted sum of the unit
+    # directions towards the source (E, 3); None for caustic maps
+    direction: np.ndarray | None = None
 
     @classmethod
-    def empty(cls, layout: ElementLayout, n: int) -> "IlluminationMap":
-        return cls(layout, np.zeros((layout.total, n), np.float32))
+    def empty(cls, layout: ElementLayout, n: int, with_direction: bool = False) -> "IlluminationMap":
+        return cls(layout, np.zeros((layout.total, n), np.float32),
+                   np.zeros((layout.total, 3), np.float32) if with_direction else None)
 
-    def deposit(self, elements: np.ndarray, flux: np.ndarray, lam: np.ndarray | None = None) -> None:
-        """Add flux (B, n) white or (B,) at wavelengths ``lam`` to the elements (B,)."""
+    def deposit(self, elements: np.ndarray, flux: np.ndarray, lam: np.ndarray | None = None,
+                towards_source: np.ndarray | None = None) -> None:
+        """Add flux (B, n) white or (B,) at wavelengths ``lam`` to the elements (B,); with
+        ``towards_source`` (B, 3), also the flux-weighted incoming direction."""
         if len(elements) == 0:
             return
+        if self.direction is not None and towards_source is not None:
+            weight = flux if lam is not None else flux.sum(axis=1)
+            np.add.at(self.direction, elements, towards_source * weight[:, None])
         if lam is not None:
             np.add.at(self.flux, (elements, lam), flux)
             return
@@ -116,6 +125,20 @@ class IlluminationMap:
             out[valid] = self.flux[idx[valid]] / area[:, None].astype(np.float32)
         return out
 
+    def incoming(self, prim, bu, bv, front) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Grating records at hits: (spectral irradiance (B, n), unit direction towards the
+        source (B, 3), has-record mask (B,))."""
+        idx, valid = self.layout.index(prim, bu, bv, front)
+        irr = self.irradiance(prim, bu, bv, front)
+        d = np.zeros((len(idx), 3), np.float32)
+        d[valid] = self.direction[idx[valid]]
+        norm = np.linalg.norm(d, axis=1)
+        ok = valid & (norm > 0) & (irr.sum(axis=1) > 0)
+        d[ok] /= norm[ok, None]
+        return irr, d, ok
+
     def __iadd__(self, other: "IlluminationMap") -> "IlluminationMap":
         self.flux += other.flux
+        if self.direction is not None and other.direction is not None:
+            self.direction += other.direction
         return self

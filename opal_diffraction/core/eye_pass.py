@@ -267,4 +267,16 @@ class _TileTrace(SpecularWalker):
                 sub = r.take(idx)
                 contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(idx)), sub.lam]
                 self._accumulate(sub, contrib, self._diffraction)
+            if ctx.grating_records is not None:
+                # light that reached the grating through mirrors and glass (the light pass's records)
+                irr, src, ok = ctx.grating_records.incoming(h.prim, h.bu, h.bv, h.front)
+                cos_l = np.einsum("ij,ij->i", src, h.ng)
+                ok &= (cos_l < 0) if g.transmission[m] else (cos_l > 0)
+                idx = np.flatnonzero(ok)
+                if idx.size:
+                    rad = diffracted_radiance(g, m, w_o[idx], src[idx], t[idx], s[idx], h.ng[idx], period[idx], edges, rng)
+                    spec = rad * irr[idx]
+                    sub = r.take(idx)
+                    contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(idx)), sub.lam]
+                    self._accumulate(sub, contrib, self._diffraction)
 

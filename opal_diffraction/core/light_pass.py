@@ -5,8 +5,10 @@ spectrum from each light, are aimed at the objects that can bend light (mirrors 
 the *casters*), follow specular reflection and refraction with Fresnel, dispersion and Russian
 roulette (transport.SpecularWalker), and where a path that has been specular at least once lands
 on a diffuse surface its spectral flux is added to that surface element of the illumination map
-(elements.py). Direct light stays the eye pass's job, so a path that reaches a diffuse surface
-first deposits nothing: no double counting.
+(elements.py). Where such a path reaches a grating, the grating's element records the incoming
+spectral flux and the direction it came from, for the eye pass to diffract. Direct light stays
+the eye pass's job, so a path that reaches a diffuse surface or grating first deposits nothing:
+no double counting.
 
 Aiming (unbiased): casters are grouped into connected objects with bounding spheres. From a
 point or spot light, or a point sampled on an area light, a direction is drawn in the cone that
@@ -132,12 +134,24 @@ def _sample_cones(origin, weights, axis, cos_max, omega, rng):
 class _LightTrace(SpecularWalker):
     """Light paths: deposit at diffuse surfaces after a specular bounce, Russian roulette."""
 
-    def __init__(self, ctx, rng, illum: IlluminationMap):
+    def __init__(self, ctx, rng, illum: IlluminationMap, records: IlluminationMap | None):
         super().__init__(ctx, rng)
         self.illum = illum
+        self.records = records
         self.deposited = 0
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
+        if self.records is not None:
+            at_grating = self.ctx.gratings.enabled[hit.mat] & (rays.depth >= 1)
+            if at_grating.any():
+                r, h = rays.take(at_grating), hit.take(at_grating)
+                idx, valid = self.records.layout.index(h.prim, h.bu, h.bv, h.front)
+                if valid.any():
+                    src = -r.d[valid]
+                    if r.lam is None:
+                        self.records.deposit(idx[valid], r.dense_w(self.n)[valid], towards_source=src)
+                    else:
+                        self.records.deposit(idx[valid], r.w[valid], r.lam[valid], towards_source=src)
         land = (kind == DIFFUSE) & (rays.depth >= 1)
         if not land.any():
             return
@@ -171,6 +185,7 @@ class LightPass:
         mk = ctx.materials.kind[ctx.tri_material] if len(ctx.tri_material) else np.zeros(0, np.int32)
         self.caster_mask = np.isin(mk, [MIRROR, DIELECTRIC])
         self.receiver_mask = mk == DIFFUSE
+        self.grating_mask = ctx.gratings.enabled[ctx.tri_material] if len(ctx.tri_material) else np.zeros(0, bool)
         self.objects = caster_objects(ctx.scene.vertices, ctx.scene.triangles, self.caster_mask)
         self.budget = self._light_budget()
 
@@ -204,31 +219,35 @@ class LightPass:
 
     @property
     def needed(self) -> bool:
-        return bool(np.any(self.budget > 0)) and bool(self.receiver_mask.any())
+        return bool(np.any(self.budget > 0)) and bool(self.receiver_mask.any() or self.grating_mask.any())
 
-    def layout(self, n_paths: int) -> ElementLayout:
+    def layout(self, n_paths: int, mask=None) -> ElementLayout:
         """Elements sized for the path budget: about 64 deposits per element over the area the
         casters can light, capped so the map stays under ~64 M floats."""
         ctx = self.ctx
         v, t = ctx.scene.vertices, ctx.scene.triangles
+        mask = self.receiver_mask if mask is None else mask
         size = float(getattr(ctx.settings, "element_size", 0.0) or 0.0)
         if size > 0:
             target = size * size
         else:
-            p = np.asarray(v, np.float64)[np.asarray(t)[self.receiver_mask]]
+            p = np.asarray(v, np.float64)[np.asarray(t)[mask]]
             area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
             target = area / max(n_paths / 64.0, 1.0)
         cap = 64_000_000 // max(ctx.grid.n, 1) // 2
         while True:
-            lay = ElementLayout.build(v, t, self.receiver_mask, target)
+            lay = ElementLayout.build(v, t, mask, target)
             if lay.total <= cap:
                 return lay
             target *= 2.0
 
     # ---------------------------------------------------------------- running
-    def run(self, n_paths: int, progress=None, should_cancel=None) -> tuple[IlluminationMap, dict]:
+    def run(self, n_paths: int, progress=None, should_cancel=None):
+        """Returns (caustic map, grating records or None, stats)."""
         ctx = self.ctx
         illum = IlluminationMap.empty(self.layout(n_paths), ctx.grid.n)
+        records = (IlluminationMap.empty(self.layout(n_paths, self.grating_mask), ctx.grid.n, with_direction=True)
+                   if self.grating_mask.any() else None)
         stats = {"light_paths": 0, "light_deposits": 0, "light_rays": 0, "elements": illum.layout.total}
         share = self.budget / max(self.budget.sum(), 1e-300)
         paths_per_light = np.floor(share * n_paths).astype(np.int64)
@@ -238,7 +257,7 @@ class LightPass:
             for bi, start in enumerate(range(0, int(n_l), BATCH_PATHS)):  # bounded memory: fixed batches
                 if should_cancel and should_cancel():
                     stats["cancelled"] = True
-                    return illum, stats
+                    return illum, records, stats
                 b = min(BATCH_PATHS, int(n_l) - start)
                 rng = np.random.default_rng(np.random.SeedSequence(
                     [int(ctx.settings.seed), LIGHT_PASS_STREAM, li, bi]))
@@ -247,7 +266,7 @@ class LightPass:
                 w = (weight[live, None] / float(n_l)).astype(np.float32) * ctx.lights.spectrum[li][None, :]
                 rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(int(live.sum()), np.int64),
                             w, None, np.zeros(int(live.sum()), np.int32), rng.random(int(live.sum())))
-                tr = _LightTrace(ctx, rng, illum)
+                tr = _LightTrace(ctx, rng, illum, records)
                 tr.walk(rays, tr.empty_mono())
                 done += b
                 stats["light_paths"] += b
@@ -255,7 +274,7 @@ class LightPass:
                 stats["light_rays"] += tr._rays
                 if progress:
                     progress(done / max(total, 1), f"light pass: {done / 1e6:.2f} M of {total / 1e6:.2f} M paths")
-        return illum, stats
+        return illum, records, stats
 
     def _emit(self, li: int, b: int, rng):
         """b path starts from light li: origins, unit directions, scalar weights (1 / pdf, times

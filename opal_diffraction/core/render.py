@@ -53,6 +53,7 @@ class RenderContext:
     world_spectrum: np.ndarray
     offset_base: float
     caustics: object = None  # elements.IlluminationMap from the light pass, or None
+    grating_records: object = None  # elements.IlluminationMap with directions, at gratings, or None
 
     @property
     def grid(self):
@@ -188,7 +189,8 @@ def render(
     if plan.light_pass:
         t0 = time.perf_counter()
         lp_progress = (lambda f, m: progress(LIGHT_PASS_SHARE * f, m)) if progress else None
-        ctx.caustics, lp_stats = light_pass.run(int(settings.light_paths), lp_progress, should_cancel)
+        ctx.caustics, ctx.grating_records, lp_stats = light_pass.run(int(settings.light_paths), lp_progress,
+                                                                     should_cancel)
         stats.update(lp_stats)
         stats["rays"] += lp_stats["light_rays"]
         stats["light_pass_s"] = time.perf_counter() - t0
