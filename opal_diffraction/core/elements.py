@@ -116,8 +116,20 @@ class IlluminationMap:
         starts = np.flatnonzero(np.concatenate([[True], e[1:] != e[:-1]]))
         self.flux[e[starts]] += np.add.reduceat(f, starts, axis=0)
 
-    def irradiance(self, prim, bu, bv, front) -> np.ndarray:
-        """Spectral irradiance (B, n) at hits: the element's flux over its area (0 off the map)."""
+    def irradiance(self, prim, bu, bv, front, rng=None) -> np.ndarray:
+        """Spectral irradiance (B, n) at hits: the element's flux over its area (0 off the map).
+
+        With ``rng`` the lookup point is jittered uniformly by up to one element in barycentric
+        terms (folded back into the triangle): over many eye samples that box-filters the map
+        over neighbouring elements, so element edges do not show as triangles.
+        """
+        if rng is not None:
+            k = np.maximum(self.layout.k[np.asarray(prim)], 1).astype(np.float64)
+            bu = np.asarray(bu, np.float64) + (rng.random(len(k)) * 2 - 1) / k
+            bv = np.asarray(bv, np.float64) + (rng.random(len(k)) * 2 - 1) / k
+            bu, bv = np.abs(bu), np.abs(bv)  # fold across the u = 0 and v = 0 edges
+            over = bu + bv > 1
+            bu, bv = np.where(over, 1 - bv, bu), np.where(over, 1 - bu, bv)  # and across u + v = 1
         idx, valid = self.layout.index(prim, bu, bv, front)
         out = np.zeros((len(idx), self.flux.shape[1]), np.float32)
         if valid.any():

@@ -127,7 +127,7 @@ class _TileTrace(SpecularWalker):
             r, h = rays.take(diffuse), hit.take(diffuse)
             self._direct_light(r, h, rng)
             if ctx.caustics is not None:
-                self._caustic_light(r, h)
+                self._caustic_light(r, h, rng)
 
     # ----------------------------------------------------------------- films
     def _accumulate(self, rays: Rays, contrib, film=None):
@@ -221,10 +221,11 @@ class _TileTrace(SpecularWalker):
             irradiance = np.sum(factors * lights.spectrum[:, rays.lam].T, axis=1)
         self._accumulate(rays, rays.weighted(brdf * irradiance))
 
-    def _caustic_light(self, rays: Rays, hit: Hit):
-        """Caustic radiance at diffuse hits: the illumination map's irradiance * albedo / pi."""
+    def _caustic_light(self, rays: Rays, hit: Hit, rng):
+        """Caustic radiance at diffuse hits: the illumination map's irradiance * albedo / pi
+        (looked up with a one-element jitter: a box filter over neighbouring elements)."""
         ctx = self.ctx
-        irr = ctx.caustics.irradiance(hit.prim, hit.bu, hit.bv, hit.front)
+        irr = ctx.caustics.irradiance(hit.prim, hit.bu, hit.bv, hit.front, rng)
         brdf = ctx.materials.reflectance[hit.mat] * np.float32(1 / np.pi)
         radiance = irr * brdf
         contrib = rays.weighted(radiance) if rays.lam is None else rays.w * radiance[np.arange(len(rays)), rays.lam]

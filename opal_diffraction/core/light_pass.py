@@ -222,8 +222,9 @@ class LightPass:
         return bool(np.any(self.budget > 0)) and bool(self.receiver_mask.any() or self.grating_mask.any())
 
     def layout(self, n_paths: int, mask=None) -> ElementLayout:
-        """Elements sized for the path budget: about 64 deposits per element over the area the
-        casters can light, capped so the map stays under ~64 M floats."""
+        """Elements sized for the path budget: about 16 deposits per element if the paths spread
+        over all receiving area (caustics concentrate them, and the eye pass's lookup filters
+        over neighbouring elements), capped so the map stays under ~64 M floats."""
         ctx = self.ctx
         v, t = ctx.scene.vertices, ctx.scene.triangles
         mask = self.receiver_mask if mask is None else mask
@@ -233,7 +234,7 @@ class LightPass:
         else:
             p = np.asarray(v, np.float64)[np.asarray(t)[mask]]
             area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
-            target = area / max(n_paths / 64.0, 1.0)
+            target = area / max(n_paths / 16.0, 1.0)
         cap = 64_000_000 // max(ctx.grid.n, 1) // 2
         while True:
             lay = ElementLayout.build(v, t, mask, target)
