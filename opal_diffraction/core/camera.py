@@ -101,10 +101,11 @@ def generate_rays(cam: Camera, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray
     w, h = int(cam.width), int(cam.height)
     hx, hy = camera_frame(cam)
     shift = _shift_extent(cam)
-    px = (2.0 * x / w - 1.0) * hx + cam.shift_x * shift
-    py = (1.0 - 2.0 * y / h) * hy + cam.shift_y * shift
+    f32 = np.float32  # sub-pixel positions and directions need no more (pixels < 2^16)
+    px = (np.asarray(x, f32) * f32(2.0 / w) - f32(1.0)) * f32(hx) + f32(cam.shift_x * shift)
+    py = (f32(1.0) - np.asarray(y, f32) * f32(2.0 / h)) * f32(hy) + f32(cam.shift_y * shift)
     m = np.asarray(cam.matrix, np.float64)
-    rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)  # drop object scale
+    rot = (m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)).astype(f32)  # drop object scale
     eye = m[:3, 3]
     if cam.kind == "ORTHO":
         local_o = np.stack([px, py, np.zeros_like(px)], axis=1)
@@ -113,6 +114,6 @@ def generate_rays(cam: Camera, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray
     else:
         local_d = np.stack([px, py, -np.ones_like(px)], axis=1)
         dirs = local_d @ rot.T
-        dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+        dirs /= np.sqrt(np.einsum("ij,ij->i", dirs, dirs))[:, None]
         origins = np.broadcast_to(eye, dirs.shape)
     return np.ascontiguousarray(origins, np.float32), np.ascontiguousarray(dirs, np.float32)

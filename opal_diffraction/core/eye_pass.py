@@ -24,10 +24,11 @@ __all__ = ["EyePass", "TileResult"]
 
 @dataclass
 class TileResult:
-    film: np.ndarray  # (P, n) float64 sum of sample contributions per pixel (everything)
-    background: np.ndarray  # (P, n) the part of film that is emitted light seen (world, emitters), not Direct
-    diffraction: np.ndarray  # (P, n) the part of film diffracted by gratings
-    caustics: np.ndarray  # (P, n) the part of film that is caustic light from the light pass
+    film: np.ndarray  # (P, n) sum of sample contributions per pixel (everything)
+    # the parts of film (P, n) that are not Direct, or None where nothing was written:
+    background: np.ndarray | None  # emitted light seen (world, emitters)
+    diffraction: np.ndarray | None  # diffracted by gratings
+    caustics: np.ndarray | None  # caustic light from the light pass
     rays: int         # rays cast (camera, secondary and shadow)
 
 
@@ -81,11 +82,33 @@ class _TileTrace(SpecularWalker):
 
     def __init__(self, ctx, n_pixels: int, rng: np.random.Generator):
         super().__init__(ctx, rng)
-        self._film = np.zeros(n_pixels * self.n, np.float32)
-        self._background = np.zeros(n_pixels * self.n, np.float32)
-        self._diffraction = np.zeros(n_pixels * self.n, np.float32)
-        self._caustics = np.zeros(n_pixels * self.n, np.float32)  # emitted light: world and emissive surfaces
         self._n_pixels = n_pixels
+        self._film = self._new_film()  # light reflected by diffuse surfaces from direct lighting
+        # the other parts of the film, allocated when first written (most scenes use a few):
+        self._parts: dict[str, np.ndarray] = {}  # 'background' (world and emitters seen),
+        #                                          'diffraction', 'caustics'
+        self.escapes = None  # a list to record rays leaving the scene (trace_escapes)
+
+    def _new_film(self) -> np.ndarray:
+        return np.zeros(self._n_pixels * self.n, np.float32)
+
+    def _part(self, name: str) -> np.ndarray:
+        arr = self._parts.get(name)
+        if arr is None:
+            arr = self._parts[name] = self._new_film()
+        return arr
+
+    @property
+    def _background(self) -> np.ndarray:
+        return self._part("background")
+
+    @property
+    def _diffraction(self) -> np.ndarray:
+        return self._part("diffraction")
+
+    @property
+    def _caustics(self) -> np.ndarray:
+        return self._part("caustics")
         self.escapes = None  # a list to record rays leaving the scene (trace_escapes)
 
     def run(self, origins, directions, pix, u_lambda, wavelength_index=None) -> TileResult:
@@ -99,9 +122,11 @@ class _TileTrace(SpecularWalker):
             rays = rays.take(np.zeros(b, bool))
         self.walk(rays, mono)
         shape = (self._n_pixels, n)
-        return TileResult((self._film + self._background + self._diffraction + self._caustics).reshape(shape),
-                          self._background.reshape(shape), self._diffraction.reshape(shape),
-                          self._caustics.reshape(shape), self._rays)
+        total = self._film
+        for part in self._parts.values():
+            total = total + part
+        get = lambda k: self._parts[k].reshape(shape) if k in self._parts else None  # noqa: E731
+        return TileResult(total.reshape(shape), get("background"), get("diffraction"), get("caustics"), self._rays)
 
     # ----------------------------------------------------------------- hooks
     def on_miss(self, rays: Rays) -> None:
@@ -177,7 +202,7 @@ class _TileTrace(SpecularWalker):
             return
         if rays.lam is None and rays.w is None:  # unit weights: count rays per pixel
             counts = np.bincount(rays.pix, minlength=self._n_pixels).astype(np.float32)
-            self._background += (counts[:, None] * bg[None, :]).ravel()
+            self._background[:] += (counts[:, None] * bg[None, :]).ravel()
             return
         contrib = rays.weighted(np.broadcast_to(bg, (len(rays), self.n)) if rays.lam is None else bg[rays.lam])
         self._accumulate(rays, contrib, self._background)

@@ -232,11 +232,11 @@ def render(
                     t_index, res = fut.result()
                     x0, y0, x1, y1, _ = tiles[t_index]
                     film[y0:y1, x0:x1] += res.film.reshape(y1 - y0, x1 - x0, nl)
-                    if res.caustics.any():
+                    if res.caustics is not None:
                         caustics_rgb[y0:y1, x0:x1] += ctx.conv.to_rgb(res.caustics).reshape(y1 - y0, x1 - x0, 3)
-                    if res.diffraction.any():
+                    if res.diffraction is not None:
                         diffraction_rgb[y0:y1, x0:x1] += ctx.conv.to_rgb(res.diffraction).reshape(y1 - y0, x1 - x0, 3)
-                    if res.background.any():
+                    if res.background is not None:
                         background_rgb[y0:y1, x0:x1] += ctx.conv.to_rgb(res.background).reshape(y1 - y0, x1 - x0, 3)
                     counts[y0:y1, x0:x1] += r_spp
                     stats["rays"] += res.rays
