@@ -59,13 +59,10 @@ class RenderContext:
     def grid(self):
         return self.conv.grid
 
-    def offset(self, p: np.ndarray) -> np.ndarray:
-        """Self-intersection offset (B,) at points p: scene-scaled plus float32 rounding of |p|."""
-        return (self.offset_base + 4e-7 * np.max(np.abs(p), axis=1)).astype(np.float32)
-
     @staticmethod
     def triangle_offsets(v: np.ndarray, t: np.ndarray, base: float) -> np.ndarray:
-        """offset() bounded over each triangle (its largest |coordinate|), looked up per hit."""
+        """Self-intersection offset per triangle: scene-scaled ``base`` plus float32 rounding of
+        its largest |coordinate| (looked up per hit, so no per-hit reduction)."""
         if len(t) == 0:
             return np.zeros(0, np.float32)
         return (base + 4e-7 * np.abs(v[t]).max(axis=(1, 2))).astype(np.float32)
