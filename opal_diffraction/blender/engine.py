@@ -9,6 +9,9 @@ Direct, Caustics and Diffraction are registered as passes for the compositor.
 
 Errors in the scene are reported with ``report({'ERROR'}, message)`` and ``error_set``: the
 operator fails with the message, no traceback, no image written.
+
+The rendered viewport (``view_update`` / ``view_draw``) is viewport.ViewportSession: a
+progressive preview in a background thread, drawn through the ``gpu`` module.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from ..core.render import render as core_render
 from ..core.scene import SceneError
 from ..core.settings import RenderSettings
 from .export import ExportCancelled, export_scene, rec709_to_working_space, render_region
+from .viewport import ViewportSession, unregister_timer
 
 __all__ = ["OpalRenderEngine", "AOV_PASSES", "render_settings", "output_path", "last_render", "register",
            "unregister"]
@@ -81,6 +85,42 @@ class OpalRenderEngine(bpy.types.RenderEngine):
     bl_use_postprocess = True
     bl_use_eevee_viewport = True  # Material Preview shading uses EEVEE
     bl_use_shading_nodes_custom = False  # our materials are Blender's own shader nodes
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._viewport = None  # a ViewportSession once the engine draws a 3D view
+
+    def __del__(self):
+        # the engine is freed (Rendered mode left, or a render finished): stop the preview thread
+        vp = getattr(self, "_viewport", None)
+        if vp is not None:
+            vp.free()
+        parent = getattr(super(), "__del__", None)
+        if parent is not None:
+            parent()
+
+    # ---------------------------------------------------------------- viewport
+    def _viewport_session(self) -> ViewportSession:
+        vp = getattr(self, "_viewport", None)
+        if vp is None:
+            vp = self._viewport = ViewportSession()
+        return vp
+
+    def view_update(self, context, depsgraph):
+        """The scene changed (or Rendered mode started): export it and restart the preview."""
+        try:
+            self._viewport_session().update(self, context, depsgraph)
+        except Exception as e:  # never take the UI down
+            traceback.print_exc(file=sys.stderr)
+            self.update_stats("", f"Error: internal error ({type(e).__name__}: {e})")
+
+    def view_draw(self, context, depsgraph):
+        """Draw the newest preview image; restart the preview when the view moved."""
+        try:
+            self._viewport_session().draw(self, context, depsgraph)
+        except Exception as e:
+            traceback.print_exc(file=sys.stderr)
+            self.update_stats("", f"Error: internal error ({type(e).__name__}: {e})")
 
     # ---------------------------------------------------------------- passes
     def update_render_passes(self, scene=None, renderlayer=None):
@@ -243,4 +283,5 @@ def register():
 
 
 def unregister():
+    unregister_timer()
     bpy.utils.unregister_class(OpalRenderEngine)

@@ -11,7 +11,9 @@ converted to the core's linear Rec.709.
 What the core cannot render yet is approximated and named in the warnings rather than failing:
 textures (averaged), rough reflection and refraction (made smooth), light radius and sun angle
 (hard shadows). Grating settings are exported with a per-triangle grating direction
-(``Scene.tri_tangent``) and validated: impossible values are an error naming the material.
+(``Scene.tri_tangent``) and, where the mesh has the opal tools' per-face period attribute
+(``opal_grating_period``), a per-triangle period (``Scene.tri_period``); impossible values are
+an error naming the material.
 """
 
 from __future__ import annotations
@@ -47,6 +49,9 @@ ROUGH_WARN = 0.1
 #: How often (in object instances) export polls test_break.
 POLL_EVERY = 64
 GRATING_ATTRIBUTE = "opal_grating_direction"
+#: Per-face grating period (FLOAT, nm) the opal tools write: overrides the material's period on
+#: grating faces (0 or less: the material's).
+PERIOD_ATTRIBUTE = "opal_grating_period"
 
 
 class ExportCancelled(Exception):
@@ -434,6 +439,7 @@ class _MeshData:
     uv: np.ndarray | None     # (T, 3, 2) float32 per-corner UVs of triangles, or None
     face_dir: np.ndarray | None  # (T, 3) per-triangle grating attribute, or None
     name: str
+    face_period: np.ndarray | None = None  # (T,) per-triangle period attribute (nm), or None
 
 
 def _foreach(coll, attr: str, n: int, dtype, width: int = 1) -> np.ndarray:
@@ -465,7 +471,7 @@ def _read_mesh(me, name: str, want_uv: bool) -> _MeshData:
     else:
         face = None
         slot = _foreach(lt, "material_index", nt, np.int32)
-    uv = face_dir = None
+    uv = face_dir = face_period = None
     if want_uv and nt:
         uvl = me.uv_layers.active
         if uvl is not None:
@@ -476,7 +482,10 @@ def _read_mesh(me, name: str, want_uv: bool) -> _MeshData:
         attr = me.attributes.get(GRATING_ATTRIBUTE)
         if attr is not None and attr.domain == "FACE" and attr.data_type == "FLOAT_VECTOR" and face is not None:
             face_dir = _foreach(attr.data, "vector", len(me.polygons), np.float32, 3)[face]
-    return _MeshData(verts.astype(np.float64), tris, slot, uv, face_dir, name)
+        attr = me.attributes.get(PERIOD_ATTRIBUTE)
+        if attr is not None and attr.domain == "FACE" and attr.data_type == "FLOAT" and face is not None:
+            face_period = _foreach(attr.data, "value", len(me.polygons), np.float32)[face]
+    return _MeshData(verts.astype(np.float64), tris, slot, uv, face_dir, name, face_period)
 
 
 def _tangents(md: _MeshData, gratings: list, tri_mat_local: np.ndarray, warn) -> np.ndarray:
@@ -504,6 +513,21 @@ def _tangents(md: _MeshData, gratings: list, tri_mat_local: np.ndarray, warn) ->
         else:
             warn(f"object '{md.name}': no '{GRATING_ATTRIBUTE}' face attribute: using the object's local X axis")
     return t
+
+
+def _periods(md: _MeshData, has: np.ndarray, warn) -> np.ndarray:
+    """Per-triangle period overrides (T,) nm for one mesh: the face attribute on grating
+    triangles, 0 elsewhere (0: the material's period); NaN, infinite or negative values are 0."""
+    out = np.zeros(len(md.triangles), np.float32)
+    if md.face_period is None or not has.any():
+        return out
+    p = np.asarray(md.face_period, np.float32)
+    bad = has & ~(np.isfinite(p) & (p >= 0))
+    if bad.any():
+        warn(f"object '{md.name}': {int(bad.sum())} face(s) have a NaN, infinite or negative "
+             f"'{PERIOD_ATTRIBUTE}': using the material's period there")
+    out[has] = np.where(np.isfinite(p[has]) & (p[has] > 0), p[has], 0.0)
+    return out
 
 
 def _transform(md: _MeshData, mats: np.ndarray):
@@ -713,7 +737,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     if test_break is not None and test_break():
         raise ExportCancelled()
     any_grating = any(g is not None for g in materials.grating)
-    vert_chunks, tri_chunks, mat_chunks, tan_chunks = [], [], [], []
+    vert_chunks, tri_chunks, mat_chunks, tan_chunks, per_chunks = [], [], [], [], []
     n_verts = 0
     for (mkey, slots), mlist in groups.items():
         md = mesh_cache[mkey]
@@ -737,10 +761,14 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
                 tan_chunks.append(t_world.reshape(-1, 3).astype(np.float32))
             else:
                 tan_chunks.append(np.zeros((len(mats) * len(md.triangles), 3), np.float32))
+            per_chunks.append(np.tile(_periods(md, has, warn), len(mats)))
         n_verts += len(verts)
     vertices = np.concatenate(vert_chunks).astype(np.float32) if vert_chunks else np.zeros((0, 3), np.float32)
     triangles = np.concatenate(tri_chunks).astype(np.int32) if tri_chunks else np.zeros((0, 3), np.int32)
     tri_material = np.concatenate(mat_chunks).astype(np.int32) if mat_chunks else np.zeros(0, np.int32)
+    tri_period = np.zeros(0, np.float32)
+    if any_grating and per_chunks and any(p.any() for p in per_chunks):
+        tri_period = np.concatenate(per_chunks).astype(np.float32)
     if n_verts >= 2**31:
         raise SceneError(f"the scene has {n_verts} vertices, more than a 32-bit index can address")
 
@@ -763,6 +791,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
         materials=Materials.from_list(materials.rows), lights=Lights.from_list(lights), camera=cam,
         world_color=np.clip(world, 0.0, None).astype(np.float32),
         tri_tangent=np.concatenate(tan_chunks) if (any_grating and tan_chunks) else np.zeros((0, 3), np.float32),
+        tri_period=tri_period,
     )
     stats = {
         "export_s": time.perf_counter() - t0, "objects": n_instances, "meshes": len(mesh_cache),

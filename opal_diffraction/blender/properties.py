@@ -168,6 +168,14 @@ class OpalRenderSettings(PropertyGroup):
         name="Filter Width", description="Width of the Blackman-Harris pixel filter, as in Cycles",
         default=1.5, min=0.0, max=10.0, subtype="PIXEL",
     )
+    preview_samples: IntProperty(
+        name="Viewport Samples", description="Samples per pixel of the rendered viewport at full resolution "
+        "(after the quick low-resolution images)", default=16, min=1, soft_max=1024,
+    )
+    preview_start_scale: IntProperty(
+        name="Start Resolution Divider", description="The rendered viewport's first image is this many times "
+        "smaller than the view (then halved step by step to full resolution)", default=8, min=1, max=64,
+    )
 
     @classmethod
     def register(cls):

@@ -13,6 +13,7 @@ import bpy
 from bpy.types import Menu, Panel
 
 from .engine import ENGINE_ID
+from .opal_presets import OPAL_MT_opal_presets
 from .operators import OPAL_OT_dispersion_preset, OPAL_OT_export_scene
 from .properties import DISPERSION_PRESETS
 
@@ -47,6 +48,9 @@ class OPAL_RENDER_PT_sampling(OpalButtonsPanel, Panel):
         row = layout.row(align=True)
         row.prop(opal, "seed")
         row.prop(opal, "use_animated_seed", text="", icon="TIME")
+        col = layout.column(align=True, heading="Viewport")
+        col.prop(opal, "preview_samples", text="Viewport Samples")
+        col.prop(opal, "preview_start_scale", text="Start Divider")
 
 
 class OPAL_RENDER_PT_spectrum(OpalButtonsPanel, Panel):
@@ -215,6 +219,9 @@ class OPAL_MATERIAL_PT_grating(OpalButtonsPanel, Panel):
     def draw_header(self, context):
         self.layout.prop(context.material.opal, "grating", text="")
 
+    def draw_header_preset(self, context):
+        self.layout.menu(OPAL_MT_opal_presets.bl_idname, text="", icon="PRESET")
+
     def draw(self, context):
         layout = self.layout
         layout.use_property_split = True
@@ -236,7 +243,8 @@ class OPAL_MATERIAL_PT_grating(OpalButtonsPanel, Panel):
                 box = layout.box()
                 box.alert = True
                 box.label(text=problem[0].upper() + problem[1:], icon="ERROR")
-            layout.label(text="Gratings are not rendered yet: the surface renders without one", icon="INFO")
+            if opal.grating_direction == "ATTRIBUTE":
+                layout.label(text="Direction and period: the faces' opal attributes", icon="INFO")
 
 
 # ============================================================================ world tab

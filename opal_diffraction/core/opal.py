@@ -49,6 +49,7 @@ __all__ = [
     "voronoi_domains",
     "tangent_basis",
     "project_to_planes",
+    "transport_tangents",
     "domain_directions",
     "aligned_directions",
     "domain_periods",
@@ -298,13 +299,33 @@ def project_to_planes(vectors, normals, fallback=None) -> np.ndarray:
     return out.astype(np.float32)
 
 
+def transport_tangents(vectors, n_from, n_to) -> np.ndarray:
+    """Tangent vectors (N, 3) carried from planes of normal ``n_from`` to planes of normal ``n_to``
+    by the smallest rotation that takes one normal to the other (Rodrigues:
+    R v = v + k x v + k x (k x v) / (1 + c), k = n_from x n_to, c = n_from . n_to), then projected
+    and normalised. Where the normals are nearly opposite (over 154 degrees apart) the rotation is ill-defined
+    and the vector is projected onto the target plane instead."""
+    v = np.broadcast_to(np.asarray(vectors, np.float64), np.shape(n_to)).reshape(-1, 3)
+    a = np.broadcast_to(np.asarray(n_from, np.float64), v.shape)
+    b = np.asarray(n_to, np.float64).reshape(-1, 3)
+    c = np.sum(a * b, axis=1)
+    k = np.cross(a, b)
+    kv = np.cross(k, v)
+    ok = c > -0.9
+    rot = v + kv + np.cross(k, kv) / np.where(ok, 1.0 + c, 1.0)[:, None]
+    out = np.where(ok[:, None], rot, v)
+    return project_to_planes(out, b)
+
+
 def domain_directions(normals, domain, domain_normals, angles) -> np.ndarray:
     """One direction per domain, tangent to the surface, consistent within the domain.
 
     Domain k's direction is the tangent at angle ``angles[k]`` from the tangent basis e1 of its
-    reference normal ``domain_normals[k]`` (e.g. the normal where its seed lies); every face of
-    the domain gets it projected onto the face's plane (falling back to the same angle in the
-    face's own basis where the face is perpendicular to it).
+    reference normal ``domain_normals[k]`` (the normal where its seed lies); every face of the
+    domain gets it carried over by the smallest rotation from the reference normal to the
+    face's (:func:`transport_tangents`): on a flat domain that is the same vector everywhere, on
+    a curved one it turns with the surface (the domain's lattice follows the stone's curvature)
+    instead of collapsing where a fixed 3D vector would be nearly normal to the surface.
     """
     dn = np.asarray(domain_normals, np.float64).reshape(-1, 3)
     ang = np.asarray(angles, np.float64)
@@ -312,9 +333,7 @@ def domain_directions(normals, domain, domain_normals, angles) -> np.ndarray:
     dvec = np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2
     dom = np.asarray(domain, np.int64)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
-    f1, f2 = tangent_basis(n)
-    own = np.cos(ang[dom])[:, None] * f1 + np.sin(ang[dom])[:, None] * f2
-    return project_to_planes(dvec[dom], n, fallback=own)
+    return transport_tangents(dvec[dom], dn[dom], n)
 
 
 def aligned_directions(normals, axis=(1.0, 0.0, 0.0)) -> np.ndarray:
@@ -339,22 +358,32 @@ def domain_periods(count: int, rng: np.random.Generator, mode: str = "SPHERES", 
 def generate_domains(vertices, triangles, count: int, seed: int = 0, tri_face=None, n_faces: int | None = None, *,
                      period_mode: str = "SPHERES", low: float = 150.0, high: float = 350.0,
                      direction_mode: str = "RANDOM", axis=(1.0, 0.0, 0.0), n_sphere: float = N_SILICA,
-                     n_void: float = N_VOID) -> DomainField:
+                     n_void: float = N_VOID, seed_mask=None) -> DomainField:
     """Cover a surface with ``count`` Voronoi grating domains.
 
     Seeds are sampled on the surface, area-weighted; each face belongs to the seed nearest its
     centre (Euclidean; ids are renumbered 0..K-1 in seed order, K <= count, so every id has at
     least one face). ``direction_mode`` 'RANDOM': each domain a uniformly random direction
-    tangent to the surface at its seed, projected onto its faces; 'ALIGNED': the paper's model,
+    tangent to the surface at its seed, carried to its faces (:func:`domain_directions`);
+    'ALIGNED': the paper's model,
     ``axis`` projected onto every face. Periods per domain from :func:`domain_periods`. The
     positions, directions and periods use separate random streams of ``seed``, so changing the
-    period range keeps the layout.
+    period range keeps the layout. ``seed_mask`` (F,) bool limits where seeds may lie (e.g. the
+    visible dome of a cabochon, not its base); every face is still assigned a domain.
     """
     geo = face_geometry(vertices, triangles, tri_face, n_faces)
     f = len(geo)
     ss_pos, ss_dir, ss_per = np.random.SeedSequence(int(seed)).spawn(3)
     count = max(int(count), 1)
-    seeds, seed_tri = sample_surface_points(vertices, triangles, count, np.random.default_rng(ss_pos))
+    tris = np.asarray(triangles, np.int64).reshape(-1, 3)
+    cand = np.arange(len(tris))
+    if seed_mask is not None:
+        fmask = np.asarray(seed_mask, bool).reshape(-1)
+        tf = np.arange(len(tris)) if tri_face is None else np.asarray(tri_face, np.int64)
+        if fmask[tf].any():
+            cand = np.flatnonzero(fmask[tf])
+    seeds, seed_tri = sample_surface_points(vertices, tris[cand], count, np.random.default_rng(ss_pos))
+    seed_tri = cand[seed_tri]
     if len(seeds) == 0:
         return DomainField(np.zeros(f, np.int32), project_to_planes((1.0, 0, 0), geo.normal),
                            np.zeros(f, np.float32))

@@ -1,0 +1,405 @@
+"""The engine's rendered viewport: progressive previews drawn through the ``gpu`` module.
+
+``view_update`` (Blender calls it when the scene changes: an edit, a new frame, a material)
+exports the evaluated depsgraph and restarts the preview; ``view_draw`` (every redraw) builds
+the core camera from the 3D view's matrices, restarts the preview when the view moved or the
+region was resized, and draws the newest image as a float texture through the scene's display
+transform (``bind_display_space_shader``), as Cycles does. Never ``bgl``.
+
+The preview renders in a background thread with the core's ``render``: first at 1/8 of the
+region's resolution with one sample (the first image comes quickly), then 1/4, 1/2, and the
+full resolution refined round after round up to the scene's preview samples. Every restart
+bumps a generation number; the old render stops at its next tile (the core polls
+``should_cancel`` between tiles) and its images are dropped. Leaving Rendered mode frees the
+engine, which cancels the thread. A main-thread timer tags the 3D views for redraw while new
+images arrive (the thread never touches bpy).
+
+The logic is plain Python for tests without a display: :func:`preview_levels` (the schedule),
+:func:`viewport_camera` (view and window matrices to a core Camera), :func:`prepare_pixels`
+(the texture buffer) and :class:`ProgressiveRenderer` (the thread).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import weakref
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..core.render import render as core_render
+from ..core.scene import Camera, Scene, SceneError
+from ..core.settings import RenderSettings
+
+__all__ = ["preview_levels", "viewport_camera", "prepare_pixels", "Frame", "ProgressiveRenderer", "ViewportSession",
+           "REDRAW_INTERVAL"]
+
+#: Seconds between redraw checks while a preview is rendering.
+REDRAW_INTERVAL = 0.1
+
+
+def preview_levels(samples: int, start_scale: int = 8) -> list[tuple[int, int]]:
+    """The progressive schedule: (downscale factor, samples per pixel) per level.
+
+    Powers of two from ``start_scale`` down to 2 with one sample each (quick, coarse images),
+    then the full resolution with ``samples`` (refined round by round).
+    """
+    levels = []
+    s = 1
+    while s * 2 <= max(int(start_scale), 1):
+        s *= 2
+    while s > 1:
+        levels.append((s, 1))
+        s //= 2
+    levels.append((1, max(int(samples), 1)))
+    return levels
+
+
+def level_size(width: int, height: int, scale: int) -> tuple[int, int]:
+    """Image size of a level: the region divided by ``scale``, rounded up, at least 1x1."""
+    return max(1, -(-int(width) // scale)), max(1, -(-int(height) // scale))
+
+
+def viewport_camera(view_matrix, window_matrix, is_perspective: bool, width: int, height: int,
+                    ortho_back: float = 1000.0) -> Camera:
+    """A core Camera that sees what the 3D view shows.
+
+    ``view_matrix``: world to view (4x4, the view looks down -Z, +Y up); ``window_matrix``: the
+    view's projection (OpenGL convention). Perspective: the horizontal field of view and the
+    off-centre shift come from P[0][0], P[0][2], P[1][1], P[1][2] (sensor fit HORIZONTAL, 36 mm
+    sensor); orthographic: the scale and shift from P[0][0], P[0][3], P[1][1], P[1][3]. An
+    orthographic eye is moved ``ortho_back`` metres back so nothing in front of the view's clip
+    range is cut off.
+    """
+    v = np.asarray(view_matrix, np.float64).reshape(4, 4)
+    p = np.asarray(window_matrix, np.float64).reshape(4, 4)
+    m = np.linalg.inv(v)
+    # drop any scale so the frame is orthonormal
+    m[:3, :3] /= np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
+    w, h = max(int(width), 1), max(int(height), 1)
+    if is_perspective:
+        lens = 18.0 * p[0, 0]  # tan(half fov x) = 1 / P00 = (36 / 2) / lens
+        shift_x = p[0, 2] / 2.0
+        shift_y = p[1, 2] * p[0, 0] / (2.0 * p[1, 1])
+        return Camera(matrix=m, kind="PERSP", lens=float(lens), sensor_width=36.0, sensor_height=36.0 * h / w,
+                      sensor_fit="HORIZONTAL", shift_x=float(shift_x), shift_y=float(shift_y), width=w, height=h)
+    scale = 2.0 / p[0, 0]
+    m[:3, 3] += m[:3, 2] * ortho_back  # back along the view's +Z
+    return Camera(matrix=m, kind="ORTHO", ortho_scale=float(scale), sensor_fit="HORIZONTAL",
+                  shift_x=float(-p[0, 3] / 2.0), shift_y=float(-p[1, 3] * p[0, 0] / (2.0 * p[1, 1])), width=w, height=h)
+
+
+def prepare_pixels(rgb: np.ndarray, to_working: np.ndarray | None = None) -> np.ndarray:
+    """A float32 RGBA buffer (H * W * 4) for a texture: rows bottom first (OpenGL's origin),
+    colours in the blend file's working space, alpha 1, NaN and negative values cleared."""
+    img = np.asarray(rgb, np.float32)
+    h, w = img.shape[:2]
+    if to_working is not None:
+        img = img @ np.asarray(to_working, np.float32).T
+    out = np.empty((h, w, 4), np.float32)
+    out[..., :3] = np.nan_to_num(img[::-1], nan=0.0, posinf=0.0, neginf=0.0)
+    np.maximum(out[..., :3], 0.0, out=out[..., :3])
+    out[..., 3] = 1.0
+    return out.ravel()
+
+
+@dataclass
+class Frame:
+    """One preview image: its generation, level, size, samples and the texture buffer."""
+
+    generation: int
+    level: int
+    width: int
+    height: int
+    samples: int
+    pixels: np.ndarray
+    serial: int = 0
+
+
+class ProgressiveRenderer:
+    """Renders a core Scene progressively in a background thread.
+
+    ``start(scene, settings, levels)`` cancels any render under way and starts a new
+    generation; ``frame()`` returns the newest image (or None); ``cancel()`` stops the thread.
+    ``on_image()`` (optional) is called from the thread after every new image.
+    """
+
+    def __init__(self, on_image=None, to_working: np.ndarray | None = None):
+        self.on_image = on_image
+        self.to_working = to_working
+        self._lock = threading.Lock()
+        self._generation = 0
+        self._frame: Frame | None = None
+        self._thread: threading.Thread | None = None
+        self._serial = 0
+        self.error = ""
+        self.warnings: list[str] = []
+        self.started_at = 0.0
+        self.first_image_s: float | None = None
+        self.done = False
+
+    @property
+    def generation(self) -> int:
+        return self._generation
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def frame(self) -> Frame | None:
+        with self._lock:
+            return self._frame
+
+    def start(self, scene: Scene, settings: RenderSettings, levels: list[tuple[int, int]]) -> int:
+        with self._lock:
+            self._generation += 1
+            gen = self._generation
+            self.error, self.warnings, self.done = "", [], False
+            self.started_at = time.perf_counter()
+            self.first_image_s = None
+        thread = threading.Thread(target=self._run, args=(gen, scene, settings, list(levels)),
+                                  name=f"opal-viewport-{gen}", daemon=True)
+        self._thread = thread
+        thread.start()
+        return gen
+
+    def cancel(self, wait: float = 0.0) -> None:
+        """Stop the render under way (it stops at its next tile); wait up to ``wait`` seconds."""
+        with self._lock:
+            self._generation += 1
+        t = self._thread
+        if wait > 0 and t is not None and t is not threading.current_thread():
+            t.join(wait)
+
+    def wait(self, timeout: float = 10.0) -> bool:
+        """Wait for the thread to finish (tests, scripts); True when it did."""
+        t = self._thread
+        if t is not None:
+            t.join(timeout)
+        return not self.running
+
+    def _stale(self, gen: int) -> bool:
+        return gen != self._generation
+
+    def _publish(self, gen: int, level: int, rr) -> None:
+        if self._stale(gen) or rr.samples <= 0:
+            return
+        pixels = prepare_pixels(rr.rgb, self.to_working)
+        h, w = rr.rgb.shape[:2]
+        with self._lock:
+            if gen != self._generation:
+                return
+            self._serial += 1
+            self._frame = Frame(gen, level, w, h, int(rr.samples), pixels, self._serial)
+            if self.first_image_s is None:
+                self.first_image_s = time.perf_counter() - self.started_at
+        if self.on_image is not None:
+            try:
+                self.on_image()
+            except Exception:  # a redraw request must never kill the render
+                pass
+
+    def _run(self, gen: int, scene: Scene, settings: RenderSettings, levels) -> None:
+        cam = scene.camera
+        try:
+            for li, (scale, spp) in enumerate(levels):
+                if self._stale(gen):
+                    return
+                w, h = level_size(cam.width, cam.height, scale)
+                lvl_scene = replace(scene, camera=replace(cam, width=w, height=h))
+                lvl_settings = replace(settings, samples=int(spp), round_samples=max(1, min(int(spp), 4)),
+                                       spectral_exr="", time_limit=0.0)
+                rr = core_render(lvl_scene, lvl_settings, should_cancel=lambda: self._stale(gen),
+                                 on_round=lambda r, li=li: self._publish(gen, li, r))
+                if not self._stale(gen):
+                    self.warnings = list(rr.warnings)
+            if not self._stale(gen):
+                self.done = True
+        except SceneError as e:
+            if not self._stale(gen):
+                self.error = str(e)
+        except Exception as e:  # keep the UI alive; say what happened
+            if not self._stale(gen):
+                self.error = f"internal error ({type(e).__name__}: {e})"
+        finally:
+            if not self._stale(gen) and self.on_image is not None:
+                try:
+                    self.on_image()
+                except Exception:
+                    pass
+
+
+# ============================================================================ the Blender side
+def _region_matrices(context):
+    rv3d = context.region_data
+    region = context.region
+    return (np.array(rv3d.view_matrix, np.float64), np.array(rv3d.window_matrix, np.float64),
+            bool(rv3d.is_perspective), int(region.width), int(region.height))
+
+
+class ViewportSession:
+    """The viewport state of one engine instance: the exported scene, the view, the renderer."""
+
+    def __init__(self):
+        self.scene: Scene | None = None
+        self.settings: RenderSettings | None = None
+        self.levels: list[tuple[int, int]] = []
+        self.view_key = None
+        self.renderer = ProgressiveRenderer(on_image=self._on_image)
+        self.texture = None
+        self._texture_key = None
+        self.export_warnings: list[str] = []
+        self.error = ""
+        self.restarts = 0
+
+    # ---------------------------------------------------------------- update (scene changed)
+    def update(self, engine, context, depsgraph) -> None:
+        """Export the scene and restart the preview (``view_update``)."""
+        from .engine import render_settings  # noqa: PLC0415 - engine imports this module
+        from .export import ExportCancelled, export_scene, rec709_to_working_space
+
+        view, window, persp, w, h = _region_matrices(context)
+        scene = depsgraph.scene
+        opal = scene.opal
+        try:
+            exported = export_scene(depsgraph, width=w, height=h)
+        except (SceneError, ExportCancelled) as e:
+            self.error = str(e) or "cancelled"
+            self.scene = None
+            self.renderer.cancel()
+            _status(engine, f"Error: {self.error}")
+            return
+        self.error = ""
+        self.export_warnings = list(exported.warnings)
+        self.renderer.to_working = rec709_to_working_space()
+        settings = render_settings(opal, scene)
+        settings.spectral_exr = ""
+        settings.time_limit = 0.0
+        self.settings = settings
+        self.levels = preview_levels(getattr(opal, "preview_samples", 16), getattr(opal, "preview_start_scale", 8))
+        self.scene = exported.scene
+        self.view_key = None  # force a restart with the current view
+        if self.sync_view(view, window, persp, w, h):
+            _status(engine, "Rendering preview")
+
+    # ---------------------------------------------------------------- the view
+    def sync_view(self, view, window, persp, width, height) -> bool:
+        """Restart when the view (matrices or region size) changed; True when it restarted."""
+        if self.scene is None or self.settings is None:
+            return False
+        key = (np.round(np.asarray(view, np.float64), 9).tobytes(), np.round(np.asarray(window, np.float64), 9).tobytes(),
+               bool(persp), int(width), int(height))
+        if key == self.view_key:
+            return False
+        self.view_key = key
+        cam = viewport_camera(view, window, persp, width, height)
+        self.renderer.start(replace(self.scene, camera=cam), self.settings, self.levels)
+        self.restarts += 1
+        return True
+
+    # ---------------------------------------------------------------- draw
+    def draw(self, engine, context, depsgraph) -> None:
+        """Draw the newest preview image (``view_draw``); restart if the view moved."""
+        view, window, persp, w, h = _region_matrices(context)
+        self.sync_view(view, window, persp, w, h)
+        frame = self.renderer.frame()
+        if frame is not None and frame.generation == self.renderer.generation:
+            self._draw_frame(engine, depsgraph.scene, frame, w, h)
+        r = self.renderer
+        if r.error:
+            _status(engine, f"Error: {r.error}")
+        elif frame is not None and frame.generation == r.generation:
+            state = "Done" if r.done else "Rendering"
+            _status(engine, f"{state} | {frame.width}x{frame.height}, {frame.samples} sample(s)")
+        if r.running:
+            _RedrawTimer.ensure(r)
+
+    def _draw_frame(self, engine, scene, frame: Frame, region_w: int, region_h: int) -> None:
+        import bpy  # noqa: PLC0415
+
+        if bpy.app.background:  # no GPU drawing without a window
+            return
+        key = (frame.generation, frame.serial)
+        import gpu  # noqa: PLC0415 - not available in background mode
+        from gpu_extras.presets import draw_texture_2d  # noqa: PLC0415
+
+        if key != self._texture_key or self.texture is None:
+            buf = gpu.types.Buffer("FLOAT", frame.width * frame.height * 4, frame.pixels)
+            self.texture = gpu.types.GPUTexture((frame.width, frame.height), format="RGBA16F", data=buf)
+            self._texture_key = key
+        gpu.state.blend_set("ALPHA_PREMULT")
+        engine.bind_display_space_shader(scene)
+        draw_texture_2d(self.texture, (0, 0), region_w, region_h)
+        engine.unbind_display_space_shader()
+        gpu.state.blend_set("NONE")
+
+    # ---------------------------------------------------------------- housekeeping
+    def _on_image(self) -> None:  # called from the render thread: only set a flag
+        _RedrawTimer.pending.set()
+
+    def free(self) -> None:
+        """Stop the render thread (the engine is being freed: Rendered mode was left)."""
+        self.renderer.cancel()
+        self.texture = None
+        self.scene = None
+
+
+def _status(engine, message: str) -> None:
+    if engine is not None:
+        try:
+            engine.update_stats("", message)
+        except (ReferenceError, AttributeError, RuntimeError):
+            pass
+
+
+class _RedrawTimer:
+    """A main-thread timer that tags 3D views in Rendered mode for redraw while previews arrive."""
+
+    pending = threading.Event()
+    registered = False
+    renderers: "weakref.WeakSet" = weakref.WeakSet()  # previews that may still produce images
+
+    @classmethod
+    def ensure(cls, renderer=None) -> None:
+        if renderer is not None:
+            cls.renderers.add(renderer)
+        try:
+            import bpy  # noqa: PLC0415
+        except ImportError:  # pragma: no cover
+            return
+        if not cls.registered:
+            bpy.app.timers.register(_redraw_tick, first_interval=REDRAW_INTERVAL)
+            cls.registered = True
+
+
+def _redraw_tick():
+    """Timer callback: redraw Rendered 3D views when a new image is ready; stops when no preview
+    is rendering any more (the last image has been drawn)."""
+    import bpy  # noqa: PLC0415
+
+    t = _RedrawTimer
+    if t.pending.is_set():
+        t.pending.clear()
+        wm = getattr(bpy.context, "window_manager", None)
+        for window in getattr(wm, "windows", []):
+            for area in window.screen.areas:
+                if area.type == "VIEW_3D" and any(s.type == "VIEW_3D" and s.shading.type == "RENDERED"
+                                                  for s in area.spaces):
+                    area.tag_redraw()
+        return REDRAW_INTERVAL
+    if any(r.running for r in list(t.renderers)):
+        return REDRAW_INTERVAL
+    t.registered = False
+    return None
+
+
+def unregister_timer() -> None:
+    try:
+        import bpy  # noqa: PLC0415
+
+        if bpy.app.timers.is_registered(_redraw_tick):
+            bpy.app.timers.unregister(_redraw_tick)
+    except Exception:
+        pass
+    _RedrawTimer.registered = False
