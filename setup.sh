@@ -6,8 +6,10 @@ set -euo pipefail
 cd "$(dirname "$0")"
 
 need_libs=()
+# (read the cache once: `ldconfig -p | grep -q` would fail under pipefail when grep exits early)
+known_libs=$(ldconfig -p 2>/dev/null || true)
 for lib in libX11.so.6 libXrender.so.1 libXfixes.so.3 libXi.so.6 libxkbcommon.so.0 libSM.so.6 libGL.so.1; do
-  ldconfig -p 2>/dev/null | grep -q "$lib" || need_libs+=("$lib")
+  grep -q "$lib" <<<"$known_libs" || need_libs+=("$lib")
 done
 if [ ${#need_libs[@]} -gt 0 ]; then
   echo "setup: installing shared libraries for bpy (missing: ${need_libs[*]})"
