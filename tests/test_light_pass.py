@@ -229,3 +229,14 @@ def test_light_arriving_through_a_mirror_diffracts_like_direct_light():
     # and the same pixels light up
     lit = a.sum(axis=2) > 0.05 * a.sum(axis=2).max()
     assert (b.sum(axis=2)[lit] > 0).mean() > 0.95
+
+
+def test_light_pass_is_the_same_whatever_the_threads():
+    maps = [light_map(slab_scene(), light_paths=3 * 32768, threads=t)[2].flux for t in (1, 2)]
+    np.testing.assert_array_equal(maps[0], maps[1])
+
+
+def test_a_too_fine_element_size_is_coarsened_with_a_warning():
+    s = slab_scene()
+    res = render(s, RenderSettings(samples=1, light_paths=10_000, element_size=1e-4))
+    assert any("element size 0.1 mm needs more memory" in w for w in res.warnings)

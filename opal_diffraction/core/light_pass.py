@@ -25,6 +25,9 @@ batch), and batches add into the map, so the map does not depend on how the work
 
 from __future__ import annotations
 
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,6 +44,7 @@ BATCH_PATHS = 1 << 15
 MAX_OBJECTS = 64
 RR_START_DEPTH = 3
 RR_SURVIVAL = 0.8
+LANES = 2  # fixed partial maps (so the result does not depend on the thread count)
 
 
 @dataclass
@@ -188,6 +192,7 @@ class LightPass:
         self.grating_mask = ctx.gratings.enabled[ctx.tri_material] if len(ctx.tri_material) else np.zeros(0, bool)
         self.objects = caster_objects(ctx.scene.vertices, ctx.scene.triangles, self.caster_mask)
         self.budget = self._light_budget()
+        self.coarsened = ""  # a warning when the memory cap made the elements coarser than asked
 
     # ---------------------------------------------------------------- planning
     def _light_budget(self) -> np.ndarray:
@@ -235,46 +240,88 @@ class LightPass:
             p = np.asarray(v, np.float64)[np.asarray(t)[mask]]
             area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
             target = area / max(n_paths / 16.0, 1.0)
-        cap = 64_000_000 // max(ctx.grid.n, 1) // 2
+        cap = 64_000_000 // max(ctx.grid.n, 1) // (2 * LANES)
+        asked = target
         while True:
             lay = ElementLayout.build(v, t, mask, target)
             if lay.total <= cap:
+                if target > asked * 1.01 and size > 0:
+                    self.coarsened = (f"element size {size * 1000:.1f} mm needs more memory than the map allows: "
+                                      f"using {np.sqrt(target) * 1000:.1f} mm (a coarser wavelength step allows finer)")
                 return lay
             target *= 2.0
 
     # ---------------------------------------------------------------- running
     def run(self, n_paths: int, progress=None, should_cancel=None):
-        """Returns (caustic map, grating records or None, stats)."""
+        """Returns (caustic map, grating records or None, stats).
+
+        The batches are dealt to LANES fixed lanes (batch j to lane j % LANES), each with its own
+        maps, run on up to ``settings.threads`` threads and summed in lane order at the end, so
+        the result does not depend on the number of threads. ``progress`` and ``should_cancel``
+        are called from the calling thread only.
+        """
         ctx = self.ctx
-        illum = IlluminationMap.empty(self.layout(n_paths), ctx.grid.n)
-        records = (IlluminationMap.empty(self.layout(n_paths, self.grating_mask), ctx.grid.n, with_direction=True)
-                   if self.grating_mask.any() else None)
-        stats = {"light_paths": 0, "light_deposits": 0, "light_rays": 0, "elements": illum.layout.total}
+        layout = self.layout(n_paths)
+        rec_layout = self.layout(n_paths, self.grating_mask) if self.grating_mask.any() else None
+        stats = {"light_paths": 0, "light_deposits": 0, "light_rays": 0, "elements": layout.total}
+        if self.coarsened:
+            stats["warning"] = self.coarsened
         share = self.budget / max(self.budget.sum(), 1e-300)
         paths_per_light = np.floor(share * n_paths).astype(np.int64)
+        jobs = [(li, bi, start, int(n_l)) for li, n_l in enumerate(paths_per_light)
+                for bi, start in enumerate(range(0, int(n_l), BATCH_PATHS))]
         total = int(paths_per_light.sum())
-        done = 0
-        for li, n_l in enumerate(paths_per_light):  # loop over lights
-            for bi, start in enumerate(range(0, int(n_l), BATCH_PATHS)):  # bounded memory: fixed batches
-                if should_cancel and should_cancel():
-                    stats["cancelled"] = True
-                    return illum, records, stats
-                b = min(BATCH_PATHS, int(n_l) - start)
+        lanes = [jobs[k::LANES] for k in range(LANES)]
+        maps = [(IlluminationMap.empty(layout, ctx.grid.n),
+                 IlluminationMap.empty(rec_layout, ctx.grid.n, with_direction=True) if rec_layout else None)
+                for _ in range(LANES)]
+        counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
+        stop = threading.Event()
+
+        def run_lane(k):
+            illum, records = maps[k]
+            for li, bi, start, n_l in lanes[k]:  # bounded memory: fixed batches
+                if stop.is_set():
+                    return
+                b = min(BATCH_PATHS, n_l - start)
                 rng = np.random.default_rng(np.random.SeedSequence(
                     [int(ctx.settings.seed), LIGHT_PASS_STREAM, li, bi]))
                 o, d, weight = self._emit(li, b, rng)
                 live = weight > 0
+                m = int(live.sum())
                 w = (weight[live, None] / float(n_l)).astype(np.float32) * ctx.lights.spectrum[li][None, :]
-                rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(int(live.sum()), np.int64),
-                            w, None, np.zeros(int(live.sum()), np.int32), rng.random(int(live.sum())))
+                rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(m, np.int64),
+                            w, None, np.zeros(m, np.int32), rng.random(m))
                 tr = _LightTrace(ctx, rng, illum, records)
                 tr.walk(rays, tr.empty_mono())
-                done += b
-                stats["light_paths"] += b
-                stats["light_deposits"] += tr.deposited
-                stats["light_rays"] += tr._rays
+                c = counts[k]
+                c["paths"] += b
+                c["deposits"] += tr.deposited
+                c["rays"] += tr._rays
+
+        threads = max(1, min(LANES, int(ctx.settings.threads or os.cpu_count() or 1)))
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            futures = [pool.submit(run_lane, k) for k in range(LANES)]
+            while True:
+                done_set, pending = wait(futures, timeout=0.2)
+                done = sum(c["paths"] for c in counts)
                 if progress:
                     progress(done / max(total, 1), f"light pass: {done / 1e6:.2f} M of {total / 1e6:.2f} M paths")
+                if not pending:
+                    break
+                if should_cancel and should_cancel():
+                    stop.set()
+                    stats["cancelled"] = True
+            for f in futures:
+                f.result()  # re-raise a worker's exception here
+        illum, records = maps[0]
+        for extra_illum, extra_records in maps[1:]:
+            illum += extra_illum
+            if records is not None:
+                records += extra_records
+        stats["light_paths"] = sum(c["paths"] for c in counts)
+        stats["light_deposits"] = sum(c["deposits"] for c in counts)
+        stats["light_rays"] = sum(c["rays"] for c in counts)
         return illum, records, stats
 
     def _emit(self, li: int, b: int, rng):

@@ -188,6 +188,8 @@ def render(
         lp_progress = (lambda f, m: progress(LIGHT_PASS_SHARE * f, m)) if progress else None
         ctx.caustics, ctx.grating_records, lp_stats = light_pass.run(int(settings.light_paths), lp_progress,
                                                                      should_cancel)
+        if lp_stats.pop("warning", ""):
+            warnings.append(light_pass.coarsened)
         stats.update(lp_stats)
         stats["rays"] += lp_stats["light_rays"]
         stats["light_pass_s"] = time.perf_counter() - t0
