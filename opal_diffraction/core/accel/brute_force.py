@@ -1,10 +1,10 @@
 """Brute-force O(rays x triangles) ray caster: the test oracle.
 
-Every ray is tested against every triangle, in float64, with the same watertight
-edge-function (Pluecker) test as Embree's robust mode and the NumPy BVH, so it is
-an independent reference for both.  Work is chunked so memory stays bounded
-(about ``_PAIR_BUDGET`` ray-triangle pairs at a time), but the cost is still
-rays x triangles: use it for tests and small scenes only.
+Every ray is tested against every triangle in float64 with Embree's robust edge-function
+("Pluecker") formulation: independent of the NumPy BVH's float32 Woop-style test, and far
+more precise than either real backend.  Work is chunked so memory stays bounded (about
+``_PAIR_BUDGET`` ray-triangle pairs at a time), but the cost is still rays x triangles:
+use it for tests and small scenes only.
 """
 from __future__ import annotations
 

@@ -105,10 +105,12 @@ class EmbreeAccelerator:
 
         self._map(work, n)
         # Hits at (or within a few ulps of) the origin: re-cast from slightly further on.
-        nud = _nudge(o)
-        close = np.flatnonzero((prim >= 0) & (t <= nud))
+        with np.errstate(all="ignore"):
+            nud = _nudge(o)
+            close = np.flatnonzero((prim >= 0) & (t <= nud))
         if len(close):
-            oc = o[close] + d[close] * nud[close, None]
+            with np.errstate(all="ignore"):
+                oc = o[close] + d[close] * nud[close, None]
             r = scene.run(oc, np.ascontiguousarray(d[close]),
                           dists=(tm[close] - nud[close]).astype(np.float32), query="INTERSECT", output=1)
             t[close] = r["tfar"] + nud[close]
@@ -127,10 +129,11 @@ class EmbreeAccelerator:
         tm = _as_tmax(tmax, n)
         if self._scene is None or n == 0:
             return np.zeros(n, bool)
-        nud = _nudge(o)
-        o2 = o + d * nud[:, None]
-        # strict t < tmax (embree accepts t <= tfar); tfar < 0 makes a ray inactive
-        tf = np.nextafter(tm - nud, np.float32(-np.inf)).astype(np.float32)
+        with np.errstate(all="ignore"):     # NaN/inf rays are simply inactive in Embree
+            nud = _nudge(o)
+            o2 = o + d * nud[:, None]
+            # strict t < tmax (embree accepts t <= tfar); tfar < 0 makes a ray inactive
+            tf = np.nextafter(tm - nud, np.float32(-np.inf)).astype(np.float32)
         occ = np.empty(n, np.int32)
         scene = self._scene
 

@@ -26,11 +26,11 @@ distance is beyond the closest hit so far is dropped with all its children.  Fin
 are replaced from a queue of rays sorted by direction octant and a Morton code of origin
 and direction (coherent gathers), shared by the worker threads.
 
-Triangle test: Embree's robust "Pluecker" test in float32 (vertices translated to the
-ray origin, edge functions U, V, W computed from the *shared* edge vertices so the two
-triangles of an edge get exactly opposite values): watertight, no slip-through on
-shared edges or vertices.  Edges are inclusive with a relative tolerance of one float32
-ulp of U+V+W, like Embree.
+Triangle test: the watertight test of Woop, Benthin and Wald (JCGT 2013) in float32:
+vertices relative to the ray origin, sheared into the ray's frame, 2D edge functions.  The
+projected vertices are bit-identical in every triangle sharing them, so shared edges get
+exactly opposite edge functions and vertex fans stay consistent: no slip-through at shared
+edges or vertices.  Edges are inclusive.  Distances come from the plane equation.
 """
 from __future__ import annotations
 
@@ -43,13 +43,14 @@ import numpy as np
 from . import Hits, _as_rays, _as_tmax, _empty_hits
 
 _F32 = np.float32
-_EPS32 = _F32(np.finfo(np.float32).eps)
 _INT_MAX = np.int32(np.iinfo(np.int32).max)
 _BOX_LO = _F32(1 - 4e-6)   # slack on the slab test: accept boxes whose entry is a few
 _BOX_HI = _F32(1 + 4e-6)   # ulps beyond their exit (flat boxes, grazing rays)
 _MIN_DIR = 1e-30           # |direction component| floor for the reciprocal
 _MIN_COS = _F32(1e-6)      # |cos(ray, triangle normal)| below which a ray counts as in-plane
 _MAX_BATCH = 1 << 21       # rays sorted and traced per batch (bounds memory for huge calls)
+_POP_ROUNDS = 2            # pop rounds per step; rays still popping continue in the next step
+_PENDING = -(1 << 62)      # cur[] marker of such rays
 
 
 def default_threads() -> int:
@@ -372,6 +373,7 @@ class NumpyBVH:
         bv = np.zeros(P, np.float32)
         alive = np.zeros(P, bool)
         n_alive = 0
+        n_pending = 0
         if any_hit:
             out_occ = out
         else:
@@ -401,12 +403,18 @@ class NumpyBVH:
             act = flatnonzero(alive)
             c = take(cur, act)
             leafm = c < 0
-            n_leaf = int(np.count_nonzero(leafm))
             pops = []
+            if n_pending:                        # rays that still have to pop (see below)
+                pm = c == _PENDING
+                pops.append(compress(pm, act))
+                leafm &= ~pm
+                n_pending = 0
+            n_leaf = int(np.count_nonzero(leafm))
+            n_inner = len(act) - n_leaf - (len(pops[0]) if pops else 0)
 
             # ---- inner nodes: test the K child boxes
-            if n_leaf < len(act):
-                innm = ~leafm
+            if n_inner:
+                innm = c >= 0
                 si = compress(innm, act)
                 ci = compress(innm, c)
                 ni = len(si)
@@ -566,7 +574,9 @@ class NumpyBVH:
             # distance is beyond the best hit is dropped with all its children
             p = np.concatenate(pops) if len(pops) > 1 else (pops[0] if pops else act[:0])
             fins = []
-            while len(p):
+            for _round in range(_POP_ROUNDS):
+                if not len(p):
+                    break
                 spp = take(sp, p)
                 empty = spp == 0
                 if empty.any():
@@ -592,6 +602,9 @@ class NumpyBVH:
                     spp[take(okw, mw)] += 1
                 sp[p] = spp
                 p = compress(~ok, p)
+            if len(p):                           # few rays, many rounds: continue next step
+                cur[p] = _PENDING
+                n_pending = len(p)
             if fins:
                 fin = np.concatenate(fins) if len(fins) > 1 else fins[0]
                 alive[fin] = False
@@ -632,7 +645,11 @@ class NumpyBVH:
 
     def _run_batch(self, o, d, tinit, any_hit, out):
         n = len(o)
-        order = self._ray_order(o, d) if (self.sort_rays and n > 4096) else np.arange(n)
+        if self.sort_rays and n > 4096:
+            with np.errstate(all="ignore"):      # NaN/inf rays just sort somewhere
+                order = self._ray_order(o, d)
+        else:
+            order = np.arange(n)
         nthreads = min(self.threads, max(1, n // 16384))
         queue = _Queue(order, nthreads)
         # per-ray data in queue order, structure of arrays
@@ -715,24 +732,4 @@ class _Queue:
 _SORT_NET = {
     2: [(0, 1)],
     4: [(0, 1), (2, 3), (0, 2), (1, 3), (1, 2)],
-    8: [(0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7), (0, 1), (2, 3), (4, 5),
-        (6, 7), (2, 4), (3, 5), (1, 4), (3, 6), (1, 2), (3, 4), (5, 6)],
 }
-
-
-def _triple(e, s, dx, dy, dz):
-    """d . (e x s) for (3,L,n) e, s and (n,) direction components."""
-    ex, ey, ez = e
-    sx, sy, sz = s
-    r = ey * sz
-    r -= ez * sy
-    r *= dx
-    q = ez * sx
-    q -= ex * sz
-    q *= dy
-    r += q
-    q = ex * sy
-    q -= ey * sx
-    q *= dz
-    r += q
-    return r
