@@ -45,7 +45,10 @@ def default_threads() -> int:
 
 def _nudge(o):
     """Per-ray start offset: a few float32 ulps of the largest origin coordinate."""
-    return np.maximum(np.abs(o).max(axis=1), np.float32(1e-30)) * np.float32(_NUDGE)
+    a = np.abs(o)
+    # column-wise maxima: ~3x faster than a reduction over the short last axis
+    m = np.maximum(np.maximum(a[:, 0], a[:, 1]), np.maximum(a[:, 2], np.float32(1e-30)))
+    return m * np.float32(_NUDGE)
 
 
 class EmbreeAccelerator:
