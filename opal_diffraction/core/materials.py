@@ -30,6 +30,7 @@ class PreparedMaterials:
     dispersive: np.ndarray   # (M,) bool: index varies over the grid
     emission: np.ndarray     # (M, n) float32 emitted spectral radiance (zero for most)
     emissive: np.ndarray     # (M,) bool
+    clear: np.ndarray        # (M,) bool: reflectance 1 at every wavelength (untinted glass/mirror)
 
     @property
     def has_dispersion(self) -> bool:
@@ -45,5 +46,7 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
         ior[i] = ior_spectrum(wl, _MODEL_NAMES[int(m.dispersion[i])], float(m.ior[i]), float(m.abbe[i]))
     dispersive = (kind == DIELECTRIC) & (np.ptp(ior, axis=1) > 0) if len(kind) else np.zeros(0, bool)
     emission = conv.illuminant_from_rgb(np.asarray(m.emission, np.float64).reshape(-1, 3)).astype(np.float32)
-    return PreparedMaterials(kind, refl.astype(np.float32), ior.astype(np.float32), dispersive,
-                             emission, emission.any(axis=1))
+    refl32 = refl.astype(np.float32)
+    clear = np.all(refl32 == 1.0, axis=1) if len(refl32) else np.zeros(0, bool)
+    return PreparedMaterials(kind, refl32, ior.astype(np.float32), dispersive,
+                             emission, emission.any(axis=1), clear)

@@ -189,11 +189,18 @@ class SpecularWalker:
         """table[rows] (B, n) for white rays, table[rows, lam] (B,) for mono rays."""
         return table[rows] if lam is None else table[rows, lam]
 
+    def _tinted(self, rays: Rays, hit: Hit):
+        """The weight after the surface's tint (skipped for clear glass and perfect mirrors)."""
+        m = self.ctx.materials
+        if m.clear[hit.mat].all():
+            return rays.w
+        return rays.weighted(self._per_ray(m.reflectance, hit.mat, rays.lam))
+
     def _mirror(self, rays: Rays, hit: Hit) -> Rays:
         ctx = self.ctx
         d = reflect(rays.d, hit.ng)
         o = hit.p + hit.eps[:, None] * hit.ng
-        w = rays.weighted(self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam))
+        w = self._tinted(rays, hit)
         return Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
 
     def _dielectric(self, rays: Rays, hit: Hit, rng) -> Rays:
@@ -207,7 +214,7 @@ class SpecularWalker:
         d = np.where(refl[:, None], reflect(rays.d, hit.ng), t_dir)
         side = np.where(refl, 1.0, -1.0).astype(np.float32)
         o = hit.p + (hit.eps * side)[:, None] * hit.ng
-        w = rays.weighted(self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam))
+        w = self._tinted(rays, hit)
         return Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
 
     def _split(self, rays: Rays, hit: Hit, rng):
