@@ -112,7 +112,7 @@ class _TileTrace(SpecularWalker):
         self.escapes = None  # a list to record rays leaving the scene (trace_escapes)
 
     def run(self, origins, directions, pix, u_lambda, wavelength_index=None) -> TileResult:
-        n, b, rng = self.n, len(pix), self.rng
+        n, b = self.n, len(pix)
         rays = Rays(origins, directions, pix.astype(np.int64), None, None,
                      np.zeros(b, np.int32), np.asarray(u_lambda, np.float64))
         mono = self.empty_mono()

@@ -197,7 +197,6 @@ class SpecularWalker:
         return rays.weighted(self._per_ray(m.reflectance, hit.mat, rays.lam))
 
     def _mirror(self, rays: Rays, hit: Hit) -> Rays:
-        ctx = self.ctx
         d = reflect(rays.d, hit.ng)
         o = hit.p + hit.eps[:, None] * hit.ng
         w = self._tinted(rays, hit)
