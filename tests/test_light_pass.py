@@ -240,3 +240,8 @@ def test_a_too_fine_element_size_is_coarsened_with_a_warning():
     s = slab_scene()
     res = render(s, RenderSettings(samples=1, light_paths=10_000, element_size=1e-4))
     assert any("element size 0.1 mm needs more memory" in w for w in res.warnings)
+
+
+def test_cancel_during_the_light_pass_stops_the_render():
+    res = render(slab_scene(), RenderSettings(samples=4, light_paths=2_000_000), should_cancel=lambda: True)
+    assert res.cancelled and res.stats.get("cancelled") and res.stats["light_paths"] < 2_000_000

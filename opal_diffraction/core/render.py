@@ -193,7 +193,7 @@ def render(
         stats.update(lp_stats)
         stats["rays"] += lp_stats["light_rays"]
         stats["light_pass_s"] = time.perf_counter() - t0
-    done_samples, cancelled = 0, False
+    done_samples, cancelled = 0, bool(stats.get("cancelled"))  # Esc during the light pass
     total_work = len(rounds) * len(tiles)
 
     def run_tile(r_index, r_spp, t_index):
@@ -219,6 +219,8 @@ def render(
     work_done = 0
     with ThreadPoolExecutor(max_workers=threads) as pool:
         for r_index, r_spp in enumerate(rounds):
+            if cancelled:
+                break
             if plan.eye_pass:
                 if threads > 1:
                     pending = [pool.submit(run_tile, r_index, r_spp, ti) for ti in range(len(tiles))]
