@@ -52,6 +52,17 @@ class Accelerator(Protocol):
     def occluded(self, origins, directions, tmax) -> np.ndarray: ...
 
 
+def default_threads() -> int:
+    """Threads a backend uses by default: OPAL_ACCEL_THREADS, else the CPUs this process may use."""
+    env = os.environ.get("OPAL_ACCEL_THREADS", "").strip()
+    if env:
+        return max(1, int(env))
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - non-Linux
+        return max(1, os.cpu_count() or 1)
+
+
 def _embree_importable() -> bool:
     try:
         import embreex.rtcore_scene  # noqa: F401

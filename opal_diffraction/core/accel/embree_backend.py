@@ -22,25 +22,14 @@ Facts about embreex 4.4.0.post1 this wrapper relies on (checked on this version)
 """
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from . import Hits, _as_rays, _as_tmax, _empty_hits
+from . import Hits, _as_rays, _as_tmax, _empty_hits, default_threads
 
 _CHUNK = 1 << 16       # rays per embree call
 _NUDGE = 2.0 ** -21     # relative (to max |origin coordinate|) start offset (~4 float32 ulps)
-
-
-def default_threads() -> int:
-    env = os.environ.get("OPAL_ACCEL_THREADS", "").strip()
-    if env:
-        return max(1, int(env))
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - non-Linux
-        return max(1, os.cpu_count() or 1)
 
 
 def _nudge(o):

@@ -34,13 +34,12 @@ edges or vertices.  Edges are inclusive.  Distances come from the plane equation
 """
 from __future__ import annotations
 
-import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from . import Hits, _as_rays, _as_tmax, _empty_hits
+from . import Hits, _as_rays, _as_tmax, _empty_hits, default_threads
 
 _F32 = np.float32
 _INT_MAX = np.int32(np.iinfo(np.int32).max)
@@ -51,16 +50,6 @@ _MIN_COS = _F32(1e-6)      # |cos(ray, triangle normal)| below which a ray count
 _MAX_BATCH = 1 << 21       # rays sorted and traced per batch (bounds memory for huge calls)
 _POP_ROUNDS = 2            # pop rounds per step; rays still popping continue in the next step
 _PENDING = -(1 << 62)      # cur[] marker of such rays
-
-
-def default_threads() -> int:
-    env = os.environ.get("OPAL_ACCEL_THREADS", "").strip()
-    if env:
-        return max(1, int(env))
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - non-Linux
-        return max(1, os.cpu_count() or 1)
 
 
 # ------------------------------------------------------------------------------------------
