@@ -165,11 +165,4 @@ class OPAL_MT_opal_presets(bpy.types.Menu):
 classes = (OPAL_OT_opal_preset, OPAL_MT_opal_presets)
 
 
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)
