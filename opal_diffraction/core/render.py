@@ -77,6 +77,7 @@ class RenderContext:
         nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
         extent = float(np.max(np.ptp(v, axis=0))) if len(v) else 1.0
         base = 1e-5 * max(extent, 1e-3)
+        gratings = prepare_gratings(scene.materials)
         return cls(
             scene=scene,
             settings=settings,
@@ -87,8 +88,10 @@ class RenderContext:
             tri_normal=nrm.astype(np.float32),
             tri_offset=cls.triangle_offsets(v, t, base),
             tri_material=np.asarray(scene.tri_material, np.int32),
-            gratings=prepare_gratings(scene.materials),
-            tri_grating_tangent=triangle_tangents(nrm, scene.tri_tangent),
+            gratings=gratings,
+            # only a scene with gratings pays for their frames
+            tri_grating_tangent=(triangle_tangents(nrm, scene.tri_tangent) if gratings.any
+                                 else np.zeros((0, 3), np.float32)),
             tri_period=np.asarray(scene.tri_period, np.float32).reshape(-1),
             world_spectrum=conv.illuminant_from_rgb(np.asarray(scene.world_color, np.float64)).astype(np.float32),
             offset_base=base,
