@@ -229,7 +229,8 @@ class LightPass:
     def layout(self, n_paths: int, mask=None) -> ElementLayout:
         """Elements sized for the path budget: about 16 deposits per element if the paths spread
         over all receiving area (caustics concentrate them, and the eye pass's lookup filters
-        over neighbouring elements), capped so the map stays under ~64 M floats."""
+        over neighbouring elements), capped so each lane's map stays under ~32 M floats
+        (128 MB; the LANES partial maps together ~256 MB at most)."""
         ctx = self.ctx
         v, t = ctx.scene.vertices, ctx.scene.triangles
         mask = self.receiver_mask if mask is None else mask
@@ -240,7 +241,7 @@ class LightPass:
             p = np.asarray(v, np.float64)[np.asarray(t)[mask]]
             area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
             target = area / max(n_paths / 16.0, 1.0)
-        cap = 64_000_000 // max(ctx.grid.n, 1) // (2 * LANES)
+        cap = 32_000_000 // max(ctx.grid.n, 1)
         asked = target
         while True:
             lay = ElementLayout.build(v, t, mask, target)
