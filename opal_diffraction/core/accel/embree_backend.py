@@ -124,8 +124,9 @@ class EmbreeAccelerator:
         with np.errstate(all="ignore"):     # NaN/inf rays are simply inactive in Embree
             nud = _nudge(o)
             o2 = o + d * nud[:, None]
-            # strict t < tmax (embree accepts t <= tfar); tfar < 0 makes a ray inactive
-            tf = np.nextafter(tm - nud, np.float32(-np.inf)).astype(np.float32)
+            # strict t < tmax (embree accepts t <= tfar, and its t may be an ulp or two off
+            # depending on the CPU's code path): shrink by a few ulps; tfar < 0: inactive
+            tf = ((tm - nud) * np.float32(1.0 - 2.0 ** -21)).astype(np.float32)
         occ = np.empty(n, np.int32)
         scene = self._scene
 
