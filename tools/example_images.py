@@ -1,0 +1,97 @@
+"""Render every example's scene at a fixed seed and save the spectral films, or compare two runs.
+
+A refactor must not change images: run this before and after and compare.
+
+    python tools/example_images.py render OUT.npz      # prism, fig5, cd (core); bpy prism, opal (exported)
+    python tools/example_images.py compare A.npz B.npz # max |difference| per image
+
+The scenes are the examples' own builders at a reduced size; the Blender ones are exported from
+the depsgraph (as F12 would) and rendered with the core, so one number per image says whether
+anything moved.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _core_scenes():
+    sys.path.insert(0, os.path.join(ROOT, "examples"))  # the examples are scripts, not a package
+    import gratings
+    import prism
+
+    yield "prism", prism.build_scene(160, 100)
+    yield "fig5", gratings.fig5_scene(120, 60)
+    yield "cd", gratings.cd_scene(120, 90)
+
+
+def _blender_scenes():
+    import bpy  # noqa: F401
+
+    import opal_diffraction
+    from opal_diffraction.blender.export import export_scene
+
+    import opal as opal_example
+    import render_example
+
+    opal_diffraction.register()
+    try:
+        render_example.build_scene(160, 100, spp=4)
+        dg = bpy.context.evaluated_depsgraph_get()
+        yield "bpy_prism", export_scene(dg).scene
+        opal_example.build_scene(96, 96, spp=4)
+        dg = bpy.context.evaluated_depsgraph_get()
+        yield "bpy_opal", export_scene(dg).scene
+    finally:
+        opal_diffraction.unregister()
+
+
+def render_all(out: str) -> None:
+    from opal_diffraction.core.render import render
+    from opal_diffraction.core.settings import RenderSettings
+
+    films = {}
+    for scenes in (_core_scenes, _blender_scenes):
+        for name, scene in scenes():
+            settings = RenderSettings(samples=4, light_paths=100_000, seed=3, threads=2)
+            r = render(scene, settings)
+            films[name] = r.spectral
+            for k, v in r.passes.items():
+                films[f"{name}:{k}"] = v
+            print(f"{name}: {r.spectral.shape}, mean {float(r.spectral.mean()):.6g}")
+    np.savez_compressed(out, **films)
+
+
+def compare(a: str, b: str) -> int:
+    fa, fb = np.load(a), np.load(b)
+    worst = 0.0
+    for k in sorted(set(fa.files) | set(fb.files)):
+        if k not in fa.files or k not in fb.files:
+            print(f"{k}: only in {'the first' if k in fa.files else 'the second'}")
+            worst = np.inf
+            continue
+        x, y = fa[k], fb[k]
+        if x.shape != y.shape:
+            print(f"{k}: shapes differ {x.shape} vs {y.shape}")
+            worst = np.inf
+            continue
+        d = float(np.max(np.abs(x.astype(np.float64) - y))) if x.size else 0.0
+        scale = float(np.max(np.abs(x))) if x.size else 0.0
+        print(f"{k}: max |diff| {d:.3g} (max value {scale:.3g})")
+        worst = max(worst, d)
+    print(f"largest difference: {worst:.3g}")
+    return 0 if worst == 0 else 1
+
+
+if __name__ == "__main__":
+    if sys.argv[1:2] == ["render"]:
+        render_all(sys.argv[2])
+    elif sys.argv[1:2] == ["compare"]:
+        sys.exit(compare(sys.argv[2], sys.argv[3]))
+    else:
+        sys.exit(__doc__)
