@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import j1
 
+from .enums import GratingType, Lattice
 from .diffraction import fraunhofer_pattern_binned, multislit
 
 __all__ = ["PreparedGratings", "prepare_gratings", "triangle_tangents", "grating_frame", "diffracted_radiance"]
@@ -59,8 +60,8 @@ def prepare_gratings(m) -> PreparedGratings:
     rot = np.asarray(m.rotation, np.float64)
     return PreparedGratings(
         enabled=np.asarray(m.grating) != 0,
-        transmission=np.asarray(m.grating_type) == 1,
-        hexagonal=np.asarray(m.lattice) == 1,
+        transmission=np.asarray(m.grating_type) == GratingType.TRANSMISSION,
+        hexagonal=np.asarray(m.lattice) == Lattice.HEXAGONAL,
         period=np.asarray(m.period, np.float64),
         slit_width=np.asarray(m.slit_width, np.float64),
         slit_count=np.asarray(m.slit_count, np.int64),

@@ -19,12 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import LIGHT_KINDS, Lights
+from .enums import LightKind
+from .scene import Lights
 from .spectrum import SpectralConverter
 
 __all__ = ["PreparedLights", "prepare_lights", "sample_light"]
 
-POINT, SPOT, SUN, AREA_RECT, AREA_DISK = (LIGHT_KINDS[k] for k in ("POINT", "SPOT", "SUN", "AREA_RECT", "AREA_DISK"))
+POINT, SPOT, SUN, AREA_RECT, AREA_DISK = (int(k) for k in LightKind)
 
 
 @dataclass

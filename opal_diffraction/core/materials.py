@@ -13,12 +13,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .optics import DISPERSION_MODELS, ior_spectrum
-from .scene import MATERIAL_KINDS, Materials
+from .enums import MaterialKind
+from .scene import Materials
 from .spectrum import SpectralConverter
 
 __all__ = ["PreparedMaterials", "prepare_materials", "DIFFUSE", "MIRROR", "DIELECTRIC"]
 
-DIFFUSE, MIRROR, DIELECTRIC = (MATERIAL_KINDS[k] for k in ("DIFFUSE", "MIRROR", "DIELECTRIC"))
+DIFFUSE, MIRROR, DIELECTRIC = (int(k) for k in (MaterialKind.DIFFUSE, MaterialKind.MIRROR, MaterialKind.DIELECTRIC))
 _MODEL_NAMES = {code: name for name, code in DISPERSION_MODELS.items()}
 
 

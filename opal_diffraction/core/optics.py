@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .enums import DispersionModel, codes
+
 __all__ = [
     "SELLMEIER_PRESETS",
     "DISPERSION_MODELS",
@@ -43,8 +45,8 @@ SELLMEIER_PRESETS: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {
     "DIAMOND": ((0.3306, 4.3356, 0.0), (0.175**2, 0.106**2, 0.0)),
 }
 
-#: Dispersion models, with stable integer codes (they are stored in scene files).
-DISPERSION_MODELS = {"NONE": 0, "ABBE": 1, "BK7": 2, "FUSED_SILICA": 3, "DIAMOND": 4}
+#: Dispersion models: name -> stable code (enums.py; stored in scene files).
+DISPERSION_MODELS = codes(DispersionModel)
 
 
 def reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
+from .enums import GratingDirection, GratingType, Lattice, LightKind, MaterialKind, codes
 from .optics import DISPERSION_MODELS
 
 __all__ = [
@@ -33,20 +34,19 @@ __all__ = [
 
 FORMAT_VERSION = 1
 
-#: Material kinds (stable codes).
-MATERIAL_KINDS = {"DIFFUSE": 0, "MIRROR": 1, "DIELECTRIC": 2}
-#: Light kinds (stable codes).
-LIGHT_KINDS = {"POINT": 0, "SPOT": 1, "SUN": 2, "AREA_RECT": 3, "AREA_DISK": 4}
+#: Material kinds and light kinds: name -> stable code (enums.py).
+MATERIAL_KINDS = codes(MaterialKind)
+LIGHT_KINDS = codes(LightKind)
 
 
 class SceneError(ValueError):
     """A scene that cannot be rendered; the message names the problem for the user."""
 
 
-#: Grating enumerations (stable codes).
-GRATING_TYPES = {"REFLECTION": 0, "TRANSMISSION": 1}
-LATTICES = {"LINES": 0, "HEXAGONAL": 1}
-GRATING_DIRECTIONS = {"UV": 0, "OBJECT_X": 1, "ATTRIBUTE": 2}
+#: Grating enumerations: name -> stable code (enums.py).
+GRATING_TYPES = codes(GratingType)
+LATTICES = codes(Lattice)
+GRATING_DIRECTIONS = codes(GratingDirection)
 
 # column name -> (dtype, per-row shape, default, enumeration or None)
 _MATERIAL_COLUMNS = {

@@ -1,0 +1,81 @@
+"""Every enumeration stored in a scene file (.npz) or a .blend file, with its stable integer code.
+
+These codes are a contract: saved scenes and saved .blend files hold the numbers, so a member's
+value never changes and new members take new values (the rule Blender's EnumProperty items
+follow). The core's tables (``scene.MATERIAL_KINDS`` ...) and the add-on's EnumProperty items are
+built from these classes, so a code is written in one place only.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+__all__ = [
+    "MaterialKind",
+    "LightKind",
+    "DispersionModel",
+    "GratingType",
+    "Lattice",
+    "GratingDirection",
+    "DispersionSampling",
+    "Backend",
+    "codes",
+]
+
+
+class MaterialKind(IntEnum):
+    DIFFUSE = 0
+    MIRROR = 1
+    DIELECTRIC = 2
+
+
+class LightKind(IntEnum):
+    POINT = 0
+    SPOT = 1
+    SUN = 2
+    AREA_RECT = 3
+    AREA_DISK = 4
+
+
+class DispersionModel(IntEnum):
+    NONE = 0
+    ABBE = 1
+    BK7 = 2
+    FUSED_SILICA = 3
+    DIAMOND = 4
+
+
+class GratingType(IntEnum):
+    REFLECTION = 0
+    TRANSMISSION = 1
+
+
+class Lattice(IntEnum):
+    LINES = 0
+    HEXAGONAL = 1
+
+
+class GratingDirection(IntEnum):
+    UV = 0
+    OBJECT_X = 1
+    ATTRIBUTE = 2
+
+
+class DispersionSampling(IntEnum):
+    """Stored in .blend files only (``scene.opal.dispersion_sampling``); the core takes the name."""
+
+    SAMPLE = 0
+    SPLIT = 1
+
+
+class Backend(IntEnum):
+    """Stored in .blend files only (``scene.opal.backend``); the core takes the lower-case name."""
+
+    AUTO = 0
+    EMBREE = 1
+    NUMPY = 2
+
+
+def codes(enum: type[IntEnum]) -> dict[str, int]:
+    """``{name: code}`` of an enumeration, in code order (the scene file's tables)."""
+    return {m.name: int(m) for m in enum}
