@@ -105,9 +105,10 @@ def viewport_first_image(width: int, height: int) -> float:
     import bpy
     import numpy as np
 
-    from opal_diffraction.blender.engine import render_settings
+    from opal_diffraction.blender.settings import render_settings
     from opal_diffraction.blender.export import export_scene
     from opal_diffraction.blender.viewport import ProgressiveRenderer, preview_levels, viewport_camera
+    from opal_diffraction.core.prepare import prepare
 
     sc = bpy.context.scene
     dg = bpy.context.evaluated_depsgraph_get()
@@ -118,7 +119,7 @@ def viewport_first_image(width: int, height: int) -> float:
     scene = exported.scene
     scene.camera = viewport_camera(view, window, True, width, height)
     r = ProgressiveRenderer()
-    r.start(scene, render_settings(sc.opal, sc), preview_levels(16, 8)[:1])
+    r.start(prepare(scene, render_settings(sc.opal, sc)), preview_levels(16, 8)[:1])
     r.wait(120.0)
     return time.perf_counter() - t0
 

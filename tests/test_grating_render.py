@@ -8,7 +8,8 @@ import pytest
 
 from opal_diffraction.core import primitives
 from opal_diffraction.core.diffraction import fraunhofer_pattern
-from opal_diffraction.core.render import RenderContext, render
+from opal_diffraction.core.prepare import prepare
+from opal_diffraction.core.render import render
 from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
 from opal_diffraction.core.settings import RenderSettings
 
@@ -53,7 +54,7 @@ def rendered():
     s = fig5_scene()
     st = RenderSettings(samples=1, filter_width=0.0, threads=1)
     res = render(s, st)
-    ctx = RenderContext.prepare(s.validated()[0], st)
+    ctx = prepare(s, st)
     return res, ctx
 
 

@@ -5,19 +5,19 @@ import pytest
 
 from opal_diffraction.core import primitives
 from opal_diffraction.core.elements import ElementLayout
-from opal_diffraction.core.light_pass import LightPass
+from opal_diffraction.core.light_pass import run_light_pass
 from opal_diffraction.core.optics import ior_spectrum
-from opal_diffraction.core.render import RenderContext, render
+from opal_diffraction.core.prepare import prepare
+from opal_diffraction.core.render import render
 from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
 from opal_diffraction.core.settings import RenderSettings
 
 
 def light_map(scene, **kw):
     st = RenderSettings(**kw)
-    ctx = RenderContext.prepare(scene.validated()[0], st)
-    lp = LightPass(ctx)
-    illum, _, stats = lp.run(st.light_paths)
-    return ctx, lp, illum, stats
+    ctx = prepare(scene, st)
+    lp = run_light_pass(ctx)
+    return ctx, lp, lp.caustics, lp.stats
 
 
 def element_positions(ctx, illum):

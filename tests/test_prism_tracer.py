@@ -10,17 +10,16 @@ import pytest
 from opal_diffraction.core import primitives
 from opal_diffraction.core.eye_pass import EyePass
 from opal_diffraction.core.optics import ior_spectrum
-from opal_diffraction.core.render import RenderContext
+from opal_diffraction.core.prepare import prepare
 from opal_diffraction.core.scene import Camera, Materials, Scene
 from opal_diffraction.core.settings import RenderSettings
 
 
-def prism_context(dispersion="BK7"):
+def prism_context(dispersion="BK7", dispersion_sampling="SAMPLE"):
     s = Scene(materials=Materials.from_list([{"kind": "DIELECTRIC", "color": (1, 1, 1), "dispersion": dispersion}]))
     s.add_mesh(*primitives.prism((0, 0, 0), side=2.0, length=4.0, axis="Y"), material=0)
     s.camera = Camera()
-    s, _ = s.validated()
-    return RenderContext.prepare(s, RenderSettings())
+    return prepare(s, RenderSettings(dispersion_sampling=dispersion_sampling))
 
 
 def deviation_through_prism(ctx, lam_index, incidence_deg, n_rays=4000):
@@ -61,8 +60,7 @@ def test_bk7_prism_minimum_deviation_through_tracer(lam_index, wavelength, expec
 
 def test_white_ray_splits_into_a_fan_ordered_by_wavelength():
     """SPLIT: one white ray becomes one ray per wavelength; blue deviates most."""
-    ctx = prism_context()
-    ctx.settings.dispersion_sampling = "SPLIT"
+    ctx = prism_context(dispersion_sampling="SPLIT")
     n = float(ior_spectrum(np.array([550.0]), "BK7")[0])
     th = np.radians(np.degrees(np.arcsin(n * 0.5)))
     normal = np.array([-np.cos(np.radians(30)), 0, np.sin(np.radians(30))])

@@ -28,8 +28,8 @@ import numpy as np
 from ..core.output import write_spectral_exr
 from ..core.render import render as core_render
 from ..core.scene import SceneError
-from ..core.settings import RenderSettings
 from .export import ExportCancelled, export_scene, rec709_to_working_space, render_region
+from .settings import render_settings
 from .viewport import ViewportSession, unregister_timer
 
 __all__ = ["OpalRenderEngine", "AOV_PASSES", "render_settings", "output_path", "last_render", "register",
@@ -43,19 +43,6 @@ AOV_PASSES = ("Direct", "Caustics", "Diffraction")
 #: back in background mode): status 'FINISHED' | 'CANCELLED' | 'ERROR', message, warnings,
 #: stats, and the pixels (rgb (H, W, 3) linear Rec.709, row 0 at the top; passes likewise).
 last_render: dict = {}
-
-
-def render_settings(opal, scene, spectral_path: str = "") -> RenderSettings:
-    """Core RenderSettings from ``scene.opal`` (names copied one to one) and Blender's threads."""
-    seed = int(opal.seed) + (int(scene.frame_current) if opal.use_animated_seed else 0)
-    return RenderSettings(
-        samples=int(opal.samples), light_paths=int(opal.light_paths), wavelength_min=float(opal.wavelength_min),
-        wavelength_max=float(opal.wavelength_max), wavelength_step=float(opal.wavelength_step),
-        max_bounces=int(opal.max_bounces), seed=max(seed, 0), dispersion_sampling=opal.dispersion_sampling,
-        spectral_exr=spectral_path, time_limit=float(opal.time_limit), threads=int(scene.render.threads),
-        backend=opal.backend.lower(), tile_size=int(opal.tile_size), round_samples=int(opal.round_samples),
-        filter_width=float(opal.filter_width),
-    )
 
 
 def output_path(path: str, frame: int, ext: str = ".exr", what: str = "spectral EXR") -> str:

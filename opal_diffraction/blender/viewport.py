@@ -1,18 +1,24 @@
 """The engine's rendered viewport: progressive previews drawn through the ``gpu`` module.
 
 ``view_update`` (Blender calls it when the scene changes: an edit, a new frame, a material)
-exports the evaluated depsgraph and restarts the preview; ``view_draw`` (every redraw) builds
-the core camera from the 3D view's matrices, restarts the preview when the view moved or the
-region was resized, and draws the newest image as a float texture through the scene's display
-transform (``bind_display_space_shader``), as Cycles does. Never ``bgl``.
+exports the evaluated depsgraph and prepares it again, reusing what did not change
+(``core.prepare(..., reuse=...)``: the acceleration structure when the geometry is the same, the
+light pass's result when nothing it reads changed), and restarts the preview only when the
+scene really changed; ``view_draw`` (every redraw) builds the core camera from the 3D view's
+matrices, restarts the preview when the view moved or the region was resized, and draws the
+newest image as a float texture through the scene's display transform
+(``bind_display_space_shader``), as Cycles does. Never ``bgl``.
 
-The preview renders in a background thread with the core's ``render``: first at 1/8 of the
-region's resolution with one sample (the first image comes quickly), then 1/4, 1/2, and the
-full resolution refined round after round up to the scene's preview samples. Every restart
-bumps a generation number; the old render stops at its next tile (the core polls
-``should_cancel`` between tiles) and its images are dropped. Leaving Rendered mode frees the
-engine, which cancels the thread. A main-thread timer tags the 3D views for redraw while new
-images arrive (the thread never touches bpy).
+The session keeps its PreparedScene and LightPassResult between redraws, so a camera move
+re-renders only the eye pass. The preview renders in a background thread with the core's
+``render_prepared``: first at 1/8 of the region's resolution with one sample (the first image
+comes quickly), then 1/4, 1/2, and the full resolution refined round after round up to the
+scene's preview samples. Every restart bumps a generation number; the old render stops at its
+next tile (the core polls ``should_cancel`` between tiles) and its images are dropped. Leaving
+Rendered mode frees the engine, which cancels the thread. A main-thread timer tags the 3D views
+for redraw while new images arrive (the thread never touches bpy).
+
+This module never imports the engine: the engine passes itself to ``update`` and ``draw``.
 
 The logic is plain Python for tests without a display: :func:`preview_levels` (the schedule),
 :func:`viewport_camera` (view and window matrices to a core Camera), :func:`prepare_pixels`
@@ -28,9 +34,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..core.render import render as core_render
-from ..core.scene import Camera, Scene, SceneError
-from ..core.settings import RenderSettings
+from ..core.light_pass import LightPassResult, run_light_pass
+from ..core.plan import plan_render
+from ..core.prepare import PreparedScene, prepare
+from ..core.render import render_prepared
+from ..core.scene import Camera, SceneError
+from .settings import render_settings
 
 __all__ = ["preview_levels", "viewport_camera", "prepare_pixels", "Frame", "ProgressiveRenderer", "ViewportSession",
            "REDRAW_INTERVAL"]
@@ -118,15 +127,17 @@ class Frame:
 
 
 class ProgressiveRenderer:
-    """Renders a core Scene progressively in a background thread.
+    """Renders a prepared scene progressively in a background thread.
 
-    ``start(scene, settings, levels)`` cancels any render under way and starts a new
+    ``start(prepared, levels, light)`` cancels any render under way and starts a new
     generation; ``frame()`` returns the newest image (or None); ``cancel()`` stops the thread.
-    ``on_image()`` (optional) is called from the thread after every new image.
+    ``on_image()`` (optional) is called from the thread after every new image; ``on_light(result)``
+    (optional) receives the light pass's result when the thread had to run it, for reuse.
     """
 
-    def __init__(self, on_image=None, to_working: np.ndarray | None = None):
+    def __init__(self, on_image=None, to_working: np.ndarray | None = None, on_light=None):
         self.on_image = on_image
+        self.on_light = on_light
         self.to_working = to_working
         self._lock = threading.Lock()
         self._generation = 0
@@ -151,14 +162,17 @@ class ProgressiveRenderer:
         with self._lock:
             return self._frame
 
-    def start(self, scene: Scene, settings: RenderSettings, levels: list[tuple[int, int]]) -> int:
+    def start(self, prepared: PreparedScene, levels: list[tuple[int, int]],
+              light: LightPassResult | None = None) -> int:
+        """Render ``prepared`` (its camera sets the full size) level by level; ``light``: its
+        finished light pass, if one is at hand (else the thread runs it when the plan asks)."""
         with self._lock:
             self._generation += 1
             gen = self._generation
             self.error, self.warnings, self.done = "", [], False
             self.started_at = time.perf_counter()
             self.first_image_s = None
-        thread = threading.Thread(target=self._run, args=(gen, scene, settings, list(levels)),
+        thread = threading.Thread(target=self._run, args=(gen, prepared, light, list(levels)),
                                   name=f"opal-viewport-{gen}", daemon=True)
         self._thread = thread
         thread.start()
@@ -200,18 +214,24 @@ class ProgressiveRenderer:
             except Exception:  # a redraw request must never kill the render
                 pass
 
-    def _run(self, gen: int, scene: Scene, settings: RenderSettings, levels) -> None:
-        cam = scene.camera
+    def _run(self, gen: int, prepared: PreparedScene, light: LightPassResult | None, levels) -> None:
+        cam = prepared.scene.camera
+        stale = lambda: self._stale(gen)  # noqa: E731
         try:
+            if light is None and plan_render(prepared).light_pass:
+                light = run_light_pass(prepared, should_cancel=stale)
+                if light.cancelled:
+                    return
+                if self.on_light is not None:
+                    self.on_light(light)
             for li, (scale, spp) in enumerate(levels):
                 if self._stale(gen):
                     return
                 w, h = level_size(cam.width, cam.height, scale)
-                lvl_scene = replace(scene, camera=replace(cam, width=w, height=h))
-                lvl_settings = replace(settings, samples=int(spp), round_samples=max(1, min(int(spp), 4)),
-                                       spectral_exr="", time_limit=0.0)
-                rr = core_render(lvl_scene, lvl_settings, should_cancel=lambda: self._stale(gen),
-                                 on_round=lambda r, li=li: self._publish(gen, li, r))
+                level = prepared.with_view(replace(cam, width=w, height=h), samples=int(spp),
+                                           round_samples=max(1, min(int(spp), 4)), spectral_exr="", time_limit=0.0)
+                rr = render_prepared(level, light, should_cancel=stale,
+                                     on_round=lambda r, li=li: self._publish(gen, li, r))
                 if not self._stale(gen):
                     self.warnings = list(rr.warnings)
             if not self._stale(gen):
@@ -242,11 +262,11 @@ class ViewportSession:
     """The viewport state of one engine instance: the exported scene, the view, the renderer."""
 
     def __init__(self):
-        self.scene: Scene | None = None
-        self.settings: RenderSettings | None = None
+        self.prepared: PreparedScene | None = None
+        self.light: LightPassResult | None = None  # the light pass of ``prepared`` once it ran
         self.levels: list[tuple[int, int]] = []
         self.view_key = None
-        self.renderer = ProgressiveRenderer(on_image=self._on_image)
+        self.renderer = ProgressiveRenderer(on_image=self._on_image, on_light=self._on_light)
         self.texture = None
         self._texture_key = None
         self.export_warnings: list[str] = []
@@ -254,39 +274,54 @@ class ViewportSession:
         self.restarts = 0
 
     # ---------------------------------------------------------------- update (scene changed)
+    @property
+    def scene(self):
+        """The exported core Scene the preview renders (None before the first export)."""
+        return None if self.prepared is None else self.prepared.scene
+
     def update(self, engine, context, depsgraph) -> None:
-        """Export the scene and restart the preview (``view_update``)."""
-        from .engine import render_settings  # noqa: PLC0415 - engine imports this module
+        """Export the scene, prepare what changed, and restart the preview if anything did
+        (``view_update``)."""
         from .export import ExportCancelled, export_scene, rec709_to_working_space
 
         view, window, persp, w, h = _region_matrices(context)
         scene = depsgraph.scene
         opal = scene.opal
+        old = self.prepared
         try:
             exported = export_scene(depsgraph, width=w, height=h)
+            settings = replace(render_settings(opal, scene), spectral_exr="", time_limit=0.0)
+            prepared = prepare(exported.scene, settings, reuse=old)
         except (SceneError, ExportCancelled) as e:
             self.error = str(e) or "cancelled"
-            self.scene = None
+            self.prepared = self.light = None
             self.renderer.cancel()
             _status(engine, f"Error: {self.error}")
             return
         self.error = ""
         self.export_warnings = list(exported.warnings)
         self.renderer.to_working = rec709_to_working_space()
-        settings = render_settings(opal, scene)
-        settings.spectral_exr = ""
-        settings.time_limit = 0.0
-        self.settings = settings
-        self.levels = preview_levels(getattr(opal, "preview_samples", 16), getattr(opal, "preview_start_scale", 8))
-        self.scene = exported.scene
+        levels = preview_levels(getattr(opal, "preview_samples", 16), getattr(opal, "preview_start_scale", 8))
+        if old is not None and self.light is not None and self.light.key != prepared.key:
+            self.light = None  # something the light pass reads changed
+        unchanged = (old is not None and prepared.key == old.key and levels == self.levels
+                     and prepared.settings == old.settings
+                     and np.array_equal(prepared.world_spectrum, old.world_spectrum))
+        self.prepared, self.levels = prepared, levels
+        if unchanged and not self.renderer.error:
+            return  # nothing the preview shows changed (a selection, a redo of the same values)
         self.view_key = None  # force a restart with the current view
         if self.sync_view(view, window, persp, w, h):
             _status(engine, "Rendering preview")
 
+    def _on_light(self, light: LightPassResult) -> None:  # from the render thread
+        if self.prepared is not None and light.key == self.prepared.key:
+            self.light = light
+
     # ---------------------------------------------------------------- the view
     def sync_view(self, view, window, persp, width, height) -> bool:
         """Restart when the view (matrices or region size) changed; True when it restarted."""
-        if self.scene is None or self.settings is None:
+        if self.prepared is None:
             return False
         key = (np.round(np.asarray(view, np.float64), 9).tobytes(), np.round(np.asarray(window, np.float64), 9).tobytes(),
                bool(persp), int(width), int(height))
@@ -294,7 +329,7 @@ class ViewportSession:
             return False
         self.view_key = key
         cam = viewport_camera(view, window, persp, width, height)
-        self.renderer.start(replace(self.scene, camera=cam), self.settings, self.levels)
+        self.renderer.start(self.prepared.with_view(cam), self.levels, self.light)
         self.restarts += 1
         return True
 
@@ -342,7 +377,7 @@ class ViewportSession:
         """Stop the render thread (the engine is being freed: Rendered mode was left)."""
         self.renderer.cancel()
         self.texture = None
-        self.scene = None
+        self.prepared = self.light = None
 
 
 def _status(engine, message: str) -> None:

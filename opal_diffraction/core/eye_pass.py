@@ -33,13 +33,18 @@ class TileResult:
 
 
 class EyePass:
-    """Traces tiles of camera samples through a prepared scene (see render.RenderContext).
+    """Traces tiles of camera samples through a prepared scene (prepare.PreparedScene), with the
+    light pass's caustics and grating records (light_pass.LightPassResult; None: no light pass).
 
     Stateless between calls, so several threads may trace tiles at once.
     """
 
-    def __init__(self, ctx):
-        self.ctx = ctx
+    def __init__(self, prepared, light=None):
+        if light is not None and light.key != prepared.key:
+            raise ValueError("the light-pass result belongs to another prepared scene")
+        self.prepared = prepared
+        self.caustic_map = None if light is None else light.caustics
+        self.record_map = None if light is None else light.grating_records
 
     def trace(self, origins, directions, pix, n_pixels: int, rng: np.random.Generator,
               u_lambda: np.ndarray | None = None) -> TileResult:
@@ -50,7 +55,7 @@ class EyePass:
         """
         if u_lambda is None:
             u_lambda = rng.random(len(pix))
-        return _TileTrace(self.ctx, n_pixels, rng).run(origins, directions, pix, u_lambda)
+        return _TileTrace(self, n_pixels, rng).run(origins, directions, pix, u_lambda)
 
     def trace_escapes(self, origins, directions, rng: np.random.Generator, wavelength_index=None) -> dict:
         """Follow rays through the scene's specular surfaces and report the ones that leave it.
@@ -62,7 +67,7 @@ class EyePass:
         directions leaving a prism, a lens, a mirror.
         """
         b = len(origins)
-        tr = _TileTrace(self.ctx, b, rng)
+        tr = _TileTrace(self, b, rng)
         tr.escapes = []
         tr.run(np.asarray(origins, np.float32), np.asarray(directions, np.float32), np.arange(b),
                rng.random(b), wavelength_index)
@@ -80,8 +85,9 @@ class EyePass:
 class _TileTrace(SpecularWalker):
     """The state of one tile's trace: its film accumulators and ray count."""
 
-    def __init__(self, ctx, n_pixels: int, rng: np.random.Generator):
-        super().__init__(ctx, rng)
+    def __init__(self, eye: EyePass, n_pixels: int, rng: np.random.Generator):
+        super().__init__(eye.prepared, rng)
+        self.caustic_map, self.record_map = eye.caustic_map, eye.record_map
         self._n_pixels = n_pixels
         self._film = self._new_film()  # light reflected by diffuse surfaces from direct lighting
         # the other parts of the film, allocated when first written (most scenes use a few):
@@ -109,7 +115,6 @@ class _TileTrace(SpecularWalker):
     @property
     def _caustics(self) -> np.ndarray:
         return self._part("caustics")
-        self.escapes = None  # a list to record rays leaving the scene (trace_escapes)
 
     def run(self, origins, directions, pix, u_lambda, wavelength_index=None) -> TileResult:
         n, b = self.n, len(pix)
@@ -136,22 +141,22 @@ class _TileTrace(SpecularWalker):
                                  "lam": rays.lam, "depth": rays.depth, "ray": rays.pix})
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
-        ctx = self.ctx
-        emits = ctx.materials.emissive[hit.mat]
+        prepared = self.prepared
+        emits = prepared.materials.emissive[hit.mat]
         if emits.any():
             r = rays.take(emits)
-            em = ctx.materials.emission[hit.mat[emits]]
+            em = prepared.materials.emission[hit.mat[emits]]
             self._accumulate(r, r.weighted(em) if r.lam is None else r.w * em[np.arange(len(r)), r.lam],
                              self._background)
-        if ctx.gratings.any:
-            on_grating = ctx.gratings.enabled[hit.mat]
+        if prepared.gratings.any:
+            on_grating = prepared.gratings.enabled[hit.mat]
             if on_grating.any():
                 self._grating_light(rays.take(on_grating), hit.take(on_grating), rng)
         diffuse = kind == DIFFUSE
         if diffuse.any():
             r, h = rays.take(diffuse), hit.take(diffuse)
             self._direct_light(r, h, rng)
-            if ctx.caustics is not None:
+            if self.caustic_map is not None:
                 self._caustic_light(r, h, rng)
 
     # ----------------------------------------------------------------- films
@@ -179,25 +184,25 @@ class _TileTrace(SpecularWalker):
         expand to spectra once per pixel: O(B L + P U n) instead of O(B n). Returns False (and
         does nothing) when the tile holds too many combinations for this to pay off.
         """
-        ctx = self.ctx
+        prepared = self.prepared
         b, nl = factors.shape
         ray, light = np.nonzero(factors)
         if ray.size == 0:
             return True
         combo = mat[ray].astype(np.int64) * nl + light
-        present = np.bincount(combo, minlength=len(ctx.materials.kind) * nl) > 0  # O(B), no sort
+        present = np.bincount(combo, minlength=len(prepared.materials.kind) * nl) > 0  # O(B), no sort
         uniq = np.flatnonzero(present)
         u = (np.cumsum(present) - 1)[combo]
         if len(uniq) * self._n_pixels > b * nl:
             return False
         g = np.bincount(pix[ray] * len(uniq) + u, weights=factors[ray, light],
                         minlength=self._n_pixels * len(uniq)).reshape(self._n_pixels, len(uniq))
-        spectra = ctx.materials.reflectance[uniq // nl] * ctx.lights.spectrum[uniq % nl] * np.float32(1 / np.pi)
+        spectra = prepared.materials.reflectance[uniq // nl] * prepared.lights.spectrum[uniq % nl] * np.float32(1 / np.pi)
         self._film += (g @ spectra).ravel()
         return True
 
     def _add_background(self, rays: Rays):
-        bg = self.ctx.world_spectrum
+        bg = self.prepared.world_spectrum
         if not bg.any():
             return
         if rays.lam is None and rays.w is None:  # unit weights: count rays per pixel
@@ -209,8 +214,8 @@ class _TileTrace(SpecularWalker):
 
     # ----------------------------------------------------------------- interactions
     def _direct_light(self, rays: Rays, hit: Hit, rng):
-        ctx = self.ctx
-        lights = ctx.lights
+        prepared = self.prepared
+        lights = prepared.lights
         nl, b = len(lights), len(rays)
         if nl == 0 or b == 0:
             return
@@ -232,14 +237,14 @@ class _TileTrace(SpecularWalker):
             factors.reshape(-1)[live * nl + li] = f[live]
         if not idx:
             return
-        occ = ctx.accel.occluded(np.concatenate(origins).astype(np.float32),
+        occ = prepared.accel.occluded(np.concatenate(origins).astype(np.float32),
                                  np.concatenate(dirs).astype(np.float32),
                                  np.concatenate(tmax).astype(np.float32))
         self._rays += len(occ)
         factors.reshape(-1)[np.concatenate(idx)[occ]] = 0.0
         if rays.lam is None and rays.w is None and self._accumulate_factored(rays.pix, hit.mat, factors):
             return
-        brdf = self._per_ray(ctx.materials.reflectance, hit.mat, rays.lam) * np.float32(1 / np.pi)
+        brdf = self._per_ray(prepared.materials.reflectance, hit.mat, rays.lam) * np.float32(1 / np.pi)
         if rays.lam is None:
             irradiance = factors @ lights.spectrum          # (B, L) @ (L, n)
         else:
@@ -249,9 +254,9 @@ class _TileTrace(SpecularWalker):
     def _caustic_light(self, rays: Rays, hit: Hit, rng):
         """Caustic radiance at diffuse hits: the illumination map's irradiance * albedo / pi
         (looked up with a one-element jitter: a box filter over neighbouring elements)."""
-        ctx = self.ctx
-        irr = ctx.caustics.irradiance(hit.prim, hit.bu, hit.bv, hit.front, rng)
-        brdf = ctx.materials.reflectance[hit.mat] * np.float32(1 / np.pi)
+        prepared = self.prepared
+        irr = self.caustic_map.irradiance(hit.prim, hit.bu, hit.bv, hit.front, rng)
+        brdf = prepared.materials.reflectance[hit.mat] * np.float32(1 / np.pi)
         radiance = irr * brdf
         contrib = rays.weighted(radiance) if rays.lam is None else rays.w * radiance[np.arange(len(rays)), rays.lam]
         self._accumulate(rays, contrib, self._caustics)
@@ -259,15 +264,15 @@ class _TileTrace(SpecularWalker):
     def _grating_light(self, rays: Rays, hit: Hit, rng):
         """Light of every light diffracted by the grating layer towards the viewer (exact w_i by
         shadow ray, so no noise from the light side), into the Diffraction part of the film."""
-        ctx = self.ctx
-        g, lights = ctx.gratings, ctx.lights
-        edges = ctx.grid.bin_edges
+        prepared = self.prepared
+        g, lights = prepared.gratings, prepared.lights
+        edges = prepared.grid.bin_edges
         for m in np.unique(hit.mat):  # loop over grating materials present (a few)
             sel = hit.mat == m
             r, h = rays.take(sel), hit.take(sel)
             b = len(r)
-            t, s = grating_frame(ctx.tri_grating_tangent[h.prim], h.ng, np.full(b, g.cos_rot[m]), np.full(b, g.sin_rot[m]))
-            over = ctx.tri_period[h.prim] if len(ctx.tri_period) else np.zeros(b, np.float32)
+            t, s = grating_frame(prepared.tri_grating_tangent[h.prim], h.ng, np.full(b, g.cos_rot[m]), np.full(b, g.sin_rot[m]))
+            over = prepared.tri_period[h.prim] if len(prepared.tri_period) else np.zeros(b, np.float32)
             period = np.where(over > 0, over, g.period[m])
             w_o = -r.d
             for li in range(len(lights)):  # loop over lights, not rays
@@ -282,7 +287,7 @@ class _TileTrace(SpecularWalker):
                 eps = h.eps[idx]
                 o = h.p[idx] + (side * eps)[:, None] * h.ng[idx]
                 tmax = np.where(np.isinf(dist[idx]), np.inf, dist[idx] - 2 * eps).astype(np.float32)
-                occ = ctx.accel.occluded(o.astype(np.float32), np.ascontiguousarray(wi[idx], np.float32), tmax)
+                occ = prepared.accel.occluded(o.astype(np.float32), np.ascontiguousarray(wi[idx], np.float32), tmax)
                 self._rays += len(occ)
                 idx = idx[~occ]
                 if idx.size == 0:
@@ -293,9 +298,9 @@ class _TileTrace(SpecularWalker):
                 sub = r.take(idx)
                 contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(idx)), sub.lam]
                 self._accumulate(sub, contrib, self._diffraction)
-            if ctx.grating_records is not None:
+            if self.record_map is not None:
                 # light that reached the grating through mirrors and glass (the light pass's records)
-                irr, src, ok = ctx.grating_records.incoming(h.prim, h.bu, h.bv, h.front)
+                irr, src, ok = self.record_map.incoming(h.prim, h.bu, h.bv, h.front)
                 cos_l = np.einsum("ij,ij->i", src, h.ng)
                 ok &= (cos_l < 0) if g.transmission[m] else (cos_l > 0)
                 idx = np.flatnonzero(ok)

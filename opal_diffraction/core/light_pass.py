@@ -25,19 +25,23 @@ batch), and batches add into the map, so the map does not depend on how the work
 
 from __future__ import annotations
 
-import os
 import threading
+import time
+from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 
 from .elements import ElementLayout, IlluminationMap
+from .geometry import orthonormal_basis, triangle_areas
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIELECTRIC, DIFFUSE, MIRROR
 from .transport import Hit, Rays, SpecularWalker
 
-__all__ = ["CasterObjects", "caster_objects", "LightPass", "LIGHT_PASS_STREAM", "BATCH_PATHS"]
+__all__ = ["CasterObjects", "caster_objects", "LightTargets", "find_light_targets", "LightPassResult",
+           "element_layout", "run_light_pass", "LIGHT_PASS_STREAM", "BATCH_PATHS"]
 
 LIGHT_PASS_STREAM = 2
 BATCH_PATHS = 1 << 15
@@ -47,7 +51,7 @@ RR_SURVIVAL = 0.8
 LANES = 2  # fixed partial maps (so the result does not depend on the thread count)
 
 
-@dataclass
+@dataclass(frozen=True)
 class CasterObjects:
     centre: np.ndarray  # (C, 3)
     radius: np.ndarray  # (C,)
@@ -96,14 +100,6 @@ def caster_objects(vertices, triangles, mask) -> CasterObjects:
     return CasterObjects(centre, radius)
 
 
-def _basis(axis: np.ndarray):
-    """Orthonormal (u, v) perpendicular to unit vectors ``axis`` (..., 3)."""
-    a = np.where(np.abs(axis[..., :1]) < 0.9, np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
-    u = np.cross(axis, a)
-    u /= np.linalg.norm(u, axis=-1, keepdims=True)
-    return u, np.cross(axis, u)
-
-
 def _cones(origin: np.ndarray, objects: CasterObjects):
     """Per (origin, object): unit axis, cos of the half angle, solid angle. origin (B, 3)."""
     to_c = objects.centre[None, :, :] - origin[:, None, :]
@@ -128,7 +124,7 @@ def _sample_cones(origin, weights, axis, cos_max, omega, rng):
     cos_t = 1 - rng.random(b) * (1 - cm)
     sin_t = np.sqrt(np.maximum(0, 1 - cos_t * cos_t))
     phi = 2 * np.pi * rng.random(b)
-    u, v = _basis(ax)
+    u, v = orthonormal_basis(ax)
     d = cos_t[:, None] * ax + (sin_t * np.cos(phi))[:, None] * u + (sin_t * np.sin(phi))[:, None] * v
     inside = np.einsum("bcj,bj->bc", axis, d) >= cos_max - 1e-12
     pdf = np.sum(np.where(inside, prob / np.maximum(omega, 1e-300), 0.0), axis=1)
@@ -138,15 +134,15 @@ def _sample_cones(origin, weights, axis, cos_max, omega, rng):
 class _LightTrace(SpecularWalker):
     """Light paths: deposit at diffuse surfaces after a specular bounce, Russian roulette."""
 
-    def __init__(self, ctx, rng, illum: IlluminationMap, records: IlluminationMap | None):
-        super().__init__(ctx, rng)
+    def __init__(self, prepared, rng, illum: IlluminationMap, records: IlluminationMap | None):
+        super().__init__(prepared, rng)
         self.illum = illum
         self.records = records
         self.deposited = 0
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
         if self.records is not None:
-            at_grating = self.ctx.gratings.enabled[hit.mat] & (rays.depth >= 1)
+            at_grating = self.prepared.gratings.enabled[hit.mat] & (rays.depth >= 1)
             if at_grating.any():
                 r, h = rays.take(at_grating), hit.take(at_grating)
                 idx, valid = self.records.layout.index(h.prim, h.bu, h.bv, h.front)
@@ -170,7 +166,7 @@ class _LightTrace(SpecularWalker):
             self.illum.deposit(idx[valid], r.w[valid], r.lam[valid])
 
     def survives(self, rays: Rays, rng) -> np.ndarray:
-        ok = rays.depth < self.ctx.settings.max_bounces
+        ok = rays.depth < self.prepared.settings.max_bounces
         deep = ok & (rays.depth >= RR_START_DEPTH)
         if deep.any():
             # Russian roulette: survivors carry 1 / survival more, so the expectation is unchanged
@@ -181,201 +177,228 @@ class _LightTrace(SpecularWalker):
         return ok
 
 
-class LightPass:
-    """Plans and runs the light pass for a prepared scene (render.RenderContext)."""
+@dataclass(frozen=True)
+class LightTargets:
+    """What the light pass aims at and who receives its light (part of the prepared scene)."""
 
-    def __init__(self, ctx):
-        self.ctx = ctx
-        mk = ctx.materials.kind[ctx.tri_material] if len(ctx.tri_material) else np.zeros(0, np.int32)
-        self.caster_mask = np.isin(mk, [MIRROR, DIELECTRIC])
-        self.receiver_mask = mk == DIFFUSE
-        self.grating_mask = ctx.gratings.enabled[ctx.tri_material] if len(ctx.tri_material) else np.zeros(0, bool)
-        self.objects = caster_objects(ctx.scene.vertices, ctx.scene.triangles, self.caster_mask)
-        self.budget = self._light_budget()
-        self.coarsened = ""  # a warning when the memory cap made the elements coarser than asked
-
-    # ---------------------------------------------------------------- planning
-    def _light_budget(self) -> np.ndarray:
-        """Estimated luminous power each light sends towards the casters (0: none)."""
-        lights, obj = self.ctx.lights, self.objects
-        out = np.zeros(len(lights))
-        if len(obj) == 0:
-            return out
-        lum = self.ctx.lights.spectrum @ self.ctx.conv.cmf_weights[:, 1].astype(np.float32)
-        for li in range(len(lights)):  # loop over lights
-            k = int(lights.kind[li])
-            if k == SUN:
-                out[li] = lum[li] * np.sum(np.pi * obj.radius**2)
-                continue
-            axis, cos_max, omega = _cones(lights.position[li][None, :], obj)
-            omega = omega[0]
-            if k == SPOT:  # objects entirely outside the spot's cone get nothing
-                ang = np.arccos(np.clip(axis[0] @ lights.direction[li], -1, 1))
-                half = np.arccos(np.clip(cos_max, -1, 1))
-                omega = np.where(ang - half > np.arccos(lights.cos_half_spot[li]), 0.0, omega)
-            if k in (AREA_RECT, AREA_DISK):
-                front = (obj.centre - lights.position[li]) @ lights.direction[li] > -obj.radius
-                extent = np.hypot(lights.size_u[li], lights.size_v[li])
-                omega = np.where(front, omega, 0.0)
-                out[li] = lum[li] * lights.area[li] * np.sum(omega) / np.pi if extent > 0 else 0.0
-                continue
-            out[li] = lum[li] * np.sum(omega)
-        return out
+    caster_mask: np.ndarray    # (T,) bool: mirror and glass triangles (light bends there)
+    receiver_mask: np.ndarray  # (T,) bool: diffuse triangles (caustics land there)
+    grating_mask: np.ndarray   # (T,) bool: grating triangles (records land there)
+    objects: CasterObjects     # bounding spheres of the connected caster objects
+    budget: np.ndarray         # (L,) estimated luminous power each light sends towards the casters
 
     @property
     def needed(self) -> bool:
+        """Some light reaches a caster, and something can receive what comes out of it."""
         return bool(np.any(self.budget > 0)) and bool(self.receiver_mask.any() or self.grating_mask.any())
 
-    def layout(self, n_paths: int, mask=None) -> ElementLayout:
-        """Elements sized for the path budget: about 16 deposits per element if the paths spread
-        over all receiving area (caustics concentrate them, and the eye pass's lookup filters
-        over neighbouring elements), capped so each lane's map stays under ~32 M floats
-        (128 MB; the LANES partial maps together ~256 MB at most)."""
-        ctx = self.ctx
-        v, t = ctx.scene.vertices, ctx.scene.triangles
-        mask = self.receiver_mask if mask is None else mask
-        size = float(getattr(ctx.settings, "element_size", 0.0) or 0.0)
-        if size > 0:
-            target = size * size
-        else:
-            p = np.asarray(v, np.float64)[np.asarray(t)[mask]]
-            area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
-            target = area / max(n_paths / 16.0, 1.0)
-        cap = 32_000_000 // max(ctx.grid.n, 1)
-        asked = target
-        while True:
-            lay = ElementLayout.build(v, t, mask, target)
-            if lay.total <= cap:
-                if target > asked * 1.01 and size > 0:
-                    self.coarsened = (f"element size {size * 1000:.1f} mm needs more memory than the map allows: "
-                                      f"using {np.sqrt(target) * 1000:.1f} mm (a coarser wavelength step allows finer)")
-                return lay
-            target *= 2.0
 
-    # ---------------------------------------------------------------- running
-    def run(self, n_paths: int, progress=None, should_cancel=None):
-        """Returns (caustic map, grating records or None, stats).
+def find_light_targets(vertices, triangles, tri_material, materials, gratings, lights, conv) -> LightTargets:
+    """The light pass's targets for a scene (prepared materials, gratings and lights)."""
+    mk = materials.kind[tri_material] if len(tri_material) else np.zeros(0, np.int32)
+    caster = np.isin(mk, [MIRROR, DIELECTRIC])
+    grating = gratings.enabled[tri_material] if len(tri_material) else np.zeros(0, bool)
+    objects = caster_objects(vertices, triangles, caster)
+    return LightTargets(caster, mk == DIFFUSE, grating, objects, _light_budget(lights, objects, conv))
 
-        The batches are dealt to LANES fixed lanes (batch j to lane j % LANES), each with its own
-        maps, run on up to ``settings.threads`` threads and summed in lane order at the end, so
-        the result does not depend on the number of threads. ``progress`` and ``should_cancel``
-        are called from the calling thread only.
-        """
-        ctx = self.ctx
-        layout = self.layout(n_paths)
-        rec_layout = self.layout(n_paths, self.grating_mask) if self.grating_mask.any() else None
-        stats = {"light_paths": 0, "light_deposits": 0, "light_rays": 0, "elements": layout.total}
-        if self.coarsened:
-            stats["warning"] = self.coarsened
-        share = self.budget / max(self.budget.sum(), 1e-300)
-        paths_per_light = np.floor(share * n_paths).astype(np.int64)
-        jobs = [(li, bi, start, int(n_l)) for li, n_l in enumerate(paths_per_light)
-                for bi, start in enumerate(range(0, int(n_l), BATCH_PATHS))]
-        total = int(paths_per_light.sum())
-        lanes = [jobs[k::LANES] for k in range(LANES)]
-        maps = [(IlluminationMap.empty(layout, ctx.grid.n),
-                 IlluminationMap.empty(rec_layout, ctx.grid.n, with_direction=True) if rec_layout else None)
-                for _ in range(LANES)]
-        counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
-        stop = threading.Event()
 
-        def run_lane(k):
-            illum, records = maps[k]
-            for li, bi, start, n_l in lanes[k]:  # bounded memory: fixed batches
-                if stop.is_set():
-                    return
-                b = min(BATCH_PATHS, n_l - start)
-                rng = np.random.default_rng(np.random.SeedSequence(
-                    [int(ctx.settings.seed), LIGHT_PASS_STREAM, li, bi]))
-                o, d, weight = self._emit(li, b, rng)
-                live = weight > 0
-                m = int(live.sum())
-                w = (weight[live, None] / float(n_l)).astype(np.float32) * ctx.lights.spectrum[li][None, :]
-                rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(m, np.int64),
-                            w, None, np.zeros(m, np.int32), rng.random(m))
-                tr = _LightTrace(ctx, rng, illum, records)
-                tr.walk(rays, tr.empty_mono())
-                c = counts[k]
-                c["paths"] += b
-                c["deposits"] += tr.deposited
-                c["rays"] += tr._rays
-
-        threads = max(1, min(LANES, int(ctx.settings.threads or os.cpu_count() or 1)))
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            futures = [pool.submit(run_lane, k) for k in range(LANES)]
-            while True:
-                done_set, pending = wait(futures, timeout=0.2)
-                done = sum(c["paths"] for c in counts)
-                if progress:
-                    progress(done / max(total, 1), f"light pass: {done / 1e6:.2f} M of {total / 1e6:.2f} M paths")
-                if not pending:
-                    break
-                if should_cancel and should_cancel():
-                    stop.set()
-                    stats["cancelled"] = True
-            for f in futures:
-                f.result()  # re-raise a worker's exception here
-        illum, records = maps[0]
-        for extra_illum, extra_records in maps[1:]:
-            illum += extra_illum
-            if records is not None:
-                records += extra_records
-        stats["light_paths"] = sum(c["paths"] for c in counts)
-        stats["light_deposits"] = sum(c["deposits"] for c in counts)
-        stats["light_rays"] = sum(c["rays"] for c in counts)
-        return illum, records, stats
-
-    def _emit(self, li: int, b: int, rng):
-        """b path starts from light li: origins, unit directions, scalar weights (1 / pdf, times
-        the geometric terms; the light's spectrum is applied by the caller)."""
-        lights, obj = self.ctx.lights, self.objects
+def _light_budget(lights, obj: CasterObjects, conv) -> np.ndarray:
+    """Estimated luminous power each light sends towards the casters (0: none)."""
+    out = np.zeros(len(lights))
+    if len(obj) == 0:
+        return out
+    lum = lights.spectrum @ conv.cmf_weights[:, 1].astype(np.float32)
+    for li in range(len(lights)):  # loop over lights
         k = int(lights.kind[li])
         if k == SUN:
-            d = lights.direction[li]
-            u, v = _basis(d[None, :])
-            u, v = u[0], v[0]
-            area = np.pi * obj.radius**2
-            prob = area / area.sum()
-            pick = np.minimum((rng.random((b, 1)) > np.cumsum(prob)[None, :]).sum(axis=1), len(obj) - 1)
-            r = obj.radius[pick] * np.sqrt(rng.random(b))
-            phi = 2 * np.pi * rng.random(b)
-            c = obj.centre[pick]
-            c_plane = c - (c @ d)[:, None] * d  # project centres on the plane through 0 normal to d
-            pts = c_plane + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
-            # mixture pdf per unit area over the disks of all objects
-            cp = obj.centre - (obj.centre @ d)[:, None] * d
-            dist2 = np.sum((pts[:, None, :] - cp[None, :, :]) ** 2, axis=2)
-            pdf = np.sum(np.where(dist2 <= obj.radius**2, prob / area, 0.0), axis=1)
-            far = 4.0 * (np.max(np.abs(self.ctx.scene.vertices)) + 1.0)
-            o = pts - far * d
-            return o, np.broadcast_to(d, (b, 3)).copy(), np.where(pdf > 0, 1.0 / np.maximum(pdf, 1e-300), 0.0)
-        if k in (POINT, SPOT):
-            origin = np.broadcast_to(lights.position[li], (b, 3))
-            axis, cos_max, omega = _cones(lights.position[li][None, :], obj)
-            axis, cos_max, omega = (np.broadcast_to(x, (b,) + x.shape[1:]) for x in (axis, cos_max, omega))
-            d, pdf = _sample_cones(origin, omega, axis, cos_max, omega, rng)
-            weight = 1.0 / np.maximum(pdf, 1e-300)  # intensity (in the spectrum) / pdf
-            if k == SPOT:
-                from .lights import _smoothstep
+            out[li] = lum[li] * np.sum(np.pi * obj.radius**2)
+            continue
+        axis, cos_max, omega = _cones(lights.position[li][None, :], obj)
+        omega = omega[0]
+        if k == SPOT:  # objects entirely outside the spot's cone get nothing
+            ang = np.arccos(np.clip(axis[0] @ lights.direction[li], -1, 1))
+            half = np.arccos(np.clip(cos_max, -1, 1))
+            omega = np.where(ang - half > np.arccos(lights.cos_half_spot[li]), 0.0, omega)
+        if k in (AREA_RECT, AREA_DISK):
+            front = (obj.centre - lights.position[li]) @ lights.direction[li] > -obj.radius
+            extent = np.hypot(lights.size_u[li], lights.size_v[li])
+            omega = np.where(front, omega, 0.0)
+            out[li] = lum[li] * lights.area[li] * np.sum(omega) / np.pi if extent > 0 else 0.0
+            continue
+        out[li] = lum[li] * np.sum(omega)
+    return out
 
-                cos_axis = d @ lights.direction[li]
-                ch, sm = lights.cos_half_spot[li], lights.spot_smooth[li]
-                cone = (cos_axis > ch).astype(np.float64)
-                if sm > 0:
-                    cone = cone * _smoothstep((cos_axis - ch) / sm)
-                weight = weight * cone
-            return np.array(origin), d, weight
-        # area lights: a uniform point on the emitter, then a direction towards an object
-        r1, r2 = rng.random(b), rng.random(b)
-        if k == AREA_RECT:
-            a, c = (r1 - 0.5) * lights.size_u[li], (r2 - 0.5) * lights.size_v[li]
-        else:
-            rad, phi = np.sqrt(r1), 2 * np.pi * r2
-            a, c = 0.5 * lights.size_u[li] * rad * np.cos(phi), 0.5 * lights.size_v[li] * rad * np.sin(phi)
-        origin = lights.position[li] + a[:, None] * lights.axis_u[li] + c[:, None] * lights.axis_v[li]
-        axis, cos_max, omega = _cones(origin, obj)
+
+@dataclass(frozen=True)
+class LightPassResult:
+    """What the light pass hands to the eye pass; ``key`` is the prepared scene's it belongs to."""
+
+    caustics: IlluminationMap | None          # flux on diffuse elements, or None (no light pass)
+    grating_records: IlluminationMap | None   # flux and direction at grating elements, or None
+    stats: Mapping[str, float]                # light_paths, light_deposits, light_rays, elements, light_pass_s
+    warnings: tuple[str, ...]
+    cancelled: bool
+    key: int
+
+    @classmethod
+    def skipped(cls, prepared) -> "LightPassResult":
+        return cls(None, None, MappingProxyType({}), (), False, prepared.key)
+
+
+def element_layout(prepared, n_paths: int, mask) -> tuple[ElementLayout, str]:
+    """Elements sized for the path budget: about 16 deposits per element if the paths spread
+    over all receiving area (caustics concentrate them, and the eye pass's lookup filters over
+    neighbouring elements), capped so each lane's map stays under ~32 M floats (128 MB; the
+    LANES partial maps together ~256 MB at most). Returns (layout, warning or "") - the warning
+    says when the cap made the user's element size coarser."""
+    v, t = prepared.scene.vertices, prepared.scene.triangles
+    size = float(prepared.settings.element_size or 0.0)
+    if size > 0:
+        target = size * size
+    else:
+        area = triangle_areas(v, np.asarray(t)[mask]).sum()
+        target = area / max(n_paths / 16.0, 1.0)
+    cap = 32_000_000 // max(prepared.grid.n, 1)
+    asked = target
+    while True:
+        lay = ElementLayout.build(v, t, mask, target)
+        if lay.total <= cap:
+            warning = ""
+            if target > asked * 1.01 and size > 0:
+                warning = (f"element size {size * 1000:.1f} mm needs more memory than the map allows: "
+                           f"using {np.sqrt(target) * 1000:.1f} mm (a coarser wavelength step allows finer)")
+            return lay, warning
+        target *= 2.0
+
+
+def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_cancel=None) -> LightPassResult:
+    """Run the light pass over ``prepared`` (``n_paths``: default the settings' light paths).
+
+    The batches are dealt to LANES fixed lanes (batch j to lane j % LANES), each with its own
+    maps, run on up to ``prepared.threads`` threads and summed in lane order at the end, so the
+    result does not depend on the number of threads. ``progress`` and ``should_cancel`` are
+    called from the calling thread only.
+    """
+    t0 = time.perf_counter()
+    n_paths = int(prepared.settings.light_paths if n_paths is None else n_paths)
+    targets: LightTargets = prepared.light_targets
+    grid_n = prepared.grid.n
+    layout, warning = element_layout(prepared, n_paths, targets.receiver_mask)
+    rec_layout = element_layout(prepared, n_paths, targets.grating_mask)[0] if targets.grating_mask.any() else None
+    share = targets.budget / max(targets.budget.sum(), 1e-300)
+    paths_per_light = np.floor(share * n_paths).astype(np.int64)
+    jobs = [(li, bi, start, int(n_l)) for li, n_l in enumerate(paths_per_light)
+            for bi, start in enumerate(range(0, int(n_l), BATCH_PATHS))]
+    total = int(paths_per_light.sum())
+    lanes = [jobs[k::LANES] for k in range(LANES)]
+    maps = [(IlluminationMap.empty(layout, grid_n),
+             IlluminationMap.empty(rec_layout, grid_n, with_direction=True) if rec_layout else None)
+            for _ in range(LANES)]
+    counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
+    stop = threading.Event()
+    cancelled = False
+    seed = int(prepared.settings.seed)
+
+    def run_lane(k):
+        illum, records = maps[k]
+        for li, bi, start, n_l in lanes[k]:  # bounded memory: fixed batches
+            if stop.is_set():
+                return
+            b = min(BATCH_PATHS, n_l - start)
+            rng = np.random.default_rng(np.random.SeedSequence([seed, LIGHT_PASS_STREAM, li, bi]))
+            o, d, weight = _emit(prepared, li, b, rng)
+            live = weight > 0
+            m = int(live.sum())
+            w = (weight[live, None] / float(n_l)).astype(np.float32) * prepared.lights.spectrum[li][None, :]
+            rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(m, np.int64),
+                        w, None, np.zeros(m, np.int32), rng.random(m))
+            tr = _LightTrace(prepared, rng, illum, records)
+            tr.walk(rays, tr.empty_mono())
+            c = counts[k]
+            c["paths"] += b
+            c["deposits"] += tr.deposited
+            c["rays"] += tr._rays
+
+    threads = max(1, min(LANES, prepared.threads))
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        futures = [pool.submit(run_lane, k) for k in range(LANES)]
+        while True:
+            done_set, pending = wait(futures, timeout=0.2)
+            done = sum(c["paths"] for c in counts)
+            if progress:
+                progress(done / max(total, 1), f"light pass: {done / 1e6:.2f} M of {total / 1e6:.2f} M paths")
+            if not pending:
+                break
+            if should_cancel and should_cancel():
+                stop.set()
+                cancelled = True
+        for f in futures:
+            f.result()  # re-raise a worker's exception here
+    illum, records = maps[0]
+    for extra_illum, extra_records in maps[1:]:
+        illum += extra_illum
+        if records is not None:
+            records += extra_records
+    stats = {"light_paths": sum(c["paths"] for c in counts), "light_deposits": sum(c["deposits"] for c in counts),
+             "light_rays": sum(c["rays"] for c in counts), "elements": layout.total,
+             "light_pass_s": time.perf_counter() - t0}
+    if cancelled:
+        stats["cancelled"] = True
+    return LightPassResult(illum, records, MappingProxyType(stats), (warning,) if warning else (), cancelled,
+                           prepared.key)
+
+
+def _emit(prepared, li: int, b: int, rng):
+    """b path starts from light li: origins, unit directions, scalar weights (1 / pdf, times
+    the geometric terms; the light's spectrum is applied by the caller)."""
+    lights, obj = prepared.lights, prepared.light_targets.objects
+    k = int(lights.kind[li])
+    if k == SUN:
+        d = lights.direction[li]
+        u, v = orthonormal_basis(d[None, :])
+        u, v = u[0], v[0]
+        area = np.pi * obj.radius**2
+        prob = area / area.sum()
+        pick = np.minimum((rng.random((b, 1)) > np.cumsum(prob)[None, :]).sum(axis=1), len(obj) - 1)
+        r = obj.radius[pick] * np.sqrt(rng.random(b))
+        phi = 2 * np.pi * rng.random(b)
+        c = obj.centre[pick]
+        c_plane = c - (c @ d)[:, None] * d  # project centres on the plane through 0 normal to d
+        pts = c_plane + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
+        # mixture pdf per unit area over the disks of all objects
+        cp = obj.centre - (obj.centre @ d)[:, None] * d
+        dist2 = np.sum((pts[:, None, :] - cp[None, :, :]) ** 2, axis=2)
+        pdf = np.sum(np.where(dist2 <= obj.radius**2, prob / area, 0.0), axis=1)
+        far = 4.0 * (np.max(np.abs(prepared.scene.vertices)) + 1.0)
+        o = pts - far * d
+        return o, np.broadcast_to(d, (b, 3)).copy(), np.where(pdf > 0, 1.0 / np.maximum(pdf, 1e-300), 0.0)
+    if k in (POINT, SPOT):
+        origin = np.broadcast_to(lights.position[li], (b, 3))
+        axis, cos_max, omega = _cones(lights.position[li][None, :], obj)
+        axis, cos_max, omega = (np.broadcast_to(x, (b,) + x.shape[1:]) for x in (axis, cos_max, omega))
         d, pdf = _sample_cones(origin, omega, axis, cos_max, omega, rng)
-        cos_l = d @ lights.direction[li]
-        # radiance (in the spectrum) * cos * area / pdf(direction)   (pdf of the point: 1 / area)
-        weight = np.where(cos_l > 0, cos_l * lights.area[li] / np.maximum(pdf, 1e-300), 0.0)
-        return origin + 1e-7 * d, d, weight
+        weight = 1.0 / np.maximum(pdf, 1e-300)  # intensity (in the spectrum) / pdf
+        if k == SPOT:
+            from .lights import _smoothstep
+
+            cos_axis = d @ lights.direction[li]
+            ch, sm = lights.cos_half_spot[li], lights.spot_smooth[li]
+            cone = (cos_axis > ch).astype(np.float64)
+            if sm > 0:
+                cone = cone * _smoothstep((cos_axis - ch) / sm)
+            weight = weight * cone
+        return np.array(origin), d, weight
+    # area lights: a uniform point on the emitter, then a direction towards an object
+    r1, r2 = rng.random(b), rng.random(b)
+    if k == AREA_RECT:
+        a, c = (r1 - 0.5) * lights.size_u[li], (r2 - 0.5) * lights.size_v[li]
+    else:
+        rad, phi = np.sqrt(r1), 2 * np.pi * r2
+        a, c = 0.5 * lights.size_u[li] * rad * np.cos(phi), 0.5 * lights.size_v[li] * rad * np.sin(phi)
+    origin = lights.position[li] + a[:, None] * lights.axis_u[li] + c[:, None] * lights.axis_v[li]
+    axis, cos_max, omega = _cones(origin, obj)
+    d, pdf = _sample_cones(origin, omega, axis, cos_max, omega, rng)
+    cos_l = d @ lights.direction[li]
+    # radiance (in the spectrum) * cos * area / pdf(direction)   (pdf of the point: 1 / area)
+    weight = np.where(cos_l > 0, cos_l * lights.area[li] / np.maximum(pdf, 1e-300), 0.0)
+    return origin + 1e-7 * d, d, weight

@@ -1,7 +1,8 @@
 """Render settings: the knobs of one render, with their defaults and validation.
 
 The names match the Blender-facing contract (``scene.opal``), so the Blender layer copies them
-one to one.
+one to one. Settings are frozen: a render's settings never change under it (``dataclasses.replace``
+makes a variant).
 """
 
 from __future__ import annotations
@@ -11,12 +12,15 @@ from dataclasses import dataclass
 from .scene import SceneError
 from .spectrum import WavelengthGrid
 
-__all__ = ["RenderSettings", "DISPERSION_SAMPLING"]
+__all__ = ["RenderSettings", "DISPERSION_SAMPLING", "EYE_ONLY_SETTINGS"]
 
 DISPERSION_SAMPLING = ("SPLIT", "SAMPLE")
 
+#: Settings only the eye pass reads: changing them keeps a prepared scene and its light pass.
+EYE_ONLY_SETTINGS = frozenset({"samples", "round_samples", "tile_size", "filter_width", "time_limit", "spectral_exr"})
 
-@dataclass
+
+@dataclass(frozen=True)
 class RenderSettings:
     samples: int = 16                 # eye samples per pixel
     light_paths: int = 1_000_000      # light-pass paths (caustics)

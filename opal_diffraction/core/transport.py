@@ -97,9 +97,9 @@ class Hit:
 class SpecularWalker:
     """Advances ray populations through specular interactions; subclasses add the shading."""
 
-    def __init__(self, ctx, rng: np.random.Generator):
-        self.ctx = ctx
-        self.n = ctx.grid.n
+    def __init__(self, prepared, rng: np.random.Generator):
+        self.prepared = prepared
+        self.n = prepared.grid.n
         self.rng = rng
         self._rays = 0  # rays cast
 
@@ -112,7 +112,7 @@ class SpecularWalker:
 
     def survives(self, rays: Rays, rng) -> np.ndarray:
         """Which rays may bounce again (default: the bounce limit)."""
-        return rays.depth < self.ctx.settings.max_bounces
+        return rays.depth < self.prepared.settings.max_bounces
 
     # the loop -------------------------------------------------------------------------------
     @staticmethod
@@ -130,10 +130,10 @@ class SpecularWalker:
     # ----------------------------------------------------------------- one bounce
     def _step(self, rays: Rays, pending, rng):
         """Advance a population by one interaction; returns (continuing rays, mono children, their hits)."""
-        ctx = self.ctx
+        prepared = self.prepared
         hit = None
         if len(rays):
-            h = ctx.accel.intersect(rays.o, rays.d)
+            h = prepared.accel.intersect(rays.o, rays.d)
             self._rays += len(rays)
             missed = h.prim < 0
             if missed.any():
@@ -149,7 +149,7 @@ class SpecularWalker:
         if hit is None or len(rays) == 0:
             return rays.take(np.zeros(len(rays), bool)), None, None
 
-        kind = ctx.materials.kind[hit.mat]
+        kind = prepared.materials.kind[hit.mat]
         self.on_hit(rays, hit, kind, rng)
 
         can_bounce = self.survives(rays, rng)
@@ -161,7 +161,7 @@ class SpecularWalker:
         diel = (kind == DIELECTRIC) & can_bounce
         if diel.any():
             if rays.lam is None:
-                disp = diel & ctx.materials.dispersive[hit.mat]
+                disp = diel & prepared.materials.dispersive[hit.mat]
                 if disp.any():
                     children, child_hits = self._split(rays.take(disp), hit.take(disp), rng)
                 diel = diel & ~disp
@@ -175,14 +175,14 @@ class SpecularWalker:
         return nxt, children, child_hits
 
     def _hit_info(self, rays: Rays, t, prim, bu, bv) -> Hit:
-        ctx = self.ctx
+        prepared = self.prepared
         p = rays.o + t[:, None] * rays.d
-        ng = ctx.tri_normal[prim]
+        ng = prepared.tri_normal[prim]
         cos = -np.einsum("ij,ij->i", rays.d, ng)
         front = cos > 0
         ng = np.where(front[:, None], ng, -ng)
-        return Hit(p.astype(np.float32, copy=False), ng, np.abs(cos), front, ctx.tri_material[prim],
-                   ctx.tri_offset[prim], prim, bu, bv)
+        return Hit(p.astype(np.float32, copy=False), ng, np.abs(cos), front, prepared.tri_material[prim],
+                   prepared.tri_offset[prim], prim, bu, bv)
 
     @staticmethod
     def _per_ray(table, rows, lam):
@@ -191,7 +191,7 @@ class SpecularWalker:
 
     def _tinted(self, rays: Rays, hit: Hit):
         """The weight after the surface's tint (skipped for clear glass and perfect mirrors)."""
-        m = self.ctx.materials
+        m = self.prepared.materials
         if m.clear[hit.mat].all():
             return rays.w
         return rays.weighted(self._per_ray(m.reflectance, hit.mat, rays.lam))
@@ -203,9 +203,9 @@ class SpecularWalker:
         return Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
 
     def _dielectric(self, rays: Rays, hit: Hit, rng) -> Rays:
-        ctx = self.ctx
+        prepared = self.prepared
         lam0 = np.zeros(len(rays), np.int64) if rays.lam is None else rays.lam
-        n = ctx.materials.ior[hit.mat, lam0]  # constant over the grid for white rays
+        n = prepared.materials.ior[hit.mat, lam0]  # constant over the grid for white rays
         eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
         fr = fresnel_dielectric(hit.cos_i, eta)
         refl = rng.random(len(rays)) < fr
@@ -219,7 +219,7 @@ class SpecularWalker:
     def _split(self, rays: Rays, hit: Hit, rng):
         """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit."""
         n, b = self.n, len(rays)
-        split = self.ctx.settings.dispersion_sampling == "SPLIT"
+        split = self.prepared.settings.dispersion_sampling == "SPLIT"
         if rays.w is None:  # unit weights: every wavelength alike
             if split:
                 parent, lam = np.repeat(np.arange(b), n), np.tile(np.arange(n), b)

@@ -19,6 +19,7 @@ from opal_diffraction.blender.export import export_scene
 from opal_diffraction.blender.opal_presets import PRESETS
 from opal_diffraction.core import opal as core_opal
 from opal_diffraction.core.camera import generate_rays
+from opal_diffraction.core.prepare import prepare
 from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
 from opal_diffraction.core.settings import RenderSettings
 
@@ -369,7 +370,7 @@ def test_progressive_renderer_runs_levels_restarts_and_cancels():
     settings = RenderSettings(wavelength_step=20.0, threads=1, tile_size=16)
     scene = _tiny_core_scene(32)
     levels = viewport.preview_levels(4, 8)
-    r.start(scene, settings, levels)
+    r.start(prepare(scene, settings), levels)
     assert r.wait(60.0) and r.done and not r.error
     frames = [f for f in images if f is not None]
     sizes = [(f.width, f.height) for f in frames]
@@ -377,13 +378,13 @@ def test_progressive_renderer_runs_levels_restarts_and_cancels():
     assert frames[-1].samples == 4 and r.first_image_s is not None
     assert frames[-1].pixels.shape == (32 * 32 * 4,) and frames[-1].pixels.max() > 0
     # a restart bumps the generation; the old render's images never show up afterwards
-    g1 = r.start(scene, settings, [(1, 64)])
-    g2 = r.start(scene, settings, [(2, 1)])
+    g1 = r.start(prepare(scene, settings), [(1, 64)])
+    g2 = r.start(prepare(scene, settings), [(2, 1)])
     assert g2 == g1 + 1
     assert r.wait(60.0)
     assert r.frame().generation == g2 and (r.frame().width, r.frame().height) == (16, 16)
     # cancel stops a long render at its next tile
-    r.start(_tiny_core_scene(64), settings, [(1, 4096)])
+    r.start(prepare(_tiny_core_scene(64), settings), [(1, 4096)])
     r.cancel(wait=30.0)
     assert not r.running
 
@@ -455,7 +456,7 @@ def test_view_update_and_view_draw_with_mocks(monkeypatch):
 
 def test_redraw_timer_runs_while_a_preview_renders():
     r = viewport.ProgressiveRenderer()
-    r.start(_tiny_core_scene(64), RenderSettings(wavelength_step=20.0, threads=1, tile_size=16), [(1, 4096)])
+    r.start(prepare(_tiny_core_scene(64), RenderSettings(wavelength_step=20.0, threads=1, tile_size=16)), [(1, 4096)])
     viewport._RedrawTimer.renderers.add(r)
     viewport._RedrawTimer.pending.set()
     assert viewport._redraw_tick() == viewport.REDRAW_INTERVAL  # a new image: redraw the views

@@ -102,11 +102,13 @@ def _check_mesh(vertices, triangles):
     return v, t.astype(np.int32)
 
 
-def build_accelerator(vertices, triangles, backend: str = "auto"):
+def build_accelerator(vertices, triangles, backend: str = "auto", threads: int | None = None):
     """Build a ray caster for the mesh ``vertices`` (V,3) / ``triangles`` (T,3).
 
     ``backend``: "auto" (embree if embreex imports, else numpy; the environment variable
     ``OPAL_ACCEL=embree|numpy|brute`` overrides "auto"), "embree", "numpy" or "brute".
+    ``threads``: how many threads one call may split its rays over (default: default_threads();
+    1 when the caller already runs calls in parallel).
     """
     if not isinstance(backend, str):
         raise ValueError(f"backend must be a string, got {backend!r}")
@@ -126,10 +128,10 @@ def build_accelerator(vertices, triangles, backend: str = "auto"):
         if not _embree_importable():
             raise ValueError("backend 'embree' requested but embreex cannot be imported (pip install embreex)")
         from .embree_backend import EmbreeAccelerator
-        return EmbreeAccelerator(v, t)
+        return EmbreeAccelerator(v, t, threads=threads)
     if b == "numpy":
         from .numpy_bvh import NumpyBVH
-        return NumpyBVH(v, t)
+        return NumpyBVH(v, t, threads=threads)
     from .brute_force import BruteForceAccelerator
     return BruteForceAccelerator(v, t)
 

@@ -1,0 +1,24 @@
+"""``scene.opal`` to the core's RenderSettings: the one place the Blender settings are read.
+
+Both the final render (engine.py) and the rendered viewport (viewport.py) use it, so neither
+imports the other for it.
+"""
+
+from __future__ import annotations
+
+from ..core.settings import RenderSettings
+
+__all__ = ["render_settings"]
+
+
+def render_settings(opal, scene, spectral_path: str = "") -> RenderSettings:
+    """Core RenderSettings from ``scene.opal`` (names copied one to one) and Blender's threads."""
+    seed = int(opal.seed) + (int(scene.frame_current) if opal.use_animated_seed else 0)
+    return RenderSettings(
+        samples=int(opal.samples), light_paths=int(opal.light_paths), wavelength_min=float(opal.wavelength_min),
+        wavelength_max=float(opal.wavelength_max), wavelength_step=float(opal.wavelength_step),
+        max_bounces=int(opal.max_bounces), seed=max(seed, 0), dispersion_sampling=opal.dispersion_sampling,
+        spectral_exr=spectral_path, time_limit=float(opal.time_limit), threads=int(scene.render.threads),
+        backend=opal.backend.lower(), tile_size=int(opal.tile_size), round_samples=int(opal.round_samples),
+        filter_width=float(opal.filter_width),
+    )

@@ -1,0 +1,45 @@
+"""Small geometry toolbox shared by every module: triangle frames and areas, orthonormal bases.
+
+One place for the few vector formulas the tracer needs again and again (pbrt-v4's
+``util/vecmath.h`` plays this role there, ``CoordinateSystem`` among them). Everything is
+vectorised over leading axes and computed in float64 unless the caller passes float32.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["triangle_cross", "triangle_areas", "triangle_normals", "orthonormal_basis"]
+
+
+def triangle_cross(vertices, triangles) -> np.ndarray:
+    """(T, 3) float64 ``(v1 - v0) x (v2 - v0)`` per triangle: its normal times twice its area."""
+    t = np.asarray(triangles, np.int64).reshape(-1, 3)
+    if len(t) == 0:
+        return np.zeros((0, 3))
+    p = np.asarray(vertices, np.float64)[t]
+    return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+
+
+def triangle_areas(vertices, triangles) -> np.ndarray:
+    """(T,) float64 area of each triangle."""
+    return 0.5 * np.linalg.norm(triangle_cross(vertices, triangles), axis=1)
+
+
+def triangle_normals(vertices, triangles) -> np.ndarray:
+    """(T, 3) float64 unit geometric normals (right-handed winding); zero for degenerate triangles."""
+    n = triangle_cross(vertices, triangles)
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+
+
+def orthonormal_basis(axis):
+    """Unit vectors (u, v) with (u, v, axis) orthonormal, for unit ``axis`` (..., 3).
+
+    u = axis x a / |axis x a| with a = X unless axis is within ~26 degrees of X (then Y), and
+    v = axis x u: continuous except where the choice of a switches, which no caller relies on.
+    """
+    axis = np.asarray(axis)
+    a = np.where(np.abs(axis[..., :1]) < 0.9, np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
+    u = np.cross(axis, a)
+    u /= np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-30)
+    return u, np.cross(axis, u)

@@ -1,0 +1,207 @@
+"""Preparation: a validated scene and its settings turned into everything the passes read.
+
+``prepare(scene, settings) -> PreparedScene`` is the first step of the one-way pipeline
+
+    Scene --prepare--> PreparedScene --plan--> RenderPlan --light pass--> LightPassResult
+          --eye pass (tiles x rounds)--> Film --> RenderResult
+
+(render.py orchestrates it). A PreparedScene is frozen and its arrays are read-only: the passes
+read it from any number of threads (and, later, machines) and nothing writes back into it. It
+holds the acceleration structure, the spectra of materials, lights and world on the wavelength
+grid, per-triangle normals, offsets and grating frames, and the light pass's targets (which
+objects bend light, which receive it, how much light each lamp sends their way), so the plan
+can decide without running anything.
+
+The camera and the eye-only settings (samples, rounds, tiles, filter, time limit) do not change
+any of that: ``with_view`` swaps them and keeps the rest, which is what the rendered viewport
+does when only the view moves (the light pass's result stays valid: same ``key``).
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, fields, is_dataclass, replace
+
+import numpy as np
+
+from .accel import build_accelerator, default_threads
+from .geometry import triangle_normals
+from .gratings import PreparedGratings, prepare_gratings, triangle_tangents
+from .light_pass import LightTargets, find_light_targets
+from .lights import PreparedLights, prepare_lights
+from .materials import PreparedMaterials, prepare_materials
+from .scene import Camera, Scene
+from .settings import EYE_ONLY_SETTINGS, RenderSettings
+from .spectrum import SpectralConverter, WavelengthGrid
+
+__all__ = ["PreparedScene", "prepare", "OFFSET_RELATIVE"]
+
+#: Self-intersection offset: this fraction of the scene's extent, plus float32 rounding of each
+#: triangle's coordinates.
+OFFSET_RELATIVE = 1e-5
+
+_keys = itertools.count(1)  # one key per preparation: a light-pass result belongs to one key
+
+
+def _read_only(x):
+    """``x`` with every array in it read-only: arrays become read-only views (the arrays they
+    view, which may be the caller's, keep their flags), dataclasses are frozen field by field."""
+    if isinstance(x, np.ndarray):
+        if x.flags.writeable:
+            x = x.view()
+            x.flags.writeable = False
+        return x
+    if is_dataclass(x) and not isinstance(x, (type, Scene, RenderSettings)):
+        for f in fields(x):
+            object.__setattr__(x, f.name, _read_only(getattr(x, f.name)))
+    return x
+
+
+@dataclass(frozen=True)
+class PreparedScene:
+    """A scene ready to trace. Read-only; build it with :func:`prepare`."""
+
+    scene: Scene                       # the validated scene
+    settings: RenderSettings           # validated
+    threads: int                       # the thread budget every pool of this render shares
+    conv: SpectralConverter            # the wavelength grid, CMFs, RGB <-> spectrum
+    accel: object                      # accel.Accelerator: ray casting over scene.triangles
+    materials: PreparedMaterials       # spectra and kinds per material
+    lights: PreparedLights             # frames, areas and emission spectra per light
+    gratings: PreparedGratings         # grating parameters per material
+    tri_normal: np.ndarray             # (T, 3) float32 unit geometric normals
+    tri_offset: np.ndarray             # (T,) float32 self-intersection offset per triangle
+    tri_material: np.ndarray           # (T,) int32
+    tri_grating_tangent: np.ndarray    # (T, 3) float32 unit grating vectors; (0, 3) without gratings
+    tri_period: np.ndarray             # (T,) float32 nm per-triangle period override (0: the material's), or (0,)
+    world_spectrum: np.ndarray         # (n,) float32 radiance of the world
+    offset_base: float                 # metres: the scene-scaled part of the offsets
+    light_targets: LightTargets        # what the light pass aims at and who receives
+    warnings: tuple[str, ...]          # from validation (dropped triangles, ...)
+    prepare_s: float                   # seconds spent validating and preparing
+    key: int                           # identity of the geometry, materials and lights
+
+    @property
+    def grid(self) -> WavelengthGrid:
+        return self.conv.grid
+
+    def with_view(self, camera: Camera | None = None, **eye_settings) -> "PreparedScene":
+        """The same prepared scene seen through ``camera`` and/or with other eye-only settings
+        (``samples``, ``round_samples``, ``tile_size``, ``filter_width``, ``time_limit``,
+        ``spectral_exr``). Nothing is rebuilt; the light pass's result stays valid."""
+        bad = set(eye_settings) - EYE_ONLY_SETTINGS
+        if bad:
+            raise ValueError(f"with_view changes only eye-pass settings, not {sorted(bad)}: prepare again")
+        scene = self.scene if camera is None else replace(self.scene, camera=camera)
+        settings = replace(self.settings, **eye_settings) if eye_settings else self.settings
+        if eye_settings:
+            settings.validate()
+        return replace(self, scene=scene, settings=settings)
+
+
+def triangle_offsets(v: np.ndarray, t: np.ndarray, base: float) -> np.ndarray:
+    """Self-intersection offset per triangle: scene-scaled ``base`` plus float32 rounding of its
+    largest |coordinate| (looked up per hit, so no per-hit reduction)."""
+    if len(t) == 0:
+        return np.zeros(0, np.float32)
+    return (base + 4e-7 * np.abs(v[t]).max(axis=(1, 2))).astype(np.float32)
+
+
+def _equal(a, b) -> bool:
+    """Deep equality of scene data: arrays by value, dataclasses field by field."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.shape(a) == np.shape(b) and np.array_equal(a, b)
+    if is_dataclass(a) and type(a) is type(b):
+        return all(_equal(getattr(a, f.name), getattr(b, f.name)) for f in fields(a))
+    return a == b
+
+
+def _same_geometry(a: Scene, b: Scene) -> bool:
+    return _equal(a.vertices, b.vertices) and _equal(a.triangles, b.triangles)
+
+
+def _same_for_light_pass(a: Scene, b: Scene) -> bool:
+    """Everything but the camera and the world (which the light pass never reads)."""
+    return all(_equal(getattr(a, f.name), getattr(b, f.name)) for f in fields(a)
+               if f.name not in ("camera", "world_color"))
+
+
+def _light_pass_settings(s: RenderSettings) -> dict:
+    return {f.name: getattr(s, f.name) for f in fields(s) if f.name not in EYE_ONLY_SETTINGS}
+
+
+def prepare(scene: Scene, settings: RenderSettings | None = None, conv: SpectralConverter | None = None,
+            reuse: PreparedScene | None = None) -> PreparedScene:
+    """Validate ``scene`` and ``settings`` (SceneError with a readable message) and prepare them.
+
+    ``conv``: a SpectralConverter for the same grid to reuse (it is the slow part for tiny scenes).
+    ``reuse``: an earlier preparation (the rendered viewport's, before an edit): whatever depends
+    only on unchanged inputs is taken from it (the acceleration structure and triangle frames
+    when the geometry is the same, the spectra when the grid is), and when nothing the light pass
+    reads has changed the result keeps its ``key``, so the earlier light-pass result stays valid.
+    """
+    t0 = time.perf_counter()
+    settings = settings or RenderSettings()
+    settings.validate()
+    scene, warnings = scene.validated()
+    grid = settings.grid()
+    if conv is None and reuse is not None:
+        conv = reuse.conv
+    conv = conv if conv is not None and conv.grid == grid else SpectralConverter(grid)
+    threads = int(settings.threads) or default_threads()
+    v = np.asarray(scene.vertices, np.float32)
+    t = np.asarray(scene.triangles, np.int32)
+    tri_material = np.asarray(scene.tri_material, np.int32)
+    materials = prepare_materials(scene.materials, conv)
+    lights = prepare_lights(scene.lights, conv)
+    gratings = prepare_gratings(scene.materials)
+    same_geometry = (reuse is not None and reuse.settings.backend == settings.backend
+                     and _same_geometry(reuse.scene, scene))
+    if same_geometry:
+        accel, nrm64, tri_normal = reuse.accel, None, reuse.tri_normal
+        tri_offset, base = reuse.tri_offset, reuse.offset_base
+    else:
+        nrm64 = triangle_normals(v, t)
+        tri_normal = nrm64.astype(np.float32)
+        extent = float(np.max(np.ptp(v, axis=0))) if len(v) else 1.0
+        base = OFFSET_RELATIVE * max(extent, 1e-3)
+        tri_offset = triangle_offsets(v, t, base)
+        # the passes parallelise over tiles and light-pass lanes with the whole budget, so the
+        # caster itself runs on one thread (no pools nested inside pools)
+        accel = build_accelerator(v, t, settings.backend, threads=1)
+    if gratings.any:  # only a scene with gratings pays for their frames
+        nrm64 = triangle_normals(v, t) if nrm64 is None else nrm64
+        tri_grating_tangent = triangle_tangents(nrm64, scene.tri_tangent)
+    else:
+        tri_grating_tangent = np.zeros((0, 3), np.float32)
+    same_for_light = (same_geometry and _same_for_light_pass(reuse.scene, scene)
+                      and _light_pass_settings(reuse.settings) == _light_pass_settings(settings))
+    if same_for_light:
+        targets, key = reuse.light_targets, reuse.key
+    else:
+        targets, key = find_light_targets(v, t, tri_material, materials, gratings, lights, conv), next(_keys)
+    prepared = PreparedScene(
+        scene=scene,
+        settings=settings,
+        threads=threads,
+        conv=conv,
+        accel=accel,
+        materials=materials,
+        lights=lights,
+        gratings=gratings,
+        tri_normal=tri_normal,
+        tri_offset=tri_offset,
+        tri_material=tri_material,
+        tri_grating_tangent=tri_grating_tangent,
+        tri_period=np.asarray(scene.tri_period, np.float32).reshape(-1),
+        world_spectrum=conv.illuminant_from_rgb(np.asarray(scene.world_color, np.float64)).astype(np.float32),
+        offset_base=base,
+        light_targets=targets,
+        warnings=tuple(warnings),
+        prepare_s=0.0,
+        key=key,
+    )
+    frozen = {f.name: _read_only(getattr(prepared, f.name)) for f in fields(prepared)}
+    frozen["prepare_s"] = time.perf_counter() - t0
+    return PreparedScene(**frozen)
