@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .geometry import triangle_areas
+
 __all__ = ["ElementLayout", "IlluminationMap", "MAX_SUBDIVISION"]
 
 MAX_SUBDIVISION = 1024  # k per triangle at most
@@ -29,10 +31,7 @@ class ElementLayout:
     @classmethod
     def build(cls, vertices, triangles, receivers: np.ndarray, target_area: float) -> "ElementLayout":
         """Elements of about ``target_area`` m^2 on the triangles where ``receivers`` is True."""
-        v = np.asarray(vertices, np.float64)
-        t = np.asarray(triangles, np.int64)
-        p = v[t] if len(t) else np.zeros((0, 3, 3))
-        area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+        area = triangle_areas(vertices, triangles)
         k = np.ceil(np.sqrt(area / max(float(target_area), 1e-30))).astype(np.int64)
         k = np.where(np.asarray(receivers, bool), np.clip(k, 1, MAX_SUBDIVISION), 0)
         count = 2 * k * k

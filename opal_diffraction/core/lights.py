@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .enums import LightKind
+from .geometry import orthonormal_basis
 from .scene import Lights
 from .spectrum import SpectralConverter
 
@@ -54,8 +55,8 @@ def prepare_lights(lights: Lights, conv: SpectralConverter) -> PreparedLights:
     u = np.asarray(lights.axis_u, np.float64).reshape(n, 3)
     u = u - np.sum(u * d, axis=1, keepdims=True) * d  # Gram-Schmidt against the normal
     un = np.linalg.norm(u, axis=1, keepdims=True)
-    fallback = np.cross(d, np.where(np.abs(d[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
-    u = np.where(un > 1e-9, u / np.maximum(un, 1e-30), fallback / np.maximum(np.linalg.norm(fallback, axis=1, keepdims=True), 1e-30))
+    fallback, _ = orthonormal_basis(d)
+    u = np.where(un > 1e-9, u / np.maximum(un, 1e-30), fallback)
     v = np.cross(d, u)
     kind = np.asarray(lights.kind, np.int32)
     su, sv = np.asarray(lights.size_u, np.float64), np.asarray(lights.size_v, np.float64)

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .geometry import triangle_cross
+
 __all__ = ["quad", "box", "prism", "uv_sphere", "icosphere"]
 
 
@@ -55,7 +57,7 @@ def prism(center, side, length, apex_angle_deg=60.0, axis="Y", rotation_deg=0.0)
     ], np.int32)
     # make the winding outward whatever the axis/rotation: flip triangles whose normal points inward
     p = verts[tris]
-    nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    nrm = triangle_cross(verts, tris)
     outward = np.sum(nrm * (p.mean(axis=1) - verts.mean(axis=0)), axis=1) > 0
     tris[~outward] = tris[~outward][:, [0, 2, 1]]
     return verts, tris

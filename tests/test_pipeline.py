@@ -1,0 +1,163 @@
+"""The one-way pipeline: immutable hand-offs, reuse of a prepared scene and its light pass, and
+a package without import cycles."""
+
+from __future__ import annotations
+
+import ast
+import os
+from dataclasses import FrozenInstanceError, replace
+
+import numpy as np
+import pytest
+
+from opal_diffraction.core import primitives
+from opal_diffraction.core.eye_pass import EyePass
+from opal_diffraction.core.light_pass import run_light_pass
+from opal_diffraction.core.plan import plan_render
+from opal_diffraction.core.prepare import prepare
+from opal_diffraction.core.render import render, render_prepared
+from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+from opal_diffraction.core.settings import RenderSettings
+
+PACKAGE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "opal_diffraction")
+
+
+def glass_scene(width=24, height=16):
+    mats = Materials.from_list([{"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)},
+                                {"kind": "DIELECTRIC", "ior": 1.5, "dispersion": "BK7", "color": (1, 1, 1)}])
+    s = Scene(materials=mats, world_color=np.array([0.05, 0.05, 0.05], np.float32))
+    s.add_mesh(*primitives.quad((0, 0, 0), (8, 0, 0), (0, 8, 0)), material=0)
+    s.add_mesh(*primitives.box((0, 0, 1.0), (1.0, 1.0, 0.5)), material=1)
+    s.lights = Lights.from_list([{"kind": "POINT", "position": (0.5, -0.5, 4.0), "power": 800.0}])
+    s.camera = Camera.look_at((0, -5, 3), (0, 0, 0.5), width=width, height=height)
+    return s
+
+
+SETTINGS = RenderSettings(samples=2, round_samples=1, light_paths=20_000, seed=5, threads=2, tile_size=8)
+
+
+def test_render_equals_the_pipeline_run_step_by_step():
+    full = render(glass_scene(), SETTINGS)
+    prepared = prepare(glass_scene(), SETTINGS)
+    plan = plan_render(prepared)
+    assert plan.light_pass and plan.dispersion
+    light = run_light_pass(prepared)
+    staged = render_prepared(prepared, light)
+    np.testing.assert_array_equal(full.spectral, staged.spectral)
+    for k in full.passes:
+        np.testing.assert_array_equal(full.passes[k], staged.passes[k])
+
+
+def test_a_camera_move_reuses_the_light_pass_exactly():
+    """with_view keeps the preparation and the light pass: the image equals a fresh render of
+    the moved camera, bit for bit."""
+    prepared = prepare(glass_scene(), SETTINGS)
+    light = run_light_pass(prepared)
+    moved_cam = Camera.look_at((1, -5, 3), (0, 0, 0.5), width=24, height=16)
+    moved = prepared.with_view(moved_cam, samples=3)
+    assert moved.key == prepared.key and moved.accel is prepared.accel
+    fresh_scene = replace(glass_scene(), camera=moved_cam)
+    fresh = render(fresh_scene, replace(SETTINGS, samples=3))
+    reused = render_prepared(moved, light)
+    np.testing.assert_array_equal(fresh.spectral, reused.spectral)
+    with pytest.raises(ValueError, match="eye-pass settings"):
+        prepared.with_view(light_paths=5)
+
+
+def test_prepare_reuses_what_did_not_change():
+    first = prepare(glass_scene(), SETTINGS)
+    # the world colour: same geometry and light-pass inputs, so the same key and structure
+    s = glass_scene()
+    s.world_color = np.array([0.2, 0.1, 0.1], np.float32)
+    world = prepare(s, SETTINGS, reuse=first)
+    assert world.key == first.key and world.accel is first.accel
+    assert not np.array_equal(world.world_spectrum, first.world_spectrum)
+    # a light's power: same geometry (structure reused), but the light pass must rerun
+    s = glass_scene()
+    s.lights.power[0] = 400.0
+    brighter = prepare(s, SETTINGS, reuse=first)
+    assert brighter.accel is first.accel and brighter.key != first.key
+    # moving a vertex: everything is rebuilt
+    s = glass_scene()
+    s.vertices[0, 2] += 0.01
+    moved = prepare(s, SETTINGS, reuse=first)
+    assert moved.accel is not first.accel and moved.key != first.key
+    # and a light pass never crosses preparations
+    with pytest.raises(ValueError, match="another prepared scene"):
+        EyePass(moved, run_light_pass(brighter))
+
+
+def test_hand_offs_are_immutable():
+    prepared = prepare(glass_scene(), SETTINGS)
+    with pytest.raises(FrozenInstanceError):
+        prepared.threads = 1
+    with pytest.raises(FrozenInstanceError):
+        SETTINGS.samples = 3
+    with pytest.raises(ValueError, match="read-only"):
+        prepared.tri_normal[0] = 0.0
+    with pytest.raises(ValueError, match="read-only"):
+        prepared.materials.reflectance[0] = 0.0
+    with pytest.raises(ValueError, match="read-only"):
+        prepared.lights.spectrum[0] = 0.0
+    plan = plan_render(prepared)
+    with pytest.raises(FrozenInstanceError):
+        plan.light_pass = False
+    light = run_light_pass(prepared)
+    with pytest.raises(TypeError):
+        light.stats["light_paths"] = 0
+
+
+def _imports(path: str, module: str) -> set[str]:
+    """Modules of the package that ``module`` (its file ``path``) imports, anywhere in the file
+    (an import deferred into a function still ties the two modules together)."""
+    tree = ast.parse(open(path, encoding="utf-8").read())
+    out = set()
+    pkg = module.rsplit(".", 1)[0] if not path.endswith("__init__.py") else module
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = pkg.split(".")
+                base = base[: len(base) - (node.level - 1)] if node.level > 1 else base
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target.startswith("opal_diffraction"):
+                out.add(target)
+                out.update(f"{target}.{a.name}" for a in node.names)
+        elif isinstance(node, ast.Import):
+            out.update(a.name for a in node.names if a.name.startswith("opal_diffraction"))
+    return out
+
+
+def test_the_package_has_no_import_cycle_and_core_never_imports_blender():
+    modules = {}
+    root = os.path.dirname(PACKAGE)
+    for folder, _, files in os.walk(PACKAGE):
+        for f in files:
+            if f.endswith(".py"):
+                path = os.path.join(folder, f)
+                rel = os.path.relpath(path, root)[:-3].replace(os.sep, ".")
+                modules[rel[: -len(".__init__")] if rel.endswith(".__init__") else rel] = path
+    graph = {m: {t for t in _imports(p, m) if t in modules and t != m} for m, p in modules.items()}
+    for m, targets in graph.items():
+        if m.startswith("opal_diffraction.core"):
+            assert not any(t.startswith("opal_diffraction.blender") for t in targets), m
+    # depth-first search for a back edge; a submodule importing from its own package's
+    # __init__ (``from . import x``) is not a cycle between concepts
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(m):
+        state[m] = 1
+        stack.append(m)
+        for t in sorted(graph[m]):
+            if state.get(t) == 1 and not m.startswith(t + "."):
+                raise AssertionError("import cycle: " + " -> ".join(stack[stack.index(t):] + [t]))
+            if t not in state:
+                visit(t)
+        stack.pop()
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m)
