@@ -73,7 +73,7 @@ def caster_objects(vertices, triangles, mask) -> CasterObjects:
         return CasterObjects(np.zeros((0, 3)), np.zeros(0))
     v = np.asarray(vertices, np.float64)
     pts = v[t]  # (T, 3, 3)
-    extent = max(float(np.ptp(pts.reshape(-1, 3), axis=0).max()), 1e-9)
+    extent = float(np.ptp(pts.reshape(-1, 3), axis=0).max()) or max(float(np.abs(pts).max()), 1e-30)
     # weld: vertices that share a position (to 1e-6 of the extent) are one node
     keys = np.round(pts.reshape(-1, 3) / (extent * 1e-6)).astype(np.int64)
     _, node = np.unique(keys, axis=0, return_inverse=True)
@@ -96,7 +96,7 @@ def caster_objects(vertices, triangles, mask) -> CasterObjects:
         p = pts[tri_label == c].reshape(-1, 3)
         lo, hi = p.min(axis=0), p.max(axis=0)
         centre[c] = 0.5 * (lo + hi)
-        radius[c] = np.sqrt(np.max(np.sum((p - centre[c]) ** 2, axis=1))) * (1 + 1e-6) + 1e-9
+        radius[c] = np.sqrt(np.max(np.sum((p - centre[c]) ** 2, axis=1))) * (1 + 1e-6) + 1e-9 * extent
     return CasterObjects(centre, radius)
 
 
@@ -369,7 +369,9 @@ def _emit(prepared, li: int, b: int, rng):
         cp = obj.centre - (obj.centre @ d)[:, None] * d
         dist2 = np.sum((pts[:, None, :] - cp[None, :, :]) ** 2, axis=2)
         pdf = np.sum(np.where(dist2 <= obj.radius**2, prob / area, 0.0), axis=1)
-        far = 4.0 * (np.max(np.abs(prepared.scene.vertices)) + 1.0)
+        # start well outside the scene, in its own units (an absolute distance would swamp a
+        # millimetre scene's coordinates in float32)
+        far = 4.0 * (np.max(np.abs(prepared.scene.vertices)) + prepared.extent)
         o = pts - far * d
         return o, np.broadcast_to(d, (b, 3)).copy(), np.where(pdf > 0, 1.0 / np.maximum(pdf, 1e-300), 0.0)
     if k in (POINT, SPOT):
@@ -401,4 +403,4 @@ def _emit(prepared, li: int, b: int, rng):
     cos_l = d @ lights.direction[li]
     # radiance (in the spectrum) * cos * area / pdf(direction)   (pdf of the point: 1 / area)
     weight = np.where(cos_l > 0, cos_l * lights.area[li] / np.maximum(pdf, 1e-300), 0.0)
-    return origin + 1e-7 * d, d, weight
+    return origin + prepared.offset_base * d, d, weight

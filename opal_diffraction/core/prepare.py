@@ -35,7 +35,7 @@ from .scene import Camera, Scene
 from .settings import EYE_ONLY_SETTINGS, RenderSettings
 from .spectrum import SpectralConverter, WavelengthGrid
 
-__all__ = ["PreparedScene", "prepare", "OFFSET_RELATIVE"]
+__all__ = ["PreparedScene", "prepare", "scene_extent", "OFFSET_RELATIVE"]
 
 #: Self-intersection offset: this fraction of the scene's extent, plus float32 rounding of each
 #: triangle's coordinates.
@@ -76,6 +76,7 @@ class PreparedScene:
     tri_grating_tangent: np.ndarray    # (T, 3) float32 unit grating vectors; (0, 3) without gratings
     tri_period: np.ndarray             # (T,) float32 nm per-triangle period override (0: the material's), or (0,)
     world_spectrum: np.ndarray         # (n,) float32 radiance of the world
+    extent: float                      # metres: the scene's size (prepare.scene_extent)
     offset_base: float                 # metres: the scene-scaled part of the offsets
     light_targets: LightTargets        # what the light pass aims at and who receives
     warnings: tuple[str, ...]          # from validation (dropped triangles, ...)
@@ -98,6 +99,16 @@ class PreparedScene:
         if eye_settings:
             settings.validate()
         return replace(self, scene=scene, settings=settings)
+
+
+def scene_extent(v: np.ndarray) -> float:
+    """The scene's size (m): the longest side of its bounding box, or its distance from the
+    origin for a flat point, 1 for an empty scene. Epsilons scale with it, so a scene renders
+    the same at 1e-9 m and at 1e9 m."""
+    if len(v) == 0:
+        return 1.0
+    extent = float(np.max(np.ptp(v, axis=0)))
+    return extent if extent > 0 else max(float(np.max(np.abs(v))), 1e-30)
 
 
 def triangle_offsets(v: np.ndarray, t: np.ndarray, base: float) -> np.ndarray:
@@ -160,12 +171,12 @@ def prepare(scene: Scene, settings: RenderSettings | None = None, conv: Spectral
                      and _same_geometry(reuse.scene, scene))
     if same_geometry:
         accel, nrm64, tri_normal = reuse.accel, None, reuse.tri_normal
-        tri_offset, base = reuse.tri_offset, reuse.offset_base
+        tri_offset, base, extent = reuse.tri_offset, reuse.offset_base, reuse.extent
     else:
         nrm64 = triangle_normals(v, t)
         tri_normal = nrm64.astype(np.float32)
-        extent = float(np.max(np.ptp(v, axis=0))) if len(v) else 1.0
-        base = OFFSET_RELATIVE * max(extent, 1e-3)
+        extent = scene_extent(v)
+        base = OFFSET_RELATIVE * extent
         tri_offset = triangle_offsets(v, t, base)
         # the passes parallelise over tiles and light-pass lanes with the whole budget, so the
         # caster itself runs on one thread (no pools nested inside pools)
@@ -196,6 +207,7 @@ def prepare(scene: Scene, settings: RenderSettings | None = None, conv: Spectral
         tri_grating_tangent=tri_grating_tangent,
         tri_period=np.asarray(scene.tri_period, np.float32).reshape(-1),
         world_spectrum=conv.illuminant_from_rgb(np.asarray(scene.world_color, np.float64)).astype(np.float32),
+        extent=extent,
         offset_base=base,
         light_targets=targets,
         warnings=tuple(warnings),
