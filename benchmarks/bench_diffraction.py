@@ -1,4 +1,5 @@
-"""Benchmark (not a test): the paper's Fig. 5 grating scene, error against wall time.
+"""Benchmark (not a test): the source paper's Fig. 5 grating scene (Kobayashi & Kawai,
+docs/physics.md), error against wall time.
 
 For slit counts N = 10, 1000 and 1e5, renders the scene at several samples per pixel and
 wavelength steps and compares with a reference image: 1 nm wavelength bins (each bin already

@@ -1,8 +1,9 @@
 """Diffraction grating examples, rendered with the core (no Blender needed).
 
-- ``fig5``: the source paper's Fig. 5 set-up: a transmission grating (period 1.6 um) between a
-  point light at 10 degrees incidence and the camera; the camera sees the zeroth order (the
-  light through the grating) and the spectra of the orders beside it.
+- ``fig5``: the source paper's (Kobayashi & Kawai, docs/physics.md) Fig. 5 set-up: a
+  transmission grating (period 1.6 um) between a point light at 10 degrees incidence and the
+  camera; the camera sees the zeroth order (the light through the grating) and the spectra of
+  the orders beside it.
 - ``cd``: a compact disc (track pitch 1.6 um, circular grooves, so the grating vector is radial)
   under a point light: the rainbow arcs of the first orders.
 

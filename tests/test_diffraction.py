@@ -1,4 +1,4 @@
-"""The Fraunhofer grating kernel against independent numbers (physics.md section 3)."""
+"""The Fraunhofer grating kernel against independent numbers (docs/physics.md section 3)."""
 
 import numpy as np
 import pytest

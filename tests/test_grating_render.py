@@ -1,7 +1,8 @@
-"""Gratings through the whole renderer: the paper's Fig. 5 set-up (a transmission grating between
-a point light at 10 degrees incidence and the camera), compared with the grating equation and
-with a brute-force evaluation of the Fraunhofer formula (fine wavelength quadrature of the point
-kernel, itself checked against phasor sums in test_diffraction.py)."""
+"""Gratings through the whole renderer: the source paper's (Kobayashi & Kawai, docs/physics.md)
+Fig. 5 set-up (a transmission grating between a point light at 10 degrees incidence and the
+camera), compared with the grating equation and with a brute-force evaluation of the Fraunhofer
+formula (fine wavelength quadrature of the point kernel, itself checked against phasor sums in
+test_diffraction.py); docs/physics.md section 3.9."""
 
 import numpy as np
 import pytest
@@ -64,6 +65,8 @@ def brute_force_row(ctx, bin_index):
     lam = np.linspace(lo, hi, 4001)
     p = fraunhofer_pattern(u[:, None], v[:, None], lam[None, :], A, D, N, L_UM * 1e3)
     mean = np.trapz(p / (lam * 1e-9) ** 2, lam, axis=1) / (hi - lo)
+    # the code's radiance factor, with its 1/cos(theta_o): a known deviation from docs/physics.md
+    # section 3.2; this reference changes together with the code
     factor = (A * 1e-9) ** 2 * (L_UM * 1e-6) * N / ((D * 1e-9) * cos_o)
     intensity = 1.0  # W/sr: power 4 pi
     return intensity * e_geo * factor * mean * ctx.lights.spectrum[0, bin_index]

@@ -1,4 +1,4 @@
-"""The light pass (physics.md section 4): caustic flux against closed forms."""
+"""The light pass (docs/physics.md section 4): caustic flux against closed forms."""
 
 import numpy as np
 import pytest

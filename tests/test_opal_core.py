@@ -1,4 +1,4 @@
-"""The opal model without Blender: Bragg law (physics.md section 5), cabochon mesh, Voronoi
+"""The opal model without Blender: Bragg law (docs/physics.md section 5.3), cabochon mesh, Voronoi
 grating domains, editing functions and preview colours (opal_diffraction.core.opal)."""
 
 from __future__ import annotations

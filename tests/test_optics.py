@@ -1,4 +1,5 @@
-"""Fresnel, Snell and dispersion against closed forms and physics.md's table (section 2)."""
+"""Fresnel, Snell and dispersion against closed forms and the table of docs/physics.md
+section 2.1."""
 
 import numpy as np
 import pytest
@@ -56,7 +57,7 @@ def test_snell_vector_form(theta, n1, n2, phi):
         assert abs(np.cross(d[0], nrm[0]) @ t[0]) < 1e-9
 
 
-TABLE = {  # physics.md section 2: n_d, V_d, n(400), n(550), n(700)
+TABLE = {  # docs/physics.md section 2.1: n_d, V_d, n(400), n(550), n(700)
     "BK7": (1.51680, 64.17, 1.53085, 1.51852, 1.51306),
     "FUSED_SILICA": (1.45846, 67.82, 1.47012, 1.45991, 1.45529),
     "DIAMOND": (2.41749, 55.3, 2.46413, 2.42295, 2.40624),

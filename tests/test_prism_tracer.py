@@ -1,4 +1,5 @@
-"""Dispersion through the tracer: a 60-degree N-BK7 prism's minimum deviation (physics.md s2).
+"""Dispersion through the tracer: a 60-degree N-BK7 prism's minimum deviation
+(docs/physics.md section 2.5).
 
 Rays are traced by the eye pass's own transport code (Fresnel choice, Snell per wavelength,
 the acceleration structure), not by the formula alone.

@@ -1,4 +1,4 @@
-"""Whole renders checked against closed-form radiometry (physics.md section 1).
+"""Whole renders checked against closed-form radiometry (docs/physics.md sections 1.5 and 7).
 
 Light units are Cycles': a white point light of power P has intensity P / (4 pi) W/sr, a sun of
 strength S gives S W/m^2 on a facing surface, an area light of power P has radiance P / (pi A).

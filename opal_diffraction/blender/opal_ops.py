@@ -12,7 +12,8 @@ Mode), call it, and write the per-face attributes back:
 They are ordinary mesh attributes, so they survive save/load, modifiers and undo, and the
 exporter reads direction and period when the material's grating direction is 'Face Attribute'.
 Every operator is REGISTER/UNDO with a redo panel; Edit Mode operators change the selected
-faces only (Merge Domains: the whole domains of the selected faces).
+faces only (Merge Domains: the whole domains of the selected faces). The 'Aligned' direction
+mode is the source paper's model (Kobayashi & Kawai, docs/physics.md section 5.1).
 """
 
 from __future__ import annotations

@@ -6,11 +6,13 @@ with the direction and period read from the per-face attributes the opal tools w
 (``grating_direction = 'ATTRIBUTE'``; the material's period is the fall-back for faces without
 one). Each preset also names the domain layout that suits it, which Add Opal uses:
 
-- Paper model: the source paper's opal, every triangle one grating, all oriented consistently
-  (the object's X axis projected onto each face), one period; parallel slits.
+- Paper model: the source paper's opal (Kobayashi & Kawai, docs/physics.md section 5.1), every
+  triangle one grating, all oriented consistently (the object's X axis projected onto each
+  face), one period; parallel slits.
 - Precious opal: a milky body under domains of a hexagonal lattice (the close-packed silica
   spheres seen from the (111) face), periods from sphere diameters of 200-330 nm through the
-  Bragg law (physics.md section 5); few coherent rows (24), so each lit domain flashes one
+  Bragg law (docs/physics.md section 5.2; air voids, and see section 5.5 for the hexagonal
+  lattice's first orders); few coherent rows (24), so each lit domain flashes one
   colour over a broad range of angles.
 - Black opal: the same lattice over a near-black body (dark potch), the most saturated colours.
 - Crystal opal: the same lattice on a transparent body (glass, IOR 1.45).

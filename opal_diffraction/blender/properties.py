@@ -1,14 +1,17 @@
 """Render and material settings: ``scene.opal`` and ``material.opal``.
 
-The names are the Blender-facing contract (architecture.md, "Blender-facing contract"): users'
-scripts and saved .blend files rely on them, so they never change. Every EnumProperty item has
-an explicit, stable index, so a file saved today still loads after items are added (the values
-are stored as those numbers). Dispersion indices equal the core's ``DISPERSION_MODELS`` codes.
+The names are the Blender-facing contract (every one is listed in docs/blender.md, "Settings",
+and the README's "In Blender"): users' scripts and saved .blend files rely on them, so they
+never change. Every EnumProperty item has an explicit, stable index, so a file saved today still
+loads after items are added (the values are stored as those numbers). Dispersion indices equal
+the core's ``DISPERSION_MODELS`` codes.
 
 Base colour, metallic, roughness, transmission and IOR are not duplicated here: they come from
 the material's shader nodes (Principled, Diffuse, Glossy, Glass BSDF, Emission), so existing
 scenes render without conversion. ``material.opal`` holds only what Blender has no slot for:
-dispersion and the diffraction grating.
+dispersion and the diffraction grating. "The source paper" in the item descriptions is
+Kobayashi & Kawai (docs/physics.md); SPLIT and SAMPLE are described in docs/physics.md
+section 2.4.
 """
 
 from __future__ import annotations

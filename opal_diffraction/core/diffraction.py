@@ -2,7 +2,8 @@
 
 Source: scalar Fraunhofer diffraction of N slits of width a and period D (e.g. Born & Wolf,
 *Principles of Optics*, 7th ed., 1999, section 8.6.1; Hecht, *Optics*, 5th ed., 2017, section
-10.2.3), with the paper's notation for the renderer (physics.md section 3). With
+10.2.3), with the source paper's notation for the renderer (Kobayashi & Kawai; docs/physics.md
+section 3.1). With
 
     u = (w_o + w_i) . t,   v = (w_o + w_i) . s,
     xi = pi a u / lambda,  eta = pi D u / lambda,  zeta = pi L v / lambda,
@@ -15,7 +16,7 @@ The source paper prints (sin N eta / eta)^2; that is a misprint for (sin N eta /
 is what the N-slit integral gives (tests compare it with a brute-force sum of N phasors). We do
 not reproduce the misprint.
 
-Numerics (physics.md section 3, "each has bitten someone"):
+Numerics (docs/physics.md sections 3.6 and 3.8, "each has bitten someone"):
 - [sin(N eta) / (N sin eta)]^2 has period pi in eta; we reduce eta_r = eta - pi round(eta / pi) in
   float64 first and switch to a series where N eta_r is tiny, so eta = m pi gives exactly 1
   (the naive ratio gives 0.0104 for N = 50 in float64, 0.752 for N = 6000 in float32).
@@ -172,7 +173,7 @@ def sinc2_mean(x0, x1) -> np.ndarray:
 
 
 def fraunhofer_pattern(u, v, wavelength, a, d, n, length) -> np.ndarray:
-    """P(u, v, lambda) at points (physics.md section 3); lengths in one unit (e.g. nm)."""
+    """P(u, v, lambda) at points (docs/physics.md section 3.1); lengths in one unit (e.g. nm)."""
     lam = np.asarray(wavelength, np.float64)
     u = np.asarray(u, np.float64)
     v = np.asarray(v, np.float64)
@@ -226,7 +227,10 @@ def fraunhofer_pattern_binned(u, v, edges, a, d, n, length, subdivisions: int = 
 
 
 def grating_radiance_factor(wavelength, a, d, n, length, cos_theta_o) -> np.ndarray:
-    """a^2 L N / (lambda^2 D cos(theta_o)): L_o = E_i * factor * P (physics.md section 3).
+    """a^2 L N / (lambda^2 D cos(theta_o)): L_o = E_i * factor * P.
+
+    Known deviation (docs/physics.md section 3.2): the specification has no 1/cos(theta_o) here
+    (it breaks energy conservation); tracked by the [diffraction] issue.
 
     Lengths in metres give radiance per unit irradiance in 1/sr. cos(theta_o) is clamped below
     at 1e-3 so grazing exits stay finite (the pattern itself vanishes there for physical orders).

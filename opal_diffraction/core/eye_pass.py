@@ -1,8 +1,9 @@
 """The eye pass: camera rays, direct light at diffuse hits, caustics and diffraction, specular
 recursion and dispersion (the transport itself is transport.SpecularWalker).
 
-The source paper's eye pass (physics.md section 4.2). At a diffuse (two-sided Lambertian) hit:
-direct light by shadow rays plus the caustic irradiance of the light pass's illumination map;
+The source paper's eye pass (Kobayashi & Kawai; docs/physics.md section 4.2). At a diffuse
+(two-sided Lambertian) hit: direct light by shadow rays plus the caustic irradiance of the light
+pass's illumination map;
 at a grating, the diffraction of every light that reaches it (gratings.py); at an emitter, its
 radiance; at mirrors and glass the path goes on. Every tile writes three films: what diffuse
 surfaces reflect (Direct and Caustics), emitted light seen (world, emitters), and diffraction.

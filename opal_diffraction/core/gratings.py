@@ -1,13 +1,16 @@
 """Diffraction gratings at surface hits: the grating frame and the diffracted radiance of a light.
 
-The model is the source paper's (physics.md section 3): a patch of N slits (period D, width a,
-length L) under spectral irradiance E_i(lambda) from direction w_i sends, towards w_o,
+The model is the source paper's (Kobayashi & Kawai; docs/physics.md section 3): a patch of N
+slits (period D, width a, length L) under spectral irradiance E_i(lambda) from direction w_i
+sends, towards w_o,
 
     L_o(lambda) = E_i(lambda) * a^2 L N / (lambda^2 D cos theta_o) * P(u, v, lambda),
     u = (w_o + w_i) . t,  v = (w_o + w_i) . s,  s = n x t,
 
 with P the normalised Fraunhofer pattern of ``diffraction.py``, averaged over each wavelength
 bin in closed form (so orders narrower than a bin are neither missed nor flickering).
+Known deviation: the specification's radiance has no 1/cos theta_o (docs/physics.md section
+3.2, tracked by the [diffraction] issue); the factors below still have it.
 
 A HEXAGONAL lattice (opal-like) is the product of two N-slit factors along t and t rotated by
 60 degrees, with the Airy envelope of disk apertures of diameter a: P = [2 J1(x)/x]^2 *
@@ -16,11 +19,13 @@ is A^2 N^2 / (lambda^2 A_cell cos theta_o) with A = pi a^2 / 4 and A_cell = (sqr
 (the same Fraunhofer normalisation as the slits: the pattern integrates to the power through
 the openings). The product of two sharp factors has no closed-form bin average, so each bin
 takes one stratified random wavelength per sample: unbiased, it converges with the samples
-per pixel (the LINES case is exact per sample).
+per pixel (the LINES case is exact per sample). Its first orders sit at
+|q| = 2 lambda / (sqrt 3 D) (docs/physics.md section 3.4).
 
 A reflection grating diffracts light arriving on the viewer's side, a transmission grating light
 arriving from the other side; the grating is layered on the base material, whose own response
-(diffuse, glass, ...) is computed as usual.
+(diffuse, glass, ...) is computed as usual (known deviation: docs/physics.md section 3.3 takes
+the diffracted power from the base instead).
 """
 
 from __future__ import annotations

@@ -1,14 +1,15 @@
 """The light pass: paths from the lights through mirrors and glass, deposited as caustics.
 
-The source paper's bidirectional half (physics.md section 4.1): light paths carry the whole
-spectrum from each light, are aimed at the objects that can bend light (mirrors and dielectrics:
-the *casters*), follow specular reflection and refraction with Fresnel, dispersion and Russian
-roulette (transport.SpecularWalker), and where a path that has been specular at least once lands
-on a diffuse surface its spectral flux is added to that surface element of the illumination map
-(elements.py). Where such a path reaches a grating, the grating's element records the incoming
-spectral flux and the direction it came from, for the eye pass to diffract. Direct light stays
-the eye pass's job, so a path that reaches a diffuse surface or grating first deposits nothing:
-no double counting.
+The source paper's bidirectional half (Kobayashi & Kawai; docs/physics.md section 4.1): light
+paths carry the whole spectrum from each light, are aimed at the objects that can bend light
+(mirrors and dielectrics: the *casters*), follow specular reflection and refraction with
+Fresnel, dispersion and Russian roulette (transport.SpecularWalker), and where a path that has
+been specular at least once lands on a diffuse surface its spectral flux is added to that
+surface element of the illumination map (elements.py). Where such a path reaches a grating, the
+grating's element records the incoming spectral flux and the direction it came from, for the eye
+pass to diffract (one flux-weighted mean direction per element: a known deviation,
+docs/physics.md section 3.5). Direct light stays the eye pass's job, so a path that reaches a
+diffuse surface or grating first deposits nothing: no double counting.
 
 Aiming (unbiased): casters are grouped into connected objects with bounding spheres. From a
 point or spot light, or a point sampled on an area light, a direction is drawn in the cone that

@@ -1,6 +1,6 @@
 """Light sources: emission spectra in Cycles' units and direct-lighting samples.
 
-Units (the contract the Blender layer matches against Cycles, physics.md section 1):
+Units (the contract the Blender layer matches against Cycles, docs/physics.md section 1.5):
 - point / spot of power P (W): radiant intensity I = P / (4 pi) W/sr times the light's
   Y-normalised spectrum; a spot is the same point light masked by a smoothstep cone
   (Blender's ``spot_size`` full angle and ``spot_blend``);

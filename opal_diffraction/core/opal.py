@@ -1,9 +1,9 @@
 """The opal model: a cabochon mesh and grating domains over a surface, as NumPy on mesh arrays.
 
-Sources. The source paper's model puts one diffraction grating on every triangle of the opal
-mesh, all oriented consistently (physics.md section 5). Real precious opal shows patches
-("domains") of differently oriented and spaced silica-sphere lattices, the "harlequin" look; a
-domain model gives it: Voronoi cells over the surface, each with its own grating direction and
+Sources. The source paper's model (Kobayashi & Kawai; docs/physics.md section 5.1) puts one
+diffraction grating on every triangle of the opal mesh, all oriented consistently. Real precious
+opal shows patches ("domains") of differently oriented and spaced silica-sphere lattices, the
+"harlequin" look; a domain model gives it: Voronoi cells over the surface, each with its own grating direction and
 period. The periods come from the silica sphere diameter through the Bragg law of the FCC
 (111) planes (Sanders, "Colour of precious opal", Nature 204, 1964, doi:10.1038/2041151a0):
 
@@ -16,6 +16,8 @@ is the *equivalent* grating period ``period_from_sphere_diameter``: the Bragg wa
 normal incidence, which the grating's first order sends where |u| = |(w_o + w_i) . t| = 1
 (light and viewer about 30 degrees either side of the normal, across the slits). Spheres of
 150-350 nm give periods of 330-770 nm: colour from violet to red, one order at a time.
+(That relation is the LINES grating's; a HEXAGONAL lattice's first orders sit at
+|q| = 2 lambda / (sqrt 3 D): a known deviation, docs/physics.md section 5.5.)
 
 Everything here is a pure function on arrays (no bpy), so the Blender operators are thin
 wrappers and the tests call the logic directly. A surface is given as vertices (V, 3) and
@@ -66,10 +68,11 @@ __all__ = [
     "preview_colors",
 ]
 
-#: Refractive index of the silica spheres and of the voids (air) between them (physics.md 5).
+#: Refractive index of the silica spheres and of the voids (air) between them
+#: (docs/physics.md section 5.3).
 N_SILICA = 1.45
 N_VOID = 1.0
-#: Diameters of the silica spheres of precious opal, nm (physics.md 5).
+#: Diameters of the silica spheres of precious opal, nm (docs/physics.md section 5.2).
 SPHERE_DIAMETER_RANGE = (150.0, 350.0)
 #: Volume fraction of the spheres in an FCC packing (0.74) and of the voids (0.26).
 _FILL = 0.74

@@ -5,8 +5,9 @@
 - Fresnel equations for an unpolarised wave at a dielectric interface (ibid., section 9.3.3):
   R = (R_s + R_p) / 2, total internal reflection when sin(theta_t) > 1.
 - Sellmeier's equation n^2 = 1 + sum B_k lambda^2 / (lambda^2 - C_k), lambda in micrometres, with the
-  coefficients of physics.md section 2: SCHOTT N-BK7 (SCHOTT data sheet), fused silica (Malitson,
-  I. H. 1965, JOSA 55(10), doi:10.1364/JOSA.55.001205), diamond (Peter, F. 1923, Z. Physik 15).
+  coefficients of docs/physics.md section 2.1: SCHOTT N-BK7 (SCHOTT data sheet), fused silica
+  (Malitson, I. H. 1965, JOSA 55(10), doi:10.1364/JOSA.55.001205), diamond (Peter, F. 1923,
+  Z. Physik 15).
 - Cauchy's n = A + B / lambda^2 fitted to an artist's IOR n_d (587.56 nm) and Abbe number V_d, with
   the Fraunhofer F (486.13 nm) and C (656.27 nm) lines.
 
@@ -38,7 +39,7 @@ LAMBDA_D = 587.56  # nm, helium d line
 LAMBDA_F = 486.13  # nm, hydrogen F line
 LAMBDA_C = 656.27  # nm, hydrogen C line
 
-#: Sellmeier coefficients (B1..B3, C1..C3 in um^2) of physics.md section 2.
+#: Sellmeier coefficients (B1..B3, C1..C3 in um^2) of docs/physics.md section 2.1.
 SELLMEIER_PRESETS: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {
     "BK7": ((1.03961212, 0.231792344, 1.01046945), (0.00600069867, 0.0200179144, 103.560653)),
     "FUSED_SILICA": ((0.6961663, 0.4079426, 0.8974794), (0.0684043**2, 0.1162414**2, 9.896161**2)),

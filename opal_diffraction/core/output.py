@@ -4,7 +4,7 @@ The spectral layout is Fichet, Pacanowski & Wilkie (2021), "An OpenEXR Layout fo
 Images", JCGT 10(3): one channel per wavelength named ``S0.<nm with a comma>nm`` (emissive
 Stokes component 0), the header attributes ``spectralLayoutVersion`` and ``emissiveUnits``, plus
 R, G, B for ordinary viewers. Channels are passed contiguous: OpenEXR 3.5's binding silently
-writes wrong pixels from strided views (architecture.md, "Facts checked here that bite").
+writes wrong pixels from strided views (checked with openexr 3.5.3: docs/physics.md section 10.3).
 Every file is written to a temporary name in the same folder and renamed, so an interrupted
 write never leaves a truncated image behind.
 """

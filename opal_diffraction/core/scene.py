@@ -88,7 +88,7 @@ class Materials:
     emission: emitted radiance as linear RGB (Cycles' units: Emission colour x strength; a white
     emitter of strength 1 has the radiance of the world colour (1, 1, 1)), both sides, any kind.
 
-    Grating layer (physics.md section 3), on top of the base kind: grating (0/1), grating_type
+    Grating layer (docs/physics.md section 3), on top of the base kind: grating (0/1), grating_type
     (GRATING_TYPES), lattice (LATTICES), period D (nm), slit_width a (nm), slit_count N,
     coherence_length L (um, the slits' length), grating_direction (GRATING_DIRECTIONS: how the
     exporter found the per-triangle tangent in ``Scene.tri_tangent``), rotation (radians, about

@@ -12,14 +12,15 @@ Everything tabulated comes from colour-science (Mansencal et al., colour-science
 
 Units. A film value is a spectral radiance sample in "Y-normalised" units: a light of RGB colour
 (1, 1, 1) emits ``e_white(lambda) = D65(lambda) / Y(D65)``, whose Y is exactly 1. Thus one
-"watt" of a white light is one unit of Y, which is Cycles' RGB convention (physics.md section 1).
+"watt" of a white light is one unit of Y, which is Cycles' RGB convention (docs/physics.md
+section 1.5).
 
 Grid points are bin centres: sample i stands for the bin [lambda_i - step/2, lambda_i + step/2].
 The colour-matching weights are the CMFs integrated over each bin (not point samples), so that a
 film holding bin averages (the diffraction kernel returns those) converts to XYZ without bias
-even at 20 nm steps. Truncation to 400-700 nm loses a little of X, Y, Z (physics.md section 1);
-a per-channel white balance on the final matrix makes a flat reflector under white light
-exactly neutral instead of slightly yellow.
+even at 20 nm steps. Truncation to 400-700 nm loses a little of X, Y, Z (docs/physics.md
+section 1.3); a per-channel white balance on the final matrix makes a flat reflector under
+white light exactly neutral instead of slightly yellow.
 """
 
 from __future__ import annotations

@@ -103,7 +103,7 @@ def light(kind: str, location, power: float, rotation=(0, 0, 0), **props):
 def lit_plane_scene(light_kind: str, pixels: int = 32, engine: str = ENGINE, **light_props):
     """A grey (albedo 0.5) diffuse 6 m square seen from above by an orthographic camera that frames
     its central 4 m (so pixel-filter samples past the frame still land on the plane), lit by one
-    light of the given kind (physics.md section 1)."""
+    light of the given kind (docs/physics.md section 1.5)."""
     sc = empty_scene(pixels, pixels, engine)
     plane(half=3.0, mat=material("grey", "DIFFUSE", (0.5, 0.5, 0.5)))
     camera(location=(0, 0, 5), ortho_scale=4.0)

@@ -1,5 +1,6 @@
 """Light units against Cycles: the same .blend rendered by Cycles and by OPAL_DIFFRACTION in the
-same bpy session must agree within 3 % in mean over the lit area (issue 3; physics.md section 1).
+same bpy session must agree within 3 % in mean over the lit area (issue 3; docs/physics.md
+section 1.5).
 
 The scene: a grey (albedo 0.5) Diffuse BSDF plane seen from above by an orthographic camera, one
 light, no world light. Both renders are written as float EXR and read back.
@@ -51,7 +52,8 @@ def test_lit_plane_matches_cycles(case, tmp_path):
 
 
 def test_point_light_matches_the_analytic_value(tmp_path):
-    """Y = rho / pi * I cos / r^2 with I = P / (4 pi): the convention physics.md measured."""
+    """Y = rho / pi * I cos / r^2 with I = P / (4 pi): the convention of docs/physics.md
+    section 1.5."""
     bs.lit_plane_scene("POINT")
     img = bs.render_to_array(str(tmp_path / "opal.exr"), bs.ENGINE, samples=16)
     n = img.shape[0]
