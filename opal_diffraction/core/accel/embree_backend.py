@@ -15,7 +15,7 @@ Facts about embreex 4.4.0.post1 this wrapper relies on (checked on this version)
   from ``o + nudge*d``; ``occluded`` casts every ray from ``o + nudge*d`` (with tmax reduced
   accordingly).  Hits closer than a few ulps of |origin| are therefore ignored by Embree
   (the NumPy backend keeps any ``t > 0``); callers must offset origins anyway.
-- OCCLUDED accepts ``t <= tfar``; we pass ``nextafter(tmax, 0)`` to get ``t < tmax``.
+- OCCLUDED accepts ``t <= tfar``; we pass ``(tmax - nudge) * (1 - 2**-21)`` to get ``t < tmax``.
 - Output ``u``/``v`` follow the Embree convention used by the interface; ``Ng`` is ignored.
 - The mesh is copied into Embree's own buffers (float32 vertices, uint32 indices); primIDs
   are indices into the triangles array in input order.
