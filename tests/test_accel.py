@@ -232,6 +232,22 @@ def test_random_soup(backend):
     check_occluded(acc, V, F, o, d, rng.uniform(0.05, 3.0, len(o)).astype(np.float32))
 
 
+@pytest.mark.skipif(not HAVE_EMBREE, reason="embreex not installed")
+def test_embree_mesh_split_into_geometries_maps_back_to_our_triangles(monkeypatch):
+    """A big mesh goes to Embree as several geometries (so a cancel poll can run between them):
+    hits must name our triangle indices exactly as with one geometry."""
+    from opal_diffraction.core.accel import embree_backend
+
+    monkeypatch.setattr(embree_backend, "_GEOMETRY_CHUNK", 37)
+    rng = np.random.default_rng(4)
+    V, F = soup(rng, 300)
+    acc = build_accelerator(V, F, "embree")
+    assert len(acc._geom_start) == -(-300 // 37)
+    o, d = random_rays(rng, 3000, V.min(0), V.max(0))
+    check_closest(acc, V, F, o, d)
+    check_occluded(acc, V, F, o, d, rng.uniform(0.05, 3.0, len(o)).astype(np.float32))
+
+
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 80), scale=st.sampled_from([1e-2, 1.0, 300.0]),
        size=st.sampled_from([0.02, 0.3, 2.0]), backend=st.sampled_from(["numpy", "embree"] if HAVE_EMBREE else ["numpy"]))

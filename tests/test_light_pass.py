@@ -243,5 +243,8 @@ def test_a_too_fine_element_size_is_coarsened_with_a_warning():
 
 
 def test_cancel_during_the_light_pass_stops_the_render():
-    res = render(slab_scene(), RenderSettings(samples=4, light_paths=2_000_000), should_cancel=lambda: True)
+    messages = []  # Esc once the light pass has begun (its first progress report)
+    res = render(slab_scene(), RenderSettings(samples=4, light_paths=2_000_000),
+                 progress=lambda f, m: messages.append(m),
+                 should_cancel=lambda: any(m.startswith("light pass") for m in messages))
     assert res.cancelled and res.stats.get("cancelled") and res.stats["light_paths"] < 2_000_000

@@ -164,3 +164,31 @@ def test_numpy_bvh_backend_renders_the_same_image_as_embree():
     close = np.isclose(a, b, rtol=1e-3, atol=1e-4).all(axis=2)
     assert close.mean() > 0.97
     assert abs(a.mean() - b.mean()) < 0.01 * a.mean()
+
+
+def test_time_limit_is_honoured_inside_the_light_pass_and_inside_a_round():
+    """A 1 s limit with 20 M light paths (about a minute of work) and one huge round: the render
+    stops within the limit's latency, says so, and its image is finite and lit."""
+    mats = Materials.from_list([{"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)},
+                                {"kind": "DIELECTRIC", "ior": 1.5, "color": (1, 1, 1)}])
+    s = Scene(materials=mats)
+    s.add_mesh(*primitives.quad((0, 0, 0), (8, 0, 0), (0, 8, 0)), material=0)
+    s.add_mesh(*primitives.box((0, 0, 1.0), (1.0, 1.0, 0.5)), material=1)
+    s.lights = Lights.from_list([{"kind": "POINT", "position": (0, 0, 4), "power": 500.0}])
+    s.camera = Camera.look_at((0, -5, 3), (0, 0, 0), width=64, height=64)
+    res = render(s, RenderSettings(samples=4096, round_samples=4096, light_paths=20_000_000, time_limit=1.0,
+                                   threads=2))
+    assert res.stats["light_paths"] < 20_000_000
+    assert any("time limit reached during the light pass" in w for w in res.warnings)
+    assert any("time limit reached after" in w for w in res.warnings)
+    assert 1 <= res.samples < 4096 and not res.cancelled
+    assert np.isfinite(res.spectral).all() and res.rgb.mean() > 0
+
+
+def test_cancel_while_preparing_returns_a_cancelled_black_image():
+    s = Scene(materials=Materials.from_list([{"kind": "DIFFUSE"}]))
+    s.add_mesh(*primitives.quad((0, 0, 0), (1, 0, 0), (0, 1, 0)), material=0)
+    s.camera = Camera.look_at((0, -2, 2), (0, 0, 0), width=8, height=6)
+    res = render(s, RenderSettings(samples=4), should_cancel=lambda: True)
+    assert res.cancelled and res.samples == 0 and res.rgb.shape == (6, 8, 3) and not res.rgb.any()
+    assert "cancelled while preparing the scene" in res.warnings

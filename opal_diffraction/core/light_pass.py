@@ -50,6 +50,7 @@ MAX_OBJECTS = 64
 RR_START_DEPTH = 3
 RR_SURVIVAL = 0.8
 LANES = 2  # fixed partial maps (so the result does not depend on the thread count)
+POLL_S = 0.1  # seconds between progress, cancel and time-limit checks
 
 
 @dataclass(frozen=True)
@@ -62,9 +63,11 @@ class CasterObjects:
 
 
 def caster_objects(vertices, triangles, mask) -> CasterObjects:
-    """Bounding spheres of the connected groups of caster triangles (welded by position).
+    """Bounding spheres of the connected groups of caster triangles (sharing vertex indices).
 
-    More than MAX_OBJECTS groups are merged on a coarse spatial grid so the mixture stays cheap.
+    Linear in the triangles (connected components of the vertex graph); a mesh whose pieces do
+    not share vertices simply makes more, tighter groups. More than MAX_OBJECTS groups are merged
+    on a coarse spatial grid so the mixture stays cheap.
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -73,31 +76,29 @@ def caster_objects(vertices, triangles, mask) -> CasterObjects:
     if len(t) == 0:
         return CasterObjects(np.zeros((0, 3)), np.zeros(0))
     v = np.asarray(vertices, np.float64)
-    pts = v[t]  # (T, 3, 3)
-    extent = float(np.ptp(pts.reshape(-1, 3), axis=0).max()) or max(float(np.abs(pts).max()), 1e-30)
-    # weld: vertices that share a position (to 1e-6 of the extent) are one node
-    keys = np.round(pts.reshape(-1, 3) / (extent * 1e-6)).astype(np.int64)
-    _, node = np.unique(keys, axis=0, return_inverse=True)
+    used, node = np.unique(t.ravel(), return_inverse=True)  # compact the vertex ids of the casters
     node = node.reshape(-1, 3)
-    n_nodes = int(node.max()) + 1
+    pts = v[used]
+    extent = float(np.ptp(pts, axis=0).max()) or max(float(np.abs(pts).max()), 1e-30)
+    n_nodes = len(used)
     rows = np.concatenate([node[:, 0], node[:, 1]])
     cols = np.concatenate([node[:, 1], node[:, 2]])
-    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_nodes, n_nodes))
+    graph = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(n_nodes, n_nodes))
     n_comp, label = connected_components(graph, directed=False)
-    tri_label = label[node[:, 0]]
     if n_comp > MAX_OBJECTS:  # many separate pieces: group them by a spatial grid instead
-        cent = pts.mean(axis=1)
-        cells = np.floor((cent - cent.min(axis=0)) / (extent / 4 + 1e-12)).astype(np.int64)
-        _, tri_label = np.unique(cells, axis=0, return_inverse=True)
-        tri_label = tri_label.ravel()
-        n_comp = int(tri_label.max()) + 1
-    centre = np.zeros((n_comp, 3))
-    radius = np.zeros(n_comp)
-    for c in range(n_comp):  # loop over objects (<= 64), not triangles
-        p = pts[tri_label == c].reshape(-1, 3)
-        lo, hi = p.min(axis=0), p.max(axis=0)
-        centre[c] = 0.5 * (lo + hi)
-        radius[c] = np.sqrt(np.max(np.sum((p - centre[c]) ** 2, axis=1))) * (1 + 1e-6) + 1e-9 * extent
+        cells = np.floor((pts - pts.min(axis=0)) / (extent / 4 + 1e-12 * extent)).astype(np.int64)
+        key = (cells[:, 0] * 5 + cells[:, 1]) * 5 + cells[:, 2]  # cells are 0..4 per axis
+        _, label = np.unique(key, return_inverse=True)
+        n_comp = int(label.max()) + 1
+    # per-group bounding box centre and radius, over the group's vertices (O(V) per pass)
+    lo = np.full((n_comp, 3), np.inf)
+    hi = np.full((n_comp, 3), -np.inf)
+    np.minimum.at(lo, label, pts)
+    np.maximum.at(hi, label, pts)
+    centre = 0.5 * (lo + hi)
+    d2 = np.zeros(n_comp)
+    np.maximum.at(d2, label, np.sum((pts - centre[label]) ** 2, axis=1))
+    radius = np.sqrt(d2) * (1 + 1e-6) + 1e-9 * extent
     return CasterObjects(centre, radius)
 
 
@@ -272,13 +273,17 @@ def element_layout(prepared, n_paths: int, mask) -> tuple[ElementLayout, str]:
         target *= 2.0
 
 
-def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_cancel=None) -> LightPassResult:
+def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_cancel=None,
+                   deadline: float | None = None) -> LightPassResult:
     """Run the light pass over ``prepared`` (``n_paths``: default the settings' light paths).
 
     The batches are dealt to LANES fixed lanes (batch j to lane j % LANES), each with its own
     maps, run on up to ``prepared.threads`` threads and summed in lane order at the end, so the
     result does not depend on the number of threads. ``progress`` and ``should_cancel`` are
-    called from the calling thread only.
+    called from the calling thread only (every POLL_S seconds at most; a lane stops at its next
+    batch). ``deadline``: a ``time.perf_counter()`` time; the pass stops there and scales what it
+    deposited by planned / traced paths (batches of all lights are interleaved, so an early stop
+    has traced every light in about the same proportion), with a warning.
     """
     t0 = time.perf_counter()
     n_paths = int(prepared.settings.light_paths if n_paths is None else n_paths)
@@ -290,6 +295,9 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
     paths_per_light = np.floor(share * n_paths).astype(np.int64)
     jobs = [(li, bi, start, int(n_l)) for li, n_l in enumerate(paths_per_light)
             for bi, start in enumerate(range(0, int(n_l), BATCH_PATHS))]
+    # interleave the lights' batches (by how far into its own light each batch is), so a pass
+    # stopped early has sampled every light alike
+    jobs.sort(key=lambda j: (j[2] / max(j[3], 1), j[0]))
     total = int(paths_per_light.sum())
     lanes = [jobs[k::LANES] for k in range(LANES)]
     maps = [(IlluminationMap.empty(layout, grid_n),
@@ -321,10 +329,11 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
             c["rays"] += tr._rays
 
     threads = max(1, min(LANES, prepared.threads))
+    timed_out = False
     with ThreadPoolExecutor(max_workers=threads) as pool:
         futures = [pool.submit(run_lane, k) for k in range(LANES)]
         while True:
-            done_set, pending = wait(futures, timeout=0.2)
+            done_set, pending = wait(futures, timeout=POLL_S)
             done = sum(c["paths"] for c in counts)
             if progress:
                 progress(done / max(total, 1), f"light pass: {done / 1e6:.2f} M of {total / 1e6:.2f} M paths")
@@ -333,6 +342,9 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
             if should_cancel and should_cancel():
                 stop.set()
                 cancelled = True
+            if deadline is not None and time.perf_counter() > deadline and not stop.is_set():
+                stop.set()
+                timed_out = True
         for f in futures:
             f.result()  # re-raise a worker's exception here
     illum, records = maps[0]
@@ -340,13 +352,23 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
         illum += extra_illum
         if records is not None:
             records += extra_records
-    stats = {"light_paths": sum(c["paths"] for c in counts), "light_deposits": sum(c["deposits"] for c in counts),
+    traced = sum(c["paths"] for c in counts)
+    warnings = [warning] if warning else []
+    if timed_out and not cancelled:
+        if traced and traced < total:
+            scale = np.float32(total / traced)
+            illum.flux *= scale
+            if records is not None:
+                records.flux *= scale
+                records.direction *= scale
+        warnings.append(f"time limit reached during the light pass: caustics from {traced / 1e6:.2f} M of "
+                        f"{total / 1e6:.2f} M light paths")
+    stats = {"light_paths": traced, "light_deposits": sum(c["deposits"] for c in counts),
              "light_rays": sum(c["rays"] for c in counts), "elements": layout.total,
              "light_pass_s": time.perf_counter() - t0}
     if cancelled:
         stats["cancelled"] = True
-    return LightPassResult(illum, records, MappingProxyType(stats), (warning,) if warning else (), cancelled,
-                           prepared.key)
+    return LightPassResult(illum, records, MappingProxyType(stats), tuple(warnings), cancelled, prepared.key)
 
 
 def _emit(prepared, li: int, b: int, rng):

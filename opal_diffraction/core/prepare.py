@@ -26,6 +26,7 @@ from dataclasses import dataclass, fields, is_dataclass, replace
 import numpy as np
 
 from .accel import build_accelerator, default_threads
+from .cancel import run_cancellable
 from .geometry import triangle_normals
 from .gratings import PreparedGratings, prepare_gratings, triangle_tangents
 from .light_pass import LightTargets, find_light_targets
@@ -143,7 +144,7 @@ def _light_pass_settings(s: RenderSettings) -> dict:
 
 
 def prepare(scene: Scene, settings: RenderSettings | None = None, conv: SpectralConverter | None = None,
-            reuse: PreparedScene | None = None) -> PreparedScene:
+            reuse: PreparedScene | None = None, should_cancel=None) -> PreparedScene:
     """Validate ``scene`` and ``settings`` (SceneError with a readable message) and prepare them.
 
     ``conv``: a SpectralConverter for the same grid to reuse (it is the slow part for tiny scenes).
@@ -151,7 +152,12 @@ def prepare(scene: Scene, settings: RenderSettings | None = None, conv: Spectral
     only on unchanged inputs is taken from it (the acceleration structure and triangle frames
     when the geometry is the same, the spectra when the grid is), and when nothing the light pass
     reads has changed the result keeps its ``key``, so the earlier light-pass result stays valid.
+    ``should_cancel()``: polled every cancel.POLL_S while preparing; raises cancel.RenderCancelled.
     """
+    return run_cancellable(lambda: _prepare(scene, settings, conv, reuse), should_cancel)
+
+
+def _prepare(scene, settings, conv, reuse) -> PreparedScene:
     t0 = time.perf_counter()
     settings = settings or RenderSettings()
     settings.validate()

@@ -23,17 +23,20 @@ import numpy as np
 
 from .camera import FilterSampler, generate_rays, pixel_samples
 from .eye_pass import EyePass
+from .cancel import RenderCancelled
 from .film import Film, RenderResult
 from .light_pass import LightPassResult, run_light_pass
-from .plan import plan_render
+from .plan import RenderPlan, plan_render
 from .prepare import PreparedScene, prepare
 from .scene import Scene, SceneError
 from .settings import RenderSettings
+from .spectrum import SpectralConverter
 
 __all__ = ["RenderResult", "render", "render_prepared"]
 
 EYE_PASS_STREAM = 1  # stream ids keep the passes' random numbers independent
 LIGHT_PASS_SHARE = 0.25  # of the progress bar, when the light pass runs
+MAX_TILE_RAYS = 1 << 18  # camera rays of one tile in one round (bounds memory and time-limit latency)
 
 
 class _Inline:
@@ -47,6 +50,13 @@ class _Inline:
 
     def cancel(self):
         pass
+
+
+def round_size(settings: RenderSettings) -> int:
+    """Samples per pixel per round: the setting, capped so one tile's round casts at most
+    MAX_TILE_RAYS camera rays (a round is the unit of memory and of time-limit checks)."""
+    tile_pixels = int(settings.tile_size) ** 2
+    return max(1, min(int(settings.round_samples), MAX_TILE_RAYS // tile_pixels))
 
 
 def _tiles(width: int, height: int, size: int, region):
@@ -81,8 +91,20 @@ def render(
     result then has shape (y1 - y0, x1 - x0).
     """
     t_start = time.perf_counter()
-    prepared = prepare(scene, settings)
+    try:
+        prepared = prepare(scene, settings, should_cancel=should_cancel)
+    except RenderCancelled:
+        return _cancelled_before_start(scene, settings or RenderSettings(), region)
     return render_prepared(prepared, None, progress, should_cancel, on_round, region, started_at=t_start)
+
+
+def _cancelled_before_start(scene: Scene, settings: RenderSettings, region) -> RenderResult:
+    """The (black, zero-sample) result of a render cancelled while it was being prepared."""
+    cam = scene.camera
+    x0, y0, x1, y1 = region if region is not None else (0, 0, int(cam.width), int(cam.height))
+    film = Film(x1 - x0, y1 - y0, SpectralConverter(settings.grid()))
+    plan = RenderPlan(eye_pass=False, notes=("cancelled while preparing the scene",))
+    return film.result(plan, True, ["cancelled while preparing the scene"], {"rays": 0})
 
 
 def render_prepared(
@@ -112,9 +134,10 @@ def render_prepared(
     stats = {"rays": 0, "prepare_s": prepared.prepare_s, "backend": prepared.accel.name,
              "triangles": len(prepared.scene.triangles)}
 
+    deadline = t_start + settings.time_limit if settings.time_limit else None
     if plan.light_pass and light is None:
         lp_progress = (lambda f, m: progress(LIGHT_PASS_SHARE * f, m)) if progress else None
-        light = run_light_pass(prepared, None, lp_progress, should_cancel)
+        light = run_light_pass(prepared, None, lp_progress, should_cancel, deadline)
     elif not plan.light_pass:
         light = None
     if light is not None:
@@ -125,12 +148,12 @@ def render_prepared(
     t_eye = time.perf_counter()
 
     spp = int(settings.samples)
-    rounds = [min(settings.round_samples, spp - s) for s in range(0, spp, settings.round_samples)]
+    per_round = round_size(settings)
+    rounds = [min(per_round, spp - s) for s in range(0, spp, per_round)]
     tiles = _tiles(int(cam.width), int(cam.height), int(settings.tile_size), (rx0, ry0, rx1, ry1))
     filt = FilterSampler(settings.filter_width)
     eye = EyePass(prepared, light)
     threads = prepared.threads
-    done_samples = 0
     total_work = len(rounds) * len(tiles)
 
     def run_tile(r_index, r_spp, t_index):
@@ -146,16 +169,17 @@ def render_prepared(
         return film.result(plan, cancelled, warnings, stats)
 
     work_done = 0
+    stop = "cancel" if cancelled else ""  # why the rounds ended early: "cancel" or "time"
     with ThreadPoolExecutor(max_workers=threads) as pool:
         for r_index, r_spp in enumerate(rounds):
-            if cancelled:
+            if stop:
                 break
             if threads > 1:
                 pending = [pool.submit(run_tile, r_index, r_spp, ti) for ti in range(len(tiles))]
             else:  # in the calling thread: simpler to profile and debug
                 pending = [_Inline(run_tile, r_index, r_spp, ti) for ti in range(len(tiles))]
             for fut in pending:
-                if cancelled:
+                if stop:
                     fut.cancel()
                     continue
                 t_index, res = fut.result()
@@ -168,15 +192,21 @@ def render_prepared(
                     progress(base + (1 - base) * work_done / total_work,
                              f"eye pass: round {r_index + 1}/{len(rounds)}, {stats['rays'] / 1e6:.1f} M rays")
                 if should_cancel and should_cancel():
-                    cancelled = True
-            if cancelled:
-                break  # tiles finished in this round keep their extra samples (counts say so)
-            done_samples += r_spp
-            if on_round:
-                on_round(finish())
-            if settings.time_limit and time.perf_counter() - t_start > settings.time_limit and r_index + 1 < len(rounds):
-                warnings.append(f"time limit reached after {done_samples} of {spp} samples per pixel")
+                    stop = "cancel"
+                # the time limit ends a round between tiles too, once every pixel has a sample
+                elif deadline is not None and r_index > 0 and time.perf_counter() > deadline:
+                    stop = "time"
+            # tiles finished in an interrupted round keep their extra samples (counts say so)
+            if not stop:
+                if on_round:
+                    on_round(finish())
+                if r_index + 1 < len(rounds) and deadline is not None and time.perf_counter() > deadline:
+                    stop = "time"
+            if stop:
                 break
+    cancelled = stop == "cancel"
+    if stop == "time":
+        warnings.append(f"time limit reached after {int(film.counts.min())} of {spp} samples per pixel")
     stats["render_s"] = time.perf_counter() - t_start
     stats["mrays_per_s"] = stats["rays"] / max(time.perf_counter() - t_eye + stats.get("light_pass_s", 0.0), 1e-9) / 1e6
     return finish()

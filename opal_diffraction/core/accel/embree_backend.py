@@ -29,6 +29,7 @@ import numpy as np
 from . import Hits, _as_rays, _as_tmax, _empty_hits, default_threads
 
 _CHUNK = 1 << 16       # rays per embree call
+_GEOMETRY_CHUNK = 1 << 18  # triangles per Embree geometry when a mesh is split
 _NUDGE = 2.0 ** -21     # relative (to max |origin coordinate|) start offset (~4 float32 ulps)
 
 
@@ -51,12 +52,33 @@ class EmbreeAccelerator:
         self.threads = default_threads() if threads is None else max(1, int(threads))
         self._pool = None
         self._scene = None
+        # first triangle of each Embree geometry (geomID), to map (geomID, primID) to our index
+        self._geom_start = np.zeros(1, np.int64)
         if self.n_triangles:
             self._scene = rtcs.EmbreeScene()
-            TriangleMesh(self._scene, np.ascontiguousarray(vertices, np.float32),
-                         np.ascontiguousarray(triangles, np.int32))
+            v = np.ascontiguousarray(vertices, np.float32)
+            t = np.ascontiguousarray(triangles, np.int32)
+            if len(t) <= _GEOMETRY_CHUNK:
+                TriangleMesh(self._scene, v, t)
+            else:
+                # embreex copies a mesh in a loop that holds the GIL (~1.5 us per triangle): add
+                # the mesh as several geometries of one scene (one BVH over all of them), so a
+                # cancel poll can run between the pieces
+                starts = np.arange(0, len(t), _GEOMETRY_CHUNK)
+                for s in starts:
+                    piece = t[s:s + _GEOMETRY_CHUNK]
+                    used, local = np.unique(piece, return_inverse=True)
+                    TriangleMesh(self._scene, v[used], local.reshape(-1, 3).astype(np.int32))
+                self._geom_start = starts.astype(np.int64)
             # Commit now, single-threaded (embreex commits lazily without a lock).
             self._scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))
+
+    def _prim_index(self, r) -> np.ndarray:
+        """Our triangle index of Embree's hits (-1 for misses)."""
+        if len(self._geom_start) == 1:
+            return r["primID"]
+        geom = r["geomID"]
+        return np.where(geom >= 0, self._geom_start[np.maximum(geom, 0)] + r["primID"], -1).astype(np.int32)
 
     # -- threading ------------------------------------------------------------------------
     def _map(self, fn, n):
@@ -91,7 +113,7 @@ class EmbreeAccelerator:
         def work(sl):
             r = scene.run(o[sl], d[sl], dists=tm[sl].copy(), query="INTERSECT", output=1)
             t[sl] = r["tfar"]
-            prim[sl] = r["primID"]
+            prim[sl] = self._prim_index(r)
             u[sl] = r["u"]
             v[sl] = r["v"]
 
@@ -106,7 +128,7 @@ class EmbreeAccelerator:
             r = scene.run(oc, np.ascontiguousarray(d[close]),
                           dists=(tm[close] - nud[close]).astype(np.float32), query="INTERSECT", output=1)
             t[close] = r["tfar"] + nud[close]
-            prim[close] = r["primID"]
+            prim[close] = self._prim_index(r)
             u[close] = r["u"]
             v[close] = r["v"]
         miss = prim < 0
