@@ -26,7 +26,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProp
 from bpy_extras import object_utils
 
 from ..core import opal as core_opal
-from .export import GRATING_ATTRIBUTE, PERIOD_ATTRIBUTE
+from .mesh_io import GRATING_ATTRIBUTE, PERIOD_ATTRIBUTE, attribute_ok, foreach
 from .opal_presets import PRESET_ITEMS, PRESETS, new_opal_material
 
 __all__ = [
@@ -69,17 +69,6 @@ class FaceData:
                                      np.zeros(self.n_faces, np.float32))
 
 
-def _foreach(coll, attr: str, n: int, dtype, width: int = 1) -> np.ndarray:
-    a = np.empty(n * width, dtype)
-    if n:
-        coll.foreach_get(attr, a)
-    return a.reshape(n, width) if width > 1 else a
-
-
-def _attr_ok(attr, data_type: str, domain: str = "FACE") -> bool:
-    return attr is not None and attr.data_type == data_type and attr.domain == domain
-
-
 def read_faces(ob) -> FaceData:
     """Snapshot of ``ob``'s mesh faces (Edit Mode: the edit mesh, through bmesh)."""
     me = ob.data
@@ -87,16 +76,16 @@ def read_faces(ob) -> FaceData:
         return _read_bmesh(bmesh.from_edit_mesh(me))
     me.calc_loop_triangles()
     nv, nt, nf = len(me.vertices), len(me.loop_triangles), len(me.polygons)
-    verts = _foreach(me.vertices, "co", nv, np.float32, 3)
-    tris = _foreach(me.loop_triangles, "vertices", nt, np.int32, 3)
-    tri_face = _foreach(me.loop_triangle_polygons, "value", nt, np.int32)
-    sel = _foreach(me.polygons, "select", nf, bool)
+    verts = foreach(me.vertices, "co", nv, np.float32, 3)
+    tris = foreach(me.loop_triangles, "vertices", nt, np.int32, 3)
+    tri_face = foreach(me.loop_triangle_polygons, "value", nt, np.int32)
+    sel = foreach(me.polygons, "select", nf, bool)
     field = None
     a_dir, a_per, a_dom = (me.attributes.get(n) for n, _ in _ATTRS)
-    if _attr_ok(a_dir, "FLOAT_VECTOR"):
-        direction = _foreach(a_dir.data, "vector", nf, np.float32, 3)
-        period = _foreach(a_per.data, "value", nf, np.float32) if _attr_ok(a_per, "FLOAT") else np.zeros(nf, np.float32)
-        domain = _foreach(a_dom.data, "value", nf, np.int32) if _attr_ok(a_dom, "INT") else np.zeros(nf, np.int32)
+    if attribute_ok(a_dir, "FLOAT_VECTOR"):
+        direction = foreach(a_dir.data, "vector", nf, np.float32, 3)
+        period = foreach(a_per.data, "value", nf, np.float32) if attribute_ok(a_per, "FLOAT") else np.zeros(nf, np.float32)
+        domain = foreach(a_dom.data, "value", nf, np.int32) if attribute_ok(a_dom, "INT") else np.zeros(nf, np.int32)
         field = core_opal.DomainField(domain, direction, period)
     active = me.polygons.active if 0 <= me.polygons.active < nf else None
     return FaceData(verts, tris, tri_face, nf, sel, field, active)
@@ -158,7 +147,7 @@ def _write_mesh(me, field, normals) -> None:
     nf = len(me.polygons)
     for name, dtype in _ATTRS:
         a = me.attributes.get(name)
-        if a is not None and not _attr_ok(a, dtype):
+        if a is not None and not attribute_ok(a, dtype):
             me.attributes.remove(a)
             a = None
         if a is None:
@@ -168,13 +157,13 @@ def _write_mesh(me, field, normals) -> None:
     me.attributes[DOMAIN_ATTRIBUTE].data.foreach_set("value", np.ascontiguousarray(field.domain, np.int32))
     if normals is not None:
         col = me.color_attributes.get(PREVIEW_ATTRIBUTE)
-        if col is not None and not _attr_ok(col, "FLOAT_COLOR", "CORNER"):
+        if col is not None and not attribute_ok(col, "FLOAT_COLOR", "CORNER"):
             me.color_attributes.remove(col)
             col = None
         if col is None:
             col = me.color_attributes.new(PREVIEW_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
         rgba = _preview_colors(field, normals)
-        starts = _foreach(me.polygons, "loop_start", nf, np.int32)
+        starts = foreach(me.polygons, "loop_start", nf, np.int32)
         order = np.argsort(starts, kind="stable")
         loop_face = order[np.searchsorted(starts[order], np.arange(len(me.loops)), side="right") - 1]
         col.data.foreach_set("color", np.ascontiguousarray(rgba[loop_face], np.float32).ravel())
