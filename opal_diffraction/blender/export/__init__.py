@@ -19,14 +19,16 @@ One module per concept, as in BlendLuxCore's ``export`` package:
 
     colour     working space <-> Rec.709, blackbody colours, image averages
     nodes      shader node trees -> the core's surfaces
-    materials  the material table
-    meshes     meshes, tangents, periods, instances -> arrays
-    lights     the light table
-    world      the background colour
-    camera     render size, border region, the camera
+    materials  the material table (export_materials)
+    meshes     meshes, tangents, periods, instances -> arrays; the MeshCache
+    lights     the light table (export_lights)
+    world      the background colour (export_world)
+    camera     render size, border region, the camera (export_camera)
     messages   the warnings, once each
 
-:func:`export_scene` here puts them together.
+:func:`export_scene` here puts them together. A rendered viewport passes a persistent
+:class:`MeshCache` (invalidated from ``depsgraph.updates``) so a re-export reads only the meshes
+whose geometry changed, or calls the per-concept functions alone.
 """
 
 from __future__ import annotations
@@ -39,13 +41,13 @@ import numpy as np
 
 from ...core.scene import Lights, Scene
 from ..mesh_io import GRATING_ATTRIBUTE, PERIOD_ATTRIBUTE
-from .camera import camera_from_object, render_region, render_size
+from .camera import export_camera, render_region, render_size
 from .colour import rec709_to_working_space, working_space_to_rec709
-from .lights import LightRows
-from .materials import MaterialTable
-from .meshes import GEOMETRY_TYPES, UNSUPPORTED_GEOMETRY, SceneMeshes, flatten
+from .lights import LightRows, export_lights
+from .materials import MaterialTable, export_materials
+from .meshes import GEOMETRY_TYPES, UNSUPPORTED_GEOMETRY, MeshCache, SceneMeshes, flatten
 from .messages import Warnings
-from .world import world_color
+from .world import export_world
 
 __all__ = [
     "ExportCancelled",
@@ -57,6 +59,12 @@ __all__ = [
     "rec709_to_working_space",
     "GRATING_ATTRIBUTE",
     "PERIOD_ATTRIBUTE",
+    "MeshCache",
+    "Warnings",
+    "export_lights",
+    "export_materials",
+    "export_world",
+    "export_camera",
 ]
 
 #: How often (in object instances) export polls test_break.
@@ -75,14 +83,16 @@ class ExportResult:
 
 
 def export_scene(depsgraph, *, width: int | None = None, height: int | None = None, camera=None,
-                 test_break=None, progress=None) -> ExportResult:
+                 test_break=None, progress=None, mesh_cache: MeshCache | None = None) -> ExportResult:
     """Export the evaluated ``depsgraph`` to a core Scene.
 
     ``width``/``height`` default to the scene's resolution times its percentage; ``camera``
     (an object) overrides the scene camera. ``test_break()`` is polled every few dozen object
     instances (raise ExportCancelled when it returns True); ``progress(message)`` receives a
-    status line now and then. Raises SceneError with a readable message for input that
-    cannot be rendered (NaN coordinates, a panoramic camera, ...).
+    status line now and then. ``mesh_cache``: a :class:`MeshCache` kept between exports of this
+    depsgraph, so that only meshes it does not hold (or that :meth:`MeshCache.invalidate`
+    dropped) are read; None reads every mesh. Raises SceneError with a readable message for
+    input that cannot be rendered (NaN coordinates, a panoramic camera, ...).
     """
     t0 = time.perf_counter()
     warn = Warnings()
@@ -91,7 +101,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     if width is None or height is None:
         width, height = render_size(scene)
     materials = MaterialTable(warn, to709)
-    meshes = SceneMeshes()
+    meshes = SceneMeshes(mesh_cache)
     groups: dict = defaultdict(list)  # (mesh key, material tuple) -> matrices
     lights = LightRows(warn, to709)
     skipped: dict[str, int] = defaultdict(int)
@@ -129,17 +139,14 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     for kind, count in skipped.items():
         warn(f"{count} {kind} object(s) are not supported and were skipped")
     core_materials = materials.finish()
-    cam_ob = camera if camera is not None else scene.camera
-    cam = None
-    if cam_ob is not None:
-        cam_eval = cam_ob.evaluated_get(depsgraph) if not cam_ob.is_evaluated else cam_ob
-        cam = camera_from_object(cam_eval, width, height, scene, warn)
-    world = np.clip(world_color(scene.world, warn, to709), 0.0, None).astype(np.float32)
+    cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn)
+    world = export_world(depsgraph, warn)
     core_scene = Scene(
         vertices=vertices, triangles=triangles, tri_material=tri_material,
         materials=core_materials, lights=Lights.from_list(lights.rows), camera=cam,
         world_color=world, tri_tangent=tri_tangent, tri_period=tri_period,
     )
+    meshes.done()
     stats = {
         "export_s": time.perf_counter() - t0, "objects": n_instances, "meshes": len(meshes),
         "triangles": len(triangles), "vertices": len(vertices), "lights": len(lights.rows),

@@ -12,8 +12,9 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.scene import Camera, SceneError
+from .messages import Warnings
 
-__all__ = ["render_size", "render_region", "camera_from_object"]
+__all__ = ["render_size", "render_region", "camera_from_object", "export_camera"]
 
 
 def render_size(scene) -> tuple[int, int]:
@@ -60,3 +61,17 @@ def camera_from_object(cam_ob, width: int, height: int, scene, warn) -> Camera:
         shift_x=float(cam.shift_x), shift_y=float(cam.shift_y), width=int(width), height=int(height),
     )
 
+
+def export_camera(depsgraph, *, width: int | None = None, height: int | None = None, camera=None,
+                  warn: Warnings | None = None) -> Camera | None:
+    """The core camera alone, as :func:`export_scene` makes it: ``camera`` (an object) or the
+    scene's, for ``width`` x ``height`` (default :func:`render_size`); None without a camera.
+    ``warn``: collects the warnings (default: dropped)."""
+    scene = depsgraph.scene
+    if width is None or height is None:
+        width, height = render_size(scene)
+    cam_ob = camera if camera is not None else scene.camera
+    if cam_ob is None:
+        return None
+    cam_eval = cam_ob.evaluated_get(depsgraph) if not cam_ob.is_evaluated else cam_ob
+    return camera_from_object(cam_eval, width, height, scene, warn if warn is not None else Warnings())

@@ -14,12 +14,12 @@ import math
 
 import numpy as np
 
-from ...core.scene import SceneError
-from .colour import blackbody_rgb, in_rec709, rgb
+from ...core.scene import Lights, SceneError
+from .colour import blackbody_rgb, in_rec709, rgb, working_space_to_rec709
 from .messages import Warnings
 from .nodes import NodeReader, surface_socket
 
-__all__ = ["light_color", "light_row", "LightRows"]
+__all__ = ["light_color", "light_row", "LightRows", "export_lights"]
 
 
 def light_color(light, warn, to709) -> tuple[np.ndarray, float, float]:
@@ -129,3 +129,13 @@ class LightRows:
             names = ", ".join(f"'{n}'" for n in self.soft[:3]) + (" ..." if len(self.soft) > 3 else "")
             self.warn(f"light radius and sun angle are not rendered yet: {names} cast hard shadows")
 
+
+def export_lights(depsgraph, warn: Warnings | None = None) -> Lights:
+    """The core's light table alone, as :func:`export_scene` makes it. ``warn``: collects the
+    warnings (default: dropped)."""
+    lights = LightRows(warn if warn is not None else Warnings(), working_space_to_rec709())
+    for inst in depsgraph.object_instances:
+        if inst.object.type == "LIGHT":
+            lights.add(inst.object, inst.matrix_world)
+    lights.warn_soft()
+    return Lights.from_list(lights.rows)

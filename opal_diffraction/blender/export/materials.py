@@ -12,11 +12,12 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.scene import Materials, SceneError
-from .colour import in_rec709, rgb
+from .colour import in_rec709, rgb, working_space_to_rec709
 from .messages import Warnings
+from .meshes import is_surface_instance
 from .nodes import ROUGH_AS_DIFFUSE, NodeReader, Surface, node_tree, surface_socket
 
-__all__ = ["DEFAULT_MATERIAL", "MaterialTable"]
+__all__ = ["DEFAULT_MATERIAL", "MaterialTable", "export_materials"]
 
 #: Blender's default surface (no material, or an empty slot): grey diffuse, as in Cycles.
 DEFAULT_MATERIAL = {"name": "(default surface)", "kind": "DIFFUSE", "color": (0.8, 0.8, 0.8)}
@@ -100,3 +101,13 @@ class MaterialTable:
         return row, grating
 
 
+
+def export_materials(depsgraph, warn: Warnings | None = None) -> Materials:
+    """The core's material table alone, row for row the one :func:`export_scene` makes (the same
+    instance order, so a cached scene's ``tri_material`` still indexes it). ``warn``: collects the
+    warnings (default: dropped)."""
+    table = MaterialTable(warn if warn is not None else Warnings(), working_space_to_rec709())
+    for inst in depsgraph.object_instances:
+        if is_surface_instance(inst):
+            table.slots(inst.object)
+    return table.finish()

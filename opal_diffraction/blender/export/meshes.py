@@ -8,10 +8,16 @@ mirrored instances get their winding flipped. Grating faces also get an object-s
 vector (:func:`tangents`: the UV map's U direction, the local X axis or the opal tools' face
 attribute) and, where the mesh has the period attribute, a per-triangle period
 (:func:`periods`).
+
+:class:`MeshCache` keeps the meshes read between exports of one depsgraph (a rendered viewport
+re-exports after every change), dropping those whose geometry changed
+(:meth:`MeshCache.invalidate` with ``depsgraph.updates``); transforms, materials and lights are
+re-read on every export.
 """
 
 from __future__ import annotations
 
+from collections import defaultdict
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +36,7 @@ __all__ = [
     "tangents",
     "periods",
     "transform",
+    "MeshCache",
     "SceneMeshes",
     "flatten",
 ]
@@ -176,13 +183,90 @@ def mesh_for(ob, otype: str, want_uv: bool) -> MeshData | None:
     return md
 
 
-# ============================================================================ the meshes of one export
-class SceneMeshes:
-    """The distinct meshes of one export, each read once: a mesh object's by its evaluated data,
-    which linked duplicates and instances share; other geometry (curves, text, metaballs) by object."""
+# ============================================================================ the cache
+@dataclass
+class _Entry:
+    mesh: MeshData | None
+    want_uv: bool
+    data_name: str            # the object's original data (what a Mesh / Curve update names)
+    eval_name: str            # the evaluated data's name (a modifier stack's result is "Mesh")
+    size: tuple[int, int] | None  # MESH: (vertices, faces) of the data it was read from
+
+
+def _data_names(ob) -> tuple[str, str]:
+    data = ob.data
+    original = getattr(getattr(ob, "original", None), "data", None)
+    return (original.name_full if original is not None else "", data.name_full if data is not None else "")
+
+
+class MeshCache:
+    """Meshes read by earlier exports of one depsgraph, kept until their geometry changes.
+
+    Pass the same cache to every :func:`export_scene` of one depsgraph (a rendered viewport's;
+    the final render's has other modifier levels), and call :meth:`invalidate` with the
+    depsgraph's updates before re-exporting. Evaluated data pointers change whenever Blender
+    re-evaluates, so an entry is keyed by the object's name and the mesh's place among that
+    object's distinct meshes in the export (0 but for geometry-nodes instances, which all carry
+    their instancer's name); it is used again only while the material slots ask for the same
+    data (UVs and attributes for gratings), the data's names are unchanged and, for a mesh, its
+    vertex and face counts match. ``reads`` counts the meshes read from Blender.
+    """
 
     def __init__(self):
+        self._entries: dict[tuple[str, int], _Entry] = {}
+        self.reads = 0
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def invalidate(self, updates) -> int:
+        """Drop the meshes whose geometry an update changed: ``updates`` is ``depsgraph.updates``
+        (read it while it is valid: in ``view_update`` or a ``depsgraph_update_post`` handler).
+        An Object with ``is_updated_geometry`` drops every mesh of that object; any other ID
+        (a Mesh, Curve, ...) every mesh read from data of that name. Returns how many were dropped."""
+        objects, data = set(), set()
+        for update in updates:
+            if not update.is_updated_geometry:
+                continue
+            idb = update.id
+            (objects if idb.id_type == "OBJECT" else data).add(idb.name_full)
+        drop = [k for k, e in self._entries.items() if k[0] in objects or e.data_name in data]
+        for k in drop:
+            del self._entries[k]
+        return len(drop)
+
+    def invalidate_all(self) -> None:
+        """Forget every mesh (after an undo, a file load, or a change of depsgraph)."""
+        self._entries.clear()
+
+    def _get(self, ob, otype: str, index: int, used: set) -> MeshData | None:
+        key = (ob.name_full, index)
+        used.add(key)
+        want_uv = wants_uv(ob)
+        data_name, eval_name = _data_names(ob)
+        data = ob.data
+        size = (len(data.vertices), len(data.polygons)) if otype == "MESH" and data is not None else None
+        e = self._entries.get(key)
+        if e is None or (e.want_uv, e.data_name, e.eval_name, e.size) != (want_uv, data_name, eval_name, size):
+            self.reads += 1
+            e = self._entries[key] = _Entry(mesh_for(ob, otype, want_uv), want_uv, data_name, eval_name, size)
+        return e.mesh
+
+    def _keep_only(self, used: set) -> None:
+        for k in [k for k in self._entries if k not in used]:  # deleted, renamed or hidden objects
+            del self._entries[k]
+
+
+class SceneMeshes:
+    """The distinct meshes of one export, each read once (or taken from a :class:`MeshCache`):
+    a mesh object's by its evaluated data, which linked duplicates and instances share; other
+    geometry (curves, text, metaballs) by object."""
+
+    def __init__(self, cache: MeshCache | None = None):
+        self.cache = cache if cache is not None else MeshCache()
         self.meshes: dict[tuple, MeshData | None] = {}
+        self._per_object: dict[str, int] = defaultdict(int)
+        self._used: set = set()
 
     def __len__(self) -> int:
         return len(self.meshes)
@@ -195,8 +279,14 @@ class SceneMeshes:
         data = ob.data
         mkey = ("data", data.as_pointer()) if (otype == "MESH" and data is not None) else ("obj", ob.name)
         if mkey not in self.meshes:
-            self.meshes[mkey] = mesh_for(ob, otype, wants_uv(ob))
+            index = self._per_object[ob.name_full]
+            self._per_object[ob.name_full] += 1
+            self.meshes[mkey] = self.cache._get(ob, otype, index, self._used)
         return mkey, self.meshes[mkey]
+
+    def done(self) -> None:
+        """The export finished: the cache forgets the meshes it did not use."""
+        self.cache._keep_only(self._used)
 
 
 # ============================================================================ instances -> arrays

@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .colour import in_rec709, rgb
+from .colour import in_rec709, rgb, working_space_to_rec709
+from .messages import Warnings
 from .nodes import NodeReader, node_tree, surface_socket
 
-__all__ = ["world_color"]
+__all__ = ["world_color", "export_world"]
 
 
 def world_color(world, warn, to709) -> np.ndarray:
@@ -35,3 +36,9 @@ def world_color(world, warn, to709) -> np.ndarray:
     warn(f"{owner}: world shader '{node.name}' is not supported: using the world colour as a uniform background")
     return in_rec709(rgb(world.color), to709)
 
+
+def export_world(depsgraph, warn: Warnings | None = None) -> np.ndarray:
+    """The core's ``Scene.world_color`` alone, (3,) float32, as :func:`export_scene` makes it.
+    ``warn``: collects the warnings (default: dropped)."""
+    world = world_color(depsgraph.scene.world, warn if warn is not None else Warnings(), working_space_to_rec709())
+    return np.clip(world, 0.0, None).astype(np.float32)
