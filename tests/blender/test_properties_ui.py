@@ -12,6 +12,7 @@ import pytest
 import blender_scenes as bs
 from opal_diffraction.blender import properties, ui
 from opal_diffraction.blender.engine import ENGINE_ID
+from opal_diffraction.core import enums
 from opal_diffraction.core.optics import DISPERSION_MODELS
 
 SCENE_CONTRACT = ["samples", "light_paths", "wavelength_min", "wavelength_max", "wavelength_step", "max_bounces",
@@ -65,6 +66,29 @@ def test_enum_items_have_stable_explicit_indices():
     for items in (properties.DISPERSION_ITEMS, properties.GRATING_TYPE_ITEMS, properties.LATTICE_ITEMS,
                   properties.GRATING_DIRECTION_ITEMS, properties.DISPERSION_SAMPLING_ITEMS, properties.BACKEND_ITEMS):
         assert all(len(it) == 4 and isinstance(it[3], int) for it in items)
+
+
+#: Every EnumProperty of scene.opal and material.opal, and the core enumeration whose codes it stores.
+ENUM_PROPERTIES = {
+    ("Scene", "dispersion_sampling"): enums.DispersionSampling,
+    ("Scene", "backend"): enums.Backend,
+    ("Material", "dispersion"): enums.DispersionModel,
+    ("Material", "grating_type"): enums.GratingType,
+    ("Material", "lattice"): enums.Lattice,
+    ("Material", "grating_direction"): enums.GratingDirection,
+}
+
+
+def test_every_enum_property_stores_a_core_enumeration():
+    """(identifier, index) of every item, in order, are the core enumeration's (name, code)."""
+    found = {}
+    for owner in ("Scene", "Material"):
+        for prop in getattr(bpy.types, owner).bl_rna.properties["opal"].fixed_type.properties:
+            if prop.type == "ENUM":
+                found[(owner, prop.identifier)] = [(i.identifier, i.value) for i in prop.enum_items]
+    assert found.keys() == ENUM_PROPERTIES.keys()
+    for key, enum in ENUM_PROPERTIES.items():
+        assert found[key] == [(m.name, int(m)) for m in enum], key
 
 
 def test_settings_survive_save_and_reload(tmp_path):
