@@ -5,18 +5,19 @@
     engine      the OPAL_DIFFRACTION render engine
     operators   export to .npz, dispersion presets
     opal_presets  opal material presets (Paper model, Precious, Black, Crystal opal)
-    opal_ops    Add Opal, grating domains, Edit Mode grating placement
+    opal        Add Opal, grating domains, Edit Mode grating placement (opal_ops: its former name)
+    mesh_io     mesh data -> NumPy, the face attributes the opal tools and the exporter share
     viewport    the engine's rendered viewport (progressive, drawn with the gpu module)
     ui          panels, and Blender's own panels enabled for the engine
 """
 
 from __future__ import annotations
 
-from . import engine, opal_ops, opal_presets, operators, properties, ui
+from . import engine, opal, opal_presets, operators, properties, ui
 
 __all__ = ["register", "unregister"]
 
-_modules = (properties, engine, operators, opal_presets, opal_ops, ui)
+_modules = (properties, engine, operators, opal_presets, opal, ui)
 
 
 def register():

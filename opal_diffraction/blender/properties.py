@@ -2,9 +2,10 @@
 
 The names are the Blender-facing contract (every one is listed in docs/blender.md, "Settings",
 and the README's "In Blender"): users' scripts and saved .blend files rely on them, so they
-never change. Every EnumProperty item has an explicit, stable index, so a file saved today still
-loads after items are added (the values are stored as those numbers). Dispersion indices equal
-the core's ``DISPERSION_MODELS`` codes.
+never change. Every EnumProperty item has
+an explicit, stable index, so a file saved today still loads after items are added (the values
+are stored as those numbers): the identifiers and indices are the members and codes of the
+core's enumerations (``core/enums.py``); only the names and tooltips are written here.
 
 Base colour, metallic, roughness, transmission and IOR are not duplicated here: they come from
 the material's shader nodes (Principled, Diffuse, Glossy, Glass BSDF, Emission), so existing
@@ -16,11 +17,13 @@ section 2.4.
 
 from __future__ import annotations
 
+from enum import IntEnum
+
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 from bpy.types import PropertyGroup
 
-from ..core.optics import DISPERSION_MODELS
+from ..core.enums import Backend, DispersionModel, DispersionSampling, GratingDirection, GratingType, Lattice
 
 __all__ = [
     "OpalRenderSettings",
@@ -39,49 +42,59 @@ _PATH_OPTIONS = ({"PATH_SUPPORTS_BLEND_RELATIVE"}
                  if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties else set())
 
 # ---------------------------------------------------------------------------- enum items
-#: (identifier, name, description, stable index); the index is what a .blend stores.
-DISPERSION_ITEMS = [
-    ("NONE", "None", "Constant index of refraction: the IOR of the material's BSDF node", DISPERSION_MODELS["NONE"]),
-    ("ABBE", "IOR + Abbe Number",
-     "Cauchy fit n = A + B/lambda^2 to the node's IOR (at 587.6 nm, the d line) and the Abbe number below; "
-     "a lower Abbe number spreads colours more", DISPERSION_MODELS["ABBE"]),
-    ("BK7", "Crown Glass (N-BK7)", "Sellmeier data of SCHOTT N-BK7 (n_d 1.5168, V_d 64.2); the node's IOR is ignored",
-     DISPERSION_MODELS["BK7"]),
-    ("FUSED_SILICA", "Fused Silica", "Sellmeier data of Malitson 1965 (n_d 1.4585, V_d 67.8); the node's IOR is ignored",
-     DISPERSION_MODELS["FUSED_SILICA"]),
-    ("DIAMOND", "Diamond", "Sellmeier data of Peter 1923 (n_d 2.4175, V_d 55.3); the node's IOR is ignored",
-     DISPERSION_MODELS["DIAMOND"]),
-]
+def _items(enum: type[IntEnum], labels: dict) -> list[tuple[str, str, str, int]]:
+    """EnumProperty items (identifier, name, description, stable index) of a core enumeration, in
+    code order: the identifier is the member's name and the index its code (what a .blend stores),
+    ``labels`` gives each member's (name, description)."""
+    if set(labels) != set(enum):
+        raise ValueError(f"{enum.__name__}: labels for {sorted(m.name for m in set(enum) ^ set(labels))} "
+                         "missing or extra")
+    return [(m.name, *labels[m], int(m)) for m in enum]
 
-DISPERSION_SAMPLING_ITEMS = [
-    ("SAMPLE", "Sample", "At a dispersive surface a ray continues with one wavelength picked at random "
-     "(hero-wavelength style): cheap per ray, converges with samples", 0),
-    ("SPLIT", "Split", "At a dispersive surface a ray splits into one ray per wavelength (the source paper's "
-     "method): no colour noise from dispersion, more rays", 1),
-]
 
-BACKEND_ITEMS = [
-    ("AUTO", "Automatic", "Embree where its wheel is installed, otherwise the NumPy BVH", 0),
-    ("EMBREE", "Embree", "Intel Embree through embreex (fastest; x86-64 only)", 1),
-    ("NUMPY", "NumPy", "The vectorised NumPy BVH (works everywhere)", 2),
-]
+DISPERSION_ITEMS = _items(DispersionModel, {
+    DispersionModel.NONE: ("None", "Constant index of refraction: the IOR of the material's BSDF node"),
+    DispersionModel.ABBE: ("IOR + Abbe Number",
+                           "Cauchy fit n = A + B/lambda^2 to the node's IOR (at 587.6 nm, the d line) and the Abbe "
+                           "number below; a lower Abbe number spreads colours more"),
+    DispersionModel.BK7: ("Crown Glass (N-BK7)",
+                          "Sellmeier data of SCHOTT N-BK7 (n_d 1.5168, V_d 64.2); the node's IOR is ignored"),
+    DispersionModel.FUSED_SILICA: ("Fused Silica",
+                                   "Sellmeier data of Malitson 1965 (n_d 1.4585, V_d 67.8); the node's IOR is ignored"),
+    DispersionModel.DIAMOND: ("Diamond",
+                              "Sellmeier data of Peter 1923 (n_d 2.4175, V_d 55.3); the node's IOR is ignored"),
+})
 
-GRATING_TYPE_ITEMS = [
-    ("REFLECTION", "Reflection", "Light diffracts back off the surface (CDs, opal, beetle shells)", 0),
-    ("TRANSMISSION", "Transmission", "Light diffracts through the surface (grating film, slide gratings)", 1),
-]
+DISPERSION_SAMPLING_ITEMS = _items(DispersionSampling, {
+    DispersionSampling.SAMPLE: ("Sample", "At a dispersive surface a ray continues with one wavelength picked at "
+                                "random (hero-wavelength style): cheap per ray, converges with samples"),
+    DispersionSampling.SPLIT: ("Split", "At a dispersive surface a ray splits into one ray per wavelength (the source "
+                               "paper's method): no colour noise from dispersion, more rays"),
+})
 
-LATTICE_ITEMS = [
-    ("LINES", "Lines", "Parallel slits (a 1D ruled grating)", 0),
-    ("HEXAGONAL", "Hexagonal", "A 2D hexagonal lattice of scatterers (opal's close-packed spheres)", 1),
-]
+BACKEND_ITEMS = _items(Backend, {
+    Backend.AUTO: ("Automatic", "Embree where its wheel is installed, otherwise the NumPy BVH"),
+    Backend.EMBREE: ("Embree", "Intel Embree through embreex (fastest; x86-64 only)"),
+    Backend.NUMPY: ("NumPy", "The vectorised NumPy BVH (works everywhere)"),
+})
 
-GRATING_DIRECTION_ITEMS = [
-    ("UV", "UV Map", "Across the slits along the active UV map's U direction; the object's local X axis "
-     "where the mesh has no UV map", 0),
-    ("OBJECT_X", "Object X Axis", "Across the slits along the object's local X axis", 1),
-    ("ATTRIBUTE", "Face Attribute", "The per-face direction attribute written by the opal tools", 2),
-]
+GRATING_TYPE_ITEMS = _items(GratingType, {
+    GratingType.REFLECTION: ("Reflection", "Light diffracts back off the surface (CDs, opal, beetle shells)"),
+    GratingType.TRANSMISSION: ("Transmission",
+                               "Light diffracts through the surface (grating film, slide gratings)"),
+})
+
+LATTICE_ITEMS = _items(Lattice, {
+    Lattice.LINES: ("Lines", "Parallel slits (a 1D ruled grating)"),
+    Lattice.HEXAGONAL: ("Hexagonal", "A 2D hexagonal lattice of scatterers (opal's close-packed spheres)"),
+})
+
+GRATING_DIRECTION_ITEMS = _items(GratingDirection, {
+    GratingDirection.UV: ("UV Map", "Across the slits along the active UV map's U direction; the object's local X "
+                          "axis where the mesh has no UV map"),
+    GratingDirection.OBJECT_X: ("Object X Axis", "Across the slits along the object's local X axis"),
+    GratingDirection.ATTRIBUTE: ("Face Attribute", "The per-face direction attribute written by the opal tools"),
+})
 
 #: Named glasses: (identifier, name, dispersion model, n_d, V_d). Applying one sets
 #: ``material.opal.dispersion`` / ``abbe_number`` and the IOR of the material's BSDF node to n_d,

@@ -12,12 +12,21 @@ from __future__ import annotations
 import bpy
 from bpy.types import Menu, Panel
 
+from ..core.optics import SELLMEIER_PRESETS
+from ..core.spectrum import WavelengthGrid
 from .engine import ENGINE_ID
 from .opal_presets import OPAL_MT_opal_presets
 from .operators import OPAL_OT_dispersion_preset, OPAL_OT_export_scene
 from .properties import DISPERSION_PRESETS
 
 __all__ = ["register", "unregister", "builtin_panels", "classes"]
+
+
+def _split(layout):
+    """``layout`` with labels beside the values and no animation decorators (Cycles' panel style)."""
+    layout.use_property_split = True
+    layout.use_property_decorate = False
+    return layout
 
 
 class OpalButtonsPanel:
@@ -36,9 +45,7 @@ class OPAL_RENDER_PT_sampling(OpalButtonsPanel, Panel):
     bl_context = "render"
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = _split(self.layout)
         opal = context.scene.opal
         col = layout.column(align=True)
         col.prop(opal, "samples")
@@ -58,9 +65,7 @@ class OPAL_RENDER_PT_spectrum(OpalButtonsPanel, Panel):
     bl_context = "render"
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = _split(self.layout)
         opal = context.scene.opal
         col = layout.column(align=True)
         col.prop(opal, "wavelength_min", text="Wavelength Min")
@@ -69,7 +74,7 @@ class OPAL_RENDER_PT_spectrum(OpalButtonsPanel, Panel):
         if opal.wavelength_min >= opal.wavelength_max:
             layout.label(text="Min must be below Max", icon="ERROR")
         else:
-            n = int((opal.wavelength_max - opal.wavelength_min) / opal.wavelength_step + 1e-9) + 1
+            n = WavelengthGrid(opal.wavelength_min, opal.wavelength_max, opal.wavelength_step).n
             layout.label(text=f"{n} wavelengths", icon="INFO")
         layout.prop(opal, "dispersion_sampling")
 
@@ -79,9 +84,7 @@ class OPAL_RENDER_PT_light_paths(OpalButtonsPanel, Panel):
     bl_context = "render"
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = _split(self.layout)
         opal = context.scene.opal
         layout.prop(opal, "max_bounces")
         layout.prop(opal, "light_paths")
@@ -93,9 +96,7 @@ class OPAL_RENDER_PT_film(OpalButtonsPanel, Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = _split(self.layout)
         layout.prop(context.scene.opal, "filter_width")
 
 
@@ -104,9 +105,7 @@ class OPAL_RENDER_PT_output(OpalButtonsPanel, Panel):
     bl_context = "render"
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = _split(self.layout)
         opal = context.scene.opal
         layout.prop(opal, "spectral_exr")
         layout.prop(opal, "scene_npz")
@@ -119,9 +118,7 @@ class OPAL_RENDER_PT_performance(OpalButtonsPanel, Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = _split(self.layout)
         rd, opal = context.scene.render, context.scene.opal
         col = layout.column(align=True)
         col.prop(rd, "threads_mode")
@@ -194,15 +191,13 @@ class OPAL_MATERIAL_PT_dispersion(OpalButtonsPanel, Panel):
         self.layout.menu(OPAL_MT_dispersion_presets.bl_idname, text="", icon="PRESET")
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = _split(self.layout)
         opal = context.material.opal
         layout.prop(opal, "dispersion")
         row = layout.row()
         row.active = opal.dispersion == "ABBE"
         row.prop(opal, "abbe_number")
-        if opal.dispersion in ("BK7", "FUSED_SILICA", "DIAMOND"):
+        if opal.dispersion in SELLMEIER_PRESETS:
             layout.label(text="The glass's own index replaces the node's IOR", icon="INFO")
         elif opal.dispersion != "NONE":
             layout.label(text="Applies to Glass BSDF or transmissive Principled BSDF", icon="INFO")
@@ -223,9 +218,7 @@ class OPAL_MATERIAL_PT_grating(OpalButtonsPanel, Panel):
         self.layout.menu(OPAL_MT_opal_presets.bl_idname, text="", icon="PRESET")
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = _split(self.layout)
         opal = context.material.opal
         layout.active = opal.grating
         layout.prop(opal, "grating_type")

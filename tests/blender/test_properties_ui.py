@@ -12,7 +12,9 @@ import pytest
 import blender_scenes as bs
 from opal_diffraction.blender import properties, ui
 from opal_diffraction.blender.engine import ENGINE_ID
-from opal_diffraction.core.optics import DISPERSION_MODELS
+from opal_diffraction.core import enums
+from opal_diffraction.core.optics import DISPERSION_MODELS, SELLMEIER_PRESETS
+from opal_diffraction.core.spectrum import WavelengthGrid
 
 SCENE_CONTRACT = ["samples", "light_paths", "wavelength_min", "wavelength_max", "wavelength_step", "max_bounces",
                   "seed", "dispersion_sampling", "spectral_exr", "time_limit"]
@@ -65,6 +67,29 @@ def test_enum_items_have_stable_explicit_indices():
     for items in (properties.DISPERSION_ITEMS, properties.GRATING_TYPE_ITEMS, properties.LATTICE_ITEMS,
                   properties.GRATING_DIRECTION_ITEMS, properties.DISPERSION_SAMPLING_ITEMS, properties.BACKEND_ITEMS):
         assert all(len(it) == 4 and isinstance(it[3], int) for it in items)
+
+
+#: Every EnumProperty of scene.opal and material.opal, and the core enumeration whose codes it stores.
+ENUM_PROPERTIES = {
+    ("Scene", "dispersion_sampling"): enums.DispersionSampling,
+    ("Scene", "backend"): enums.Backend,
+    ("Material", "dispersion"): enums.DispersionModel,
+    ("Material", "grating_type"): enums.GratingType,
+    ("Material", "lattice"): enums.Lattice,
+    ("Material", "grating_direction"): enums.GratingDirection,
+}
+
+
+def test_every_enum_property_stores_a_core_enumeration():
+    """(identifier, index) of every item, in order, are the core enumeration's (name, code)."""
+    found = {}
+    for owner in ("Scene", "Material"):
+        for prop in getattr(bpy.types, owner).bl_rna.properties["opal"].fixed_type.properties:
+            if prop.type == "ENUM":
+                found[(owner, prop.identifier)] = [(i.identifier, i.value) for i in prop.enum_items]
+    assert found.keys() == ENUM_PROPERTIES.keys()
+    for key, enum in ENUM_PROPERTIES.items():
+        assert found[key] == [(m.name, int(m)) for m in enum], key
 
 
 def test_settings_survive_save_and_reload(tmp_path):
@@ -152,6 +177,24 @@ def test_panels_show_only_for_the_engine_and_draw_existing_properties():
     labels = " ".join(str(e[2].get("text", "")) for e in drawn if e[0] == "label")
     assert "period must be > 0" in labels
     assert ("operator", "opal.export_scene") in drawn
+
+
+def _labels(cls, ctx) -> str:
+    log = []
+    cls.draw(types.SimpleNamespace(layout=_Layout(log)), ctx)
+    return " ".join(str(e[2].get("text", "")) for e in log if e[0] == "label")
+
+
+def test_panels_take_the_wavelength_count_and_the_sellmeier_glasses_from_the_core():
+    sc = bs.empty_scene()
+    sc.opal.wavelength_min, sc.opal.wavelength_max, sc.opal.wavelength_step = 400.0, 700.0, 7.0
+    n = WavelengthGrid(400.0, 700.0, 7.0).n
+    assert f"{n} wavelengths" in _labels(ui.OPAL_RENDER_PT_spectrum, _context(ENGINE_ID))
+    mat = bs.material("glass", "GLASS")
+    for ident in DISPERSION_MODELS:
+        mat.opal.dispersion = ident
+        own_index = "The glass's own index" in _labels(ui.OPAL_MATERIAL_PT_dispersion, _context(ENGINE_ID, material=mat))
+        assert own_index == (ident in SELLMEIER_PRESETS), ident
 
 
 def test_builtin_panels_enabled_and_cleaned_up():

@@ -1,0 +1,155 @@
+"""Depsgraph -> core Scene: geometry, materials, lights, camera and world, as flat NumPy arrays.
+
+Everything is read from the evaluated depsgraph the engine is given (never from ``bpy.context``),
+so modifiers, geometry nodes, instancing and the render-time visibility are what the render
+sees. Geometry is read with ``foreach_get`` into NumPy (no Python loop per triangle or vertex);
+a mesh that many instances share is read once and transformed for all of its instances in one
+vectorised product. Blender's units are kept: metres, Cycles' light units (watts for point,
+spot and area lights, W/m^2 for the sun), colours in the blend file's linear working space,
+converted to the core's linear Rec.709.
+
+What the core cannot render yet is approximated and named in the warnings rather than failing:
+textures (averaged), rough reflection and refraction (made smooth), light radius and sun angle
+(hard shadows). Grating settings are exported with a per-triangle grating direction
+(``Scene.tri_tangent``) and, where the mesh has the opal tools' per-face period attribute
+(``opal_grating_period``), a per-triangle period (``Scene.tri_period``); impossible values are
+an error naming the material.
+
+One module per concept, as in BlendLuxCore's ``export`` package:
+
+    colour     working space <-> Rec.709, blackbody colours, image averages
+    nodes      shader node trees -> the core's surfaces
+    materials  the material table (export_materials)
+    meshes     meshes, tangents, periods, instances -> arrays; the MeshCache
+    lights     the light table (export_lights)
+    world      the background colour (export_world)
+    camera     render size, border region, the camera (export_camera)
+    messages   the warnings, once each
+
+:func:`export_scene` here puts them together. A rendered viewport passes a persistent
+:class:`MeshCache` (invalidated from ``depsgraph.updates``) so a re-export reads only the meshes
+whose geometry changed, or calls the per-concept functions alone.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...core.scene import Lights, Scene
+from ..mesh_io import GRATING_ATTRIBUTE, PERIOD_ATTRIBUTE
+from .camera import export_camera, render_region, render_size
+from .colour import rec709_to_working_space, working_space_to_rec709
+from .lights import LightRows, export_lights
+from .materials import MaterialTable, export_materials
+from .meshes import GEOMETRY_TYPES, UNSUPPORTED_GEOMETRY, MeshCache, SceneMeshes, flatten
+from .messages import Warnings
+from .world import export_world
+
+__all__ = [
+    "ExportCancelled",
+    "ExportResult",
+    "export_scene",
+    "render_size",
+    "render_region",
+    "working_space_to_rec709",
+    "rec709_to_working_space",
+    "GRATING_ATTRIBUTE",
+    "PERIOD_ATTRIBUTE",
+    "MeshCache",
+    "Warnings",
+    "export_lights",
+    "export_materials",
+    "export_world",
+    "export_camera",
+]
+
+#: How often (in object instances) export polls test_break.
+POLL_EVERY = 64
+
+
+class ExportCancelled(Exception):
+    """The user pressed Esc while the scene was being exported."""
+
+
+@dataclass
+class ExportResult:
+    scene: Scene
+    warnings: list[str] = field(default_factory=list)
+    stats: dict = field(default_factory=dict)
+
+
+def export_scene(depsgraph, *, width: int | None = None, height: int | None = None, camera=None,
+                 test_break=None, progress=None, mesh_cache: MeshCache | None = None) -> ExportResult:
+    """Export the evaluated ``depsgraph`` to a core Scene.
+
+    ``width``/``height`` default to the scene's resolution times its percentage; ``camera``
+    (an object) overrides the scene camera. ``test_break()`` is polled every few dozen object
+    instances (raise ExportCancelled when it returns True); ``progress(message)`` receives a
+    status line now and then. ``mesh_cache``: a :class:`MeshCache` kept between exports of this
+    depsgraph, so that only meshes it does not hold (or that :meth:`MeshCache.invalidate`
+    dropped) are read; None reads every mesh. Raises SceneError with a readable message for
+    input that cannot be rendered (NaN coordinates, a panoramic camera, ...).
+    """
+    t0 = time.perf_counter()
+    warn = Warnings()
+    to709 = working_space_to_rec709()
+    scene = depsgraph.scene
+    if width is None or height is None:
+        width, height = render_size(scene)
+    materials = MaterialTable(warn, to709)
+    meshes = SceneMeshes(mesh_cache)
+    groups: dict = defaultdict(list)  # (mesh key, material tuple) -> matrices
+    lights = LightRows(warn, to709)
+    skipped: dict[str, int] = defaultdict(int)
+    n_instances = 0
+
+    for i, inst in enumerate(depsgraph.object_instances):
+        if i % POLL_EVERY == 0:
+            if test_break is not None and test_break():
+                raise ExportCancelled()
+            if progress is not None and i:
+                progress(f"exporting: {i} objects")
+        ob = inst.object
+        otype = ob.type
+        if otype == "LIGHT":
+            lights.add(ob, inst.matrix_world)
+            continue
+        if otype not in GEOMETRY_TYPES:
+            if otype in UNSUPPORTED_GEOMETRY:
+                skipped[otype.lower()] += 1
+            continue
+        if not inst.show_self:
+            continue
+        slots = materials.slots(ob)
+        mkey, md = meshes.get(ob, otype)
+        if md is None or len(md.triangles) == 0:
+            continue
+        groups[(mkey, slots)].append(np.array(inst.matrix_world, np.float64))
+        n_instances += 1
+
+    if test_break is not None and test_break():
+        raise ExportCancelled()
+    vertices, triangles, tri_material, tri_tangent, tri_period = flatten(groups, meshes, materials.grating, warn)
+
+    lights.warn_soft()
+    for kind, count in skipped.items():
+        warn(f"{count} {kind} object(s) are not supported and were skipped")
+    core_materials = materials.finish()
+    cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn)
+    world = export_world(depsgraph, warn)
+    core_scene = Scene(
+        vertices=vertices, triangles=triangles, tri_material=tri_material,
+        materials=core_materials, lights=Lights.from_list(lights.rows), camera=cam,
+        world_color=world, tri_tangent=tri_tangent, tri_period=tri_period,
+    )
+    meshes.done()
+    stats = {
+        "export_s": time.perf_counter() - t0, "objects": n_instances, "meshes": len(meshes),
+        "triangles": len(triangles), "vertices": len(vertices), "lights": len(lights.rows),
+        "materials": len(materials.rows),
+    }
+    return ExportResult(core_scene, warn.items, stats)

@@ -1,0 +1,93 @@
+"""Colours: the blend file's linear working space <-> the core's linear Rec.709, blackbody colours,
+and the average colour of an image.
+
+Blender 5.0 gives each file a working space (``bpy.data.colorspace.working_space``: Linear
+Rec.709, Linear Rec.2020 or ACEScg); the core works in linear Rec.709. The 3x3 conversions come
+from colour-science's ``matrix_RGB_to_RGB`` with Bradford chromatic adaptation; None stands for
+the identity (a Rec.709 file). A blackbody colour is the core's own spectrum -> RGB conversion
+of Planck's law at luminance 1, Blender's Blackbody node convention.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+__all__ = [
+    "working_space_to_rec709",
+    "rec709_to_working_space",
+    "rgb",
+    "in_rec709",
+    "blackbody_rgb",
+    "image_mean",
+]
+
+_COLOUR_SPACE_NAMES = {
+    "Linear Rec.2020": "ITU-R BT.2020",
+    "ACEScg": "ACEScg",
+}
+
+
+def _working_space() -> str:
+    cs = getattr(bpy.data, "colorspace", None)  # Blender 5.0+: a per-file working space
+    return getattr(cs, "working_space", "Linear Rec.709") if cs is not None else "Linear Rec.709"
+
+
+def _matrix_to_rec709(space: str) -> np.ndarray | None:
+    name = _COLOUR_SPACE_NAMES.get(space)
+    if name is None:
+        return None
+    from ...core.spectrum import _colour
+
+    colour = _colour()
+    return np.asarray(colour.matrix_RGB_to_RGB(colour.RGB_COLOURSPACES[name], colour.RGB_COLOURSPACES["sRGB"],
+                                               chromatic_adaptation_transform="Bradford"), np.float64)
+
+
+def working_space_to_rec709() -> np.ndarray | None:
+    """3x3 matrix from the blend file's linear working space to linear Rec.709 (None: identity)."""
+    return _matrix_to_rec709(_working_space())
+
+
+def rec709_to_working_space() -> np.ndarray | None:
+    """3x3 matrix from linear Rec.709 to the blend file's working space (None: identity)."""
+    m = _matrix_to_rec709(_working_space())
+    return None if m is None else np.linalg.inv(m)
+
+
+def rgb(v) -> np.ndarray:
+    """The first three components of a Blender colour, as float64."""
+    return np.array(tuple(v)[:3], np.float64)
+
+
+def in_rec709(col: np.ndarray, to709: np.ndarray | None) -> np.ndarray:
+    """A working-space colour in linear Rec.709 (``to709`` from :func:`working_space_to_rec709`)."""
+    return col if to709 is None else to709 @ col
+
+
+def blackbody_rgb(temperature: float) -> np.ndarray:
+    """Linear Rec.709 colour of a blackbody with luminance 1 (Blender's Blackbody node convention)."""
+    from ...core.spectrum import SpectralConverter
+
+    conv = blackbody_rgb.conv = getattr(blackbody_rgb, "conv", None) or SpectralConverter()
+    t = float(temperature) if temperature > 0 else 6500.0
+    return conv.to_rgb(conv.blackbody(t)).astype(np.float64)
+
+
+def image_mean(image) -> np.ndarray | None:
+    """Average linear RGB of an image's pixels (sRGB-encoded images are decoded first)."""
+    try:
+        n = len(image.pixels)
+        if n == 0:
+            return None
+        px = np.empty(n, np.float32)
+        image.pixels.foreach_get(px)
+        ch = max(int(image.channels), 1)
+        px3 = px.reshape(-1, ch)[:, :3].astype(np.float64)
+        if px3.shape[1] < 3:
+            px3 = np.repeat(px3[:, :1], 3, axis=1)
+        if not image.is_float and image.colorspace_settings.name in ("sRGB", "sRGB 2.1"):
+            px3 = np.where(px3 <= 0.04045, px3 / 12.92, ((px3 + 0.055) / 1.055) ** 2.4)
+        return px3.mean(axis=0)
+    except Exception:  # unreadable or missing file: the caller falls back
+        return None

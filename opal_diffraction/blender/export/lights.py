@@ -1,0 +1,141 @@
+"""Blender lights -> the core's light table, in Cycles' units.
+
+Point, spot and area lights keep their power in watts, the sun its strength in W/m^2; exposure
+multiplies by 2^exposure, an unnormalised area light emits per m^2 (times its area here), and
+the emission node of a light's node tree scales the strength and tints the colour. A white
+light with "Temperature" on is a blackbody spectrum (``temperature`` > 0), a tinted one an RGB
+product. What the core cannot render is named in the warnings: light radius and sun angle
+(hard shadows), square and non-uniformly scaled spot cones, area spread below 180 degrees.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...core.scene import Lights, SceneError
+from .colour import blackbody_rgb, in_rec709, rgb, working_space_to_rec709
+from .messages import Warnings
+from .nodes import NodeReader, surface_socket
+
+__all__ = ["light_color", "light_row", "LightRows", "export_lights"]
+
+
+def light_color(light, warn, to709) -> tuple[np.ndarray, float, float]:
+    """(Rec.709 colour, temperature K or 0, strength factor from the light's nodes)."""
+    col = in_rec709(rgb(light.color), to709)
+    temperature = 0.0
+    if getattr(light, "use_temperature", False):
+        if np.allclose(col, 1.0, atol=1e-4):
+            temperature = float(light.temperature)
+        else:  # tinted blackbody: an RGB product (the spectrum is approximated)
+            col = col * in_rec709(rgb(light.temperature_color), to709)
+    strength = 1.0
+    nt = light.node_tree if getattr(light, "use_nodes", False) else None
+    if nt is not None:
+        owner = f"light '{light.name}'"
+        reader = NodeReader(owner, warn, to709)
+        sock = surface_socket(nt)
+        src = reader.source(sock) if sock else None
+        if src is None:
+            return col, temperature, 0.0
+        node = src[0]
+        if node.bl_idname != "ShaderNodeEmission":
+            warn(f"{owner}: light node '{node.name}' is not supported: using the light's colour")
+            return col, temperature, strength
+        strength = max(reader.value(node, "Strength", 1.0), 0.0)
+        csrc = reader.source(node.inputs["Color"])
+        if csrc is not None and csrc[0].bl_idname == "ShaderNodeBlackbody":
+            t_node = reader.value(csrc[0], "Temperature", 6500.0)
+            if temperature == 0.0 and np.allclose(col, 1.0, atol=1e-4):
+                temperature = t_node
+            else:
+                col = col * blackbody_rgb(t_node)
+        else:
+            col = col * reader.color(node, "Color", (1, 1, 1))
+    return col, temperature, strength
+
+
+def light_row(ob, m: np.ndarray, warn, to709, soft: list) -> dict | None:
+    """The core's row for light object ``ob`` with world matrix ``m``, or None when it is skipped;
+    appends the name to ``soft`` when its radius or angle (soft shadows) is lost."""
+    light = ob.data
+    x, y, z = m[:3, 0], m[:3, 1], m[:3, 2]
+    nz = np.linalg.norm(z)
+    if not np.isfinite(m).all() or nz < 1e-12:
+        raise SceneError(f"light '{ob.name}': its transform is NaN, infinite or has zero scale")
+    col, temperature, strength = light_color(light, warn, to709)
+    power = float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0)) * strength
+    row = {
+        "position": tuple(m[:3, 3]), "direction": tuple(-z / nz), "axis_u": tuple(x / max(np.linalg.norm(x), 1e-30)),
+        "color": tuple(float(c) for c in np.clip(col, 0.0, None)), "power": max(power, 0.0),
+        "temperature": temperature,
+    }
+    t = light.type
+    if t in ("POINT", "SPOT"):
+        if light.shadow_soft_size > 0:
+            soft.append(ob.name)
+        row["kind"] = t
+        if t == "SPOT":
+            row["spot_size"] = float(light.spot_size)
+            row["spot_blend"] = float(light.spot_blend)
+            if getattr(light, "use_square", False):
+                warn(f"light '{ob.name}': square spot cones are rendered round")
+            sx, sy = np.linalg.norm(x), np.linalg.norm(y)
+            if abs(sx - sy) > 1e-3 * max(sx, sy):
+                warn(f"light '{ob.name}': a non-uniformly scaled spot cone is rendered round")
+    elif t == "SUN":
+        row["kind"] = "SUN"
+        if getattr(light, "angle", 0.0) > math.radians(1.0):
+            soft.append(ob.name)
+    elif t == "AREA":
+        shape = light.shape
+        su = float(light.size) * float(np.linalg.norm(x))
+        sv = float(light.size_y if shape in ("RECTANGLE", "ELLIPSE") else light.size) * float(np.linalg.norm(y))
+        row["kind"] = "AREA_RECT" if shape in ("SQUARE", "RECTANGLE") else "AREA_DISK"
+        row["size_u"], row["size_v"] = su, sv
+        if su <= 0 or sv <= 0:
+            warn(f"light '{ob.name}': area light of zero size skipped")
+            return None
+        if not getattr(light, "normalize", True):  # Cycles: an unnormalised light emits power per m^2
+            area = su * sv * (1.0 if row["kind"] == "AREA_RECT" else math.pi / 4)
+            row["power"] *= area
+        if getattr(light, "spread", math.pi) < math.pi - 1e-4:
+            warn(f"light '{ob.name}': area light spread below 180 degrees is rendered as a full 180")
+    else:
+        warn(f"light '{ob.name}': light type {t} is not supported: skipped")
+        return None
+    return row
+
+
+class LightRows:
+    """The light rows of one export, in instance order, and the lights whose softness is lost."""
+
+    def __init__(self, warn: Warnings, to709: np.ndarray | None):
+        self.rows: list[dict] = []
+        self.soft: list[str] = []
+        self.warn, self.to709 = warn, to709
+
+    def add(self, ob, matrix_world) -> None:
+        """Add a light object instance with its world matrix (skipped when it cannot render)."""
+        row = light_row(ob, np.array(matrix_world, np.float64), self.warn, self.to709, self.soft)
+        if row is not None:
+            self.rows.append(row)
+
+    def warn_soft(self) -> None:
+        """Name the lights that will cast hard shadows instead of soft ones."""
+        if self.soft:
+            names = ", ".join(f"'{n}'" for n in self.soft[:3]) + (" ..." if len(self.soft) > 3 else "")
+            self.warn(f"light radius and sun angle are not rendered yet: {names} cast hard shadows")
+
+
+def export_lights(depsgraph, warn: Warnings | None = None) -> Lights:
+    """The core's light table alone, as :func:`export_scene` makes it. ``warn``: collects the
+    warnings (default: dropped)."""
+    lights = LightRows(warn if warn is not None else Warnings(), working_space_to_rec709())
+    for inst in depsgraph.object_instances:
+        if inst.object.type == "LIGHT":
+            lights.add(inst.object, inst.matrix_world)
+    lights.warn_soft()
+    return Lights.from_list(lights.rows)

@@ -1,0 +1,335 @@
+"""Geometry: evaluated objects -> object-space triangles, their instances -> world-space arrays.
+
+A mesh is read with ``foreach_get`` into NumPy (:mod:`..mesh_io`; no Python loop per triangle or
+vertex), once per distinct evaluated mesh however many instances share it: linked duplicates,
+collection and vertex instances, geometry-nodes instances. The instances of one mesh with one
+set of material slots are transformed together in one vectorised product (:func:`transform`);
+mirrored instances get their winding flipped. Grating faces also get an object-space grating
+vector (:func:`tangents`: the UV map's U direction, the local X axis or the opal tools' face
+attribute) and, where the mesh has the period attribute, a per-triangle period
+(:func:`periods`).
+
+:class:`MeshCache` keeps the meshes read between exports of one depsgraph (a rendered viewport
+re-exports after every change), dropping those whose geometry changed
+(:meth:`MeshCache.invalidate` with ``depsgraph.updates``); transforms, materials and lights are
+re-read on every export.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...core.scene import SceneError
+from ..mesh_io import GRATING_ATTRIBUTE, PERIOD_ATTRIBUTE, attribute_ok, foreach
+
+__all__ = [
+    "GEOMETRY_TYPES",
+    "UNSUPPORTED_GEOMETRY",
+    "is_surface_instance",
+    "MeshData",
+    "read_mesh",
+    "wants_uv",
+    "mesh_for",
+    "tangents",
+    "periods",
+    "transform",
+    "MeshCache",
+    "SceneMeshes",
+    "flatten",
+]
+
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
+UNSUPPORTED_GEOMETRY = {"CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL", "GPENCIL"}
+
+
+def is_surface_instance(inst) -> bool:
+    """Whether a depsgraph object instance renders as a surface (geometry that shows itself)."""
+    return inst.object.type in GEOMETRY_TYPES and inst.show_self
+
+
+@dataclass
+class MeshData:
+    vertices: np.ndarray      # (V, 3) float64, object space
+    triangles: np.ndarray     # (T, 3) int32
+    slot: np.ndarray          # (T,) int32 material slot per triangle
+    uv: np.ndarray | None     # (T, 3, 2) float32 per-corner UVs of triangles, or None
+    face_dir: np.ndarray | None  # (T, 3) per-triangle grating attribute, or None
+    name: str
+    face_period: np.ndarray | None = None  # (T,) per-triangle period attribute (nm), or None
+
+
+def read_mesh(me, name: str, want_uv: bool) -> MeshData:
+    """Object-space triangles of a mesh, their material slots and, with ``want_uv`` (a grating
+    material), UVs and the opal face attributes; ``name`` (the object's) is for warnings."""
+    if hasattr(me, "calc_loop_triangles"):
+        me.calc_loop_triangles()
+    lt = me.loop_triangles
+    nt, nv = len(lt), len(me.vertices)
+    pos = me.attributes.get("position")
+    if pos is not None and pos.data_type == "FLOAT_VECTOR":
+        verts = foreach(pos.data, "vector", nv, np.float32, 3)
+    else:
+        verts = foreach(me.vertices, "co", nv, np.float32, 3)
+    tris = foreach(lt, "vertices", nt, np.int32, 3)
+    # material slot per triangle: through the triangle -> face map when this Blender has it
+    mi_attr = me.attributes.get("material_index")
+    if hasattr(me, "loop_triangle_polygons") and nt:
+        face = foreach(me.loop_triangle_polygons, "value", nt, np.int32)
+        if mi_attr is not None and mi_attr.domain == "FACE":
+            slot = foreach(mi_attr.data, "value", len(me.polygons), np.int32)[face]
+        else:
+            slot = np.zeros(nt, np.int32)
+    else:
+        face = None
+        slot = foreach(lt, "material_index", nt, np.int32)
+    uv = face_dir = face_period = None
+    if want_uv and nt:
+        uvl = me.uv_layers.active
+        if uvl is not None:
+            loops = foreach(lt, "loops", nt, np.int32, 3)
+            uv_all = foreach(uvl.uv if hasattr(uvl, "uv") else uvl.data, "vector" if hasattr(uvl, "uv") else "uv",
+                              len(me.loops), np.float32, 2)
+            uv = uv_all[loops]
+        attr = me.attributes.get(GRATING_ATTRIBUTE)
+        if attribute_ok(attr, "FLOAT_VECTOR") and face is not None:
+            face_dir = foreach(attr.data, "vector", len(me.polygons), np.float32, 3)[face]
+        attr = me.attributes.get(PERIOD_ATTRIBUTE)
+        if attribute_ok(attr, "FLOAT") and face is not None:
+            face_period = foreach(attr.data, "value", len(me.polygons), np.float32)[face]
+    return MeshData(verts.astype(np.float64), tris, slot, uv, face_dir, name, face_period)
+
+
+def tangents(md: MeshData, gratings: list, tri_mat_local: np.ndarray, warn) -> np.ndarray:
+    """Object-space grating vectors (T, 3) for one mesh: the UV map's U direction, the local X
+    axis, or the per-face attribute, per the material's ``grating_direction`` (the core projects
+    them onto each triangle and applies the material's rotation)."""
+    v = md.vertices[md.triangles]
+    e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+    modes = np.array([g["grating_direction"] if g else "" for g in gratings], dtype=object)[tri_mat_local]
+    t = np.zeros((len(md.triangles), 3))
+    t[:] = (1.0, 0.0, 0.0)
+    if (modes == "UV").any() and md.uv is None:
+        warn(f"object '{md.name}': no UV map for the grating direction: using the object's local X axis")
+    if md.uv is not None and (modes == "UV").any():
+        duv1 = (md.uv[:, 1] - md.uv[:, 0]).astype(np.float64)
+        duv2 = (md.uv[:, 2] - md.uv[:, 0]).astype(np.float64)
+        det = duv1[:, 0] * duv2[:, 1] - duv2[:, 0] * duv1[:, 1]
+        ok = (modes == "UV") & (np.abs(det) > 1e-20)
+        tu = (e1 * duv2[:, 1:2] - e2 * duv1[:, 1:2]) / np.where(ok, det, 1.0)[:, None]
+        t[ok] = tu[ok]
+    if (modes == "ATTRIBUTE").any():
+        if md.face_dir is not None:
+            attr = modes == "ATTRIBUTE"
+            t[attr] = md.face_dir[attr]
+        else:
+            warn(f"object '{md.name}': no '{GRATING_ATTRIBUTE}' face attribute: using the object's local X axis")
+    return t
+
+
+def periods(md: MeshData, has: np.ndarray, warn) -> np.ndarray:
+    """Per-triangle period overrides (T,) nm for one mesh: the face attribute on grating
+    triangles, 0 elsewhere (0: the material's period); NaN, infinite or negative values are 0."""
+    out = np.zeros(len(md.triangles), np.float32)
+    if md.face_period is None or not has.any():
+        return out
+    p = np.asarray(md.face_period, np.float32)
+    bad = has & ~(np.isfinite(p) & (p >= 0))
+    if bad.any():
+        warn(f"object '{md.name}': {int(bad.sum())} face(s) have a NaN, infinite or negative "
+             f"'{PERIOD_ATTRIBUTE}': using the material's period there")
+    out[has] = np.where(np.isfinite(p[has]) & (p[has] > 0), p[has], 0.0)
+    return out
+
+
+def transform(md: MeshData, mats: np.ndarray):
+    """World vertices (K*V, 3) and triangles for K instances (matrices (K, 4, 4)); mirrored
+    instances get their winding flipped so normals keep pointing outwards."""
+    k, nv = len(mats), len(md.vertices)
+    verts = np.einsum("kij,vj->kvi", mats[:, :3, :3], md.vertices) + mats[:, None, :3, 3]
+    det = np.linalg.det(mats[:, :3, :3])
+    base = (np.arange(k, dtype=np.int64) * nv)[:, None, None]
+    tris = np.broadcast_to(md.triangles[None].astype(np.int64), (k,) + md.triangles.shape) + base
+    if (det < 0).any():
+        tris = tris.copy()
+        tris[det < 0] = tris[det < 0][:, :, [0, 2, 1]]
+    return verts.reshape(-1, 3), tris.reshape(-1, 3), det
+
+
+def wants_uv(ob) -> bool:
+    """Whether a material of ``ob`` has a grating (its mesh is then read with UVs and attributes)."""
+    return any(s.material is not None and getattr(s.material, "opal", None) is not None and s.material.opal.grating
+               for s in ob.material_slots)
+
+
+def mesh_for(ob, otype: str, want_uv: bool) -> MeshData | None:
+    """Triangles of an evaluated object (modifiers applied), object space; None if it has none."""
+    if otype == "MESH":
+        md = read_mesh(ob.data, ob.name, want_uv)
+    else:
+        try:
+            me = ob.to_mesh()
+        except RuntimeError:
+            return None
+        try:
+            md = None if me is None else read_mesh(me, ob.name, want_uv)
+        finally:
+            ob.to_mesh_clear()
+    if md is not None and len(md.vertices) and not np.isfinite(md.vertices).all():
+        bad = int((~np.isfinite(md.vertices).all(axis=1)).sum())
+        raise SceneError(f"object '{ob.name}': {bad} vertex coordinate(s) are NaN or infinite; fix or delete them")
+    return md
+
+
+# ============================================================================ the cache
+@dataclass
+class _Entry:
+    mesh: MeshData | None
+    want_uv: bool
+    data_name: str            # the object's original data (what a Mesh / Curve update names)
+    eval_name: str            # the evaluated data's name (a modifier stack's result is "Mesh")
+    size: tuple[int, int] | None  # MESH: (vertices, faces) of the data it was read from
+
+
+def _data_names(ob) -> tuple[str, str]:
+    data = ob.data
+    original = getattr(getattr(ob, "original", None), "data", None)
+    return (original.name_full if original is not None else "", data.name_full if data is not None else "")
+
+
+class MeshCache:
+    """Meshes read by earlier exports of one depsgraph, kept until their geometry changes.
+
+    Pass the same cache to every :func:`export_scene` of one depsgraph (a rendered viewport's;
+    the final render's has other modifier levels), and call :meth:`invalidate` with the
+    depsgraph's updates before re-exporting. Evaluated data pointers change whenever Blender
+    re-evaluates, so an entry is keyed by the object's name and the mesh's place among that
+    object's distinct meshes in the export (0 but for geometry-nodes instances, which all carry
+    their instancer's name); it is used again only while the material slots ask for the same
+    data (UVs and attributes for gratings), the data's names are unchanged and, for a mesh, its
+    vertex and face counts match. ``reads`` counts the meshes read from Blender.
+    """
+
+    def __init__(self):
+        self._entries: dict[tuple[str, int], _Entry] = {}
+        self.reads = 0
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def invalidate(self, updates) -> int:
+        """Drop the meshes whose geometry an update changed: ``updates`` is ``depsgraph.updates``
+        (read it while it is valid: in ``view_update`` or a ``depsgraph_update_post`` handler).
+        An Object with ``is_updated_geometry`` drops every mesh of that object; any other ID
+        (a Mesh, Curve, ...) every mesh read from data of that name. Returns how many were dropped."""
+        objects, data = set(), set()
+        for update in updates:
+            if not update.is_updated_geometry:
+                continue
+            idb = update.id
+            (objects if idb.id_type == "OBJECT" else data).add(idb.name_full)
+        drop = [k for k, e in self._entries.items() if k[0] in objects or e.data_name in data]
+        for k in drop:
+            del self._entries[k]
+        return len(drop)
+
+    def invalidate_all(self) -> None:
+        """Forget every mesh (after an undo, a file load, or a change of depsgraph)."""
+        self._entries.clear()
+
+    def _get(self, ob, otype: str, index: int, used: set) -> MeshData | None:
+        key = (ob.name_full, index)
+        used.add(key)
+        want_uv = wants_uv(ob)
+        data_name, eval_name = _data_names(ob)
+        data = ob.data
+        size = (len(data.vertices), len(data.polygons)) if otype == "MESH" and data is not None else None
+        e = self._entries.get(key)
+        if e is None or (e.want_uv, e.data_name, e.eval_name, e.size) != (want_uv, data_name, eval_name, size):
+            self.reads += 1
+            e = self._entries[key] = _Entry(mesh_for(ob, otype, want_uv), want_uv, data_name, eval_name, size)
+        return e.mesh
+
+    def _keep_only(self, used: set) -> None:
+        for k in [k for k in self._entries if k not in used]:  # deleted, renamed or hidden objects
+            del self._entries[k]
+
+
+class SceneMeshes:
+    """The distinct meshes of one export, each read once (or taken from a :class:`MeshCache`):
+    a mesh object's by its evaluated data, which linked duplicates and instances share; other
+    geometry (curves, text, metaballs) by object."""
+
+    def __init__(self, cache: MeshCache | None = None):
+        self.cache = cache if cache is not None else MeshCache()
+        self.meshes: dict[tuple, MeshData | None] = {}
+        self._per_object: dict[str, int] = defaultdict(int)
+        self._used: set = set()
+
+    def __len__(self) -> int:
+        return len(self.meshes)
+
+    def __getitem__(self, mkey) -> MeshData | None:
+        return self.meshes[mkey]
+
+    def get(self, ob, otype: str) -> tuple[tuple, MeshData | None]:
+        """(this export's key of ``ob``'s mesh, the mesh or None)."""
+        data = ob.data
+        mkey = ("data", data.as_pointer()) if (otype == "MESH" and data is not None) else ("obj", ob.name)
+        if mkey not in self.meshes:
+            index = self._per_object[ob.name_full]
+            self._per_object[ob.name_full] += 1
+            self.meshes[mkey] = self.cache._get(ob, otype, index, self._used)
+        return mkey, self.meshes[mkey]
+
+    def done(self) -> None:
+        """The export finished: the cache forgets the meshes it did not use."""
+        self.cache._keep_only(self._used)
+
+
+# ============================================================================ instances -> arrays
+def flatten(groups: dict, meshes: SceneMeshes, grating: list, warn):
+    """World-space arrays of every instance: ``groups`` maps (mesh key, material rows of its
+    slots) to the instances' world matrices; ``grating`` is the material table's grating
+    settings per row (None: no grating). Returns (vertices (V, 3) float32, triangles (T, 3)
+    int32, tri_material (T,) int32, tri_tangent (T, 3) float32 or (0, 3) without gratings,
+    tri_period (T,) float32 or (0,) without period attributes)."""
+    any_grating = any(g is not None for g in grating)
+    vert_chunks, tri_chunks, mat_chunks, tan_chunks, per_chunks = [], [], [], [], []
+    n_verts = 0
+    for (mkey, slots), mlist in groups.items():
+        md = meshes[mkey]
+        mats = np.stack(mlist)
+        if not np.isfinite(mats).all():
+            raise SceneError(f"object '{md.name}': its transform is NaN or infinite")
+        slot_map = np.asarray(slots, np.int32)
+        tri_mat_local = slot_map[np.clip(md.slot, 0, len(slot_map) - 1)]
+        verts, tris, det = transform(md, mats)
+        vert_chunks.append(verts)
+        tri_chunks.append(tris + n_verts)
+        mat_chunks.append(np.tile(tri_mat_local, len(mats)))
+        if any_grating:
+            grat = list(grating)
+            has = np.array([g is not None for g in grat])[tri_mat_local]
+            if has.any():
+                t_local = tangents(md, grat, tri_mat_local, warn)
+                t_world = np.einsum("kij,tj->kti", mats[:, :3, :3], t_local)
+                t_world /= np.maximum(np.linalg.norm(t_world, axis=2, keepdims=True), 1e-30)
+                t_world[:, ~has] = 0.0
+                tan_chunks.append(t_world.reshape(-1, 3).astype(np.float32))
+            else:
+                tan_chunks.append(np.zeros((len(mats) * len(md.triangles), 3), np.float32))
+            per_chunks.append(np.tile(periods(md, has, warn), len(mats)))
+        n_verts += len(verts)
+    vertices = np.concatenate(vert_chunks).astype(np.float32) if vert_chunks else np.zeros((0, 3), np.float32)
+    triangles = np.concatenate(tri_chunks).astype(np.int32) if tri_chunks else np.zeros((0, 3), np.int32)
+    tri_material = np.concatenate(mat_chunks).astype(np.int32) if mat_chunks else np.zeros(0, np.int32)
+    tri_period = np.zeros(0, np.float32)
+    if any_grating and per_chunks and any(p.any() for p in per_chunks):
+        tri_period = np.concatenate(per_chunks).astype(np.float32)
+    if n_verts >= 2**31:
+        raise SceneError(f"the scene has {n_verts} vertices, more than a 32-bit index can address")
+    tri_tangent = np.concatenate(tan_chunks) if (any_grating and tan_chunks) else np.zeros((0, 3), np.float32)
+    return vertices, triangles, tri_material, tri_tangent, tri_period

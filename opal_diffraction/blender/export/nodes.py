@@ -1,0 +1,224 @@
+"""Shader node trees -> the core's surface kinds: what a material, light or world shader evaluates to.
+
+Follows a node tree from its output node through reroutes, mix and add shaders, and evaluates
+the BSDF it finds to one of the core's surfaces (diffuse, mirror, dielectric) with a colour, an
+IOR and an emission. What the core cannot represent is approximated and named in the warnings:
+textures are averaged (:func:`colour.image_mean`), rough reflection and refraction are made
+smooth (rougher than ``ROUGH_AS_DIFFUSE``: diffuse), mixes of unlike surfaces keep the heavier.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from .colour import blackbody_rgb, image_mean, in_rec709, rgb
+from .messages import Warnings
+
+__all__ = ["ROUGH_AS_DIFFUSE", "ROUGH_WARN", "Surface", "node_tree", "surface_socket", "NodeReader"]
+
+#: Roughness above which a glossy surface is treated as diffuse rather than as a mirror.
+ROUGH_AS_DIFFUSE = 0.5
+#: Roughness above which smooth-surface approximations are worth a warning.
+ROUGH_WARN = 0.1
+
+
+@dataclass
+class Surface:
+    """What a shader evaluates to, in the core's terms."""
+
+    kind: str | None  # 'DIFFUSE' | 'MIRROR' | 'DIELECTRIC'; None: no BSDF (emission only or black)
+    color: np.ndarray
+    ior: float = 1.5
+    roughness: float = 0.0
+    emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+def node_tree(id_data):
+    """The shader node tree an ID renders with, or None (use_nodes is always on from Blender 5.0)."""
+    nt = getattr(id_data, "node_tree", None)
+    if nt is not None and bpy.app.version < (5, 0, 0) and not id_data.use_nodes:
+        return None
+    return nt
+
+
+def surface_socket(nt):
+    """The Surface input of a node tree's output node (Cycles' output, else the one for all
+    engines), or None when there is no output node or it has no Surface input."""
+    out = nt.get_output_node("CYCLES") or nt.get_output_node("ALL")
+    return out.inputs.get("Surface") if out is not None else None
+
+
+class NodeReader:
+    """Evaluates a shader node tree to a Surface, approximating what it cannot represent."""
+
+    def __init__(self, owner: str, warn: Warnings, to709: np.ndarray | None):
+        self.owner, self.warn, self.to709 = owner, warn, to709
+
+    # ---------------------------------------------------------------- sockets
+    @staticmethod
+    def source(socket):
+        """(node, output socket) feeding ``socket``, following reroutes; None when unlinked."""
+        seen = 0
+        while socket is not None and socket.is_linked and seen < 64:
+            link = socket.links[0]
+            if not getattr(link, "is_valid", True) or getattr(link, "is_muted", False):
+                return None
+            node = link.from_node
+            if node.bl_idname == "NodeReroute":
+                socket = node.inputs[0] if node.inputs else None
+                seen += 1
+                continue
+            return node, link.from_socket
+        return None
+
+    def color(self, node, name: str, default=(0.8, 0.8, 0.8)) -> np.ndarray:
+        """Linear Rec.709 colour of input ``name``; textures are averaged, other links fall back."""
+        sock = node.inputs.get(name)
+        if sock is None:
+            return np.array(default, np.float64)
+        src = self.source(sock)
+        if src is None:
+            return self._to709(rgb(sock.default_value))
+        n, out = src
+        if n.bl_idname == "ShaderNodeRGB":
+            return self._to709(rgb(out.default_value))
+        if n.bl_idname == "ShaderNodeBlackbody":
+            return blackbody_rgb(self.value(n, "Temperature", 6500.0))
+        if n.bl_idname in ("ShaderNodeTexImage", "ShaderNodeTexEnvironment") and getattr(n, "image", None):
+            mean = image_mean(n.image)
+            if mean is not None:
+                self.warn(f"{self.owner}: image texture '{n.image.name}' on '{name}' is rendered as its average colour")
+                return self._to709(mean)
+        self.warn(f"{self.owner}: '{name}' of '{node.name}' is driven by a '{n.name}' node, which is not "
+                  f"supported: using the socket's own value")
+        return self._to709(rgb(sock.default_value))
+
+    def value(self, node, name: str, default: float = 0.0) -> float:
+        sock = node.inputs.get(name)
+        if sock is None:
+            return float(default)
+        src = self.source(sock)
+        if src is None:
+            return float(sock.default_value)
+        n, out = src
+        if n.bl_idname == "ShaderNodeValue":
+            return float(out.default_value)
+        self.warn(f"{self.owner}: '{name}' of '{node.name}' is driven by a '{n.name}' node, which is not "
+                  f"supported: using the socket's own value")
+        return float(sock.default_value)
+
+    def _to709(self, col: np.ndarray) -> np.ndarray:
+        return in_rec709(col, self.to709)
+
+    # ---------------------------------------------------------------- shaders
+    def surface(self, socket) -> Surface:
+        """Evaluate the shader plugged into ``socket`` (an output node's Surface input)."""
+        return self._shader(self.source(socket), depth=0)
+
+    def _shader(self, src, depth: int) -> Surface:
+        black = Surface(None, np.zeros(3))
+        if src is None:
+            return black
+        node, out = src
+        if depth > 32:
+            self.warn(f"{self.owner}: shader nesting too deep: truncated")
+            return black
+        idn = node.bl_idname
+        if getattr(node, "mute", False):
+            self.warn(f"{self.owner}: muted shader node '{node.name}' renders black")
+            return black
+        if idn == "ShaderNodeBsdfPrincipled":
+            return self._principled(node)
+        if idn == "ShaderNodeBsdfDiffuse":
+            return Surface("DIFFUSE", self.color(node, "Color"))
+        if idn in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic", "ShaderNodeBsdfMetallic"):
+            col = self.color(node, "Base Color" if idn == "ShaderNodeBsdfMetallic" else "Color")
+            rough = self.value(node, "Roughness", 0.5)
+            return self._glossy(node, col, rough)
+        if idn in ("ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction"):
+            rough = self.value(node, "Roughness", 0.0)
+            if rough > ROUGH_WARN:
+                self.warn(f"{self.owner}: rough glass (roughness {rough:.2f}) is rendered perfectly smooth")
+            if idn == "ShaderNodeBsdfRefraction":
+                self.warn(f"{self.owner}: Refraction BSDF is rendered as glass (with Fresnel reflection)")
+            return Surface("DIELECTRIC", self.color(node, "Color", (1, 1, 1)), self.value(node, "IOR", 1.5), rough)
+        if idn == "ShaderNodeEmission":
+            strength = self.value(node, "Strength", 1.0)
+            return Surface(None, np.zeros(3), emission=self.color(node, "Color", (1, 1, 1)) * max(strength, 0.0))
+        if idn == "ShaderNodeMixShader":
+            f = min(max(self.value(node, "Fac", 0.5) if node.inputs.get("Fac") else 0.5, 0.0), 1.0)
+            a = self._shader(self.source(node.inputs[1]), depth + 1)
+            b = self._shader(self.source(node.inputs[2]), depth + 1)
+            return self._combine(a, b, 1.0 - f, f, node)
+        if idn == "ShaderNodeAddShader":
+            a = self._shader(self.source(node.inputs[0]), depth + 1)
+            b = self._shader(self.source(node.inputs[1]), depth + 1)
+            return self._combine(a, b, 1.0, 1.0, node)
+        # Anything else (Translucent, Subsurface, Sheen, Toon, Hair, groups, ...): a diffuse
+        # surface of the node's colour, if it has one.
+        col = None
+        for name in ("Color", "Base Color"):
+            if node.inputs.get(name) is not None and getattr(node.inputs[name], "type", "") == "RGBA":
+                col = self.color(node, name)
+                break
+        if idn == "ShaderNodeBsdfTransparent":
+            self.warn(f"{self.owner}: Transparent BSDF is not supported: rendered black")
+            return black
+        self.warn(f"{self.owner}: shader node '{node.name}' ({idn}) is not supported: rendered as a diffuse "
+                  f"surface{' of its colour' if col is not None else ''}")
+        return Surface("DIFFUSE", col if col is not None else np.full(3, 0.8))
+
+    def _glossy(self, node, col, rough) -> Surface:
+        if rough >= ROUGH_AS_DIFFUSE:
+            self.warn(f"{self.owner}: '{node.name}' roughness {rough:.2f} is rendered as a diffuse surface")
+            return Surface("DIFFUSE", col, roughness=rough)
+        if rough > ROUGH_WARN:
+            self.warn(f"{self.owner}: '{node.name}' roughness {rough:.2f} is rendered as a perfect mirror")
+        return Surface("MIRROR", col, roughness=rough)
+
+    def _principled(self, node) -> Surface:
+        base = self.color(node, "Base Color")
+        metallic = self.value(node, "Metallic", 0.0)
+        rough = self.value(node, "Roughness", 0.5)
+        trans_name = "Transmission Weight" if node.inputs.get("Transmission Weight") else "Transmission"
+        trans = self.value(node, trans_name, 0.0)
+        ior = self.value(node, "IOR", 1.5)
+        strength = self.value(node, "Emission Strength", 0.0) if node.inputs.get("Emission Strength") else 1.0
+        emission = self.color(node, "Emission Color" if node.inputs.get("Emission Color") else "Emission", (0, 0, 0))
+        emission = emission * max(strength, 0.0)
+        if node.inputs.get("Alpha") is not None and self.value(node, "Alpha", 1.0) < 1.0:
+            self.warn(f"{self.owner}: alpha below 1 is not supported: rendered opaque")
+        for layer in ("Subsurface Weight", "Coat Weight", "Sheen Weight"):
+            if node.inputs.get(layer) is not None and self.value(node, layer, 0.0) > 0.0:
+                self.warn(f"{self.owner}: the Principled BSDF's {layer.split()[0].lower()} layer is not rendered")
+        if 0.0 < metallic < 1.0 or 0.0 < trans < 1.0:
+            self.warn(f"{self.owner}: partial metallic/transmission ({metallic:.2f}/{trans:.2f}) is rounded to "
+                      "the nearest of diffuse, mirror and glass")
+        if trans >= 0.5 and metallic < 0.5:
+            if rough > ROUGH_WARN:
+                self.warn(f"{self.owner}: rough glass (roughness {rough:.2f}) is rendered perfectly smooth")
+            return Surface("DIELECTRIC", base, ior, rough, emission)
+        if metallic >= 0.5:
+            s = self._glossy(node, base, rough)
+            s.emission = emission
+            return s
+        return Surface("DIFFUSE", base, ior, rough, emission)
+
+    def _combine(self, a: Surface, b: Surface, wa: float, wb: float, node) -> Surface:
+        emission = wa * a.emission + wb * b.emission
+        if a.kind is None and b.kind is None:
+            return Surface(None, np.zeros(3), emission=emission)
+        if a.kind is None or b.kind is None:
+            s, w = (b, wb) if a.kind is None else (a, wa)
+            return Surface(s.kind, s.color * (w if s.kind == "DIFFUSE" else 1.0), s.ior, s.roughness, emission)
+        if a.kind == b.kind:
+            t = wb / max(wa + wb, 1e-12)
+            col = wa * a.color + wb * b.color if node.bl_idname == "ShaderNodeAddShader" else (1 - t) * a.color + t * b.color
+            return Surface(a.kind, col, (1 - t) * a.ior + t * b.ior, (1 - t) * a.roughness + t * b.roughness, emission)
+        keep = a if wa >= wb else b
+        self.warn(f"{self.owner}: '{node.name}' mixes {a.kind.lower()} and {b.kind.lower()} surfaces: rendered as "
+                  f"{keep.kind.lower()}")
+        return Surface(keep.kind, keep.color, keep.ior, keep.roughness, emission)
