@@ -30,7 +30,8 @@ from ..core.render import render as core_render
 from ..core.scene import SceneError
 from .export import ExportCancelled, export_scene, rec709_to_working_space, render_region
 from .settings import render_settings
-from .viewport import ViewportSession, unregister_timer
+from . import viewport
+from .viewport import ViewportSession
 
 __all__ = ["OpalRenderEngine", "AOV_PASSES", "render_settings", "output_path", "last_render", "register",
            "unregister"]
@@ -267,8 +268,9 @@ class OpalRenderEngine(bpy.types.RenderEngine):
 
 def register():
     bpy.utils.register_class(OpalRenderEngine)
+    viewport.register()
 
 
 def unregister():
-    unregister_timer()
+    viewport.unregister()
     bpy.utils.unregister_class(OpalRenderEngine)

@@ -267,6 +267,10 @@ class ViewportSession:
         self.levels: list[tuple[int, int]] = []
         self.view_key = None
         self.renderer = ProgressiveRenderer(on_image=self._on_image, on_light=self._on_light)
+        from .export import MeshCache  # noqa: PLC0415 - export needs bpy; this module's logic does not
+
+        self.mesh_cache = MeshCache()  # meshes read from Blender, kept until their geometry changes
+        _SESSIONS.add(self)
         self.texture = None
         self._texture_key = None
         self.export_warnings: list[str] = []
@@ -289,7 +293,8 @@ class ViewportSession:
         opal = scene.opal
         old = self.prepared
         try:
-            exported = export_scene(depsgraph, width=w, height=h)
+            self.mesh_cache.invalidate(depsgraph.updates)
+            exported = export_scene(depsgraph, width=w, height=h, mesh_cache=self.mesh_cache)
             settings = replace(render_settings(opal, scene), spectral_exr="", time_limit=0.0)
             prepared = prepare(exported.scene, settings, reuse=old)
         except (SceneError, ExportCancelled) as e:
@@ -380,6 +385,29 @@ class ViewportSession:
         self.prepared = self.light = None
 
 
+#: Every live session, so undo and file loads can drop their mesh caches.
+_SESSIONS: "weakref.WeakSet[ViewportSession]" = weakref.WeakSet()
+
+
+def _drop_mesh_caches(*_args) -> None:
+    """Undo, redo and loading a file replace mesh data without geometry updates a cache can
+    trust: start every viewport's cache afresh."""
+    for session in list(_SESSIONS):
+        session.mesh_cache.invalidate_all()
+
+
+_HANDLERS = ("undo_post", "redo_post", "load_post")
+
+
+def register() -> None:
+    import bpy  # noqa: PLC0415
+
+    for name in _HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        if _drop_mesh_caches not in handlers:
+            handlers.append(_drop_mesh_caches)
+
+
 def _status(engine, message: str) -> None:
     if engine is not None:
         try:
@@ -427,6 +455,16 @@ def _redraw_tick():
         return REDRAW_INTERVAL
     t.registered = False
     return None
+
+
+def unregister() -> None:
+    import bpy  # noqa: PLC0415
+
+    for name in _HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        if _drop_mesh_caches in handlers:
+            handlers.remove(_drop_mesh_caches)
+    unregister_timer()
 
 
 def unregister_timer() -> None:
