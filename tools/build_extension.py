@@ -54,6 +54,8 @@ PLATFORM_TAGS = {
 }
 PYTHON_VERSION = "3.11"
 EXCLUDE = ("__pycache__", ".pyc", ".pyo", ".DS_Store")
+#: What the stage leaves out of the package (shutil.ignore_patterns patterns)
+DEV_ONLY = ("__pycache__", "*.pyc", "*.pyo", "_scripts.py")
 
 
 def blender_ext_cli() -> str:
@@ -81,7 +83,8 @@ def stage(stage_dir: str, wheels: dict[str, list[str]]) -> None:
     """Copy the package and write the manifest (with its wheels and platforms) into stage_dir."""
     if os.path.exists(stage_dir):
         shutil.rmtree(stage_dir)
-    shutil.copytree(PACKAGE, stage_dir, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo"))
+    # _scripts.py loads the repository's example and tool scripts for tests and benchmarks: not part of the add-on
+    shutil.copytree(PACKAGE, stage_dir, ignore=shutil.ignore_patterns(*DEV_ONLY))
     with open(MANIFEST, "rb") as f:
         tomllib.load(f)  # fail early on a broken manifest
     with open(MANIFEST, encoding="utf-8") as f:

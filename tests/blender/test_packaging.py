@@ -4,7 +4,6 @@ its own user folder), renders from the installed copy, and writes nothing into i
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import subprocess
@@ -14,14 +13,12 @@ import zipfile
 
 import pytest
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+from opal_diffraction._scripts import REPO_ROOT as ROOT
+from opal_diffraction._scripts import load_script
 
 
 def _build_tool():
-    spec = importlib.util.spec_from_file_location("build_extension", os.path.join(ROOT, "tools", "build_extension.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("tools/build_extension.py")
 
 
 @pytest.fixture(scope="module")
@@ -54,6 +51,7 @@ def test_zip_builds_and_validates(built_zip):
     for dep in ("colour_science", "scipy", "openexr"):
         assert dep in wheels.lower(), dep
     assert manifest["platforms"] == [tool.current_platform()]
+    assert not any(n.endswith("_scripts.py") for n in names), "the development-only loader is in the zip"
 
 
 INSTALL_SCRIPT = r"""
