@@ -70,6 +70,7 @@ def test_flux_under_a_glass_slab_is_the_fresnel_transmitted_fraction():
     assert np.all(np.abs(pos[lit, :2]) <= 0.5 + 0.05)  # only under the slab
 
 
+@pytest.mark.slow
 def test_ball_lens_focuses_at_n_r_over_2_n_minus_1():
     """Paraxial rays (a stop with a 0.15 R hole above the ball) focus f = n R / (2 (n - 1)) from the centre."""
     n, radius = 1.5, 1.0

@@ -43,6 +43,8 @@ def test_manifest_is_valid_and_complete():
     assert "files" in m["permissions"]
 
 
+# the tests of the built zip are slow: the build (its wheels downloaded on a fresh clone) and a second Blender
+@pytest.mark.slow
 def test_zip_builds_and_validates(built_zip):
     tool = _build_tool()
     res = subprocess.run([sys.executable, tool.blender_ext_cli(), "validate", built_zip], capture_output=True, text=True)
@@ -59,6 +61,7 @@ def test_zip_builds_and_validates(built_zip):
     assert not any(n.endswith("_scripts.py") for n in names), "the development-only loader is in the zip"
 
 
+@pytest.mark.slow
 def test_zip_wheels_are_the_venvs_pins(built_zip):
     """The shipped extension and the test venv use the same pinned versions: each wheel in the zip is
     requirements.txt's pin, which is what this venv has installed; and every wheel that depends on
@@ -113,6 +116,7 @@ json.dump(info, open(os.path.join(out, "info.json"), "w"))
 """
 
 
+@pytest.mark.slow
 def test_zip_installs_enables_and_renders(built_zip, tmp_path):
     script = tmp_path / "install.py"
     script.write_text(INSTALL_SCRIPT)
