@@ -62,7 +62,8 @@ def test_the_venv_runs_the_pins_the_zip_bundles():
             if name == "embreex":  # x86-64 only (requirements.txt's marker)
                 continue
             raise
-        assert Version(installed) == Version(pins[tool.canonical_name(name)]), name
+        pin = pins[tool.canonical_name(name)]
+        assert Version(installed) == Version(pin), f"the venv has {name} {installed}, requirements.txt pins {pin}"
 
 
 @pytest.mark.parametrize("blender", sorted(tool.BLENDER_NUMPY))
