@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Sets up everything the project needs on a brand-new machine (idempotent):
 # the X11/GL shared libraries the bpy module loads, and a virtualenv in .venv
-# with the pinned Python packages. Re-running it is cheap.
+# with the pinned Python packages and this project installed editable. Re-running it is cheap.
 set -euo pipefail
 cd "$(dirname "$0")"
 
@@ -23,10 +23,14 @@ command -v "$PY" >/dev/null || PY=python3
 if [ ! -x .venv/bin/python ]; then
   "$PY" -m venv .venv
 fi
+# pip runs again only when requirements.txt or pyproject.toml changed since the last install
 stamp=.venv/.requirements.sha
-want=$(sha256sum requirements.txt | cut -d' ' -f1)
+want=$(sha256sum requirements.txt pyproject.toml | sha256sum | cut -d" " -f1)
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   .venv/bin/python -m pip install -q --upgrade pip
   .venv/bin/python -m pip install -q -r requirements.txt
+  # the project itself, editable (its dependencies are the pins above): tests, examples,
+  # benchmarks and tools import opal_diffraction from this checkout without touching sys.path
+  .venv/bin/python -m pip install -q --no-deps -e .
   echo "$want" > "$stamp"
 fi

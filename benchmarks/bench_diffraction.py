@@ -16,19 +16,14 @@ The reference's own noise is printed too (the same reference with another seed).
 from __future__ import annotations
 
 import argparse
-import os
-import sys
 import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, ".."))
-sys.path.insert(0, os.path.join(HERE, "..", "examples"))
-
-from opal_diffraction.core.output import srgb_encode  # noqa: E402
-from opal_diffraction.core.render import render  # noqa: E402
-from opal_diffraction.core.settings import RenderSettings  # noqa: E402
+from opal_diffraction._scripts import load_example
+from opal_diffraction.core.output import srgb_encode
+from opal_diffraction.core.render import render
+from opal_diffraction.core.settings import RenderSettings
 
 
 def main():
@@ -38,7 +33,7 @@ def main():
     ap.add_argument("--ref-spp", type=int, default=32)
     ap.add_argument("--n", type=int, nargs="+", default=[10, 1000, 100000])
     args = ap.parse_args()
-    from gratings import fig5_scene
+    fig5_scene = load_example("gratings").fig5_scene
 
     render(fig5_scene(8, 4), RenderSettings(samples=1))  # warm-up
     print(f"{'N':>7s} {'step nm':>7s} {'spp':>4s} {'time s':>7s} {'display RMSE':>12s}")

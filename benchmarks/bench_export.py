@@ -13,12 +13,8 @@ prints numbers and never fails on a timing.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
-
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
-sys.path.insert(0, ROOT)
 
 
 def _reset():

@@ -12,19 +12,16 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "examples"))
-
-from opal_diffraction.core import primitives  # noqa: E402
-from opal_diffraction.core.camera import generate_rays  # noqa: E402
-from opal_diffraction.core.render import RenderContext, render  # noqa: E402
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene  # noqa: E402
-from opal_diffraction.core.settings import RenderSettings  # noqa: E402
+from opal_diffraction._scripts import load_example
+from opal_diffraction.core import primitives
+from opal_diffraction.core.camera import generate_rays
+from opal_diffraction.core.render import RenderContext, render
+from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+from opal_diffraction.core.settings import RenderSettings
 
 
 def diffuse_scene(pixels=512) -> Scene:
@@ -78,7 +75,7 @@ def main():
     ap.add_argument("--backend", default="auto")
     ap.add_argument("--spp", type=int, default=4)
     args = ap.parse_args()
-    from prism import build_scene
+    build_scene = load_example("prism").build_scene
 
     scenes = {"diffuse 20k tris 512x512": diffuse_scene(512), "prism example 640x400": build_scene(640, 400)}
     print(f"{'scene':28s} {'backend':8s} {'rays (M)':>9s} {'eye pass Mrays/s':>17s} {'raw Mrays/s':>12s} {'ratio':>6s}")

@@ -12,14 +12,11 @@ resolution, 1 sample) and to the full-resolution image with the viewport samples
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 import types
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
-sys.path.insert(0, ROOT)
-sys.path.insert(0, os.path.join(ROOT, "examples"))
+from opal_diffraction._scripts import load_example
 
 
 def main(argv=None) -> int:
@@ -35,7 +32,7 @@ def main(argv=None) -> int:
     from opal_diffraction.blender import viewport
     from opal_diffraction.blender.engine import OpalRenderEngine
 
-    import opal as example  # examples/opal.py
+    example = load_example("opal")  # examples/opal.py
 
     opal_diffraction.register()
     try:

@@ -15,20 +15,15 @@ RGB relative to the reference's mean, and the worst pixel):
 from __future__ import annotations
 
 import argparse
-import os
-import sys
 import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, ".."))
-sys.path.insert(0, os.path.join(HERE, "..", "examples"))
-
-from opal_diffraction.core import primitives  # noqa: E402
-from opal_diffraction.core.render import render  # noqa: E402
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene  # noqa: E402
-from opal_diffraction.core.settings import RenderSettings  # noqa: E402
+from opal_diffraction._scripts import load_example
+from opal_diffraction.core import primitives
+from opal_diffraction.core.render import render
+from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+from opal_diffraction.core.settings import RenderSettings
 
 
 def colour_chart(pixels=192) -> Scene:
@@ -56,7 +51,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--threads", type=int, default=2)
     args = ap.parse_args()
-    from prism import build_scene
+    build_scene = load_example("prism").build_scene
 
     cases = [
         ("colour chart", colour_chart(), dict(samples=1)),

@@ -40,16 +40,14 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from opal_diffraction.core import primitives
+from opal_diffraction.core.accel import build_accelerator
+from opal_diffraction.core.camera import generate_rays
+from opal_diffraction.core.render import render
+from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+from opal_diffraction.core.settings import RenderSettings
+
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
-sys.path.insert(0, ROOT)
-
-from opal_diffraction.core import primitives  # noqa: E402
-from opal_diffraction.core.accel import build_accelerator  # noqa: E402
-from opal_diffraction.core.camera import generate_rays  # noqa: E402
-from opal_diffraction.core.render import render  # noqa: E402
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene  # noqa: E402
-from opal_diffraction.core.settings import RenderSettings  # noqa: E402
-
 LLVM_CANDIDATES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1",
                    "/usr/lib/aarch64-linux-gnu/libLLVM-19.so")
 if "DRJIT_LIBLLVM_PATH" not in os.environ:  # Mitsuba's LLVM variants need a libLLVM newer than 15

@@ -21,7 +21,6 @@ import sys
 import time
 
 ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-sys.path.insert(0, ROOT)
 
 #: Where the light sits for the two images (metres; the opal is 2 m long, centred at the origin).
 LIGHT_FIRST = (-3.0, -9.0, 12.0)

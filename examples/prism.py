@@ -16,10 +16,8 @@ import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-
-from opal_diffraction.core import primitives  # noqa: E402
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene  # noqa: E402
+from opal_diffraction.core import primitives
+from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
 
 
 def build_scene(width=640, height=400) -> Scene:

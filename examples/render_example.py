@@ -23,7 +23,6 @@ import os
 import sys
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
-sys.path.insert(0, ROOT)
 
 #: The striped wall: stripes of WALL_HEIGHT / N_STRIPES metres, alternating white and black.
 N_STRIPES, WALL_HEIGHT = 16, 8.0  # as examples/prism.py

@@ -1,4 +1,4 @@
-import os
-import sys
-
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+"""Shared pytest set-up. Nothing to do here: ./setup.sh installs the project editable, so the tests
+import opal_diffraction as installed; the example scripts load through
+opal_diffraction._scripts.load_example; pytest's configuration (test paths, markers) is in
+pyproject.toml."""

@@ -92,7 +92,8 @@ def test_sinc2_integral():
     assert sinc2_mean(-1e-9, 1e-9) == pytest.approx(1.0)
 
 
-@pytest.mark.parametrize("n", [1, 2, 7, 50, 1000, 10**5])
+@pytest.mark.parametrize("n", [1, 2, 7, 50, pytest.param(1000, marks=pytest.mark.slow),
+                               pytest.param(10**5, marks=pytest.mark.slow)])
 def test_bin_averaged_kernel_matches_fine_quadrature(n):
     """The renderer's per-bin value equals the pattern's mean over the bin's wavelengths."""
     d, a, length = 1600.0, 700.0, 2e4  # nm; L = 20 um

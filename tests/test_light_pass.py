@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from opal_diffraction._scripts import load_example
 from opal_diffraction.core import primitives
 from opal_diffraction.core.elements import ElementLayout
 from opal_diffraction.core.light_pass import run_light_pass
@@ -69,6 +70,7 @@ def test_flux_under_a_glass_slab_is_the_fresnel_transmitted_fraction():
     assert np.all(np.abs(pos[lit, :2]) <= 0.5 + 0.05)  # only under the slab
 
 
+@pytest.mark.slow
 def test_ball_lens_focuses_at_n_r_over_2_n_minus_1():
     """Paraxial rays (a stop with a 0.15 R hole above the ball) focus f = n R / (2 (n - 1)) from the centre."""
     n, radius = 1.5, 1.0
@@ -80,9 +82,7 @@ def test_ball_lens_focuses_at_n_r_over_2_n_minus_1():
         s.add_mesh(*primitives.quad((0, 0, -depth), (0.6, 0, 0), (0, 0.6, 0)), material=0)
         s.add_mesh(*primitives.icosphere((0, 0, 0), radius, 5), material=1)
         # the stop: an annulus, diffuse (paths that hit it end there)
-        sys_path = __import__("os").path.join(__import__("os").path.dirname(__file__), "..", "examples")
-        __import__("sys").path.insert(0, sys_path)
-        from gratings import annulus
+        annulus = load_example("gratings").annulus
         v, t, _ = annulus(0.15 * radius, 3.0, segments=128, rings=4)
         s.add_mesh(v + [0, 0, 1.5], t, material=0)
         s.lights = Lights.from_list([{"kind": "SUN", "direction": (0, 0, -1), "power": 1.0}])

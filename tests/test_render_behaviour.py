@@ -78,6 +78,7 @@ def test_progress_reaches_one_and_partial_results_arrive_per_round():
     assert partial == [2, 4, 6, 8] and res.samples == 8 and not res.cancelled
 
 
+@pytest.mark.slow  # a subprocess: python -m opal_diffraction render
 def test_cli_renders_exr_png_and_spectral_exr(tmp_path):
     s = prism_and_stripes(pixels=12)
     s.save(tmp_path / "scene.npz")

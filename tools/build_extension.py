@@ -12,7 +12,8 @@ Steps:
    ``platforms``. Blender ships numpy; it does not ship colour-science (spectra, CIE observer,
    blackbody) or the scipy and typing-extensions it imports, OpenEXR's Python binding (spectral
    EXR output) or embreex (Embree ray casting, x86-64 only; without it the core falls back to its
-   NumPy BVH).
+   NumPy BVH). Their versions are the ``==`` pins of ``requirements.txt``: the zip ships exactly
+   what the test venv runs.
 3. ``blender_ext.py build`` (the extension CLI inside the bpy wheel), ``--split-platforms`` when
    wheels are bundled (one zip per platform), then ``blender_ext.py validate`` on every zip.
 
@@ -27,6 +28,7 @@ import argparse
 import glob
 import os
 import platform
+import re
 import shutil
 import subprocess
 import sys
@@ -35,16 +37,25 @@ import tomllib
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
 PACKAGE = os.path.join(ROOT, "opal_diffraction")
 MANIFEST = os.path.join(ROOT, "blender_manifest.toml")
+REQUIREMENTS = os.path.join(ROOT, "requirements.txt")
 
-#: Runtime dependencies Blender does not ship, as pip requirements; (requirement, optional).
-#: scipy is pinned to a release that supports every numpy Blender 4.2-5.x bundles (>= 1.22.4).
-WHEELS = [
-    ("colour-science==0.4.6", False),
-    ("typing-extensions>=4.6", False),
-    ("scipy==1.13.1", False),
-    ("OpenEXR==3.5.3", False),
-    ("embreex==4.4.0.post1", True),
+#: Runtime dependencies Blender does not ship, bundled as wheels; (distribution, optional). Each is
+#: pinned (``==``) in requirements.txt, the one source of their versions (see wheel_requirements).
+#: The scipy pin must support every numpy Blender bundles from blender_version_min on (Blender
+#: 4.2 LTS: numpy 1.24.3; 5.0: 1.26.4).
+BUNDLED = [
+    ("colour-science", False),
+    ("typing-extensions", False),
+    ("scipy", False),
+    ("OpenEXR", False),
+    ("embreex", True),
 ]
+#: numpy bundled with Blender releases (the oldest is blender_version_min's): every bundled wheel
+#: that depends on numpy must accept each (tests/test_packaging_meta.py, tests/blender/test_packaging.py).
+#: 4.2 LTS: numpy 1.24.3 (Blender's build_files/build_environment/cmake/versions.cmake of that
+#: series; also what SciPy's version warning reports inside Blender 4.2); 5.0: 1.26.4 (versions.cmake,
+#: and the bpy 5.0.1 wheel requires numpy>=1.26,<2). 4.3-4.5 bundle a numpy between the two.
+BLENDER_NUMPY = {"4.2": "1.24.3", "5.0": "1.26.4"}
 #: Blender platform -> pip --platform tags (newest first), for CPython 3.11 (Blender 4.2-5.x).
 PLATFORM_TAGS = {
     "linux-x64": ["manylinux_2_28_x86_64", "manylinux_2_17_x86_64", "manylinux2014_x86_64"],
@@ -54,6 +65,44 @@ PLATFORM_TAGS = {
 }
 PYTHON_VERSION = "3.11"
 EXCLUDE = ("__pycache__", ".pyc", ".pyo", ".DS_Store")
+#: What the stage leaves out of the package (shutil.ignore_patterns patterns)
+DEV_ONLY = ("__pycache__", "*.pyc", "*.pyo", "_scripts.py")
+
+
+def canonical_name(name: str) -> str:
+    """A distribution name as PEP 503 normalises it (``OpenEXR`` -> ``openexr``, ``typing_extensions``
+    -> ``typing-extensions``)."""
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def pinned_versions(path: str = REQUIREMENTS) -> dict[str, str]:
+    """``{canonical name: version}`` of the ``name==version`` lines of a requirements file (environment
+    markers and comments ignored; ranges and wildcards are not pins and are left out)."""
+    pins = {}
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            line = line.split("#", 1)[0].split(";", 1)[0].strip()
+            m = re.fullmatch(r"([A-Za-z0-9][A-Za-z0-9._-]*)(?:\[[^\]]*\])?\s*==\s*([A-Za-z0-9._+!-]+)", line)
+            if m:
+                pins[canonical_name(m.group(1))] = m.group(2)
+    return pins
+
+
+def wheel_requirements(path: str = REQUIREMENTS) -> list[tuple[str, bool]]:
+    """The bundled wheels as pip requirements, ``[("scipy==1.15.3", False), ...]``, at the pins of
+    requirements.txt; exits with an error when one of BUNDLED is not pinned there."""
+    pins = pinned_versions(path)
+    missing = [name for name, _ in BUNDLED if canonical_name(name) not in pins]
+    if missing:
+        raise SystemExit(f"error: {os.path.relpath(path, ROOT)} pins no exact version (==) of {missing}; "
+                         "the extension bundles these wheels at the venv's pins")
+    return [(f"{name}=={pins[canonical_name(name)]}", optional) for name, optional in BUNDLED]
+
+
+def wheel_name_version(filename: str) -> tuple[str, str]:
+    """``(canonical name, version)`` of a wheel file name (``scipy-1.15.3-cp311-...whl``)."""
+    name, version = os.path.basename(filename).split("-")[:2]
+    return canonical_name(name), version
 
 
 def blender_ext_cli() -> str:
@@ -81,7 +130,8 @@ def stage(stage_dir: str, wheels: dict[str, list[str]]) -> None:
     """Copy the package and write the manifest (with its wheels and platforms) into stage_dir."""
     if os.path.exists(stage_dir):
         shutil.rmtree(stage_dir)
-    shutil.copytree(PACKAGE, stage_dir, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo"))
+    # _scripts.py loads the repository's example and tool scripts for tests and benchmarks: not part of the add-on
+    shutil.copytree(PACKAGE, stage_dir, ignore=shutil.ignore_patterns(*DEV_ONLY))
     with open(MANIFEST, "rb") as f:
         tomllib.load(f)  # fail early on a broken manifest
     with open(MANIFEST, encoding="utf-8") as f:
@@ -105,14 +155,19 @@ def stage(stage_dir: str, wheels: dict[str, list[str]]) -> None:
         f.write(text)
 
 
+def _cached_wheels(folder: str, key: tuple[str, str]) -> list[str]:
+    return [p for p in glob.glob(os.path.join(folder, "*.whl")) if wheel_name_version(p) == key]
+
+
 def download_wheels(plat: str, cache: str, offline: bool) -> list[str]:
     """Wheels for one Blender platform (cached); optional ones are skipped when unavailable."""
     folder = os.path.join(cache, plat)
     os.makedirs(folder, exist_ok=True)
     out = []
-    for req, optional in WHEELS:
-        name = req.split("=")[0].split(">")[0].split("<")[0].strip().lower().replace("-", "_")
-        have = [p for p in glob.glob(os.path.join(folder, "*.whl")) if os.path.basename(p).lower().startswith(name + "-")]
+    for req, optional in wheel_requirements():
+        name, version = req.split("==")
+        key = (canonical_name(name), version)
+        have = _cached_wheels(folder, key)  # only the pinned version: a wheel cached for an older pin is not reused
         if have:
             out.append(sorted(have)[-1])
             continue
@@ -130,7 +185,9 @@ def download_wheels(plat: str, cache: str, offline: bool) -> list[str]:
                 print(f"note: {req} has no wheel for {plat}: skipped (the NumPy BVH is used there)")
                 continue
             raise SystemExit(f"error: pip could not download {req} for {plat}:\n{res.stderr.strip()}")
-        have = [p for p in glob.glob(os.path.join(folder, "*.whl")) if os.path.basename(p).lower().startswith(name + "-")]
+        have = _cached_wheels(folder, key)
+        if not have:
+            raise SystemExit(f"error: pip downloaded no wheel named {key[0]}-{version}-*.whl for {req} ({plat})")
         out.append(sorted(have)[-1])
     return out
 

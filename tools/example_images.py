@@ -21,9 +21,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def _core_scenes():
-    sys.path.insert(0, os.path.join(ROOT, "examples"))  # the examples are scripts, not a package
-    import gratings
-    import prism
+    from opal_diffraction._scripts import load_example  # the examples are scripts, not a package
+
+    gratings = load_example("gratings")
+    prism = load_example("prism")
 
     yield "prism", prism.build_scene(160, 100)
     yield "fig5", gratings.fig5_scene(120, 60)
@@ -34,10 +35,11 @@ def _blender_scenes():
     import bpy  # noqa: F401
 
     import opal_diffraction
+    from opal_diffraction._scripts import load_example
     from opal_diffraction.blender.export import export_scene
 
-    import opal as opal_example
-    import render_example
+    opal_example = load_example("opal")
+    render_example = load_example("render_example")
 
     opal_diffraction.register()
     try:
@@ -52,8 +54,13 @@ def _blender_scenes():
 
 
 def render_all(out: str) -> None:
+    import opal_diffraction
     from opal_diffraction.core.render import render
     from opal_diffraction.core.settings import RenderSettings
+
+    tree = os.path.dirname(os.path.dirname(os.path.realpath(opal_diffraction.__file__)))
+    if tree != os.path.realpath(ROOT):  # e.g. another checkout's venv (its editable install) or PYTHONPATH
+        print(f"note: rendering opal_diffraction and examples/ of {tree}, not of {ROOT}", file=sys.stderr)
 
     films = {}
     for scenes in (_core_scenes, _blender_scenes):

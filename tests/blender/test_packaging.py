@@ -4,24 +4,26 @@ its own user folder), renders from the installed copy, and writes nothing into i
 
 from __future__ import annotations
 
-import importlib.util
+import importlib.metadata as md
+import io
 import json
 import os
 import subprocess
 import sys
 import tomllib
 import zipfile
+from email.parser import Parser
 
 import pytest
+from packaging.requirements import Requirement
+from packaging.version import Version
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+from opal_diffraction._scripts import REPO_ROOT as ROOT
+from opal_diffraction._scripts import load_script
 
 
 def _build_tool():
-    spec = importlib.util.spec_from_file_location("build_extension", os.path.join(ROOT, "tools", "build_extension.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("tools/build_extension.py")
 
 
 @pytest.fixture(scope="module")
@@ -41,6 +43,8 @@ def test_manifest_is_valid_and_complete():
     assert "files" in m["permissions"]
 
 
+# the tests of the built zip are slow: the build (its wheels downloaded on a fresh clone) and a second Blender
+@pytest.mark.slow
 def test_zip_builds_and_validates(built_zip):
     tool = _build_tool()
     res = subprocess.run([sys.executable, tool.blender_ext_cli(), "validate", built_zip], capture_output=True, text=True)
@@ -54,6 +58,34 @@ def test_zip_builds_and_validates(built_zip):
     for dep in ("colour_science", "scipy", "openexr"):
         assert dep in wheels.lower(), dep
     assert manifest["platforms"] == [tool.current_platform()]
+    assert not any(n.endswith("_scripts.py") for n in names), "the development-only loader is in the zip"
+
+
+@pytest.mark.slow
+def test_zip_wheels_are_the_venvs_pins(built_zip):
+    """The shipped extension and the test venv use the same pinned versions: each wheel in the zip is
+    requirements.txt's pin, which is what this venv has installed; and every wheel that depends on
+    numpy accepts the numpy of each Blender from blender_version_min on."""
+    tool = _build_tool()
+    pins = tool.pinned_versions()
+    with zipfile.ZipFile(built_zip) as z:
+        manifest = tomllib.loads(z.read("blender_manifest.toml").decode())
+        shipped = {}
+        for w in manifest["wheels"]:
+            name, version = tool.wheel_name_version(w)
+            shipped[name] = version
+            with zipfile.ZipFile(io.BytesIO(z.read(w.removeprefix("./")))) as wheel:
+                meta_path = next(n for n in wheel.namelist() if n.endswith(".dist-info/METADATA"))
+                meta = Parser().parsestr(wheel.read(meta_path).decode())
+            for r in map(Requirement, meta.get_all("Requires-Dist") or []):
+                if tool.canonical_name(r.name) == "numpy" and (r.marker is None or r.marker.evaluate({"extra": ""})):
+                    for blender, numpy in tool.BLENDER_NUMPY.items():
+                        assert r.specifier.contains(numpy), f"{w} needs {r}; Blender {blender} has numpy {numpy}"
+    expected = {tool.canonical_name(n) for n, optional in tool.BUNDLED if not optional}
+    assert expected <= set(shipped) <= {tool.canonical_name(n) for n, _ in tool.BUNDLED}
+    for name, version in shipped.items():
+        assert version == pins[name], f"the zip ships {name} {version}, requirements.txt pins {pins[name]}"
+        assert Version(md.version(name)) == Version(version), f"the venv has {name} {md.version(name)}, the zip {version}"
 
 
 INSTALL_SCRIPT = r"""
@@ -84,6 +116,7 @@ json.dump(info, open(os.path.join(out, "info.json"), "w"))
 """
 
 
+@pytest.mark.slow
 def test_zip_installs_enables_and_renders(built_zip, tmp_path):
     script = tmp_path / "install.py"
     script.write_text(INSTALL_SCRIPT)

@@ -280,6 +280,7 @@ def test_unsupported_nodes_warn_and_render(last_render):
 
 
 # ---------------------------------------------------------------------------- headless example
+@pytest.mark.slow  # a subprocess that imports bpy
 def test_render_example_runs_headless(tmp_path):
     out = tmp_path / "example"
     res = subprocess.run([sys.executable, os.path.join(ROOT, "examples", "render_example.py"), "--spp", "1",
