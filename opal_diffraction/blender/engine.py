@@ -125,6 +125,9 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         except ExportCancelled:
             last_render.update(status="CANCELLED", message="cancelled while exporting the scene")
             self._status("Cancelled")
+        except KeyboardInterrupt:  # Ctrl-C in a terminal (the bpy module, blender -b): stop cleanly
+            last_render.update(status="CANCELLED", message="interrupted")
+            self._status("Cancelled")
         except SceneError as e:
             self._fail(str(e))
         except MemoryError:

@@ -153,6 +153,24 @@ def test_cancel_during_export(monkeypatch, last_render):
     assert "export" in last_render["message"]
 
 
+def test_ctrl_c_ends_the_render_cleanly(monkeypatch, capfd, last_render):
+    """Ctrl-C (KeyboardInterrupt from the terminal) during a render: a consistent CANCELLED
+    status and no traceback."""
+    _box_scene()
+    calls = []
+
+    def interrupt(self):  # the interrupt arrives after the export, inside the core
+        calls.append(1)
+        if len(calls) > 3:
+            raise KeyboardInterrupt
+        return False
+
+    monkeypatch.setattr(OpalRenderEngine, "_should_stop", interrupt)
+    bpy.ops.render.render()
+    assert last_render["status"] == "CANCELLED" and last_render["message"] == "interrupted"
+    assert "Traceback" not in capfd.readouterr().err
+
+
 def test_spectral_exr_and_scene_file(tmp_path, last_render):
     sc = _box_scene(16, 12)
     sc.frame_set(3)
