@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry import triangle_cross
+
 __all__ = [
     "cabochon",
 ]
@@ -58,7 +60,7 @@ def cabochon(size_x: float = 0.02, size_y: float = 0.015, height: float = 0.007,
         t = np.vstack([t, np.stack([np.full(n, centre), s + (j + 1) % n, s + j], axis=1)])
     # outward winding: the dome's triangles face away from the axis / up, the base's down
     p = v[t]
-    nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    nrm = triangle_cross(v, t)
     out = p.mean(axis=1) - np.array([0.0, 0.0, h * 0.25])
     flip = np.sum(nrm * out, axis=1) < 0
     t[flip] = t[flip][:, [0, 2, 1]]

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry import triangle_areas
 from .bragg import N_SILICA, N_VOID, period_from_sphere_diameter
 from .surface import face_geometry, project_to_planes, tangent_basis, transport_tangents
 
@@ -52,7 +53,7 @@ def sample_surface_points(vertices, triangles, count: int, rng: np.random.Genera
     v = np.asarray(vertices, np.float64)
     t = np.asarray(triangles, np.int64).reshape(-1, 3)
     p = v[t]
-    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    area = triangle_areas(v, t)
     total = area.sum()
     if count <= 0 or len(t) == 0 or not total > 0:
         return np.zeros((0, 3)), np.zeros(0, np.int64)

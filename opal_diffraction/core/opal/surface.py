@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry import triangle_cross
+
 __all__ = [
     "FaceGeometry",
     "face_geometry",
@@ -40,7 +42,7 @@ def face_geometry(vertices, triangles, tri_face=None, n_faces: int | None = None
     v = np.asarray(vertices, np.float64)
     t = np.asarray(triangles, np.int64).reshape(-1, 3)
     p = v[t]
-    cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    cross = triangle_cross(v, t)
     area = 0.5 * np.linalg.norm(cross, axis=1)
     cen = p.mean(axis=1)
     if tri_face is None:
