@@ -248,6 +248,20 @@ def test_embree_mesh_split_into_geometries_maps_back_to_our_triangles(monkeypatc
     check_occluded(acc, V, F, o, d, rng.uniform(0.05, 3.0, len(o)).astype(np.float32))
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("size", [1e-20, 1e-30, 1e-38])
+def test_tiny_triangles_give_finite_hits_or_misses(backend, size):
+    """Triangles so small that float32 products underflow: never NaN barycentrics."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32) * np.float32(size)
+    F = np.array([[0, 1, 2]], np.int32)
+    acc = build_accelerator(V, F, backend)
+    o = np.array([[0.25 * size, 0.25 * size, -1.0]] * 4, np.float32)
+    d = np.array([[0, 0, 1]] * 4, np.float32)
+    h = acc.intersect(o, d)
+    assert np.isfinite(h.u).all() and np.isfinite(h.v).all()
+    assert np.all((h.prim == -1) | ((h.u >= 0) & (h.v >= 0) & (h.u + h.v <= 1 + 1e-6)))
+
+
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 80), scale=st.sampled_from([1e-2, 1.0, 300.0]),
        size=st.sampled_from([0.02, 0.3, 2.0]), backend=st.sampled_from(["numpy", "embree"] if HAVE_EMBREE else ["numpy"]))

@@ -510,6 +510,7 @@ class NumpyBVH:
                 np.maximum(mx, Wf, out=mx)
                 inside = mn >= 0                  # edges inclusive
                 inside |= mx <= 0
+                inside &= uvw != 0                # all three underflowed (a ~1e-20 m triangle): no hit
                 # distance from the plane equation (unit normal), independent of the shear
                 dx, dy, dz = r[3], r[4], r[5]
                 ngx, ngy, ngz = tr[9], tr[10], tr[11]
@@ -554,9 +555,12 @@ class NumpyBVH:
                         best[sb] = take(tj, cb)
                         bleaf[sb] = take(lf, cb)
                         bslot[sb] = jb
-                        inv = 1.0 / uvw[jb, cb]
-                        bu[sb] = V[jb, cb] * inv      # Embree's u, v: weights of v1, v2
-                        bv[sb] = Wf[jb, cb] * inv
+                        w_sum = uvw[jb, cb]
+                        inv = 1.0 / w_sum
+                        vb, wb = V[jb, cb], Wf[jb, cb]
+                        tiny = ~np.isfinite(inv)  # a subnormal sum (triangles of ~1e-20 m): divide
+                        bu[sb] = np.where(tiny, vb / np.where(tiny, w_sum, 1), vb * inv)  # Embree's u, v:
+                        bv[sb] = np.where(tiny, wb / np.where(tiny, w_sum, 1), wb * inv)  # weights of v1, v2
                     pops.append(sl)
 
             # ---- pop: take the next child of the top entry; an entry whose (nearest) entry
