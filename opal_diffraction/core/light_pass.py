@@ -195,12 +195,15 @@ class LightTargets:
         return bool(np.any(self.budget > 0)) and bool(self.receiver_mask.any() or self.grating_mask.any())
 
 
-def find_light_targets(vertices, triangles, tri_material, materials, gratings, lights, conv) -> LightTargets:
-    """The light pass's targets for a scene (prepared materials, gratings and lights)."""
+def find_light_targets(vertices, triangles, tri_material, materials, gratings, lights, conv,
+                       light_paths: int = 1) -> LightTargets:
+    """The light pass's targets for a scene (prepared materials, gratings and lights). Without
+    light paths or lights there is nothing to aim, so the casters are not grouped at all."""
     mk = materials.kind[tri_material] if len(tri_material) else np.zeros(0, np.int32)
     caster = np.isin(mk, [MIRROR, DIELECTRIC])
     grating = gratings.enabled[tri_material] if len(tri_material) else np.zeros(0, bool)
-    objects = caster_objects(vertices, triangles, caster)
+    aimed = caster if light_paths > 0 and len(lights) else np.zeros_like(caster)
+    objects = caster_objects(vertices, triangles, aimed)
     return LightTargets(caster, mk == DIFFUSE, grating, objects, _light_budget(lights, objects, conv))
 
 

@@ -45,10 +45,10 @@ def plan_render(prepared) -> RenderPlan:
         notes.append("light pass skipped: no mirror or glass in the scene")
     elif len(prepared.lights) == 0:
         notes.append("light pass skipped: no lights")
-    elif not prepared.light_targets.needed:
-        notes.append("light pass skipped: no light reaches a mirror or glass object")
     elif settings.light_paths <= 0:
         notes.append("light pass skipped: light paths set to 0")
+    elif not prepared.light_targets.needed:
+        notes.append("light pass skipped: no light reaches a mirror or glass object")
     else:
         light_pass = True
         notes.append(f"light pass: {settings.light_paths / 1e6:.2f} M paths aimed at "

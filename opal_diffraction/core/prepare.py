@@ -147,7 +147,7 @@ def prepare(scene: Scene, settings: RenderSettings | None = None, conv: Spectral
             reuse: PreparedScene | None = None, should_cancel=None) -> PreparedScene:
     """Validate ``scene`` and ``settings`` (SceneError with a readable message) and prepare them.
 
-    ``conv``: a SpectralConverter for the same grid to reuse (it is the slow part for tiny scenes).
+    ``conv``: a SpectralConverter for the same grid to reuse.
     ``reuse``: an earlier preparation (the rendered viewport's, before an edit): whatever depends
     only on unchanged inputs is taken from it (the acceleration structure and triangle frames
     when the geometry is the same, the spectra when the grid is), and when nothing the light pass
@@ -197,7 +197,8 @@ def _prepare(scene, settings, conv, reuse) -> PreparedScene:
     if same_for_light:
         targets, key = reuse.light_targets, reuse.key
     else:
-        targets, key = find_light_targets(v, t, tri_material, materials, gratings, lights, conv), next(_keys)
+        targets = find_light_targets(v, t, tri_material, materials, gratings, lights, conv, settings.light_paths)
+        key = next(_keys)
     prepared = PreparedScene(
         scene=scene,
         settings=settings,
