@@ -3,11 +3,11 @@
     .venv/bin/python benchmarks/bench_cancel_latency.py [--triangles 10000000]
 
 A wavy grid of ``--triangles`` triangles, half of them glass (so the light pass has casters to
-group and aim at) under a point light. First one render with cancel never requested records
-when each stage starts (preparation, light pass, eye pass: the progress callback and the
-prepared scene's timing say so); then, for each stage, a render that requests cancel half-way
-into that stage and measures how long render() takes to return after the request. Prints the
-table for docs/benchmarks.md. Needs ~6 GB of memory at 10 M triangles.
+group and aim at) under a point light. The preparation is timed alone first; then renders that
+request cancel 10 %, 50 % and 90 % into the preparation, 2 s into the light pass and 2 s into
+the eye pass (the progress callback says when each pass starts) measure how long render()
+takes to return after the request. Prints the table for docs/benchmarks.md. Needs ~4 GB of
+memory at 10 M triangles.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from opal_diffraction.core.prepare import prepare
 from opal_diffraction.core.render import render
 from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
 from opal_diffraction.core.settings import RenderSettings
@@ -45,37 +46,25 @@ def big_scene(triangles: int) -> Scene:
 SETTINGS = RenderSettings(samples=16, light_paths=1_000_000, threads=2)
 
 
-def timeline(scene):
-    """(stage, start, end) seconds from the call, from one uncancelled render."""
-    marks = {}
+def latency(scene, trigger) -> tuple[float, bool, str]:
+    """Render with a cancel requested once ``trigger(elapsed, stage)`` is true; returns (seconds
+    from the request to render() returning, whether the result says cancelled, the stage)."""
     t0 = time.perf_counter()
+    state = {"stage": "preparation"}
 
     def progress(fraction, message):
-        stage = "light pass" if message.startswith("light pass") else "eye pass"
-        marks.setdefault(stage, time.perf_counter() - t0)
-
-    res = render(scene, SETTINGS, progress=progress)
-    total = time.perf_counter() - t0
-    prep = res.stats["prepare_s"]
-    lp_end = marks.get("eye pass", total)
-    return [("preparation (validation, normals, Embree build, light targets)", 0.0, prep),
-            ("light pass", marks.get("light pass", prep), lp_end), ("eye pass", lp_end, total)]
-
-
-def latency(scene, at: float) -> tuple[float, bool]:
-    t0 = time.perf_counter()
-    asked = {}
+        state["stage"] = "light pass" if message.startswith("light pass") else "eye pass"
+        state.setdefault(state["stage"], time.perf_counter() - t0)
 
     def should_cancel():
         now = time.perf_counter() - t0
-        if now >= at:
-            asked.setdefault("t", now)
-            return True
-        return False
+        if "asked" not in state and trigger(now, state):
+            state["asked"] = now
+        return "asked" in state
 
-    res = render(scene, SETTINGS, should_cancel=should_cancel)
+    res = render(scene, SETTINGS, progress=progress, should_cancel=should_cancel)
     done = time.perf_counter() - t0
-    return done - asked.get("t", done), res.cancelled
+    return done - state.get("asked", done), res.cancelled, state["stage"]
 
 
 def main(argv=None) -> int:
@@ -84,17 +73,20 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     scene = big_scene(args.triangles)
-    print(f"{len(scene.triangles) / 1e6:.1f} M triangles built in {time.perf_counter() - t0:.1f} s")
-    stages = timeline(scene)
-    for name, a, b in stages:
-        print(f"  {name}: {a:.1f} - {b:.1f} s", flush=True)
+    print(f"{len(scene.triangles) / 1e6:.1f} M triangles built in {time.perf_counter() - t0:.1f} s", flush=True)
+    t0 = time.perf_counter()
+    prepare(scene, SETTINGS)
+    t_prep = time.perf_counter() - t0
+    print(f"preparation alone: {t_prep:.1f} s", flush=True)
     print("\n| stage | cancel requested at (s) | latency (s) | cancelled |")
     print("|---|---|---|---|")
-    for name, a, b in stages:
-        for frac in (0.25, 0.75):
-            at = a + frac * (b - a)
-            lat, ok = latency(scene, at)
-            print(f"| {name} | {at:.1f} | {lat:.2f} | {ok} |", flush=True)
+    cases = [(f"preparation, {int(100 * f)} % in", lambda now, st, f=f: now >= f * t_prep) for f in (0.1, 0.5, 0.9)]
+    cases += [("light pass, 2 s in", lambda now, st: "light pass" in st and now >= st["light pass"] + 2.0),
+              ("eye pass, 2 s in", lambda now, st: "eye pass" in st and now >= st["eye pass"] + 2.0)]
+    for name, trigger in cases:
+        t0 = time.perf_counter()
+        lat, ok, stage = latency(scene, trigger)
+        print(f"| {name} ({stage}) | {time.perf_counter() - t0 - lat:.1f} | {lat:.2f} | {ok} |", flush=True)
     return 0
 
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass, fields, is_dataclass, replace
 import numpy as np
 
 from .accel import build_accelerator, default_threads
-from .cancel import run_cancellable
+from .cancel import check, run_cancellable
 from .geometry import triangle_normals
 from .gratings import PreparedGratings, prepare_gratings, triangle_tangents
 from .light_pass import LightTargets, find_light_targets
@@ -154,14 +154,15 @@ def prepare(scene: Scene, settings: RenderSettings | None = None, conv: Spectral
     reads has changed the result keeps its ``key``, so the earlier light-pass result stays valid.
     ``should_cancel()``: polled every cancel.POLL_S while preparing; raises cancel.RenderCancelled.
     """
-    return run_cancellable(lambda: _prepare(scene, settings, conv, reuse), should_cancel)
+    return run_cancellable(lambda stopped: _prepare(scene, settings, conv, reuse, stopped), should_cancel)
 
 
-def _prepare(scene, settings, conv, reuse) -> PreparedScene:
+def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
     t0 = time.perf_counter()
     settings = settings or RenderSettings()
     settings.validate()
     scene, warnings = scene.validated()
+    check(stopped)
     grid = settings.grid()
     if conv is None and reuse is not None:
         conv = reuse.conv
@@ -184,9 +185,11 @@ def _prepare(scene, settings, conv, reuse) -> PreparedScene:
         extent = scene_extent(v)
         base = OFFSET_RELATIVE * extent
         tri_offset = triangle_offsets(v, t, base)
+        check(stopped)
         # the passes parallelise over tiles and light-pass lanes with the whole budget, so the
         # caster itself runs on one thread (no pools nested inside pools)
-        accel = build_accelerator(v, t, settings.backend, threads=1)
+        accel = build_accelerator(v, t, settings.backend, threads=1, stopped=stopped)
+        check(stopped)
     if gratings.any:  # only a scene with gratings pays for their frames
         nrm64 = triangle_normals(v, t) if nrm64 is None else nrm64
         tri_grating_tangent = triangle_tangents(nrm64, scene.tri_tangent)

@@ -102,13 +102,14 @@ def _check_mesh(vertices, triangles):
     return v, t.astype(np.int32)
 
 
-def build_accelerator(vertices, triangles, backend: str = "auto", threads: int | None = None):
+def build_accelerator(vertices, triangles, backend: str = "auto", threads: int | None = None, stopped=None):
     """Build a ray caster for the mesh ``vertices`` (V,3) / ``triangles`` (T,3).
 
     ``backend``: "auto" (embree if embreex imports, else numpy; the environment variable
     ``OPAL_ACCEL=embree|numpy|brute`` overrides "auto"), "embree", "numpy" or "brute".
     ``threads``: how many threads one call may split its rays over (default: default_threads();
-    1 when the caller already runs calls in parallel).
+    1 when the caller already runs calls in parallel). ``stopped()``: polled between the pieces
+    of a long build (Embree); True raises cancel.RenderCancelled.
     """
     if not isinstance(backend, str):
         raise ValueError(f"backend must be a string, got {backend!r}")
@@ -128,7 +129,7 @@ def build_accelerator(vertices, triangles, backend: str = "auto", threads: int |
         if not _embree_importable():
             raise ValueError("backend 'embree' requested but embreex cannot be imported (pip install embreex)")
         from .embree_backend import EmbreeAccelerator
-        return EmbreeAccelerator(v, t, threads=threads)
+        return EmbreeAccelerator(v, t, threads=threads, stopped=stopped)
     if b == "numpy":
         from .numpy_bvh import NumpyBVH
         return NumpyBVH(v, t, threads=threads)

@@ -26,6 +26,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ..cancel import check
 from . import Hits, _as_rays, _as_tmax, _empty_hits, default_threads
 
 _CHUNK = 1 << 16       # rays per embree call
@@ -44,7 +45,7 @@ def _nudge(o):
 class EmbreeAccelerator:
     name = "embree"
 
-    def __init__(self, vertices, triangles, threads: int | None = None):
+    def __init__(self, vertices, triangles, threads: int | None = None, stopped=None):
         from embreex import rtcore_scene as rtcs
         from embreex.mesh_construction import TriangleMesh
 
@@ -66,6 +67,7 @@ class EmbreeAccelerator:
                 # cancel poll can run between the pieces
                 starts = np.arange(0, len(t), _GEOMETRY_CHUNK)
                 for s in starts:
+                    check(stopped)
                     piece = t[s:s + _GEOMETRY_CHUNK]
                     used, local = np.unique(piece, return_inverse=True)
                     TriangleMesh(self._scene, v[used], local.reshape(-1, 3).astype(np.int32))
