@@ -8,7 +8,9 @@ The diffuse BRDF is albedo / pi. Y is read from the spectral film through the CI
 import numpy as np
 import pytest
 
+from opal_diffraction.core import primitives
 from opal_diffraction.core.render import render
+from opal_diffraction.core.scene import Camera, Materials, Scene
 from opal_diffraction.core.settings import RenderSettings
 from opal_diffraction.core.spectrum import SpectralConverter
 
@@ -139,3 +141,32 @@ def test_mirror_reflects_the_world_tinted():
     assert on_mirror.mean() > 0.5
     np.testing.assert_allclose(rgb[on_mirror], np.tile(tint, (on_mirror.sum(), 1)), atol=5e-3)
     np.testing.assert_allclose(rgb[~on_mirror], 1.0, atol=1e-4)
+
+
+def test_a_uniform_world_lights_diffuse_surfaces():
+    """A floor of albedo rho under a uniform world of radiance L, with a black infinite wall (a
+    very large one) on one side: the wall hides half of the cosine-weighted hemisphere of every
+    floor point, so the floor's radiance is rho L / 2 where the wall subtends 90 degrees (far
+    from its edges), and rho L where nothing blocks the sky. Checked on the spectrum at every
+    wavelength against block-wise noise."""
+    from scipy.stats import norm
+
+    rho, world = 0.5, 0.8
+    mats = Materials.from_list([{"kind": "DIFFUSE", "color": (rho, rho, rho)},
+                                {"kind": "DIFFUSE", "color": (0.0, 0.0, 0.0)}])
+    s = Scene(materials=mats, world_color=np.array([world, world, world], np.float32))
+    s.add_mesh(*primitives.quad((0, 0, 0), (1e4, 0, 0), (0, 1e4, 0)), material=0)
+    s.add_mesh(*primitives.quad((0, 0.5, 1e4 / 2), (1e4, 0, 0), (0, 0, 1e4)), material=1)  # the wall at y = 0.5
+    cam = np.eye(4)  # looking straight down at the floor just in front of the wall
+    cam[:3, 3] = (0.0, 0.0, 0.3)
+    s.camera = Camera(matrix=cam, kind="ORTHO", ortho_scale=0.1, width=16, height=16)
+    res = render(s, RenderSettings(samples=64, light_paths=0, seed=3, threads=2))
+    conv_white = render(Scene(materials=mats, world_color=s.world_color, camera=s.camera),
+                        RenderSettings(samples=1, light_paths=0)).spectral.mean(axis=(0, 1))  # L(lambda) seen directly
+    expected = 0.5 * rho * conv_white
+    blocks = res.spectral.reshape(4, 4, 4, 4, -1).mean(axis=(1, 3)).reshape(16, -1)
+    mean = blocks.mean(axis=0)
+    sigma = blocks.std(axis=0, ddof=1) / np.sqrt(len(blocks))
+    z = norm.isf(0.001 / (2 * len(mean)))
+    assert np.all(np.abs(mean - expected) <= z * sigma + 1e-6 * expected), (mean / expected)
+    assert res.rgb.min() > 0

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .geometry import orthonormal_basis
 from .gratings import diffracted_radiance, grating_frame
 from .lights import sample_light
 from .materials import DIFFUSE
@@ -89,6 +90,7 @@ class _TileTrace(SpecularWalker):
     def __init__(self, eye: EyePass, n_pixels: int, rng: np.random.Generator):
         super().__init__(eye.prepared, rng)
         self.caustic_map, self.record_map = eye.caustic_map, eye.record_map
+        self.world_lights = bool(eye.prepared.world_spectrum.any())
         self._n_pixels = n_pixels
         self._film = self._new_film()  # light reflected by diffuse surfaces from direct lighting
         # the other parts of the film, allocated when first written (most scenes use a few):
@@ -157,6 +159,8 @@ class _TileTrace(SpecularWalker):
         if diffuse.any():
             r, h = rays.take(diffuse), hit.take(diffuse)
             self._direct_light(r, h, rng)
+            if self.world_lights:
+                self._world_light(r, h, rng)
             if self.caustic_map is not None:
                 self._caustic_light(r, h, rng)
 
@@ -251,6 +255,34 @@ class _TileTrace(SpecularWalker):
         else:
             irradiance = np.sum(factors * lights.spectrum[:, rays.lam].T, axis=1)
         self._accumulate(rays, rays.weighted(brdf * irradiance))
+
+    def _world_light(self, rays: Rays, hit: Hit, rng):
+        """Light from a uniform world reaching diffuse surfaces directly: one cosine-weighted
+        shadow ray per hit, so each unoccluded ray adds albedo * L_world (the Lambertian BRDF
+        rho / pi times L cos / pdf with pdf = cos / pi) - exact for a constant world, whose
+        variance is only the visibility's. (Light from the world through mirrors and glass onto
+        diffuse surfaces is a caustic path the light pass does not trace yet.)"""
+        prepared = self.prepared
+        b = len(rays)
+        u1, u2 = rng.random(b, np.float32), rng.random(b, np.float32)
+        r, phi = np.sqrt(u1), np.float32(2 * np.pi) * u2
+        tu, tv = orthonormal_basis(hit.ng)
+        local_z = np.sqrt(np.maximum(np.float32(1) - u1, 0))
+        wi = ((r * np.cos(phi))[:, None] * tu + (r * np.sin(phi))[:, None] * tv
+              + local_z[:, None] * hit.ng).astype(np.float32)
+        o = (hit.p + hit.eps[:, None] * hit.ng).astype(np.float32)
+        occ = prepared.accel.occluded(o, wi, np.full(b, np.inf, np.float32))
+        self._rays += b
+        seen = ~occ
+        if not seen.any():
+            return
+        rr, mats = rays.take(seen), hit.mat[seen]
+        bg = prepared.world_spectrum
+        if rr.lam is None:
+            contrib = rr.weighted(prepared.materials.reflectance[mats] * bg[None, :])
+        else:
+            contrib = rr.w * prepared.materials.reflectance[mats, rr.lam] * bg[rr.lam]
+        self._accumulate(rr, contrib)
 
     def _caustic_light(self, rays: Rays, hit: Hit, rng):
         """Caustic radiance at diffuse hits: the illumination map's irradiance * albedo / pi
