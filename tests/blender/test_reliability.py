@@ -7,12 +7,15 @@ contract that backs it: minimums, units and one-line tooltips."""
 from __future__ import annotations
 
 import math
+import types
 
 import bpy
 import numpy as np
 import pytest
 
 import blender_scenes as bs
+from opal_diffraction.blender import properties, ui
+from opal_diffraction.blender.engine import ENGINE_ID
 from opal_diffraction.blender.export import export_scene
 from opal_diffraction.blender.export.nodes import MAX_INTENSITY
 from opal_diffraction.core.scene import SceneError
@@ -189,6 +192,17 @@ def test_no_output_and_empty_surface_say_so():
     assert any("material 'unplugged'" in w and "nothing is connected to the Surface" in w for w in ex.warnings)
 
 
+def test_material_panel_names_an_eevee_only_output():
+    _scene()
+    mat = bs.material("eevee_panel")
+    mat.node_tree.nodes["Material Output"].target = "EEVEE"
+    log = []
+    ctx = types.SimpleNamespace(engine=ENGINE_ID, material=mat, scene=bpy.context.scene)
+    ui.OPAL_MATERIAL_PT_surface.draw(types.SimpleNamespace(layout=_Layout(log)), ctx)
+    labels = [(a[1].get("text", ""), a[1].get("icon", "")) for a in log if a[0] == "label"]
+    assert any("EEVEE only" in t and icon == "ERROR" for t, icon in labels), labels
+
+
 # ---------------------------------------------------------------------------- huge, inf, NaN, negative
 @pytest.mark.parametrize("strength", [FLT_MAX, float("inf")])
 def test_flt_max_emission_is_clamped_with_finite_pixels(strength, last_render):
@@ -261,6 +275,33 @@ def test_huge_ior_and_blackbody_extremes_stay_finite(last_render):
     assert glass.name == "dense"
 
 
+@pytest.mark.parametrize("rotation", [float("nan"), float("inf")])
+def test_nan_or_inf_grating_rotation(rotation, capfd, last_render):
+    _scene()
+    mat = _cube_material(bs.material("ruled", "PRINCIPLED", (0.5, 0.5, 0.5)))
+    mat.opal.grating = True
+    mat.opal.grating_direction = "OBJECT_X"
+    mat.opal.rotation = rotation  # Blender stores NaN as given and inf as FLT_MAX
+    if math.isnan(mat.opal.rotation):
+        _render_error(capfd, r"material 'ruled': grating rotation must be a finite angle \(got nan\)")
+        assert last_render["status"] == "ERROR"
+    else:
+        bpy.ops.render.render()
+        assert last_render["status"] == "FINISHED"
+        assert np.isfinite(last_render["rgb"]).all()
+        rot = _export().scene.materials.rotation
+        assert np.isfinite(rot).all() and (np.abs(rot) <= math.pi + 1e-6).all()
+
+
+def test_nan_grating_values_are_problems():
+    mat = bpy.data.materials.new("nan_grating")
+    for name in ("period", "slit_width", "coherence_length"):
+        setattr(mat.opal, name, float("nan"))
+    problems = " ".join(mat.opal.grating_problems())
+    assert "period must be > 0 nm (got nan nm)" in problems
+    assert "slit width must be > 0 nm" in problems and "coherence length must be > 0 µm" in problems
+
+
 # ---------------------------------------------------------------------------- skipped geometry
 def test_hair_particle_systems_are_reported_with_counts(last_render):
     _scene()
@@ -289,6 +330,131 @@ def test_hair_curves_and_point_clouds_are_reported_with_counts():
     assert any(w.startswith("hair curves are not rendered: 1 skipped ('Fur'; 3 strands)") for w in ws), ws
     if hasattr(bpy.data, "pointclouds"):
         assert any(w.startswith("point clouds are not rendered: 1 skipped ('Dust'") for w in ws), ws
+
+
+# ---------------------------------------------------------------------------- properties
+class _Layout:
+    """Records labels (with their icons) and props a panel draws."""
+
+    def __init__(self, log):
+        self.log = log
+
+    def __getattr__(self, name):
+        if name in ("row", "column", "box", "split"):
+            return lambda *a, **k: _Layout(self.log)
+        if name in ("label", "separator", "template_node_view", "menu"):
+            return lambda *a, **k: self.log.append((name, k))
+        raise AttributeError(name)
+
+    def __setattr__(self, name, value):
+        object.__setattr__(self, name, value)
+
+    def prop(self, data, name, **kw):
+        assert name in data.bl_rna.properties, name
+        self.log.append(("prop", dict(kw, name=name)))
+
+
+def _spectrum_labels(step, lo=400.0, hi=700.0):
+    sc = bpy.context.scene
+    sc.opal.wavelength_min, sc.opal.wavelength_max, sc.opal.wavelength_step = lo, hi, step
+    log = []
+    ctx = types.SimpleNamespace(engine=ENGINE_ID, scene=sc)
+    ui.OPAL_RENDER_PT_spectrum.draw(types.SimpleNamespace(layout=_Layout(log)), ctx)
+    return [(k.get("text", ""), k.get("icon", "")) for kind, k in log if kind == "label"]
+
+
+def test_spectrum_panel_warns_about_a_coarse_step():
+    bs.empty_scene()
+    labels = _spectrum_labels(30.0)
+    assert ("Only 11 wavelengths: colours are approximate", "ERROR") in labels, labels
+    assert _spectrum_labels(5.0) == [("61 wavelengths", "INFO")]
+    assert _spectrum_labels(20.0) == [("16 wavelengths", "INFO")]
+    assert ("Min must be below Max", "ERROR") in _spectrum_labels(5.0, 600.0, 500.0)
+    assert ("Invalid wavelength range or step", "ERROR") in _spectrum_labels(float("nan"))  # no traceback
+
+
+def _props(owner):
+    return {p.identifier: p for p in getattr(bpy.types, owner).bl_rna.properties["opal"].fixed_type.properties
+            if p.identifier != "rna_type"}
+
+
+def test_minimums_exclude_values_that_can_only_fail_later():
+    m, s = _props("Material"), _props("Scene")
+    assert m["period"].hard_min == pytest.approx(properties.MIN_PERIOD_NM) and properties.MIN_PERIOD_NM > 0
+    assert m["slit_width"].hard_min > 0 and m["slit_width"].hard_min <= m["period"].hard_min
+    assert m["coherence_length"].hard_min == pytest.approx(properties.MIN_COHERENCE_UM)
+    assert properties.MIN_COHERENCE_UM > 0
+    assert m["slit_count"].hard_min >= 1 and m["abbe_number"].hard_min > 0
+    assert s["wavelength_step"].hard_min > 0 and s["samples"].hard_min >= 1 and s["round_samples"].hard_min >= 1
+    assert s["tile_size"].hard_min >= 1 and s["wavelength_min"].hard_min >= 360 and s["wavelength_max"].hard_max <= 830
+    mat = bpy.data.materials.new("mins")
+    mat.opal.period, mat.opal.coherence_length, mat.opal.slit_count = 0.0, 0.0, 0
+    assert mat.opal.period > 0 and mat.opal.coherence_length > 0 and mat.opal.slit_count == 1
+    mat.opal.slit_width = 5000.0  # wider than the period: only the render can tell, with a clear message
+    assert any("larger than its period" in p for p in mat.opal.grating_problems())
+
+
+#: Properties that are lengths, and how each says its unit.
+LENGTHS = {("Scene", "wavelength_min"), ("Scene", "wavelength_max"), ("Scene", "wavelength_step"),
+           ("Material", "period"), ("Material", "slit_width"), ("Material", "coherence_length")}
+
+
+def test_every_length_says_its_unit():
+    for owner, name in LENGTHS:
+        p = _props(owner)[name]
+        says = (p.unit == "LENGTH" or p.subtype == "WAVELENGTH" or "nm" in p.description or "µm" in p.description
+                or "nm" in p.name or "µm" in p.name)
+        assert says, (owner, name)
+    assert "µm" in _props("Material")["coherence_length"].description
+    mat = bpy.data.materials.new("units")
+    mat.opal.grating = True
+    log = []
+    ui.OPAL_MATERIAL_PT_grating.draw(types.SimpleNamespace(layout=_Layout(log)),
+                                     types.SimpleNamespace(engine=ENGINE_ID, material=mat))
+    drawn = {k["name"]: k.get("text", "") for kind, k in log if kind == "prop"}
+    assert drawn["coherence_length"] == "Coherence Length (µm)"
+    for owner in ("Scene", "Material"):  # every float with a physical unit is covered above
+        for name, p in _props(owner).items():
+            if p.type == "FLOAT" and p.subtype in ("WAVELENGTH", "DISTANCE") or p.unit == "LENGTH":
+                assert (owner, name) in LENGTHS, (owner, name)
+
+
+def _clean(text: str) -> bool:
+    return bool(text) and "\n" not in text and text == text.strip() and "  " not in text and not text.endswith(".")
+
+
+def test_tooltips_are_one_clean_line():
+    """Every property of scene.opal and material.opal and every enum item: one line, no doubled or
+    trailing spaces, no final period (Blender adds one, as for its own tooltips)."""
+    for owner in ("Scene", "Material"):
+        for name, p in _props(owner).items():
+            assert _clean(p.description), (owner, name, p.description)
+            if p.type == "ENUM":
+                for item in p.enum_items:
+                    assert _clean(item.description), (owner, name, item.identifier, item.description)
+    for op in (bpy.ops.opal.export_scene, bpy.ops.opal.dispersion_preset):
+        rna = op.get_rna_type()
+        assert _clean(rna.description), (rna.identifier, rna.description)
+        for p in rna.properties:
+            if p.identifier != "rna_type" and not p.is_hidden:
+                assert _clean(p.description), (rna.identifier, p.identifier, p.description)
+                for item in getattr(p, "enum_items", ()):
+                    assert _clean(item.description), (rna.identifier, item.identifier)
+
+
+def test_export_operator_reports_warnings_and_errors_without_a_traceback(tmp_path, capfd):
+    _scene()
+    _cube_material(bs.material("looped_op", "DIFFUSE"))
+    nt = bpy.data.materials["looped_op"].node_tree
+    r1, r2 = nt.nodes.new("NodeReroute"), nt.nodes.new("NodeReroute")
+    nt.links.new(r1.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    nt.links.new(r2.outputs[0], r1.inputs[0])
+    nt.links.new(r1.outputs[0], r2.inputs[0])
+    assert bpy.ops.opal.export_scene(filepath=str(tmp_path / "s.npz")) == {"FINISHED"}
+    bpy.data.lights["point_light"].energy = float("nan")
+    with pytest.raises(RuntimeError, match="light 'point_light': its power is NaN"):
+        bpy.ops.opal.export_scene(filepath=str(tmp_path / "t.npz"))
+    assert "Traceback" not in capfd.readouterr().err
 
 
 def test_nan_material_raises_scene_error_from_the_export():
