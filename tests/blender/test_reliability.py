@@ -15,7 +15,7 @@ import pytest
 
 import blender_scenes as bs
 from opal_diffraction.blender import properties, ui
-from opal_diffraction.blender.engine import ENGINE_ID
+from opal_diffraction.blender.engine import ENGINE_ID, OpalRenderEngine, warning_summary
 from opal_diffraction.blender.export import export_scene
 from opal_diffraction.blender.export.nodes import MAX_INTENSITY
 from opal_diffraction.core.scene import SceneError
@@ -253,6 +253,25 @@ def test_negative_strength_and_power_are_zero_with_a_warning(last_render):
     assert (np.asarray(lt.power) >= 0).all()
 
 
+@pytest.mark.parametrize("what, setup, match", [
+    ("emission", lambda: bpy.data.materials["cube"].node_tree.nodes["Emission"].inputs["Strength"]
+     .__setattr__("default_value", float("nan")), r"material 'cube': 'Strength' of 'Emission' is NaN"),
+    ("colour", lambda: bpy.data.materials["cube"].node_tree.nodes["Emission"].inputs["Color"]
+     .__setattr__("default_value", (float("nan"), 1, 1, 1)), r"material 'cube': 'Color' of 'Emission' is NaN"),
+    ("power", lambda: setattr(bpy.data.lights["point_light"], "energy", float("nan")),
+     r"light 'point_light': its power is NaN"),
+    ("light colour", lambda: setattr(bpy.data.lights["point_light"], "color", (float("nan"), 1, 1)),
+     r"light 'point_light': its colour is NaN"),
+])
+def test_nan_values_are_a_clear_error(what, setup, match, capfd, last_render):
+    _scene()
+    _cube_material(bs.material("cube", "EMISSION", (1, 1, 1)))
+    setup()
+    text = _render_error(capfd, match)
+    assert text.count(match.split(": ", 1)[1].replace("\\", "")[:20]) == 1, text  # the error's text once
+    assert last_render["status"] == "ERROR"
+
+
 def test_nan_world_strength_is_a_clear_error(capfd):
     sc = _scene()
     world = bpy.data.worlds.new("sky")
@@ -330,6 +349,62 @@ def test_hair_curves_and_point_clouds_are_reported_with_counts():
     assert any(w.startswith("hair curves are not rendered: 1 skipped ('Fur'; 3 strands)") for w in ws), ws
     if hasattr(bpy.data, "pointclouds"):
         assert any(w.startswith("point clouds are not rendered: 1 skipped ('Dust'") for w in ws), ws
+
+
+# ---------------------------------------------------------------------------- reporting
+def test_every_warning_is_reported_once_and_counted(capfd, last_render):
+    """Each warning is one report (Blender prints reports in background mode, one line each), and
+    the stats line counts them."""
+    _scene()
+    _cube_material(bs.material("toon", "ShaderNodeBsdfToon"))
+    bpy.data.objects["plane"].data.materials[0] = bs.material("toon2", "ShaderNodeBsdfToon")
+    bpy.context.scene.opal.wavelength_step = 25.0
+    capfd.readouterr()
+    bpy.ops.render.render()
+    out = capfd.readouterr().out
+    warnings = last_render["warnings"]
+    assert len(warnings) >= 3 and len(set(warnings)) == len(warnings)
+    for w in warnings:
+        assert out.count(f"Opal Diffraction: {w}") == 1, (w, out)
+    assert f"{len(warnings)} warnings (all in the Info editor): {warnings[0]}" in last_render["stats_log"][-1]
+    assert warning_summary([]) == "" and warning_summary(["a"]) == " | 1 warning: a"
+
+
+def test_an_errors_text_appears_once(capfd, last_render):
+    _scene()
+    bs.mesh_object("broken", [(0, 0, 0), (1, 0, 0), (float("nan"), 1, 0)], [(0, 1, 2)])
+    text = _render_error(capfd, "object 'broken'")
+    assert text.count("vertex coordinate(s) are NaN") == 1, text
+    assert last_render["stats_log"][-1] == f"Error: {last_render['message']}"
+
+
+def test_cancel_leaves_a_consistent_status(monkeypatch, last_render):
+    sc = _scene(32)
+    sc.opal.samples, sc.opal.round_samples, sc.opal.tile_size = 32, 2, 8
+    calls = []
+
+    def should_stop(self):  # Esc once the render is under way
+        calls.append(1)
+        return len(calls) > 4
+
+    monkeypatch.setattr(OpalRenderEngine, "_should_stop", should_stop)
+    bpy.ops.render.render()
+    assert last_render["status"] == "CANCELLED" and last_render["message"]
+    assert last_render["stats_log"][-1].startswith("Cancelled")
+    assert not any(w.startswith("cancelled") for w in last_render["warnings"])
+    monkeypatch.setattr(OpalRenderEngine, "_should_stop", lambda self: True)  # Esc during the export
+    bpy.ops.render.render()
+    assert last_render["status"] == "CANCELLED" and last_render["stats_log"][-1] == "Cancelled"
+
+
+def test_coarse_wavelength_step_warns_in_the_render(last_render):
+    sc = _scene()
+    sc.opal.wavelength_step = 30.0
+    w = _render_finishes(last_render, "wavelength step of 30 nm", "only 11 wavelength samples")
+    assert "use a step of 20 nm or less" in w
+    sc.opal.wavelength_step = 20.0  # 16 samples: enough
+    bpy.ops.render.render()
+    assert not any("wavelength step" in w for w in last_render["warnings"])
 
 
 # ---------------------------------------------------------------------------- properties
