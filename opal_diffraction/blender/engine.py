@@ -7,8 +7,14 @@ is the top of the image, Blender's the bottom). Combined is in the blend file's 
 space, so Blender's colour management (view transform, look, exposure) applies as for Cycles.
 Direct, Caustics and Diffraction are registered as passes for the compositor.
 
-Errors in the scene are reported with ``report({'ERROR'}, message)`` and ``error_set``: the
-operator fails with the message, no traceback, no image written.
+Errors in the scene are reported once with ``report({'ERROR'}, message)`` (the status bar, the
+Info editor, the operator's RuntimeError from a script) and shown in the render window's stats
+line as "Error: message": the operator fails, no traceback, no image written. (``error_set`` is
+not used: Blender would report its text a second time from ``bpy.ops.render.render``.) Every
+warning, from the export, the settings and the core, is reported once (the Info editor lists
+them all; the console too in background mode); the stats line counts them and shows the first.
+A cancelled render (Esc, Ctrl-C) ends with status 'CANCELLED' and a stats line that starts with
+"Cancelled".
 
 The rendered viewport (``view_update`` / ``view_draw``) is viewport.ViewportSession: a
 progressive preview in a background thread, drawn through the ``gpu`` module.
@@ -33,8 +39,8 @@ from .settings import render_settings
 from . import viewport
 from .viewport import ViewportSession
 
-__all__ = ["OpalRenderEngine", "AOV_PASSES", "render_settings", "output_path", "last_render", "register",
-           "unregister"]
+__all__ = ["OpalRenderEngine", "AOV_PASSES", "render_settings", "output_path", "warning_summary", "last_render",
+           "register", "unregister"]
 
 ENGINE_ID = "OPAL_DIFFRACTION"
 #: Passes besides Combined, in the order the core fills them.
@@ -62,6 +68,16 @@ def output_path(path: str, frame: int, ext: str = ".exr", what: str = "spectral 
     if not os.path.splitext(out)[1]:
         out += ext
     return os.path.normpath(out)
+
+
+def warning_summary(warnings: list[str]) -> str:
+    """The stats line's tail for a render's warnings: how many, and the first (every one of them
+    is reported, so the Info editor lists them all)."""
+    if not warnings:
+        return ""
+    if len(warnings) == 1:
+        return f" | 1 warning: {warnings[0]}"
+    return f" | {len(warnings)} warnings (all in the Info editor): {warnings[0]}"
 
 
 class OpalRenderEngine(bpy.types.RenderEngine):
@@ -123,11 +139,9 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         try:
             self._render(depsgraph)
         except ExportCancelled:
-            last_render.update(status="CANCELLED", message="cancelled while exporting the scene")
-            self._status("Cancelled")
+            self._cancelled("cancelled while exporting the scene")
         except KeyboardInterrupt:  # Ctrl-C in a terminal (the bpy module, blender -b): stop cleanly
-            last_render.update(status="CANCELLED", message="interrupted")
-            self._status("Cancelled")
+            self._cancelled("interrupted")
         except SceneError as e:
             self._fail(str(e))
         except MemoryError:
@@ -157,8 +171,11 @@ class OpalRenderEngine(bpy.types.RenderEngine):
     def _fail(self, message: str) -> None:
         last_render.update(status="ERROR", message=message)
         self._status(f"Error: {message}")
-        self.error_set(message)
         self.report({"ERROR"}, f"Opal Diffraction: {message}")
+
+    def _cancelled(self, message: str) -> None:
+        last_render.update(status="CANCELLED", message=message)
+        self._status("Cancelled")
 
     def _render(self, depsgraph):
         t0 = time.perf_counter()
@@ -175,7 +192,7 @@ class OpalRenderEngine(bpy.types.RenderEngine):
             depsgraph, width=width, height=height, camera=self.camera_override,
             test_break=self._should_stop, progress=lambda msg: self._status(msg.capitalize()),
         )
-        warnings = list(exported.warnings)
+        warnings = [w for w in (opal.wavelength_warning(),) if w] + list(exported.warnings)
         last_render["export"] = dict(exported.stats)
         if npz_path:
             exported.scene.validated()  # do not write a file the command line cannot render
@@ -219,7 +236,13 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         self._fill(result, rr, to_working)
         self.end_result(result)
 
-        warnings += [w for w in rr.warnings if w not in warnings]
+        core_warnings = list(rr.warnings)
+        message = ""
+        if rr.cancelled:  # the core says where it stopped: the render's message, not a warning
+            notes = [w for w in core_warnings if w.startswith("cancelled")]
+            core_warnings = [w for w in core_warnings if w not in notes]
+            message = notes[0] if notes else "cancelled"
+        warnings += core_warnings
         if (np.asarray(exported.scene.materials.grating) != 0).any() and not getattr(rr.plan, "gratings", False):
             warnings.append("diffraction gratings are not rendered yet: surfaces with a grating render without it")
         stats = dict(rr.stats, **{"export_" + k: v for k, v in exported.stats.items()})
@@ -230,17 +253,17 @@ class OpalRenderEngine(bpy.types.RenderEngine):
                 stats["spectral_exr"] = spectral_path
             except Exception as e:  # the image itself is fine: keep it, say what failed
                 warnings.append(f"could not write the spectral EXR '{spectral_path}': {e}")
+        warnings = list(dict.fromkeys(warnings))  # once each, in first-seen order
         for w in warnings:
             self.report({"WARNING"}, f"Opal Diffraction: {w}")
         summary = (f"{rr.samples} samples | {stats.get('rays', 0) / 1e6:.1f} M rays | "
                    f"{exported.stats['triangles']} triangles | {stats['total_s']:.1f} s")
         if rr.cancelled:
             summary = "Cancelled | " + summary
-        if warnings:
-            summary += f" | {len(warnings)} warning(s): {warnings[0]}"
+        summary += warning_summary(warnings)
         self._status(summary)
         last_render.update(
-            status="CANCELLED" if rr.cancelled else "FINISHED", warnings=warnings, stats=stats,
+            status="CANCELLED" if rr.cancelled else "FINISHED", message=message, warnings=warnings, stats=stats,
             samples=rr.samples, rgb=rr.rgb, passes=rr.passes, plan=rr.plan.summary(), region=region,
             spectral_exr=stats.get("spectral_exr", ""), partial_updates=state["round"],
             plan_gratings=bool(getattr(rr.plan, "gratings", False)),

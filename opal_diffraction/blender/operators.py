@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import sys
+import traceback
 
 import bpy
 from bpy.props import EnumProperty, StringProperty
@@ -16,8 +18,11 @@ __all__ = ["OPAL_OT_export_scene", "OPAL_OT_dispersion_preset", "register", "unr
 
 
 class OPAL_OT_export_scene(bpy.types.Operator, ExportHelper):
-    """Export the evaluated scene (geometry with modifiers, materials, lights, camera, world) to an
-    .npz scene file that ``python -m opal_diffraction render`` re-renders without Blender"""
+    """Export the evaluated scene to an .npz file the command line renders without Blender"""
+
+    # the tooltip: one line, no final period (Blender's style; a docstring's line breaks would show)
+    bl_description = ("Export the evaluated scene (geometry with modifiers, materials, lights, camera, world) to "
+                      "an .npz scene file that the command line re-renders without Blender")
 
     bl_idname = "opal.export_scene"
     bl_label = "Export Opal Scene (.npz)"
@@ -43,8 +48,13 @@ class OPAL_OT_export_scene(bpy.types.Operator, ExportHelper):
         except (SceneError, ExportCancelled, OSError) as e:
             self.report({"ERROR"}, f"Opal Diffraction export failed: {e or 'cancelled'}")
             return {"CANCELLED"}
+        except Exception as e:  # a bug: say so plainly, keep the details for the console
+            traceback.print_exc(file=sys.stderr)
+            self.report({"ERROR"}, f"Opal Diffraction export failed: internal error ({type(e).__name__}: {e}); "
+                                   "details are in the system console")
+            return {"CANCELLED"}
         for w in exported.warnings:
-            self.report({"WARNING"}, w)
+            self.report({"WARNING"}, f"Opal Diffraction: {w}")
         s = exported.stats
         self.report({"INFO"}, f"Exported {s['triangles']} triangles, {s['lights']} lights, {s['materials']} "
                               f"materials to {path} in {s['export_s']:.2f} s (viewport modifier levels)")

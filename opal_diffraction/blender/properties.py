@@ -17,6 +17,7 @@ section 2.4.
 
 from __future__ import annotations
 
+import math
 from enum import IntEnum
 
 import bpy
@@ -24,12 +25,16 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, Po
 from bpy.types import PropertyGroup
 
 from ..core.enums import Backend, DispersionModel, DispersionSampling, GratingDirection, GratingType, Lattice
+from ..core.spectrum import WavelengthGrid
 
 __all__ = [
     "OpalRenderSettings",
     "OpalMaterialSettings",
     "DISPERSION_ITEMS",
     "DISPERSION_PRESETS",
+    "MIN_GOOD_WAVELENGTHS",
+    "MIN_PERIOD_NM",
+    "MIN_COHERENCE_UM",
     "register",
     "unregister",
 ]
@@ -40,6 +45,15 @@ _NM = "WAVELENGTH" if "WAVELENGTH" in _SUBTYPES else "NONE"
 # Output paths accept '//' (relative to the .blend) where this Blender asks paths to say so.
 _PATH_OPTIONS = ({"PATH_SUPPORTS_BLEND_RELATIVE"}
                  if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties else set())
+
+#: Fewer wavelength samples than this make colours visibly approximate (and dispersion banded):
+#: the panel and the render's warnings say so.
+MIN_GOOD_WAVELENGTHS = 16
+#: Smallest grating period and slit width (nm) the fields accept: 0 can only fail at render time.
+MIN_PERIOD_NM = 1.0
+#: Smallest coherence length (um) the field accepts (1 nm).
+MIN_COHERENCE_UM = 0.001
+
 
 # ---------------------------------------------------------------------------- enum items
 def _items(enum: type[IntEnum], labels: dict) -> list[tuple[str, str, str, int]]:
@@ -193,6 +207,26 @@ class OpalRenderSettings(PropertyGroup):
         "smaller than the view (then halved step by step to full resolution)", default=8, min=1, max=64,
     )
 
+    def wavelength_count(self) -> int | None:
+        """Wavelength samples of the grid these settings give, or None when the grid is invalid
+        (minimum not below maximum, NaN, out of range: the render stops with the core's message)."""
+        try:
+            return WavelengthGrid(float(self.wavelength_min), float(self.wavelength_max),
+                                  float(self.wavelength_step)).n
+        except ValueError:
+            return None
+
+    def wavelength_warning(self) -> str:
+        """A warning when the grid has fewer than ``MIN_GOOD_WAVELENGTHS`` samples, else ""."""
+        n = self.wavelength_count()
+        if n is None or n >= MIN_GOOD_WAVELENGTHS:
+            return ""
+        span = float(self.wavelength_max) - float(self.wavelength_min)
+        good = int(span / (MIN_GOOD_WAVELENGTHS - 1) * 10) / 10
+        return (f"the wavelength step of {self.wavelength_step:g} nm leaves only {n} wavelength samples between "
+                f"{self.wavelength_min:g} and {self.wavelength_max:g} nm (fewer than {MIN_GOOD_WAVELENGTHS}): colours "
+                f"are approximate and dispersion is banded; use a step of {good:g} nm or less")
+
     @classmethod
     def register(cls):
         bpy.types.Scene.opal = PointerProperty(
@@ -231,12 +265,12 @@ class OpalMaterialSettings(PropertyGroup):
     )
     period: FloatProperty(
         name="Period", description="Distance between neighbouring slits (grating pitch): a CD is 1600 nm, a "
-        "DVD 740 nm; orders appear at sin(theta) = m lambda / period", default=1600.0, min=0.0,
+        "DVD 740 nm; orders appear at sin(theta) = m lambda / period", default=1600.0, min=MIN_PERIOD_NM,
         soft_min=100.0, soft_max=10000.0, subtype=_NM, precision=1,
     )
     slit_width: FloatProperty(
-        name="Slit Width", description="Width of one slit or ridge: at most the period; half the period "
-        "suppresses the even orders", default=800.0, min=0.0, soft_min=10.0, soft_max=10000.0,
+        name="Slit Width", description="Width of one slit or ridge in nm: at most the period; half the period "
+        "suppresses the even orders", default=800.0, min=MIN_PERIOD_NM, soft_min=10.0, soft_max=10000.0,
         subtype=_NM, precision=1,
     )
     slit_count: IntProperty(
@@ -244,9 +278,9 @@ class OpalMaterialSettings(PropertyGroup):
         "orders (peaks are lambda / (N period) wide)", default=1000, min=1, soft_max=100000,
     )
     coherence_length: FloatProperty(
-        name="Coherence Length", description="Length along the slits that diffracts coherently, in "
-        "micrometres: shorter lengths smear the orders across the slit direction", default=10.0, min=0.0,
-        soft_min=0.1, soft_max=1000.0, precision=2,
+        name="Coherence Length", description="Length along the slits that diffracts coherently, in µm: "
+        "shorter lengths smear the orders across the slit direction", default=10.0, min=MIN_COHERENCE_UM,
+        soft_min=0.1, soft_max=1000.0, precision=3,
     )
     grating_direction: EnumProperty(
         name="Direction", description="How the direction across the slits is found on the surface",
@@ -258,17 +292,24 @@ class OpalMaterialSettings(PropertyGroup):
     )
 
     def grating_problems(self) -> list[str]:
-        """Readable reasons why the grating settings cannot work (empty when they can)."""
+        """Readable reasons why the grating settings cannot work (empty when they can). The fields'
+        minimums exclude most of them; values from older files, scripts or drivers (0, NaN) are
+        caught here, and a render stops with them as its error."""
         problems = []
-        if not self.period > 0.0:
-            problems.append(f"grating period must be > 0 nm (got {self.period:g} nm)")
-        if not self.slit_width > 0.0:
-            problems.append(f"grating slit width must be > 0 nm (got {self.slit_width:g} nm)")
-        elif self.period > 0.0 and self.slit_width > self.period:
-            problems.append(f"grating slit width ({self.slit_width:g} nm) is larger than its period "
-                            f"({self.period:g} nm)")
-        if not self.coherence_length > 0.0:
-            problems.append(f"grating coherence length must be > 0 um (got {self.coherence_length:g} um)")
+        period, slit, coherence = float(self.period), float(self.slit_width), float(self.coherence_length)
+        finite = float("inf")
+        if not 0.0 < period < finite:
+            problems.append(f"grating period must be > 0 nm (got {period:g} nm)")
+        if not 0.0 < slit < finite:
+            problems.append(f"grating slit width must be > 0 nm (got {slit:g} nm)")
+        elif 0.0 < period < finite and slit > period:
+            problems.append(f"grating slit width ({slit:g} nm) is larger than its period ({period:g} nm)")
+        if not self.slit_count >= 1:
+            problems.append(f"grating slit count must be at least 1 (got {self.slit_count})")
+        if not 0.0 < coherence < finite:
+            problems.append(f"grating coherence length must be > 0 µm (got {coherence:g} µm)")
+        if not math.isfinite(self.rotation):
+            problems.append(f"grating rotation must be a finite angle (got {self.rotation:g})")
         return problems
 
     @classmethod

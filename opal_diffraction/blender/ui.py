@@ -13,11 +13,11 @@ import bpy
 from bpy.types import Menu, Panel
 
 from ..core.optics import SELLMEIER_PRESETS
-from ..core.spectrum import WavelengthGrid
 from .engine import ENGINE_ID
+from .export.nodes import missing_output, output_node
 from .opal_presets import OPAL_MT_opal_presets
 from .operators import OPAL_OT_dispersion_preset, OPAL_OT_export_scene
-from .properties import DISPERSION_PRESETS
+from .properties import DISPERSION_PRESETS, MIN_GOOD_WAVELENGTHS
 
 __all__ = ["register", "unregister", "builtin_panels", "classes"]
 
@@ -71,10 +71,15 @@ class OPAL_RENDER_PT_spectrum(OpalButtonsPanel, Panel):
         col.prop(opal, "wavelength_min", text="Wavelength Min")
         col.prop(opal, "wavelength_max", text="Max")
         col.prop(opal, "wavelength_step", text="Step")
-        if opal.wavelength_min >= opal.wavelength_max:
-            layout.label(text="Min must be below Max", icon="ERROR")
+        n = opal.wavelength_count()
+        if n is None:
+            layout.label(text="Min must be below Max" if opal.wavelength_min >= opal.wavelength_max
+                         else "Invalid wavelength range or step", icon="ERROR")
+        elif n < MIN_GOOD_WAVELENGTHS:
+            col = layout.column(align=True)
+            col.label(text=f"Only {n} wavelengths: colours are approximate", icon="ERROR")
+            col.label(text=f"Use at least {MIN_GOOD_WAVELENGTHS} (a smaller step)", icon="BLANK1")
         else:
-            n = WavelengthGrid(opal.wavelength_min, opal.wavelength_max, opal.wavelength_step).n
             layout.label(text=f"{n} wavelengths", icon="INFO")
         layout.prop(opal, "dispersion_sampling")
 
@@ -135,14 +140,16 @@ def _material_poll(cls, context):
     return mat is not None and not getattr(mat, "grease_pencil", None) and context.engine in cls.COMPAT_ENGINES
 
 
-def _draw_node_input(layout, id_data, input_name: str) -> bool:
-    """Draw the node tree feeding the output node's ``input_name`` (as Cycles' panels do)."""
+def _draw_node_input(layout, id_data, input_name: str, output: str = "Material Output") -> bool:
+    """Draw the node tree feeding the output node's ``input_name`` (as Cycles' panels do); without
+    an output node for Cycles, say why (``output``: what the node is called)."""
     ntree = getattr(id_data, "node_tree", None)
     if ntree is None:
         return False
-    node = ntree.get_output_node("CYCLES") or ntree.get_output_node("ALL")
+    node = output_node(ntree)
     if node is None:
-        layout.label(text="No output node")
+        why = missing_output(ntree, output)  # e.g. the only output targets EEVEE
+        layout.label(text=why[0].upper() + why[1:], icon="ERROR")
         return True
     sock = node.inputs.get(input_name)
     if sock is None:
@@ -227,7 +234,7 @@ class OPAL_MATERIAL_PT_grating(OpalButtonsPanel, Panel):
         col.prop(opal, "period")
         col.prop(opal, "slit_width")
         col.prop(opal, "slit_count")
-        layout.prop(opal, "coherence_length", text="Coherence Length (um)")
+        layout.prop(opal, "coherence_length", text="Coherence Length (µm)")
         col = layout.column(align=True)
         col.prop(opal, "grating_direction")
         col.prop(opal, "rotation")
@@ -253,7 +260,7 @@ class OPAL_WORLD_PT_surface(OpalButtonsPanel, Panel):
         layout = self.layout
         layout.use_property_split = True
         world = context.world
-        if not _draw_node_input(layout, world, "Surface"):
+        if not _draw_node_input(layout, world, "Surface", "World Output"):
             layout.prop(world, "color")
         layout.label(text="Rendered as a uniform background colour", icon="INFO")
 

@@ -10,10 +10,14 @@ converted to the core's linear Rec.709.
 
 What the core cannot render yet is approximated and named in the warnings rather than failing:
 textures (averaged), rough reflection and refraction (made smooth), light radius and sun angle
-(hard shadows). Grating settings are exported with a per-triangle grating direction
-(``Scene.tri_tangent``) and, where the mesh has the opal tools' per-face period attribute
-(``opal_grating_period``), a per-triangle period (``Scene.tri_period``); impossible values are
-an error naming the material.
+(hard shadows), volume shaders (a volume-only material's faces are left out, as Cycles draws no
+surface for it); hair (curves objects and hair particle systems), point clouds and volume
+objects are skipped with counts. Values that would overflow the tracer's float32 (an emission or
+light power up to Blender's FLT_MAX) are clamped with a warning, NaN is an error naming the
+material or light, and a node cycle renders as the default surface with a warning. Grating
+settings are exported with a per-triangle grating direction (``Scene.tri_tangent``) and, where
+the mesh has the opal tools' per-face period attribute (``opal_grating_period``), a per-triangle
+period (``Scene.tri_period``); impossible values are an error naming the material.
 
 One module per concept, as in BlendLuxCore's ``export`` package:
 
@@ -45,8 +49,9 @@ from .camera import export_camera, render_region, render_size
 from .colour import rec709_to_working_space, working_space_to_rec709
 from .lights import LightRows, export_lights
 from .materials import MaterialTable, export_materials
-from .meshes import GEOMETRY_TYPES, UNSUPPORTED_GEOMETRY, MeshCache, SceneMeshes, flatten
-from .messages import Warnings
+from .meshes import (GEOMETRY_TYPES, UNSUPPORTED_GEOMETRY, MeshCache, SceneMeshes, element_count, flatten,
+                     hair_systems, strand_count)
+from .messages import Skipped, Warnings
 from .world import export_world
 
 __all__ = [
@@ -104,7 +109,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     meshes = SceneMeshes(mesh_cache)
     groups: dict = defaultdict(list)  # (mesh key, material tuple) -> matrices
     lights = LightRows(warn, to709)
-    skipped: dict[str, int] = defaultdict(int)
+    skipped = Skipped()
     n_instances = 0
 
     for i, inst in enumerate(depsgraph.object_instances):
@@ -119,9 +124,12 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
             lights.add(ob, inst.matrix_world)
             continue
         if otype not in GEOMETRY_TYPES:
-            if otype in UNSUPPORTED_GEOMETRY:
-                skipped[otype.lower()] += 1
+            if otype in UNSUPPORTED_GEOMETRY and inst.show_self:
+                skipped.add(otype, ob.name, element_count(ob))
             continue
+        if inst.show_particles:
+            for psys in hair_systems(ob):
+                skipped.add("HAIR", ob.name, strand_count(psys))
         if not inst.show_self:
             continue
         slots = materials.slots(ob)
@@ -133,11 +141,11 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
 
     if test_break is not None and test_break():
         raise ExportCancelled()
-    vertices, triangles, tri_material, tri_tangent, tri_period = flatten(groups, meshes, materials.grating, warn)
+    vertices, triangles, tri_material, tri_tangent, tri_period = flatten(
+        groups, meshes, materials.grating, warn, materials.hidden_rows())
 
     lights.warn_soft()
-    for kind, count in skipped.items():
-        warn(f"{count} {kind} object(s) are not supported and were skipped")
+    skipped.report(warn)
     core_materials = materials.finish()
     cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn)
     world = export_world(depsgraph, warn)

@@ -19,6 +19,7 @@ __all__ = [
     "rgb",
     "in_rec709",
     "blackbody_rgb",
+    "BLACKBODY_MIN_K",
     "image_mean",
 ]
 
@@ -65,12 +66,19 @@ def in_rec709(col: np.ndarray, to709: np.ndarray | None) -> np.ndarray:
     return col if to709 is None else to709 @ col
 
 
+#: Temperatures below this (K) take its colour, as Cycles' Blackbody node clamps low temperatures
+#: (and Planck's law at a few kelvin underflows to 0/0 over the visible range).
+BLACKBODY_MIN_K = 800.0
+
+
 def blackbody_rgb(temperature: float) -> np.ndarray:
-    """Linear Rec.709 colour of a blackbody with luminance 1 (Blender's Blackbody node convention)."""
+    """Linear Rec.709 colour of a blackbody with luminance 1 (Blender's Blackbody node convention);
+    below ``BLACKBODY_MIN_K`` that temperature's colour, NaN, infinite or not positive: 6500 K."""
     from ...core.spectrum import SpectralConverter
 
     conv = blackbody_rgb.conv = getattr(blackbody_rgb, "conv", None) or SpectralConverter()
-    t = float(temperature) if temperature > 0 else 6500.0
+    t = float(temperature)
+    t = max(t, BLACKBODY_MIN_K) if 0.0 < t < float("inf") else 6500.0
     return conv.to_rgb(conv.blackbody(t)).astype(np.float64)
 
 

@@ -6,6 +6,8 @@ the emission node of a light's node tree scales the strength and tints the colou
 light with "Temperature" on is a blackbody spectrum (``temperature`` > 0), a tinted one an RGB
 product. What the core cannot render is named in the warnings: light radius and sun angle
 (hard shadows), square and non-uniformly scaled spot cones, area spread below 180 degrees.
+A NaN power, colour, temperature or size is an error naming the light; a negative power is 0 and
+one beyond ``MAX_INTENSITY`` (Blender accepts up to FLT_MAX) is clamped, with a warning.
 """
 
 from __future__ import annotations
@@ -15,46 +17,94 @@ import math
 import numpy as np
 
 from ...core.scene import Lights, SceneError
-from .colour import blackbody_rgb, in_rec709, rgb, working_space_to_rec709
+from .colour import BLACKBODY_MIN_K, blackbody_rgb, in_rec709, rgb, working_space_to_rec709
 from .messages import Warnings
-from .nodes import NodeReader, surface_socket
+from .nodes import MAX_INTENSITY, NodeReader, missing_output, surface_socket
 
 __all__ = ["light_color", "light_row", "LightRows", "export_lights"]
 
 
-def light_color(light, warn, to709) -> tuple[np.ndarray, float, float]:
-    """(Rec.709 colour, temperature K or 0, strength factor from the light's nodes)."""
+def light_color(light, warn, to709, owner: str | None = None) -> tuple[np.ndarray, float, float]:
+    """(Rec.709 colour, temperature K or 0, strength factor from the light's nodes). ``owner``
+    names the light in messages (default: its data's name). A NaN colour or temperature is an
+    error; a colour above ``MAX_INTENSITY`` is clamped with a warning."""
+    owner = owner or f"light '{light.name}'"
     col = in_rec709(rgb(light.color), to709)
+    if np.isnan(col).any():
+        raise SceneError(f"{owner}: its colour is NaN")
     temperature = 0.0
     if getattr(light, "use_temperature", False):
         if np.allclose(col, 1.0, atol=1e-4):
             temperature = float(light.temperature)
+            if not 0.0 < temperature < float("inf"):
+                raise SceneError(f"{owner}: its temperature must be a positive number of kelvin "
+                                 f"(got {temperature:g})")
+            temperature = max(temperature, BLACKBODY_MIN_K)
         else:  # tinted blackbody: an RGB product (the spectrum is approximated)
             col = col * in_rec709(rgb(light.temperature_color), to709)
     strength = 1.0
     nt = light.node_tree if getattr(light, "use_nodes", False) else None
     if nt is not None:
-        owner = f"light '{light.name}'"
         reader = NodeReader(owner, warn, to709)
         sock = surface_socket(nt)
         src = reader.source(sock) if sock else None
+        if reader.cycle is not None:
+            warn(f"{owner}: its node tree has a cycle (through the link {reader.cycle}): using the light's colour")
+            return _finite(col, owner, warn), temperature, strength
         if src is None:
-            return col, temperature, 0.0
+            why = missing_output(nt, "Light Output") if sock is None else "nothing is connected to its Surface"
+            warn(f"{owner}: {why}: the light is off, as in Cycles")
+            return _finite(col, owner, warn), temperature, 0.0
         node = src[0]
         if node.bl_idname != "ShaderNodeEmission":
             warn(f"{owner}: light node '{node.name}' is not supported: using the light's colour")
-            return col, temperature, strength
-        strength = max(reader.value(node, "Strength", 1.0), 0.0)
+            return _finite(col, owner, warn), temperature, strength
+        strength = reader.strength(node, "Strength", 1.0)
         csrc = reader.source(node.inputs["Color"])
         if csrc is not None and csrc[0].bl_idname == "ShaderNodeBlackbody":
-            t_node = reader.value(csrc[0], "Temperature", 6500.0)
+            t_node = max(reader.temperature(csrc[0]), BLACKBODY_MIN_K)
             if temperature == 0.0 and np.allclose(col, 1.0, atol=1e-4):
                 temperature = t_node
             else:
                 col = col * blackbody_rgb(t_node)
         else:
             col = col * reader.color(node, "Color", (1, 1, 1))
-    return col, temperature, strength
+    return _finite(col, owner, warn), temperature, strength
+
+
+def _finite(col: np.ndarray, owner: str, warn) -> np.ndarray:
+    if (col > MAX_INTENSITY).any():
+        warn(f"{owner}: its colour ({col.max():.3g}) is above {MAX_INTENSITY:.0e}: clamped")
+        col = np.minimum(col, MAX_INTENSITY)
+    return col
+
+
+def _power(ob, light, strength: float, col: np.ndarray, warn) -> float:
+    """The light's power in the core's units (W, or W/m^2 for a sun): energy x 2^exposure x node
+    strength. NaN is an error; a negative power is 0 and one whose product with the colour is
+    above ``MAX_INTENSITY`` is lowered to it, each with a warning naming the light."""
+    energy = float(light.energy)
+    exposure = float(getattr(light, "exposure", 0.0))
+    if energy != energy or exposure != exposure:
+        raise SceneError(f"light '{ob.name}': its {'power' if energy != energy else 'exposure'} is NaN")
+    if energy == 0.0 or strength == 0.0:
+        return 0.0
+    power = energy * 2.0 ** min(exposure, 1024.0) * strength
+    if power < 0.0:
+        warn(f"light '{ob.name}': negative power ({power:g}) is rendered as 0 (the light is off)")
+        return 0.0
+    peak = power * max(float(col.max()), 1.0)
+    if not peak <= MAX_INTENSITY:
+        warn(f"light '{ob.name}': its power ({power:.3g}) is above {MAX_INTENSITY:.0e}: clamped")
+        power = MAX_INTENSITY / max(float(col.max()), 1.0)
+    return power
+
+
+def _finite_size(ob, what: str, value: float) -> float:
+    value = float(value)
+    if not np.isfinite(value):
+        raise SceneError(f"light '{ob.name}': its {what} is NaN or infinite")
+    return value
 
 
 def light_row(ob, m: np.ndarray, warn, to709, soft: list) -> dict | None:
@@ -65,12 +115,12 @@ def light_row(ob, m: np.ndarray, warn, to709, soft: list) -> dict | None:
     nz = np.linalg.norm(z)
     if not np.isfinite(m).all() or nz < 1e-12:
         raise SceneError(f"light '{ob.name}': its transform is NaN, infinite or has zero scale")
-    col, temperature, strength = light_color(light, warn, to709)
-    power = float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0)) * strength
+    col, temperature, strength = light_color(light, warn, to709, f"light '{ob.name}'")
+    col = np.clip(col, 0.0, None)
+    power = _power(ob, light, strength, col, warn)
     row = {
         "position": tuple(m[:3, 3]), "direction": tuple(-z / nz), "axis_u": tuple(x / max(np.linalg.norm(x), 1e-30)),
-        "color": tuple(float(c) for c in np.clip(col, 0.0, None)), "power": max(power, 0.0),
-        "temperature": temperature,
+        "color": tuple(float(c) for c in col), "power": power, "temperature": temperature,
     }
     t = light.type
     if t in ("POINT", "SPOT"):
@@ -78,8 +128,8 @@ def light_row(ob, m: np.ndarray, warn, to709, soft: list) -> dict | None:
             soft.append(ob.name)
         row["kind"] = t
         if t == "SPOT":
-            row["spot_size"] = float(light.spot_size)
-            row["spot_blend"] = float(light.spot_blend)
+            row["spot_size"] = _finite_size(ob, "spot size", light.spot_size)
+            row["spot_blend"] = _finite_size(ob, "spot blend", light.spot_blend)
             if getattr(light, "use_square", False):
                 warn(f"light '{ob.name}': square spot cones are rendered round")
             sx, sy = np.linalg.norm(x), np.linalg.norm(y)
@@ -91,8 +141,9 @@ def light_row(ob, m: np.ndarray, warn, to709, soft: list) -> dict | None:
             soft.append(ob.name)
     elif t == "AREA":
         shape = light.shape
-        su = float(light.size) * float(np.linalg.norm(x))
-        sv = float(light.size_y if shape in ("RECTANGLE", "ELLIPSE") else light.size) * float(np.linalg.norm(y))
+        su = _finite_size(ob, "size", light.size) * float(np.linalg.norm(x))
+        sv = _finite_size(ob, "size", light.size_y if shape in ("RECTANGLE", "ELLIPSE") else light.size) * float(
+            np.linalg.norm(y))
         row["kind"] = "AREA_RECT" if shape in ("SQUARE", "RECTANGLE") else "AREA_DISK"
         row["size_u"], row["size_v"] = su, sv
         if su <= 0 or sv <= 0:
@@ -100,7 +151,7 @@ def light_row(ob, m: np.ndarray, warn, to709, soft: list) -> dict | None:
             return None
         if not getattr(light, "normalize", True):  # Cycles: an unnormalised light emits power per m^2
             area = su * sv * (1.0 if row["kind"] == "AREA_RECT" else math.pi / 4)
-            row["power"] *= area
+            row["power"] = min(row["power"] * area, MAX_INTENSITY)
         if getattr(light, "spread", math.pi) < math.pi - 1e-4:
             warn(f"light '{ob.name}': area light spread below 180 degrees is rendered as a full 180")
     else:

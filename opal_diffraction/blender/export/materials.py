@@ -5,9 +5,16 @@ from its viewport colour, like Workbench. ``material.opal`` adds what Blender ha
 dispersion (on glass-like surfaces only) and the diffraction grating, whose impossible settings
 are an error naming the material. Blender's default surface (no material, or an empty slot) is
 grey diffuse, as in Cycles.
+
+What Cycles would not render either is black, as in Cycles, with a warning saying why (no output
+node for Cycles, e.g. one that targets EEVEE only; nothing on Surface). A volume-only material
+is left out of the scene (its faces skipped: Cycles draws no surface for it), a node cycle
+renders as the default surface, and NaN values are an error naming the material.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -15,9 +22,13 @@ from ...core.scene import Materials, SceneError
 from .colour import in_rec709, rgb, working_space_to_rec709
 from .messages import Warnings
 from .meshes import is_surface_instance
-from .nodes import ROUGH_AS_DIFFUSE, NodeReader, Surface, node_tree, surface_socket
+from .nodes import MAX_INTENSITY, ROUGH_AS_DIFFUSE, NodeReader, Surface, missing_output, node_tree, output_node
 
 __all__ = ["DEFAULT_MATERIAL", "MaterialTable", "export_materials"]
+
+#: The largest IOR exported (larger ones are lowered, with a warning): Blender accepts up to
+#: FLT_MAX, whose square overflows the tracer's float32 Fresnel terms.
+MAX_IOR = 1000.0
 
 #: Blender's default surface (no material, or an empty slot): grey diffuse, as in Cycles.
 DEFAULT_MATERIAL = {"name": "(default surface)", "kind": "DIFFUSE", "color": (0.8, 0.8, 0.8)}
@@ -30,6 +41,7 @@ class MaterialTable:
         self.rows: list[dict] = []
         self.index: dict[str, int] = {}
         self.grating: list[dict | None] = []  # per row: grating settings or None
+        self.hidden: set[int] = set()  # rows whose faces are left out (volume-only materials)
         self.warn, self.to709 = warn, to709
 
     def lookup(self, material) -> int:
@@ -54,19 +66,13 @@ class MaterialTable:
 
     def _convert(self, mat) -> tuple[dict, dict | None]:
         owner = f"material '{mat.name}'"
-        reader = NodeReader(owner, self.warn, self.to709)
-        nt = node_tree(mat)
-        surf = None
-        if nt is not None:
-            sock = surface_socket(nt)
-            if sock is not None:
-                surf = reader.surface(sock)
-            else:
-                self.warn(f"{owner}: no Material Output node: rendered black")
-                surf = Surface(None, np.zeros(3))
+        surf = self._surface(mat, owner)
         if surf is None:  # no node tree: the viewport colour, like Workbench
             col = in_rec709(rgb(mat.diffuse_color), self.to709)
-            surf = Surface("MIRROR" if mat.metallic >= 0.5 and mat.roughness < ROUGH_AS_DIFFUSE else "DIFFUSE", col)
+            if np.isnan(col).any():
+                raise SceneError(f"{owner}: its viewport colour is NaN")
+            surf = Surface("MIRROR" if mat.metallic >= 0.5 and mat.roughness < ROUGH_AS_DIFFUSE else "DIFFUSE",
+                           np.minimum(col, MAX_INTENSITY))
         kind = surf.kind or "DIFFUSE"
         color = surf.color if surf.kind is not None else np.zeros(3)
         row = {
@@ -78,12 +84,19 @@ class MaterialTable:
         }
         opal = getattr(mat, "opal", None)
         if kind == "DIELECTRIC":
+            if surf.ior != surf.ior:
+                raise SceneError(f"{owner}: its IOR is NaN")
             if not surf.ior >= 1.0:
                 self.warn(f"{owner}: IOR {surf.ior:g} below 1 is raised to 1")
                 row["ior"] = 1.0
+            elif surf.ior > MAX_IOR:
+                self.warn(f"{owner}: IOR {surf.ior:.3g} above {MAX_IOR:g} is lowered to {MAX_IOR:g}")
+                row["ior"] = MAX_IOR
             if opal is not None:
                 row["dispersion"] = opal.dispersion
                 row["abbe"] = float(opal.abbe_number)
+                if opal.dispersion == "ABBE" and not 0.0 < opal.abbe_number < float("inf"):
+                    raise SceneError(f"{owner}: the Abbe number must be a positive number (got {opal.abbe_number:g})")
         elif opal is not None and opal.dispersion != "NONE":
             self.warn(f"{owner}: dispersion is set but the surface is not glass-like: dispersion ignored")
         grating = None
@@ -95,11 +108,56 @@ class MaterialTable:
                 "grating": 1, "grating_type": opal.grating_type, "lattice": opal.lattice,
                 "period": float(opal.period), "slit_width": float(opal.slit_width),
                 "slit_count": int(opal.slit_count), "coherence_length": float(opal.coherence_length),
-                "grating_direction": opal.grating_direction, "rotation": float(opal.rotation),
+                "grating_direction": opal.grating_direction,
+                # one turn at most (Blender accepts up to FLT_MAX radians, whose float32 sine is noise)
+                "rotation": math.remainder(float(opal.rotation), math.tau),
             }
             row.update(grating)
         return row, grating
 
+    def _surface(self, mat, owner: str) -> Surface | None:
+        """The Surface of ``mat``'s node tree (None: it has none, use the viewport colour). A tree
+        Cycles cannot render either (no output node for Cycles, nothing on Surface) is black, as
+        in Cycles, with a warning saying why; a volume-only material is hidden; a node cycle gives
+        the default surface."""
+        nt = node_tree(mat)
+        if nt is None:
+            return None
+        out = output_node(nt)
+        if out is None:
+            self.warn(f"{owner}: {missing_output(nt)}: rendered black, as in Cycles")
+            return Surface(None, np.zeros(3))
+        sock = out.inputs.get("Surface")
+        reader = NodeReader(owner, self.warn, self.to709)
+        surf = reader.surface(sock) if sock is not None else Surface(None, np.zeros(3))
+        if reader.cycle is not None:
+            self.warn(f"{owner}: its node tree has a cycle (through the link {reader.cycle}, drawn red in the node "
+                      "editor): rendered as the default surface (grey diffuse)")
+            return Surface("DIFFUSE", np.array(DEFAULT_MATERIAL["color"], np.float64))
+        vol = out.inputs.get("Volume")
+        # a cycle in the volume's nodes only: the volume is not rendered anyway
+        has_volume = vol is not None and NodeReader(owner, self.warn, self.to709).source(vol) is not None
+        has_surface = sock is not None and reader.source(sock) is not None
+        if has_volume and not has_surface:
+            # Cycles draws no surface for a material with only a Volume shader: rays cross the
+            # boundary unchanged and only the volume inside scatters or absorbs. The tracer has
+            # no volumes, so the closest image is empty space: the material's faces are left out
+            # of the scene (an opaque black or clear-glass stand-in would block or bend light
+            # where Cycles shows the volume's background through it).
+            self.warn(f"{owner}: volume shaders are not rendered: '{mat.name}' renders as empty space (its faces "
+                      "are left out, as Cycles draws no surface for a volume-only material)")
+            self.hidden.add(len(self.rows))
+        elif has_volume:
+            self.warn(f"{owner}: volume shaders are not rendered: only its surface is")
+        elif not has_surface:
+            self.warn(f"{owner}: nothing is connected to the Surface of '{out.name}': rendered black, as in Cycles")
+        return surf
+
+    def hidden_rows(self) -> np.ndarray:
+        """Per material row: whether its faces are left out of the scene (volume-only materials)."""
+        hidden = np.zeros(len(self.rows), bool)
+        hidden[list(self.hidden)] = True
+        return hidden
 
 
 def export_materials(depsgraph, warn: Warnings | None = None) -> Materials:

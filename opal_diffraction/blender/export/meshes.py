@@ -29,6 +29,9 @@ __all__ = [
     "GEOMETRY_TYPES",
     "UNSUPPORTED_GEOMETRY",
     "is_surface_instance",
+    "element_count",
+    "hair_systems",
+    "strand_count",
     "MeshData",
     "read_mesh",
     "wants_uv",
@@ -36,6 +39,7 @@ __all__ = [
     "tangents",
     "periods",
     "transform",
+    "subset",
     "MeshCache",
     "SceneMeshes",
     "flatten",
@@ -43,6 +47,42 @@ __all__ = [
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 UNSUPPORTED_GEOMETRY = {"CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL", "GPENCIL"}
+
+
+def element_count(ob) -> int:
+    """Strands of a hair curves object, points of a point cloud (0 for other kinds), for the
+    warning that says what was skipped."""
+    data = ob.data
+    for name in ("curves", "points"):
+        coll = getattr(data, name, None)
+        if coll is not None:
+            try:
+                return len(coll)
+            except TypeError:
+                return 0
+    return 0
+
+
+def hair_systems(ob) -> list:
+    """The hair particle systems of an evaluated object that Cycles would render as strands."""
+    out = []
+    for psys in getattr(ob, "particle_systems", ()):
+        ps = psys.settings
+        if ps is not None and ps.type == "HAIR" and ps.render_type == "PATH":
+            out.append(psys)
+    return out
+
+
+def strand_count(psys) -> int:
+    """Strands a hair particle system renders: its parents or, when it has children, those (the
+    evaluated children, or parents x the render child count where they are not evaluated) and
+    the parents only with "Parents" on."""
+    parents = len(psys.particles)
+    ps = psys.settings
+    if getattr(ps, "child_type", "NONE") == "NONE":
+        return parents
+    children = len(psys.child_particles) or parents * int(getattr(ps, "rendered_child_count", 0))
+    return children + (parents if getattr(ps, "use_parent_particles", False) else 0)
 
 
 def is_surface_instance(inst) -> bool:
@@ -290,10 +330,18 @@ class SceneMeshes:
 
 
 # ============================================================================ instances -> arrays
-def flatten(groups: dict, meshes: SceneMeshes, grating: list, warn):
+def subset(md: MeshData, keep: np.ndarray) -> MeshData:
+    """``md`` with only the triangles where ``keep`` is True (the vertices all kept)."""
+    pick = (lambda a: None if a is None else a[keep])
+    return MeshData(md.vertices, md.triangles[keep], md.slot[keep], pick(md.uv), pick(md.face_dir), md.name,
+                    pick(md.face_period))
+
+
+def flatten(groups: dict, meshes: SceneMeshes, grating: list, warn, hidden: np.ndarray | None = None):
     """World-space arrays of every instance: ``groups`` maps (mesh key, material rows of its
     slots) to the instances' world matrices; ``grating`` is the material table's grating
-    settings per row (None: no grating). Returns (vertices (V, 3) float32, triangles (T, 3)
+    settings per row (None: no grating); ``hidden`` (per row, optional): rows whose triangles
+    are left out (volume-only materials). Returns (vertices (V, 3) float32, triangles (T, 3)
     int32, tri_material (T,) int32, tri_tangent (T, 3) float32 or (0, 3) without gratings,
     tri_period (T,) float32 or (0,) without period attributes)."""
     any_grating = any(g is not None for g in grating)
@@ -306,6 +354,11 @@ def flatten(groups: dict, meshes: SceneMeshes, grating: list, warn):
             raise SceneError(f"object '{md.name}': its transform is NaN or infinite")
         slot_map = np.asarray(slots, np.int32)
         tri_mat_local = slot_map[np.clip(md.slot, 0, len(slot_map) - 1)]
+        if hidden is not None and hidden[slot_map].any():
+            keep = ~hidden[tri_mat_local]
+            if not keep.any():
+                continue
+            md, tri_mat_local = subset(md, keep), tri_mat_local[keep]
         verts, tris, det = transform(md, mats)
         vert_chunks.append(verts)
         tri_chunks.append(tris + n_verts)

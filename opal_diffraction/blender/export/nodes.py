@@ -5,6 +5,13 @@ the BSDF it finds to one of the core's surfaces (diffuse, mirror, dielectric) wi
 IOR and an emission. What the core cannot represent is approximated and named in the warnings:
 textures are averaged (:func:`colour.image_mean`), rough reflection and refraction are made
 smooth (rougher than ``ROUGH_AS_DIFFUSE``: diffuse), mixes of unlike surfaces keep the heavier.
+
+Nothing a node tree holds can hang the export or reach the tracer as NaN or Inf: a node cycle
+(Blender marks one link of it invalid) is detected and named (:attr:`NodeReader.cycle`; the
+material then renders as the default surface), other invalid links are ignored as Cycles
+ignores them, a NaN input is an error naming the owner, node and socket, and an emission
+strength or colour beyond ``MAX_INTENSITY`` (Blender's fields go up to FLT_MAX) is clamped with a
+warning, as is a negative strength.
 """
 
 from __future__ import annotations
@@ -14,15 +21,25 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from ...core.scene import SceneError
 from .colour import blackbody_rgb, image_mean, in_rec709, rgb
 from .messages import Warnings
 
-__all__ = ["ROUGH_AS_DIFFUSE", "ROUGH_WARN", "Surface", "node_tree", "surface_socket", "NodeReader"]
+__all__ = ["ROUGH_AS_DIFFUSE", "ROUGH_WARN", "MAX_INTENSITY", "Surface", "node_tree", "output_node",
+           "missing_output", "surface_socket", "NodeReader"]
 
 #: Roughness above which a glossy surface is treated as diffuse rather than as a mirror.
 ROUGH_AS_DIFFUSE = 0.5
 #: Roughness above which smooth-surface approximations are worth a warning.
 ROUGH_WARN = 0.1
+#: The largest emission (colour x strength, W/(m^2 sr) per colour unit) and light power (W, or
+#: W/m^2 for a sun) exported; larger values are clamped with a warning. Blender's fields accept up
+#: to FLT_MAX (3.4e38), which overflows the tracer's float32 arithmetic into Inf pixels; 1e20
+#: leaves 18 orders of magnitude for the 1/r^2 falloff, spectral weights and sample sums.
+MAX_INTENSITY = 1e20
+#: Output node types, and what Blender calls them.
+OUTPUT_NODES = {"ShaderNodeOutputMaterial": "Material Output", "ShaderNodeOutputWorld": "World Output",
+                "ShaderNodeOutputLight": "Light Output"}
 
 
 @dataclass
@@ -44,10 +61,32 @@ def node_tree(id_data):
     return nt
 
 
+def output_node(nt):
+    """The output node Cycles renders, or None: of the output nodes whose target is Cycles or All,
+    an exact Cycles target first, then the active one (``get_output_node``, Cycles' own choice when
+    a tree has several outputs)."""
+    return nt.get_output_node("CYCLES") or nt.get_output_node("ALL")
+
+
+def missing_output(nt, what: str = "Material Output") -> str:
+    """Why :func:`output_node` found nothing, in words for a warning: no output node at all, or
+    output nodes that all target EEVEE (named, with the fix)."""
+    outs = [n for n in nt.nodes if n.bl_idname in OUTPUT_NODES]
+    if not outs:
+        return f"no {what} node"
+    names = ", ".join(f"'{n.name}'" for n in outs[:3]) + (" ..." if len(outs) > 3 else "")
+    targets = sorted({getattr(n, "target", "ALL") for n in outs})
+    if targets == ["EEVEE"]:
+        many = len(outs) > 1
+        return (f"its {OUTPUT_NODES.get(outs[0].bl_idname, what)} node{'s' if many else ''} ({names}) "
+                f"target{'' if many else 's'} EEVEE only: set the Target to All or Cycles")
+    return f"no {what} node for Cycles or All ({names} target {', '.join(targets)})"
+
+
 def surface_socket(nt):
-    """The Surface input of a node tree's output node (Cycles' output, else the one for all
-    engines), or None when there is no output node or it has no Surface input."""
-    out = nt.get_output_node("CYCLES") or nt.get_output_node("ALL")
+    """The Surface input of a node tree's output node (:func:`output_node`), or None when there is
+    no output node or it has no Surface input."""
+    out = output_node(nt)
     return out.inputs.get("Surface") if out is not None else None
 
 
@@ -56,26 +95,49 @@ class NodeReader:
 
     def __init__(self, owner: str, warn: Warnings, to709: np.ndarray | None):
         self.owner, self.warn, self.to709 = owner, warn, to709
+        #: The first node cycle met ("'A' -> 'B'", the link Blender marked invalid), or None.
+        self.cycle: str | None = None
 
     # ---------------------------------------------------------------- sockets
-    @staticmethod
-    def source(socket):
-        """(node, output socket) feeding ``socket``, following reroutes; None when unlinked."""
-        seen = 0
-        while socket is not None and socket.is_linked and seen < 64:
+    def source(self, socket):
+        """(node, output socket) feeding ``socket``, following reroutes; None when unlinked, muted
+        or linked through an invalid link (a cycle is recorded in :attr:`cycle`)."""
+        visited = set()
+        while socket is not None and socket.is_linked:
             link = socket.links[0]
-            if not getattr(link, "is_valid", True) or getattr(link, "is_muted", False):
+            if getattr(link, "is_muted", False):
+                return None
+            if not getattr(link, "is_valid", True):
+                self._invalid_link(link)
                 return None
             node = link.from_node
             if node.bl_idname == "NodeReroute":
+                if node.name in visited:  # a loop of reroutes that Blender did not flag
+                    self.cycle = self.cycle or f"'{node.name}' -> '{link.to_node.name}'"
+                    return None
+                visited.add(node.name)
                 socket = node.inputs[0] if node.inputs else None
-                seen += 1
                 continue
             return node, link.from_socket
         return None
 
+    def _invalid_link(self, link) -> None:
+        """A link Blender drew red: part of a cycle (recorded) or between incompatible sockets
+        (ignored, as Cycles ignores it, with a warning)."""
+        a, b = link.from_node, link.to_node
+        if _feeds(b, a):
+            self.cycle = self.cycle or f"'{a.name}' -> '{b.name}'"
+        else:
+            self.warn(f"{self.owner}: the link from '{a.name}' to '{b.name}' is invalid (red in the node "
+                      "editor): ignored, as in Cycles")
+
     def color(self, node, name: str, default=(0.8, 0.8, 0.8)) -> np.ndarray:
-        """Linear Rec.709 colour of input ``name``; textures are averaged, other links fall back."""
+        """Linear Rec.709 colour of input ``name``; textures are averaged, other links fall back.
+        NaN is an error naming the socket; infinite or huge components are clamped to
+        ``MAX_INTENSITY``."""
+        return self._finite_color(self._color(node, name, default), node, name)
+
+    def _color(self, node, name: str, default) -> np.ndarray:
         sock = node.inputs.get(name)
         if sock is None:
             return np.array(default, np.float64)
@@ -86,7 +148,7 @@ class NodeReader:
         if n.bl_idname == "ShaderNodeRGB":
             return self._to709(rgb(out.default_value))
         if n.bl_idname == "ShaderNodeBlackbody":
-            return blackbody_rgb(self.value(n, "Temperature", 6500.0))
+            return blackbody_rgb(self.temperature(n))
         if n.bl_idname in ("ShaderNodeTexImage", "ShaderNodeTexEnvironment") and getattr(n, "image", None):
             mean = image_mean(n.image)
             if mean is not None:
@@ -96,7 +158,24 @@ class NodeReader:
                   f"supported: using the socket's own value")
         return self._to709(rgb(sock.default_value))
 
+    def _finite_color(self, col: np.ndarray, node, name: str) -> np.ndarray:
+        col = np.asarray(col, np.float64)
+        if np.isnan(col).any():
+            raise SceneError(f"{self.owner}: '{name}' of '{node.name}' is NaN")
+        if (col > MAX_INTENSITY).any():
+            self.warn(f"{self.owner}: '{name}' of '{node.name}' is above {MAX_INTENSITY:.0e}: clamped")
+            col = np.minimum(col, MAX_INTENSITY)
+        return col
+
     def value(self, node, name: str, default: float = 0.0) -> float:
+        """Input ``name`` as a float (a Value node's, or the socket's own); NaN is an error naming
+        the socket."""
+        v = self._value(node, name, default)
+        if v != v:
+            raise SceneError(f"{self.owner}: '{name}' of '{node.name}' is NaN")
+        return v
+
+    def _value(self, node, name: str, default: float) -> float:
         sock = node.inputs.get(name)
         if sock is None:
             return float(default)
@@ -109,6 +188,37 @@ class NodeReader:
         self.warn(f"{self.owner}: '{name}' of '{node.name}' is driven by a '{n.name}' node, which is not "
                   f"supported: using the socket's own value")
         return float(sock.default_value)
+
+    def strength(self, node, name: str = "Strength", default: float = 1.0) -> float:
+        """An emission strength in [0, MAX_INTENSITY]: a negative one is 0 and a larger one
+        ``MAX_INTENSITY``, each with a warning (Cycles subtracts light for a negative strength,
+        which the tracer cannot)."""
+        s = self.value(node, name, default)
+        if s < 0.0:
+            self.warn(f"{self.owner}: negative '{name}' ({s:g}) of '{node.name}' is rendered as 0")
+            return 0.0
+        if s > MAX_INTENSITY:
+            self.warn(f"{self.owner}: '{name}' of '{node.name}' ({s:.3g}) is above {MAX_INTENSITY:.0e}: clamped")
+            return MAX_INTENSITY
+        return s
+
+    def emission(self, color: np.ndarray, strength: float, node) -> np.ndarray:
+        """Emission colour x strength, each component at most ``MAX_INTENSITY`` (with a warning)."""
+        e = np.asarray(color, np.float64) * strength
+        if (e > MAX_INTENSITY).any():
+            self.warn(f"{self.owner}: the emission of '{node.name}' (colour x strength {e.max():.3g}) is above "
+                      f"{MAX_INTENSITY:.0e}: clamped")
+            e = np.minimum(e, MAX_INTENSITY)
+        return e
+
+    def temperature(self, node) -> float:
+        """A Blackbody node's temperature (K); infinite or not positive: 6500 K, with a warning."""
+        t = self.value(node, "Temperature", 6500.0)
+        if not (0.0 < t < float("inf")):
+            self.warn(f"{self.owner}: Blackbody temperature {t:g} K of '{node.name}' is not a positive number: "
+                      "using 6500 K")
+            return 6500.0
+        return t
 
     def _to709(self, col: np.ndarray) -> np.ndarray:
         return in_rec709(col, self.to709)
@@ -146,8 +256,9 @@ class NodeReader:
                 self.warn(f"{self.owner}: Refraction BSDF is rendered as glass (with Fresnel reflection)")
             return Surface("DIELECTRIC", self.color(node, "Color", (1, 1, 1)), self.value(node, "IOR", 1.5), rough)
         if idn == "ShaderNodeEmission":
-            strength = self.value(node, "Strength", 1.0)
-            return Surface(None, np.zeros(3), emission=self.color(node, "Color", (1, 1, 1)) * max(strength, 0.0))
+            strength = self.strength(node, "Strength", 1.0)
+            color = self.color(node, "Color", (1, 1, 1))
+            return Surface(None, np.zeros(3), emission=self.emission(color, strength, node))
         if idn == "ShaderNodeMixShader":
             f = min(max(self.value(node, "Fac", 0.5) if node.inputs.get("Fac") else 0.5, 0.0), 1.0)
             a = self._shader(self.source(node.inputs[1]), depth + 1)
@@ -186,9 +297,9 @@ class NodeReader:
         trans_name = "Transmission Weight" if node.inputs.get("Transmission Weight") else "Transmission"
         trans = self.value(node, trans_name, 0.0)
         ior = self.value(node, "IOR", 1.5)
-        strength = self.value(node, "Emission Strength", 0.0) if node.inputs.get("Emission Strength") else 1.0
+        strength = self.strength(node, "Emission Strength", 0.0) if node.inputs.get("Emission Strength") else 1.0
         emission = self.color(node, "Emission Color" if node.inputs.get("Emission Color") else "Emission", (0, 0, 0))
-        emission = emission * max(strength, 0.0)
+        emission = self.emission(emission, strength, node)
         if node.inputs.get("Alpha") is not None and self.value(node, "Alpha", 1.0) < 1.0:
             self.warn(f"{self.owner}: alpha below 1 is not supported: rendered opaque")
         for layer in ("Subsurface Weight", "Coat Weight", "Sheen Weight"):
@@ -222,3 +333,20 @@ class NodeReader:
         self.warn(f"{self.owner}: '{node.name}' mixes {a.kind.lower()} and {b.kind.lower()} surfaces: rendered as "
                   f"{keep.kind.lower()}")
         return Surface(keep.kind, keep.color, keep.ior, keep.roughness, emission)
+
+
+def _feeds(target, start) -> bool:
+    """Whether ``target`` is upstream of ``start`` through any links, valid or not (so a link
+    ``start -> target`` closes a cycle). Visits each node once."""
+    stack, seen = [start], set()
+    while stack:
+        n = stack.pop()
+        if n.name in seen:
+            continue
+        seen.add(n.name)
+        for sock in n.inputs:
+            for link in sock.links:
+                if link.from_node.name == target.name:
+                    return True
+                stack.append(link.from_node)
+    return False
