@@ -248,3 +248,23 @@ def test_cancel_during_the_light_pass_stops_the_render():
                  progress=lambda f, m: messages.append(m),
                  should_cancel=lambda: any(m.startswith("light pass") for m in messages))
     assert res.cancelled and res.stats.get("cancelled") and res.stats["light_paths"] < 2_000_000
+
+
+def test_more_receiving_triangles_than_the_map_can_hold_is_a_warning_not_a_hang():
+    """At 1 nm (301 wavelengths) the map holds ~53 k element pairs: a floor of 80 k triangles
+    under a glass box gets no caustic map and a warning, and the render finishes (the element
+    search used to double the element size forever)."""
+    n = 200
+    x, y = np.meshgrid(np.linspace(-4, 4, n + 1), np.linspace(-4, 4, n + 1), indexing="ij")
+    v = np.stack([x, y, np.zeros_like(x)], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a = (i * (n + 1) + j).ravel()
+    t = np.concatenate([np.stack([a, a + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + n + 1], 1)])
+    s = slab_scene()
+    floor = Scene(materials=s.materials)
+    floor.add_mesh(v, t, material=0)
+    floor.add_mesh(*primitives.box((0, 0, 1.0), (1.0, 1.0, 0.2)), material=1)
+    floor.lights, floor.camera = s.lights, s.camera
+    res = render(floor, RenderSettings(samples=1, light_paths=20_000, wavelength_step=1.0))
+    assert any("receiving triangles are too many for the caustic map" in w for w in res.warnings)
+    assert np.isfinite(res.spectral).all() and res.rgb.mean() > 0

@@ -31,9 +31,18 @@ class ElementLayout:
     @classmethod
     def build(cls, vertices, triangles, receivers: np.ndarray, target_area: float) -> "ElementLayout":
         """Elements of about ``target_area`` m^2 on the triangles where ``receivers`` is True."""
-        area = triangle_areas(vertices, triangles)
+        return cls.from_areas(triangle_areas(vertices, triangles), receivers, target_area)
+
+    @staticmethod
+    def subdivisions(area: np.ndarray, receivers: np.ndarray, target_area: float) -> np.ndarray:
+        """(T,) k per triangle for elements of about ``target_area`` (0 off the receivers)."""
         k = np.ceil(np.sqrt(area / max(float(target_area), 1e-30))).astype(np.int64)
-        k = np.where(np.asarray(receivers, bool), np.clip(k, 1, MAX_SUBDIVISION), 0)
+        return np.where(np.asarray(receivers, bool), np.clip(k, 1, MAX_SUBDIVISION), 0)
+
+    @classmethod
+    def from_areas(cls, area: np.ndarray, receivers: np.ndarray, target_area: float) -> "ElementLayout":
+        """``build`` from the triangles' areas (T,), computed once by the caller."""
+        k = cls.subdivisions(area, receivers, target_area)
         count = 2 * k * k
         offset = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64) if len(k) else np.zeros(0, np.int64)
         with np.errstate(divide="ignore", invalid="ignore"):

@@ -250,30 +250,34 @@ class LightPassResult:
         return cls(None, None, MappingProxyType({}), (), False, prepared.key)
 
 
-def element_layout(prepared, n_paths: int, mask) -> tuple[ElementLayout, str]:
+def element_layout(prepared, n_paths: int, mask, what: str = "caustic") -> tuple[ElementLayout, str]:
     """Elements sized for the path budget: about 16 deposits per element if the paths spread
     over all receiving area (caustics concentrate them, and the eye pass's lookup filters over
     neighbouring elements), capped so each lane's map stays under ~32 M floats (128 MB; the
     LANES partial maps together ~256 MB at most). Returns (layout, warning or "") - the warning
-    says when the cap made the user's element size coarser."""
+    says when the cap made the user's element size coarser, or when even one element pair per
+    triangle is over the cap (then the map is empty: no caustics on those surfaces, said aloud)."""
     v, t = prepared.scene.vertices, prepared.scene.triangles
+    mask = np.asarray(mask, bool)
+    area = triangle_areas(v, t)  # once: the search below only recounts
     size = float(prepared.settings.element_size or 0.0)
-    if size > 0:
-        target = size * size
-    else:
-        area = triangle_areas(v, np.asarray(t)[mask]).sum()
-        target = area / max(n_paths / 16.0, 1.0)
+    target = size * size if size > 0 else area[mask].sum() / max(n_paths / 16.0, 1.0)
     cap = 32_000_000 // max(prepared.grid.n, 1)
+    if 2 * int(mask.sum()) > cap:
+        return (ElementLayout.from_areas(area, np.zeros_like(mask), 1.0),
+                f"{int(mask.sum())} receiving triangles are too many for the {what} map ({cap // 2} at most at "
+                f"{prepared.grid.n} wavelengths): light through mirrors and glass is not deposited on them "
+                "(a coarser wavelength step allows more)")
     asked = target
     while True:
-        lay = ElementLayout.build(v, t, mask, target)
-        if lay.total <= cap:
+        k = ElementLayout.subdivisions(area, mask, target)
+        if int((2 * k * k).sum()) <= cap:
             warning = ""
             if target > asked * 1.01 and size > 0:
                 warning = (f"element size {size * 1000:.1f} mm needs more memory than the map allows: "
                            f"using {np.sqrt(target) * 1000:.1f} mm (a coarser wavelength step allows finer)")
-            return lay, warning
-        target *= 2.0
+            return ElementLayout.from_areas(area, mask, target), warning
+        target *= 2.0  # terminates: with k = 1 everywhere the count is 2 * receivers <= cap
 
 
 def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_cancel=None,
@@ -293,7 +297,8 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
     targets: LightTargets = prepared.light_targets
     grid_n = prepared.grid.n
     layout, warning = element_layout(prepared, n_paths, targets.receiver_mask)
-    rec_layout = element_layout(prepared, n_paths, targets.grating_mask)[0] if targets.grating_mask.any() else None
+    rec_layout, rec_warning = (element_layout(prepared, n_paths, targets.grating_mask, "grating-record") if targets.grating_mask.any()
+                               else (None, ""))
     share = targets.budget / max(targets.budget.sum(), 1e-300)
     paths_per_light = np.floor(share * n_paths).astype(np.int64)
     jobs = [(li, bi, start, int(n_l)) for li, n_l in enumerate(paths_per_light)
@@ -356,7 +361,7 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
         if records is not None:
             records += extra_records
     traced = sum(c["paths"] for c in counts)
-    warnings = [warning] if warning else []
+    warnings = list(dict.fromkeys(w for w in (warning, rec_warning) if w))
     if timed_out and not cancelled:
         if traced and traced < total:
             scale = np.float32(total / traced)
