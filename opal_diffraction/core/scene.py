@@ -117,7 +117,7 @@ class Materials:
     rotation: np.ndarray = field(default_factory=lambda: _material_column_default("rotation", 0))
 
     def __len__(self):
-        return len(self.kind)
+        return _rows(self.kind)
 
     @classmethod
     def from_list(cls, rows: list[dict]) -> "Materials":
@@ -192,7 +192,7 @@ class Lights:
     size_v: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
 
     def __len__(self):
-        return len(self.kind)
+        return _rows(self.kind)
 
     @classmethod
     def from_list(cls, rows: list[dict]) -> "Lights":
@@ -234,6 +234,15 @@ class Lights:
             proto = getattr(out, f.name)
             setattr(out, f.name, np.array(cols[f.name], proto.dtype).reshape((-1,) + proto.shape[1:]))
         return out
+
+
+def _rows(column) -> int:
+    """Rows of a table column; 0 for what is not an array of rows (validation names the problem)."""
+    try:
+        shape = np.shape(column)
+    except Exception:
+        return 0
+    return int(shape[0]) if shape else 0
 
 
 def _shape_words(tail) -> str:
@@ -679,6 +688,9 @@ def _validate_camera(c: Camera) -> Camera:
     m = m.astype(np.float64)
     if m.shape != (4, 4) or not np.isfinite(m).all():
         raise SceneError("camera matrix must be a finite 4x4 matrix")
+    if np.abs(m[3] - (0.0, 0.0, 0.0, 1.0)).max() > 1e-6:
+        raise SceneError(f"camera matrix: the bottom row must be (0, 0, 0, 1) (an affine transform), got "
+                         f"{[float(x) for x in m[3]]}")
     if np.abs(m[:3, 3]).max() > COORD_LIMIT:
         raise SceneError(f"camera position {_g(np.abs(m[:3, 3]).max())} m is beyond the renderable limit "
                          f"{COORD_LIMIT:g} m")
