@@ -191,7 +191,7 @@ def test_malformed_scene_files_are_one_line_errors(tmp_path):
     files = tmp_path / "files"
     files.mkdir()
     cases = malformed_files(str(files))
-    assert len(cases) >= 150, len(cases)
+    assert len(cases) >= 350, len(cases)
     outdir = tmp_path / "out"
     outdir.mkdir()
     results = {"error": 0, "rendered": 0}
@@ -207,7 +207,9 @@ def test_malformed_scene_files_are_one_line_errors(tmp_path):
             assert out.exists(), name
             results["rendered"] += 1
     assert not tmp_files(tmp_path)
-    assert results["error"] >= 140, results
+    print(f"\nmalformed files: {len(cases)} variants, {results['error']} clean errors, {results['rendered']} rendered "
+          f"(variants an older file may also have: a missing optional array)")
+    assert results["error"] >= 360, results
 
 
 def test_bad_arguments_and_output_paths_are_one_line_errors(tmp_path):
