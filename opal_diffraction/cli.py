@@ -13,7 +13,7 @@ one line ``error: ...`` on stderr and exit status 2. Ctrl-C stops the render at 
 (exit 143), stops at once. Images are written to temporary files that are renamed when complete
 and removed on every way out, so an interrupted run never leaves a ``.tmp_*`` file or a
 truncated image behind. Exit 1 is a failure of the renderer itself (``OPAL_DEBUG=1`` shows the
-traceback).
+traceback, and the NumPy / colour-science warnings that are otherwise silenced).
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import sys
 import tempfile
 import threading
 import time
+import warnings
 
 __all__ = ["main", "CliError"]
 
@@ -268,7 +269,9 @@ def main(argv=None) -> int:
         _error(e)
         return EXIT_USAGE
     created: list = []  # output folders the checks made, removed again unless an image is written
-    with _Signals() as sig:
+    with _Signals() as sig, warnings.catch_warnings():
+        if not os.environ.get("OPAL_DEBUG"):  # NumPy's and colour's RuntimeWarnings are not for users
+            warnings.simplefilter("ignore")
         try:
             code = _render(args, sig, created)
             if code == EXIT_OK or sig.phase == "done" and code == EXIT_INTERRUPTED and args.save_partial:
