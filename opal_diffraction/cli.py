@@ -2,45 +2,99 @@
 
     python -m opal_diffraction render SCENE.npz -o OUT.exr [--spp N] [--seed S] [--wavelength-step NM] ...
 
-Writes a float RGB EXR, an 8-bit PNG preview next to it, and optionally a spectral EXR. Same
-seed, same image.
+Writes a float RGB EXR, an 8-bit PNG preview next to it (or at ``--preview``), and optionally a
+spectral EXR. Same seed, same image.
+
+Everything the user gives is checked before the render starts: the arguments, the scene file
+(a missing, empty, corrupted or malformed file, wrong arrays), the settings, the output paths
+(extensions, distinct files, writable folders) and the memory the image needs. Any problem is
+one line ``error: ...`` on stderr and exit status 2. Ctrl-C stops the render at the next tile
+(exit 130; ``--save-partial`` writes the image rendered so far); a second Ctrl-C, or SIGTERM
+(exit 143), stops at once. Images are written to temporary files that are renamed when complete
+and removed on every way out, so an interrupted run never leaves a ``.tmp_*`` file or a
+truncated image behind. Exit 1 is a failure of the renderer itself (``OPAL_DEBUG=1`` shows the
+traceback, and the NumPy / colour-science warnings that are otherwise silenced).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
+import signal
 import sys
+import tempfile
+import threading
 import time
+import warnings
 
-__all__ = ["main"]
+__all__ = ["main", "CliError"]
+
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
+
+
+class CliError(Exception):
+    """Bad input or arguments: printed as ``error: ...``, exit status 2."""
+
+
+class _Stop(BaseException):
+    """Raised by the signal handlers to stop at once (BaseException: no ``except Exception``
+    swallows it, and the output writer removes its temporary file)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+class _UsageExit(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (``error: ...``, exit 2) instead of usage + message."""
+
+    def error(self, message):
+        raise _UsageExit(message)
 
 
 class _ProgressBar:
     """A one-line progress bar on stderr (redrawn at most ten times a second)."""
 
-    def __init__(self, stream=sys.stderr, width: int = 30):
-        self.stream, self.width, self.last, self.t0 = stream, width, 0.0, time.perf_counter()
+    def __init__(self, stream=None, width: int = 30):
+        self.stream = stream if stream is not None else sys.stderr
+        self.width, self.last, self.t0, self.drawn = width, 0.0, time.perf_counter(), False
 
     def __call__(self, fraction: float, message: str) -> None:
         now = time.perf_counter()
         if fraction < 1.0 and now - self.last < 0.1:
             return
         self.last = now
+        fraction = min(max(float(fraction), 0.0), 1.0)
         filled = int(round(self.width * fraction))
         bar = "#" * filled + "-" * (self.width - filled)
         self.stream.write(f"\r[{bar}] {100 * fraction:5.1f}% {now - self.t0:6.1f}s {message[:60]:<60}")
+        self.drawn = fraction < 1.0
         if fraction >= 1.0:
             self.stream.write("\n")
         self.stream.flush()
 
+    def end_line(self) -> None:
+        """Finish a half-drawn bar so the next message starts on its own line."""
+        if self.drawn:
+            self.stream.write("\n")
+            self.stream.flush()
+            self.drawn = False
+
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m opal_diffraction", description="opal_diffraction spectral renderer")
-    sub = p.add_subparsers(dest="command", required=True)
+    p = _Parser(prog="python -m opal_diffraction", description="opal_diffraction spectral renderer")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     r = sub.add_parser("render", help="render a scene file (.npz) to an EXR and a PNG preview")
     r.add_argument("scene", help="scene file written by Scene.save or Blender's export operator")
-    r.add_argument("-o", "--output", required=True, help="output RGB EXR path (a .png preview is written beside it)")
+    r.add_argument("-o", "--output", required=True, help="output RGB EXR path, ending in .exr (a .png preview "
+                   "is written beside it)")
+    r.add_argument("--preview", default=None, help="PNG preview path (default: the output path with .png)")
+    r.add_argument("--no-preview", action="store_true", help="do not write the PNG preview")
     r.add_argument("--spp", type=int, default=16, help="eye samples per pixel (default 16)")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--wavelength-min", type=float, default=400.0)
@@ -55,17 +109,212 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--threads", type=int, default=0, help="0: all cores")
     r.add_argument("--backend", choices=["auto", "embree", "numpy"], default="auto")
     r.add_argument("--exposure", type=float, default=0.0, help="stops applied to the PNG preview only")
+    r.add_argument("--save-partial", action="store_true", help="on Ctrl-C, write the image rendered so far")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     return p
 
 
+# ------------------------------------------------------------------------------ output paths
+def _same_file(a: str, b: str) -> bool:
+    ra, rb = os.path.normcase(os.path.realpath(a)), os.path.normcase(os.path.realpath(b))
+    if ra == rb:
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _check_writable(path: str, what: str, created: list) -> None:
+    """``path`` can be written: not a directory, and its folder takes new files (tried with a
+    temporary file). Missing folders are created as the writer would (appended to ``created``,
+    so a run that writes nothing removes them again)."""
+    if path == "" or path.endswith(os.sep) or (os.altsep and path.endswith(os.altsep)):
+        raise CliError(f"{what} {path!r} is not a file name")
+    if os.path.isdir(path):
+        raise CliError(f"{what} {path} is a directory")
+    if os.path.lexists(path) and not os.path.isfile(path):
+        raise CliError(f"{what} {path} exists and is not a regular file")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        missing, f = [], folder
+        while not os.path.lexists(f):
+            missing.append(f)
+            parent = os.path.dirname(f)
+            if parent == f:
+                break
+            f = parent
+        if not os.path.isdir(f):
+            raise CliError(f"cannot write {what} {path}: {f} is not a folder")
+        for d in reversed(missing):
+            try:
+                os.mkdir(d)
+            except OSError as e:
+                raise CliError(f"cannot write {what} {path}: cannot create the folder {d} ({e.strerror})") from None
+            created.append(d)
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".tmp_", suffix=".probe", dir=folder)
+    except OSError as e:
+        raise CliError(f"cannot write {what} {path}: the folder {folder} is not writable ({e.strerror})") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def _remove_created(created: list) -> None:
+    """Remove the folders the checks created, if they are still empty (newest first)."""
+    for d in reversed(created):
+        try:
+            os.rmdir(d)
+        except OSError:
+            pass
+    created.clear()
+
+
+def _output_paths(args, created: list) -> dict:
+    """{'exr': path, 'png': path or None, 'spectral': path or None}, checked (CliError)."""
+    out = args.output
+    if not out.lower().endswith(".exr"):
+        raise CliError(f"output {out!r} must end in .exr (the RGB image is an OpenEXR file; the PNG preview "
+                       f"is written beside it)")
+    png = None if args.no_preview else (args.preview or os.path.splitext(out)[0] + ".png")
+    if png is not None and not png.lower().endswith(".png"):
+        raise CliError(f"preview {png!r} must end in .png")
+    spectral = args.spectral_exr or None
+    if spectral is not None and not spectral.lower().endswith(".exr"):
+        raise CliError(f"spectral EXR {spectral!r} must end in .exr")
+    named = [("output", out), ("preview", png), ("spectral EXR", spectral)]
+    for i, (wa, a) in enumerate(named):
+        if a is None:
+            continue
+        if _same_file(a, args.scene):
+            raise CliError(f"{wa} {a} is the scene file: it would be overwritten")
+        for wb, b in named[i + 1:]:
+            if b is not None and _same_file(a, b):
+                raise CliError(f"{wb} {b} is the same file as the {wa}: give them different paths")
+    for what, path in named:
+        if path is not None:
+            _check_writable(path, what, created)
+    return {"exr": out, "png": png, "spectral": spectral}
+
+
+def _physical_memory() -> int | None:
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _check_memory(prepared) -> None:
+    from .core.settings import film_bytes
+
+    cam = prepared.scene.camera
+    need = film_bytes(cam.width, cam.height, prepared.grid.n)
+    have = _physical_memory()
+    if have and need > 0.75 * have:
+        raise CliError(f"the image needs {need / 2**30:.1f} GiB for its film ({cam.width}x{cam.height} pixels x "
+                       f"{prepared.grid.n} wavelengths), more than this machine's {have / 2**30:.1f} GiB allow: "
+                       f"lower the resolution or use a coarser wavelength step")
+
+
+# ------------------------------------------------------------------------------ signals
+class _Signals:
+    """SIGINT / SIGTERM handling by phase. While rendering, the first signal asks the render to
+    stop at the next tile (the render's ``should_cancel``; tiles already running finish); in
+    every other phase, and for a second signal, the handler raises _Stop at once. Handlers are
+    restored on exit (main() may run inside another program)."""
+
+    def __init__(self):
+        self.phase = "setup"
+        self.cancel_signal: int | None = None
+        self.old = {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                try:
+                    self.old[sig] = signal.signal(sig, self._handle)
+                except (ValueError, OSError):  # pragma: no cover - no signals here
+                    pass
+        return self
+
+    def __exit__(self, *exc):
+        for sig, handler in self.old.items():
+            signal.signal(sig, handler)
+        return False
+
+    def _handle(self, signum, frame):
+        if self.phase == "render" and self.cancel_signal is None:
+            self.cancel_signal = signum  # stop at the next tile; a second signal stops at once
+            return
+        raise _Stop(signum)
+
+    def should_cancel(self) -> bool:
+        return self.cancel_signal is not None
+
+
+def _error(message: str) -> None:
+    print("error: " + " ".join(str(message).split()), file=sys.stderr)
+
+
+def _one_line(e: BaseException) -> str:
+    text = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {text[0][:300]}" if text else type(e).__name__
+
+
+# ------------------------------------------------------------------------------ main
 def main(argv=None) -> int:
-    args = _parser().parse_args(argv)
+    try:
+        args = _parser().parse_args(argv)
+    except _UsageExit as e:
+        _error(e)
+        return EXIT_USAGE
+    created: list = []  # output folders the checks made, removed again unless an image is written
+    with _Signals() as sig, warnings.catch_warnings():
+        if not os.environ.get("OPAL_DEBUG"):  # NumPy's and colour's RuntimeWarnings are not for users
+            warnings.simplefilter("ignore")
+        try:
+            code = _render(args, sig, created)
+            if code == EXIT_OK or sig.phase == "done" and code == EXIT_INTERRUPTED and args.save_partial:
+                created.clear()
+            return code
+        except CliError as e:
+            _error(e)
+            return EXIT_USAGE
+        except _Stop as e:
+            if e.signum == signal.SIGTERM:
+                print("\nterminated", file=sys.stderr)
+                return EXIT_TERMINATED
+            print("\ninterrupted" + (" while writing: no file was left half-written" if sig.phase == "write" else ""),
+                  file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except KeyboardInterrupt:  # a Ctrl-C before the handlers were installed
+            print("\ninterrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except MemoryError:
+            _error("out of memory: lower the resolution, the samples per round or use a coarser wavelength step")
+            return EXIT_FAILURE
+        except Exception as e:  # a failure of the renderer itself: one line, the traceback on request
+            if os.environ.get("OPAL_DEBUG"):
+                import traceback
+
+                traceback.print_exc()
+            _error(f"the render failed ({_one_line(e)}); set OPAL_DEBUG=1 for the traceback")
+            return EXIT_FAILURE
+        finally:
+            _remove_created(created)
+
+
+def _render(args, sig: _Signals, created: list) -> int:
     from .core.output import write_png, write_rgb_exr, write_spectral_exr
-    from .core.render import render
+    from .core.prepare import prepare
+    from .core.render import render_prepared
     from .core.scene import Scene, SceneError
     from .core.settings import RenderSettings
 
+    t_start = time.perf_counter()
+    if not math.isfinite(args.exposure) or abs(args.exposure) > 100:
+        raise CliError(f"exposure must be a finite number of stops within +-100, got {args.exposure}")
+    paths = _output_paths(args, created)
     try:
         scene = Scene.load(args.scene)
         if args.resolution:
@@ -79,23 +328,55 @@ def main(argv=None) -> int:
             spectral_exr=args.spectral_exr, time_limit=args.time_limit, threads=args.threads,
             backend=args.backend,
         )
-        result = render(scene, settings, progress=None if args.quiet else _ProgressBar())
+        settings.validate()
+        sig.phase = "prepare"
+        prepared = prepare(scene, settings)
     except SceneError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("\ninterrupted", file=sys.stderr)
-        return 130
+        raise CliError(str(e)) from None
+    _check_memory(prepared)
+    for w in settings.warnings():
+        print(f"warning: {w}", file=sys.stderr)
+
+    bar = None if args.quiet else _ProgressBar()
+    sig.phase = "render"
+    try:
+        result = render_prepared(prepared, progress=bar, should_cancel=sig.should_cancel, started_at=t_start)
+    except SceneError as e:
+        raise CliError(str(e)) from None
+    finally:
+        if bar is not None:
+            bar.end_line()
+    interrupted = sig.cancel_signal is not None
+    if sig.cancel_signal == signal.SIGTERM:
+        sig.phase = "done"
+        print("terminated: nothing written", file=sys.stderr)
+        return EXIT_TERMINATED
+    if interrupted and not args.save_partial:
+        sig.phase = "done"
+        print("interrupted: nothing written (--save-partial writes the image rendered so far)", file=sys.stderr)
+        return EXIT_INTERRUPTED
     for w in result.warnings:
         print(f"warning: {w}", file=sys.stderr)
-    write_rgb_exr(args.output, result.rgb)
-    png = os.path.splitext(args.output)[0] + ".png"
-    write_png(png, result.rgb, args.exposure)
-    if args.spectral_exr:
-        write_spectral_exr(args.spectral_exr, result.spectral, result.wavelengths, result.rgb)
+
+    sig.phase = "write"
+    try:
+        write_rgb_exr(paths["exr"], result.rgb)
+        if paths["png"]:
+            write_png(paths["png"], result.rgb, args.exposure)
+        if paths["spectral"]:
+            write_spectral_exr(paths["spectral"], result.spectral, result.wavelengths, result.rgb)
+    except OSError as e:
+        _error(f"cannot write the image: {e.strerror or e} ({e.filename or paths['exr']})")
+        return EXIT_FAILURE
+    sig.phase = "done"
+    written = " and ".join(p for p in (paths["exr"], paths["png"], paths["spectral"]) if p)
+    if interrupted:
+        print(f"interrupted: wrote the partial image ({result.samples} of {settings.samples} samples per pixel) to "
+              f"{written}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     s = result.stats
     if not args.quiet:
         print(f"{result.plan.summary()}", file=sys.stderr)
-        print(f"wrote {args.output} and {png}: {s['render_s']:.2f} s, {s['rays'] / 1e6:.2f} M rays "
+        print(f"wrote {written}: {s['render_s']:.2f} s, {s['rays'] / 1e6:.2f} M rays "
               f"({s['mrays_per_s']:.2f} Mrays/s, {s['backend']})", file=sys.stderr)
-    return 0
+    return EXIT_OK

@@ -12,6 +12,7 @@ write never leaves a truncated image behind.
 from __future__ import annotations
 
 import os
+import signal
 import tempfile
 
 import numpy as np
@@ -23,22 +24,50 @@ def spectral_channel_name(wavelength_nm: float) -> str:
     return "S0." + f"{wavelength_nm:.6f}".replace(".", ",") + "nm"
 
 
+#: Prefix of the temporary files images are written to before the rename.
+TMP_PREFIX = ".tmp_"
+
+
 def _atomic_write(path, write):
+    """``write(tmp)`` to a temporary file beside ``path``, then rename it to ``path``.
+
+    The temporary file is removed on every way out (an exception, KeyboardInterrupt, or any
+    exception a signal handler raises, e.g. the command line's SIGTERM handler) from the moment
+    it exists; its removal cannot itself be interrupted by SIGINT / SIGTERM.
+    """
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
     os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp_", suffix=os.path.splitext(path)[1], dir=folder)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; an image should get the usual permissions
+    tmp = None
     try:
+        fd, tmp = tempfile.mkstemp(prefix=TMP_PREFIX, suffix=os.path.splitext(path)[1], dir=folder)
+        os.close(fd)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; an image should get the usual permissions
         write(tmp)
         os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
+        tmp = None
+    finally:
+        if tmp is not None:
+            _remove_quietly(tmp)
+
+
+def _remove_quietly(tmp: str) -> None:
+    """Remove ``tmp`` with SIGINT and SIGTERM held back (they are delivered right after)."""
+    held = {signal.SIGINT, signal.SIGTERM}
+    try:
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    except (AttributeError, OSError, ValueError):  # no pthread_sigmask (Windows)
+        old = None
+    try:
+        if os.path.lexists(tmp):
             os.unlink(tmp)
-        raise
+    except OSError:
+        pass
+    finally:
+        if old is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def _exr(path, channels: dict, extra_header: dict | None = None):

@@ -11,12 +11,13 @@ entries are added (the same rule Blender's EnumProperty items follow).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
 from .enums import GratingDirection, GratingType, Lattice, LightKind, MaterialKind, codes
-from .optics import DISPERSION_MODELS
+from .optics import DISPERSION_MODELS, ior_spectrum
 
 __all__ = [
     "SceneError",
@@ -40,7 +41,10 @@ LIGHT_KINDS = codes(LightKind)
 
 
 class SceneError(ValueError):
-    """A scene that cannot be rendered; the message names the problem for the user."""
+    """A scene that cannot be rendered; the message (always one line) names the problem for the user."""
+
+    def __init__(self, message="", *args):
+        super().__init__(" ".join(str(message).split()), *args)
 
 
 #: Grating enumerations: name -> stable code (enums.py).
@@ -113,7 +117,7 @@ class Materials:
     rotation: np.ndarray = field(default_factory=lambda: _material_column_default("rotation", 0))
 
     def __len__(self):
-        return len(self.kind)
+        return _rows(self.kind)
 
     @classmethod
     def from_list(cls, rows: list[dict]) -> "Materials":
@@ -123,6 +127,9 @@ class Materials:
         are given by name ('BK7', 'REFLECTION', ...).
         """
         out = {}
+        for i, r in enumerate(rows):
+            if not isinstance(r, dict):
+                raise SceneError(f"material {i}: expected a dict of settings, got {type(r).__name__}")
         for name, (dtype, tail, default, enum) in _MATERIAL_COLUMNS.items():
             col = _material_column_default(name, len(rows))
             for i, r in enumerate(rows):
@@ -133,10 +140,15 @@ class Materials:
                     continue
                 val = r[name]
                 if enum is not None:
-                    if val not in enum:
+                    if not isinstance(val, str) or val not in enum:
                         raise SceneError(f"material {i}: unknown {name} {val!r}; expected one of {sorted(enum)}")
                     val = enum[val]
-                col[i] = val
+                _check_cell(val, f"material {i}: {name}", tail, name == "name")
+                try:
+                    col[i] = val
+                except Exception:
+                    raise SceneError(f"material {i}: {name} {val!r} is not a valid value "
+                                     f"(expected {'a name' if name == 'name' else _shape_words(tail)})") from None
             out[name] = col
         # clear glass by default: a dielectric without a colour is untinted
         for i, r in enumerate(rows):
@@ -180,16 +192,26 @@ class Lights:
     size_v: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
 
     def __len__(self):
-        return len(self.kind)
+        return _rows(self.kind)
 
     @classmethod
     def from_list(cls, rows: list[dict]) -> "Lights":
         """Build from dicts like {'kind': 'POINT', 'position': (0, 0, 2), 'power': 100}."""
         cols = {f.name: [] for f in fields(cls)}
+        known = {f.name for f in fields(cls)}
+        proto = cls()
         for i, r in enumerate(rows):
+            if not isinstance(r, dict):
+                raise SceneError(f"light {i}: expected a dict of settings, got {type(r).__name__}")
+            unknown = set(r) - known
+            if unknown:
+                raise SceneError(f"light {i}: unknown setting(s) {sorted(unknown)}")
             k = r.get("kind", "POINT")
-            if k not in LIGHT_KINDS:
+            if not isinstance(k, str) or k not in LIGHT_KINDS:
                 raise SceneError(f"light {i}: unknown kind {k!r}; expected one of {sorted(LIGHT_KINDS)}")
+            for name, val in r.items():
+                if name != "kind":
+                    _check_cell(val, f"light {i}: {name}", getattr(proto, name).shape[1:], False)
             d = np.asarray(r.get("direction", (0.0, 0.0, -1.0)), np.float64)
             au = np.asarray(r.get("axis_u", _any_perpendicular(d)), np.float64)
             vals = {
@@ -212,6 +234,33 @@ class Lights:
             proto = getattr(out, f.name)
             setattr(out, f.name, np.array(cols[f.name], proto.dtype).reshape((-1,) + proto.shape[1:]))
         return out
+
+
+def _rows(column) -> int:
+    """Rows of a table column; 0 for what is not an array of rows (validation names the problem)."""
+    try:
+        shape = np.shape(column)
+    except Exception:
+        return 0
+    return int(shape[0]) if shape else 0
+
+
+def _shape_words(tail) -> str:
+    return "a number" if not tail else f"{tail[0]} numbers"
+
+
+def _check_cell(val, what: str, tail, is_name: bool) -> None:
+    """One value given to ``from_list``: a string for a name, else a number or ``tail[0]`` numbers."""
+    if is_name:
+        if not isinstance(val, str):
+            raise SceneError(f"{what} must be a string, got {val!r}")
+        return
+    try:
+        a = np.asarray(val)
+    except Exception:
+        a = None
+    if a is None or a.dtype.kind not in "iufb" or a.shape != tuple(tail) or (a.dtype.kind == "b" and "grating" not in what):
+        raise SceneError(f"{what} must be {_shape_words(tail)}, got {val!r}")
 
 
 def _any_perpendicular(d) -> np.ndarray:
@@ -310,64 +359,93 @@ class Scene:
     def validated(self) -> tuple["Scene", list[str]]:
         """Return (a clean copy, warnings); raise SceneError naming what makes it unrenderable.
 
-        Errors: non-finite coordinates, indices out of range, no camera, bad camera or light
-        numbers. Dropped with a warning: zero-area triangles. Warned: nothing to render, no light.
+        Every table column is checked for its dtype (numbers, or integers for indices and
+        codes: strings, complex numbers, booleans and objects are errors), its shape (row count
+        and per-row shape), finite values, float32 range (the tracer computes in float32) and
+        the rules of its quantity; the message names the column, the row and the rule. Dropped
+        with a warning: zero-area triangles and triangles too small for float32 ray casting.
+        Warned: nothing to render, no light.
         """
+        try:
+            return self._validated()
+        except SceneError:
+            raise
+        except MemoryError:
+            raise SceneError("the scene is too large to validate in this machine's memory") from None
+        except Exception as e:  # a gap in the checks: still one readable line, never a traceback
+            raise SceneError(f"the scene cannot be validated ({type(e).__name__}: {_one_line(e)})") from None
+
+    def _validated(self) -> tuple["Scene", list[str]]:
         warns: list[str] = []
         if self.camera is None:
             raise SceneError("the scene has no camera: add one and make it the active camera")
-        _validate_camera(self.camera)
-        v = np.asarray(self.vertices, np.float32)
-        t = np.asarray(self.triangles)
-        if v.ndim != 2 or v.shape[1] != 3:
-            raise SceneError(f"vertices must have shape (V, 3), got {v.shape}")
-        if t.ndim != 2 or t.shape[1] != 3:
-            raise SceneError(f"triangles must have shape (T, 3), got {t.shape}")
-        bad = ~np.isfinite(np.asarray(self.vertices, np.float64)).all(axis=1)
+        if not isinstance(self.camera, Camera):
+            raise SceneError(f"the scene's camera must be a Camera, got {type(self.camera).__name__}")
+        camera = _validate_camera(self.camera)
+        v = _column(self.vertices, "vertices", (3,), allow_empty=True)
+        t = _column(self.triangles, "triangles", (3,), kind="int", allow_empty=True)
+        v64 = v.astype(np.float64, copy=False)
+        bad = ~np.isfinite(v64).all(axis=1)
         if bad.any():
             raise SceneError(
                 f"{int(bad.sum())} vertex coordinate(s) are NaN or infinite (first: vertex {int(np.argmax(bad))})"
             )
+        _check_range(v64, lambda i: f"vertex {i}", "coordinate", " m", limit=COORD_LIMIT)
+        v = v if v.dtype == np.float32 else v.astype(np.float32)
         if len(t):
             if t.min() < 0 or t.max() >= len(v):
                 i = int(np.argmax((t < 0).any(1) | (t >= len(v)).any(1)))
                 raise SceneError(
                     f"triangle {i} uses vertex index {t[i].tolist()} but the scene has {len(v)} vertices"
                 )
-        tm = np.asarray(self.tri_material)
+        tm = _column(self.tri_material, "tri_material", (), kind="int", allow_empty=len(t) == 0)
         if tm.shape != (len(t),):
             raise SceneError(f"tri_material must have one entry per triangle ({len(t)}), got shape {tm.shape}")
-        nm = len(self.materials)
+        if not isinstance(self.materials, Materials):
+            raise SceneError(f"the scene's materials must be a Materials table, got {type(self.materials).__name__}")
+        if not isinstance(self.lights, Lights):
+            raise SceneError(f"the scene's lights must be a Lights table, got {type(self.lights).__name__}")
+        materials = _validate_materials(self.materials)
+        nm = len(materials)
         if len(tm) and (tm.min() < 0 or tm.max() >= nm):
             i = int(np.argmax((tm < 0) | (tm >= nm)))
             raise SceneError(f"triangle {i} uses material {int(tm[i])} but the scene has {nm} materials")
-        _validate_materials(self.materials)
-        _validate_lights(self.lights)
-        if not np.isfinite(np.asarray(self.world_color, np.float64)).all():
-            raise SceneError("world colour is NaN or infinite")
+        lights = _validate_lights(self.lights)
+        wc = _column(self.world_color, "world colour", (), rows=3)
+        _check_range(wc[None, :], lambda i: "world colour", "value", "", limit=EMISSION_LIMIT, finite_text="world colour is NaN or infinite")
 
-        tt = np.asarray(self.tri_tangent, np.float32).reshape(-1, 3)
-        tp = np.asarray(self.tri_period, np.float32).reshape(-1)
+        tt = _column(self.tri_tangent, "tri_tangent", (3,), allow_empty=True)
+        tp = _column(self.tri_period, "tri_period", (), allow_empty=True)
         if len(tt) not in (0, len(t)) or len(tp) not in (0, len(t)):
             raise SceneError(f"tri_tangent / tri_period must have one entry per triangle ({len(t)}) or none")
         if not np.isfinite(tt).all() or not np.isfinite(tp).all() or (tp < 0).any():
             raise SceneError("a per-triangle grating direction or period is NaN, infinite or negative")
+        _check_range(tt.astype(np.float64), lambda i: f"triangle {i}", "grating direction", "")
+        _check_range(tp.astype(np.float64), lambda i: f"triangle {i}", "grating period", " nm", limit=PERIOD_MAX)
+        tt = tt if tt.dtype == np.float32 else tt.astype(np.float32)
+        tp = tp if tp.dtype == np.float32 else tp.astype(np.float32)
         t = t.astype(np.int32)
         if len(t):
             p = v.astype(np.float64)[t]
             area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
             degenerate = area2 <= 0.0
+            tiny = ~degenerate & (area2 < 2 * MIN_TRIANGLE_AREA)
             if degenerate.any():
                 warns.append(f"dropped {int(degenerate.sum())} degenerate (zero-area) triangle(s)")
-                keep = ~degenerate
+            if tiny.any():
+                warns.append(f"dropped {int(tiny.sum())} triangle(s) too small for float32 ray casting "
+                             f"(area below {MIN_TRIANGLE_AREA:g} m^2)")
+            if degenerate.any() or tiny.any():
+                keep = ~(degenerate | tiny)
                 t, tm = t[keep], tm[keep]
                 tt = tt[keep] if len(tt) else tt
                 tp = tp[keep] if len(tp) else tp
         if len(t) == 0:
             warns.append("the scene has no geometry: the image shows only the background")
-        if len(self.lights) == 0:
+        if len(lights) == 0:
             warns.append("the scene has no lights: only the background is lit")
-        clean = replace(self, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp)
+        clean = replace(self, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
+                        materials=materials, lights=lights, camera=camera, world_color=wc)
         return clean, warns
 
     # ------------------------------------------------------------------ .npz
@@ -393,115 +471,506 @@ class Scene:
 
     @classmethod
     def load(cls, path) -> "Scene":
-        """Read a scene written by :meth:`save`; a clear SceneError if it is not one."""
+        """Read a scene written by :meth:`save`; a clear one-line SceneError if it is not one
+        (missing, a directory, empty, not a .npz archive, a corrupted or missing member).
+        The arrays are checked by :meth:`validated` (every render does that)."""
+        import zipfile
+
+        shown = os.fspath(path) if isinstance(path, (str, bytes, os.PathLike)) else path
+        if isinstance(shown, (str, bytes)):
+            if not os.path.exists(shown):
+                raise SceneError(f"scene file not found: {shown}")
+            if os.path.isdir(shown):
+                raise SceneError(f"{shown} is a directory, not a scene file")
+            if os.path.getsize(shown) == 0:
+                raise SceneError(f"{shown} is empty, not a scene file")
         try:
             z = np.load(path, allow_pickle=False)
         except FileNotFoundError:
-            raise SceneError(f"scene file not found: {path}") from None
-        except Exception as e:  # not a zip, truncated, ...
-            raise SceneError(f"cannot read scene file {path}: {e}") from None
+            raise SceneError(f"scene file not found: {shown}") from None
+        except Exception as e:  # not a zip, truncated, a pickle, unreadable, ...
+            raise SceneError(f"cannot read scene file {shown}: {_one_line(e)}") from None
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            raise SceneError(f"{shown} is a single array (.npy), not a scene archive (.npz)")
         with z:
-            if "format_version" not in z:
-                raise SceneError(f"{path} is not an opal_diffraction scene (no format_version)")
-            ver = int(z["format_version"])
+            def read(name):
+                try:
+                    return z[name]
+                except KeyError:
+                    raise SceneError(f"{shown} has no {name!r} array: not a complete scene file") from None
+                except Exception as e:  # zipfile.BadZipFile, zlib.error, EOFError, ValueError, MemoryError, ...
+                    raise SceneError(f"{shown}: array {name!r} is corrupted or unreadable ({_one_line(e)})") from None
+
+            try:
+                names = set(z.files)
+            except Exception as e:
+                raise SceneError(f"cannot read scene file {shown}: {_one_line(e)}") from None
+            if "format_version" not in names:
+                raise SceneError(f"{shown} is not an opal_diffraction scene (no format_version)")
+            fv = read("format_version")
+            if fv.shape != () or fv.dtype.kind not in "iu":
+                raise SceneError(f"{shown}: format_version must be one integer, got {fv.dtype} of shape {fv.shape}")
+            ver = int(fv)
             if ver > FORMAT_VERSION:
-                raise SceneError(f"{path} was written by a newer version (format {ver} > {FORMAT_VERSION})")
-            cols = {f.name: z["material_" + f.name] for f in fields(Materials) if "material_" + f.name in z}
-            mats = Materials.from_columns(cols, len(cols.get("kind", ())))
-            lights = Lights(**{f.name: z["light_" + f.name] for f in fields(Lights) if "light_" + f.name in z})
+                raise SceneError(f"{shown} was written by a newer version (format {ver} > {FORMAT_VERSION})")
+            cols = {f.name: read("material_" + f.name) for f in fields(Materials) if "material_" + f.name in names}
+            kind = cols.get("kind")
+            rows = kind.shape[0] if kind is not None and kind.ndim >= 1 else 0
+            mats = Materials.from_columns(cols, rows)
+            lights = Lights(**{f.name: read("light_" + f.name) for f in fields(Lights) if "light_" + f.name in names})
             cam = None
-            if "camera_matrix" in z:
+            if "camera_matrix" in names:
                 kw = {}
                 for f in fields(Camera):
-                    if "camera_" + f.name in z:
-                        val = z["camera_" + f.name]
+                    if "camera_" + f.name in names:
+                        val = read("camera_" + f.name)
                         kw[f.name] = val.item() if val.ndim == 0 else val
                 cam = Camera(**kw)
             return cls(
-                vertices=z["vertices"],
-                triangles=z["triangles"],
-                tri_material=z["tri_material"],
+                vertices=read("vertices"),
+                triangles=read("triangles"),
+                tri_material=read("tri_material"),
                 materials=mats,
                 lights=lights,
                 camera=cam,
-                world_color=z["world_color"],
-                tri_tangent=z["tri_tangent"] if "tri_tangent" in z else np.zeros((0, 3), np.float32),
-                tri_period=z["tri_period"] if "tri_period" in z else np.zeros(0, np.float32),
+                world_color=read("world_color"),
+                tri_tangent=read("tri_tangent") if "tri_tangent" in names else np.zeros((0, 3), np.float32),
+                tri_period=read("tri_period") if "tri_period" in names else np.zeros(0, np.float32),
             )
 
 
-def _validate_camera(c: Camera) -> None:
-    m = np.asarray(c.matrix, np.float64)
+# ---------------------------------------------------------------------------------- validation
+# The limits of what the tracer can compute (it traces and accumulates in float32).
+
+#: Largest finite float32 (3.4e38): any value above it becomes inf when the tracer reads it.
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+#: Positions (vertices, lights, the camera) and lengths stay within this many metres: float32
+#: ray-triangle tests multiply three coordinates (differences to the ray origin), which
+#: overflows beyond ~1e12 m.
+COORD_LIMIT = 1e12
+#: Emitted quantities (a light's intensity W/sr, irradiance W/m^2 or radiance W/m^2/sr, an
+#: emission or world colour) stay below this, leaving float32 room for spectra, distances and sums.
+EMISSION_LIMIT = 1e25
+#: Triangles below this area (m^2) cannot be intersected in float32 (their edge products
+#: underflow); they are dropped with a warning.
+MIN_TRIANGLE_AREA = 1e-30
+#: Image size: each side, and the pixel count (checked before anything is allocated).
+MAX_SIDE = 65536
+MAX_PIXELS = 1 << 28
+#: Blackbody temperatures (K); 0 means "no temperature: use the colour". Below 100 K Planck's
+#: law underflows on parts of the 360-830 nm observer range.
+TEMPERATURE_MIN, TEMPERATURE_MAX = 100.0, 1e9
+#: Refractive indices, grating lengths and counts the tracer handles without overflow.
+IOR_MAX = 1000.0
+PERIOD_MAX = 1e7            # nm (1 cm)
+COHERENCE_MAX = 1e6         # um (1 m)
+SLIT_COUNT_MAX = 10_000_000
+#: Camera: the tangent of the half field of view (persp) at most this, shifts at most this.
+FOV_TAN_MAX = 1e6
+SHIFT_MAX = 1000.0
+
+_OBSERVER_NM = (360.0, 830.0)  # the wavelengths any grid may hold (spectrum.py)
+
+
+def _g(x) -> str:
+    """A number for a message: 3 significant digits."""
+    try:
+        return f"{float(x):.3g}"
+    except (TypeError, ValueError, OverflowError):
+        return repr(x)
+
+
+def _one_line(e: BaseException) -> str:
+    text = str(e).strip().splitlines()
+    return text[0][:200] if text else type(e).__name__
+
+
+_DTYPE_WORDS = {"U": "strings", "S": "bytes", "c": "complex numbers", "b": "booleans", "O": "Python objects",
+                "M": "dates", "m": "time spans", "V": "raw records"}
+
+
+def _column(value, what: str, tail: tuple = (), rows: int | None = None, kind: str = "float",
+            allow_empty: bool = False) -> np.ndarray:
+    """``value`` as an array of numbers of shape (rows,) + tail (rows None: any count), or a
+    SceneError naming ``what``, the dtype or the shape. kind: 'float' (integers and floats),
+    'int' (integers only), 'flag' (integers or booleans). ``allow_empty``: any empty array
+    stands for zero rows."""
+    try:
+        a = np.asarray(value)
+    except Exception:  # ragged nested lists, objects numpy cannot hold
+        raise SceneError(f"{what} is not a regular array of numbers") from None
+    k = a.dtype.kind
+    if k not in "iuf" and not (kind == "flag" and k == "b"):
+        words = _DTYPE_WORDS.get(k, str(a.dtype))
+        want = "numbers" if kind == "float" else "integers"
+        raise SceneError(f"{what} must hold {want}, got {words} ({a.dtype})")
+    if kind != "float" and k == "f":
+        raise SceneError(f"{what} must hold integers, got {a.dtype}")
+    ok = a.ndim == 1 + len(tail) and a.shape[1:] == tuple(tail) and (rows is None or a.shape[0] == rows)
+    if not ok:
+        if allow_empty and a.size == 0 and rows in (None, 0):
+            return a.reshape((0,) + tuple(tail))
+        want = "(" + ", ".join([str(rows) if rows is not None else "N"] + [str(x) for x in tail]) + \
+               ("," if not tail else "") + ")"
+        raise SceneError(f"{what} must have shape {want}, got {a.shape}")
+    if kind != "float" and a.size and k in "iu":
+        lo, hi = int(a.min()), int(a.max())
+        if lo < -(2**31) or hi >= 2**31:
+            raise SceneError(f"{what} holds {hi if hi >= 2**31 else lo}, outside the 32-bit integer range")
+    return a
+
+
+def _first_row(mask: np.ndarray) -> int:
+    m = mask.reshape(len(mask), -1).any(axis=1) if mask.ndim > 1 else mask
+    return int(np.argmax(m))
+
+
+def _check_range(a64: np.ndarray, label, name: str, unit: str, limit: float | None = None,
+                 finite_text: str | None = None, nonneg: bool = False) -> None:
+    """Finite, within float32, |x| <= limit (and >= 0 with ``nonneg``), per row; ``label(i)``
+    names row i ("light 2"). Empty arrays pass."""
+    if a64.size == 0:
+        return
+    a64 = np.asarray(a64, np.float64)
+    bad = ~np.isfinite(a64)
+    if bad.any():
+        i = _first_row(bad)
+        if finite_text:
+            raise SceneError(finite_text)
+        raise SceneError(f"{label(i)}: {name} is NaN or infinite")
+    mag = np.abs(a64)
+    over = mag > FLOAT32_MAX
+    if over.any():
+        i = _first_row(over)
+        raise SceneError(f"{label(i)}: {name} {_g(np.max(mag.reshape(len(mag), -1)[i]))}{unit} overflows float32 "
+                         f"(max 3.4e38)")
+    if limit is not None:
+        big = mag > limit
+        if big.any():
+            i = _first_row(big)
+            raise SceneError(f"{label(i)}: {name} {_g(np.max(mag.reshape(len(mag), -1)[i]))}{unit} is beyond "
+                             f"the renderable limit {limit:g}{unit}")
+    if nonneg and (a64 < 0).any():
+        i = _first_row(a64 < 0)
+        raise SceneError(f"{label(i)}: {name} must be >= 0, got {_g(np.min(a64.reshape(len(a64), -1)[i]))}{unit}")
+
+
+def _number(value, what: str, integer: bool = False):
+    """A scalar setting as a Python int/float, or a SceneError (strings, complex, bool, arrays)."""
+    if isinstance(value, (bool, np.bool_)) or isinstance(value, (str, bytes, complex, np.complexfloating)):
+        raise SceneError(f"{what} must be a number, got {value!r}")
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value.item()
+        if isinstance(value, (bool, str, bytes, complex)):
+            raise SceneError(f"{what} must be a number, got {value!r}")
+    if not isinstance(value, (int, float, np.integer, np.floating)):
+        raise SceneError(f"{what} must be a number, got {type(value).__name__}")
+    if integer:
+        if isinstance(value, (int, np.integer)):
+            return int(value)
+        f = float(value)
+        if not np.isfinite(f) or f != int(f):
+            raise SceneError(f"{what} must be a whole number, got {_g(f)}")
+        return int(f)
+    f = float(value)
+    if not np.isfinite(f):
+        raise SceneError(f"{what} must be a finite number, got {f}")
+    return f
+
+
+def _validate_camera(c: Camera) -> Camera:
+    try:
+        m = np.asarray(c.matrix)
+    except Exception:
+        raise SceneError("camera matrix must be a finite 4x4 matrix") from None
+    if m.dtype.kind not in "iuf":
+        raise SceneError(f"camera matrix must hold numbers, got {_DTYPE_WORDS.get(m.dtype.kind, m.dtype)}")
+    m = m.astype(np.float64)
     if m.shape != (4, 4) or not np.isfinite(m).all():
         raise SceneError("camera matrix must be a finite 4x4 matrix")
+    if np.abs(m[3] - (0.0, 0.0, 0.0, 1.0)).max() > 1e-6:
+        raise SceneError(f"camera matrix: the bottom row must be (0, 0, 0, 1) (an affine transform), got "
+                         f"{[float(x) for x in m[3]]}")
+    if np.abs(m[:3, 3]).max() > COORD_LIMIT:
+        raise SceneError(f"camera position {_g(np.abs(m[:3, 3]).max())} m is beyond the renderable limit "
+                         f"{COORD_LIMIT:g} m")
+    if np.abs(m[:3, :3]).max() > COORD_LIMIT:
+        raise SceneError("camera matrix: its scale is beyond the renderable limit")
     if abs(np.linalg.det(m[:3, :3])) < 1e-12:
         raise SceneError("camera matrix is singular (zero scale?)")
-    if c.kind not in ("PERSP", "ORTHO"):
-        raise SceneError(f"camera type {c.kind!r} is not supported (PERSP or ORTHO)")
-    if c.sensor_fit not in ("AUTO", "HORIZONTAL", "VERTICAL"):
-        raise SceneError(f"camera sensor fit {c.sensor_fit!r} is not AUTO, HORIZONTAL or VERTICAL")
-    if int(c.width) < 1 or int(c.height) < 1:
+    for name, allowed in (("kind", ("PERSP", "ORTHO")), ("sensor_fit", ("AUTO", "HORIZONTAL", "VERTICAL"))):
+        val = getattr(c, name)
+        if not isinstance(val, str) or val not in allowed:
+            what = "camera type" if name == "kind" else "camera sensor fit"
+            raise SceneError(f"{what} {val!r} is not supported ({' or '.join(allowed)})")
+    w = _number(c.width, "image width", integer=True)
+    h = _number(c.height, "image height", integer=True)
+    if w < 1 or h < 1:
         raise SceneError(f"image resolution must be at least 1x1, got {c.width}x{c.height}")
+    if w > MAX_SIDE or h > MAX_SIDE:
+        raise SceneError(f"image resolution {w}x{h}: each side must be at most {MAX_SIDE} pixels")
+    if w * h > MAX_PIXELS:
+        raise SceneError(f"image resolution {w}x{h} is {w * h / 1e6:.0f} M pixels, more than the "
+                         f"{MAX_PIXELS / 1e6:.0f} M a render allows")
+    vals = {}
     for name in ("lens", "sensor_width", "sensor_height", "ortho_scale"):
-        val = float(getattr(c, name))
-        if not np.isfinite(val) or val <= 0:
+        val = _number(getattr(c, name), f"camera {name}")
+        if not val > 0:
             raise SceneError(f"camera {name} must be > 0, got {val}")
+        if val > FLOAT32_MAX:
+            raise SceneError(f"camera {name} {_g(val)} overflows float32 (max 3.4e38)")
+        vals[name] = val
+    for name in ("shift_x", "shift_y"):
+        val = _number(getattr(c, name), f"camera {name}")
+        if abs(val) > SHIFT_MAX:
+            raise SceneError(f"camera {name} {_g(val)} is beyond +-{SHIFT_MAX:g} (a fraction of the image)")
+        vals[name] = val
+    if c.kind == "PERSP":
+        for sensor in ("sensor_width", "sensor_height"):
+            tan_half = vals[sensor] / vals["lens"] / 2
+            if tan_half > FOV_TAN_MAX:
+                raise SceneError(f"camera field of view too wide: {sensor} / lens = {_g(2 * tan_half)} "
+                                 f"(at most {2 * FOV_TAN_MAX:g})")
+    elif vals["ortho_scale"] > COORD_LIMIT:
+        raise SceneError(f"camera ortho_scale {_g(vals['ortho_scale'])} m is beyond the renderable limit "
+                         f"{COORD_LIMIT:g} m")
+    same = (w == c.width and type(c.width) is int and h == c.height and type(c.height) is int
+            and type(c.kind) is str and type(c.sensor_fit) is str)
+    return c if same else replace(c, width=w, height=h, kind=str(c.kind), sensor_fit=str(c.sensor_fit))
 
 
-def _validate_materials(m: Materials) -> None:
-    n = len(m.kind)
-    for f in fields(Materials):
-        if len(getattr(m, f.name)) != n:
-            raise SceneError(f"material table column {f.name!r} has {len(getattr(m, f.name))} rows, expected {n}")
-    if n == 0:
-        return
-    if not np.isin(m.kind, list(MATERIAL_KINDS.values())).all():
-        raise SceneError(f"material kind codes must be in {sorted(MATERIAL_KINDS.values())}")
-    if not np.isin(m.dispersion, list(DISPERSION_MODELS.values())).all():
-        raise SceneError(f"dispersion codes must be in {sorted(DISPERSION_MODELS.values())}")
-    if not np.isfinite(m.color).all():
-        raise SceneError("a material colour is NaN or infinite")
-    if not np.isfinite(m.emission).all() or (m.emission < 0).any():
-        raise SceneError("a material emission is negative, NaN or infinite")
-    diel = m.kind == MATERIAL_KINDS["DIELECTRIC"]
-    bad_ior = diel & ~(np.isfinite(m.ior) & (m.ior >= 1.0))
-    if bad_ior.any():
-        i = int(np.argmax(bad_ior))
-        raise SceneError(f"material {m.name[i]!r}: IOR must be >= 1, got {float(m.ior[i])}")
-    abbe = diel & (m.dispersion == DISPERSION_MODELS["ABBE"]) & ~(m.abbe > 0)
-    if abbe.any():
-        i = int(np.argmax(abbe))
-        raise SceneError(f"material {m.name[i]!r}: Abbe dispersion needs an Abbe number > 0")
-    g = np.asarray(m.grating) != 0
-    for col, what in (("period", "period"), ("slit_width", "slit width"), ("coherence_length", "coherence length")):
-        bad = g & ~(np.isfinite(getattr(m, col)) & (getattr(m, col) > 0))
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise SceneError(f"material {m.name[i]!r}: grating {what} must be > 0, got {float(getattr(m, col)[i])}")
-    bad = g & (m.slit_width > m.period)
+def _clean_float(a: np.ndarray, canonical) -> np.ndarray:
+    """Float columns keep their float32/float64 dtype (the values the caller gave); others
+    (integers, float16, longdouble) become the canonical dtype."""
+    return a if a.dtype in (np.float32, np.float64) else a.astype(canonical)
+
+
+def _enum_check(col: np.ndarray, enum: dict, label, what: str) -> None:
+    bad = ~np.isin(col, list(enum.values()))
     if bad.any():
         i = int(np.argmax(bad))
-        raise SceneError(f"material {m.name[i]!r}: grating slit width {float(m.slit_width[i])} nm is larger "
-                         f"than the period {float(m.period[i])} nm")
-    bad = g & (m.slit_count < 1)
-    if bad.any():
-        raise SceneError(f"material {m.name[int(np.argmax(bad))]!r}: grating slit count must be >= 1")
+        names = ", ".join(f"{v}={k}" for k, v in enum.items())
+        raise SceneError(f"{label(i)}: {what} code {int(col[i])} is not one of {names}")
 
 
-def _validate_lights(lt: Lights) -> None:
-    n = len(lt.kind)
-    for f in fields(Lights):
-        if len(getattr(lt, f.name)) != n:
-            raise SceneError(f"light table column {f.name!r} has {len(getattr(lt, f.name))} rows, expected {n}")
+def _material_label(names):
+    def label(i):
+        try:
+            return f"material {i} {str(names[i])!r}"
+        except Exception:
+            return f"material {i}"
+    return label
+
+
+def _validate_materials(m: Materials) -> Materials:
+    # the row count comes from the kind column; every column must have that many rows and its per-row shape
+    kind = _column(m.kind, "material table column 'kind'", (), kind="int", allow_empty=True)
+    n = len(kind)
+    for f in fields(Materials):
+        col = getattr(m, f.name)
+        try:
+            rows = len(col)
+        except TypeError:
+            rows = None
+        if rows != n:
+            raise SceneError(f"material table column {f.name!r} has {rows if rows is not None else 'no'} rows, "
+                             f"expected {n}")
+    try:
+        names = np.asarray(m.name)
+    except Exception:
+        names = None
+    if names is None or names.shape != (n,) or not (names.dtype.kind in "US" or
+                                                     (names.dtype.kind == "O" and all(isinstance(x, str) for x in names))):
+        raise SceneError(f"material table column 'name' must hold {n} strings, got "
+                         f"{'shape ' + str(names.shape) + ' of ' + str(names.dtype) if names is not None else 'no array'}")
+    label = _material_label(names)
+    out = {"name": m.name, "kind": kind}
+    for name, (dtype, tail, _default, enum) in _MATERIAL_COLUMNS.items():
+        if name in ("name", "kind"):
+            continue
+        is_int = np.dtype(dtype).kind == "i"
+        col = _column(getattr(m, name), f"material table column {name!r}", tail, rows=n,
+                      kind=("flag" if name == "grating" else "int") if is_int else "float", allow_empty=n == 0)
+        out[name] = col
     if n == 0:
-        return
-    for name in ("position", "direction", "axis_u", "color", "power", "spot_size", "size_u", "size_v"):
-        if not np.isfinite(np.asarray(getattr(lt, name), np.float64)).all():
-            raise SceneError(f"a light's {name} is NaN or infinite")
-    if (lt.power < 0).any():
-        raise SceneError(f"light {int(np.argmax(lt.power < 0))}: power must be >= 0")
-    if (np.linalg.norm(lt.direction, axis=1) < 1e-12).any():
-        raise SceneError("a light has a zero direction vector")
-    area = np.isin(lt.kind, [LIGHT_KINDS["AREA_RECT"], LIGHT_KINDS["AREA_DISK"]])
-    if (area & ((lt.size_u <= 0) | (lt.size_v <= 0))).any():
-        raise SceneError("an area light has a zero or negative size")
+        return m if all(out[k] is getattr(m, k) for k in out) else Materials(**out)
+    _enum_check(kind, MATERIAL_KINDS, label, "kind")
+    _enum_check(out["dispersion"], DISPERSION_MODELS, label, "dispersion")
+    for name, enum in (("grating_type", GRATING_TYPES), ("lattice", LATTICES), ("grating_direction", GRATING_DIRECTIONS)):
+        _enum_check(out[name], enum, label, name.replace("_", " "))
+    g = out["grating"].astype(np.int64)
+    bad = (g != 0) & (g != 1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"{label(i)}: grating flag must be 0 or 1, got {int(g[i])}")
+    f64 = {name: out[name].astype(np.float64) for name in out
+           if name != "name" and np.dtype(_MATERIAL_COLUMNS[name][0]).kind == "f"}
+    # every float column: finite and within float32
+    for name in ("color", "emission", "ior", "abbe", "period", "slit_width", "coherence_length", "rotation"):
+        _check_range(f64[name], label, name.replace("_", " "), "")
+    em = f64["emission"]
+    if (em < 0).any():
+        i = _first_row(em < 0)
+        raise SceneError(f"{label(i)}: emission {em[i].tolist()} is negative")
+    _check_range(em, label, "emission", "", limit=EMISSION_LIMIT)
+    k = kind
+    diel = k == MATERIAL_KINDS["DIELECTRIC"]
+    ior = f64["ior"]
+    bad_ior = diel & ~((ior >= 1.0) & (ior <= IOR_MAX))
+    if bad_ior.any():
+        i = int(np.argmax(bad_ior))
+        if ior[i] < 1.0:
+            raise SceneError(f"{label(i)}: IOR must be >= 1, got {float(ior[i])}")
+        raise SceneError(f"{label(i)}: IOR {_g(ior[i])} is above {IOR_MAX:g}")
+    abbe_rows = diel & (out["dispersion"] == DISPERSION_MODELS["ABBE"])
+    abbe = f64["abbe"]
+    bad = abbe_rows & ~(abbe > 0)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"{label(i)}: Abbe dispersion needs an Abbe number > 0")
+    for i in np.flatnonzero(abbe_rows):  # loop over Abbe glasses (a few): the index must stay in [1, IOR_MAX]
+        n_ends = ior_spectrum(np.array(_OBSERVER_NM), "ABBE", float(ior[i]), float(abbe[i]))
+        if not (np.isfinite(n_ends).all() and n_ends.min() >= 1.0 and n_ends.max() <= IOR_MAX):
+            raise SceneError(f"{label(i)}: Abbe number {_g(abbe[i])} with IOR {_g(ior[i])} gives an index of "
+                             f"{_g(n_ends[1])} at {_OBSERVER_NM[1]:g} nm and {_g(n_ends[0])} at "
+                             f"{_OBSERVER_NM[0]:g} nm, outside 1-{IOR_MAX:g} (use a larger Abbe number)")
+    on = g != 0
+    for col, what, unit, limit in (("period", "period", " nm", PERIOD_MAX), ("slit_width", "slit width", " nm", PERIOD_MAX),
+                                   ("coherence_length", "coherence length", " um", COHERENCE_MAX)):
+        val = f64[col]
+        bad = on & ~(val > 0)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"{label(i)}: grating {what} must be > 0, got {float(val[i])}")
+        bad = on & (val > limit)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"{label(i)}: grating {what} {_g(val[i])}{unit} is above {limit:g}{unit}")
+    bad = on & (f64["slit_width"] > f64["period"])
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"{label(i)}: grating slit width {float(out['slit_width'][i])} nm is larger "
+                         f"than the period {float(out['period'][i])} nm")
+    sc = out["slit_count"].astype(np.int64)
+    bad = on & ((sc < 1) | (sc > SLIT_COUNT_MAX))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"{label(i)}: grating slit count must be >= 1 and <= {SLIT_COUNT_MAX}, got {int(sc[i])}")
+    clean = {}
+    for name, col in out.items():
+        dtype = _MATERIAL_COLUMNS[name][0]
+        if name == "name":
+            clean[name] = col
+        elif np.dtype(dtype).kind == "f":
+            clean[name] = _clean_float(col, dtype)
+        else:
+            clean[name] = col if col.dtype == dtype else col.astype(dtype)
+    if all(clean[f.name] is getattr(m, f.name) for f in fields(Materials)):
+        return m
+    return Materials(**clean)
+
+
+_LIGHT_COLUMNS = {  # name -> (per-row shape, canonical dtype)
+    "kind": ((), np.int32), "position": ((3,), np.float64), "direction": ((3,), np.float64),
+    "axis_u": ((3,), np.float64), "color": ((3,), np.float32), "power": ((), np.float64),
+    "temperature": ((), np.float64), "spot_size": ((), np.float64), "spot_blend": ((), np.float64),
+    "size_u": ((), np.float64), "size_v": ((), np.float64),
+}
+
+
+def _validate_lights(lt: Lights) -> Lights:
+    kind = _column(lt.kind, "light table column 'kind'", (), kind="int", allow_empty=True)
+    n = len(kind)
+    for f in fields(Lights):
+        col = getattr(lt, f.name)
+        try:
+            rows = len(col)
+        except TypeError:
+            rows = None
+        if rows != n:
+            raise SceneError(f"light table column {f.name!r} has {rows if rows is not None else 'no'} rows, "
+                             f"expected {n}")
+    out = {"kind": kind}
+    for name, (tail, _dtype) in _LIGHT_COLUMNS.items():
+        if name != "kind":
+            out[name] = _column(getattr(lt, name), f"light table column {name!r}", tail, rows=n, allow_empty=n == 0)
+    if n == 0:
+        return lt if all(out[k] is getattr(lt, k) for k in out) else Lights(**{
+            k: v if v.dtype == _LIGHT_COLUMNS[k][1] else v.astype(_LIGHT_COLUMNS[k][1]) for k, v in out.items()})
+
+    def label(i):
+        return f"light {i}"
+
+    _enum_check(kind, LIGHT_KINDS, label, "kind")
+    f64 = {name: out[name].astype(np.float64) for name in out if name != "kind"}
+    units = {"position": " m", "power": " W", "size_u": " m", "size_v": " m", "temperature": " K"}
+    for name in ("position", "direction", "axis_u", "color", "power", "temperature", "spot_size", "spot_blend",
+                 "size_u", "size_v"):
+        a = f64[name]
+        if not np.isfinite(a).all():
+            i = _first_row(~np.isfinite(a))
+            raise SceneError(f"light {i}: {name.replace('_', ' ')} is NaN or infinite")
+        limit = COORD_LIMIT if name in ("position", "size_u", "size_v") else None
+        _check_range(a, label, name.replace("_", " "), units.get(name, ""), limit=limit)
+    power = f64["power"]
+    if (power < 0).any():
+        raise SceneError(f"light {int(np.argmax(power < 0))}: power must be >= 0, got {_g(power[power < 0][0])}")
+    dn = np.linalg.norm(f64["direction"], axis=1)
+    if (dn < 1e-12).any():
+        i = int(np.argmax(dn < 1e-12))
+        raise SceneError(f"light {i}: direction {f64['direction'][i].tolist()} is a zero vector")
+    temp = f64["temperature"]
+    bad = (temp != 0) & ~((temp >= TEMPERATURE_MIN) & (temp <= TEMPERATURE_MAX))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"light {i}: temperature {_g(temp[i])} K is outside {TEMPERATURE_MIN:g}-{TEMPERATURE_MAX:g} K "
+                         f"(0: use the light's colour)")
+    spot = kind == LIGHT_KINDS["SPOT"]
+    bad = spot & ~((f64["spot_size"] >= 0) & (f64["spot_size"] <= np.pi + 1e-6))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"light {i}: spot size {_g(f64['spot_size'][i])} rad is outside 0-pi")
+    bad = spot & ~((f64["spot_blend"] >= 0) & (f64["spot_blend"] <= 1 + 1e-6))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"light {i}: spot blend {_g(f64['spot_blend'][i])} is outside 0-1")
+    su, sv = f64["size_u"], f64["size_v"]
+    rect, disk = kind == LIGHT_KINDS["AREA_RECT"], kind == LIGHT_KINDS["AREA_DISK"]
+    area_rows = rect | disk
+    bad = area_rows & ((su <= 0) | (sv <= 0))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"light {i}: an area light has a zero or negative size ({_g(su[i])} x {_g(sv[i])} m)")
+    area = np.where(rect, su * sv, np.where(disk, np.pi * su * sv / 4, 0.0))
+    tiny = area_rows & (area < float(np.finfo(np.float32).tiny))
+    if tiny.any():
+        i = int(np.argmax(tiny))
+        raise SceneError(f"light {i}: area {_g(area[i])} m^2 underflows float32 (min 1.2e-38)")
+    # what the light emits, before its spectrum's shape: W/sr, W/m^2 or W/m^2/sr
+    scale = np.where(temp > 0, 1.0, np.maximum(f64["color"], 0.0).max(axis=1))
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        point = np.isin(kind, [LIGHT_KINDS["POINT"], LIGHT_KINDS["SPOT"]])
+        emitted = np.where(point, power / (4 * np.pi), np.where(area_rows, power / (np.pi * np.where(area_rows, area, 1.0)),
+                                                                  power)) * scale
+    over = ~(emitted <= EMISSION_LIMIT)
+    if over.any():
+        i = int(np.argmax(over))
+        if point[i]:
+            what, unit, how = "intensity", "W/sr", "power / (4 pi)"
+        elif area_rows[i]:
+            what, unit, how = "radiance", "W/m^2/sr", "power / (pi * area)"
+        else:
+            what, unit, how = "irradiance", "W/m^2", "strength"
+        why = "overflows float32" if emitted[i] > FLOAT32_MAX else "is beyond the renderable limit"
+        raise SceneError(f"light {i}: {what} {_g(emitted[i])} {unit} ({how}, times the colour) {why} "
+                         f"(max {EMISSION_LIMIT:g} {unit})")
+    clean = {}
+    for name, (tail, dtype) in _LIGHT_COLUMNS.items():
+        col = out[name]
+        if np.dtype(dtype).kind == "f":
+            clean[name] = _clean_float(col, dtype)
+        else:
+            clean[name] = col if col.dtype == dtype else col.astype(dtype)
+    if all(clean[f.name] is getattr(lt, f.name) for f in fields(Lights)):
+        return lt
+    return Lights(**clean)

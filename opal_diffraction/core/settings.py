@@ -2,22 +2,63 @@
 
 The names match the Blender-facing contract (``scene.opal``), so the Blender layer copies them
 one to one. Settings are frozen: a render's settings never change under it (``dataclasses.replace``
-makes a variant).
+makes a variant). Numbers given as NumPy scalars become Python numbers, and whole floats given
+for counts become ints (``samples=16.0`` is 16), so equal settings compare and hash equal;
+everything else is checked by ``validate`` (a SceneError naming the setting and the rule).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+import os
+from dataclasses import dataclass, fields
 
-from .scene import SceneError
-from .spectrum import WavelengthGrid
+import numpy as np
 
-__all__ = ["RenderSettings", "DISPERSION_SAMPLING", "EYE_ONLY_SETTINGS"]
+from .scene import COORD_LIMIT, SceneError, _g, _number
+from .spectrum import _MAX_NM, _MIN_NM, WavelengthGrid
+
+__all__ = ["RenderSettings", "DISPERSION_SAMPLING", "EYE_ONLY_SETTINGS", "BACKENDS", "MAX_WAVELENGTHS",
+           "MIN_WAVELENGTHS", "FEW_WAVELENGTHS", "film_bytes"]
 
 DISPERSION_SAMPLING = ("SPLIT", "SAMPLE")
+BACKENDS = ("auto", "embree", "numpy", "brute")
 
 #: Settings only the eye pass reads: changing them keeps a prepared scene and its light pass.
 EYE_ONLY_SETTINGS = frozenset({"samples", "round_samples", "tile_size", "filter_width", "time_limit", "spectral_exr"})
+
+#: The wavelength grid holds 2 to 4001 samples (360-830 nm at 0.1175 nm at most); below 16 the
+#: colours are coarse (a warning, not an error).
+MIN_WAVELENGTHS, MAX_WAVELENGTHS, FEW_WAVELENGTHS = 2, 4001, 16
+
+# name -> (lowest, highest) for the integer settings
+_INT_RANGES = {
+    "samples": (1, 1 << 24),
+    "light_paths": (0, 10**10),
+    "max_bounces": (0, 1024),
+    "seed": (0, 2**64 - 1),
+    "threads": (0, 1024),
+    "tile_size": (1, 65536),
+    "round_samples": (1, 1 << 16),
+}
+_FLOAT_FIELDS = ("element_size", "wavelength_min", "wavelength_max", "wavelength_step", "time_limit", "filter_width")
+_WORDS = {"samples": "samples", "light_paths": "light paths", "max_bounces": "max bounces", "seed": "seed",
+          "threads": "threads", "tile_size": "tile size", "round_samples": "round samples",
+          "element_size": "element size", "wavelength_min": "wavelength min", "wavelength_max": "wavelength max",
+          "wavelength_step": "wavelength step", "time_limit": "time limit", "filter_width": "filter width"}
+FILTER_WIDTH_MAX = 100.0  # pixels
+
+
+def _wavelength_count(lo: float, hi: float, step: float) -> float:
+    """Samples lo + i * step <= hi (as WavelengthGrid counts them), in float so it cannot overflow."""
+    return math.floor((hi - lo) / step + 1e-9) + 1 if (hi - lo) / step < 1e15 else math.inf
+
+
+def film_bytes(width: int, height: int, wavelengths: int) -> int:
+    """Memory (bytes) of a render's film: the (H, W, n) float32 spectral sums, the RGB parts
+    and the counts, plus the finished image's spectral and RGB copies."""
+    px = int(width) * int(height)
+    return px * (2 * 4 * int(wavelengths) + 4 * 3 * 6 + 4)
 
 
 @dataclass(frozen=True)
@@ -34,29 +75,113 @@ class RenderSettings:
     spectral_exr: str = ""            # path of a spectral EXR to write; empty: off
     time_limit: float = 0.0           # seconds, 0: none (stops between sample rounds)
     threads: int = 0                  # 0: all cores
-    backend: str = "auto"             # ray casting: 'auto' | 'embree' | 'numpy'
+    backend: str = "auto"             # ray casting: 'auto' | 'embree' | 'numpy' | 'brute' (tests)
     tile_size: int = 64               # pixels per tile side
     round_samples: int = 8            # samples per pixel per progressive round
     filter_width: float = 1.5         # Blackman-Harris reconstruction filter width (pixels)
 
+    def __post_init__(self):
+        # normalise number types only (never raise here: validate() names what is wrong)
+        for f in fields(self):
+            val = getattr(self, f.name)
+            if isinstance(val, (bool, np.bool_)):
+                continue
+            new = val
+            if f.name in _INT_RANGES:
+                if isinstance(val, np.integer):
+                    new = int(val)
+                elif isinstance(val, (float, np.floating)) and math.isfinite(val) and float(val).is_integer():
+                    new = int(val)
+            elif f.name in _FLOAT_FIELDS:
+                if isinstance(val, (np.integer, np.floating)) and not isinstance(val, np.complexfloating):
+                    new = float(val)
+            elif isinstance(val, np.str_):
+                new = str(val)
+            if new is not val:
+                object.__setattr__(self, f.name, new)
+
     def grid(self) -> WavelengthGrid:
+        self._validate_grid()
         try:
             return WavelengthGrid(self.wavelength_min, self.wavelength_max, self.wavelength_step)
         except ValueError as e:
             raise SceneError(str(e)) from None
 
+    def _validate_grid(self) -> int:
+        lo = _number(self.wavelength_min, "wavelength min")
+        hi = _number(self.wavelength_max, "wavelength max")
+        step = _number(self.wavelength_step, "wavelength step")
+        if step <= 0:
+            raise SceneError(f"wavelength grid: step must be > 0 nm, got {step}")
+        if lo >= hi:
+            raise SceneError(f"wavelength grid: minimum {lo} nm must be below maximum {hi} nm")
+        if lo < _MIN_NM or hi > _MAX_NM:
+            raise SceneError(f"wavelength grid: {lo}-{hi} nm is outside the observer's {_MIN_NM:.0f}-{_MAX_NM:.0f} nm")
+        n = _wavelength_count(lo, hi, step)
+        if n < MIN_WAVELENGTHS:
+            raise SceneError(f"wavelength step {_g(step)} nm leaves {n} sample from {_g(lo)} to {_g(hi)} nm: at "
+                             f"least {MIN_WAVELENGTHS} are needed, and fewer than {FEW_WAVELENGTHS} make colours "
+                             f"coarse (use a step of at most {_g((hi - lo) / (FEW_WAVELENGTHS - 1))} nm)")
+        if n > MAX_WAVELENGTHS:
+            shown = f"{n:.0f}" if n < 1e15 else "over 1e15"
+            raise SceneError(f"wavelength step {_g(step)} nm gives {shown} samples from {_g(lo)} to {_g(hi)} nm, "
+                             f"more than the {MAX_WAVELENGTHS} allowed (use a step of at least "
+                             f"{_g((hi - lo) / (MAX_WAVELENGTHS - 1))} nm)")
+        return int(n)
+
+    def warnings(self) -> list[str]:
+        """Things about valid settings the user should know (call after validate)."""
+        out = []
+        n = _wavelength_count(float(self.wavelength_min), float(self.wavelength_max), float(self.wavelength_step))
+        if n < FEW_WAVELENGTHS:
+            out.append(f"wavelength step {_g(self.wavelength_step)} nm leaves only {n} samples from "
+                       f"{_g(self.wavelength_min)} to {_g(self.wavelength_max)} nm: colours are coarse below "
+                       f"{FEW_WAVELENGTHS} (use a step of at most "
+                       f"{_g((self.wavelength_max - self.wavelength_min) / (FEW_WAVELENGTHS - 1))} nm)")
+        return out
+
     def validate(self) -> None:
-        """Raise SceneError with a readable message for settings that cannot work."""
-        if int(self.samples) < 1:
-            raise SceneError(f"samples must be at least 1, got {self.samples}")
-        if int(self.light_paths) < 0 or self.element_size < 0:
-            raise SceneError("light paths and element size must be >= 0")
-        if int(self.max_bounces) < 0:
-            raise SceneError(f"max bounces must be >= 0, got {self.max_bounces}")
-        if self.dispersion_sampling not in DISPERSION_SAMPLING:
-            raise SceneError(f"dispersion sampling must be SPLIT or SAMPLE, got {self.dispersion_sampling!r}")
-        if self.time_limit < 0:
+        """Raise SceneError with a readable message for settings that cannot work: every
+        setting's type (counts are whole numbers, lengths and times finite numbers, names
+        strings) and range, the wavelength grid (2-4001 samples inside 360-830 nm) and the
+        backend (known, and importable)."""
+        vals = {}
+        for name, (lo, hi) in _INT_RANGES.items():
+            v = _number(getattr(self, name), _WORDS[name], integer=True)
+            if v < lo:
+                rule = {"samples": "at least 1", "tile_size": "at least 1", "round_samples": "at least 1"}.get(name, ">= 0")
+                raise SceneError(f"{_WORDS[name]} must be {rule}, got {v}")
+            if v > hi:
+                raise SceneError(f"{_WORDS[name]} {v} is above the maximum {hi}")
+            vals[name] = v
+        for name in _FLOAT_FIELDS:
+            vals[name] = _number(getattr(self, name), _WORDS[name])
+        if vals["element_size"] < 0 or vals["element_size"] > COORD_LIMIT:
+            raise SceneError(f"element size must be >= 0 m (0: automatic) and at most {COORD_LIMIT:g} m, "
+                             f"got {vals['element_size']}")
+        if vals["time_limit"] < 0:
             raise SceneError("time limit must be >= 0 seconds")
-        if int(self.tile_size) < 1 or int(self.round_samples) < 1:
-            raise SceneError("tile size and round samples must be >= 1")
-        self.grid()
+        if not 0 <= vals["filter_width"] <= FILTER_WIDTH_MAX:
+            raise SceneError(f"filter width must be between 0 and {FILTER_WIDTH_MAX:g} pixels, got {vals['filter_width']}")
+        if not isinstance(self.dispersion_sampling, str) or self.dispersion_sampling not in DISPERSION_SAMPLING:
+            raise SceneError(f"dispersion sampling must be SPLIT or SAMPLE, got {self.dispersion_sampling!r}")
+        if not isinstance(self.spectral_exr, (str, os.PathLike)):
+            raise SceneError(f"spectral EXR must be a path (a string), got {type(self.spectral_exr).__name__}")
+        _validate_backend(self.backend)
+        self._validate_grid()
+
+
+def _validate_backend(backend) -> None:
+    if not isinstance(backend, str) or backend.strip().lower() not in BACKENDS:
+        raise SceneError(f"unknown ray-casting backend {backend!r}: expected one of {', '.join(BACKENDS)}")
+    b = backend.strip().lower()
+    if b == "auto":
+        env = os.environ.get("OPAL_ACCEL", "").strip().lower()
+        if env and env != "auto" and env not in BACKENDS:
+            raise SceneError(f"OPAL_ACCEL={env!r}: expected 'embree', 'numpy' or 'brute'")
+        b = env if env and env != "auto" else b
+    if b == "embree":
+        from .accel import available_backends
+
+        if "embree" not in available_backends():
+            raise SceneError("backend 'embree' requested but embreex cannot be imported (pip install embreex)")

@@ -191,6 +191,16 @@ class SpectralConverter:
         if np.any(~np.isfinite(temps)) or np.any(temps <= 0):
             raise ValueError(f"blackbody temperature must be a positive number of kelvin, got {temperature_k}")
         shape = colour.SpectralShape(self.grid.wavelengths[0], self.grid.wavelengths[-1], self.grid.step)
-        out = np.stack([colour.sd_blackbody(t, shape).values[: self.grid.n] for t in temps])
+        rows = []
+        for t in temps:
+            import warnings
+
+            with warnings.catch_warnings():  # "shape could not be honoured": colour rounds odd steps
+                warnings.simplefilter("ignore")
+                values = colour.sd_blackbody(t, shape).values[: self.grid.n]
+            if len(values) < self.grid.n:  # colour's rounding dropped the last sample: Planck on the grid
+                values = colour.colorimetry.planck_law(self.grid.wavelengths * 1e-9, t) * 1e-9
+            rows.append(values)
+        out = np.stack(rows)
         out = out / (out @ self.cmf_weights[:, 1])[:, None]
         return out.reshape(np.shape(temperature_k) + (self.grid.n,))
