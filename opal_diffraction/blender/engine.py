@@ -96,12 +96,15 @@ class OpalRenderEngine(bpy.types.RenderEngine):
 
     def __del__(self):
         # the engine is freed (Rendered mode left, or a render finished): stop the preview thread
-        vp = getattr(self, "_viewport", None)
-        if vp is not None:
-            vp.free()
-        parent = getattr(super(), "__del__", None)
-        if parent is not None:
-            parent()
+        try:
+            vp = getattr(self, "_viewport", None)
+            if vp is not None:
+                vp.free()
+            parent = getattr(super(), "__del__", None)
+            if parent is not None:
+                parent()
+        except ReferenceError:  # Blender already removed the engine's RNA struct: nothing to stop
+            pass
 
     # ---------------------------------------------------------------- viewport
     def _viewport_session(self) -> ViewportSession:

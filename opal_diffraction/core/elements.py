@@ -36,8 +36,9 @@ class ElementLayout:
     @staticmethod
     def subdivisions(area: np.ndarray, receivers: np.ndarray, target_area: float) -> np.ndarray:
         """(T,) k per triangle for elements of about ``target_area`` (0 off the receivers)."""
-        k = np.ceil(np.sqrt(area / max(float(target_area), 1e-30))).astype(np.int64)
-        return np.where(np.asarray(receivers, bool), np.clip(k, 1, MAX_SUBDIVISION), 0)
+        k = np.ceil(np.sqrt(area / max(float(target_area), 1e-30)))
+        k = np.clip(np.nan_to_num(k, nan=1.0), 1, MAX_SUBDIVISION).astype(np.int64)  # clip before the cast
+        return np.where(np.asarray(receivers, bool), k, 0)
 
     @classmethod
     def from_areas(cls, area: np.ndarray, receivers: np.ndarray, target_area: float) -> "ElementLayout":

@@ -128,8 +128,8 @@ def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.G
             cos_axis = -(wi @ pl.direction[index].astype(f32))
             ch, sm = pl.cos_half_spot[index], pl.spot_smooth[index]
             cone = np.where(cos_axis > ch, 1.0, 0.0)
-            if sm > 0:
-                cone = cone * _smoothstep((cos_axis - ch) / sm)
+            if f32(sm) > 0:  # a blend band that is 0 in float32 is a hard edge
+                cone = cone * _smoothstep((cos_axis - ch) / f32(sm))
             g = g * cone
         return wi, dist, g
     cos_l = -(wi @ pl.direction[index].astype(f32))

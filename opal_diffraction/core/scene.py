@@ -442,7 +442,7 @@ class Scene:
                 tp = tp[keep] if len(tp) else tp
         if len(t) == 0:
             warns.append("the scene has no geometry: the image shows only the background")
-        if len(lights) == 0:
+        if len(lights) == 0 and not np.any(np.asarray(wc) > 0):  # a coloured world lights the scene
             warns.append("the scene has no lights: only the background is lit")
         clean = replace(self, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
                         materials=materials, lights=lights, camera=camera, world_color=wc)
