@@ -41,6 +41,8 @@ __all__ = ["PreparedScene", "prepare", "scene_extent", "OFFSET_RELATIVE"]
 #: Self-intersection offset: this fraction of the scene's extent, plus float32 rounding of each
 #: triangle's coordinates.
 OFFSET_RELATIVE = 1e-5
+#: Scenes smaller than this (m) are cast with the NumPy BVH: Embree's epsilons are absolute.
+EMBREE_MIN_EXTENT = 1e-10
 
 _keys = itertools.count(1)  # one key per preparation: a light-pass result belongs to one key
 
@@ -186,9 +188,15 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         base = OFFSET_RELATIVE * extent
         tri_offset = triangle_offsets(v, t, base)
         check(stopped)
+        backend = settings.backend
+        if extent < EMBREE_MIN_EXTENT and backend in ("auto", "embree") and len(t):
+            # measured: Embree misses or double-counts hits in scenes of ~1e-12 m (its own
+            # epsilons are absolute); the NumPy BVH is scale-free
+            warnings.append(f"the scene is {extent:.1e} m across, too small for Embree: ray casting with the NumPy BVH")
+            backend = "numpy"
         # the passes parallelise over tiles and light-pass lanes with the whole budget, so the
         # caster itself runs on one thread (no pools nested inside pools)
-        accel = build_accelerator(v, t, settings.backend, threads=1, stopped=stopped)
+        accel = build_accelerator(v, t, backend, threads=1, stopped=stopped)
         check(stopped)
     if gratings.any:  # only a scene with gratings pays for their frames
         nrm64 = triangle_normals(v, t) if nrm64 is None else nrm64
