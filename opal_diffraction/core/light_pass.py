@@ -364,8 +364,13 @@ class DepositLog:
         if len(elements):
             self.calls.append((elements, flux, lam, towards_source))
 
-    def replay(self, target: IlluminationMap | None) -> None:
-        for elements, flux, lam, towards_source in self.calls:
+    def replay(self, target: IlluminationMap) -> None:
+        self.replay_calls(self.calls, target)
+
+    @staticmethod
+    def replay_calls(calls, target: IlluminationMap) -> None:
+        """Add recorded ``calls`` (a DepositLog's ``calls``, e.g. sent back by a worker) to ``target``."""
+        for elements, flux, lam, towards_source in calls:
             target.deposit(elements, flux, lam, towards_source)
 
 

@@ -10,7 +10,9 @@ finished LightPassResult), which is what the rendered viewport reuses while only
 moves. The image is split into tiles and the samples into progressive rounds (tiles.py). Every
 (round, tile) batch draws its random numbers from its own stream, ``SeedSequence([seed, pass,
 round, tile])``, and writes only its own pixels, so the image is identical whatever the number
-of threads; rounds make time limits, cancellation and partial previews cheap.
+of threads, or machines: ``render(..., client=dask_client)`` runs the same units on a Dask
+cluster (distributed.py, imported only then); rounds make time limits, cancellation and partial
+previews cheap.
 """
 
 from __future__ import annotations
@@ -54,6 +56,7 @@ def render(
     should_cancel: Callable[[], bool] | None = None,
     on_round: Callable[[RenderResult], None] | None = None,
     region: tuple[int, int, int, int] | None = None,
+    client=None,
 ) -> RenderResult:
     """Render ``scene``; raises SceneError (a readable message) for unrenderable input.
 
@@ -62,12 +65,21 @@ def render(
     ``on_round(result)`` receives the partial image after every round. ``region`` = (x0, y0, x1,
     y1) renders only those pixels of the camera's image (a border render; rows from the top); the
     result then has shape (y1 - y0, x1 - x0).
+
+    ``client``: a ``dask.distributed.Client``; the light pass's batches and the eye pass's
+    tiles x rounds then run on its workers and the image is the one this machine renders alone,
+    bit for bit (core/distributed.py, docs/distributed.md). None: this process's threads.
     """
     t_start = time.perf_counter()
     try:
         prepared = prepare(scene, settings, should_cancel=should_cancel)
     except RenderCancelled:
         return _cancelled_before_start(scene, settings or RenderSettings(), region)
+    if client is not None:
+        from .distributed import render_on_cluster  # dask only when asked for
+
+        return render_on_cluster(client, scene, settings or RenderSettings(), prepared, progress, should_cancel,
+                                 on_round, region, started_at=t_start)
     return render_prepared(prepared, None, progress, should_cancel, on_round, region, started_at=t_start)
 
 
