@@ -54,6 +54,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--time-limit", type=float, default=0.0, help="seconds; 0: none")
     r.add_argument("--threads", type=int, default=0, help="0: all cores")
     r.add_argument("--backend", choices=["auto", "embree", "numpy"], default="auto")
+    r.add_argument("--scheduler", default="", help="render on a Dask cluster, the same image: tcp://HOST:PORT of "
+                   "a scheduler, or local:N for N worker processes here (needs requirements-dask.txt)")
     r.add_argument("--exposure", type=float, default=0.0, help="stops applied to the PNG preview only")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     return p
@@ -79,7 +81,14 @@ def main(argv=None) -> int:
             spectral_exr=args.spectral_exr, time_limit=args.time_limit, threads=args.threads,
             backend=args.backend,
         )
-        result = render(scene, settings, progress=None if args.quiet else _ProgressBar())
+        bar = None if args.quiet else _ProgressBar()
+        if args.scheduler:
+            from .core.distributed import connect
+
+            with connect(args.scheduler) as client:
+                result = render(scene, settings, progress=bar, client=client)
+        else:
+            result = render(scene, settings, progress=bar)
     except SceneError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -208,3 +208,44 @@ def test_scheduler_addresses_fail_with_a_readable_error():
     with pytest.raises(ClusterError, match="cannot reach the Dask scheduler"):
         with connect("tcp://127.0.0.1:9", timeout=1):  # nothing listens there
             pass
+
+
+@pytest.mark.slow
+def test_cli_renders_the_same_exr_on_local_workers(tmp_path):
+    pytest.importorskip("distributed")
+    scene = tmp_path / "scene.npz"
+    every_pass_scene(24, 16).save(str(scene))
+    common = [sys.executable, "-m", "opal_diffraction", "render", str(scene), "--spp", "2", "--light-paths",
+              "40000", "--seed", "4", "-q"]
+    subprocess.run(common + ["-o", str(tmp_path / "a.exr"), "--spectral-exr", str(tmp_path / "a_s.exr")],
+                   check=True, timeout=300)
+    out = subprocess.run(common + ["-o", str(tmp_path / "b.exr"), "--spectral-exr", str(tmp_path / "b_s.exr"),
+                                   "--scheduler", "local:2"], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "a.exr").read_bytes() == (tmp_path / "b.exr").read_bytes()
+    assert (tmp_path / "a_s.exr").read_bytes() == (tmp_path / "b_s.exr").read_bytes()
+    bad = subprocess.run(common + ["-o", str(tmp_path / "c.exr"), "--scheduler", "tcp://127.0.0.1"],
+                         capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2 and bad.stderr.strip().startswith("error: cannot reach the Dask scheduler")
+
+
+def test_the_dask_extra_is_the_requirements_pin_and_this_venv_runs_it():
+    """pyproject.toml's extra "dask" and requirements-dask.txt (what ./setup.sh installs) agree."""
+    import importlib.metadata as md
+    import tomllib
+
+    from packaging.requirements import Requirement
+
+    from opal_diffraction._scripts import REPO_ROOT
+
+    with open(os.path.join(REPO_ROOT, "pyproject.toml"), "rb") as f:
+        extra = [Requirement(r) for r in tomllib.load(f)["project"]["optional-dependencies"]["dask"]]
+    with open(os.path.join(REPO_ROOT, "requirements-dask.txt")) as f:
+        pinned = [Requirement(line.strip()) for line in f if line.strip() and not line.startswith("#")]
+    assert [(r.name, r.extras, str(r.specifier)) for r in extra] == [(r.name, r.extras, str(r.specifier))
+                                                                     for r in pinned]
+    (pin,) = pinned
+    assert pin.name == "dask" and pin.extras == {"distributed"} and str(pin.specifier).startswith("==")
+    version = str(pin.specifier)[2:]
+    pytest.importorskip("distributed")
+    assert md.version("dask") == md.version("distributed") == version
