@@ -43,6 +43,7 @@ import hashlib
 import importlib
 import os
 import pickle
+import sys
 import threading
 import time
 import uuid
@@ -211,10 +212,37 @@ def make_job(scene: Scene, settings: RenderSettings, region, backend: str) -> di
 
 
 # --------------------------------------------------------------------------- on a worker
+#: glibc malloc on a worker: Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_=65536, which
+#: also switches off glibc's adaptive mmap threshold, so every NumPy temporary above 128 kB is a
+#: fresh mmap whose pages fault in zeroed: the tracer ran 2-2.5x slower on a worker than in a
+#: plain process (benchmarks/bench_distributed.py). Above this size arrays are still mmapped
+#: (and given back when freed), below it the heap reuses them; the heap's top is trimmed past
+#: MALLOC_TRIM_BYTES.
+MALLOC_MMAP_BYTES = 32 << 20
+MALLOC_TRIM_BYTES = 256 << 20
+_malloc_tuned: list[bool] = []
+
+
+def _tune_malloc() -> None:
+    """Set this worker process's glibc malloc thresholds once (Linux only; else a no-op)."""
+    if _malloc_tuned or not sys.platform.startswith("linux"):
+        return
+    _malloc_tuned.append(True)
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallopt(-3, MALLOC_MMAP_BYTES)  # M_MMAP_THRESHOLD
+        libc.mallopt(-1, MALLOC_TRIM_BYTES)  # M_TRIM_THRESHOLD
+    except (OSError, AttributeError):  # not glibc (musl, ...): leave it
+        pass
+
+
 class _Frame:
     """A worker's preparation of one job, shared by the job's tasks on that worker."""
 
     def __init__(self, job: dict):
+        _tune_malloc()
         if job["code"] != code_digest():
             raise RuntimeError(f"{_MISMATCH}a worker (pid {os.getpid()}) runs a different opal_diffraction core "
                                "than the client: install the same version on every machine")
