@@ -105,7 +105,7 @@ _WIRE_CLASSES = {c.__name__: c for c in (Scene, Materials, Lights, Camera, Rende
 
 def to_wire(x):
     """``x`` as plain data (dicts, lists, NumPy arrays, str, numbers, None): the dataclasses of
-    the scene, settings, maps and tiles become tagged dicts, so unpickling needs no module of
+    the scene, the settings and element layouts become tagged dicts, so unpickling needs no module of
     ours. Raises TypeError for anything else that is not plain."""
     if isinstance(x, np.ndarray) or x is None or isinstance(x, (str, bytes, bool, int, float, np.generic)):
         return x
@@ -394,8 +394,8 @@ def _worker_threads(client, should_cancel) -> int:
 
 class _Replicas:
     """Keeps the scattered job and light maps on every worker: a worker that joins mid-render (a
-    dead one's replacement) gets a copy from its peers within REPLICATE_S, so losing a worker
-    never loses the last copy while others run."""
+    dead one's replacement) gets a copy from its peers within REPLICATE_S, rather than with its
+    first task, so one more death is less likely to take the last copy."""
 
     def __init__(self, client):
         self.client, self.futures, self.workers, self.last = client, [], set(client.nthreads()), time.perf_counter()
