@@ -108,6 +108,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--time-limit", type=float, default=0.0, help="seconds; 0: none")
     r.add_argument("--threads", type=int, default=0, help="0: all cores")
     r.add_argument("--backend", choices=["auto", "embree", "numpy"], default="auto")
+    r.add_argument("--scheduler", default="", help="render on a Dask cluster, the same image: tcp://HOST:PORT of "
+                   "a scheduler, or local:N for N worker processes here (needs requirements-dask.txt)")
     r.add_argument("--exposure", type=float, default=0.0, help="stops applied to the PNG preview only")
     r.add_argument("--save-partial", action="store_true", help="on Ctrl-C, write the image rendered so far")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -340,7 +342,14 @@ def _render(args, sig: _Signals, created: list) -> int:
     bar = None if args.quiet else _ProgressBar()
     sig.phase = "render"
     try:
-        result = render_prepared(prepared, progress=bar, should_cancel=sig.should_cancel, started_at=t_start)
+        if args.scheduler:  # the same image, rendered on a Dask cluster (core/distributed.py)
+            from .core.distributed import connect, render_on_cluster
+
+            with connect(args.scheduler) as client:
+                result = render_on_cluster(client, scene, settings, prepared, progress=bar,
+                                           should_cancel=sig.should_cancel, started_at=t_start)
+        else:
+            result = render_prepared(prepared, progress=bar, should_cancel=sig.should_cancel, started_at=t_start)
     except SceneError as e:
         raise CliError(str(e)) from None
     finally:

@@ -27,10 +27,12 @@ import re
 import sys
 import time
 import traceback
+from contextlib import nullcontext
 
 import bpy
 import numpy as np
 
+from ..core.distributed import connect
 from ..core.output import write_spectral_exr
 from ..core.render import render as core_render
 from ..core.scene import SceneError
@@ -231,8 +233,9 @@ class OpalRenderEngine(bpy.types.RenderEngine):
             self.update_result(result)
 
         try:
-            rr = core_render(exported.scene, settings, progress=progress, should_cancel=self._should_stop,
-                             on_round=on_round, region=region)
+            with connect(opal.scheduler) if opal.scheduler.strip() else nullcontext() as client:
+                rr = core_render(exported.scene, settings, progress=progress, should_cancel=self._should_stop,
+                                 on_round=on_round, region=region, client=client)
         except BaseException:
             self.end_result(result, cancel=True)
             raise

@@ -186,6 +186,12 @@ class OpalRenderSettings(PropertyGroup):
     backend: EnumProperty(
         name="Ray Casting", description="Ray casting backend", items=BACKEND_ITEMS, default="AUTO",
     )
+    scheduler: StringProperty(
+        name="Scheduler", description="Render on a Dask cluster (F12 and headless renders): the scheduler's "
+        "address, tcp://HOST:8786, or local:N for N worker processes on this machine; the image is the same "
+        "as rendered here. Needs dask (requirements-dask.txt) here and on the workers. Empty: render here",
+        default="",
+    )
     tile_size: IntProperty(
         name="Tile Size", description="Side of the square tiles the image is split into (pixels); cancel "
         "requests are honoured between tiles", default=64, min=8, max=1024, subtype="PIXEL",

@@ -132,6 +132,7 @@ class OPAL_RENDER_PT_performance(OpalButtonsPanel, Panel):
         sub.prop(rd, "threads")
         layout.prop(opal, "backend")
         layout.prop(opal, "tile_size")
+        layout.prop(opal, "scheduler")
 
 
 # ============================================================================ material tab

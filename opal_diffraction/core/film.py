@@ -19,7 +19,14 @@ import numpy as np
 from .plan import RenderPlan
 from .spectrum import SpectralConverter
 
-__all__ = ["Film", "RenderResult"]
+__all__ = ["Film", "RenderResult", "tile_parts_rgb"]
+
+PARTS = ("background", "caustics", "diffraction")  # a TileResult's non-Direct parts
+
+
+def tile_parts_rgb(conv: SpectralConverter, tile) -> dict:
+    """An eye_pass.TileResult's non-Direct parts as (P, 3) RGB (None where it wrote none)."""
+    return {name: None if getattr(tile, name) is None else conv.to_rgb(getattr(tile, name)) for name in PARTS}
 
 
 @dataclass
@@ -42,18 +49,23 @@ class Film:
         self.conv = conv
         self.spectral = np.zeros((height, width, conv.grid.n), np.float32)
         # RGB sums of the parts of the spectral sum that are not Direct light
-        self.parts = {name: np.zeros((height, width, 3), np.float32)
-                      for name in ("background", "caustics", "diffraction")}
+        self.parts = {name: np.zeros((height, width, 3), np.float32) for name in PARTS}
         self.counts = np.zeros((height, width), np.float32)  # samples per pixel so far
 
     def add_tile(self, x0: int, y0: int, x1: int, y1: int, tile, samples: int) -> None:
         """Add an eye_pass.TileResult covering pixels [x0, x1) x [y0, y1) with ``samples`` each."""
+        self.add_converted(x0, y0, x1, y1, tile.film, tile_parts_rgb(self.conv, tile), samples)
+
+    def add_converted(self, x0: int, y0: int, x1: int, y1: int, film: np.ndarray, parts_rgb: dict,
+                      samples: int) -> None:
+        """``add_tile`` for a tile whose non-Direct parts are already RGB (``tile_parts_rgb``;
+        a Dask worker converts them, so only the spectral sums and RGB parts cross the wire)."""
         h, w = y1 - y0, x1 - x0
-        self.spectral[y0:y1, x0:x1] += tile.film.reshape(h, w, -1)
+        self.spectral[y0:y1, x0:x1] += film.reshape(h, w, -1)
         for name, arr in self.parts.items():
-            part = getattr(tile, name)
+            part = parts_rgb.get(name)
             if part is not None:
-                arr[y0:y1, x0:x1] += self.conv.to_rgb(part).reshape(h, w, 3)
+                arr[y0:y1, x0:x1] += part.reshape(h, w, 3)
         self.counts[y0:y1, x0:x1] += samples
 
     def result(self, plan: RenderPlan, cancelled: bool, warnings, stats) -> RenderResult:

@@ -22,6 +22,10 @@ path budget in proportion to the power they send towards casters.
 
 Every batch of paths draws its random numbers from its own stream (seed, light pass, light,
 batch), and batches add into the map, so the map does not depend on how the work is split.
+``LightWork`` is that split: the batches in order and the LANES fixed lanes they are dealt to;
+``trace_batch`` traces one batch into any pair of sinks with a ``deposit`` method (the lane's
+maps here; a ``DepositLog`` on a Dask worker, replayed into the lane's maps on the client in the
+same order, so a distributed map equals this one bit for bit: core/distributed.py).
 """
 
 from __future__ import annotations
@@ -42,7 +46,8 @@ from .materials import DIELECTRIC, DIFFUSE, MIRROR
 from .transport import Hit, Rays, SpecularWalker
 
 __all__ = ["CasterObjects", "caster_objects", "LightTargets", "find_light_targets", "LightPassResult",
-           "element_layout", "run_light_pass", "LIGHT_PASS_STREAM", "BATCH_PATHS"]
+           "element_layout", "run_light_pass", "LIGHT_PASS_STREAM", "BATCH_PATHS", "LANES", "LightBatch",
+           "LightWork", "trace_batch", "DepositLog", "finish_light_pass"]
 
 LIGHT_PASS_STREAM = 2
 BATCH_PATHS = 1 << 15
@@ -195,15 +200,12 @@ class LightTargets:
         return bool(np.any(self.budget > 0)) and bool(self.receiver_mask.any() or self.grating_mask.any())
 
 
-def find_light_targets(vertices, triangles, tri_material, materials, gratings, lights, conv,
-                       light_paths: int = 1) -> LightTargets:
-    """The light pass's targets for a scene (prepared materials, gratings and lights). Without
-    light paths or lights there is nothing to aim, so the casters are not grouped at all."""
+def find_light_targets(vertices, triangles, tri_material, materials, gratings, lights, conv) -> LightTargets:
+    """The light pass's targets for a scene (prepared materials, gratings and lights)."""
     mk = materials.kind[tri_material] if len(tri_material) else np.zeros(0, np.int32)
     caster = np.isin(mk, [MIRROR, DIELECTRIC])
     grating = gratings.enabled[tri_material] if len(tri_material) else np.zeros(0, bool)
-    aimed = caster if light_paths > 0 and len(lights) else np.zeros_like(caster)
-    objects = caster_objects(vertices, triangles, aimed)
+    objects = caster_objects(vertices, triangles, caster)
     return LightTargets(caster, mk == DIFFUSE, grating, objects, _light_budget(lights, objects, conv))
 
 
@@ -250,91 +252,186 @@ class LightPassResult:
         return cls(None, None, MappingProxyType({}), (), False, prepared.key)
 
 
-def element_layout(prepared, n_paths: int, mask, what: str = "caustic") -> tuple[ElementLayout, str]:
+def element_layout(prepared, n_paths: int, mask) -> tuple[ElementLayout, str]:
     """Elements sized for the path budget: about 16 deposits per element if the paths spread
     over all receiving area (caustics concentrate them, and the eye pass's lookup filters over
     neighbouring elements), capped so each lane's map stays under ~32 M floats (128 MB; the
     LANES partial maps together ~256 MB at most). Returns (layout, warning or "") - the warning
-    says when the cap made the user's element size coarser, or when even one element pair per
-    triangle is over the cap (then the map is empty: no caustics on those surfaces, said aloud)."""
+    says when the cap made the user's element size coarser."""
     v, t = prepared.scene.vertices, prepared.scene.triangles
-    mask = np.asarray(mask, bool)
-    area = triangle_areas(v, t)  # once: the search below only recounts
     size = float(prepared.settings.element_size or 0.0)
-    target = size * size if size > 0 else area[mask].sum() / max(n_paths / 16.0, 1.0)
+    if size > 0:
+        target = size * size
+    else:
+        area = triangle_areas(v, np.asarray(t)[mask]).sum()
+        target = area / max(n_paths / 16.0, 1.0)
     cap = 32_000_000 // max(prepared.grid.n, 1)
-    if 2 * int(mask.sum()) > cap:
-        return (ElementLayout.from_areas(area, np.zeros_like(mask), 1.0),
-                f"{int(mask.sum())} receiving triangles are too many for the {what} map ({cap // 2} at most at "
-                f"{prepared.grid.n} wavelengths): light through mirrors and glass is not deposited on them "
-                "(a coarser wavelength step allows more)")
     asked = target
     while True:
-        k = ElementLayout.subdivisions(area, mask, target)
-        if int((2 * k * k).sum()) <= cap:
+        lay = ElementLayout.build(v, t, mask, target)
+        if lay.total <= cap:
             warning = ""
             if target > asked * 1.01 and size > 0:
                 warning = (f"element size {size * 1000:.1f} mm needs more memory than the map allows: "
                            f"using {np.sqrt(target) * 1000:.1f} mm (a coarser wavelength step allows finer)")
-            return ElementLayout.from_areas(area, mask, target), warning
-        target *= 2.0  # terminates: with k = 1 everywhere the count is 2 * receivers <= cap
+            return lay, warning
+        target *= 2.0
+
+
+@dataclass(frozen=True)
+class LightBatch:
+    """One batch of light paths: ``paths`` paths of light ``light`` (its ``batch``-th), starting at
+    path ``start`` of that light's ``light_paths``; its random stream is
+    SeedSequence([seed, LIGHT_PASS_STREAM, light, batch])."""
+
+    light: int
+    batch: int
+    start: int
+    light_paths: int
+
+    @property
+    def paths(self) -> int:
+        return min(BATCH_PATHS, self.light_paths - self.start)
+
+
+@dataclass(frozen=True)
+class LightWork:
+    """The light pass of one prepared scene cut into batches, and the lanes they are dealt to.
+
+    ``batches`` interleave the lights (ordered by how far into its own light each batch is), so
+    a pass stopped early has sampled every light alike; lane k holds batches k, k + LANES, ...
+    in that order, and its maps are the batches' deposits added in that order. A pure function
+    of the prepared scene and the path count: every machine computes the same one.
+    """
+
+    layout: ElementLayout                 # caustic map elements (on diffuse receivers)
+    record_layout: ElementLayout | None   # grating record elements, or None without gratings
+    warning: str                          # from element_layout, or ""
+    batches: tuple[LightBatch, ...]
+    total: int                            # paths planned
+
+    @classmethod
+    def of(cls, prepared, n_paths: int | None = None) -> "LightWork":
+        n_paths = int(prepared.settings.light_paths if n_paths is None else n_paths)
+        targets: LightTargets = prepared.light_targets
+        layout, warning = element_layout(prepared, n_paths, targets.receiver_mask)
+        rec_layout, rec_warning = (element_layout(prepared, n_paths, targets.grating_mask, "grating-record")
+                                   if targets.grating_mask.any() else (None, ""))
+        warning = "; ".join(dict.fromkeys(w for w in (warning, rec_warning) if w))
+        share = targets.budget / max(targets.budget.sum(), 1e-300)
+        paths_per_light = np.floor(share * n_paths).astype(np.int64)
+        jobs = [LightBatch(li, bi, start, int(n_l)) for li, n_l in enumerate(paths_per_light)
+                for bi, start in enumerate(range(0, int(n_l), BATCH_PATHS))]
+        jobs.sort(key=lambda j: (j.start / max(j.light_paths, 1), j.light))
+        return cls(layout, rec_layout, warning, tuple(jobs), int(paths_per_light.sum()))
+
+    def lane(self, k: int) -> tuple[int, ...]:
+        """Indices into ``batches`` of lane k, in the order its maps add them."""
+        return tuple(range(k, len(self.batches), LANES))
+
+    def empty_maps(self, n: int) -> tuple[IlluminationMap, IlluminationMap | None]:
+        """One lane's (caustic map, grating records), zero."""
+        return (IlluminationMap.empty(self.layout, n),
+                IlluminationMap.empty(self.record_layout, n, with_direction=True) if self.record_layout else None)
+
+
+def trace_batch(prepared, job: LightBatch, illum, records) -> dict:
+    """Trace one batch of light paths, depositing into ``illum`` and ``records`` (objects with a
+    ``layout`` and IlluminationMap's ``deposit``: maps, or DepositLogs; ``records`` None
+    without gratings). Returns its counts: paths, deposits, rays."""
+    seed = int(prepared.settings.seed)
+    b = job.paths
+    rng = np.random.default_rng(np.random.SeedSequence([seed, LIGHT_PASS_STREAM, job.light, job.batch]))
+    o, d, weight = _emit(prepared, job.light, b, rng)
+    live = weight > 0
+    m = int(live.sum())
+    w = (weight[live, None] / float(job.light_paths)).astype(np.float32) * prepared.lights.spectrum[job.light][None, :]
+    rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(m, np.int64),
+                w, None, np.zeros(m, np.int32), rng.random(m))
+    tr = _LightTrace(prepared, rng, illum, records)
+    tr.walk(rays, tr.empty_mono())
+    return {"paths": b, "deposits": tr.deposited, "rays": tr._rays}
+
+
+class DepositLog:
+    """A sink that records ``deposit`` calls instead of adding them, for ``replay`` into a map:
+    the same additions in the same order, so the map is the one direct deposits make."""
+
+    def __init__(self, layout: ElementLayout | None):
+        self.layout = layout
+        self.calls: list[tuple] = []  # (elements, flux, lam, towards_source), in call order
+
+    def deposit(self, elements, flux, lam=None, towards_source=None) -> None:
+        if len(elements):
+            self.calls.append((elements, flux, lam, towards_source))
+
+    def replay(self, target: IlluminationMap) -> None:
+        self.replay_calls(self.calls, target)
+
+    @staticmethod
+    def replay_calls(calls, target: IlluminationMap) -> None:
+        """Add recorded ``calls`` (a DepositLog's ``calls``, e.g. sent back by a worker) to ``target``."""
+        for elements, flux, lam, towards_source in calls:
+            target.deposit(elements, flux, lam, towards_source)
+
+
+def finish_light_pass(prepared, work: LightWork, maps, counts, t0: float, timed_out: bool = False,
+                      cancelled: bool = False) -> LightPassResult:
+    """The LightPassResult of lanes' ``maps`` [(illum, records)] and ``counts`` [dict]: the lanes
+    summed in lane order, rescaled by planned / traced paths after a time limit."""
+    illum, records = maps[0]
+    for extra_illum, extra_records in maps[1:]:
+        illum += extra_illum
+        if records is not None:
+            records += extra_records
+    total = work.total
+    traced = sum(c["paths"] for c in counts)
+    warnings = [work.warning] if work.warning else []
+    if timed_out and not cancelled:
+        if traced and traced < total:
+            scale = np.float32(total / traced)
+            illum.flux *= scale
+            if records is not None:
+                records.flux *= scale
+                records.direction *= scale
+        warnings.append(f"time limit reached during the light pass: caustics from {traced / 1e6:.2f} M of "
+                        f"{total / 1e6:.2f} M light paths")
+    stats = {"light_paths": traced, "light_deposits": sum(c["deposits"] for c in counts),
+             "light_rays": sum(c["rays"] for c in counts), "elements": work.layout.total,
+             "light_pass_s": time.perf_counter() - t0}
+    if cancelled:
+        stats["cancelled"] = True
+    return LightPassResult(illum, records, MappingProxyType(stats), tuple(warnings), cancelled, prepared.key)
 
 
 def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_cancel=None,
                    deadline: float | None = None) -> LightPassResult:
     """Run the light pass over ``prepared`` (``n_paths``: default the settings' light paths).
 
-    The batches are dealt to LANES fixed lanes (batch j to lane j % LANES), each with its own
-    maps, run on up to ``prepared.threads`` threads and summed in lane order at the end, so the
-    result does not depend on the number of threads. ``progress`` and ``should_cancel`` are
-    called from the calling thread only (every POLL_S seconds at most; a lane stops at its next
-    batch). ``deadline``: a ``time.perf_counter()`` time; the pass stops there and scales what it
-    deposited by planned / traced paths (batches of all lights are interleaved, so an early stop
-    has traced every light in about the same proportion), with a warning.
+    The batches are dealt to LANES fixed lanes (LightWork: batch j to lane j % LANES), each with
+    its own maps, run on up to ``prepared.threads`` threads and summed in lane order at the end,
+    so the result does not depend on the number of threads. ``progress`` and ``should_cancel``
+    are called from the calling thread only (every POLL_S seconds at most; a lane stops at its
+    next batch). ``deadline``: a ``time.perf_counter()`` time; the pass stops there and scales
+    what it deposited by planned / traced paths (batches of all lights are interleaved, so an
+    early stop has traced every light in about the same proportion), with a warning.
     """
     t0 = time.perf_counter()
-    n_paths = int(prepared.settings.light_paths if n_paths is None else n_paths)
-    targets: LightTargets = prepared.light_targets
-    grid_n = prepared.grid.n
-    layout, warning = element_layout(prepared, n_paths, targets.receiver_mask)
-    rec_layout, rec_warning = (element_layout(prepared, n_paths, targets.grating_mask, "grating-record") if targets.grating_mask.any()
-                               else (None, ""))
-    share = targets.budget / max(targets.budget.sum(), 1e-300)
-    paths_per_light = np.floor(share * n_paths).astype(np.int64)
-    jobs = [(li, bi, start, int(n_l)) for li, n_l in enumerate(paths_per_light)
-            for bi, start in enumerate(range(0, int(n_l), BATCH_PATHS))]
-    # interleave the lights' batches (by how far into its own light each batch is), so a pass
-    # stopped early has sampled every light alike
-    jobs.sort(key=lambda j: (j[2] / max(j[3], 1), j[0]))
-    total = int(paths_per_light.sum())
-    lanes = [jobs[k::LANES] for k in range(LANES)]
-    maps = [(IlluminationMap.empty(layout, grid_n),
-             IlluminationMap.empty(rec_layout, grid_n, with_direction=True) if rec_layout else None)
-            for _ in range(LANES)]
+    work = LightWork.of(prepared, n_paths)
+    total = work.total
+    maps = [work.empty_maps(prepared.grid.n) for _ in range(LANES)]
     counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
     stop = threading.Event()
     cancelled = False
-    seed = int(prepared.settings.seed)
 
     def run_lane(k):
         illum, records = maps[k]
-        for li, bi, start, n_l in lanes[k]:  # bounded memory: fixed batches
+        for j in work.lane(k):  # bounded memory: fixed batches
             if stop.is_set():
                 return
-            b = min(BATCH_PATHS, n_l - start)
-            rng = np.random.default_rng(np.random.SeedSequence([seed, LIGHT_PASS_STREAM, li, bi]))
-            o, d, weight = _emit(prepared, li, b, rng)
-            live = weight > 0
-            m = int(live.sum())
-            w = (weight[live, None] / float(n_l)).astype(np.float32) * prepared.lights.spectrum[li][None, :]
-            rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(m, np.int64),
-                        w, None, np.zeros(m, np.int32), rng.random(m))
-            tr = _LightTrace(prepared, rng, illum, records)
-            tr.walk(rays, tr.empty_mono())
-            c = counts[k]
-            c["paths"] += b
-            c["deposits"] += tr.deposited
-            c["rays"] += tr._rays
+            done = trace_batch(prepared, work.batches[j], illum, records)
+            for name, value in done.items():
+                counts[k][name] += value
 
     threads = max(1, min(LANES, prepared.threads))
     timed_out = False
@@ -355,28 +452,7 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
                 timed_out = True
         for f in futures:
             f.result()  # re-raise a worker's exception here
-    illum, records = maps[0]
-    for extra_illum, extra_records in maps[1:]:
-        illum += extra_illum
-        if records is not None:
-            records += extra_records
-    traced = sum(c["paths"] for c in counts)
-    warnings = list(dict.fromkeys(w for w in (warning, rec_warning) if w))
-    if timed_out and not cancelled:
-        if traced and traced < total:
-            scale = np.float32(total / traced)
-            illum.flux *= scale
-            if records is not None:
-                records.flux *= scale
-                records.direction *= scale
-        warnings.append(f"time limit reached during the light pass: caustics from {traced / 1e6:.2f} M of "
-                        f"{total / 1e6:.2f} M light paths")
-    stats = {"light_paths": traced, "light_deposits": sum(c["deposits"] for c in counts),
-             "light_rays": sum(c["rays"] for c in counts), "elements": layout.total,
-             "light_pass_s": time.perf_counter() - t0}
-    if cancelled:
-        stats["cancelled"] = True
-    return LightPassResult(illum, records, MappingProxyType(stats), tuple(warnings), cancelled, prepared.key)
+    return finish_light_pass(prepared, work, maps, counts, t0, timed_out, cancelled)
 
 
 def _emit(prepared, li: int, b: int, rng):

@@ -7,10 +7,12 @@ The pipeline is one-way; each step hands the next an immutable value and nothing
 
 ``render`` runs all of it; ``render_prepared`` starts from a PreparedScene (and optionally a
 finished LightPassResult), which is what the rendered viewport reuses while only the view
-moves. The image is split into tiles and the samples into progressive rounds. Every (round,
-tile) batch draws its random numbers from its own stream, ``SeedSequence([seed, pass, round,
-tile])``, and writes only its own pixels, so the image is identical whatever the number of
-threads (and, later, machines); rounds make time limits, cancellation and partial previews cheap.
+moves. The image is split into tiles and the samples into progressive rounds (tiles.py). Every
+(round, tile) batch draws its random numbers from its own stream, ``SeedSequence([seed, pass,
+round, tile])``, and writes only its own pixels, so the image is identical whatever the number
+of threads, or machines: ``render(..., client=dask_client)`` runs the same units on a Dask
+cluster (distributed.py, imported only then); rounds make time limits, cancellation and partial
+previews cheap.
 """
 
 from __future__ import annotations
@@ -19,9 +21,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
-import numpy as np
-
-from .camera import FilterSampler, generate_rays, pixel_samples
+from .camera import FilterSampler
 from .eye_pass import EyePass
 from .cancel import RenderCancelled
 from .film import Film, RenderResult
@@ -31,12 +31,9 @@ from .prepare import PreparedScene, prepare
 from .scene import Scene, SceneError
 from .settings import RenderSettings
 from .spectrum import SpectralConverter
+from .tiles import EYE_PASS_STREAM, LIGHT_PASS_SHARE, MAX_TILE_RAYS, EyeWork, round_size, trace_tile  # noqa: F401
 
 __all__ = ["RenderResult", "render", "render_prepared"]
-
-EYE_PASS_STREAM = 1  # stream ids keep the passes' random numbers independent
-LIGHT_PASS_SHARE = 0.25  # of the progress bar, when the light pass runs
-MAX_TILE_RAYS = 1 << 18  # camera rays of one tile in one round (bounds memory and time-limit latency)
 
 
 class _Inline:
@@ -52,28 +49,6 @@ class _Inline:
         pass
 
 
-def round_size(settings: RenderSettings) -> int:
-    """Samples per pixel per round: the setting, capped so one tile's round casts at most
-    MAX_TILE_RAYS camera rays (a round is the unit of memory and of time-limit checks)."""
-    tile_pixels = int(settings.tile_size) ** 2
-    return max(1, min(int(settings.round_samples), MAX_TILE_RAYS // tile_pixels))
-
-
-def _tiles(width: int, height: int, size: int, region):
-    """Tiles of the full image's grid that meet ``region``, clipped to it, in region coordinates,
-    each with its stream id (its index in the full grid, so a region render aligned to tile
-    boundaries reproduces the full render's pixels exactly)."""
-    rx0, ry0, rx1, ry1 = region
-    per_row = -(-width // size)
-    out = []
-    for ty in range(ry0 // size, -(-ry1 // size)):
-        for tx in range(rx0 // size, -(-rx1 // size)):
-            x0, y0 = max(tx * size, rx0), max(ty * size, ry0)
-            x1, y1 = min((tx + 1) * size, rx1), min((ty + 1) * size, ry1)
-            out.append((x0 - rx0, y0 - ry0, x1 - rx0, y1 - ry0, ty * per_row + tx))
-    return out
-
-
 def render(
     scene: Scene,
     settings: RenderSettings | None = None,
@@ -81,6 +56,7 @@ def render(
     should_cancel: Callable[[], bool] | None = None,
     on_round: Callable[[RenderResult], None] | None = None,
     region: tuple[int, int, int, int] | None = None,
+    client=None,
 ) -> RenderResult:
     """Render ``scene``; raises SceneError (a readable message) for unrenderable input.
 
@@ -89,12 +65,21 @@ def render(
     ``on_round(result)`` receives the partial image after every round. ``region`` = (x0, y0, x1,
     y1) renders only those pixels of the camera's image (a border render; rows from the top); the
     result then has shape (y1 - y0, x1 - x0).
+
+    ``client``: a ``dask.distributed.Client``; the light pass's batches and the eye pass's
+    tiles x rounds then run on its workers and the image is the one this machine renders alone,
+    bit for bit (core/distributed.py, docs/distributed.md). None: this process's threads.
     """
     t_start = time.perf_counter()
     try:
         prepared = prepare(scene, settings, should_cancel=should_cancel)
     except RenderCancelled:
         return _cancelled_before_start(scene, settings or RenderSettings(), region)
+    if client is not None:
+        from .distributed import render_on_cluster  # dask only when asked for
+
+        return render_on_cluster(client, scene, settings or RenderSettings(), prepared, progress, should_cancel,
+                                 on_round, region, started_at=t_start)
     return render_prepared(prepared, None, progress, should_cancel, on_round, region, started_at=t_start)
 
 
@@ -148,22 +133,15 @@ def render_prepared(
     t_eye = time.perf_counter()
 
     spp = int(settings.samples)
-    per_round = round_size(settings)
-    rounds = [min(per_round, spp - s) for s in range(0, spp, per_round)]
-    tiles = _tiles(int(cam.width), int(cam.height), int(settings.tile_size), (rx0, ry0, rx1, ry1))
+    work = EyeWork.of(prepared, (rx0, ry0, rx1, ry1))
+    rounds, tiles = work.rounds, work.tiles
     filt = FilterSampler(settings.filter_width)
     eye = EyePass(prepared, light)
     threads = prepared.threads
-    total_work = len(rounds) * len(tiles)
+    total_work = work.units
 
     def run_tile(r_index, r_spp, t_index):
-        x0, y0, x1, y1, stream = tiles[t_index]
-        rng = np.random.default_rng(np.random.SeedSequence([int(settings.seed), EYE_PASS_STREAM, r_index, stream]))
-        ys, xs = np.mgrid[y0 + ry0:y1 + ry0, x0 + rx0:x1 + rx0]
-        sx, sy, sl, pidx = pixel_samples(xs.ravel().astype(np.float64), ys.ravel().astype(np.float64), r_spp, rng, filt)
-        o, d = generate_rays(cam, sx, sy)
-        res = eye.trace(o, d, pidx, (y1 - y0) * (x1 - x0), rng, u_lambda=sl)
-        return t_index, res
+        return t_index, trace_tile(eye, filt, work, r_index, t_index)
 
     def finish():
         return film.result(plan, cancelled, warnings, stats)

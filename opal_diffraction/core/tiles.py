@@ -1,0 +1,84 @@
+"""The eye pass's units of work: rounds of samples x tiles of pixels, each with its own stream.
+
+The image is split into tiles and the samples into progressive rounds. Every (round, tile) unit
+draws its random numbers from its own stream, ``SeedSequence([seed, EYE_PASS_STREAM, round,
+tile])``, and writes only its own pixels; the film adds the units round by round, so the image
+is the same whatever runs them: threads here (render.py) or Dask workers (distributed.py).
+``EyeWork`` is the split (a pure function of the prepared scene and the region), ``trace_tile``
+runs one unit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .camera import FilterSampler, generate_rays, pixel_samples
+from .settings import RenderSettings
+
+__all__ = ["EYE_PASS_STREAM", "LIGHT_PASS_SHARE", "MAX_TILE_RAYS", "round_size", "tiles_of", "EyeWork",
+           "trace_tile"]
+
+EYE_PASS_STREAM = 1  # stream ids keep the passes' random numbers independent
+LIGHT_PASS_SHARE = 0.25  # of the progress bar, when the light pass runs
+MAX_TILE_RAYS = 1 << 18  # camera rays of one tile in one round (bounds memory and time-limit latency)
+
+
+def round_size(settings: RenderSettings) -> int:
+    """Samples per pixel per round: the setting, capped so one tile's round casts at most
+    MAX_TILE_RAYS camera rays (a round is the unit of memory and of time-limit checks)."""
+    tile_pixels = int(settings.tile_size) ** 2
+    return max(1, min(int(settings.round_samples), MAX_TILE_RAYS // tile_pixels))
+
+
+def tiles_of(width: int, height: int, size: int, region):
+    """Tiles of the full image's grid that meet ``region``, clipped to it, in region coordinates,
+    each with its stream id (its index in the full grid, so a region render aligned to tile
+    boundaries reproduces the full render's pixels exactly)."""
+    rx0, ry0, rx1, ry1 = region
+    per_row = -(-width // size)
+    out = []
+    for ty in range(ry0 // size, -(-ry1 // size)):
+        for tx in range(rx0 // size, -(-rx1 // size)):
+            x0, y0 = max(tx * size, rx0), max(ty * size, ry0)
+            x1, y1 = min((tx + 1) * size, rx1), min((ty + 1) * size, ry1)
+            out.append((x0 - rx0, y0 - ry0, x1 - rx0, y1 - ry0, ty * per_row + tx))
+    return out
+
+
+@dataclass(frozen=True)
+class EyeWork:
+    """The eye pass of one render: samples per round, tiles (x0, y0, x1, y1, stream) in region
+    coordinates, the region (x0, y0, x1, y1) of the camera's image, the seed."""
+
+    rounds: tuple[int, ...]
+    tiles: tuple[tuple[int, int, int, int, int], ...]
+    region: tuple[int, int, int, int]
+    seed: int
+
+    @classmethod
+    def of(cls, prepared, region=None) -> "EyeWork":
+        settings, cam = prepared.settings, prepared.scene.camera
+        region = tuple(region) if region is not None else (0, 0, int(cam.width), int(cam.height))
+        spp, per_round = int(settings.samples), round_size(settings)
+        rounds = tuple(min(per_round, spp - s) for s in range(0, spp, per_round))
+        tiles = tuple(tiles_of(int(cam.width), int(cam.height), int(settings.tile_size), region))
+        return cls(rounds, tiles, region, int(settings.seed))
+
+    @property
+    def units(self) -> int:
+        return len(self.rounds) * len(self.tiles)
+
+
+def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: int):
+    """Trace tile ``t_index`` of round ``r_index`` with ``eye`` (an eye_pass.EyePass):
+    its eye_pass.TileResult."""
+    x0, y0, x1, y1, stream = work.tiles[t_index]
+    rx0, ry0 = work.region[:2]
+    rng = np.random.default_rng(np.random.SeedSequence([work.seed, EYE_PASS_STREAM, r_index, stream]))
+    ys, xs = np.mgrid[y0 + ry0:y1 + ry0, x0 + rx0:x1 + rx0]
+    sx, sy, sl, pidx = pixel_samples(xs.ravel().astype(np.float64), ys.ravel().astype(np.float64),
+                                     work.rounds[r_index], rng, filt)
+    o, d = generate_rays(eye.prepared.scene.camera, sx, sy)
+    return eye.trace(o, d, pidx, (y1 - y0) * (x1 - x0), rng, u_lambda=sl)
