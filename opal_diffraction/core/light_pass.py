@@ -200,12 +200,15 @@ class LightTargets:
         return bool(np.any(self.budget > 0)) and bool(self.receiver_mask.any() or self.grating_mask.any())
 
 
-def find_light_targets(vertices, triangles, tri_material, materials, gratings, lights, conv) -> LightTargets:
-    """The light pass's targets for a scene (prepared materials, gratings and lights)."""
+def find_light_targets(vertices, triangles, tri_material, materials, gratings, lights, conv,
+                       light_paths: int = 1) -> LightTargets:
+    """The light pass's targets for a scene (prepared materials, gratings and lights). Without
+    light paths or lights there is nothing to aim, so the casters are not grouped at all."""
     mk = materials.kind[tri_material] if len(tri_material) else np.zeros(0, np.int32)
     caster = np.isin(mk, [MIRROR, DIELECTRIC])
     grating = gratings.enabled[tri_material] if len(tri_material) else np.zeros(0, bool)
-    objects = caster_objects(vertices, triangles, caster)
+    aimed = caster if light_paths > 0 and len(lights) else np.zeros_like(caster)
+    objects = caster_objects(vertices, triangles, aimed)
     return LightTargets(caster, mk == DIFFUSE, grating, objects, _light_budget(lights, objects, conv))
 
 
@@ -252,30 +255,34 @@ class LightPassResult:
         return cls(None, None, MappingProxyType({}), (), False, prepared.key)
 
 
-def element_layout(prepared, n_paths: int, mask) -> tuple[ElementLayout, str]:
+def element_layout(prepared, n_paths: int, mask, what: str = "caustic") -> tuple[ElementLayout, str]:
     """Elements sized for the path budget: about 16 deposits per element if the paths spread
     over all receiving area (caustics concentrate them, and the eye pass's lookup filters over
     neighbouring elements), capped so each lane's map stays under ~32 M floats (128 MB; the
     LANES partial maps together ~256 MB at most). Returns (layout, warning or "") - the warning
-    says when the cap made the user's element size coarser."""
+    says when the cap made the user's element size coarser, or when even one element pair per
+    triangle is over the cap (then the map is empty: no caustics on those surfaces, said aloud)."""
     v, t = prepared.scene.vertices, prepared.scene.triangles
+    mask = np.asarray(mask, bool)
+    area = triangle_areas(v, t)  # once: the search below only recounts
     size = float(prepared.settings.element_size or 0.0)
-    if size > 0:
-        target = size * size
-    else:
-        area = triangle_areas(v, np.asarray(t)[mask]).sum()
-        target = area / max(n_paths / 16.0, 1.0)
+    target = size * size if size > 0 else area[mask].sum() / max(n_paths / 16.0, 1.0)
     cap = 32_000_000 // max(prepared.grid.n, 1)
+    if 2 * int(mask.sum()) > cap:
+        return (ElementLayout.from_areas(area, np.zeros_like(mask), 1.0),
+                f"{int(mask.sum())} receiving triangles are too many for the {what} map ({cap // 2} at most at "
+                f"{prepared.grid.n} wavelengths): light through mirrors and glass is not deposited on them "
+                "(a coarser wavelength step allows more)")
     asked = target
     while True:
-        lay = ElementLayout.build(v, t, mask, target)
-        if lay.total <= cap:
+        k = ElementLayout.subdivisions(area, mask, target)
+        if int((2 * k * k).sum()) <= cap:
             warning = ""
             if target > asked * 1.01 and size > 0:
                 warning = (f"element size {size * 1000:.1f} mm needs more memory than the map allows: "
                            f"using {np.sqrt(target) * 1000:.1f} mm (a coarser wavelength step allows finer)")
-            return lay, warning
-        target *= 2.0
+            return ElementLayout.from_areas(area, mask, target), warning
+        target *= 2.0  # terminates: with k = 1 everywhere the count is 2 * receivers <= cap
 
 
 @dataclass(frozen=True)
