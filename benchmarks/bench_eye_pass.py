@@ -19,7 +19,8 @@ import numpy as np
 from opal_diffraction._scripts import load_example
 from opal_diffraction.core import primitives
 from opal_diffraction.core.camera import generate_rays
-from opal_diffraction.core.render import RenderContext, render
+from opal_diffraction.core.prepare import prepare
+from opal_diffraction.core.render import render
 from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
 from opal_diffraction.core.settings import RenderSettings
 
@@ -37,7 +38,7 @@ def diffuse_scene(pixels=512) -> Scene:
 def raw_throughput(scene: Scene, settings: RenderSettings, n_rays: int, shadow_fraction: float) -> float:
     """Mrays/s of the backend alone, casting camera rays and shadow rays in the eye pass's mix."""
     scene, _ = scene.validated()
-    ctx = RenderContext.prepare(scene, settings)
+    ctx = prepare(scene, settings)
     cam = scene.camera
     rng = np.random.default_rng(0)
     n_cam = int(n_rays * (1 - shadow_fraction))

@@ -667,16 +667,15 @@ def main(argv=None) -> int:
 def profile_light_pass(spec: Spec, paths: int) -> int:
     from pyinstrument import Profiler
 
-    from opal_diffraction.core.light_pass import LightPass
-    from opal_diffraction.core.render import RenderContext
+    from opal_diffraction.core.light_pass import run_light_pass
+    from opal_diffraction.core.prepare import prepare
 
     scene, _ = our_scene(spec).validated()
     st = RenderSettings(samples=1, light_paths=paths, threads=1)
-    ctx = RenderContext.prepare(scene, st)
-    lp = LightPass(ctx)
+    ctx = prepare(scene, st)
     prof = Profiler(interval=0.002)
     prof.start()
-    lp.run(paths)
+    run_light_pass(ctx, paths)
     prof.stop()
     print(prof.output_text(unicode=False, color=False, show_all=False))
     return 0
