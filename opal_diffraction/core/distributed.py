@@ -453,11 +453,7 @@ def render_on_cluster(client, scene: Scene, settings: RenderSettings, prepared, 
     settings = prepared.settings
     plan = plan_render(prepared)
     warnings = list(prepared.warnings) + list(plan.warnings)
-    cam = prepared.scene.camera
-    rx0, ry0, rx1, ry1 = region if region is not None else (0, 0, int(cam.width), int(cam.height))
-    if not (0 <= rx0 < rx1 <= int(cam.width) and 0 <= ry0 < ry1 <= int(cam.height)):
-        raise SceneError(f"render region {region} is outside the {cam.width}x{cam.height} image")
-    film = Film(rx1 - rx0, ry1 - ry0, prepared.conv)
+    (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv)
     stats = {"rays": 0, "prepare_s": prepared.prepare_s, "backend": prepared.accel.name,
              "triangles": len(prepared.scene.triangles), "scheduler": str(client.scheduler.address)}
     deadline = t_start + settings.time_limit if settings.time_limit else None

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .plan import RenderPlan
+from .scene import SceneError
 from .spectrum import SpectralConverter
 
 __all__ = ["Film", "RenderResult", "tile_parts_rgb"]
@@ -51,6 +52,16 @@ class Film:
         # RGB sums of the parts of the spectral sum that are not Direct light
         self.parts = {name: np.zeros((height, width, 3), np.float32) for name in PARTS}
         self.counts = np.zeros((height, width), np.float32)  # samples per pixel so far
+
+    @classmethod
+    def for_region(cls, camera, region, conv: SpectralConverter):
+        """((x0, y0, x1, y1), an empty Film) for ``region`` of ``camera``'s image (None: all of
+        it; rows from the top). SceneError for a region outside the image."""
+        w, h = int(camera.width), int(camera.height)
+        x0, y0, x1, y1 = region if region is not None else (0, 0, w, h)
+        if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h):
+            raise SceneError(f"render region {region} is outside the {camera.width}x{camera.height} image")
+        return (x0, y0, x1, y1), cls(x1 - x0, y1 - y0, conv)
 
     def add_tile(self, x0: int, y0: int, x1: int, y1: int, tile, samples: int) -> None:
         """Add an eye_pass.TileResult covering pixels [x0, x1) x [y0, y1) with ``samples`` each."""

@@ -28,7 +28,7 @@ from .film import Film, RenderResult
 from .light_pass import LightPassResult, run_light_pass
 from .plan import RenderPlan, plan_render
 from .prepare import PreparedScene, prepare
-from .scene import Scene, SceneError
+from .scene import Scene
 from .settings import RenderSettings
 from .spectrum import SpectralConverter
 from .tiles import EYE_PASS_STREAM, LIGHT_PASS_SHARE, MAX_TILE_RAYS, EyeWork, round_size, trace_tile  # noqa: F401
@@ -111,11 +111,7 @@ def render_prepared(
     settings = prepared.settings
     plan = plan_render(prepared)
     warnings = list(prepared.warnings) + list(plan.warnings)
-    cam = prepared.scene.camera
-    rx0, ry0, rx1, ry1 = region if region is not None else (0, 0, int(cam.width), int(cam.height))
-    if not (0 <= rx0 < rx1 <= int(cam.width) and 0 <= ry0 < ry1 <= int(cam.height)):
-        raise SceneError(f"render region {region} is outside the {cam.width}x{cam.height} image")
-    film = Film(rx1 - rx0, ry1 - ry0, prepared.conv)
+    (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv)
     stats = {"rays": 0, "prepare_s": prepared.prepare_s, "backend": prepared.accel.name,
              "triangles": len(prepared.scene.triangles)}
 
