@@ -762,19 +762,23 @@ def _material_label(names):
     return label
 
 
+def _check_row_counts(table, what: str, n: int) -> None:
+    """Every column of a material or light table has ``n`` rows (SceneError naming the column)."""
+    for f in fields(table):
+        try:
+            rows = len(getattr(table, f.name))
+        except TypeError:
+            rows = None
+        if rows != n:
+            raise SceneError(f"{what} table column {f.name!r} has {rows if rows is not None else 'no'} rows, "
+                             f"expected {n}")
+
+
 def _validate_materials(m: Materials) -> Materials:
     # the row count comes from the kind column; every column must have that many rows and its per-row shape
     kind = _column(m.kind, "material table column 'kind'", (), kind="int", allow_empty=True)
     n = len(kind)
-    for f in fields(Materials):
-        col = getattr(m, f.name)
-        try:
-            rows = len(col)
-        except TypeError:
-            rows = None
-        if rows != n:
-            raise SceneError(f"material table column {f.name!r} has {rows if rows is not None else 'no'} rows, "
-                             f"expected {n}")
+    _check_row_counts(m, "material", n)
     try:
         names = np.asarray(m.name)
     except Exception:
@@ -881,15 +885,7 @@ _LIGHT_COLUMNS = {  # name -> (per-row shape, canonical dtype)
 def _validate_lights(lt: Lights) -> Lights:
     kind = _column(lt.kind, "light table column 'kind'", (), kind="int", allow_empty=True)
     n = len(kind)
-    for f in fields(Lights):
-        col = getattr(lt, f.name)
-        try:
-            rows = len(col)
-        except TypeError:
-            rows = None
-        if rows != n:
-            raise SceneError(f"light table column {f.name!r} has {rows if rows is not None else 'no'} rows, "
-                             f"expected {n}")
+    _check_row_counts(lt, "light", n)
     out = {"kind": kind}
     for name, (tail, _dtype) in _LIGHT_COLUMNS.items():
         if name != "kind":
