@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["triangle_cross", "triangle_areas", "triangle_normals", "orthonormal_basis"]
+__all__ = ["triangle_cross", "triangle_areas", "triangle_normals", "orthonormal_basis", "interpolate_corners"]
 
 
 def triangle_cross(vertices, triangles) -> np.ndarray:
@@ -43,3 +43,14 @@ def orthonormal_basis(axis):
     u = np.cross(axis, a)
     u /= np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-30)
     return u, np.cross(axis, u)
+
+
+def interpolate_corners(corner_values: np.ndarray, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> np.ndarray:
+    """Per-corner data (T, 3, k) at hit points: (1 - u - v) c0 + u c1 + v c2 of triangle ``prim``
+    with barycentrics (u, v) as the ray caster reports them (hit = (1-u-v) v0 + u v1 + v v2).
+    Returns (B, k) in the dtype of ``corner_values`` (shading normals, UVs, tangents)."""
+    c = corner_values[prim]  # (B, 3, k)
+    dt = c.dtype
+    u = np.asarray(bu, dt)[:, None]
+    v = np.asarray(bv, dt)[:, None]
+    return (1 - u - v) * c[:, 0] + u * c[:, 1] + v * c[:, 2]
