@@ -100,7 +100,10 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--wavelength-min", type=float, default=400.0)
     r.add_argument("--wavelength-max", type=float, default=700.0)
     r.add_argument("--wavelength-step", type=float, default=5.0)
-    r.add_argument("--max-bounces", type=int, default=8)
+    r.add_argument("--max-bounces", type=int, default=12, help="bounces of every kind (Cycles' Max Bounces)")
+    r.add_argument("--diffuse-bounces", type=int, default=4)
+    r.add_argument("--glossy-bounces", type=int, default=4)
+    r.add_argument("--transmission-bounces", type=int, default=12)
     r.add_argument("--light-paths", type=int, default=1_000_000, help="light-pass paths for caustics (0: off)")
     r.add_argument("--dispersion-sampling", choices=["SPLIT", "SAMPLE"], default="SAMPLE")
     r.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"), help="override the camera's resolution")
@@ -326,7 +329,9 @@ def _render(args, sig: _Signals, created: list) -> int:
         settings = RenderSettings(
             samples=args.spp, seed=args.seed, wavelength_min=args.wavelength_min,
             wavelength_max=args.wavelength_max, wavelength_step=args.wavelength_step,
-            max_bounces=args.max_bounces, dispersion_sampling=args.dispersion_sampling, light_paths=args.light_paths,
+            max_bounces=args.max_bounces, diffuse_bounces=args.diffuse_bounces,
+            glossy_bounces=args.glossy_bounces, transmission_bounces=args.transmission_bounces,
+            dispersion_sampling=args.dispersion_sampling, light_paths=args.light_paths,
             spectral_exr=args.spectral_exr, time_limit=args.time_limit, threads=args.threads,
             backend=args.backend,
         )

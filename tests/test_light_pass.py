@@ -194,7 +194,8 @@ def test_caustics_appear_in_the_render_and_its_pass():
     assert res.plan.light_pass and res.stats["light_paths"] == 50_000
     c = res.passes["Caustics"]
     assert c.max() > 0
-    np.testing.assert_allclose(res.passes["Direct"] + c + res.passes["Diffraction"], res.rgb, atol=1e-5)
+    np.testing.assert_allclose(res.passes["Direct"] + res.passes["Indirect"] + c + res.passes["Diffraction"], res.rgb,
+                               atol=1e-5)
 
 
 def grating_under_sun(via_mirror: bool):

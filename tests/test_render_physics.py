@@ -126,7 +126,8 @@ def test_dispersive_slab_split_is_exact_and_sample_is_unbiased():
     mat = {"kind": "DIELECTRIC", "color": (1, 1, 1), "dispersion": "DIAMOND"}
     scene = glass_in_uniform_world(mat, world=(0.5, 0.5, 0.5), pixels=24)
     # diamond's TIR traps some paths for many bounces inside the slab: allow enough of them
-    split = render(scene, RenderSettings(samples=2, threads=1, dispersion_sampling="SPLIT", max_bounces=64)).rgb
+    split = render(scene, RenderSettings(samples=2, threads=1, dispersion_sampling="SPLIT", max_bounces=64,
+                                            glossy_bounces=64, transmission_bounces=64)).rgb
     np.testing.assert_allclose(split, 0.5, rtol=1e-4)
     sample = render(scene, RenderSettings(samples=64, threads=1, dispersion_sampling="SAMPLE")).rgb
     # one wavelength per sample: per-pixel colour noise, but the image mean is the world's

@@ -5,7 +5,7 @@ One render: export the evaluated depsgraph (polling Esc), hand the scene to the 
 Blender's render result with ``foreach_set`` on float32 arrays (rows flipped: the core's row 0
 is the top of the image, Blender's the bottom). Combined is in the blend file's linear working
 space, so Blender's colour management (view transform, look, exposure) applies as for Cycles.
-Direct, Caustics and Diffraction are registered as passes for the compositor.
+Direct, Indirect, Caustics and Diffraction are registered as passes for the compositor.
 
 Errors in the scene are reported once with ``report({'ERROR'}, message)`` (the status bar, the
 Info editor, the operator's RuntimeError from a script) and shown in the render window's stats
@@ -46,7 +46,7 @@ __all__ = ["OpalRenderEngine", "AOV_PASSES", "render_settings", "output_path", "
 
 ENGINE_ID = "OPAL_DIFFRACTION"
 #: Passes besides Combined, in the order the core fills them.
-AOV_PASSES = ("Direct", "Caustics", "Diffraction")
+AOV_PASSES = ("Direct", "Indirect", "Caustics", "Diffraction")
 
 #: What the last render did, for scripts and tests (Blender's Render Result image cannot be read
 #: back in background mode): status 'FINISHED' | 'CANCELLED' | 'ERROR', message, warnings,

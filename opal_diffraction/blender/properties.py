@@ -153,8 +153,20 @@ class OpalRenderSettings(PropertyGroup):
         "20 nm render faster with a small colour error", default=5.0, min=0.5, max=100.0, subtype=_NM, precision=1,
     )
     max_bounces: IntProperty(
-        name="Max Bounces", description="Specular bounces (mirror reflections and refractions) followed along "
-        "an eye path", default=8, min=0, max=1024, soft_max=64,
+        name="Total", description="Bounces of every kind along a path, as Cycles' Max Bounces "
+        "(0: direct light only)", default=12, min=0, max=1024, soft_max=64,
+    )
+    diffuse_bounces: IntProperty(
+        name="Diffuse", description="Diffuse bounces along an eye path, as Cycles'", default=4, min=0, max=1024,
+        soft_max=64,
+    )
+    glossy_bounces: IntProperty(
+        name="Glossy", description="Mirror and glossy reflections along an eye path, as Cycles'", default=4, min=0,
+        max=1024, soft_max=64,
+    )
+    transmission_bounces: IntProperty(
+        name="Transmission", description="Refractions through glass along an eye path, as Cycles'", default=12,
+        min=0, max=1024, soft_max=64,
     )
     seed: IntProperty(
         name="Seed", description="Seed of the random numbers: the same seed gives the same image whatever "

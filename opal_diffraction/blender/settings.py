@@ -17,7 +17,8 @@ def render_settings(opal, scene, spectral_path: str = "") -> RenderSettings:
     return RenderSettings(
         samples=int(opal.samples), light_paths=int(opal.light_paths), wavelength_min=float(opal.wavelength_min),
         wavelength_max=float(opal.wavelength_max), wavelength_step=float(opal.wavelength_step),
-        max_bounces=int(opal.max_bounces), seed=max(seed, 0), dispersion_sampling=opal.dispersion_sampling,
+        max_bounces=int(opal.max_bounces), diffuse_bounces=int(opal.diffuse_bounces),
+        glossy_bounces=int(opal.glossy_bounces), transmission_bounces=int(opal.transmission_bounces), seed=max(seed, 0), dispersion_sampling=opal.dispersion_sampling,
         spectral_exr=spectral_path, time_limit=float(opal.time_limit), threads=int(scene.render.threads),
         backend=opal.backend.lower(), tile_size=int(opal.tile_size), round_samples=int(opal.round_samples),
         filter_width=float(opal.filter_width),

@@ -91,7 +91,9 @@ class OPAL_RENDER_PT_light_paths(OpalButtonsPanel, Panel):
     def draw(self, context):
         layout = _split(self.layout)
         opal = context.scene.opal
-        layout.prop(opal, "max_bounces")
+        col = layout.column(align=True, heading="Max Bounces")
+        for name in ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces"):
+            col.prop(opal, name)
         layout.prop(opal, "light_paths")
 
 

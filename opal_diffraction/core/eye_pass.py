@@ -1,12 +1,14 @@
-"""The eye pass: camera rays, direct light at diffuse hits, caustics and diffraction, specular
-recursion and dispersion (the transport itself is transport.SpecularWalker).
+"""The eye pass: a spectral path tracer with the source paper's caustics and diffraction
+(the specular transport itself is transport.SpecularWalker).
 
-The source paper's eye pass (Kobayashi & Kawai; docs/physics.md section 4.2). At a diffuse
-(two-sided Lambertian) hit: direct light by shadow rays plus the caustic irradiance of the light
-pass's illumination map;
-at a grating, the diffraction of every light that reaches it (gratings.py); at an emitter, its
-radiance; at mirrors and glass the path goes on. Every tile writes three films: what diffuse
-surfaces reflect (Direct and Caustics), emitted light seen (world, emitters), and diffraction.
+The source paper's eye pass (Kobayashi & Kawai; docs/physics.md section 4.2), grown into a path
+tracer (section 4.5; pbrt-v4's PathIntegrator): at every diffuse (two-sided Lambertian) vertex,
+direct light by shadow rays plus the caustic irradiance of the light pass's illumination map,
+then a cosine-sampled bounce under Cycles' bounce limits and Russian roulette; at a grating, the
+diffraction of every light that reaches it (gratings.py); at an emitter and where a ray leaves
+the scene, the emitted radiance; at mirrors and glass the path goes on. Paths the light pass
+already counted (diffuse <- specular <- emitter) are left out. Every tile writes the films:
+Direct (one diffuse vertex), Indirect (more), Caustics, Diffraction and emitted light seen.
 """
 
 from __future__ import annotations
@@ -28,7 +30,8 @@ __all__ = ["EyePass", "TileResult"]
 class TileResult:
     film: np.ndarray  # (P, n) sum of sample contributions per pixel (everything)
     # the parts of film (P, n) that are not Direct, or None where nothing was written:
-    background: np.ndarray | None  # emitted light seen (world, emitters)
+    background: np.ndarray | None  # emitted light seen (world, emitters), directly or through mirrors and glass
+    indirect: np.ndarray | None  # light that reached the eye through two or more diffuse vertices
     diffraction: np.ndarray | None  # diffracted by gratings
     caustics: np.ndarray | None  # caustic light from the light pass
     rays: int         # rays cast (camera, secondary and shadow)
@@ -85,17 +88,22 @@ class EyePass:
 
 
 class _TileTrace(SpecularWalker):
-    """The state of one tile's trace: its film accumulators and ray count."""
+    """The state of one tile's trace: its film accumulators, ray count and the path tracer's
+    per-path state (``Rays.extra``, see ``_new_state``)."""
 
     def __init__(self, eye: EyePass, n_pixels: int, rng: np.random.Generator):
         super().__init__(eye.prepared, rng)
         self.caustic_map, self.record_map = eye.caustic_map, eye.record_map
-        self.world_lights = bool(eye.prepared.world_spectrum.any())
+        s = eye.prepared.settings
+        self.limits = (s.max_bounces, s.diffuse_bounces, s.glossy_bounces, s.transmission_bounces)
+        # which emitters' caustic paths (diffuse <- specular... <- emitter) the light pass has
+        # already counted: the eye pass leaves those paths out (docs/physics.md section 4.5)
+        self.caustics_cover_lights = self.caustic_map is not None
         self._n_pixels = n_pixels
         self._film = self._new_film()  # light reflected by diffuse surfaces from direct lighting
         # the other parts of the film, allocated when first written (most scenes use a few):
         self._parts: dict[str, np.ndarray] = {}  # 'background' (world and emitters seen),
-        #                                          'diffraction', 'caustics'
+        #                                          'indirect', 'diffraction', 'caustics'
         self.escapes = None  # a list to record rays leaving the scene (trace_escapes)
 
     def _new_film(self) -> np.ndarray:
@@ -119,14 +127,37 @@ class _TileTrace(SpecularWalker):
     def _caustics(self) -> np.ndarray:
         return self._part("caustics")
 
+    def _light_film(self, vertices: int) -> np.ndarray:
+        """The film part for light reaching the eye after ``vertices`` diffuse (non-specular)
+        vertices: 0 emitted light seen (through mirrors and glass), 1 direct, 2+ indirect."""
+        return self._background if vertices == 0 else self._film if vertices == 1 else self._part("indirect")
+
+    @staticmethod
+    def _new_state(b: int) -> dict:
+        """The path tracer's per-path state, carried in ``Rays.extra``:
+        nd: diffuse vertices so far; diffuse / glossy / transmission: bounces of each kind (the
+        total is ``Rays.depth``); pdf: solid-angle pdf of the last BSDF-sampled direction (0: a
+        camera ray or a specular bounce - no MIS partner); caustic: 0, 1 = the last diffuse vertex
+        receives the light pass's caustics, 2 = and specular bounces followed it (a caustic path,
+        counted by the light pass); final: the bounce limit was reached - this segment only
+        gathers emitted light (for MIS), nothing more; origin: the last diffuse vertex."""
+        return {"nd": np.zeros(b, np.int8), "diffuse": np.zeros(b, np.int16), "glossy": np.zeros(b, np.int16),
+                "transmission": np.zeros(b, np.int16), "pdf": np.zeros(b, np.float32),
+                "caustic": np.zeros(b, np.int8), "final": np.zeros(b, bool)}
+
+    def empty_mono(self) -> Rays:
+        r = super().empty_mono()
+        r.extra = self._new_state(0)
+        return r
+
     def run(self, origins, directions, pix, u_lambda, wavelength_index=None) -> TileResult:
         n, b = self.n, len(pix)
         rays = Rays(origins, directions, pix.astype(np.int64), None, None,
-                     np.zeros(b, np.int32), np.asarray(u_lambda, np.float64))
+                     np.zeros(b, np.int32), np.asarray(u_lambda, np.float64), self._new_state(b))
         mono = self.empty_mono()
         if wavelength_index is not None:  # start monochromatic (tools and tests)
             lam = np.broadcast_to(np.asarray(wavelength_index, np.int64), (b,)).copy()
-            mono = Rays(rays.o, rays.d, rays.pix, np.ones(b, np.float32), lam, rays.depth, rays.u_lam)
+            mono = Rays(rays.o, rays.d, rays.pix, np.ones(b, np.float32), lam, rays.depth, rays.u_lam, rays.extra)
             rays = rays.take(np.zeros(b, bool))
         self.walk(rays, mono)
         shape = (self._n_pixels, n)
@@ -134,23 +165,34 @@ class _TileTrace(SpecularWalker):
         for part in self._parts.values():
             total = total + part
         get = lambda k: self._parts[k].reshape(shape) if k in self._parts else None  # noqa: E731
-        return TileResult(total.reshape(shape), get("background"), get("diffraction"), get("caustics"), self._rays)
+        return TileResult(total.reshape(shape), get("background"), get("indirect"), get("diffraction"),
+                          get("caustics"), self._rays)
 
     # ----------------------------------------------------------------- hooks
     def on_miss(self, rays: Rays) -> None:
-        self._add_background(rays)
+        st = rays.extra
+        # the world through glass after a diffuse vertex is a caustic path the light pass does
+        # not trace from the world (yet): counted here, so nothing is covered
+        for nd in np.unique(st["nd"]):
+            self._add_background(rays.take(st["nd"] == nd), self._light_film(min(int(nd), 2)))
         if self.escapes is not None:
-            self.escapes.append({"origin": rays.o, "direction": rays.d, "weight": rays.dense_w(self.n),
-                                 "lam": rays.lam, "depth": rays.depth, "ray": rays.pix})
+            first = st["nd"] == 0  # paths that met only mirrors and glass
+            r = rays.take(first)
+            self.escapes.append({"origin": r.o, "direction": r.d, "weight": r.dense_w(self.n),
+                                 "lam": r.lam, "depth": r.depth, "ray": r.pix})
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
         prepared = self.prepared
+        st = rays.extra
         emits = prepared.materials.emissive[hit.mat]
         if emits.any():
-            r = rays.take(emits)
-            em = prepared.materials.emission[hit.mat[emits]]
-            self._accumulate(r, r.weighted(em) if r.lam is None else r.w * em[np.arange(len(r)), r.lam],
-                             self._background)
+            self._emitted(rays.take(emits), hit.take(emits))
+        live = ~st["final"]  # a final segment only gathers emission
+        if not live.any():
+            return
+        if not live.all():
+            rays, hit, kind = rays.take(live), hit.take(live), kind[live]
+            st = rays.extra
         if prepared.gratings.any:
             on_grating = prepared.gratings.enabled[hit.mat]
             if on_grating.any():
@@ -158,11 +200,71 @@ class _TileTrace(SpecularWalker):
         diffuse = kind == DIFFUSE
         if diffuse.any():
             r, h = rays.take(diffuse), hit.take(diffuse)
-            self._direct_light(r, h, rng)
-            if self.world_lights:
-                self._world_light(r, h, rng)
+            first = r.extra["nd"] == 0
+            if first.all():
+                self._direct_light(r, h, rng, self._film)
+            else:
+                if first.any():
+                    self._direct_light(r.take(first), h.take(first), rng, self._film)
+                self._direct_light(r.take(~first), h.take(~first), rng, self._part("indirect"))
             if self.caustic_map is not None:
                 self._caustic_light(r, h, rng)
+
+    def survives(self, rays: Rays, rng) -> np.ndarray:
+        """Specular bounces go on below the total limit and past Russian roulette (after three
+        bounces, survival probability = the largest spectral throughput, at most 1, survivors
+        reweighted by 1 / that: unbiased; pbrt-v4's rule). Mono rays are not rouletted."""
+        ok = (rays.depth < self.limits[0]) & ~rays.extra["final"]
+        if rays.lam is None and rays.w is not None:
+            deep = ok & (rays.depth >= 3)
+            if deep.any():
+                q = np.minimum(rays.w.max(axis=1), np.float32(1.0))
+                roulette = deep & (q < 1)
+                if roulette.any():
+                    alive = rng.random(len(rays), np.float32) < q
+                    ok &= ~roulette | alive
+                    kept = roulette & alive
+                    rays.w[kept] /= q[kept, None]
+        return ok
+
+    def after_delta(self, rays: Rays, transmitted: np.ndarray) -> Rays:
+        """Count a mirror or dielectric bounce (reflection: glossy, refraction: transmission, as
+        Cycles counts them) and drop paths over their kind's limit. A specular bounce has no BSDF
+        pdf for MIS, and makes a path that left a caustic receiver a caustic path."""
+        st = rays.extra
+        st["glossy"] = st["glossy"] + ~transmitted
+        st["transmission"] = st["transmission"] + transmitted
+        st["pdf"] = np.zeros(len(rays), np.float32)
+        st["caustic"] = np.where(st["caustic"] == 1, np.int8(2), st["caustic"])
+        ok = np.where(transmitted, st["transmission"] <= self.limits[3], st["glossy"] <= self.limits[2])
+        return rays.take(ok)
+
+    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
+        """Diffuse bounces: a cosine-weighted direction (the Lambertian BRDF's importance
+        sampling, weight = albedo). A path at its diffuse or total bounce limit still takes one
+        last, emission-only segment ('final'), so light sources and the world that the next
+        event estimation does not sample are still seen once (and MIS stays whole)."""
+        st = rays.extra
+        sel = (kind == DIFFUSE) & ~st["final"]
+        if not sel.any():
+            return None
+        # roulette applies to the bounce; a path that loses it takes no segment at all
+        sel &= can_bounce | (rays.depth >= self.limits[0])
+        r, h = rays.take(sel), hit.take(sel)
+        b = len(r)
+        if b == 0:
+            return None
+        wi, cos = _cosine_hemisphere(h.ng, self.rng)
+        albedo = self._per_ray(self.prepared.materials.reflectance, h.mat, r.lam)
+        o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
+        out = r.moved(o, wi, r.weighted(albedo))
+        s = out.extra
+        s["nd"] = np.minimum(s["nd"] + 1, 100).astype(np.int8)
+        s["diffuse"] = s["diffuse"] + 1
+        s["pdf"] = (cos * np.float32(1 / np.pi)).astype(np.float32)
+        s["caustic"] = np.full(b, 1 if self.caustic_map is not None else 0, np.int8)
+        s["final"] = (s["diffuse"] > self.limits[1]) | (out.depth > self.limits[0])
+        return out
 
     # ----------------------------------------------------------------- films
     def _accumulate(self, rays: Rays, contrib, film=None):
@@ -181,7 +283,7 @@ class _TileTrace(SpecularWalker):
         sums = np.add.reduceat(contrib, starts, axis=0)
         film.reshape(self._n_pixels, n)[pix[starts]] += sums
 
-    def _accumulate_factored(self, pix, mat, factors) -> bool:
+    def _accumulate_factored(self, pix, mat, factors, film) -> bool:
         """Direct light of unit-weight white rays without a per-ray spectrum.
 
         Each such ray adds factor_l * albedo[mat] * light_l(lambda) / pi, a sum over a few
@@ -203,22 +305,34 @@ class _TileTrace(SpecularWalker):
         g = np.bincount(pix[ray] * len(uniq) + u, weights=factors[ray, light],
                         minlength=self._n_pixels * len(uniq)).reshape(self._n_pixels, len(uniq))
         spectra = prepared.materials.reflectance[uniq // nl] * prepared.lights.spectrum[uniq % nl] * np.float32(1 / np.pi)
-        self._film += (g @ spectra).ravel()
+        film += (g @ spectra).ravel()
         return True
 
-    def _add_background(self, rays: Rays):
+    def _add_background(self, rays: Rays, film):
         bg = self.prepared.world_spectrum
-        if not bg.any():
+        if not bg.any() or len(rays) == 0:
             return
         if rays.lam is None and rays.w is None:  # unit weights: count rays per pixel
             counts = np.bincount(rays.pix, minlength=self._n_pixels).astype(np.float32)
-            self._background[:] += (counts[:, None] * bg[None, :]).ravel()
+            film[:] += (counts[:, None] * bg[None, :]).ravel()
             return
         contrib = rays.weighted(np.broadcast_to(bg, (len(rays), self.n)) if rays.lam is None else bg[rays.lam])
-        self._accumulate(rays, contrib, self._background)
+        self._accumulate(rays, contrib, film)
+
+    def _emitted(self, rays: Rays, hit: Hit):
+        """Emission of the surfaces hit (Cycles' units: the material's emission is radiance, seen
+        from both sides). Found by BSDF sampling only (no next-event estimation of mesh lights
+        yet), so every path adds it at full weight."""
+        em = self.prepared.materials.emission[hit.mat]
+        nd = rays.extra["nd"]
+        for k in np.unique(nd):
+            sel = nd == k
+            r, e = rays.take(sel), em[sel]
+            self._accumulate(r, r.weighted(e) if r.lam is None else r.w * e[np.arange(len(r)), r.lam],
+                             self._light_film(min(int(k), 2)))
 
     # ----------------------------------------------------------------- interactions
-    def _direct_light(self, rays: Rays, hit: Hit, rng):
+    def _direct_light(self, rays: Rays, hit: Hit, rng, film):
         prepared = self.prepared
         lights = prepared.lights
         nl, b = len(lights), len(rays)
@@ -247,42 +361,14 @@ class _TileTrace(SpecularWalker):
                                  np.concatenate(tmax).astype(np.float32))
         self._rays += len(occ)
         factors.reshape(-1)[np.concatenate(idx)[occ]] = 0.0
-        if rays.lam is None and rays.w is None and self._accumulate_factored(rays.pix, hit.mat, factors):
+        if rays.lam is None and rays.w is None and self._accumulate_factored(rays.pix, hit.mat, factors, film):
             return
         brdf = self._per_ray(prepared.materials.reflectance, hit.mat, rays.lam) * np.float32(1 / np.pi)
         if rays.lam is None:
             irradiance = factors @ lights.spectrum          # (B, L) @ (L, n)
         else:
             irradiance = np.sum(factors * lights.spectrum[:, rays.lam].T, axis=1)
-        self._accumulate(rays, rays.weighted(brdf * irradiance))
-
-    def _world_light(self, rays: Rays, hit: Hit, rng):
-        """Light from a uniform world reaching diffuse surfaces directly: one cosine-weighted
-        shadow ray per hit, so each unoccluded ray adds albedo * L_world (the Lambertian BRDF
-        rho / pi times L cos / pdf with pdf = cos / pi) - exact for a constant world, whose
-        variance is only the visibility's. (Light from the world through mirrors and glass onto
-        diffuse surfaces is a caustic path the light pass does not trace yet.)"""
-        prepared = self.prepared
-        b = len(rays)
-        u1, u2 = rng.random(b, np.float32), rng.random(b, np.float32)
-        r, phi = np.sqrt(u1), np.float32(2 * np.pi) * u2
-        tu, tv = orthonormal_basis(hit.ng)
-        local_z = np.sqrt(np.maximum(np.float32(1) - u1, 0))
-        wi = ((r * np.cos(phi))[:, None] * tu + (r * np.sin(phi))[:, None] * tv
-              + local_z[:, None] * hit.ng).astype(np.float32)
-        o = (hit.p + hit.eps[:, None] * hit.ng).astype(np.float32)
-        occ = prepared.accel.occluded(o, wi, np.full(b, np.inf, np.float32))
-        self._rays += b
-        seen = ~occ
-        if not seen.any():
-            return
-        rr, mats = rays.take(seen), hit.mat[seen]
-        bg = prepared.world_spectrum
-        if rr.lam is None:
-            contrib = rr.weighted(prepared.materials.reflectance[mats] * bg[None, :])
-        else:
-            contrib = rr.w * prepared.materials.reflectance[mats, rr.lam] * bg[rr.lam]
-        self._accumulate(rr, contrib)
+        self._accumulate(rays, rays.weighted(brdf * irradiance), film)
 
     def _caustic_light(self, rays: Rays, hit: Hit, rng):
         """Caustic radiance at diffuse hits: the illumination map's irradiance * albedo / pi
@@ -344,3 +430,15 @@ class _TileTrace(SpecularWalker):
                     contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(idx)), sub.lam]
                     self._accumulate(sub, contrib, self._diffraction)
 
+
+
+def _cosine_hemisphere(n: np.ndarray, rng: np.random.Generator):
+    """Cosine-weighted unit directions about the unit normals n (B, 3) and their cosines (Malley's
+    method: a uniform disk point lifted to the hemisphere; pdf = cos / pi)."""
+    b = len(n)
+    u1, u2 = rng.random(b, np.float32), rng.random(b, np.float32)
+    r, phi = np.sqrt(u1), np.float32(2 * np.pi) * u2
+    tu, tv = orthonormal_basis(n)
+    cos = np.sqrt(np.maximum(np.float32(1) - u1, 0))
+    wi = (r * np.cos(phi))[:, None] * tu + (r * np.sin(phi))[:, None] * tv + cos[:, None] * n
+    return wi.astype(np.float32), cos.astype(np.float32)

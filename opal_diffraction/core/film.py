@@ -22,7 +22,7 @@ from .spectrum import SpectralConverter
 
 __all__ = ["Film", "RenderResult", "tile_parts_rgb"]
 
-PARTS = ("background", "caustics", "diffraction")  # a TileResult's non-Direct parts
+PARTS = ("background", "indirect", "caustics", "diffraction")  # a TileResult's non-Direct parts
 
 
 def tile_parts_rgb(conv: SpectralConverter, tile) -> dict:
@@ -40,7 +40,7 @@ class RenderResult:
     plan: RenderPlan
     warnings: list[str] = field(default_factory=list)
     stats: dict = field(default_factory=dict)
-    passes: dict = field(default_factory=dict)  # 'Direct', 'Caustics', 'Diffraction': (H, W, 3)
+    passes: dict = field(default_factory=dict)  # 'Direct', 'Indirect', 'Caustics', 'Diffraction': (H, W, 3)
 
 
 class Film:
@@ -86,8 +86,9 @@ class Film:
         rgb = self.conv.to_rgb(spectral)
         caustics = self.parts["caustics"] * scale
         diffraction = self.parts["diffraction"] * scale
-        passes = {"Direct": rgb - self.parts["background"] * scale - diffraction - caustics,
-                  "Caustics": caustics, "Diffraction": diffraction}
+        indirect = self.parts["indirect"] * scale
+        passes = {"Direct": rgb - self.parts["background"] * scale - indirect - diffraction - caustics,
+                  "Indirect": indirect, "Caustics": caustics, "Diffraction": diffraction}
         samples = int(self.counts.min()) if self.counts.size else 0
         return RenderResult(spectral, rgb, self.conv.grid.wavelengths.copy(), samples, cancelled, plan,
                             list(warnings), dict(stats), passes)

@@ -25,7 +25,8 @@ DISPERSION_SAMPLING = ("SPLIT", "SAMPLE")
 BACKENDS = ("auto", "embree", "numpy", "brute")
 
 #: Settings only the eye pass reads: changing them keeps a prepared scene and its light pass.
-EYE_ONLY_SETTINGS = frozenset({"samples", "round_samples", "tile_size", "filter_width", "time_limit", "spectral_exr"})
+EYE_ONLY_SETTINGS = frozenset({"samples", "round_samples", "tile_size", "filter_width", "time_limit", "spectral_exr",
+                               "diffuse_bounces", "glossy_bounces", "transmission_bounces"})
 
 #: The wavelength grid holds 2 to 4001 samples (360-830 nm at 0.1175 nm at most); below 16 the
 #: colours are coarse (a warning, not an error).
@@ -36,6 +37,9 @@ _INT_RANGES = {
     "samples": (1, 1 << 24),
     "light_paths": (0, 10**10),
     "max_bounces": (0, 1024),
+    "diffuse_bounces": (0, 1024),
+    "glossy_bounces": (0, 1024),
+    "transmission_bounces": (0, 1024),
     "seed": (0, 2**64 - 1),
     "threads": (0, 1024),
     "tile_size": (1, 65536),
@@ -43,6 +47,8 @@ _INT_RANGES = {
 }
 _FLOAT_FIELDS = ("element_size", "wavelength_min", "wavelength_max", "wavelength_step", "time_limit", "filter_width")
 _WORDS = {"samples": "samples", "light_paths": "light paths", "max_bounces": "max bounces", "seed": "seed",
+          "diffuse_bounces": "diffuse bounces", "glossy_bounces": "glossy bounces",
+          "transmission_bounces": "transmission bounces",
           "threads": "threads", "tile_size": "tile size", "round_samples": "round samples",
           "element_size": "element size", "wavelength_min": "wavelength min", "wavelength_max": "wavelength max",
           "wavelength_step": "wavelength step", "time_limit": "time limit", "filter_width": "filter width"}
@@ -69,7 +75,12 @@ class RenderSettings:
     wavelength_min: float = 400.0     # nm
     wavelength_max: float = 700.0     # nm
     wavelength_step: float = 5.0      # nm
-    max_bounces: int = 8              # specular bounces along an eye path
+    # bounces along a path, as Cycles counts them (defaults: Cycles'): all kinds together, and
+    # per kind (mirror and glossy reflection, refraction, diffuse); 0 diffuse bounces = direct light only
+    max_bounces: int = 12
+    diffuse_bounces: int = 4
+    glossy_bounces: int = 4
+    transmission_bounces: int = 12
     seed: int = 0
     dispersion_sampling: str = "SAMPLE"  # 'SPLIT': one ray per wavelength; 'SAMPLE': one stochastic wavelength
     spectral_exr: str = ""            # path of a spectral EXR to write; empty: off

@@ -43,6 +43,9 @@ class Rays:
     lam: np.ndarray | None  # (B,) int wavelength index for mono rays, None for white
     depth: np.ndarray  # (B,) int specular bounces so far
     u_lam: np.ndarray  # (B,) float: the sample's stratified number for choosing a wavelength
+    # per-ray arrays a subclass carries along (the eye pass's path state: bounce counts, the last
+    # BSDF pdf for MIS, ...); taken, concatenated and inherited with the rays. None: nothing.
+    extra: dict | None = None
 
     def __len__(self):
         return len(self.pix)
@@ -51,7 +54,13 @@ class Rays:
         if mask.dtype == bool and len(mask) and mask.all():
             return self
         return Rays(self.o[mask], self.d[mask], self.pix[mask], None if self.w is None else self.w[mask],
-                     None if self.lam is None else self.lam[mask], self.depth[mask], self.u_lam[mask])
+                     None if self.lam is None else self.lam[mask], self.depth[mask], self.u_lam[mask],
+                     None if self.extra is None else {k: v[mask] for k, v in self.extra.items()})
+
+    def moved(self, o, d, w, depth=None) -> "Rays":
+        """The same paths (pixels, wavelengths, extra state) continuing from o along d with weight w."""
+        return Rays(o, d, self.pix, w, self.lam, self.depth + 1 if depth is None else depth, self.u_lam,
+                     None if self.extra is None else dict(self.extra))
 
     def weighted(self, x):
         """The ray weight times x (x itself for unit-weight camera rays)."""
@@ -65,9 +74,14 @@ class Rays:
         if (a.w is None) != (b.w is None):  # one side has implicit unit weights: make them explicit
             n = (a.w if a.w is not None else b.w).shape[1]
             a, b = replace(a, w=a.dense_w(n)), replace(b, w=b.dense_w(n))
+        extra = None
+        if a.extra is not None or b.extra is not None:
+            if a.extra is None or b.extra is None or a.extra.keys() != b.extra.keys():
+                raise ValueError("cannot join ray populations that carry different state")
+            extra = {k: np.concatenate([a.extra[k], b.extra[k]]) for k in a.extra}
         return Rays(*(None if x is None else np.concatenate([x, y]) for x, y in
                        zip((a.o, a.d, a.pix, a.w, a.lam, a.depth, a.u_lam),
-                           (b.o, b.d, b.pix, b.w, b.lam, b.depth, b.u_lam))))
+                           (b.o, b.d, b.pix, b.w, b.lam, b.depth, b.u_lam))), extra)
 
 
 @dataclass
@@ -114,6 +128,16 @@ class SpecularWalker:
         """Which rays may bounce again (default: the bounce limit)."""
         return rays.depth < self.prepared.settings.max_bounces
 
+    def after_delta(self, rays: Rays, transmitted: np.ndarray) -> Rays:
+        """Rays leaving a mirror or dielectric (``transmitted``: refracted rather than reflected),
+        before they are traced on: a subclass counts bounces by kind and drops those over a limit."""
+        return rays
+
+    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
+        """Rays continuing from the non-specular surfaces (diffuse, rough): None by default (the
+        light pass ends its paths there; the eye pass samples a BSDF)."""
+        return None
+
     # the loop -------------------------------------------------------------------------------
     @staticmethod
     def empty_mono() -> Rays:
@@ -157,7 +181,8 @@ class SpecularWalker:
         out = []
         mirror = (kind == MIRROR) & can_bounce
         if mirror.any():
-            out.append(self._mirror(rays.take(mirror), hit.take(mirror)))
+            r = self._mirror(rays.take(mirror), hit.take(mirror))
+            out.append(self.after_delta(r, np.zeros(len(r), bool)))
         diel = (kind == DIELECTRIC) & can_bounce
         if diel.any():
             if rays.lam is None:
@@ -166,7 +191,12 @@ class SpecularWalker:
                     children, child_hits = self._split(rays.take(disp), hit.take(disp), rng)
                 diel = diel & ~disp
             if diel.any():
-                out.append(self._dielectric(rays.take(diel), hit.take(diel), rng))
+                r, transmitted = self._dielectric(rays.take(diel), hit.take(diel), rng)
+                out.append(self.after_delta(r, transmitted))
+        scattered = self.scatter(rays, hit, kind, can_bounce, rng)
+        if scattered is not None and len(scattered):
+            out.append(scattered)
+        out = [r for r in out if len(r)]
         if not out:
             return rays.take(np.zeros(len(rays), bool)), children, child_hits
         nxt = out[0]
@@ -199,10 +229,10 @@ class SpecularWalker:
     def _mirror(self, rays: Rays, hit: Hit) -> Rays:
         d = reflect(rays.d, hit.ng)
         o = hit.p + hit.eps[:, None] * hit.ng
-        w = self._tinted(rays, hit)
-        return Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
+        return rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit))
 
-    def _dielectric(self, rays: Rays, hit: Hit, rng) -> Rays:
+    def _dielectric(self, rays: Rays, hit: Hit, rng) -> tuple[Rays, np.ndarray]:
+        """Fresnel-sampled reflection or refraction: (the rays going on, refracted (B,) bool)."""
         prepared = self.prepared
         lam0 = np.zeros(len(rays), np.int64) if rays.lam is None else rays.lam
         n = prepared.materials.ior[hit.mat, lam0]  # constant over the grid for white rays
@@ -213,8 +243,7 @@ class SpecularWalker:
         d = np.where(refl[:, None], reflect(rays.d, hit.ng), t_dir)
         side = np.where(refl, 1.0, -1.0).astype(np.float32)
         o = hit.p + (hit.eps * side)[:, None] * hit.ng
-        w = self._tinted(rays, hit)
-        return Rays(o.astype(np.float32), d.astype(np.float32), rays.pix, w, rays.lam, rays.depth + 1, rays.u_lam)
+        return rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit)), ~refl
 
     def _split(self, rays: Rays, hit: Hit, rng):
         """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit."""
@@ -240,5 +269,6 @@ class SpecularWalker:
             parent = np.flatnonzero(live)
             w = total[live].astype(np.float32)  # w_k / p_k with p_k = w_k / total
         children = Rays(rays.o[parent], rays.d[parent], rays.pix[parent], w.astype(np.float32),
-                         lam.astype(np.int64), rays.depth[parent], rays.u_lam[parent])
+                         lam.astype(np.int64), rays.depth[parent], rays.u_lam[parent],
+                         None if rays.extra is None else {k: v[parent] for k, v in rays.extra.items()})
         return children, hit.take(parent)

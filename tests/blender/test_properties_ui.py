@@ -17,6 +17,7 @@ from opal_diffraction.core.optics import DISPERSION_MODELS, SELLMEIER_PRESETS
 from opal_diffraction.core.spectrum import WavelengthGrid
 
 SCENE_CONTRACT = ["samples", "light_paths", "wavelength_min", "wavelength_max", "wavelength_step", "max_bounces",
+                  "diffuse_bounces", "glossy_bounces", "transmission_bounces",
                   "seed", "dispersion_sampling", "spectral_exr", "time_limit"]
 MATERIAL_CONTRACT = ["grating", "grating_type", "lattice", "period", "slit_width", "slit_count", "coherence_length",
                      "grating_direction", "rotation", "dispersion", "abbe_number"]
