@@ -35,6 +35,11 @@ class TileResult:
     diffraction: np.ndarray | None  # diffracted by gratings
     caustics: np.ndarray | None  # caustic light from the light pass
     rays: int         # rays cast (camera, secondary and shadow)
+    # denoising features, per-pixel sums over samples (P, 3), as Cycles' Denoising Albedo and
+    # Denoising Normal passes: the first diffuse surface's linear RGB albedo times the
+    # (grey) throughput of the mirrors and glass before it, and its world-space shading normal
+    albedo: np.ndarray | None = None
+    normal: np.ndarray | None = None
 
 
 class EyePass:
@@ -105,6 +110,9 @@ class _TileTrace(SpecularWalker):
         self._parts: dict[str, np.ndarray] = {}  # 'background' (world and emitters seen),
         #                                          'indirect', 'diffraction', 'caustics'
         self.escapes = None  # a list to record rays leaving the scene (trace_escapes)
+        self._albedo = np.zeros((n_pixels, 3), np.float32)
+        self._normal = np.zeros((n_pixels, 3), np.float32)
+        self._albedo_rgb = np.asarray(eye.prepared.scene.materials.color, np.float32).reshape(-1, 3)
 
     def _new_film(self) -> np.ndarray:
         return np.zeros(self._n_pixels * self.n, np.float32)
@@ -166,7 +174,7 @@ class _TileTrace(SpecularWalker):
             total = total + part
         get = lambda k: self._parts[k].reshape(shape) if k in self._parts else None  # noqa: E731
         return TileResult(total.reshape(shape), get("background"), get("indirect"), get("diffraction"),
-                          get("caustics"), self._rays)
+                          get("caustics"), self._rays, self._albedo, self._normal)
 
     # ----------------------------------------------------------------- hooks
     def on_miss(self, rays: Rays) -> None:
@@ -201,6 +209,8 @@ class _TileTrace(SpecularWalker):
         if diffuse.any():
             r, h = rays.take(diffuse), hit.take(diffuse)
             first = r.extra["nd"] == 0
+            if first.any():
+                self._denoising_features(r.take(first), h.take(first))
             if first.all():
                 self._direct_light(r, h, rng, self._film)
             else:
@@ -267,6 +277,21 @@ class _TileTrace(SpecularWalker):
         return out
 
     # ----------------------------------------------------------------- films
+    def _denoising_features(self, rays: Rays, hit: Hit):
+        """Albedo and normal of the first diffuse surface a sample sees (mono rays count with the
+        throughput divided by the wavelength count: their weight is the whole spectrum's)."""
+        if rays.w is None:
+            grey = np.ones(len(rays), np.float32)
+        elif rays.lam is None:
+            grey = rays.w.mean(axis=1)
+        else:
+            grey = rays.w / np.float32(self.n)
+        albedo = self._albedo_rgb[hit.mat] * grey[:, None]
+        normal = hit.ns if hasattr(hit, "ns") else hit.ng
+        for arr, val in ((self._albedo, albedo), (self._normal, normal)):
+            for c in range(3):
+                arr[:, c] += np.bincount(rays.pix, weights=val[:, c], minlength=self._n_pixels).astype(np.float32)
+
     def _accumulate(self, rays: Rays, contrib, film=None):
         """Add per-ray contributions to their pixels: (B, n) for white rays, (B,) for mono."""
         n = self.n
