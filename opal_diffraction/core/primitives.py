@@ -11,7 +11,7 @@ import numpy as np
 
 from .geometry import triangle_cross
 
-__all__ = ["quad", "box", "prism", "uv_sphere", "icosphere"]
+__all__ = ["quad", "box", "prism", "uv_sphere", "icosphere", "round_brilliant"]
 
 
 def quad(center, u, v):
@@ -106,3 +106,48 @@ def icosphere(center, radius, subdivisions=3):
                             np.stack([c, ca, bc], 1), np.stack([ab, bc, ca], 1)])
         v = np.concatenate([v, mid])
     return v * radius + np.asarray(center, np.float64), f.astype(np.int32)
+
+
+def round_brilliant(center, diameter, table=0.57, crown_deg=34.5, pavilion_deg=40.75, girdle=0.02):
+    """A round brilliant gem (58-facet style, simplified to 8-fold symmetry), table up (+Z), its
+    girdle centred at ``center``: Tolkowsky's proportions by default (table 57 % of the
+    diameter, crown angle 34.5 deg, pavilion angle 40.75 deg, girdle 2 %). The crown joins an
+    octagonal table to a 16-sided girdle with star and bezel triangles; the pavilion runs from
+    the girdle's 16 corners through 8 main facets to a pointed culet. Flat facets: no shading
+    normals wanted."""
+    c = np.asarray(center, np.float64)
+    r = 0.5 * float(diameter)
+    rt = table * r
+    hc = (r - rt) * np.tan(np.radians(crown_deg))      # crown height above the girdle's top
+    hp = r * np.tan(np.radians(pavilion_deg))          # pavilion depth below the girdle's bottom
+    hg = 0.5 * girdle * float(diameter)                # half the girdle's thickness
+    a8 = np.arange(8) * (2 * np.pi / 8)
+    a16 = np.arange(16) * (2 * np.pi / 16)
+    ring = lambda rad, ang, z: np.stack([rad * np.cos(ang), rad * np.sin(ang), np.full(len(ang), z)], 1)  # noqa: E731
+    verts = np.concatenate([
+        ring(rt, a8, hg + hc),            # 0..7 table corners
+        ring(r, a16, hg),                 # 8..23 girdle top
+        ring(r, a16, -hg),                # 24..39 girdle bottom
+        [[0.0, 0.0, hg + hc]],            # 40 table centre
+        [[0.0, 0.0, -hg - hp]],           # 41 culet
+    ]) + c
+    t8, g_top, g_bot, tc, cul = 0, 8, 24, 40, 41
+    tris = []
+    for i in range(8):
+        j = (i + 1) % 8
+        tris.append((tc, t8 + i, t8 + j))                              # table
+        gi, gm, gj = g_top + 2 * i, g_top + (2 * i + 1) % 16, g_top + (2 * j) % 16
+        tris.append((t8 + i, gi, gm))                                   # crown: bezel halves
+        tris.append((t8 + i, gm, t8 + j))                               # star facet
+        tris.append((t8 + j, gm, gj))
+    for k in range(16):
+        m = (k + 1) % 16
+        tris.append((g_top + k, g_bot + k, g_bot + m))                  # girdle band
+        tris.append((g_top + k, g_bot + m, g_top + m))
+        tris.append((g_bot + k, cul, g_bot + m))                        # pavilion
+    verts, tris = verts, np.array(tris, np.int64)
+    nrm = triangle_cross(verts, tris)
+    cen = verts[tris].mean(axis=1) - c
+    outward = np.sum(nrm * cen, axis=1) > 0
+    tris[~outward] = tris[~outward][:, [0, 2, 1]]
+    return verts, tris.astype(np.int32)
