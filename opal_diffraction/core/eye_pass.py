@@ -229,7 +229,7 @@ class _TileTrace(SpecularWalker):
         origins, dirs, tmax, idx = [], [], [], []
         for li in range(nl):  # loop over lights (a handful), not rays
             wi, dist, g = sample_light(lights, li, hit.p, rng)
-            cos_s = np.einsum("ij,ij->i", wi, hit.ng)
+            cos_s = np.einsum("ij,ij->i", wi, hit.ns)
             f = np.where(cos_s > 0, g * cos_s, np.float32(0.0))
             live = np.flatnonzero(f > 0)
             if live.size == 0:
