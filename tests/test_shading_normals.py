@@ -1,4 +1,4 @@
-"""Shading normals (docs/physics.md section 4.5): the scene model, the specular fix-ups, and a
+"""Shading normals (docs/physics.md section 4.6): the scene model, the specular fix-ups, and a
 smooth-shaded glass ball's caustic against exact ray tracing through an ideal sphere.
 
 The caustic test is the physics one: parallel light through a tessellated 64 x 32 UV sphere

@@ -10,7 +10,7 @@ grating's element records the incoming spectral flux and the direction it came f
 pass to diffract (one flux-weighted mean direction per element: a known deviation,
 docs/physics.md section 3.5). Direct light stays the eye pass's job, so a path that reaches a
 diffuse surface or grating first deposits nothing: no double counting. On smooth-shaded casters
-the paths bend about the shading normals (transport.py, docs/physics.md section 4.5); deposits
+the paths bend about the shading normals (transport.py, docs/physics.md section 4.6); deposits
 and records stay indexed by the geometric hit (triangle, barycentrics, side).
 
 Aiming (unbiased): casters are grouped into connected objects with bounding spheres. From a

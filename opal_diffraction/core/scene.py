@@ -321,7 +321,7 @@ class Scene:
 
     ``corner_normals`` (T, 3, 3): the shading normal at each corner of each triangle (Blender's
     corner normals: smooth, split or custom), world space, interpolated across the triangle at
-    render time (docs/physics.md section 4.5); empty (0, 3, 3) means flat shading everywhere.
+    render time (docs/physics.md section 4.6); empty (0, 3, 3) means flat shading everywhere.
     """
 
     vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))

@@ -17,7 +17,7 @@ reflectance, so the weight is unchanged (for mono rays the index is the one at t
 so total internal reflection differs per wavelength). Geometry is assumed closed with outward
 normals (entering vs leaving a dielectric is read from the side of the hit).
 
-Shading normals (docs/physics.md section 4.5): where the scene has per-corner normals, a hit's
+Shading normals (docs/physics.md section 4.6): where the scene has per-corner normals, a hit's
 ``ns`` is their barycentric interpolation (Phong normal interpolation), normalised and put on the
 side of the triangle's winding normal, then flipped with ``ng`` to face the incoming ray; mirror
 reflection, Fresnel and refraction use it, while offsets and side tests keep ``ng``. Where ``ns``
@@ -130,7 +130,7 @@ def valid_specular_normal(wo: np.ndarray, ng: np.ndarray, ns: np.ndarray) -> np.
     rotated towards ``ng`` (in their common plane) until R . ng = t, as Cycles'
     ``ensure_valid_specular_reflection`` does. The rotated normal N' = sqrt(1 - z^2) X + z ng
     (X: ns's part perpendicular to ng) solves 2 (N' . wo) z - wo . ng = t; squared, a quadratic
-    in z^2 (docs/physics.md section 4.5). Also fixes rays arriving behind ns (ns . wo < 0)."""
+    in z^2 (docs/physics.md section 4.6). Also fixes rays arriving behind ns (ns . wo < 0)."""
     iz = np.einsum("ij,ij->i", wo, ng)
     c = np.einsum("ij,ij->i", wo, ns)
     thresh = np.minimum(0.9 * iz, SPECULAR_MIN_COS)

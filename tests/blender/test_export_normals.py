@@ -1,4 +1,4 @@
-"""Export of smooth shading (docs/physics.md section 4.5): Blender's corner normals, as Cycles
+"""Export of smooth shading (docs/physics.md section 4.6): Blender's corner normals, as Cycles
 shades with them, in world space, on the core Scene's ``corner_normals``.
 
 References are analytic: a sphere's normal at a point is radial, an ellipsoid's is the gradient
