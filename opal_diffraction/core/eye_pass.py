@@ -264,7 +264,12 @@ class _TileTrace(SpecularWalker):
         b = len(r)
         if b == 0:
             return None
-        wi, cos = _cosine_hemisphere(h.ng, self.rng)
+        wi, cos = _cosine_hemisphere(h.ns, self.rng)
+        if self.prepared.corner_normals is not None:  # about ns; a direction below the surface ends the path
+            up = np.einsum("ij,ij->i", wi, h.ng) > 0
+            if not up.all():
+                r, h, wi, cos = r.take(up), h.take(up), wi[up], cos[up]
+                b = len(r)
         albedo = self._per_ray(self.prepared.materials.reflectance, h.mat, r.lam)
         o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
         out = r.moved(o, wi, r.weighted(albedo))
@@ -287,7 +292,7 @@ class _TileTrace(SpecularWalker):
         else:
             grey = rays.w / np.float32(self.n)
         albedo = self._albedo_rgb[hit.mat] * grey[:, None]
-        normal = hit.ns if hasattr(hit, "ns") else hit.ng
+        normal = hit.ns
         for arr, val in ((self._albedo, albedo), (self._normal, normal)):
             for c in range(3):
                 arr[:, c] += np.bincount(rays.pix, weights=val[:, c], minlength=self._n_pixels).astype(np.float32)
@@ -364,12 +369,15 @@ class _TileTrace(SpecularWalker):
         if nl == 0 or b == 0:
             return
         # One sample per light per ray; all shadow rays in a single any-hit call.
+        flat = prepared.corner_normals is None
         factors = np.zeros((b, nl), np.float32)
         origins, dirs, tmax, idx = [], [], [], []
         for li in range(nl):  # loop over lights (a handful), not rays
             wi, dist, g = sample_light(lights, li, hit.p, rng)
-            cos_s = np.einsum("ij,ij->i", wi, hit.ng)
-            f = np.where(cos_s > 0, g * cos_s, np.float32(0.0))
+            # shaded with ns; light from below the geometric surface does not reach it (no leaks)
+            cos_s = np.einsum("ij,ij->i", wi, hit.ns)
+            above = True if flat else np.einsum("ij,ij->i", wi, hit.ng) > 0
+            f = np.where((cos_s > 0) & above, g * cos_s, np.float32(0.0))
             live = np.flatnonzero(f > 0)
             if live.size == 0:
                 continue

@@ -9,7 +9,9 @@ surface element of the illumination map (elements.py). Where such a path reaches
 grating's element records the incoming spectral flux and the direction it came from, for the eye
 pass to diffract (one flux-weighted mean direction per element: a known deviation,
 docs/physics.md section 3.5). Direct light stays the eye pass's job, so a path that reaches a
-diffuse surface or grating first deposits nothing: no double counting.
+diffuse surface or grating first deposits nothing: no double counting. On smooth-shaded casters
+the paths bend about the shading normals (transport.py, docs/physics.md section 4.6); deposits
+and records stay indexed by the geometric hit (triangle, barycentrics, side).
 
 Aiming (unbiased): casters are grouped into connected objects with bounding spheres. From a
 point or spot light, or a point sampled on an area light, a direction is drawn in the cone that

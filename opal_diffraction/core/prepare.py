@@ -8,7 +8,8 @@
 (render.py orchestrates it). A PreparedScene is frozen and its arrays are read-only: the passes
 read it from any number of threads (and, later, machines) and nothing writes back into it. It
 holds the acceleration structure, the spectra of materials, lights and world on the wavelength
-grid, per-triangle normals, offsets and grating frames, and the light pass's targets (which
+grid, per-triangle normals, offsets and grating frames, the shading normals per corner (None for
+a flat scene), and the light pass's targets (which
 objects bend light, which receive it, how much light each lamp sends their way), so the plan
 can decide without running anything.
 
@@ -85,6 +86,7 @@ class PreparedScene:
     warnings: tuple[str, ...]          # from validation (dropped triangles, ...)
     prepare_s: float                   # seconds spent validating and preparing
     key: int                           # identity of the geometry, materials and lights
+    corner_normals: np.ndarray | None = None  # (T, 3, 3) float32 unit shading normals per corner; None: flat
 
     @property
     def grid(self) -> WavelengthGrid:
@@ -133,6 +135,11 @@ def _equal(a, b) -> bool:
 
 def _same_geometry(a: Scene, b: Scene) -> bool:
     return _equal(a.vertices, b.vertices) and _equal(a.triangles, b.triangles)
+
+
+def _same_shading(a: Scene, b: Scene) -> bool:
+    """The shading normals (part of the geometry the light pass bends light with)."""
+    return _equal(np.asarray(a.corner_normals), np.asarray(b.corner_normals))
 
 
 def _same_for_light_pass(a: Scene, b: Scene) -> bool:
@@ -203,7 +210,13 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         tri_grating_tangent = triangle_tangents(nrm64, scene.tri_tangent)
     else:
         tri_grating_tangent = np.zeros((0, 3), np.float32)
-    same_for_light = (same_geometry and _same_for_light_pass(reuse.scene, scene)
+    if len(scene.corner_normals) == 0:
+        corner_normals = None
+    elif same_geometry and reuse.corner_normals is not None and _same_shading(reuse.scene, scene):
+        corner_normals = reuse.corner_normals
+    else:
+        corner_normals = np.asarray(scene.corner_normals, np.float32)  # unit length (validated)
+    same_for_light = (same_geometry and _same_shading(reuse.scene, scene) and _same_for_light_pass(reuse.scene, scene)
                       and _light_pass_settings(reuse.settings) == _light_pass_settings(settings))
     if same_for_light:
         targets, key = reuse.light_targets, reuse.key
@@ -231,6 +244,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         warnings=tuple(warnings),
         prepare_s=0.0,
         key=key,
+        corner_normals=corner_normals,
     )
     frozen = {f.name: _read_only(getattr(prepared, f.name)) for f in fields(prepared)}
     frozen["prepare_s"] = time.perf_counter() - t0

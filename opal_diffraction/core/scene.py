@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
+from .geometry import triangle_normals
 from .enums import GratingDirection, GratingType, Lattice, LightKind, MaterialKind, codes
 from .optics import DISPERSION_MODELS, ior_spectrum
 
@@ -317,6 +318,10 @@ class Scene:
     the grating vector t-hat in world space (projected onto each triangle's plane at render
     time; zero rows fall back to the world X axis), and ``tri_period`` (T,), a period in nm that
     overrides the material's (0: use the material's), as the opal domain tools write them.
+
+    ``corner_normals`` (T, 3, 3): the shading normal at each corner of each triangle (Blender's
+    corner normals: smooth, split or custom), world space, interpolated across the triangle at
+    render time (docs/physics.md section 4.6); empty (0, 3, 3) means flat shading everywhere.
     """
 
     vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
@@ -328,13 +333,15 @@ class Scene:
     world_color: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
     tri_tangent: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     tri_period: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    corner_normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3), np.float32))
 
     # ------------------------------------------------------------------ building
-    def add_mesh(self, vertices, triangles, material: int, tangent=None, period=None) -> None:
+    def add_mesh(self, vertices, triangles, material: int, tangent=None, period=None, normals=None) -> None:
         """Append a mesh (its own vertex numbering) with one material for all its triangles.
 
         ``tangent``: a grating direction (3,) for all its triangles or (T, 3) per triangle;
-        ``period``: a period override in nm, scalar or (T,).
+        ``period``: a period override in nm, scalar or (T,); ``normals``: shading normals, (V, 3)
+        per vertex or (T, 3, 3) per corner (None: flat; see ``corner_normals``).
         """
         v = np.asarray(vertices, np.float32).reshape(-1, 3)
         t = np.asarray(triangles, np.int64).reshape(-1, 3) + len(self.vertices)
@@ -354,6 +361,30 @@ class Scene:
             new = np.zeros(len(t), np.float32) if period is None else np.broadcast_to(
                 np.asarray(period, np.float32), (len(t),))
             self.tri_period = np.concatenate([old, new])
+        self._add_corner_normals(v, t - (len(self.vertices) - len(v)), n_old, normals)
+
+    def _add_corner_normals(self, v, t_local, n_old: int, normals) -> None:
+        """Append the new mesh's corner normals; once any mesh has them, the flat ones (before or
+        after) get their face normal at all three corners."""
+        if normals is None and not len(self.corner_normals):
+            return
+        if normals is None:
+            new = np.repeat(triangle_normals(v, t_local)[:, None, :], 3, axis=1)
+        else:
+            nrm = np.asarray(normals, np.float32)
+            if nrm.shape == (len(v), 3):
+                new = nrm[t_local]
+            elif nrm.shape == (len(t_local), 3, 3):
+                new = nrm
+            else:
+                raise SceneError(f"mesh normals must have shape ({len(v)}, 3) per vertex or ({len(t_local)}, 3, 3) "
+                                 f"per corner, got {nrm.shape}")
+        old = self.corner_normals
+        if not len(old) and n_old:
+            prev = np.asarray(self.triangles[:n_old], np.int64)
+            old = np.repeat(triangle_normals(self.vertices, prev)[:, None, :], 3, axis=1)
+        self.corner_normals = np.concatenate([np.asarray(old, np.float32).reshape(-1, 3, 3),
+                                              np.asarray(new, np.float32)])
 
     # ------------------------------------------------------------------ validation
     def validated(self) -> tuple["Scene", list[str]]:
@@ -425,6 +456,7 @@ class Scene:
         tt = tt if tt.dtype == np.float32 else tt.astype(np.float32)
         tp = tp if tp.dtype == np.float32 else tp.astype(np.float32)
         t = t.astype(np.int32)
+        cn = _validate_corner_normals(self.corner_normals, v, t, warns)
         if len(t):
             p = v.astype(np.float64)[t]
             area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
@@ -440,12 +472,13 @@ class Scene:
                 t, tm = t[keep], tm[keep]
                 tt = tt[keep] if len(tt) else tt
                 tp = tp[keep] if len(tp) else tp
+                cn = cn[keep] if len(cn) else cn
         if len(t) == 0:
             warns.append("the scene has no geometry: the image shows only the background")
         if len(lights) == 0 and not np.any(np.asarray(wc) > 0):  # a coloured world lights the scene
             warns.append("the scene has no lights: only the background is lit")
         clean = replace(self, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
-                        materials=materials, lights=lights, camera=camera, world_color=wc)
+                        materials=materials, lights=lights, camera=camera, world_color=wc, corner_normals=cn)
         return clean, warns
 
     # ------------------------------------------------------------------ .npz
@@ -459,6 +492,7 @@ class Scene:
             "world_color": np.asarray(self.world_color, np.float32),
             "tri_tangent": np.asarray(self.tri_tangent, np.float32).reshape(-1, 3),
             "tri_period": np.asarray(self.tri_period, np.float32).reshape(-1),
+            "corner_normals": np.asarray(self.corner_normals, np.float32).reshape(-1, 3, 3),
         }
         for f in fields(Materials):
             d["material_" + f.name] = getattr(self.materials, f.name)
@@ -536,6 +570,8 @@ class Scene:
                 world_color=read("world_color"),
                 tri_tangent=read("tri_tangent") if "tri_tangent" in names else np.zeros((0, 3), np.float32),
                 tri_period=read("tri_period") if "tri_period" in names else np.zeros(0, np.float32),
+                # older files have no shading normals: flat shading
+                corner_normals=read("corner_normals") if "corner_normals" in names else np.zeros((0, 3, 3), np.float32),
             )
 
 
@@ -772,6 +808,29 @@ def _check_row_counts(table, what: str, n: int) -> None:
         if rows != n:
             raise SceneError(f"{what} table column {f.name!r} has {rows if rows is not None else 'no'} rows, "
                              f"expected {n}")
+
+
+def _validate_corner_normals(value, v: np.ndarray, t: np.ndarray, warns: list) -> np.ndarray:
+    """Scene.corner_normals: (T, 3, 3) finite, or empty (flat). Returned unit length in float32;
+    a zero normal falls back to its triangle's face normal (one warning for all of them)."""
+    cn = _column(value, "corner_normals", (3, 3), allow_empty=True)
+    if len(cn) == 0:
+        return np.zeros((0, 3, 3), np.float32)
+    if len(cn) != len(t):
+        raise SceneError(f"corner_normals must have one (3, 3) entry per triangle ({len(t)}) or none, got {len(cn)}")
+    c64 = cn.astype(np.float64)
+    _check_range(c64.reshape(len(c64), 9), lambda i: f"triangle {i}", "shading normal", "")
+    length = np.linalg.norm(c64, axis=2, keepdims=True)
+    zero = ~(length > 1e-30)
+    if zero.any():
+        face = triangle_normals(v, t)
+        # degenerate triangles (zero face normal) are dropped later: no warning for them
+        n_zero = int((zero[:, :, 0] & (np.abs(face).max(axis=1) > 0)[:, None]).sum())
+        if n_zero:
+            warns.append(f"{n_zero} zero shading normal(s): their triangles' face normals are used there")
+        c64 = np.where(zero, face[:, None, :], c64)
+        length = np.where(zero, 1.0, length)
+    return (c64 / length).astype(np.float32)
 
 
 def _validate_materials(m: Materials) -> Materials:

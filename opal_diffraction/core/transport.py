@@ -17,6 +17,16 @@ reflectance, so the weight is unchanged (for mono rays the index is the one at t
 so total internal reflection differs per wavelength). Geometry is assumed closed with outward
 normals (entering vs leaving a dielectric is read from the side of the hit).
 
+Shading normals (docs/physics.md section 4.6): where the scene has per-corner normals, a hit's
+``ns`` is their barycentric interpolation (Phong normal interpolation), normalised and put on the
+side of the triangle's winding normal, then flipped with ``ng`` to face the incoming ray; mirror
+reflection, Fresnel and refraction use it, while offsets and side tests keep ``ng``. Where ``ns``
+would reflect a ray below the geometric surface it is first bent towards ``ng`` just enough that
+the mirror direction leaves at a small angle above it (Cycles' ``ensure_valid_specular_reflection``,
+intern/cycles/kernel/closure/bsdf_util.h, applied to every specular hit); a refracted direction
+that would stay on the incident side is refracted about ``ng`` instead. Without corner normals
+``ns`` is ``ng`` and nothing changes.
+
 Subclasses say what happens where a path leaves the scene (``on_miss``) and at every surface it
 hits (``on_hit``: direct light for the eye pass, deposits for the light pass), and whether a
 path goes on (``survives``: bounce limit, Russian roulette).
@@ -28,10 +38,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .geometry import interpolate_corners
 from .materials import DIELECTRIC, MIRROR
 from .optics import fresnel_dielectric, reflect, refract
 
-__all__ = ["Rays", "Hit", "SpecularWalker"]
+__all__ = ["Rays", "Hit", "SpecularWalker", "shading_normals", "valid_specular_normal"]
 
 
 @dataclass
@@ -88,6 +99,7 @@ class Rays:
 class Hit:
     p: np.ndarray     # (B, 3) float32 hit points
     ng: np.ndarray    # (B, 3) float32 geometric normal facing the incoming ray
+    ns: np.ndarray    # (B, 3) float32 unit shading normal, on ng's side of the surface (ng itself when flat)
     cos_i: np.ndarray  # (B,) cosine between -d and ng (>= 0)
     front: np.ndarray  # (B,) bool: the ray arrived on the side the triangle's normal points to
     mat: np.ndarray   # (B,) material index
@@ -96,7 +108,7 @@ class Hit:
     bu: np.ndarray    # (B,) barycentric u (hit = (1-u-v) v0 + u v1 + v v2)
     bv: np.ndarray    # (B,) barycentric v
 
-    _FIELDS = ("p", "ng", "cos_i", "front", "mat", "eps", "prim", "bu", "bv")
+    _FIELDS = ("p", "ng", "ns", "cos_i", "front", "mat", "eps", "prim", "bu", "bv")
 
     def take(self, mask) -> "Hit":
         if mask.dtype == bool and len(mask) and mask.all():
@@ -106,6 +118,55 @@ class Hit:
     @staticmethod
     def concat(a: "Hit", b: "Hit") -> "Hit":
         return Hit(*(np.concatenate([getattr(a, f), getattr(b, f)]) for f in Hit._FIELDS))
+
+
+def shading_normals(corner_normals: np.ndarray, prim, bu, bv, ng: np.ndarray) -> np.ndarray:
+    """Unit shading normals (B, 3) at hits: the corner normals of triangle ``prim`` interpolated
+    with the hit's barycentrics and normalised, on the side of ``ng`` (the triangle's winding
+    normal, (B, 3)): a normal pointing into the other half-space (a bad custom normal) is
+    negated, one that interpolates to zero (opposite corners) is ``ng``."""
+    n = interpolate_corners(corner_normals, prim, bu, bv)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    n = n / np.maximum(length, np.float32(1e-30))
+    n = np.where(np.einsum("ij,ij->i", n, ng)[:, None] < 0, -n, n)
+    return np.where(length > 1e-6, n, ng).astype(np.float32, copy=False)
+
+
+#: The mirror direction about a shading normal leaves at least this cosine above the geometric
+#: surface (or 0.9 of the incoming ray's, if that is shallower): Cycles' threshold.
+SPECULAR_MIN_COS = 0.01
+
+
+def valid_specular_normal(wo: np.ndarray, ng: np.ndarray, ns: np.ndarray) -> np.ndarray:
+    """The shading normal to reflect ``wo`` (unit, pointing away from the surface, wo . ng >= 0)
+    about, for ``ns`` on ng's side: ``ns`` itself where the mirror direction R = 2 (ns . wo) ns - wo
+    lies at least t = min(0.9 wo . ng, SPECULAR_MIN_COS) above the geometric surface, else ns
+    rotated towards ``ng`` (in their common plane) until R . ng = t, as Cycles'
+    ``ensure_valid_specular_reflection`` does. The rotated normal N' = sqrt(1 - z^2) X + z ng
+    (X: ns's part perpendicular to ng) solves 2 (N' . wo) z - wo . ng = t; squared, a quadratic
+    in z^2 (docs/physics.md section 4.6). Also fixes rays arriving behind ns (ns . wo < 0)."""
+    iz = np.einsum("ij,ij->i", wo, ng)
+    c = np.einsum("ij,ij->i", wo, ns)
+    thresh = np.minimum(0.9 * iz, SPECULAR_MIN_COS)
+    bad = 2 * c * np.einsum("ij,ij->i", ns, ng) - iz < thresh
+    if not bad.any():
+        return ns
+    w, g, n = (x[bad].astype(np.float64) for x in (wo, ng, ns))
+    izb, t = iz[bad].astype(np.float64), thresh[bad].astype(np.float64)
+    x = n - np.einsum("ij,ij->i", n, g)[:, None] * g
+    xl = np.linalg.norm(x, axis=1, keepdims=True)
+    x = np.where(xl > 1e-12, x / np.maximum(xl, 1e-300), n)
+    ix = np.einsum("ij,ij->i", w, x)
+    a = np.maximum(ix * ix + izb * izb, 1e-300)
+    b = 2 * (a + izb * t)
+    root = np.sqrt(np.maximum(b * b - 4 * a * (t + izb) ** 2, 0))
+    # of the two roots in z^2, the one that solves the unsquared equation: wo's X part and
+    # t + wo.ng (1 - 2 z^2) have the same sign
+    z2 = np.clip(np.where(ix < 0, b + root, b - root) / (4 * a), 0, 1)
+    fixed = np.sqrt(1 - z2)[:, None] * x + np.sqrt(z2)[:, None] * g
+    out = ns.copy()
+    out[bad] = fixed
+    return out
 
 
 class SpecularWalker:
@@ -207,11 +268,16 @@ class SpecularWalker:
     def _hit_info(self, rays: Rays, t, prim, bu, bv) -> Hit:
         prepared = self.prepared
         p = rays.o + t[:, None] * rays.d
-        ng = prepared.tri_normal[prim]
-        cos = -np.einsum("ij,ij->i", rays.d, ng)
+        ng0 = prepared.tri_normal[prim]
+        cos = -np.einsum("ij,ij->i", rays.d, ng0)
         front = cos > 0
-        ng = np.where(front[:, None], ng, -ng)
-        return Hit(p.astype(np.float32, copy=False), ng, np.abs(cos), front, prepared.tri_material[prim],
+        ng = np.where(front[:, None], ng0, -ng0)
+        if prepared.corner_normals is None:
+            ns = ng
+        else:  # on the triangle's side first, then flipped with ng: both face the incoming ray's side
+            ns = shading_normals(prepared.corner_normals, prim, bu, bv, ng0)
+            ns = np.where(front[:, None], ns, -ns)
+        return Hit(p.astype(np.float32, copy=False), ng, ns, np.abs(cos), front, prepared.tri_material[prim],
                    prepared.tri_offset[prim], prim, bu, bv)
 
     @staticmethod
@@ -226,8 +292,14 @@ class SpecularWalker:
             return rays.w
         return rays.weighted(self._per_ray(m.reflectance, hit.mat, rays.lam))
 
+    def _specular_normal(self, rays: Rays, hit: Hit) -> np.ndarray:
+        """The normal specular reflection and refraction use: ng when flat, else ns made valid."""
+        if self.prepared.corner_normals is None:
+            return hit.ng
+        return valid_specular_normal(-rays.d, hit.ng, hit.ns)
+
     def _mirror(self, rays: Rays, hit: Hit) -> Rays:
-        d = reflect(rays.d, hit.ng)
+        d = reflect(rays.d, self._specular_normal(rays, hit))
         o = hit.p + hit.eps[:, None] * hit.ng
         return rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit))
 
@@ -237,13 +309,21 @@ class SpecularWalker:
         lam0 = np.zeros(len(rays), np.int64) if rays.lam is None else rays.lam
         n = prepared.materials.ior[hit.mat, lam0]  # constant over the grid for white rays
         eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
-        fr = fresnel_dielectric(hit.cos_i, eta)
+        ns = self._specular_normal(rays, hit)
+        cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
+        fr = fresnel_dielectric(cos_s, eta)
         refl = rng.random(len(rays)) < fr
-        t_dir, _ = refract(rays.d, hit.ng, eta)
-        d = np.where(refl[:, None], reflect(rays.d, hit.ng), t_dir)
-        side = np.where(refl, 1.0, -1.0).astype(np.float32)
+        t_dir, _ = refract(rays.d, ns, eta)
+        if ns is not hit.ng:
+            # a refraction about ns that stays on the incident side is refracted about ng instead
+            stay = ~refl & (np.einsum("ij,ij->i", t_dir, hit.ng) >= 0)
+            if stay.any():
+                t_dir[stay] = refract(rays.d[stay], hit.ng[stay], eta[stay])[0]
+        d = np.where(refl[:, None], reflect(rays.d, ns), t_dir)
+        # offset to the side the new direction leaves on (a refraction about ng can be a TIR)
+        side = np.where(np.einsum("ij,ij->i", d, hit.ng) > 0, 1.0, -1.0).astype(np.float32)
         o = hit.p + (hit.eps * side)[:, None] * hit.ng
-        return rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit)), ~refl
+        return rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit)), side < 0
 
     def _split(self, rays: Rays, hit: Hit, rng):
         """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit."""

@@ -17,7 +17,8 @@ light power up to Blender's FLT_MAX) are clamped with a warning, NaN is an error
 material or light, and a node cycle renders as the default surface with a warning. Grating
 settings are exported with a per-triangle grating direction (``Scene.tri_tangent``) and, where
 the mesh has the opal tools' per-face period attribute (``opal_grating_period``), a per-triangle
-period (``Scene.tri_period``); impossible values are an error naming the material.
+period (``Scene.tri_period``); impossible values are an error naming the material. Smooth
+shading is exported as per-corner shading normals (``Scene.corner_normals``, world space).
 
 One module per concept, as in BlendLuxCore's ``export`` package:
 
@@ -141,7 +142,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
 
     if test_break is not None and test_break():
         raise ExportCancelled()
-    vertices, triangles, tri_material, tri_tangent, tri_period = flatten(
+    vertices, triangles, tri_material, tri_tangent, tri_period, corner_normals = flatten(
         groups, meshes, materials.grating, warn, materials.hidden_rows())
 
     lights.warn_soft()
@@ -152,7 +153,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     core_scene = Scene(
         vertices=vertices, triangles=triangles, tri_material=tri_material,
         materials=core_materials, lights=Lights.from_list(lights.rows), camera=cam,
-        world_color=world, tri_tangent=tri_tangent, tri_period=tri_period,
+        world_color=world, tri_tangent=tri_tangent, tri_period=tri_period, corner_normals=corner_normals,
     )
     meshes.done()
     stats = {

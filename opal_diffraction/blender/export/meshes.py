@@ -7,7 +7,11 @@ set of material slots are transformed together in one vectorised product (:func:
 mirrored instances get their winding flipped. Grating faces also get an object-space grating
 vector (:func:`tangents`: the UV map's U direction, the local X axis or the opal tools' face
 attribute) and, where the mesh has the period attribute, a per-triangle period
-(:func:`periods`).
+(:func:`periods`). Smooth-shaded meshes carry their per-corner shading normals as Cycles shades
+with them (:func:`read_corner_normals`: Blender's ``Mesh.corner_normals``, which already
+account for flat and smooth faces, sharp edges, "Smooth by Angle" and custom split normals),
+taken to world space with the inverse transpose of each instance's matrix
+(:func:`world_corner_normals`); a fully flat mesh carries none.
 
 :class:`MeshCache` keeps the meshes read between exports of one depsgraph (a rendered viewport
 re-exports after every change), dropping those whose geometry changed
@@ -22,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...core.geometry import triangle_normals
 from ...core.scene import SceneError
 from ..mesh_io import GRATING_ATTRIBUTE, PERIOD_ATTRIBUTE, attribute_ok, foreach
 
@@ -38,6 +43,8 @@ __all__ = [
     "mesh_for",
     "tangents",
     "periods",
+    "read_corner_normals",
+    "world_corner_normals",
     "transform",
     "subset",
     "MeshCache",
@@ -99,6 +106,8 @@ class MeshData:
     face_dir: np.ndarray | None  # (T, 3) per-triangle grating attribute, or None
     name: str
     face_period: np.ndarray | None = None  # (T,) per-triangle period attribute (nm), or None
+    corner_normal: np.ndarray | None = None  # (T, 3, 3) float32 object-space shading normals, or None: all flat
+    flat_tri: np.ndarray | None = None  # (T,) bool: triangles of flat faces (face normal), or None: none flat
 
 
 def read_mesh(me, name: str, want_uv: bool) -> MeshData:
@@ -139,7 +148,52 @@ def read_mesh(me, name: str, want_uv: bool) -> MeshData:
         attr = me.attributes.get(PERIOD_ATTRIBUTE)
         if attribute_ok(attr, "FLOAT") and face is not None:
             face_period = foreach(attr.data, "value", len(me.polygons), np.float32)[face]
-    return MeshData(verts.astype(np.float64), tris, slot, uv, face_dir, name, face_period)
+    md = MeshData(verts.astype(np.float64), tris, slot, uv, face_dir, name, face_period)
+    md.corner_normal, md.flat_tri = read_corner_normals(me, lt, nt, face)
+    return md
+
+
+def read_corner_normals(me, lt, nt: int, face) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(corner normals (T, 3, 3) float32 object space, flat (T,) bool or None) of a mesh's
+    triangles, as Cycles shades them: Blender's ``corner_normals`` (4.1+), which hold the smooth,
+    split (sharp edges, "Smooth by Angle", auto smooth) and custom normals; triangles of flat
+    faces are marked (they take their own face normal after the transform). (None, None) for a
+    mesh with no smooth face (``normals_domain`` 'FACE'). ``face``: triangle -> polygon, or None."""
+    if nt == 0 or getattr(me, "normals_domain", "FACE") == "FACE" or not hasattr(me, "corner_normals"):
+        return None, None
+    loops = foreach(lt, "loops", nt, np.int32, 3)
+    normals = foreach(me.corner_normals, "vector", len(me.loops), np.float32, 3)[loops]
+    sharp = me.attributes.get("sharp_face")
+    flat = None
+    if attribute_ok(sharp, "BOOLEAN") and face is not None:
+        flat = foreach(sharp.data, "value", len(me.polygons), bool)[face]
+        flat = flat if flat.any() else None
+    return normals, flat
+
+
+def world_corner_normals(md: MeshData, mats: np.ndarray, verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """(K*T, 3, 3) float32 unit world shading normals of K instances (matrices (K, 4, 4)) of
+    ``md``, whose world vertices and triangles :func:`transform` gave. A normal n goes to
+    M^-T n (the inverse transpose keeps it perpendicular to the surface under non-uniform
+    scale), computed as sign(det M) cof(M) n, which needs no inverse; mirrored instances get
+    their corners in the flipped winding's order. Flat triangles, and every triangle of a mesh
+    without corner normals, get their world face normal at all three corners."""
+    k, nt = len(mats), len(md.triangles)
+    face = triangle_normals(verts, tris).reshape(k, nt, 1, 3)
+    out = np.repeat(face, 3, axis=2)
+    if md.corner_normal is not None:
+        c0, c1, c2 = (mats[:, :3, j] for j in range(3))  # columns of each matrix
+        n = md.corner_normal.astype(np.float64)
+        cof = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=2)  # (K, 3, 3) cof(M)
+        det = np.einsum("ki,ki->k", c0, np.cross(c1, c2))
+        world = np.einsum("kij,tcj->ktci", cof * np.sign(det)[:, None, None], n)
+        world /= np.maximum(np.linalg.norm(world, axis=3, keepdims=True), 1e-30)
+        mirrored = det < 0
+        if mirrored.any():
+            world[mirrored] = world[mirrored][:, :, [0, 2, 1]]
+        smooth = np.ones(nt, bool) if md.flat_tri is None else ~md.flat_tri
+        out[:, smooth] = world[:, smooth]
+    return out.reshape(-1, 3, 3).astype(np.float32)
 
 
 def tangents(md: MeshData, gratings: list, tri_mat_local: np.ndarray, warn) -> np.ndarray:
@@ -334,7 +388,7 @@ def subset(md: MeshData, keep: np.ndarray) -> MeshData:
     """``md`` with only the triangles where ``keep`` is True (the vertices all kept)."""
     pick = (lambda a: None if a is None else a[keep])
     return MeshData(md.vertices, md.triangles[keep], md.slot[keep], pick(md.uv), pick(md.face_dir), md.name,
-                    pick(md.face_period))
+                    pick(md.face_period), corner_normal=pick(md.corner_normal), flat_tri=pick(md.flat_tri))
 
 
 def flatten(groups: dict, meshes: SceneMeshes, grating: list, warn, hidden: np.ndarray | None = None):
@@ -343,9 +397,12 @@ def flatten(groups: dict, meshes: SceneMeshes, grating: list, warn, hidden: np.n
     settings per row (None: no grating); ``hidden`` (per row, optional): rows whose triangles
     are left out (volume-only materials). Returns (vertices (V, 3) float32, triangles (T, 3)
     int32, tri_material (T,) int32, tri_tangent (T, 3) float32 or (0, 3) without gratings,
-    tri_period (T,) float32 or (0,) without period attributes)."""
+    tri_period (T,) float32 or (0,) without period attributes, corner_normals (T, 3, 3) float32
+    or (0, 3, 3) when no mesh has a smooth face)."""
     any_grating = any(g is not None for g in grating)
     vert_chunks, tri_chunks, mat_chunks, tan_chunks, per_chunks = [], [], [], [], []
+    smooth = any(meshes[mkey] is not None and meshes[mkey].corner_normal is not None for mkey, _ in groups)
+    normal_chunks = []
     n_verts = 0
     for (mkey, slots), mlist in groups.items():
         md = meshes[mkey]
@@ -360,6 +417,8 @@ def flatten(groups: dict, meshes: SceneMeshes, grating: list, warn, hidden: np.n
                 continue
             md, tri_mat_local = subset(md, keep), tri_mat_local[keep]
         verts, tris, det = transform(md, mats)
+        if smooth:
+            normal_chunks.append(world_corner_normals(md, mats, verts, tris))
         vert_chunks.append(verts)
         tri_chunks.append(tris + n_verts)
         mat_chunks.append(np.tile(tri_mat_local, len(mats)))
@@ -385,4 +444,5 @@ def flatten(groups: dict, meshes: SceneMeshes, grating: list, warn, hidden: np.n
     if n_verts >= 2**31:
         raise SceneError(f"the scene has {n_verts} vertices, more than a 32-bit index can address")
     tri_tangent = np.concatenate(tan_chunks) if (any_grating and tan_chunks) else np.zeros((0, 3), np.float32)
-    return vertices, triangles, tri_material, tri_tangent, tri_period
+    corner_normals = np.concatenate(normal_chunks) if normal_chunks else np.zeros((0, 3, 3), np.float32)
+    return vertices, triangles, tri_material, tri_tangent, tri_period, corner_normals
