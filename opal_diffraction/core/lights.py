@@ -46,6 +46,9 @@ POINT, SPOT, SUN, AREA_RECT, AREA_DISK = (int(k) for k in LightKind)
 #: Radiance of a sized light stays below this (W/m^2/sr per spectral unit): a radius whose
 #: radiance I / (pi r^2) would overflow float32 renders as the delta light it is indistinguishable from.
 _MAX_RADIANCE_SCALE = 1e30
+#: Directions handed back in float32 may land this far (in cosine) outside the cone they were
+#: drawn in: light_pdf still counts them in.
+_CONE_SLACK = 4e-7
 
 
 @dataclass
@@ -296,13 +299,13 @@ def light_pdf(pl: PreparedLights, index: int, p: np.ndarray, wi: np.ndarray) -> 
         return np.zeros(b, np.float32)
     if k == SUN:
         omc = float(pl.sun_omc[index])
-        inside = wi @ (-pl.direction[index]) >= 1.0 - omc
+        inside = wi @ (-pl.direction[index]) >= 1.0 - omc - _CONE_SLACK
         return np.where(inside, 1.0 / (2 * np.pi * omc), 0.0).astype(np.float32)
     if k in (POINT, SPOT):
         r = float(pl.radius[index])
         if pl.sphere[index]:
             axis, d, r, omc, inside = _sphere_geometry(pl, index, p)
-            in_cone = np.einsum("ij,ij->i", wi, axis) >= 1.0 - omc
+            in_cone = np.einsum("ij,ij->i", wi, axis) >= 1.0 - omc - _CONE_SLACK
             return np.where(inside, 1.0 / (4 * np.pi), np.where(in_cone, 1.0 / (2 * np.pi * omc), 0.0)).astype(
                 np.float32)
         to_p = p - pl.position[index]
