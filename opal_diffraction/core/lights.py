@@ -172,28 +172,45 @@ def is_delta(pl: PreparedLights, index: int) -> bool:
     return False
 
 
-def _sample_cone(axis: np.ndarray, omc, rng: np.random.Generator, b: int) -> np.ndarray:
+def _basis(ax, ay, az):
+    """A branchless orthonormal basis about the unit vector (ax, ay, az), per component
+    (Duff et al. 2017, "Building an orthonormal basis, revisited"): ((ux, uy, uz), (vx, vy, vz))."""
+    sign = np.where(az >= 0, 1.0, -1.0).astype(ax.dtype)
+    a = -1.0 / (sign + az)
+    b = ax * ay * a
+    return (1.0 + sign * ax * ax * a, sign * b, -sign * ax), (b, sign + ay * ay * a, -ay)
+
+
+def _sample_cone(axis: np.ndarray, omc, rng: np.random.Generator, b: int, dtype=np.float64) -> np.ndarray:
     """Directions uniform in the cone around unit ``axis`` ((3,) or (B, 3)) with 1 - cos(half
     angle) = ``omc`` (scalar or (B,)): cos = 1 - u omc, sin from u omc (2 - u omc), so narrow
-    cones keep their precision. float64 (B, 3)."""
-    x = rng.random(b) * omc
+    cones keep their precision. (B, 3) of ``dtype``."""
+    axis = np.broadcast_to(np.asarray(axis, dtype), (b, 3))
+    ax, ay, az = axis[:, 0], axis[:, 1], axis[:, 2]
+    x = rng.random(b, dtype) * np.asarray(omc, dtype)
     cos_t = 1.0 - x
     sin_t = np.sqrt(np.maximum(x * (2.0 - x), 0.0))
-    phi = 2 * np.pi * rng.random(b)
-    axis = np.broadcast_to(np.asarray(axis, np.float64), (b, 3))
-    tu, tv = orthonormal_basis(axis)
-    return (cos_t[:, None] * axis + (sin_t * np.cos(phi))[:, None] * tu + (sin_t * np.sin(phi))[:, None] * tv)
+    phi = dtype(2 * np.pi) * rng.random(b, dtype)
+    cu, cv = sin_t * np.cos(phi), sin_t * np.sin(phi)
+    (ux, uy, uz), (vx, vy, vz) = _basis(ax, ay, az)
+    out = np.empty((b, 3), dtype)
+    out[:, 0] = cos_t * ax + cu * ux + cv * vx
+    out[:, 1] = cos_t * ay + cu * uy + cv * vy
+    out[:, 2] = cos_t * az + cu * uz + cv * vz
+    return out
 
 
 def _sphere_geometry(pl, index, p):
-    """(to_centre unit (B, 3), d (B,), r, omc (B,) of the cone the sphere subtends, inside (B,))."""
-    c = pl.position[index]
+    """(to_centre unit (B, 3), d (B,), r, omc (B,) of the cone the sphere subtends, inside (B,)),
+    in the dtype of p."""
+    dt = np.float32 if p.dtype == np.float32 else np.float64
+    c = pl.position[index].astype(dt)
     r = float(pl.radius[index])
-    to_c = c - np.asarray(p, np.float64)
-    d = np.linalg.norm(to_c, axis=1)
+    to_c = c - p
+    d = np.sqrt(np.einsum("ij,ij->i", to_c, to_c))
     inside = d <= r
-    axis = to_c / np.maximum(d, 1e-300)[:, None]
-    omc = np.where(inside, 2.0, _one_minus_cos_from_sin2((r / np.maximum(d, 1e-300)) ** 2))
+    axis = to_c / np.maximum(d, dt(1e-30))[:, None]
+    omc = np.where(inside, dt(2.0), _one_minus_cos_from_sin2((dt(r) / np.maximum(d, dt(1e-30))) ** 2)).astype(dt)
     return axis, d, r, omc, inside
 
 
@@ -218,7 +235,7 @@ def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.G
     if k == SUN:
         if pl.sun_half[index] > 0:
             omc = float(pl.sun_omc[index])
-            wi = _sample_cone(-pl.direction[index], omc, rng, b).astype(f32)
+            wi = _sample_cone(-pl.direction[index], omc, rng, b, f32)
             # radiance / S = 1 / (pi sin^2 h), pdf = 1 / (2 pi omc), sin^2 h = omc (2 - omc)
             return wi, np.full(b, np.inf, f32), np.full(b, 2.0 / (2.0 - omc), f32)
         wi = np.broadcast_to(-pl.direction[index].astype(f32), (b, 3))
@@ -250,41 +267,43 @@ def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.G
 
 
 def _sample_sized_point(pl, index, p, rng):
+    """sample_light for a point / spot with a radius, in float32 (p's own precision)."""
     b = len(p)
     f32 = np.float32
+    p = np.asarray(p, f32)
     r = float(pl.radius[index])
     if pl.sphere[index]:
         axis, d, r, omc, inside = _sphere_geometry(pl, index, p)
-        wi = np.empty((b, 3))
-        g = np.empty(b)
-        out = ~inside
-        if out.any():
-            wi[out] = _sample_cone(axis[out], omc[out], rng, int(out.sum()))
-            g[out] = 2.0 * omc[out] / (r * r)  # (1 / (pi r^2)) / (1 / (2 pi omc))
-        if inside.any():  # uniform over all directions: pdf 1 / (4 pi)
-            wi[inside] = _sample_cone(axis[inside], 2.0, rng, int(inside.sum()))
-            g[inside] = 4.0 / (r * r)
+        if inside.any():  # uniform over all directions there (pdf 1 / (4 pi)): omc = 2
+            wi = _sample_cone(axis, omc, rng, b, f32)
+            g = np.where(inside, f32(4.0 / (r * r)), f32(2.0 / (r * r)) * omc)
+        else:
+            wi = _sample_cone(axis, omc, rng, b, f32)
+            g = f32(2.0 / (r * r)) * omc  # (1 / (pi r^2)) / (1 / (2 pi omc))
         cos_t = np.einsum("ij,ij->i", wi, axis)
-        dist = _distance_to_sphere(d, cos_t, r, inside)
+        dist = _distance_to_sphere(d, cos_t, f32(r), inside)
         if int(pl.kind[index]) == SPOT:  # the cone mask along the ray, outside the sphere only (spot.h)
             g = np.where(inside, g, g * _spot_mask(pl, index, -wi))
-        return wi.astype(f32), dist.astype(f32), g.astype(f32)
+        return wi, dist.astype(f32), g.astype(f32)
     # soft falloff: a uniform point on the disk of radius r facing p; g = (1/(pi r^2)) / pdf with
     # pdf = t^2 / (pi r^2 cos_l) and cos_l = d / t (the disk is perpendicular to the centre direction)
-    c = pl.position[index]
-    to_p = np.asarray(p, np.float64) - c
-    d = np.linalg.norm(to_p, axis=1)
-    n = to_p / np.maximum(d, 1e-300)[:, None]
-    tu, tv = orthonormal_basis(n)
-    rad, phi = r * np.sqrt(rng.random(b)), 2 * np.pi * rng.random(b)
-    q = c + (rad * np.cos(phi))[:, None] * tu + (rad * np.sin(phi))[:, None] * tv
-    to_q = q - p
-    t = np.maximum(np.linalg.norm(to_q, axis=1), 1e-300)
+    c = pl.position[index].astype(f32)
+    to_p = p - c
+    d = np.sqrt(np.einsum("ij,ij->i", to_p, to_p))
+    n = to_p / np.maximum(d, f32(1e-30))[:, None]
+    (ux, uy, uz), (vx, vy, vz) = _basis(n[:, 0], n[:, 1], n[:, 2])
+    rad, phi = f32(r) * np.sqrt(rng.random(b, f32)), f32(2 * np.pi) * rng.random(b, f32)
+    cu, cv = rad * np.cos(phi), rad * np.sin(phi)
+    to_q = np.empty((b, 3), f32)  # q - p = (c - p) + cu u + cv v
+    to_q[:, 0] = cu * ux + cv * vx - to_p[:, 0]
+    to_q[:, 1] = cu * uy + cv * vy - to_p[:, 1]
+    to_q[:, 2] = cu * uz + cv * vz - to_p[:, 2]
+    t = np.maximum(np.sqrt(np.einsum("ij,ij->i", to_q, to_q)), f32(1e-30))
     wi = to_q / t[:, None]
-    g = d / t**3
+    g = d / (t * t * t)
     if int(pl.kind[index]) == SPOT:
         g = g * _spot_mask(pl, index, -wi)
-    return wi.astype(f32), t.astype(f32), g.astype(f32)
+    return wi, t, g.astype(f32)
 
 
 def light_pdf(pl: PreparedLights, index: int, p: np.ndarray, wi: np.ndarray) -> np.ndarray:
