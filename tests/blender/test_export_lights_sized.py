@@ -118,14 +118,15 @@ def _penumbra_width(profile: np.ndarray, x0: float) -> float:
     return level(0.75) - level(0.25)
 
 
-def _compare(name, cyc, ref, what, rtol=0.05):
-    """4 x 4-pixel block means where lit: |ref / cycles - 1| < rtol (Cycles at 256 spp: about
-    1 % noise per block), and the profiles through the shadow within 5 % of the lit level."""
+def _compare(name, cyc, ref, what, rtol=0.05, k=4):
+    """k x k-pixel block means where lit: |ref / cycles - 1| < rtol (Cycles at 256 spp: about
+    1 % noise per 4 x 4 block; this engine's render, as noisy, is compared in 8 x 8 blocks), and
+    the profiles through the shadow within 5 % of the lit level."""
     mask = ~_occluder_pixels()
-    bc = (cyc * mask).reshape(N // 4, 4, N // 4, 4).sum(axis=(1, 3))
-    br = (ref * mask).reshape(N // 4, 4, N // 4, 4).sum(axis=(1, 3))
-    cnt = mask.reshape(N // 4, 4, N // 4, 4).sum(axis=(1, 3))
-    lit = (cnt == 16) & (bc > 0.2 * bc.max())
+    bc = (cyc * mask).reshape(N // k, k, N // k, k).sum(axis=(1, 3))
+    br = (ref * mask).reshape(N // k, k, N // k, k).sum(axis=(1, 3))
+    cnt = mask.reshape(N // k, k, N // k, k).sum(axis=(1, 3))
+    lit = (cnt == k * k) & (bc > 0.2 * bc.max())
     ratio = br[lit] / bc[lit]
     print(f"{name} {what}: block ratio mean {ratio.mean():.4f} min {ratio.min():.4f} max {ratio.max():.4f}")
     assert abs(ratio.mean() - 1) < 0.02, (name, what, ratio.mean())
@@ -170,7 +171,7 @@ def test_soft_shadow_matches_cycles(case, tmp_path):
     cyc, opal = _renders(tmp_path)
     ref = _analytic_image(row)
     _compare(case, cyc, ref, "analytic")
-    _compare(case, cyc, opal, "this engine")
+    _compare(case, cyc, opal, "this engine", k=8)
     if x_far is None:
         return
     w_c, w_a, w_o = (_penumbra_width(_profile(im), x_far) for im in (cyc, ref, opal))
