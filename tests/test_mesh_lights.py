@@ -175,3 +175,19 @@ def test_glowing_panel_throws_the_analytic_flux_through_a_glass_slab():
     # Student t with 5 degrees of freedom: |t| > 6.87 has probability 1e-3
     assert abs(z) < 6.87
     assert se / expected < 0.01  # and the test is sharp: within a percent
+
+
+def test_an_emitting_mesh_is_a_light_for_the_warnings():
+    """'the scene has no lights' is for scenes that nothing lights: not when a mesh emits."""
+    mats = Materials.from_list([{"kind": "DIFFUSE"}, {"kind": "DIFFUSE", "emission": (1.0, 1.0, 1.0)}])
+    s = Scene(materials=mats)
+    s.add_mesh(*primitives.quad((0, 0, 0), (4, 0, 0), (0, 4, 0)), material=0)
+    s.camera = Camera.look_at((0, -4, 3), (0, 0, 0), width=8, height=8)
+    _, warns = s.validated()
+    assert any("no lights" in w for w in warns)
+    s.add_mesh(*primitives.quad((0, 0, 1), (1, 0, 0), (0, 1, 0)), material=1)
+    _, warns = s.validated()
+    assert not any("no lights" in w for w in warns), warns
+    ctx = prepare(s, RenderSettings(wavelength_step=20.0))
+    assert ctx.mesh_lights is not None and sorted(ctx.mesh_lights.tri.tolist()) == [2, 3]
+    assert prepare(Scene(materials=mats, camera=s.camera), RenderSettings(wavelength_step=20.0)).mesh_lights is None

@@ -39,6 +39,8 @@ class MeshLights:
         self.total = float(self._cdf[-1])
         self._area_pdf = area_pdf_by_tri  # (T,) float64: area pdf of a point on scene triangle t (0: not an emitter)
         self._tri_normal = tri_normal     # (T, 3) float64 unit normals of all scene triangles
+        for a in (tri, v0, e1, e2, normal, area, weight, self._cdf, area_pdf_by_tri, tri_normal):
+            a.flags.writeable = False  # part of a frozen PreparedScene, read from many threads
 
     @classmethod
     def build(cls, vertices, triangles, tri_material, emission_spectra, tri_normal,
