@@ -16,7 +16,10 @@ point or spot light, or a point sampled on an area light, a direction is drawn i
 subtends one object's sphere, the object chosen in proportion to its cone's solid angle; the pdf
 of a direction is the mixture sum_c P_c [w in cone c] / Omega_c, so overlapping cones are
 accounted for. A sun draws a point on the disk one object's sphere casts across its beam, with
-the matching mixture pdf per unit area. Paths start with weight (emitted radiometric quantity /
+the matching mixture pdf per unit area. Lights with a size start on their surface (a sphere) or
+in their cone (a sun with an angle), and emissive triangles (mesh_lights.MeshLights) at a point
+chosen by area x luminance, each aimed the same way (docs/physics.md section 7.7; the emissive
+meshes are one more entry, index L, of the budget). Paths start with weight (emitted radiometric quantity /
 pdf / paths of that light), so the map holds flux in W per wavelength sample; lights share the
 path budget in proportion to the power they send towards casters.
 
