@@ -63,7 +63,8 @@ def scene_arrays(s: Scene) -> dict:
 REQUIRED = {"format_version", "vertices", "triangles", "tri_material", "world_color", "camera_matrix"}
 # missing these falls back to a default (an older file): a clean render, not an error
 OPTIONAL = {"tri_tangent", "tri_period"} | {"material_" + f.name for f in fields(Materials) if f.name != "kind"} | {
-    "camera_" + f.name for f in fields(Camera) if f.name != "matrix"}
+    "camera_" + f.name for f in fields(Camera) if f.name != "matrix"} | {
+    "light_radius", "light_angle", "light_soft_falloff"}  # light columns newer than format 1
 
 
 def malformed_files(folder) -> list[tuple[str, str, bool]]:

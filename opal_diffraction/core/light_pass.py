@@ -18,7 +18,10 @@ point or spot light, or a point sampled on an area light, a direction is drawn i
 subtends one object's sphere, the object chosen in proportion to its cone's solid angle; the pdf
 of a direction is the mixture sum_c P_c [w in cone c] / Omega_c, so overlapping cones are
 accounted for. A sun draws a point on the disk one object's sphere casts across its beam, with
-the matching mixture pdf per unit area. Paths start with weight (emitted radiometric quantity /
+the matching mixture pdf per unit area. Lights with a size start on their surface (a sphere) or
+in their cone (a sun with an angle), and emissive triangles (mesh_lights.MeshLights) at a point
+chosen by area x luminance, each aimed the same way (docs/physics.md section 7.7; the emissive
+meshes are one more entry, index L, of the budget). Paths start with weight (emitted radiometric quantity /
 pdf / paths of that light), so the map holds flux in W per wavelength sample; lights share the
 path budget in proportion to the power they send towards casters.
 
@@ -195,23 +198,33 @@ class LightTargets:
     grating_mask: np.ndarray   # (T,) bool: grating triangles (records land there)
     objects: CasterObjects     # bounding spheres of the connected caster objects
     budget: np.ndarray         # (L,) estimated luminous power each light sends towards the casters
+    mesh_budget: float = 0.0   # the same for all emissive triangles together (mesh_lights.MeshLights)
 
     @property
     def needed(self) -> bool:
         """Some light reaches a caster, and something can receive what comes out of it."""
-        return bool(np.any(self.budget > 0)) and bool(self.receiver_mask.any() or self.grating_mask.any())
+        return (bool(np.any(self.budget > 0)) or self.mesh_budget > 0) and bool(
+            self.receiver_mask.any() or self.grating_mask.any())
+
+    @property
+    def budgets(self) -> np.ndarray:
+        """(L + 1,) the lights' budgets, then the emissive meshes' (light-pass index L)."""
+        return np.append(self.budget, self.mesh_budget)
 
 
 def find_light_targets(vertices, triangles, tri_material, materials, gratings, lights, conv,
-                       light_paths: int = 1) -> LightTargets:
-    """The light pass's targets for a scene (prepared materials, gratings and lights). Without
-    light paths or lights there is nothing to aim, so the casters are not grouped at all."""
+                       light_paths: int = 1, mesh_lights=None) -> LightTargets:
+    """The light pass's targets for a scene (prepared materials, gratings, lights and emissive
+    meshes). Without light paths or lights there is nothing to aim, so the casters are not
+    grouped at all."""
     mk = materials.kind[tri_material] if len(tri_material) else np.zeros(0, np.int32)
     caster = np.isin(mk, [MIRROR, DIELECTRIC])
     grating = gratings.enabled[tri_material] if len(tri_material) else np.zeros(0, bool)
-    aimed = caster if light_paths > 0 and len(lights) else np.zeros_like(caster)
+    emitters = len(lights) > 0 or mesh_lights is not None
+    aimed = caster if light_paths > 0 and emitters else np.zeros_like(caster)
     objects = caster_objects(vertices, triangles, aimed)
-    return LightTargets(caster, mk == DIFFUSE, grating, objects, _light_budget(lights, objects, conv))
+    return LightTargets(caster, mk == DIFFUSE, grating, objects, _light_budget(lights, objects, conv),
+                        _mesh_light_budget(mesh_lights, objects))
 
 
 def _light_budget(lights, obj: CasterObjects, conv) -> np.ndarray:
@@ -327,7 +340,8 @@ class LightWork:
         rec_layout, rec_warning = (element_layout(prepared, n_paths, targets.grating_mask, "grating-record")
                                    if targets.grating_mask.any() else (None, ""))
         warning = "; ".join(dict.fromkeys(w for w in (warning, rec_warning) if w))
-        share = targets.budget / max(targets.budget.sum(), 1e-300)
+        budgets = targets.budgets  # the lights, then the emissive meshes (index L)
+        share = budgets / max(budgets.sum(), 1e-300)
         paths_per_light = np.floor(share * n_paths).astype(np.int64)
         jobs = [LightBatch(li, bi, start, int(n_l)) for li, n_l in enumerate(paths_per_light)
                 for bi, start in enumerate(range(0, int(n_l), BATCH_PATHS))]
@@ -351,10 +365,15 @@ def trace_batch(prepared, job: LightBatch, illum, records) -> dict:
     seed = int(prepared.settings.seed)
     b = job.paths
     rng = np.random.default_rng(np.random.SeedSequence([seed, LIGHT_PASS_STREAM, job.light, job.batch]))
-    o, d, weight = _emit(prepared, job.light, b, rng)
-    live = weight > 0
+    if job.light == len(prepared.lights):  # the emissive meshes: a spectrum per path
+        o, d, wspec = _emit_mesh(prepared, b, rng)
+        live = wspec.max(axis=1) > 0
+        w = (wspec[live] / float(job.light_paths)).astype(np.float32)
+    else:
+        o, d, weight = _emit(prepared, job.light, b, rng)
+        live = weight > 0
+        w = (weight[live, None] / float(job.light_paths)).astype(np.float32) * prepared.lights.spectrum[job.light][None, :]
     m = int(live.sum())
-    w = (weight[live, None] / float(job.light_paths)).astype(np.float32) * prepared.lights.spectrum[job.light][None, :]
     rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(m, np.int64),
                 w, None, np.zeros(m, np.int32), rng.random(m))
     tr = _LightTrace(prepared, rng, illum, records)
@@ -469,6 +488,10 @@ def _emit(prepared, li: int, b: int, rng):
     the geometric terms; the light's spectrum is applied by the caller)."""
     lights, obj = prepared.lights, prepared.light_targets.objects
     k = int(lights.kind[li])
+    if k == SUN and lights.sun_half[li] > 0:
+        return _emit_sun_cone(prepared, li, b, rng)
+    if k in (POINT, SPOT) and lights.radius[li] > 0:
+        return _emit_sized_point(prepared, li, b, rng)
     if k == SUN:
         d = lights.direction[li]
         u, v = orthonormal_basis(d[None, :])
@@ -520,3 +543,93 @@ def _emit(prepared, li: int, b: int, rng):
     # radiance (in the spectrum) * cos * area / pdf(direction)   (pdf of the point: 1 / area)
     weight = np.where(cos_l > 0, cos_l * lights.area[li] / np.maximum(pdf, 1e-300), 0.0)
     return origin + prepared.offset_base * d, d, weight
+
+
+def _far_distance(prepared) -> float:
+    """Sun paths start this far from the origin: well outside the scene, in its own units (an
+    absolute distance would swamp a millimetre scene's coordinates in float32)."""
+    return 4.0 * (float(np.max(np.abs(prepared.scene.vertices))) + prepared.extent)
+
+
+def _emit_sun_cone(prepared, li: int, b: int, rng):
+    """A sun with an angle: a direction uniform in its cone (pdf 1 / (2 pi (1 - cos h))), then
+    a point on the disk one caster's sphere casts across that direction (object chosen by its
+    disk area), with the mixture pdf per unit area. Weight = (radiance / S) / (pdf_dir pdf_area)
+    = g_sun / pdf_area with g_sun = 2 / (1 + cos h) (docs/physics.md section 7.7)."""
+    from .lights import _sample_cone
+
+    lights, obj = prepared.lights, prepared.light_targets.objects
+    omc = float(lights.sun_omc[li])
+    d = _sample_cone(lights.direction[li], omc, rng, b)  # travel directions (B, 3)
+    u, v = orthonormal_basis(d)
+    area = np.pi * obj.radius**2
+    prob = area / area.sum()
+    pick = np.minimum((rng.random((b, 1)) > np.cumsum(prob)[None, :]).sum(axis=1), len(obj) - 1)
+    r = obj.radius[pick] * np.sqrt(rng.random(b))
+    phi = 2 * np.pi * rng.random(b)
+    c = obj.centre[pick]
+    c_plane = c - np.einsum("ij,ij->i", c, d)[:, None] * d  # on the plane through 0 normal to d
+    pts = c_plane + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
+    # |pts - proj(centre)|^2 = |pts - centre|^2 - ((pts - centre) . d)^2, for every object at once
+    cd = d @ obj.centre.T  # (B, C)
+    dist2 = (np.sum(pts**2, axis=1)[:, None] - 2 * pts @ obj.centre.T + np.sum(obj.centre**2, axis=1)[None, :]
+             - cd**2)
+    pdf = np.sum(np.where(dist2 <= obj.radius**2 * (1 + 1e-9), prob / area, 0.0), axis=1)
+    weight = np.where(pdf > 0, (2.0 / (2.0 - omc)) / np.maximum(pdf, 1e-300), 0.0)
+    return pts - _far_distance(prepared) * d, d, weight
+
+
+def _emit_sized_point(prepared, li: int, b: int, rng):
+    """A point or spot light with a radius: a uniform point on its sphere (pdf 1 / (4 pi r^2)),
+    then a direction towards a caster (the mixture cone pdf), outward only. Radiance I / (pi r^2)
+    (in the spectrum: I), so weight = 4 cos_l / pdf_dir, times the spot mask along the direction
+    (docs/physics.md section 7.7). A soft-falloff light (a disk facing each shading point) is
+    emitted as the sphere of the same radius: the same intensity, and the same cone seen from a
+    caster to first order in r / distance."""
+    from .lights import _sample_cone, _spot_mask
+
+    lights, obj = prepared.lights, prepared.light_targets.objects
+    r = float(lights.radius[li])
+    nrm = _sample_cone(np.array([0.0, 0.0, 1.0]), 2.0, rng, b)  # uniform on the sphere
+    q = lights.position[li] + r * nrm
+    axis, cos_max, omega = _cones(q, obj)
+    d, pdf = _sample_cones(q, omega, axis, cos_max, omega, rng)
+    cos_l = np.einsum("ij,ij->i", d, nrm)
+    weight = np.where((cos_l > 0) & (pdf > 0), 4.0 * cos_l / np.maximum(pdf, 1e-300), 0.0)
+    if int(lights.kind[li]) == SPOT:
+        weight = weight * _spot_mask(lights, li, d)
+    return q + prepared.offset_base * d, d, weight
+
+
+def _emit_mesh(prepared, b: int, rng):
+    """Paths from the emissive triangles (prepared.mesh_lights): a triangle by area x luminance
+    and a uniform point on it (area pdf p_A), a direction towards a caster (mixture cone pdf,
+    either side: the emitters are two-sided). Returns origins, directions and spectral weights
+    (B, n) = L_e |cos_l| / (p_A pdf_dir) (docs/physics.md section 7.7)."""
+    ml, obj = prepared.mesh_lights, prepared.light_targets.objects
+    q, j, pa = ml.sample_points(rng, b)
+    axis, cos_max, omega = _cones(q, obj)
+    d, pdf = _sample_cones(q, omega, axis, cos_max, omega, rng)
+    n = ml.normal[j]
+    cos_s = np.einsum("ij,ij->i", d, n)
+    scalar = np.where((pdf > 0) & (cos_s != 0), np.abs(cos_s) / np.maximum(pa * pdf, 1e-300), 0.0)
+    tri = ml.tri[j]
+    emission = prepared.materials.emission[prepared.tri_material[tri]]
+    eps = prepared.tri_offset[tri].astype(np.float64)
+    origin = q + (np.sign(cos_s) * eps)[:, None] * n  # off the emitter, on the side the path leaves
+    return origin, d, emission * scalar[:, None]
+
+
+def _mesh_light_budget(mesh_lights, obj: CasterObjects, max_emitters: int = 16384) -> float:
+    """Estimated luminous power the emissive triangles send towards the casters, as for area
+    lights: sum over triangles of Y A Omega / pi (Omega: the casters' cones from the triangle's
+    centroid). Over at most ``max_emitters`` triangles (an evenly spaced subset, rescaled)."""
+    if mesh_lights is None or len(obj) == 0:
+        return 0.0
+    e = len(mesh_lights)
+    step = max(1, -(-e // max_emitters))
+    sel = np.arange(0, e, step)
+    centroid = mesh_lights.v0[sel] + (mesh_lights.e1[sel] + mesh_lights.e2[sel]) / 3.0
+    _, _, omega = _cones(centroid, obj)
+    part = float(np.sum(mesh_lights.weight[sel] * omega.sum(axis=1)) / np.pi)
+    return part * float(mesh_lights.weight.sum()) / max(float(mesh_lights.weight[sel].sum()), 1e-300)

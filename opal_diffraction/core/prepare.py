@@ -33,6 +33,7 @@ from .gratings import PreparedGratings, prepare_gratings, triangle_tangents
 from .light_pass import LightTargets, find_light_targets
 from .lights import PreparedLights, prepare_lights
 from .materials import PreparedMaterials, prepare_materials
+from .mesh_lights import MeshLights
 from .scene import Camera, Scene
 from .settings import EYE_ONLY_SETTINGS, RenderSettings
 from .spectrum import SpectralConverter, WavelengthGrid
@@ -83,6 +84,7 @@ class PreparedScene:
     extent: float                      # metres: the scene's size (prepare.scene_extent)
     offset_base: float                 # metres: the scene-scaled part of the offsets
     light_targets: LightTargets        # what the light pass aims at and who receives
+    mesh_lights: MeshLights | None     # the emitting triangles as lights (None: no material emits)
     warnings: tuple[str, ...]          # from validation (dropped triangles, ...)
     prepare_s: float                   # seconds spent validating and preparing
     key: int                           # identity of the geometry, materials and lights
@@ -216,12 +218,15 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         corner_normals = reuse.corner_normals
     else:
         corner_normals = np.asarray(scene.corner_normals, np.float32)  # unit length (validated)
+    mesh_lights = MeshLights.build(v, t, tri_material, materials.emission, tri_normal,
+                                   luminance_weights=conv.cmf_weights[:, 1])
     same_for_light = (same_geometry and _same_shading(reuse.scene, scene) and _same_for_light_pass(reuse.scene, scene)
                       and _light_pass_settings(reuse.settings) == _light_pass_settings(settings))
     if same_for_light:
         targets, key = reuse.light_targets, reuse.key
     else:
-        targets = find_light_targets(v, t, tri_material, materials, gratings, lights, conv, settings.light_paths)
+        targets = find_light_targets(v, t, tri_material, materials, gratings, lights, conv, settings.light_paths,
+                                     mesh_lights=mesh_lights)
         key = next(_keys)
     prepared = PreparedScene(
         scene=scene,
@@ -241,6 +246,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         extent=extent,
         offset_base=base,
         light_targets=targets,
+        mesh_lights=mesh_lights,
         warnings=tuple(warnings),
         prepare_s=0.0,
         key=key,

@@ -176,6 +176,12 @@ class Lights:
     AREA_RECT / AREA_DISK: ``power`` in watts, emitted one-sided along ``direction`` as a Lambertian
     emitter of radiance power / (pi * area); ``axis_u`` is the local X axis, ``size_u`` / ``size_v``
     the side lengths (disk: diameters).
+    ``radius`` (m, POINT / SPOT; Blender's ``shadow_soft_size``): 0 is a delta point light; > 0 a
+    light of that radius with the same intensity in total, radiance power / (4 pi * pi radius^2)
+    (docs/physics.md section 7.5): a sphere, or with ``soft_falloff`` 1 (Blender's "Soft
+    Falloff", Cycles' default) a disk of that radius facing the shading point.
+    ``angle`` (radians, SUN; Blender's ``angle``): the sun's full angular diameter, 0 a delta
+    direction; the strength stays the irradiance facing it.
     ``color`` is linear RGB; ``temperature`` > 0 (kelvin) uses a blackbody spectrum instead
     (scaled to the same luminance as a white light of the same power).
     """
@@ -191,6 +197,9 @@ class Lights:
     spot_blend: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
     size_u: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
     size_v: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
+    radius: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
+    angle: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
+    soft_falloff: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
 
     def __len__(self):
         return _rows(self.kind)
@@ -227,6 +236,9 @@ class Lights:
                 "spot_blend": r.get("spot_blend", 0.15),
                 "size_u": r.get("size_u", 1.0),
                 "size_v": r.get("size_v", r.get("size_u", 1.0)),
+                "radius": r.get("radius", 0.0),
+                "angle": r.get("angle", 0.0),
+                "soft_falloff": r.get("soft_falloff", 0),
             }
             for name, v in vals.items():
                 cols[name].append(v)
@@ -475,7 +487,9 @@ class Scene:
                 cn = cn[keep] if len(cn) else cn
         if len(t) == 0:
             warns.append("the scene has no geometry: the image shows only the background")
-        if len(lights) == 0 and not np.any(np.asarray(wc) > 0):  # a coloured world lights the scene
+        # a coloured world lights the scene, and so does a mesh whose material emits
+        emitting = len(t) > 0 and bool(np.any(np.asarray(materials.emission)[np.unique(tm)] > 0))
+        if len(lights) == 0 and not np.any(np.asarray(wc) > 0) and not emitting:
             warns.append("the scene has no lights: only the background is lit")
         clean = replace(self, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
                         materials=materials, lights=lights, camera=camera, world_color=wc, corner_normals=cn)
@@ -552,6 +566,9 @@ class Scene:
             rows = kind.shape[0] if kind is not None and kind.ndim >= 1 else 0
             mats = Materials.from_columns(cols, rows)
             lights = Lights(**{f.name: read("light_" + f.name) for f in fields(Lights) if "light_" + f.name in names})
+            for name in _LIGHT_OPTIONAL:  # columns an older file lacks: 0 (delta lights, as they rendered)
+                if "light_" + name not in names:
+                    setattr(lights, name, np.zeros(_rows(lights.kind), _LIGHT_COLUMNS[name][1]))
             cam = None
             if "camera_matrix" in names:
                 kw = {}
@@ -937,8 +954,11 @@ _LIGHT_COLUMNS = {  # name -> (per-row shape, canonical dtype)
     "kind": ((), np.int32), "position": ((3,), np.float64), "direction": ((3,), np.float64),
     "axis_u": ((3,), np.float64), "color": ((3,), np.float32), "power": ((), np.float64),
     "temperature": ((), np.float64), "spot_size": ((), np.float64), "spot_blend": ((), np.float64),
-    "size_u": ((), np.float64), "size_v": ((), np.float64),
+    "size_u": ((), np.float64), "size_v": ((), np.float64), "radius": ((), np.float64),
+    "angle": ((), np.float64), "soft_falloff": ((), np.int32),
 }
+#: Light columns added after format 1: a file without them loads with 0 (what it rendered then).
+_LIGHT_OPTIONAL = ("radius", "angle", "soft_falloff")
 
 
 def _validate_lights(lt: Lights) -> Lights:
@@ -948,7 +968,8 @@ def _validate_lights(lt: Lights) -> Lights:
     out = {"kind": kind}
     for name, (tail, _dtype) in _LIGHT_COLUMNS.items():
         if name != "kind":
-            out[name] = _column(getattr(lt, name), f"light table column {name!r}", tail, rows=n, allow_empty=n == 0)
+            out[name] = _column(getattr(lt, name), f"light table column {name!r}", tail, rows=n, allow_empty=n == 0,
+                                **({"kind": "int"} if name == "soft_falloff" else {}))
     if n == 0:
         return lt if all(out[k] is getattr(lt, k) for k in out) else Lights(**{
             k: v if v.dtype == _LIGHT_COLUMNS[k][1] else v.astype(_LIGHT_COLUMNS[k][1]) for k, v in out.items()})
@@ -957,15 +978,16 @@ def _validate_lights(lt: Lights) -> Lights:
         return f"light {i}"
 
     _enum_check(kind, LIGHT_KINDS, label, "kind")
-    f64 = {name: out[name].astype(np.float64) for name in out if name != "kind"}
-    units = {"position": " m", "power": " W", "size_u": " m", "size_v": " m", "temperature": " K"}
+    f64 = {name: out[name].astype(np.float64) for name in out if name not in ("kind", "soft_falloff")}
+    units = {"position": " m", "power": " W", "size_u": " m", "size_v": " m", "temperature": " K", "radius": " m",
+             "angle": " rad"}
     for name in ("position", "direction", "axis_u", "color", "power", "temperature", "spot_size", "spot_blend",
-                 "size_u", "size_v"):
+                 "size_u", "size_v", "radius", "angle"):
         a = f64[name]
         if not np.isfinite(a).all():
             i = _first_row(~np.isfinite(a))
             raise SceneError(f"light {i}: {name.replace('_', ' ')} is NaN or infinite")
-        limit = COORD_LIMIT if name in ("position", "size_u", "size_v") else None
+        limit = COORD_LIMIT if name in ("position", "size_u", "size_v", "radius") else None
         _check_range(a, label, name.replace("_", " "), units.get(name, ""), limit=limit)
     power = f64["power"]
     if (power < 0).any():
@@ -989,6 +1011,21 @@ def _validate_lights(lt: Lights) -> Lights:
     if bad.any():
         i = int(np.argmax(bad))
         raise SceneError(f"light {i}: spot blend {_g(f64['spot_blend'][i])} is outside 0-1")
+    point = np.isin(kind, [LIGHT_KINDS["POINT"], LIGHT_KINDS["SPOT"]])
+    bad = point & (f64["radius"] < 0)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"light {i}: radius {_g(f64['radius'][i])} m is negative")
+    sun = kind == LIGHT_KINDS["SUN"]
+    bad = sun & ~((f64["angle"] >= 0) & (f64["angle"] <= np.pi + 1e-6))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"light {i}: sun angle {_g(f64['angle'][i])} rad is outside 0-pi")
+    sf = out["soft_falloff"].astype(np.int64)
+    bad = (sf != 0) & (sf != 1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"light {i}: soft falloff must be 0 or 1, got {int(sf[i])}")
     su, sv = f64["size_u"], f64["size_v"]
     rect, disk = kind == LIGHT_KINDS["AREA_RECT"], kind == LIGHT_KINDS["AREA_DISK"]
     area_rows = rect | disk

@@ -9,8 +9,7 @@ spot and area lights, W/m^2 for the sun), colours in the blend file's linear wor
 converted to the core's linear Rec.709.
 
 What the core cannot render yet is approximated and named in the warnings rather than failing:
-textures (averaged), rough reflection and refraction (made smooth), light radius and sun angle
-(hard shadows), volume shaders (a volume-only material's faces are left out, as Cycles draws no
+textures (averaged), rough reflection and refraction (made smooth), volume shaders (a volume-only material's faces are left out, as Cycles draws no
 surface for it); hair (curves objects and hair particle systems), point clouds and volume
 objects are skipped with counts. Values that would overflow the tracer's float32 (an emission or
 light power up to Blender's FLT_MAX) are clamped with a warning, NaN is an error naming the
@@ -145,7 +144,6 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     vertices, triangles, tri_material, tri_tangent, tri_period, corner_normals = flatten(
         groups, meshes, materials.grating, warn, materials.hidden_rows())
 
-    lights.warn_soft()
     skipped.report(warn)
     core_materials = materials.finish()
     cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn)

@@ -4,8 +4,12 @@ Point, spot and area lights keep their power in watts, the sun its strength in W
 multiplies by 2^exposure, an unnormalised area light emits per m^2 (times its area here), and
 the emission node of a light's node tree scales the strength and tints the colour. A white
 light with "Temperature" on is a blackbody spectrum (``temperature`` > 0), a tinted one an RGB
-product. What the core cannot render is named in the warnings: light radius and sun angle
-(hard shadows), square and non-uniformly scaled spot cones, area spread below 180 degrees.
+product. A point or spot light's radius (``shadow_soft_size``) and "Soft Falloff" and a sun's
+angle are kept (soft shadows, lights seen in mirrors: docs/physics.md section 7.5); with
+*Normalize* off the power is multiplied by the light's area as Cycles' scene/light.cpp does
+(a sphere's 4 pi r^2, 4 for a point; a sun's pi sin^2(angle / 2), 1 without an angle; an area
+light's area). What the core cannot render is named in the warnings: square and non-uniformly
+scaled spot cones, area spread below 180 degrees.
 A NaN power, colour, temperature or size is an error naming the light; a negative power is 0 and
 one beyond ``MAX_INTENSITY`` (Blender accepts up to FLT_MAX) is clamped, with a warning.
 """
@@ -107,9 +111,8 @@ def _finite_size(ob, what: str, value: float) -> float:
     return value
 
 
-def light_row(ob, m: np.ndarray, warn, to709, soft: list) -> dict | None:
-    """The core's row for light object ``ob`` with world matrix ``m``, or None when it is skipped;
-    appends the name to ``soft`` when its radius or angle (soft shadows) is lost."""
+def light_row(ob, m: np.ndarray, warn, to709) -> dict | None:
+    """The core's row for light object ``ob`` with world matrix ``m``, or None when it is skipped."""
     light = ob.data
     x, y, z = m[:3, 0], m[:3, 1], m[:3, 2]
     nz = np.linalg.norm(z)
@@ -123,9 +126,13 @@ def light_row(ob, m: np.ndarray, warn, to709, soft: list) -> dict | None:
         "color": tuple(float(c) for c in col), "power": power, "temperature": temperature,
     }
     t = light.type
+    normalize = bool(getattr(light, "normalize", True))
     if t in ("POINT", "SPOT"):
-        if light.shadow_soft_size > 0:
-            soft.append(ob.name)
+        radius = max(_finite_size(ob, "radius", getattr(light, "shadow_soft_size", 0.0)), 0.0)
+        row["radius"] = radius
+        row["soft_falloff"] = int(bool(getattr(light, "use_soft_falloff", True)))
+        if not normalize:  # Cycles: eval_fac = 1 / pi instead of 1 / (pi * area), area 4 pi r^2 (4 at r = 0)
+            row["power"] = min(row["power"] * (4 * math.pi * radius**2 if radius > 0 else 4.0), MAX_INTENSITY)
         row["kind"] = t
         if t == "SPOT":
             row["spot_size"] = _finite_size(ob, "spot size", light.spot_size)
@@ -137,8 +144,10 @@ def light_row(ob, m: np.ndarray, warn, to709, soft: list) -> dict | None:
                 warn(f"light '{ob.name}': a non-uniformly scaled spot cone is rendered round")
     elif t == "SUN":
         row["kind"] = "SUN"
-        if getattr(light, "angle", 0.0) > math.radians(1.0):
-            soft.append(ob.name)
+        angle = min(max(_finite_size(ob, "angle", getattr(light, "angle", 0.0)), 0.0), math.pi)
+        row["angle"] = angle
+        if not normalize and angle > 0:  # Cycles: the sun's area pi sin^2(angle / 2)
+            row["power"] = row["power"] * math.pi * math.sin(0.5 * angle) ** 2
     elif t == "AREA":
         shape = light.shape
         su = _finite_size(ob, "size", light.size) * float(np.linalg.norm(x))
@@ -149,7 +158,7 @@ def light_row(ob, m: np.ndarray, warn, to709, soft: list) -> dict | None:
         if su <= 0 or sv <= 0:
             warn(f"light '{ob.name}': area light of zero size skipped")
             return None
-        if not getattr(light, "normalize", True):  # Cycles: an unnormalised light emits power per m^2
+        if not normalize:  # Cycles: an unnormalised light emits power per m^2
             area = su * sv * (1.0 if row["kind"] == "AREA_RECT" else math.pi / 4)
             row["power"] = min(row["power"] * area, MAX_INTENSITY)
         if getattr(light, "spread", math.pi) < math.pi - 1e-4:
@@ -161,24 +170,17 @@ def light_row(ob, m: np.ndarray, warn, to709, soft: list) -> dict | None:
 
 
 class LightRows:
-    """The light rows of one export, in instance order, and the lights whose softness is lost."""
+    """The light rows of one export, in instance order."""
 
     def __init__(self, warn: Warnings, to709: np.ndarray | None):
         self.rows: list[dict] = []
-        self.soft: list[str] = []
         self.warn, self.to709 = warn, to709
 
     def add(self, ob, matrix_world) -> None:
         """Add a light object instance with its world matrix (skipped when it cannot render)."""
-        row = light_row(ob, np.array(matrix_world, np.float64), self.warn, self.to709, self.soft)
+        row = light_row(ob, np.array(matrix_world, np.float64), self.warn, self.to709)
         if row is not None:
             self.rows.append(row)
-
-    def warn_soft(self) -> None:
-        """Name the lights that will cast hard shadows instead of soft ones."""
-        if self.soft:
-            names = ", ".join(f"'{n}'" for n in self.soft[:3]) + (" ..." if len(self.soft) > 3 else "")
-            self.warn(f"light radius and sun angle are not rendered yet: {names} cast hard shadows")
 
 
 def export_lights(depsgraph, warn: Warnings | None = None) -> Lights:
@@ -188,5 +190,4 @@ def export_lights(depsgraph, warn: Warnings | None = None) -> Lights:
     for inst in depsgraph.object_instances:
         if inst.object.type == "LIGHT":
             lights.add(inst.object, inst.matrix_world)
-    lights.warn_soft()
     return Lights.from_list(lights.rows)
