@@ -19,7 +19,8 @@ import numpy as np
 
 from .geometry import orthonormal_basis
 from .gratings import diffracted_radiance, grating_frame
-from .lights import sample_light
+from .lights import intersect_lights, is_delta, light_pdf, sample_light, sun_radiance
+from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIFFUSE
 from .transport import Hit, Rays, SpecularWalker
 
@@ -104,6 +105,13 @@ class _TileTrace(SpecularWalker):
         # which emitters' caustic paths (diffuse <- specular... <- emitter) the light pass has
         # already counted: the eye pass leaves those paths out (docs/physics.md section 4.5)
         self.caustics_cover_lights = self.caustic_map is not None
+        pl = eye.prepared.lights
+        kinds = np.asarray(pl.kind)
+        self.delta = np.array([is_delta(pl, i) for i in range(len(pl))], bool)
+        # lights a ray can meet: area lights, points and spots with a radius; suns with an angle
+        self.hittable = ~self.delta & np.isin(kinds, [POINT, SPOT, AREA_RECT, AREA_DISK])
+        self.soft_suns = np.flatnonzero(~self.delta & (kinds == SUN))
+        self.mesh_lights = eye.prepared.mesh_lights
         self._n_pixels = n_pixels
         self._film = self._new_film()  # light reflected by diffuse surfaces from direct lighting
         # the other parts of the film, allocated when first written (most scenes use a few):
@@ -177,7 +185,57 @@ class _TileTrace(SpecularWalker):
                           get("caustics"), self._rays, self._albedo, self._normal)
 
     # ----------------------------------------------------------------- hooks
+    def on_segment(self, rays: Rays, t: np.ndarray) -> None:
+        """Sized lights a segment passes before it hits anything: their radiance, weighted
+        against next-event estimation by the power heuristic (Veach 1997, section 9.2). Lights
+        are invisible to camera rays and transparent to paths, as Cycles' default ray
+        visibility has them; a caustic path the light pass counted is left out."""
+        if not self.hittable.any():
+            return
+        seen = self._not_covered(rays) & (rays.depth > 0)
+        if not seen.any():
+            return
+        r = rays.take(seen)
+        idx, _, scale = intersect_lights(self.prepared.lights, r.o, r.d, t[seen])
+        met = idx >= 0
+        if not met.any():
+            return
+        r, idx, scale = r.take(met), idx[met], scale[met]
+        p_light = np.zeros(len(r), np.float32)
+        for li in np.unique(idx):  # the few lights met
+            sel = idx == li
+            p_light[sel] = light_pdf(self.prepared.lights, int(li), r.o[sel], r.d[sel])
+        scale = scale * _power_heuristic(r.extra["pdf"], p_light)
+        spectrum = self.prepared.lights.spectrum
+        radiance = scale[:, None] * spectrum[idx] if r.lam is None else scale * spectrum[idx, r.lam]
+        self._add_by_vertices(r, r.weighted(radiance))
+
+    def _not_covered(self, rays: Rays) -> np.ndarray:
+        """Rays whose emitter hit is not a caustic path the light pass counted (section 4.5)."""
+        if not self.caustics_cover_lights:
+            return np.ones(len(rays), bool)
+        return rays.extra["caustic"] != 2
+
+    def _add_by_vertices(self, rays: Rays, contrib):
+        """Accumulate light found at the end of a path segment into the part its diffuse-vertex
+        count says (``_light_film``)."""
+        nd = rays.extra["nd"]
+        if len(nd) and (nd == nd[0]).all():
+            self._accumulate(rays, contrib, self._light_film(min(int(nd[0]), 2)))
+            return
+        for k in np.unique(nd):
+            sel = nd == k
+            self._accumulate(rays.take(sel), contrib[sel], self._light_film(min(int(k), 2)))
+
     def on_miss(self, rays: Rays) -> None:
+        if len(self.soft_suns):
+            seen = self._not_covered(rays) & (rays.depth > 0)
+            if seen.any():
+                r = rays.take(seen)
+                lights = self.prepared.lights
+                p_light = sum(light_pdf(lights, int(li), r.o, r.d) for li in self.soft_suns)
+                rad = sun_radiance(lights, r.d) * _power_heuristic(r.extra["pdf"], p_light)[:, None]
+                self._add_by_vertices(r, r.weighted(rad) if r.lam is None else r.w * rad[np.arange(len(r)), r.lam])
         st = rays.extra
         # the world through glass after a diffuse vertex is a caustic path the light pass does
         # not trace from the world (yet): counted here, so nothing is covered
@@ -212,11 +270,11 @@ class _TileTrace(SpecularWalker):
             if first.any():
                 self._denoising_features(r.take(first), h.take(first))
             if first.all():
-                self._direct_light(r, h, rng, self._film)
+                self._next_events(r, h, rng, self._film)
             else:
                 if first.any():
-                    self._direct_light(r.take(first), h.take(first), rng, self._film)
-                self._direct_light(r.take(~first), h.take(~first), rng, self._part("indirect"))
+                    self._next_events(r.take(first), h.take(first), rng, self._film)
+                self._next_events(r.take(~first), h.take(~first), rng, self._part("indirect"))
             if self.caustic_map is not None:
                 self._caustic_light(r, h, rng)
 
@@ -351,17 +409,60 @@ class _TileTrace(SpecularWalker):
 
     def _emitted(self, rays: Rays, hit: Hit):
         """Emission of the surfaces hit (Cycles' units: the material's emission is radiance, seen
-        from both sides). Found by BSDF sampling only (no next-event estimation of mesh lights
-        yet), so every path adds it at full weight."""
+        from both sides), weighted against the mesh lights' next-event estimation by the power
+        heuristic where a BSDF sample found it; a caustic path the light pass counted is left out."""
+        keep = self._not_covered(rays)
+        if not keep.all():
+            rays, hit = rays.take(keep), hit.take(keep)
+        if len(rays) == 0:
+            return
         em = self.prepared.materials.emission[hit.mat]
-        nd = rays.extra["nd"]
-        for k in np.unique(nd):
-            sel = nd == k
-            r, e = rays.take(sel), em[sel]
-            self._accumulate(r, r.weighted(e) if r.lam is None else r.w * e[np.arange(len(r)), r.lam],
-                             self._light_film(min(int(k), 2)))
+        e = em if rays.lam is None else em[np.arange(len(rays)), rays.lam]
+        pdf = rays.extra["pdf"]
+        if self.mesh_lights is not None and (pdf > 0).any():
+            wgt = _power_heuristic(pdf, self.mesh_lights.pdf(hit.prim, rays.o, hit.p).astype(np.float32))
+            e = e * (wgt[:, None] if rays.lam is None else wgt)
+        self._add_by_vertices(rays, rays.weighted(e) if rays.lam is None else rays.w * e)
 
     # ----------------------------------------------------------------- interactions
+    def _next_events(self, rays: Rays, hit: Hit, rng, film):
+        """Next-event estimation at diffuse vertices: every light, and the emissive meshes."""
+        self._direct_light(rays, hit, rng, film)
+        if self.mesh_lights is not None:
+            self._mesh_light_nee(rays, hit, rng, film)
+
+    def _mesh_light_nee(self, rays: Rays, hit: Hit, rng, film):
+        """One power-proportional point on the emissive triangles per vertex (core/mesh_lights.py),
+        by shadow ray, weighted against BSDF sampling by the power heuristic."""
+        prepared = self.prepared
+        wi, dist, g, prim, pdf = self.mesh_lights.sample(hit.p, rng)
+        wi = wi.astype(np.float32)
+        cos_s = np.einsum("ij,ij->i", wi, hit.ns)
+        ok = (cos_s > 0) & (g > 0)
+        if prepared.corner_normals is not None:
+            ok &= np.einsum("ij,ij->i", wi, hit.ng) > 0
+        live = np.flatnonzero(ok)
+        if live.size == 0:
+            return
+        eps = hit.eps[live]
+        o = (hit.p[live] + eps[:, None] * hit.ng[live]).astype(np.float32)
+        tmax = (dist[live] - 2 * eps - 2 * prepared.tri_offset[prim[live]]).astype(np.float32)
+        occ = prepared.accel.occluded(o, wi[live], tmax)
+        self._rays += len(occ)
+        live = live[~occ]
+        if live.size == 0:
+            return
+        r, h = rays.take(live), hit.take(live)
+        cos = cos_s[live]
+        f = (g[live] * cos * _power_heuristic(pdf[live].astype(np.float32), cos * np.float32(1 / np.pi))).astype(np.float32)
+        em = prepared.materials.emission[prepared.tri_material[prim[live]]]
+        brdf = self._per_ray(prepared.materials.reflectance, h.mat, r.lam) * np.float32(1 / np.pi)
+        if r.lam is None:
+            contrib = r.weighted(brdf * em * f[:, None])
+        else:
+            contrib = r.w * brdf * em[np.arange(len(r)), r.lam] * f
+        self._accumulate(r, contrib, film)
+
     def _direct_light(self, rays: Rays, hit: Hit, rng, film):
         prepared = self.prepared
         lights = prepared.lights
@@ -378,6 +479,9 @@ class _TileTrace(SpecularWalker):
             cos_s = np.einsum("ij,ij->i", wi, hit.ns)
             above = True if flat else np.einsum("ij,ij->i", wi, hit.ng) > 0
             f = np.where((cos_s > 0) & above, g * cos_s, np.float32(0.0))
+            if not self.delta[li]:  # a light BSDF sampling can also find: the power heuristic
+                f = f * _power_heuristic(light_pdf(lights, li, hit.p, wi), np.maximum(cos_s, 0) * np.float32(1 / np.pi),
+                                         light_first=True)
             live = np.flatnonzero(f > 0)
             if live.size == 0:
                 continue
@@ -475,3 +579,18 @@ def _cosine_hemisphere(n: np.ndarray, rng: np.random.Generator):
     cos = np.sqrt(np.maximum(np.float32(1) - u1, 0))
     wi = (r * np.cos(phi))[:, None] * tu + (r * np.sin(phi))[:, None] * tv + cos[:, None] * n
     return wi.astype(np.float32), cos.astype(np.float32)
+
+
+def _power_heuristic(p_this: np.ndarray, p_other: np.ndarray, light_first: bool = False) -> np.ndarray:
+    """Veach's power heuristic (beta = 2) for one sample of each of two strategies: the weight of
+    a BSDF sample with pdf ``p_this`` against light sampling's ``p_other`` (``light_first``: the
+    arguments are the light sample's pdf and then the BSDF's). A zero pdf for the sample's own
+    strategy means a specular or camera ray with no competitor: weight 1."""
+    a = np.asarray(p_this, np.float32)
+    b = np.asarray(p_other, np.float32)
+    a2, b2 = a * a, b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = np.where(a2 + b2 > 0, a2 / (a2 + b2), np.float32(1.0))
+    if not light_first:
+        w = np.where(a > 0, w, np.float32(1.0))
+    return np.where(np.isfinite(w), w, np.float32(1.0)).astype(np.float32)

@@ -179,6 +179,10 @@ class SpecularWalker:
         self._rays = 0  # rays cast
 
     # hooks ----------------------------------------------------------------------------------
+    def on_segment(self, rays: Rays, t: np.ndarray) -> None:
+        """Every traced segment, before its hit or miss is handled: rays and the distance t (B,)
+        to what they hit (inf: nothing) - where the eye pass finds the lights a ray passes."""
+
     def on_miss(self, rays: Rays) -> None:
         """Rays that left the scene."""
 
@@ -221,6 +225,7 @@ class SpecularWalker:
             h = prepared.accel.intersect(rays.o, rays.d)
             self._rays += len(rays)
             missed = h.prim < 0
+            self.on_segment(rays, np.where(missed, np.float32(np.inf), h.t))
             if missed.any():
                 self.on_miss(rays.take(missed))
             keep = ~missed
