@@ -1,8 +1,8 @@
 """Render the Cycles comparison scenes (tests/blender/parity_scenes.py) with Cycles and with
 OPAL_DIFFRACTION in one bpy session and measure how far apart they are.
 
-    python tools/cycles_parity.py [--ref-spp 1024] [--spp 64] [SCENE ...]   # a table for the scenes
-    python tools/cycles_parity.py --png [SCENE ...]                         # plus side-by-side PNGs
+    python tools/cycles_parity.py [--ref-spp 4096] [--spp 64 256] [SCENE ...]   # a table for the scenes
+    python tools/cycles_parity.py --png [SCENE ...]                              # plus side-by-side PNGs
 
 The metrics (the [scenes] issue's "Must show", issue 10):
 
@@ -48,6 +48,9 @@ ENGINE = "OPAL_DIFFRACTION"
 #: The two seeds of the Cycles reference's halves and of ours.
 REF_SEEDS = (101, 102)
 OUR_SEEDS = (1, 2)
+#: Cycles at low samples in the table, for scale (another seed pair than the reference's).
+CYCLES_LOW = 64
+LOW_SEEDS = (7, 8)
 
 
 def scenes_module():
@@ -100,23 +103,25 @@ class Comparison:
     rel_rmse: float             # 8x8-box-filtered relative RMSE, ours vs reference
     noise_floor: float          # its expected value from noise alone
     ref: Render
-    ours: Render
+    ours: Render                # the image compared (ours, or Cycles at low samples for scale)
+    renderer: str = "ours"
 
     @property
     def bias(self) -> float:
         return float(np.sqrt(max(self.rel_rmse ** 2 - self.noise_floor ** 2, 0.0)))
 
     def row(self) -> str:
-        return (f"| {self.scene} | {self.ours.samples} | {self.mean_ratio:.3f} +- {self.mean_ratio_sigma:.3f} | "
+        return (f"| {self.scene} | {self.renderer} | {self.ours.samples} | {self.mean_ratio:.3f} +- "
+                f"{self.mean_ratio_sigma:.3f} | "
                 f"{self.rel_rmse:.3f} | {self.noise_floor:.3f} | {self.ours.seconds:.1f} | "
                 f"{self.ref.samples} | {self.ref.seconds:.1f} |")
 
 
-TABLE_HEAD = ("| scene | our spp | mean ratio | filtered rel. RMSE | noise floor | our s | Cycles spp | Cycles s |\n"
-              "|---|---|---|---|---|---|---|---|")
+TABLE_HEAD = ("| scene | renderer | spp | mean ratio | filtered rel. RMSE | noise floor | s | reference spp | "
+              "reference s |\n|---|---|---|---|---|---|---|---|---|")
 
 
-def compare(scene: str, ours: Render, ref: Render, block: int = BLOCK) -> Comparison:
+def compare(scene: str, ours: Render, ref: Render, block: int = BLOCK, renderer: str = "ours") -> Comparison:
     """The metrics of ``ours`` against ``ref`` (see the module docstring)."""
     ref_mean = box_filter(ref.image, block).mean()
     floor = np.hypot(ours.block_noise(block), ref.block_noise(block)) / ref_mean
@@ -124,7 +129,7 @@ def compare(scene: str, ours: Render, ref: Render, block: int = BLOCK) -> Compar
     n_blocks = (ref.image.shape[0] // block) * (ref.image.shape[1] // block)
     sigma = np.hypot(ours.luma_block_noise(block), ref.luma_block_noise(block)) / np.sqrt(n_blocks) / lum_ref
     return Comparison(scene, float(luminance(ours.image).mean() / lum_ref), float(sigma),
-                      filtered_rel_rmse(ours.image, ref.image, block), float(floor), ref, ours)
+                      filtered_rel_rmse(ours.image, ref.image, block), float(floor), ref, ours, renderer)
 
 
 # ---------------------------------------------------------------------------- rendering
@@ -234,7 +239,7 @@ def side_by_side_png(path: str, ref: np.ndarray, ours: np.ndarray, scale: int = 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("scenes", nargs="*", help="scene names (default: all)")
-    ap.add_argument("--ref-spp", type=int, default=1024, help="Cycles reference samples")
+    ap.add_argument("--ref-spp", type=int, default=4096, help="Cycles reference samples (cached)")
     ap.add_argument("--spp", type=int, nargs="+", default=[64, 256], help="our samples (one row each)")
     ap.add_argument("--png", action="store_true", help="write out/parity/<scene>.png (Cycles | ours | diff)")
     ap.add_argument("--no-cache", action="store_true", help="render the reference even when cached")
@@ -245,12 +250,18 @@ def main(argv=None) -> int:
     opal_diffraction.register()
     try:
         names = args.scenes or list(scenes_module().SCENES)
-        print(f"Cycles reference {args.ref_spp} spp; ours at {args.spp} spp; 8x8-box-filtered metrics\n")
+        print(f"Cycles reference {args.ref_spp} spp; ours at {args.spp} spp and Cycles at {CYCLES_LOW} spp against "
+              "it; 8x8-box-filtered metrics; seconds for both half renders\n")
         print(TABLE_HEAD)
         for name in names:
-            for spp in args.spp:
-                c = measure(name, spp, args.ref_spp, cache_dir=None if args.no_cache else OUT)
-                print(c.row(), flush=True)
+            with tempfile.TemporaryDirectory(prefix="parity_") as work:
+                build(name, work)
+                ref = cycles_reference(name, args.ref_spp, work, None if args.no_cache else OUT)
+                for spp in args.spp:
+                    c = compare(name, render_pair(ENGINE, spp, OUR_SEEDS, work), ref)
+                    print(c.row(), flush=True)
+                print(compare(name, render_pair("CYCLES", CYCLES_LOW, LOW_SEEDS, work), ref,
+                              renderer="Cycles").row(), flush=True)
             if args.png:
                 os.makedirs(OUT, exist_ok=True)
                 side_by_side_png(os.path.join(OUT, f"{name}.png"), c.ref.image, c.ours.image)
