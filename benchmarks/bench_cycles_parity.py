@@ -12,7 +12,8 @@ error it levels off at.
 The error is the tool's 8x8-box-filtered relative RMSE (RMS over blocks and channels of the
 block-mean difference over the reference's mean). Times are wall-clock seconds of
 ``bpy.ops.render.render`` for one render, both engines with 2 threads; ours includes the export
-from Blender, preparation and any light pass. The time to reach E_64 is interpolated in log-log
+from Blender, preparation and any light pass (one warm-up render of each engine comes first,
+so no timed render pays for imports). The time to reach E_64 is interpolated in log-log
 between the two sample counts around it.
 
     python benchmarks/bench_cycles_parity.py [--ref-spp 4096] [SCENE ...]
@@ -95,6 +96,8 @@ def main(argv=None) -> int:
     try:
         names = args.scenes or list(cp.scenes_module().SCENES)
         print(f"Cycles reference {args.ref_spp} spp (cached in out/parity); 64x64 pixels, 2 threads\n")
+        with tempfile.TemporaryDirectory(prefix="bench_parity_") as work:
+            cp.warm_up(work)
         print(HEAD)
         for name in names:
             with tempfile.TemporaryDirectory(prefix="bench_parity_") as work:

@@ -175,6 +175,14 @@ def build(scene: str, work_dir: str):
     return scenes_module().build(scene, work_dir)
 
 
+def warm_up(work_dir: str) -> None:
+    """One render of each engine at 1 sample (the first scene), so the first timed render does not
+    pay for imports and first-use setup (Embree, OpenEXR, kernels)."""
+    build(next(iter(scenes_module().SCENES)), work_dir)
+    for engine in ("CYCLES", ENGINE):
+        render_once(engine, 1, 0, os.path.join(work_dir, "warm_up.exr"))
+
+
 def cache_key(scene: str, samples: int) -> str:
     """A hash of the scene sources, the scene's name, the reference's samples and seeds and the
     Blender version: a cached reference is reused only for the same scene and renderer."""
@@ -252,6 +260,8 @@ def main(argv=None) -> int:
         names = args.scenes or list(scenes_module().SCENES)
         print(f"Cycles reference {args.ref_spp} spp; ours at {args.spp} spp and Cycles at {CYCLES_LOW} spp against "
               "it; 8x8-box-filtered metrics; seconds for both half renders\n")
+        with tempfile.TemporaryDirectory(prefix="parity_") as work:
+            warm_up(work)
         print(TABLE_HEAD)
         for name in names:
             with tempfile.TemporaryDirectory(prefix="parity_") as work:
