@@ -16,9 +16,8 @@ What both engines are told alike (:func:`match_engines`):
 - the view transform 'Standard', look 'None', exposure 0, gamma 1, Cycles' film exposure 1,
   opaque film;
 - bounces: Cycles' defaults written explicitly (max 12, diffuse 4, glossy 4, transmission 12,
-  transparent 8, volume 0); ``scene.opal.max_bounces`` = 12 and, where this version of the
-  engine has them, ``scene.opal.diffuse_bounces`` / ``glossy_bounces`` /
-  ``transmission_bounces`` the same;
+  transparent 8, volume 0), and ``scene.opal``'s ``max_bounces`` / ``diffuse_bounces`` /
+  ``glossy_bounces`` / ``transmission_bounces`` the same;
 - Cycles' biasing shortcuts off, so the reference converges to the unbiased image: no sample
   clamping (``sample_clamp_direct`` / ``sample_clamp_indirect`` = 0; Cycles' default clamps
   indirect light at 10, which would dim the light seen in the mirror sphere) and no Filter
@@ -73,10 +72,8 @@ def match_engines(sc) -> None:
     cy.blur_glossy = 0.0
     for k, v in CYCLES_BOUNCES.items():
         setattr(cy, k, v)
-    sc.opal.max_bounces = CYCLES_BOUNCES["max_bounces"]
-    for k in ("diffuse_bounces", "glossy_bounces", "transmission_bounces"):
-        if hasattr(sc.opal, k):  # the path tracer's bounce settings, where this engine has them
-            setattr(sc.opal, k, CYCLES_BOUNCES[k])
+    for k in ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces"):
+        setattr(sc.opal, k, CYCLES_BOUNCES[k])
 
 
 def _scene():
