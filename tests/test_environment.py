@@ -1,0 +1,231 @@
+"""Environment maps (docs/physics.md section 7.6): the equirectangular convention, the sampling
+density against a chi-square test and quadrature, irradiance by importance sampling against
+quadrature, and the world as an emitter of the light pass against a SUN light and closed forms."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from opal_diffraction.core.environment import EnvironmentMap, direction_to_uv, uv_to_direction
+
+
+def rotation_xyz(ax, ay, az) -> np.ndarray:
+    """Blender's XYZ Euler rotation matrix Rz Ry Rx."""
+    cx, sx, cy, sy, cz, sz = math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay), math.cos(az), math.sin(az)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def structured_map(w=32, h=16) -> np.ndarray:
+    """A gradient in both directions, a bright 2 x 2 patch and a black band: (H, W, 3)."""
+    jj, ii = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
+    img = np.zeros((h, w, 3), np.float32)
+    img[..., 0] = 0.2 + ii / w
+    img[..., 1] = 0.1 + jj / h
+    img[..., 2] = 0.3
+    img[h // 2 + 2: h // 2 + 4, 5:7] = (40.0, 30.0, 20.0)
+    img[2:4] = 0.0  # a black band: zero density there
+    return img
+
+
+ROT = rotation_xyz(0.3, -0.7, 1.1)
+
+
+# ------------------------------------------------------------------------------ convention
+def test_cycles_equirectangular_convention():
+    """u = 0.5 - atan2(y, x) / 2 pi, v = 1 - acos(z) / pi (Cycles' direction_to_equirectangular):
+    -X at u = 0, +Y at u = 0.25, +X at 0.5, -Y at 0.75; up at v = 1, down at v = 0."""
+    dirs = np.array([[-1, 1e-12, 0], [0, 1, 0], [1, 0, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    u, v = direction_to_uv(dirs)
+    np.testing.assert_allclose(u[:4] % 1.0, [0.0, 0.25, 0.5, 0.75], atol=1e-9)
+    np.testing.assert_allclose(v, [0.5, 0.5, 0.5, 0.5, 1.0, 0.0], atol=1e-9)
+    rng = np.random.default_rng(1)
+    uu, vv = rng.random(100), rng.random(100)
+    back_u, back_v = direction_to_uv(uv_to_direction(uu, vv))
+    np.testing.assert_allclose(back_u % 1.0, uu, atol=1e-9)
+    np.testing.assert_allclose(back_v, vv, atol=1e-9)
+
+
+@pytest.mark.parametrize("interpolation", ["LINEAR", "CLOSEST"])
+def test_texel_centres_return_their_texels(interpolation):
+    """At each texel centre's world direction (through the rotation) the lookup is that texel."""
+    img = np.random.default_rng(2).random((8, 12, 3)).astype(np.float32)
+    env = EnvironmentMap(img, ROT, interpolation)
+    jj, ii = np.meshgrid(np.arange(8), np.arange(12), indexing="ij")
+    m = uv_to_direction((ii.ravel() + 0.5) / 12, (jj.ravel() + 0.5) / 8)
+    world = m @ ROT  # R^T m: the world direction that maps to m
+    np.testing.assert_allclose(env.radiance_rgb(world), img.reshape(-1, 3), rtol=1e-4, atol=1e-6)
+
+
+def test_rotation_moves_the_map():
+    """A map rotated by R shows at world direction R^T m what the unrotated map shows at m; a
+    90 degree turn about Z moves the +X texel to +Y."""
+    img = structured_map()
+    rng = np.random.default_rng(3)
+    m = rng.normal(size=(500, 3))
+    m /= np.linalg.norm(m, axis=1, keepdims=True)
+    plain, turned = EnvironmentMap(img), EnvironmentMap(img, ROT)
+    np.testing.assert_allclose(turned.radiance_rgb(m @ ROT), plain.radiance_rgb(m), rtol=1e-5, atol=1e-6)
+    quarter = rotation_xyz(0, 0, math.pi / 2)  # world -> map: world +Y maps to map +X
+    np.testing.assert_allclose(EnvironmentMap(img, quarter.T).radiance_rgb([[0, 1, 0]]),
+                               plain.radiance_rgb([[1, 0, 0]]), rtol=1e-5)
+
+
+# ------------------------------------------------------------------------------ sampling
+def _cell_integrals(env, n_theta, n_phi, sub=24):
+    """The pdf integrated over each (theta, phi) cell by the midpoint rule in (cos theta, phi)
+    with sub x sub points per cell (the density is piecewise constant, so this converges)."""
+    out = np.zeros((n_theta, n_phi))
+    t_edges = np.linspace(0, np.pi, n_theta + 1)
+    p_edges = np.linspace(0, 2 * np.pi, n_phi + 1)
+    for a in range(n_theta):  # loop over theta rows of cells (a few dozen)
+        z0, z1 = np.cos(t_edges[a + 1]), np.cos(t_edges[a])
+        z = z0 + (np.arange(sub) + 0.5) / sub * (z1 - z0)
+        phi = (np.arange(n_phi * sub) + 0.5) / (n_phi * sub) * 2 * np.pi
+        zz, pp = np.meshgrid(z, phi, indexing="ij")
+        s = np.sqrt(1 - zz**2)
+        d = np.stack([s * np.cos(pp), s * np.sin(pp), zz], axis=-1).reshape(-1, 3)
+        pdf = env.pdf(d).reshape(sub, n_phi, sub)
+        cell_area = (z1 - z0) * (p_edges[1] - p_edges[0])
+        out[a] = pdf.mean(axis=(0, 2)) * cell_area
+    return out
+
+
+def _chi2_pvalue(observed, expected, min_expected=5.0):
+    """Mitsuba 3's chi2.py: cells with expected counts below min_expected pooled into one."""
+    obs, exp = observed.ravel(), expected.ravel()
+    order = np.argsort(exp)
+    obs, exp = obs[order], exp[order]
+    small = exp < min_expected
+    pooled_obs, pooled_exp = obs[~small], exp[~small]
+    if small.any() and exp[small].sum() >= min_expected:
+        pooled_obs = np.append(pooled_obs, obs[small].sum())
+        pooled_exp = np.append(pooled_exp, exp[small].sum())
+    elif small.any():
+        assert obs[small].sum() < 10, "samples where the density says almost none"
+    chi2 = np.sum((pooled_obs - pooled_exp) ** 2 / pooled_exp)
+    dof = len(pooled_exp) - 1
+    return float(stats.chi2.sf(chi2, dof)), dof
+
+
+@pytest.mark.parametrize("interpolation", ["LINEAR", "CLOSEST"])
+def test_sample_matches_pdf_chi_square(interpolation):
+    """Histogram of 400 k samples over a 30 x 60 (theta, phi) grid against the pdf integrated over
+    each cell; one of two tests, so the threshold is 0.01 / 2 (Mitsuba 3's chi2 test)."""
+    env = EnvironmentMap(structured_map(), ROT, interpolation)
+    n, n_theta, n_phi = 400_000, 30, 60
+    rng = np.random.default_rng(4)
+    d, pdf, rgb = env.sample(rng.random(n), rng.random(n))
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-9)
+    # the returned pdf and radiance are pdf(d) and radiance_rgb(d) (texel edges aside)
+    agree = np.isclose(pdf, env.pdf(d), rtol=1e-9)
+    assert agree.mean() > 0.999
+    np.testing.assert_allclose(rgb, env.radiance_rgb(d), rtol=1e-4, atol=1e-5)
+    theta = np.arccos(np.clip(d[:, 2], -1, 1))
+    phi = np.arctan2(d[:, 1], d[:, 0]) % (2 * np.pi)
+    hist, _, _ = np.histogram2d(theta, phi, bins=[n_theta, n_phi], range=[[0, np.pi], [0, 2 * np.pi]])
+    expected = _cell_integrals(env, n_theta, n_phi) * n
+    assert abs(expected.sum() / n - 1) < 1e-3
+    p, dof = _chi2_pvalue(hist, expected)
+    print(f"chi2 {interpolation}: p = {p:.3g} over {dof} degrees of freedom")
+    assert p > 0.01 / 2
+
+
+def test_pdf_integrates_to_one_and_follows_the_radiance():
+    """Quadrature over the sphere (1024 x 2048 points, uniform in cos theta and phi) of pdf is 1;
+    the density is zero on the black band and proportional to the luminance elsewhere."""
+    env = EnvironmentMap(structured_map(), ROT, "CLOSEST")
+    nz, nphi = 1024, 2048
+    z = -1 + 2 * (np.arange(nz) + 0.5) / nz
+    phi = (np.arange(nphi) + 0.5) / nphi * 2 * np.pi
+    zz, pp = np.meshgrid(z, phi, indexing="ij")
+    s = np.sqrt(1 - zz**2)
+    d = np.stack([s * np.cos(pp), s * np.sin(pp), zz], axis=-1).reshape(-1, 3)
+    pdf = env.pdf(d)
+    integral = pdf.mean() * 4 * np.pi
+    assert abs(integral - 1) < 2e-3, integral
+    lum = env.radiance_rgb(d).astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    ratio = pdf[lum > 0] / lum[lum > 0]
+    np.testing.assert_allclose(ratio, ratio[0], rtol=1e-5)  # CLOSEST: pdf exactly proportional
+    assert np.all(pdf[lum == 0] == 0)
+
+
+def test_linear_lookup_never_has_radiance_where_the_density_is_zero():
+    """Bilinear lookups blend into the black band's edge: the density must cover them (the
+    distribution uses each texel's cell mean), else an estimator would lose that light."""
+    env = EnvironmentMap(structured_map(), ROT, "LINEAR")
+    rng = np.random.default_rng(5)
+    d = rng.normal(size=(200_000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    lit = env.radiance_rgb(d).max(axis=1) > 0
+    assert np.all(env.pdf(d)[lit] > 0)
+    assert (~lit).sum() > 1000  # the band is there
+
+
+def test_black_map_samples_the_sphere_uniformly():
+    env = EnvironmentMap(np.zeros((4, 8, 3), np.float32))
+    rng = np.random.default_rng(6)
+    d, pdf, rgb = env.sample(rng.random(10_000), rng.random(10_000))
+    assert env.black and np.all(rgb == 0)
+    np.testing.assert_allclose(pdf, 1 / (4 * np.pi), rtol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-9)
+    # uniform on the sphere: z uniform in [-1, 1] (Kolmogorov-Smirnov)
+    assert stats.kstest(d[:, 2], "uniform", args=(-1, 2)).pvalue > 1e-3
+
+
+def test_poles_and_one_texel_maps():
+    """A 1 x 1 map is a constant world: density 1 / 4 pi everywhere, the poles included."""
+    env = EnvironmentMap(np.full((1, 1, 3), 2.0, np.float32))
+    poles = np.array([[0, 0, 1.0], [0, 0, -1.0], [1, 0, 0]])
+    np.testing.assert_allclose(env.pdf(poles), 1 / (4 * np.pi))
+    np.testing.assert_allclose(env.radiance_rgb(poles), 2.0)
+    u = np.array([0.0, 0.999999, 0.5])
+    d, pdf, rgb = env.sample(u, u[::-1])
+    assert np.isfinite(d).all() and np.all(pdf > 0) and np.allclose(rgb, 2.0)
+    np.testing.assert_allclose(env.integral_rgb(), 8 * np.pi)
+
+
+def test_bad_maps_are_refused():
+    with pytest.raises(ValueError, match="finite and non-negative"):
+        EnvironmentMap(np.full((2, 2, 3), np.nan, np.float32))
+    with pytest.raises(ValueError, match="orthogonal"):
+        EnvironmentMap(np.ones((2, 2, 3), np.float32), np.diag([1.0, 2.0, 1.0]))
+    with pytest.raises(ValueError, match="interpolation"):
+        EnvironmentMap(np.ones((2, 2, 3), np.float32), None, "CUBIC")
+
+
+def test_importance_sampled_irradiance_matches_quadrature():
+    """E = integral over the hemisphere of L cos: the estimator mean(L cos+ / pdf) over 200 k
+    samples against a 1024 x 1024 quadrature of the lookup in (cos theta, phi) about the normal;
+    a Z-test with the samples' own standard error (plus the quadrature's error bound)."""
+    env = EnvironmentMap(structured_map(), ROT, "LINEAR")
+    n_plane = np.array([0.3, -0.5, 0.81])
+    n_plane /= np.linalg.norm(n_plane)
+    rng = np.random.default_rng(7)
+    n = 200_000
+    d, pdf, rgb = env.sample(rng.random(n), rng.random(n))
+    cos = np.maximum(d @ n_plane, 0)
+    f = rgb * np.where(pdf > 0, cos / np.where(pdf > 0, pdf, 1), 0.0)[:, None]
+    est, se = f.mean(axis=0), f.std(axis=0) / math.sqrt(n)
+    # quadrature in a frame about the normal: dE = L cos dcos dphi
+    t = np.cross(n_plane, [1.0, 0, 0])
+    t /= np.linalg.norm(t)
+    b = np.cross(n_plane, t)
+    m = 1024
+    c = (np.arange(m) + 0.5) / m
+    ph = (np.arange(m) + 0.5) / m * 2 * np.pi
+    cc, pp = np.meshgrid(c, ph, indexing="ij")
+    s = np.sqrt(1 - cc**2)
+    dirs = (s * np.cos(pp))[..., None] * t + (s * np.sin(pp))[..., None] * b + cc[..., None] * n_plane
+    lum = env.radiance_rgb(dirs.reshape(-1, 3)).astype(np.float64)
+    quad = (lum * cc.reshape(-1, 1)).mean(axis=0) * 2 * np.pi
+    z = (est - quad) / se
+    print(f"irradiance: estimate {est} +- {se}, quadrature {quad}, z {z}")
+    assert np.all(np.abs(z) < 4.0)
+    assert np.all(se / quad < 0.01)  # the test has power: 1 % noise
