@@ -229,3 +229,142 @@ def test_importance_sampled_irradiance_matches_quadrature():
     print(f"irradiance: estimate {est} +- {se}, quadrature {quad}, z {z}")
     assert np.all(np.abs(z) < 4.0)
     assert np.all(se / quad < 0.01)  # the test has power: 1 % noise
+
+
+# ------------------------------------------------------------------------------ the light pass
+from opal_diffraction.core import primitives  # noqa: E402
+from opal_diffraction.core.elements import IlluminationMap  # noqa: E402
+from opal_diffraction.core.light_pass import BATCH_PATHS, LightWork, trace_batch  # noqa: E402
+from opal_diffraction.core.prepare import prepare  # noqa: E402
+from opal_diffraction.core.scene import Camera, Lights, Materials, Scene  # noqa: E402
+from opal_diffraction.core.settings import RenderSettings  # noqa: E402
+
+IOR = 1.5
+SLAB_HALF, SLAB_BOTTOM, SLAB_T, RECEIVER_HALF = 1.0, 0.15, 0.02, 0.2
+
+
+def slab_over_receiver(**world) -> Scene:
+    """A thin 2 x 2 m glass slab (bottom face at z = 0.15) over a 0.4 x 0.4 m diffuse receiver at
+    z = 0, nothing else: every deposit on the receiver came through the slab."""
+    mats = Materials.from_list([{"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)}, {"kind": "DIELECTRIC", "ior": IOR}])
+    s = Scene(materials=mats, **world)
+    s.add_mesh(*primitives.quad((0, 0, 0), (2 * RECEIVER_HALF, 0, 0), (0, 2 * RECEIVER_HALF, 0)), material=0)
+    s.add_mesh(*primitives.box((0, 0, SLAB_BOTTOM + SLAB_T / 2), (2 * SLAB_HALF, 2 * SLAB_HALF, SLAB_T)), material=1)
+    s.camera = Camera(width=4, height=4)
+    return s
+
+
+def batch_fluxes(scene, n_paths, seed=0):
+    """Per-batch total flux (B, n) on the receivers, per light index (the world is the last):
+    the batches are independent, so their spread gives the estimate's standard error."""
+    prepared = prepare(scene, RenderSettings(light_paths=n_paths, max_bounces=32, seed=seed, wavelength_step=20.0))
+    work = LightWork.of(prepared)
+    out = {}
+    for job in work.batches:  # loop over batches (a few dozen)
+        illum = IlluminationMap.empty(work.layout, prepared.grid.n)
+        trace_batch(prepared, job, illum, None)
+        out.setdefault(job.light, []).append(illum.flux.sum(axis=0))
+    return prepared, {k: np.array(v) for k, v in out.items()}
+
+
+def total_and_error(per_batch):
+    """Sum of the batches and its standard error (batches of equal size)."""
+    b = len(per_batch)
+    return per_batch.sum(axis=0), np.sqrt(b * per_batch.var(axis=0, ddof=1))
+
+
+def slab_transmittance(cos_t):
+    """(1 - R) / (1 + R): a non-absorbing slab with every internal reflection (unpolarised
+    Fresnel per interface, as the tracer; docs/physics.md section 2.3)."""
+    cos_t = np.clip(cos_t, 0, 1)
+    sin_t = np.sqrt(1 - cos_t**2)
+    cos_r = np.sqrt(1 - (sin_t / IOR) ** 2)
+    rs = ((cos_t - IOR * cos_r) / (cos_t + IOR * cos_r)) ** 2
+    rp = ((cos_r - IOR * cos_t) / (cos_r + IOR * cos_t)) ** 2
+    r = 0.5 * (rs + rp)
+    return (1 - r) / (1 + r)
+
+
+def test_uniform_world_caustic_under_a_slab_matches_the_closed_form():
+    """The world as a light of the light pass: flux through the slab onto the receiver =
+    integral over receiver points and over the directions whose line meets the slab's bottom
+    face of L cos(theta) (T(theta) from above, plus R(theta) = 1 - T from the lower half of the
+    world mirrored in the slab where the receiver does not hide it) (quadrature, 16 x 16 points
+    x 600 x 600 directions), against
+    1.3 M world paths; a Z-test on the batches' spread."""
+    scene = slab_over_receiver(world_color=np.array([1.0, 1.0, 1.0], np.float32))
+    prepared, per = batch_fluxes(scene, 40 * BATCH_PATHS)
+    assert list(per) == [0]  # no lights: the world is light 0
+    got, err = total_and_error(per[0])
+    # quadrature: directions in (cos theta, phi) over the upper hemisphere
+    m = 600
+    c = (np.arange(m) + 0.5) / m
+    phi = (np.arange(m) + 0.5) / m * 2 * np.pi
+    cc, pp = np.meshgrid(c, phi, indexing="ij")
+    tan = np.sqrt(1 - cc**2) / cc
+    g = (np.arange(16) + 0.5) / 16 * 2 * RECEIVER_HALF - RECEIVER_HALF
+    t_slab = slab_transmittance(cc)
+    seen = np.zeros_like(cc)
+    for x in g:  # loop over receiver points (16 x 16)
+        for y in g:
+            hx, hy = x + SLAB_BOTTOM * tan * np.cos(pp), y + SLAB_BOTTOM * tan * np.sin(pp)
+            through = (np.abs(hx) < SLAB_HALF) & (np.abs(hy) < SLAB_HALF)
+            # the slab also reflects the lower half of the world (R_slab = 1 - T), unless the
+            # mirrored line comes from the receiver's own (unlit) underside
+            bx, by = x + 2 * SLAB_BOTTOM * tan * np.cos(pp), y + 2 * SLAB_BOTTOM * tan * np.sin(pp)
+            blocked = (np.abs(bx) < RECEIVER_HALF) & (np.abs(by) < RECEIVER_HALF)
+            seen += through * (t_slab + (1 - t_slab) * ~blocked)
+    seen /= 16 * 16
+    integral = np.mean(seen * cc) * 2 * np.pi  # per unit L and area
+    expected = prepared.world_spectrum * integral * (2 * RECEIVER_HALF) ** 2
+    z = (got - expected) / err
+    print(f"uniform world: flux {got[10]:.5f} +- {err[10]:.5f}, closed form {expected[10]:.5f}; "
+          f"|z| max {np.abs(z).max():.2f}, relative error {err[10] / got[10]:.4f}")
+    assert np.all(np.abs(z) < 4.5)
+    assert np.all(err / expected < 0.02)
+
+
+def _patch_map(w=256, h=128):
+    """Black except a 2 x 2 texel patch around (u, v) = (0.3, 0.8) of radiance 5000."""
+    img = np.zeros((h, w, 3), np.float32)
+    i, j = int(0.3 * w), int(0.8 * h)
+    img[j:j + 2, i:i + 2] = 5000.0
+    return img
+
+
+def test_a_bright_patch_throws_the_caustic_of_a_sun_of_its_irradiance():
+    """A map black but for a small bright patch and a SUN light of the same irradiance (the
+    patch's integral of L cos about its centroid direction, by quadrature) and direction throw
+    the same flux through the slab (two independent estimates, a Z-test), and both the closed
+    form E cos(theta) T(theta) A."""
+    rot = rotation_xyz(0.2, 0.0, 0.5)
+    img = _patch_map()
+    env = EnvironmentMap(img, rot)
+    # the patch's irradiance and centroid direction by quadrature over its neighbourhood (u, v)
+    n = 400
+    uu, vv = np.meshgrid(0.3 + (np.arange(n) + 0.5) / n * 0.03 - 0.01, 0.8 + (np.arange(n) + 0.5) / n * 0.06 - 0.02)
+    m = uv_to_direction(uu.ravel(), vv.ravel())
+    d_world = m @ rot
+    lum = env.radiance_rgb(d_world)[:, 1].astype(np.float64)
+    domega = (0.03 * 2 * np.pi / n) * (0.06 * np.pi / n) * np.sin(np.pi * (1 - vv.ravel()))
+    vec = (lum * domega) @ d_world
+    centre = vec / np.linalg.norm(vec)
+    irradiance = float(np.sum(lum * domega * (d_world @ centre)))
+    assert centre[2] > 0.5, "the patch must be above the slab"
+    world_scene = slab_over_receiver(world_color=np.ones(3, np.float32), world_image=img, world_rotation=rot)
+    sun_scene = slab_over_receiver()
+    sun_scene.lights = Lights.from_list([{"kind": "SUN", "direction": -centre, "power": irradiance}])
+    p_world, per_world = batch_fluxes(world_scene, 30 * BATCH_PATHS, seed=1)
+    p_sun, per_sun = batch_fluxes(sun_scene, 30 * BATCH_PATHS, seed=2)
+    fw, ew = total_and_error(per_world[0])
+    fs, es = total_and_error(per_sun[0])
+    white = p_world.conv.illuminant_from_rgb(np.ones(3))
+    np.testing.assert_allclose(p_sun.lights.spectrum[0], irradiance * white, rtol=1e-5)  # the sun's units
+    z = (fw - fs) / np.hypot(ew, es)
+    expected = irradiance * centre[2] * slab_transmittance(centre[2]) * (2 * RECEIVER_HALF) ** 2 * white
+    print(f"patch {fw[10]:.5f} +- {ew[10]:.5f}, sun {fs[10]:.5f} +- {es[10]:.5f}, closed form {expected[10]:.5f}; "
+          f"|z| max {np.abs(z).max():.2f}")
+    assert np.all(np.abs(z) < 4.5)
+    assert np.all(np.abs(fs - expected) < 4.5 * es)
+    assert np.all(np.abs(fw - expected) < 4.5 * ew + 0.002 * expected)  # the patch spans ~1.5 degrees
+    assert np.all(ew / fw < 0.02)

@@ -207,6 +207,12 @@ class _TileTrace(SpecularWalker):
         return True
 
     def _add_background(self, rays: Rays):
+        env = self.prepared.environment
+        if env is not None:  # the world map seen along the escaping rays (docs/physics.md section 7.6)
+            spectra = self.prepared.conv.illuminant_from_rgb(env.radiance_rgb(rays.d)).astype(np.float32)
+            contrib = rays.weighted(spectra) if rays.lam is None else rays.w * spectra[np.arange(len(rays)), rays.lam]
+            self._accumulate(rays, contrib, self._background)
+            return
         bg = self.prepared.world_spectrum
         if not bg.any():
             return

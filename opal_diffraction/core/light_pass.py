@@ -20,6 +20,11 @@ the matching mixture pdf per unit area. Paths start with weight (emitted radiome
 pdf / paths of that light), so the map holds flux in W per wavelength sample; lights share the
 path budget in proportion to the power they send towards casters.
 
+The world (a uniform colour or an environment map, core/environment.py) is one more emitter,
+light index L after the L lights: directions from its distribution, points on the casters'
+disks across each direction as for a sun (``_emit_world``, docs/physics.md section 7.6), its
+share of the paths by the power it sends through those disks.
+
 Every batch of paths draws its random numbers from its own stream (seed, light pass, light,
 batch), and batches add into the map, so the map does not depend on how the work is split.
 ``LightWork`` is that split: the batches in order and the LANES fixed lanes they are dealt to;
@@ -193,23 +198,33 @@ class LightTargets:
     grating_mask: np.ndarray   # (T,) bool: grating triangles (records land there)
     objects: CasterObjects     # bounding spheres of the connected caster objects
     budget: np.ndarray         # (L,) estimated luminous power each light sends towards the casters
+    world_budget: float = 0.0  # the same for the world (uniform or map): its paths are "light" L
 
     @property
     def needed(self) -> bool:
         """Some light reaches a caster, and something can receive what comes out of it."""
-        return bool(np.any(self.budget > 0)) and bool(self.receiver_mask.any() or self.grating_mask.any())
+        return ((bool(np.any(self.budget > 0)) or self.world_budget > 0)
+                and bool(self.receiver_mask.any() or self.grating_mask.any()))
+
+    def budgets(self) -> np.ndarray:
+        """(L + 1,) the lights' budgets and the world's, last: the light pass's shares."""
+        return np.append(self.budget, self.world_budget)
 
 
 def find_light_targets(vertices, triangles, tri_material, materials, gratings, lights, conv,
-                       light_paths: int = 1) -> LightTargets:
-    """The light pass's targets for a scene (prepared materials, gratings and lights). Without
-    light paths or lights there is nothing to aim, so the casters are not grouped at all."""
+                       light_paths: int = 1, world_spectrum=None) -> LightTargets:
+    """The light pass's targets for a scene (prepared materials, gratings and lights;
+    ``world_spectrum`` (n,) the world's mean radiance, or None: a black world). Without light
+    paths or any light there is nothing to aim, so the casters are not grouped at all."""
     mk = materials.kind[tri_material] if len(tri_material) else np.zeros(0, np.int32)
     caster = np.isin(mk, [MIRROR, DIELECTRIC])
     grating = gratings.enabled[tri_material] if len(tri_material) else np.zeros(0, bool)
-    aimed = caster if light_paths > 0 and len(lights) else np.zeros_like(caster)
+    world_lum = 0.0 if world_spectrum is None else float(np.asarray(world_spectrum, np.float64) @ conv.cmf_weights[:, 1])
+    aimed = caster if light_paths > 0 and (len(lights) or world_lum > 0) else np.zeros_like(caster)
     objects = caster_objects(vertices, triangles, aimed)
-    return LightTargets(caster, mk == DIFFUSE, grating, objects, _light_budget(lights, objects, conv))
+    # the world's power through the casters' disks: integral of L over the sphere x sum pi r^2
+    world_budget = 4 * np.pi * world_lum * float(np.sum(np.pi * objects.radius**2)) if len(objects) else 0.0
+    return LightTargets(caster, mk == DIFFUSE, grating, objects, _light_budget(lights, objects, conv), world_budget)
 
 
 def _light_budget(lights, obj: CasterObjects, conv) -> np.ndarray:
@@ -325,7 +340,8 @@ class LightWork:
         rec_layout, rec_warning = (element_layout(prepared, n_paths, targets.grating_mask, "grating-record")
                                    if targets.grating_mask.any() else (None, ""))
         warning = "; ".join(dict.fromkeys(w for w in (warning, rec_warning) if w))
-        share = targets.budget / max(targets.budget.sum(), 1e-300)
+        budgets = targets.budgets()  # the lights, then the world (light index L)
+        share = budgets / max(budgets.sum(), 1e-300)
         paths_per_light = np.floor(share * n_paths).astype(np.int64)
         jobs = [LightBatch(li, bi, start, int(n_l)) for li, n_l in enumerate(paths_per_light)
                 for bi, start in enumerate(range(0, int(n_l), BATCH_PATHS))]
@@ -349,10 +365,15 @@ def trace_batch(prepared, job: LightBatch, illum, records) -> dict:
     seed = int(prepared.settings.seed)
     b = job.paths
     rng = np.random.default_rng(np.random.SeedSequence([seed, LIGHT_PASS_STREAM, job.light, job.batch]))
-    o, d, weight = _emit(prepared, job.light, b, rng)
-    live = weight > 0
+    if job.light == len(prepared.lights):  # the world
+        o, d, spectral = _emit_world(prepared, b, rng)
+        live = spectral.max(axis=1) > 0
+        w = (spectral[live] / float(job.light_paths)).astype(np.float32)
+    else:
+        o, d, weight = _emit(prepared, job.light, b, rng)
+        live = weight > 0
+        w = (weight[live, None] / float(job.light_paths)).astype(np.float32) * prepared.lights.spectrum[job.light][None, :]
     m = int(live.sum())
-    w = (weight[live, None] / float(job.light_paths)).astype(np.float32) * prepared.lights.spectrum[job.light][None, :]
     rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(m, np.int64),
                 w, None, np.zeros(m, np.int32), rng.random(m))
     tr = _LightTrace(prepared, rng, illum, records)
@@ -518,3 +539,40 @@ def _emit(prepared, li: int, b: int, rng):
     # radiance (in the spectrum) * cos * area / pdf(direction)   (pdf of the point: 1 / area)
     weight = np.where(cos_l > 0, cos_l * lights.area[li] / np.maximum(pdf, 1e-300), 0.0)
     return origin + prepared.offset_base * d, d, weight
+
+
+def _emit_world(prepared, b: int, rng):
+    """b path starts from the world (docs/physics.md section 7.6): a direction w towards the sky
+    from the map's distribution (uniform over the sphere for a uniform world), then a point on
+    the disk one caster object's bounding sphere casts across w (the object chosen by disk
+    area, as for a SUN), the path starting far out along w and travelling along -w. Returns
+    origins, directions and spectral weights (B, n) = L(w) / pdf(w) / pdf_A(point): the flux
+    of the world's radiance through the disks, unbiased (no clamping, no cut-off)."""
+    obj = prepared.light_targets.objects
+    env = prepared.environment
+    if env is None:  # uniform world: directions uniform on the sphere
+        z = 1.0 - 2.0 * rng.random(b)
+        phi = 2 * np.pi * rng.random(b)
+        s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+        towards_sky = np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
+        spectral = np.broadcast_to(prepared.world_spectrum.astype(np.float64) * (4 * np.pi), (b, prepared.grid.n))
+    else:
+        towards_sky, pdf, rgb = env.sample(rng.random(b), rng.random(b))
+        inv = np.where(pdf > 0, 1.0 / np.where(pdf > 0, pdf, 1.0), 0.0)
+        spectral = prepared.conv.illuminant_from_rgb(rgb) * inv[:, None]
+    area = np.pi * obj.radius**2
+    prob = area / area.sum()
+    pick = np.minimum((rng.random((b, 1)) > np.cumsum(prob)[None, :]).sum(axis=1), len(obj) - 1)
+    r = obj.radius[pick] * np.sqrt(rng.random(b))
+    phi = 2 * np.pi * rng.random(b)
+    u, v = orthonormal_basis(towards_sky)
+    # every object's centre projected on the plane through 0 normal to w: (B, C, 3)
+    cp = obj.centre[None, :, :] - (towards_sky @ obj.centre.T)[:, :, None] * towards_sky[:, None, :]
+    pts = cp[np.arange(b), pick] + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
+    # mixture pdf per unit area over the disks of all objects (they overlap for some w)
+    dist2 = np.sum((pts[:, None, :] - cp) ** 2, axis=2)
+    pdf_a = np.sum(np.where(dist2 <= obj.radius**2, prob / area, 0.0), axis=1)
+    far = 4.0 * (np.max(np.abs(prepared.scene.vertices)) + prepared.extent)
+    o = pts + far * towards_sky
+    weight = np.where(pdf_a > 0, 1.0 / np.maximum(pdf_a, 1e-300), 0.0)
+    return o, -towards_sky, spectral * weight[:, None]
