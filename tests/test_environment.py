@@ -368,3 +368,93 @@ def test_a_bright_patch_throws_the_caustic_of_a_sun_of_its_irradiance():
     assert np.all(np.abs(fs - expected) < 4.5 * es)
     assert np.all(np.abs(fw - expected) < 4.5 * ew + 0.002 * expected)  # the patch spans ~1.5 degrees
     assert np.all(ew / fw < 0.02)
+
+
+# ------------------------------------------------------------------------------ scene, prepare, eye pass
+from opal_diffraction.core.camera import generate_rays  # noqa: E402
+from opal_diffraction.core.render import render  # noqa: E402
+from opal_diffraction.core.scene import MAX_SIDE, SceneError  # noqa: E402
+
+
+def _world_scene(**kw) -> Scene:
+    s = Scene(materials=Materials.from_list([{"kind": "DIFFUSE"}]), **kw)
+    s.add_mesh(*primitives.quad((0, 0, 0), (1, 0, 0), (0, 1, 0)), material=0)
+    s.camera = Camera.look_at((0, -3, 1), (0, 0, 0), width=8, height=8)
+    return s
+
+
+def test_world_map_saves_loads_and_older_files_have_none(tmp_path):
+    img = structured_map(8, 4)
+    s = _world_scene(world_color=np.array([2.0, 1.0, 0.5], np.float32), world_image=img, world_rotation=ROT)
+    s.save(tmp_path / "a.npz")
+    t = Scene.load(tmp_path / "a.npz")
+    np.testing.assert_array_equal(t.world_image, img)
+    np.testing.assert_array_equal(t.world_rotation, ROT)
+    # a file written before world maps existed
+    with np.load(tmp_path / "a.npz") as z:
+        old = {k: z[k] for k in z.files if k not in ("world_image", "world_rotation")}
+    np.savez(tmp_path / "old.npz", **old)
+    o = Scene.load(tmp_path / "old.npz")
+    assert o.world_image.shape == (0, 0, 3) and np.array_equal(o.world_rotation, np.eye(3))
+    clean, _ = o.validated()
+    assert clean.world_image.size == 0
+
+
+@pytest.mark.parametrize("image, rotation, message", [
+    (np.full((2, 4, 3), np.nan, np.float32), np.eye(3), "NaN or infinite"),
+    (-np.ones((2, 4, 3), np.float32), np.eye(3), "negative"),
+    (np.ones((2, 4), np.float32), np.eye(3), r"shape \(H, W, 3\)"),
+    (np.ones((1, MAX_SIDE + 1, 3), np.float32), np.eye(3), "at most"),
+    (np.ones((2, 4, 3), np.float32), np.diag([1.0, 1.0, 2.0]), "not orthonormal"),
+    (np.ones((2, 4, 3), np.float32), np.full((3, 3), np.inf), "NaN or infinite"),
+    (np.ones((2, 4, 3), np.float32), np.eye(2), "3x3"),
+    (np.full((2, 4, 3), 1e30, np.float32), np.eye(3), "renderable limit"),
+])
+def test_bad_world_maps_are_clear_errors(image, rotation, message):
+    s = _world_scene(world_color=np.ones(3, np.float32), world_image=image, world_rotation=rotation)
+    with pytest.raises(SceneError, match=message):
+        s.validated()
+
+
+def test_a_mapped_world_lights_the_scene_a_black_one_does_not():
+    lit = _world_scene(world_color=np.ones(3, np.float32), world_image=structured_map(8, 4))
+    assert not any("no lights" in w for w in lit.validated()[1])
+    dark = _world_scene(world_color=np.ones(3, np.float32), world_image=np.zeros((4, 8, 3), np.float32))
+    assert any("no lights" in w for w in dark.validated()[1])
+    mirror = np.diag([-1.0, 1.0, 1.0])  # a mirrored map (a Mapping node's negative scale) is allowed
+    _world_scene(world_color=np.ones(3, np.float32), world_image=structured_map(8, 4), world_rotation=mirror).validated()
+
+
+def test_prepare_builds_the_map_and_keys_the_light_pass_on_it():
+    settings = RenderSettings(wavelength_step=20.0)
+    uniform = prepare(_world_scene(world_color=np.full(3, 0.5, np.float32)), settings)
+    assert uniform.environment is None
+    img = structured_map(8, 4)
+    s = _world_scene(world_color=np.array([2.0, 1.0, 1.0], np.float32), world_image=img, world_rotation=ROT)
+    first = prepare(s, settings)
+    env = first.environment
+    assert isinstance(env, EnvironmentMap)
+    np.testing.assert_allclose(env.rgb, img * np.array([2.0, 1.0, 1.0], np.float32))  # colour x image
+    np.testing.assert_allclose(first.world_spectrum, first.conv.illuminant_from_rgb(env.mean_rgb()), rtol=1e-5)
+    same = prepare(s, settings, reuse=first)
+    assert same.key == first.key and same.environment is env
+    s2 = _world_scene(world_color=np.array([2.0, 1.0, 1.0], np.float32), world_image=img, world_rotation=np.eye(3))
+    turned = prepare(s2, settings, reuse=first)
+    assert turned.key != first.key and turned.environment is not env
+
+
+def test_the_background_is_the_map_along_each_camera_ray():
+    """No geometry: every pixel shows the map at its camera ray (pixel centres, filter 0), after
+    the RGB -> spectrum -> RGB round trip (Mallett-Yuksel under the white illuminant, docs/physics.md
+    section 1.4: within 1 % for these colours)."""
+    img = structured_map(32, 16)
+    world = np.array([1.5, 1.0, 0.8], np.float32)
+    s = Scene(materials=Materials.from_list([{"kind": "DIFFUSE"}]), world_color=world, world_image=img,
+              world_rotation=ROT)
+    s.camera = Camera.look_at((0, 0, 0), (1, 0.3, 0.4), width=24, height=16, lens=12)
+    r = render(s, RenderSettings(samples=1, filter_width=0.0, wavelength_step=5.0))
+    ys, xs = np.meshgrid(np.arange(16) + 0.5, np.arange(24) + 0.5, indexing="ij")
+    _, d = generate_rays(s.camera, xs.ravel(), ys.ravel())
+    expected = EnvironmentMap(img * world, ROT).radiance_rgb(d).reshape(16, 24, 3)
+    np.testing.assert_allclose(r.rgb, expected, rtol=0.01, atol=2e-3)
+    assert expected.std() > 0.1  # the view shows structure
