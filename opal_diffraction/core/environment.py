@@ -43,12 +43,16 @@ _TWO_PI = 2.0 * np.pi
 
 
 def direction_to_uv(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Cycles' equirectangular (u, v) of map-frame directions m (B, 3) (any length > 0)."""
+    """Cycles' equirectangular (u, v) of map-frame directions m (B, 3) (any length > 0), in
+    float32 for float32 input, else float64."""
     m = np.asarray(m)
+    if m.dtype != np.float32:
+        m = m.astype(np.float64, copy=False)
     ln = np.sqrt(np.einsum("ij,ij->i", m, m))
     z = np.clip(m[:, 2] / np.where(ln > 0, ln, 1), -1, 1)
-    u = 0.5 - np.arctan2(m[:, 1], m[:, 0]) / _TWO_PI
-    v = 1.0 - np.arccos(z) / np.pi
+    one, pi, two_pi = (m.dtype.type(x) for x in (1.0, np.pi, _TWO_PI))
+    u = one / 2 - np.arctan2(m[:, 1], m[:, 0]) / two_pi
+    v = one - np.arccos(z) / pi
     return u, v
 
 
@@ -80,6 +84,11 @@ class EnvironmentMap:
         if rot.shape != (3, 3) or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-5):
             raise ValueError("an environment map's rotation must be an orthogonal 3x3 matrix")
         self.rgb = np.ascontiguousarray(rgb)
+        # texels padded to 16 bytes and viewed as complex128: one np.take per corner gathers a
+        # whole texel (fancy indexing of (H, W, 3) by two index arrays is ~10x slower)
+        padded = np.zeros((rgb.shape[0] * rgb.shape[1], 4), np.float32)
+        padded[:, :3] = self.rgb.reshape(-1, 3)
+        self._texels = padded.view(np.complex128).ravel()
         self.rotation = rot
         self.interpolation = interpolation
         h, w = rgb.shape[:2]
@@ -112,31 +121,38 @@ class EnvironmentMap:
         #: (H, W) float64 solid-angle density of each texel (sample() and pdf()).
         self.density = weights / (total * omega_row[:, None])
         self._omega_row = omega_row
-        for a in (self.rgb, self.rotation, self._row_cdf, self._cond_flat, self.density, self._z_lo, self._dz):
+        for a in (self.rgb, self._texels, self.rotation, self._row_cdf, self._cond_flat, self.density, self._z_lo, self._dz):
             a.flags.writeable = False
 
     # ----------------------------------------------------------------- lookups
     def _map_dirs(self, d) -> np.ndarray:
-        return np.asarray(d, np.float64).reshape(-1, 3) @ self.rotation.T
+        """Map-frame directions of world directions d (B, 3), in d's precision (float32 rays
+        stay float32: a texel of a 16 k map is 4e-4 rad, float32 resolves 1e-7)."""
+        d = np.asarray(d)
+        dtype = np.float32 if d.dtype == np.float32 else np.float64
+        return d.reshape(-1, 3).astype(dtype, copy=False) @ self.rotation.T.astype(dtype)
+
+    def _texel_values(self, j: np.ndarray, i: np.ndarray) -> np.ndarray:
+        """(B, 3) float32 texels at rows j, columns i (in range)."""
+        return np.take(self._texels, j * self.width + i).view(np.float32).reshape(-1, 4)[:, :3]
 
     def _lookup(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Texel lookup at (u, v) (B,), Cycles' way: (B, 3) float32."""
         h, w = self.height, self.width
-        img = self.rgb
-        x = np.asarray(u, np.float64) * w
-        y = np.asarray(v, np.float64) * h
+        x = np.asarray(u) * w
+        y = np.asarray(v) * h
         if self.interpolation == "CLOSEST":
             i = np.floor(x).astype(np.int64) % w
             j = np.floor(y).astype(np.int64) % h
-            return img[j, i]
+            return np.ascontiguousarray(self._texel_values(j, i))
         x, y = x - 0.5, y - 0.5
         i0, j0 = np.floor(x), np.floor(y)
         fx, fy = (x - i0).astype(np.float32)[:, None], (y - j0).astype(np.float32)[:, None]
         i0, j0 = i0.astype(np.int64) % w, j0.astype(np.int64) % h
         i1, j1 = (i0 + 1) % w, (j0 + 1) % h
-        top = img[j1, i0] * (1 - fx) + img[j1, i1] * fx
-        bottom = img[j0, i0] * (1 - fx) + img[j0, i1] * fx
-        return (bottom * (1 - fy) + top * fy).astype(np.float32)
+        top = self._texel_values(j1, i0) * (1 - fx) + self._texel_values(j1, i1) * fx
+        bottom = self._texel_values(j0, i0) * (1 - fx) + self._texel_values(j0, i1) * fx
+        return bottom * (1 - fy) + top * fy
 
     def radiance_rgb(self, d) -> np.ndarray:
         """(B, 3) float32 radiance arriving from world directions ``d`` (B, 3) (the direction the
@@ -153,7 +169,7 @@ class EnvironmentMap:
         """(B,) float64: the solid-angle density with which :meth:`sample` draws world direction d."""
         u, v = direction_to_uv(self._map_dirs(d))
         i, j = self._texel(u, v)
-        return self.density[j, i]
+        return np.take(self.density, j * self.width + i)
 
     # ----------------------------------------------------------------- sampling
     def sample(self, u1, u2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -165,9 +181,14 @@ class EnvironmentMap:
         u2 = np.asarray(u2, np.float64).ravel()
         h, w = self.height, self.width
         j = np.clip(np.searchsorted(self._row_cdf, u1, side="right") - 1, 0, h - 1)
+        x = j + u2
+        # work in texel order: the search over the H (W + 1) conditional CDF entries and the
+        # texel lookups then walk memory in order (measured 20x faster on a 4 k map than
+        # random order); the results go back to the callers' order at the end
+        order = np.argsort(x)
+        u1, j, x = u1[order], j[order], x[order]
         lo, hi = self._row_cdf[j], self._row_cdf[j + 1]
         t1 = np.clip((u1 - lo) / np.where(hi > lo, hi - lo, 1.0), 0.0, 1.0)
-        x = j + u2
         k = np.clip(np.searchsorted(self._cond_flat, x, side="right") - 1, j * (w + 1), j * (w + 1) + w - 1)
         i = k - j * (w + 1)
         clo, chi = self._cond_flat[k], self._cond_flat[k + 1]
@@ -178,10 +199,12 @@ class EnvironmentMap:
         phi = np.pi - _TWO_PI * u
         s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
         m = np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
-        d = m @ self.rotation  # R^T m, row vectors
-        pdf = self.density[j, i]
+        pdf = np.take(self.density, j * w + i)
         rgb = np.zeros((len(u1), 3), np.float32) if self.black else self._lookup(u, v)
-        return d, pdf, rgb
+        back = np.empty_like(order)
+        back[order] = np.arange(len(order))
+        # R^T m as row vectors; np.take: row gathers by fancy indexing are several times slower
+        return np.take(m, back, axis=0) @ self.rotation, np.take(pdf, back), np.take(rgb, back, axis=0)
 
     # ----------------------------------------------------------------- totals
     def solid_angles(self) -> np.ndarray:
