@@ -215,3 +215,22 @@ def test_a_mapped_world_is_a_light_and_no_lights_is_not_said(tmp_path):
     s, warns = _export().scene.validated()
     assert s.world_image.shape == (H, W, 3)
     assert not any("no lights" in w for w in warns)
+
+
+def test_emission_world_shader_and_an_unlinked_vector_export_the_map():
+    """An Emission shader (instead of Background) with an Environment Texture whose Vector is
+    not linked: the map, the strength as its multiplier and no rotation, without warnings."""
+    bs.empty_scene(8, 8)
+    bs.camera()
+    img, px = pattern_image()
+    w, env = env_world(strength=3.0, image=img, vector_type=None)
+    nt = w.node_tree
+    em = nt.nodes.new("ShaderNodeEmission")
+    em.inputs["Strength"].default_value = 3.0
+    nt.links.new(env.outputs["Color"], em.inputs["Color"])
+    nt.links.new(em.outputs[0], nt.nodes["World Output"].inputs["Surface"])
+    ex = _export()
+    np.testing.assert_allclose(ex.scene.world_image, px, rtol=1e-6)
+    np.testing.assert_allclose(ex.scene.world_color, 3.0)
+    np.testing.assert_array_equal(ex.scene.world_rotation, np.eye(3))
+    assert not any("Env World" in x for x in ex.warnings), ex.warnings

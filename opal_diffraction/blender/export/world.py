@@ -89,7 +89,8 @@ def _environment(reader: NodeReader, shader, env, owner: str, warn) -> WorldLigh
     """A Background/Emission ``shader`` lit by Environment Texture ``env`` (equirectangular)."""
     strength = reader.strength(shader)
     image = env.image
-    px = read_image(image) if image is not None else None
+    has_pixels = image is not None and image.size[0] * image.size[1] > 0 and image.channels > 0
+    px = read_image(image, warn, owner) if has_pixels else None
     if px is None:
         what = f"image '{image.name}' has no pixels (missing file '{image.filepath}'?)" if image is not None \
             else "has no image"
@@ -127,8 +128,7 @@ def _vector_rotation(reader: NodeReader, env, owner: str, warn) -> np.ndarray:
         elif not _is_direction(*inner, owner, warn):
             return np.eye(3)
         return rot
-    if _is_direction(node, out, owner, warn):
-        return np.eye(3)
+    _is_direction(node, out, owner, warn)  # warns when it is not the ray direction
     return np.eye(3)
 
 
