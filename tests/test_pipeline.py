@@ -66,12 +66,15 @@ def test_a_camera_move_reuses_the_light_pass_exactly():
 
 def test_prepare_reuses_what_did_not_change():
     first = prepare(glass_scene(), SETTINGS)
-    # the world colour: same geometry and light-pass inputs, so the same key and structure
+    # the world colour: same geometry (structure reused), but the world lights the light pass
+    # (caustics through the glass), so its key changes
     s = glass_scene()
     s.world_color = np.array([0.2, 0.1, 0.1], np.float32)
     world = prepare(s, SETTINGS, reuse=first)
-    assert world.key == first.key and world.accel is first.accel
+    assert world.key != first.key and world.accel is first.accel
     assert not np.array_equal(world.world_spectrum, first.world_spectrum)
+    # the same scene again: the same key
+    assert prepare(glass_scene(), SETTINGS, reuse=first).key == first.key
     # a light's power: same geometry (structure reused), but the light pass must rerun
     s = glass_scene()
     s.lights.power[0] = 400.0

@@ -237,15 +237,19 @@ class _TileTrace(SpecularWalker):
                 rad = sun_radiance(lights, r.d) * _power_heuristic(r.extra["pdf"], p_light)[:, None]
                 self._add_by_vertices(r, r.weighted(rad) if r.lam is None else r.w * rad[np.arange(len(r)), r.lam])
         st = rays.extra
-        # the world through glass after a diffuse vertex is a caustic path the light pass does
-        # not trace from the world (yet): counted here, so nothing is covered
-        for nd in np.unique(st["nd"]):
-            self._add_background(rays.take(st["nd"] == nd), self._light_film(min(int(nd), 2)))
         if self.escapes is not None:
             first = st["nd"] == 0  # paths that met only mirrors and glass
             r = rays.take(first)
             self.escapes.append({"origin": r.o, "direction": r.d, "weight": r.dense_w(self.n),
                                  "lam": r.lam, "depth": r.depth, "ray": r.pix})
+        # the world through glass after a diffuse vertex is a caustic path the light pass
+        # counted (it emits from the world too)
+        keep = self._not_covered(rays)
+        if not keep.all():
+            rays = rays.take(keep)
+            st = rays.extra
+        for nd in np.unique(st["nd"]):
+            self._add_background(rays.take(st["nd"] == nd), self._light_film(min(int(nd), 2)))
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
         prepared = self.prepared
@@ -397,6 +401,16 @@ class _TileTrace(SpecularWalker):
         return True
 
     def _add_background(self, rays: Rays, film):
+        env = self.prepared.environment
+        if env is not None:  # the world map seen along the escaping rays (docs/physics.md section 7.9)
+            if len(rays) == 0:
+                return
+            spectra = self.prepared.conv.illuminant_from_rgb(env.radiance_rgb(rays.d)).astype(np.float32)
+            # a BSDF sample, weighted against the map's next-event estimation (power heuristic)
+            spectra *= _power_heuristic(rays.extra["pdf"], env.pdf(rays.d).astype(np.float32))[:, None]
+            contrib = rays.weighted(spectra) if rays.lam is None else rays.w * spectra[np.arange(len(rays)), rays.lam]
+            self._accumulate(rays, contrib, film)
+            return
         bg = self.prepared.world_spectrum
         if not bg.any() or len(rays) == 0:
             return
@@ -430,6 +444,41 @@ class _TileTrace(SpecularWalker):
         self._direct_light(rays, hit, rng, film)
         if self.mesh_lights is not None:
             self._mesh_light_nee(rays, hit, rng, film)
+        if self.prepared.environment is not None:
+            self._environment_nee(rays, hit, rng, film)
+
+    def _environment_nee(self, rays: Rays, hit: Hit, rng, film):
+        """One direction from the world map's luminance distribution per vertex
+        (core/environment.py), by shadow ray, weighted against BSDF sampling by the power
+        heuristic: a small bright sun in a map lights the scene without noise."""
+        prepared = self.prepared
+        env = prepared.environment
+        b = len(rays)
+        wi, pdf, rgb = env.sample(rng.random(b), rng.random(b))
+        wi = wi.astype(np.float32)
+        cos_s = np.einsum("ij,ij->i", wi, hit.ns)
+        ok = (cos_s > 0) & (pdf > 0)
+        if prepared.corner_normals is not None:
+            ok &= np.einsum("ij,ij->i", wi, hit.ng) > 0
+        live = np.flatnonzero(ok)
+        if live.size == 0:
+            return
+        o = (hit.p[live] + hit.eps[live, None] * hit.ng[live]).astype(np.float32)
+        occ = prepared.accel.occluded(o, wi[live], np.full(live.size, np.inf, np.float32))
+        self._rays += len(occ)
+        live = live[~occ]
+        if live.size == 0:
+            return
+        r, h = rays.take(live), hit.take(live)
+        cos, p_env = cos_s[live], pdf[live].astype(np.float32)
+        f = cos / p_env * _power_heuristic(p_env, cos * np.float32(1 / np.pi), light_first=True)
+        radiance = prepared.conv.illuminant_from_rgb(rgb[live]).astype(np.float32)
+        brdf = self._per_ray(prepared.materials.reflectance, h.mat, r.lam) * np.float32(1 / np.pi)
+        if r.lam is None:
+            contrib = r.weighted(brdf * radiance * f[:, None])
+        else:
+            contrib = r.w * brdf * radiance[np.arange(len(r)), r.lam] * f
+        self._accumulate(r, contrib, film)
 
     def _mesh_light_nee(self, rays: Rays, hit: Hit, rng, film):
         """One power-proportional point on the emissive triangles per vertex (core/mesh_lights.py),

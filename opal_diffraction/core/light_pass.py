@@ -25,6 +25,11 @@ meshes are one more entry, index L, of the budget). Paths start with weight (emi
 pdf / paths of that light), so the map holds flux in W per wavelength sample; lights share the
 path budget in proportion to the power they send towards casters.
 
+The world (a uniform colour or an environment map, core/environment.py) is one more emitter,
+light-pass index L + 1 (after the L lights and the emissive meshes): directions from its distribution, points on the casters'
+disks across each direction as for a sun (``_emit_world``, docs/physics.md section 7.9), its
+share of the paths by the power it sends through those disks.
+
 Every batch of paths draws its random numbers from its own stream (seed, light pass, light,
 batch), and batches add into the map, so the map does not depend on how the work is split.
 ``LightWork`` is that split: the batches in order and the LANES fixed lanes they are dealt to;
@@ -199,32 +204,38 @@ class LightTargets:
     objects: CasterObjects     # bounding spheres of the connected caster objects
     budget: np.ndarray         # (L,) estimated luminous power each light sends towards the casters
     mesh_budget: float = 0.0   # the same for all emissive triangles together (mesh_lights.MeshLights)
+    world_budget: float = 0.0  # the same for the world (uniform or map)
 
     @property
     def needed(self) -> bool:
         """Some light reaches a caster, and something can receive what comes out of it."""
-        return (bool(np.any(self.budget > 0)) or self.mesh_budget > 0) and bool(
+        return (bool(np.any(self.budget > 0)) or self.mesh_budget > 0 or self.world_budget > 0) and bool(
             self.receiver_mask.any() or self.grating_mask.any())
 
     @property
     def budgets(self) -> np.ndarray:
-        """(L + 1,) the lights' budgets, then the emissive meshes' (light-pass index L)."""
-        return np.append(self.budget, self.mesh_budget)
+        """(L + 2,) the lights' budgets, then the emissive meshes' (light-pass index L) and the
+        world's (index L + 1)."""
+        return np.append(self.budget, [self.mesh_budget, self.world_budget])
 
 
 def find_light_targets(vertices, triangles, tri_material, materials, gratings, lights, conv,
-                       light_paths: int = 1, mesh_lights=None) -> LightTargets:
-    """The light pass's targets for a scene (prepared materials, gratings, lights and emissive
-    meshes). Without light paths or lights there is nothing to aim, so the casters are not
-    grouped at all."""
+                       light_paths: int = 1, mesh_lights=None, world_spectrum=None) -> LightTargets:
+    """The light pass's targets for a scene (prepared materials, gratings, lights, emissive
+    meshes, and ``world_spectrum`` (n,) the world's mean radiance, or None: a black world).
+    Without light paths or any emitter there is nothing to aim, so the casters are not grouped
+    at all."""
     mk = materials.kind[tri_material] if len(tri_material) else np.zeros(0, np.int32)
     caster = np.isin(mk, [MIRROR, DIELECTRIC])
     grating = gratings.enabled[tri_material] if len(tri_material) else np.zeros(0, bool)
-    emitters = len(lights) > 0 or mesh_lights is not None
+    world_lum = 0.0 if world_spectrum is None else float(np.asarray(world_spectrum, np.float64) @ conv.cmf_weights[:, 1])
+    emitters = len(lights) > 0 or mesh_lights is not None or world_lum > 0
     aimed = caster if light_paths > 0 and emitters else np.zeros_like(caster)
     objects = caster_objects(vertices, triangles, aimed)
+    # the world's power through the casters' disks: integral of L over the sphere x sum pi r^2
+    world_budget = 4 * np.pi * world_lum * float(np.sum(np.pi * objects.radius**2)) if len(objects) else 0.0
     return LightTargets(caster, mk == DIFFUSE, grating, objects, _light_budget(lights, objects, conv),
-                        _mesh_light_budget(mesh_lights, objects))
+                        _mesh_light_budget(mesh_lights, objects), world_budget)
 
 
 def _light_budget(lights, obj: CasterObjects, conv) -> np.ndarray:
@@ -340,7 +351,7 @@ class LightWork:
         rec_layout, rec_warning = (element_layout(prepared, n_paths, targets.grating_mask, "grating-record")
                                    if targets.grating_mask.any() else (None, ""))
         warning = "; ".join(dict.fromkeys(w for w in (warning, rec_warning) if w))
-        budgets = targets.budgets  # the lights, then the emissive meshes (index L)
+        budgets = targets.budgets  # the lights, then the emissive meshes (index L), the world (L + 1)
         share = budgets / max(budgets.sum(), 1e-300)
         paths_per_light = np.floor(share * n_paths).astype(np.int64)
         jobs = [LightBatch(li, bi, start, int(n_l)) for li, n_l in enumerate(paths_per_light)
@@ -365,8 +376,9 @@ def trace_batch(prepared, job: LightBatch, illum, records) -> dict:
     seed = int(prepared.settings.seed)
     b = job.paths
     rng = np.random.default_rng(np.random.SeedSequence([seed, LIGHT_PASS_STREAM, job.light, job.batch]))
-    if job.light == len(prepared.lights):  # the emissive meshes: a spectrum per path
-        o, d, wspec = _emit_mesh(prepared, b, rng)
+    if job.light >= len(prepared.lights):  # the emissive meshes or the world: a spectrum per path
+        emit = _emit_mesh if job.light == len(prepared.lights) else _emit_world
+        o, d, wspec = emit(prepared, b, rng)
         live = wspec.max(axis=1) > 0
         w = (wspec[live] / float(job.light_paths)).astype(np.float32)
     else:
@@ -633,3 +645,39 @@ def _mesh_light_budget(mesh_lights, obj: CasterObjects, max_emitters: int = 1638
     _, _, omega = _cones(centroid, obj)
     part = float(np.sum(mesh_lights.weight[sel] * omega.sum(axis=1)) / np.pi)
     return part * float(mesh_lights.weight.sum()) / max(float(mesh_lights.weight[sel].sum()), 1e-300)
+
+
+def _emit_world(prepared, b: int, rng):
+    """b path starts from the world (docs/physics.md section 7.9): a direction w towards the sky
+    from the map's distribution (uniform over the sphere for a uniform world), then a point on
+    the disk one caster object's bounding sphere casts across w (the object chosen by disk
+    area, as for a SUN), the path starting far out along w and travelling along -w. Returns
+    origins, directions and spectral weights (B, n) = L(w) / pdf(w) / pdf_A(point): the flux
+    of the world's radiance through the disks, unbiased (no clamping, no cut-off)."""
+    obj = prepared.light_targets.objects
+    env = prepared.environment
+    if env is None:  # uniform world: directions uniform on the sphere
+        z = 1.0 - 2.0 * rng.random(b)
+        phi = 2 * np.pi * rng.random(b)
+        s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+        towards_sky = np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
+        spectral = np.broadcast_to(prepared.world_spectrum.astype(np.float64) * (4 * np.pi), (b, prepared.grid.n))
+    else:
+        towards_sky, pdf, rgb = env.sample(rng.random(b), rng.random(b))
+        inv = np.where(pdf > 0, 1.0 / np.where(pdf > 0, pdf, 1.0), 0.0)
+        spectral = prepared.conv.illuminant_from_rgb(rgb) * inv[:, None]
+    area = np.pi * obj.radius**2
+    prob = area / area.sum()
+    pick = np.minimum((rng.random((b, 1)) > np.cumsum(prob)[None, :]).sum(axis=1), len(obj) - 1)
+    r = obj.radius[pick] * np.sqrt(rng.random(b))
+    phi = 2 * np.pi * rng.random(b)
+    u, v = orthonormal_basis(towards_sky)
+    # every object's centre projected on the plane through 0 normal to w: (B, C, 3)
+    cp = obj.centre[None, :, :] - (towards_sky @ obj.centre.T)[:, :, None] * towards_sky[:, None, :]
+    pts = cp[np.arange(b), pick] + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
+    # mixture pdf per unit area over the disks of all objects (they overlap for some w)
+    dist2 = np.sum((pts[:, None, :] - cp) ** 2, axis=2)
+    pdf_a = np.sum(np.where(dist2 <= obj.radius**2, prob / area, 0.0), axis=1)
+    o = pts + _far_distance(prepared) * towards_sky
+    weight = np.where(pdf_a > 0, 1.0 / np.maximum(pdf_a, 1e-300), 0.0)
+    return o, -towards_sky, spectral * weight[:, None]

@@ -28,6 +28,7 @@ import numpy as np
 
 from .accel import build_accelerator, default_threads
 from .cancel import check, run_cancellable
+from .environment import EnvironmentMap
 from .geometry import triangle_normals
 from .gratings import PreparedGratings, prepare_gratings, triangle_tangents
 from .light_pass import LightTargets, find_light_targets
@@ -80,7 +81,9 @@ class PreparedScene:
     tri_material: np.ndarray           # (T,) int32
     tri_grating_tangent: np.ndarray    # (T, 3) float32 unit grating vectors; (0, 3) without gratings
     tri_period: np.ndarray             # (T,) float32 nm per-triangle period override (0: the material's), or (0,)
-    world_spectrum: np.ndarray         # (n,) float32 radiance of the world
+    world_spectrum: np.ndarray         # (n,) float32 radiance of a uniform world; with a map, the map's
+    #                                    mean over the sphere (what does not sample the map yet uses)
+    environment: EnvironmentMap | None  # the world map (radiance = world colour x image), or None: uniform
     extent: float                      # metres: the scene's size (prepare.scene_extent)
     offset_base: float                 # metres: the scene-scaled part of the offsets
     light_targets: LightTargets        # what the light pass aims at and who receives
@@ -145,9 +148,24 @@ def _same_shading(a: Scene, b: Scene) -> bool:
 
 
 def _same_for_light_pass(a: Scene, b: Scene) -> bool:
-    """Everything but the camera and the world (which the light pass never reads)."""
-    return all(_equal(getattr(a, f.name), getattr(b, f.name)) for f in fields(a)
-               if f.name not in ("camera", "world_color"))
+    """Everything but the camera (the world is a light of the light pass: its colour, map and
+    rotation count)."""
+    return all(_equal(getattr(a, f.name), getattr(b, f.name)) for f in fields(a) if f.name != "camera")
+
+
+def _same_world(a: Scene, b: Scene) -> bool:
+    return all(_equal(getattr(a, k), getattr(b, k)) for k in ("world_color", "world_image", "world_rotation"))
+
+
+def world_environment(scene: Scene, reuse: PreparedScene | None = None) -> EnvironmentMap | None:
+    """The scene's world map as an EnvironmentMap of radiance world_color x image (None: a
+    uniform world, or a black one); an earlier preparation's map when the world is unchanged."""
+    if reuse is not None and _same_world(reuse.scene, scene):
+        return reuse.environment
+    color = np.asarray(scene.world_color, np.float32)
+    if scene.world_image.size == 0 or not np.any(color > 0):
+        return None
+    return EnvironmentMap(scene.world_image * color[None, None, :], scene.world_rotation)
 
 
 def _light_pass_settings(s: RenderSettings) -> dict:
@@ -220,13 +238,18 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         corner_normals = np.asarray(scene.corner_normals, np.float32)  # unit length (validated)
     mesh_lights = MeshLights.build(v, t, tri_material, materials.emission, tri_normal,
                                    luminance_weights=conv.cmf_weights[:, 1])
+    environment = world_environment(scene, reuse)
+    if environment is None:
+        world_spectrum = conv.illuminant_from_rgb(np.asarray(scene.world_color, np.float64)).astype(np.float32)
+    else:
+        world_spectrum = conv.illuminant_from_rgb(environment.mean_rgb()).astype(np.float32)
     same_for_light = (same_geometry and _same_shading(reuse.scene, scene) and _same_for_light_pass(reuse.scene, scene)
                       and _light_pass_settings(reuse.settings) == _light_pass_settings(settings))
     if same_for_light:
         targets, key = reuse.light_targets, reuse.key
     else:
         targets = find_light_targets(v, t, tri_material, materials, gratings, lights, conv, settings.light_paths,
-                                     mesh_lights=mesh_lights)
+                                     mesh_lights=mesh_lights, world_spectrum=world_spectrum)
         key = next(_keys)
     prepared = PreparedScene(
         scene=scene,
@@ -242,7 +265,8 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         tri_material=tri_material,
         tri_grating_tangent=tri_grating_tangent,
         tri_period=np.asarray(scene.tri_period, np.float32).reshape(-1),
-        world_spectrum=conv.illuminant_from_rgb(np.asarray(scene.world_color, np.float64)).astype(np.float32),
+        world_spectrum=world_spectrum,
+        environment=environment,
         extent=extent,
         offset_base=base,
         light_targets=targets,

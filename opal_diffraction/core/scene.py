@@ -334,6 +334,12 @@ class Scene:
     ``corner_normals`` (T, 3, 3): the shading normal at each corner of each triangle (Blender's
     corner normals: smooth, split or custom), world space, interpolated across the triangle at
     render time (docs/physics.md section 4.6); empty (0, 3, 3) means flat shading everywhere.
+    The world: ``world_color`` (3,) linear RGB radiance, or, when ``world_image`` (H, W, 3)
+    float32 holds an equirectangular map (Cycles' convention, row 0 at the bottom;
+    core/environment.py), the multiplier of that map (the Background's strength times its
+    tint): the radiance from direction d is world_color * image(world_rotation @ d).
+    ``world_rotation`` (3, 3) is orthogonal, world direction -> map direction. An empty
+    (0, 0, 3) image: a uniform world.
     """
 
     vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
@@ -346,6 +352,8 @@ class Scene:
     tri_tangent: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     tri_period: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     corner_normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3), np.float32))
+    world_image: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3), np.float32))
+    world_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
 
     # ------------------------------------------------------------------ building
     def add_mesh(self, vertices, triangles, material: int, tangent=None, period=None, normals=None) -> None:
@@ -456,6 +464,7 @@ class Scene:
         lights = _validate_lights(self.lights)
         wc = _column(self.world_color, "world colour", (), rows=3)
         _check_range(wc[None, :], lambda i: "world colour", "value", "", limit=EMISSION_LIMIT, finite_text="world colour is NaN or infinite")
+        world_image, world_rotation = _validate_world_image(self.world_image, self.world_rotation, wc)
 
         tt = _column(self.tri_tangent, "tri_tangent", (3,), allow_empty=True)
         tp = _column(self.tri_period, "tri_period", (), allow_empty=True)
@@ -487,12 +496,14 @@ class Scene:
                 cn = cn[keep] if len(cn) else cn
         if len(t) == 0:
             warns.append("the scene has no geometry: the image shows only the background")
-        # a coloured world lights the scene, and so does a mesh whose material emits
+        # a coloured or mapped world lights the scene, and so does a mesh whose material emits
         emitting = len(t) > 0 and bool(np.any(np.asarray(materials.emission)[np.unique(tm)] > 0))
-        if len(lights) == 0 and not np.any(np.asarray(wc) > 0) and not emitting:
+        world_lit = bool(np.any(np.asarray(wc) > 0)) and (world_image.size == 0 or bool(np.any(world_image > 0)))
+        if len(lights) == 0 and not world_lit and not emitting:
             warns.append("the scene has no lights: only the background is lit")
         clean = replace(self, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
-                        materials=materials, lights=lights, camera=camera, world_color=wc, corner_normals=cn)
+                        materials=materials, lights=lights, camera=camera, world_color=wc, corner_normals=cn,
+                        world_image=world_image, world_rotation=world_rotation)
         return clean, warns
 
     # ------------------------------------------------------------------ .npz
@@ -507,6 +518,8 @@ class Scene:
             "tri_tangent": np.asarray(self.tri_tangent, np.float32).reshape(-1, 3),
             "tri_period": np.asarray(self.tri_period, np.float32).reshape(-1),
             "corner_normals": np.asarray(self.corner_normals, np.float32).reshape(-1, 3, 3),
+            "world_image": np.asarray(self.world_image, np.float32),
+            "world_rotation": np.asarray(self.world_rotation, np.float64),
         }
         for f in fields(Materials):
             d["material_" + f.name] = getattr(self.materials, f.name)
@@ -589,6 +602,9 @@ class Scene:
                 tri_period=read("tri_period") if "tri_period" in names else np.zeros(0, np.float32),
                 # older files have no shading normals: flat shading
                 corner_normals=read("corner_normals") if "corner_normals" in names else np.zeros((0, 3, 3), np.float32),
+                # older files have no world map: a uniform world
+                world_image=read("world_image") if "world_image" in names else np.zeros((0, 0, 3), np.float32),
+                world_rotation=read("world_rotation") if "world_rotation" in names else np.eye(3),
             )
 
 
@@ -729,6 +745,57 @@ def _number(value, what: str, integer: bool = False):
     if not np.isfinite(f):
         raise SceneError(f"{what} must be a finite number, got {f}")
     return f
+
+
+def _validate_world_image(image, rotation, world_color) -> tuple[np.ndarray, np.ndarray]:
+    """The world map (H, W, 3) float32 (empty: (0, 0, 3)) and its rotation (3, 3) float64, or a
+    SceneError: finite, non-negative, within the image size limits, its product with the world
+    colour within EMISSION_LIMIT, the rotation orthogonal."""
+    try:
+        img = np.asarray(image)
+    except Exception:
+        raise SceneError("world image is not a regular array of numbers") from None
+    if img.dtype.kind not in "iuf":
+        raise SceneError(f"world image must hold numbers, got {_DTYPE_WORDS.get(img.dtype.kind, img.dtype)}")
+    if img.size == 0:
+        img = np.zeros((0, 0, 3), np.float32)
+    else:
+        if img.ndim != 3 or img.shape[2] != 3:
+            raise SceneError(f"world image must have shape (H, W, 3), got {img.shape}")
+        h, w = img.shape[:2]
+        if h > MAX_SIDE or w > MAX_SIDE:
+            raise SceneError(f"world image {w}x{h}: each side must be at most {MAX_SIDE} pixels")
+        if h * w > MAX_PIXELS:
+            raise SceneError(f"world image {w}x{h} is {w * h / 1e6:.0f} M pixels, more than the "
+                             f"{MAX_PIXELS / 1e6:.0f} M allowed")
+        if img.dtype != np.float32:
+            with np.errstate(over="ignore", invalid="ignore"):
+                if not np.isfinite(img.astype(np.float64)).all() or np.abs(img.astype(np.float64)).max() > FLOAT32_MAX:
+                    raise SceneError("world image holds NaN, infinite or float32-overflowing values")
+            img = img.astype(np.float32)
+        if not np.isfinite(img).all():
+            raise SceneError("world image holds NaN or infinite values")
+        if (img < 0).any():
+            raise SceneError(f"world image holds negative radiance (min {_g(img.min())})")
+        peak = float(img.max()) * float(np.max(world_color))
+        if peak > EMISSION_LIMIT:
+            raise SceneError(f"world image times the world colour reaches {_g(peak)}, beyond the renderable "
+                             f"limit {EMISSION_LIMIT:g}")
+        img = np.ascontiguousarray(img)
+    try:
+        rot = np.asarray(rotation)
+    except Exception:
+        raise SceneError("world rotation must be a 3x3 rotation matrix") from None
+    if rot.dtype.kind not in "iuf" or rot.shape != (3, 3):
+        raise SceneError(f"world rotation must be a 3x3 matrix of numbers, got {rot.dtype} of shape {rot.shape}")
+    rot = rot.astype(np.float64)
+    if not np.isfinite(rot).all():
+        raise SceneError("world rotation is NaN or infinite")
+    err = float(np.abs(rot @ rot.T - np.eye(3)).max())
+    if err > 1e-4:
+        raise SceneError(f"world rotation is not orthonormal (|R R^T - I| = {_g(err)}): a rotation, "
+                         "optionally with a mirror, is expected")
+    return img, rot
 
 
 def _validate_camera(c: Camera) -> Camera:

@@ -9,7 +9,7 @@ spot and area lights, W/m^2 for the sun), colours in the blend file's linear wor
 converted to the core's linear Rec.709.
 
 What the core cannot render yet is approximated and named in the warnings rather than failing:
-textures (averaged), rough reflection and refraction (made smooth), volume shaders (a volume-only material's faces are left out, as Cycles draws no
+textures (averaged; a world's equirectangular Environment Texture is exported as a map), rough reflection and refraction (made smooth), volume shaders (a volume-only material's faces are left out, as Cycles draws no
 surface for it); hair (curves objects and hair particle systems), point clouds and volume
 objects are skipped with counts. Values that would overflow the tracer's float32 (an emission or
 light power up to Blender's FLT_MAX) are clamped with a warning, NaN is an error naming the
@@ -26,7 +26,7 @@ One module per concept, as in BlendLuxCore's ``export`` package:
     materials  the material table (export_materials)
     meshes     meshes, tangents, periods, instances -> arrays; the MeshCache
     lights     the light table (export_lights)
-    world      the background colour (export_world)
+    world      the world: a colour, or an environment map with its rotation (export_world_light)
     camera     render size, border region, the camera (export_camera)
     messages   the warnings, once each
 
@@ -52,7 +52,7 @@ from .materials import MaterialTable, export_materials
 from .meshes import (GEOMETRY_TYPES, UNSUPPORTED_GEOMETRY, MeshCache, SceneMeshes, element_count, flatten,
                      hair_systems, strand_count)
 from .messages import Skipped, Warnings
-from .world import export_world
+from .world import export_world, export_world_light
 
 __all__ = [
     "ExportCancelled",
@@ -69,6 +69,7 @@ __all__ = [
     "export_lights",
     "export_materials",
     "export_world",
+    "export_world_light",
     "export_camera",
 ]
 
@@ -147,11 +148,12 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     skipped.report(warn)
     core_materials = materials.finish()
     cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn)
-    world = export_world(depsgraph, warn)
+    world = export_world_light(depsgraph, warn)
     core_scene = Scene(
         vertices=vertices, triangles=triangles, tri_material=tri_material,
         materials=core_materials, lights=Lights.from_list(lights.rows), camera=cam,
-        world_color=world, tri_tangent=tri_tangent, tri_period=tri_period, corner_normals=corner_normals,
+        world_color=world.color, tri_tangent=tri_tangent, tri_period=tri_period, corner_normals=corner_normals,
+        world_image=world.image, world_rotation=world.rotation,
     )
     meshes.done()
     stats = {

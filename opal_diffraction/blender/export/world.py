@@ -1,46 +1,188 @@
-"""The Blender world -> the core's uniform background colour (linear Rec.709, Cycles' units).
+"""The Blender world -> the core's world light: a uniform colour, or an equirectangular map with
+its multiplier and rotation (linear Rec.709, Cycles' units).
 
-The colour of a Background or Emission shader times its strength (a texture on it is averaged),
-or the world's viewport colour when it has no node tree; the core renders no environment map.
-A NaN colour or strength is an error naming the world, a huge one is clamped with a warning.
+A Background or Emission shader whose Color is an Environment Texture node (equirectangular
+projection) exports that node's image (``images.read_image``: linear Rec.709, row 0 at the
+bottom) as ``Scene.world_image``, the shader's Strength as ``Scene.world_color`` (the map's
+multiplier), and the Mapping node on the texture's Vector (fed by Texture Coordinate Generated
+or Object, or nothing: the ray direction) as ``Scene.world_rotation``, the world -> map
+rotation Cycles applies (``kernel/svm/mapping_util.h``: POINT and VECTOR map a direction v to
+R S v, TEXTURE to R^T v / S, NORMAL to R v / S, with R = Rz Ry Rx from the Euler angles; the
+texture then normalises, so only the signs of a uniform scale matter). Approximated, with a
+warning naming the world and the node: a mirror-ball projection and other colour sources
+(averaged, or the socket's value, as for materials), a Mapping location or non-uniform scale
+(ignored), interpolation other than Linear (rendered Linear). A missing image renders magenta
+times the strength, as in Cycles (checked: Cycles 5.0 shows (1, 0, 1) for an Environment
+Texture with no image or a missing file). Without a node tree: the world's viewport colour. A
+NaN colour or strength is an error naming the world, a huge one is clamped with a warning.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ...core.scene import SceneError
 from .colour import in_rec709, rgb, working_space_to_rec709
+from .images import read_image
 from .messages import Warnings
 from .nodes import MAX_INTENSITY, NodeReader, missing_output, node_tree, surface_socket
 
-__all__ = ["world_color", "export_world"]
+__all__ = ["WorldLight", "world_light", "world_color", "export_world", "export_world_light", "mapping_rotation",
+           "MISSING_IMAGE_RGB"]
+
+#: What Cycles shows for an image texture without pixels (kernel/svm/image.h: IMAGE_TEXTURE_MISSING_RGBA).
+MISSING_IMAGE_RGB = (1.0, 0.0, 1.0)
+
+
+@dataclass
+class WorldLight:
+    """The world as the core takes it: ``color`` (3,), the uniform radiance or, with an image,
+    its multiplier; ``image`` (H, W, 3) float32 or (0, 0, 3); ``rotation`` (3, 3) world -> map."""
+
+    color: np.ndarray
+    image: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3), np.float32))
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
 
 
 def world_color(world, warn, to709) -> np.ndarray:
-    """The background colour (3,) of ``world`` (None: black), unclipped."""
+    """The world's colour (3,) (None: black), unclipped: with an environment map, its multiplier."""
+    return world_light(world, warn, to709).color
+
+
+def world_light(world, warn, to709) -> WorldLight:
+    """``world`` (None: black) as a :class:`WorldLight`, colour unclipped."""
     if world is None:
-        return np.zeros(3)
+        return WorldLight(np.zeros(3))
     owner = f"world '{world.name}'"
     nt = node_tree(world)
     if nt is None:
-        return _viewport_color(world, owner, to709)
+        return WorldLight(_viewport_color(world, owner, to709))
     reader = NodeReader(owner, warn, to709)
     sock = surface_socket(nt)
     if sock is None:
         warn(f"{owner}: {missing_output(nt, 'World Output')}: the background is black, as in Cycles")
-        return np.zeros(3)
+        return WorldLight(np.zeros(3))
     src = reader.source(sock)
     if reader.cycle is not None:
         warn(f"{owner}: its node tree has a cycle (through the link {reader.cycle}): using the world colour")
-        return _viewport_color(world, owner, to709)
+        return WorldLight(_viewport_color(world, owner, to709))
     if src is None:
-        return np.zeros(3)
+        return WorldLight(np.zeros(3))
     node = src[0]
     if node.bl_idname in ("ShaderNodeBackground", "ShaderNodeEmission"):
-        return reader.emission(reader.color(node, "Color", (0.05, 0.05, 0.05)), reader.strength(node), node)
+        col_src = reader.source(node.inputs["Color"]) if node.inputs.get("Color") is not None else None
+        if (col_src is not None and col_src[0].bl_idname == "ShaderNodeTexEnvironment"
+                and not getattr(col_src[0], "mute", False)):
+            env = col_src[0]
+            if env.projection == "EQUIRECTANGULAR" or env.image is None:
+                return _environment(reader, node, env, owner, warn)
+            warn(f"{owner}: Environment Texture '{env.name}' uses the mirror-ball projection, which is not "
+                 "supported: rendered as the image's average colour")
+        return WorldLight(reader.emission(reader.color(node, "Color", (0.05, 0.05, 0.05)), reader.strength(node), node))
     warn(f"{owner}: world shader '{node.name}' is not supported: using the world colour as a uniform background")
-    return _viewport_color(world, owner, to709)
+    return WorldLight(_viewport_color(world, owner, to709))
+
+
+def _environment(reader: NodeReader, shader, env, owner: str, warn) -> WorldLight:
+    """A Background/Emission ``shader`` lit by Environment Texture ``env`` (equirectangular)."""
+    strength = reader.strength(shader)
+    image = env.image
+    has_pixels = image is not None and image.size[0] * image.size[1] > 0 and image.channels > 0
+    px = read_image(image, warn, owner) if has_pixels else None
+    if px is None:
+        what = f"image '{image.name}' has no pixels (missing file '{image.filepath}'?)" if image is not None \
+            else "has no image"
+        warn(f"{owner}: Environment Texture '{env.name}' {what}: the world is magenta, as in Cycles")
+        return WorldLight(reader.emission(np.array(MISSING_IMAGE_RGB), strength, shader))
+    rgb_img = np.ascontiguousarray(px[..., :3], np.float32)
+    if not np.isfinite(rgb_img).all():
+        raise SceneError(f"{owner}: image '{image.name}' of '{env.name}' holds NaN or infinite pixels")
+    if (rgb_img < 0).any():  # float images may hold negative values (out-of-gamut colours)
+        warn(f"{owner}: image '{image.name}' has negative values: clamped to 0")
+        rgb_img = np.maximum(rgb_img, 0.0)
+    peak = float(rgb_img.max()) * strength
+    if peak > MAX_INTENSITY:
+        warn(f"{owner}: image '{image.name}' times the strength of '{shader.name}' ({peak:.3g}) is above "
+             f"{MAX_INTENSITY:.0e}: clamped")
+        rgb_img = np.minimum(rgb_img, np.float32(MAX_INTENSITY / max(strength, 1e-30)))
+    if env.interpolation != "Linear":
+        warn(f"{owner}: Environment Texture '{env.name}' interpolation '{env.interpolation}' is rendered as Linear")
+    rotation = _vector_rotation(reader, env, owner, warn)
+    return WorldLight(np.full(3, strength), rgb_img, rotation)
+
+
+def _vector_rotation(reader: NodeReader, env, owner: str, warn) -> np.ndarray:
+    """The world -> map rotation of what feeds ``env``'s Vector: nothing, Texture Coordinate
+    Generated / Object (the ray direction), or a Mapping node on one of those."""
+    src = reader.source(env.inputs["Vector"])
+    if src is None:
+        return np.eye(3)
+    node, out = src
+    if node.bl_idname == "ShaderNodeMapping":
+        rot = mapping_rotation(node, owner, warn)
+        inner = reader.source(node.inputs["Vector"])
+        if inner is None:
+            warn(f"{owner}: the Vector of Mapping '{node.name}' is not linked: using the ray direction")
+        elif not _is_direction(*inner, owner, warn):
+            return np.eye(3)
+        return rot
+    _is_direction(node, out, owner, warn)  # warns when it is not the ray direction
+    return np.eye(3)
+
+
+def _is_direction(node, out, owner: str, warn) -> bool:
+    """Whether (node, output) is the world's ray direction (Texture Coordinate Generated, or
+    Object without an object); else a warning, and the ray direction is used."""
+    if node.bl_idname == "ShaderNodeTexCoord" and out.name in ("Generated", "Object"):
+        if out.name == "Object" and getattr(node, "object", None) is not None:
+            warn(f"{owner}: Texture Coordinate '{node.name}' Object output of object '{node.object.name}' is not "
+                 "supported for the world: using the ray direction")
+            return False
+        return True
+    warn(f"{owner}: '{node.name}' ({out.name}) driving the environment's Vector is not supported: "
+         "using the ray direction")
+    return False
+
+
+def _euler_xyz(angles) -> np.ndarray:
+    """Blender's XYZ Euler rotation: Rz Ry Rx."""
+    x, y, z = (float(a) for a in angles)
+    cx, sx, cy, sy, cz, sz = np.cos(x), np.sin(x), np.cos(y), np.sin(y), np.cos(z), np.sin(z)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def mapping_rotation(node, owner: str, warn) -> np.ndarray:
+    """The world -> map rotation (3, 3) a Mapping node applies to a direction, as Cycles: POINT and
+    VECTOR R S v, TEXTURE R^T v / S, NORMAL R v / S; of the scale only its signs matter after
+    the texture normalises (a non-uniform one is warned about), the location is ignored (warned)."""
+    def socket(name, default):
+        s = node.inputs.get(name)
+        if s is None:
+            return np.array(default, np.float64)
+        if s.is_linked:
+            warn(f"{owner}: Mapping '{node.name}' {name} is driven by a node: using its own value")
+        return np.array(s.default_value[:], np.float64)
+
+    vtype = node.vector_type
+    rot = _euler_xyz(socket("Rotation", (0, 0, 0)))
+    scale = socket("Scale", (1, 1, 1))
+    if vtype in ("POINT", "TEXTURE") and np.any(socket("Location", (0, 0, 0)) != 0):
+        warn(f"{owner}: Mapping '{node.name}' location is ignored for the environment (a direction has no position)")
+    if not np.isfinite(rot).all() or not np.isfinite(scale).all():
+        raise SceneError(f"{owner}: Mapping '{node.name}' rotation or scale is NaN or infinite")
+    mag = np.abs(scale)
+    if np.any(mag == 0) or mag.max() > mag.min() * (1 + 1e-6):
+        warn(f"{owner}: Mapping '{node.name}' non-uniform or zero scale {tuple(np.round(scale, 4))} is ignored "
+             "for the environment (only its signs are kept)")
+    sign = np.diag(np.where(scale < 0, -1.0, 1.0))
+    if vtype == "TEXTURE":
+        return sign @ rot.T
+    return rot @ sign
 
 
 def _viewport_color(world, owner: str, to709) -> np.ndarray:
@@ -50,8 +192,15 @@ def _viewport_color(world, owner: str, to709) -> np.ndarray:
     return np.minimum(col, MAX_INTENSITY)
 
 
+def export_world_light(depsgraph, warn: Warnings | None = None) -> WorldLight:
+    """The core's world (``Scene.world_color``, ``world_image``, ``world_rotation``) as
+    :func:`export_scene` makes it: the colour clipped to >= 0 and float32. ``warn``: collects
+    the warnings (default: dropped)."""
+    light = world_light(depsgraph.scene.world, warn if warn is not None else Warnings(), working_space_to_rec709())
+    light.color = np.clip(light.color, 0.0, None).astype(np.float32)
+    return light
+
+
 def export_world(depsgraph, warn: Warnings | None = None) -> np.ndarray:
-    """The core's ``Scene.world_color`` alone, (3,) float32, as :func:`export_scene` makes it.
-    ``warn``: collects the warnings (default: dropped)."""
-    world = world_color(depsgraph.scene.world, warn if warn is not None else Warnings(), working_space_to_rec709())
-    return np.clip(world, 0.0, None).astype(np.float32)
+    """The core's ``Scene.world_color`` alone, (3,) float32, as :func:`export_scene` makes it."""
+    return export_world_light(depsgraph, warn).color
