@@ -19,6 +19,7 @@ from .geometry import orthonormal_basis
 from .gratings import diffracted_radiance, grating_frame
 from .lights import sample_light
 from .materials import DIFFUSE
+from .surface import surface_reflectance
 from .transport import Hit, Rays, SpecularWalker
 
 __all__ = ["EyePass", "TileResult"]
@@ -247,9 +248,10 @@ class _TileTrace(SpecularWalker):
                                  np.concatenate(tmax).astype(np.float32))
         self._rays += len(occ)
         factors.reshape(-1)[np.concatenate(idx)[occ]] = 0.0
-        if rays.lam is None and rays.w is None and self._accumulate_factored(rays.pix, hit.mat, factors):
+        if (rays.lam is None and rays.w is None and not prepared.textures.uses("color")
+                and self._accumulate_factored(rays.pix, hit.mat, factors)):
             return
-        brdf = self._per_ray(prepared.materials.reflectance, hit.mat, rays.lam) * np.float32(1 / np.pi)
+        brdf = surface_reflectance(prepared, hit, rays.lam) * np.float32(1 / np.pi)
         if rays.lam is None:
             irradiance = factors @ lights.spectrum          # (B, L) @ (L, n)
         else:
@@ -276,12 +278,13 @@ class _TileTrace(SpecularWalker):
         seen = ~occ
         if not seen.any():
             return
-        rr, mats = rays.take(seen), hit.mat[seen]
+        rr = rays.take(seen)
         bg = prepared.world_spectrum
+        albedo = surface_reflectance(prepared, hit.take(seen), rr.lam)
         if rr.lam is None:
-            contrib = rr.weighted(prepared.materials.reflectance[mats] * bg[None, :])
+            contrib = rr.weighted(albedo * bg[None, :])
         else:
-            contrib = rr.w * prepared.materials.reflectance[mats, rr.lam] * bg[rr.lam]
+            contrib = rr.w * albedo * bg[rr.lam]
         self._accumulate(rr, contrib)
 
     def _caustic_light(self, rays: Rays, hit: Hit, rng):
