@@ -83,19 +83,12 @@ def blackbody_rgb(temperature: float) -> np.ndarray:
 
 
 def image_mean(image) -> np.ndarray | None:
-    """Average linear RGB of an image's pixels (sRGB-encoded images are decoded first)."""
+    """Average linear Rec.709 RGB of an image's pixels as Cycles reads them (images.read_image:
+    sRGB decoded, alpha premultiplied), or None for an image without pixels."""
+    from .images import read_image  # images imports this module
+
     try:
-        n = len(image.pixels)
-        if n == 0:
-            return None
-        px = np.empty(n, np.float32)
-        image.pixels.foreach_get(px)
-        ch = max(int(image.channels), 1)
-        px3 = px.reshape(-1, ch)[:, :3].astype(np.float64)
-        if px3.shape[1] < 3:
-            px3 = np.repeat(px3[:, :1], 3, axis=1)
-        if not image.is_float and image.colorspace_settings.name in ("sRGB", "sRGB 2.1"):
-            px3 = np.where(px3 <= 0.04045, px3 / 12.92, ((px3 + 0.055) / 1.055) ** 2.4)
-        return px3.mean(axis=0)
-    except Exception:  # unreadable or missing file: the caller falls back
+        px = read_image(image)
+    except Exception:  # unreadable: the caller falls back
         return None
+    return None if px is None else px[..., :3].reshape(-1, 3).mean(axis=0, dtype=np.float64)
