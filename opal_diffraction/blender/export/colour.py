@@ -1,5 +1,5 @@
-"""Colours: the blend file's linear working space <-> the core's linear Rec.709, blackbody colours,
-and the average colour of an image.
+"""Colours: the blend file's linear working space <-> the core's linear Rec.709, and blackbody
+colours (an image's average colour is ``images.image_mean``).
 
 Blender 5.0 gives each file a working space (``bpy.data.colorspace.working_space``: Linear
 Rec.709, Linear Rec.2020 or ACEScg); the core works in linear Rec.709. The 3x3 conversions come
@@ -20,7 +20,6 @@ __all__ = [
     "in_rec709",
     "blackbody_rgb",
     "BLACKBODY_MIN_K",
-    "image_mean",
 ]
 
 _COLOUR_SPACE_NAMES = {
@@ -80,15 +79,3 @@ def blackbody_rgb(temperature: float) -> np.ndarray:
     t = float(temperature)
     t = max(t, BLACKBODY_MIN_K) if 0.0 < t < float("inf") else 6500.0
     return conv.to_rgb(conv.blackbody(t)).astype(np.float64)
-
-
-def image_mean(image) -> np.ndarray | None:
-    """Average linear Rec.709 RGB of an image's pixels as Cycles reads them (images.read_image:
-    sRGB decoded, alpha premultiplied), or None for an image without pixels."""
-    from .images import read_image  # images imports this module
-
-    try:
-        px = read_image(image)
-    except Exception:  # unreadable: the caller falls back
-        return None
-    return None if px is None else px[..., :3].reshape(-1, 3).mean(axis=0, dtype=np.float64)

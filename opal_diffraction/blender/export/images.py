@@ -34,7 +34,7 @@ from ...core.enums import TextureEncoding
 from ...core.textures import srgb_to_linear as _decode
 from .colour import working_space_to_rec709
 
-__all__ = ["read_image", "read_texture", "srgb_to_linear", "is_data", "MISSING_RGB", "TextureTable"]
+__all__ = ["read_image", "read_texture", "image_mean", "srgb_to_linear", "is_data", "MISSING_RGB", "TextureTable"]
 
 #: Colour spaces whose byte values are linear already (decoded as they are).
 _LINEAR_SPACES = {"Linear Rec.709", "Linear Rec.2020", "Linear CIE-XYZ D65", "Linear CIE-XYZ E",
@@ -125,6 +125,17 @@ def read_image(image, warn=None, owner: str = "") -> np.ndarray | None:
     if encoding == int(TextureEncoding.SRGB):
         px[..., :3] = srgb_to_linear(px[..., :3])
     return px
+
+
+def image_mean(image) -> np.ndarray | None:
+    """Average linear Rec.709 RGB of an image's pixels as Cycles reads them (:func:`read_image`:
+    sRGB decoded, alpha premultiplied), or None for an image without pixels (no warning: the
+    caller names what it falls back to)."""
+    try:
+        px = read_image(image)
+    except Exception:  # unreadable: the caller falls back
+        return None
+    return None if px is None else px[..., :3].reshape(-1, 3).mean(axis=0, dtype=np.float64)
 
 
 #: Blender's Image Texture node settings -> the core's names.

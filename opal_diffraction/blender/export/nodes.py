@@ -7,7 +7,7 @@ colour and, through a tangent-space Normal Map node, on its normal are bound as 
 per hit (:class:`TextureRef`, ``Surface.textures``; docs/physics.md section 13) with their
 coordinates (the UV map, or Generated) and any Mapping node folded in. What the core cannot
 represent is approximated and named in the warnings: other textures and procedural nodes are
-averaged (:func:`colour.image_mean`) or use the socket's own value, rough reflection and
+averaged (:func:`images.image_mean`) or use the socket's own value, rough reflection and
 refraction are made smooth (rougher than ``ROUGH_AS_DIFFUSE``: diffuse), mixes of unlike
 surfaces keep the heavier.
 
@@ -28,7 +28,8 @@ import numpy as np
 from mathutils import Euler
 
 from ...core.scene import SceneError
-from .colour import blackbody_rgb, image_mean, in_rec709, rgb
+from .colour import blackbody_rgb, in_rec709, rgb
+from .images import image_mean
 from .messages import Warnings
 
 __all__ = ["ROUGH_AS_DIFFUSE", "ROUGH_WARN", "MAX_INTENSITY", "Surface", "TextureRef", "node_tree", "output_node",
