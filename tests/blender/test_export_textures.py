@@ -176,29 +176,43 @@ def test_each_image_is_read_once_and_shared(tmp_path):
 
 
 # ------------------------------------------------------------------------------------ against Cycles
-@pytest.mark.parametrize("colorspace,interpolation", [("sRGB", "Closest"), ("sRGB", "Linear"),
-                                                      ("Non-Color", "Closest"), ("Non-Color", "Linear"),
-                                                      ("float", "Linear")])
-def test_decoded_texels_match_cycles(colorspace, interpolation, tmp_path):
+# beyond the image on every side: 4 pixels per texel, texel edges on pixel edges (Cycles' point
+# samples still stray by a fraction of a pixel now and then: pixel centres stay clear of edges)
+WIDE_UVS = ((-0.25, -0.25), (1.25, -0.25), (1.25, 1.25), (-0.25, 1.25))
+
+
+@pytest.mark.parametrize("colorspace,interpolation,extension,uvs", [
+    ("sRGB", "Closest", "REPEAT", None), ("sRGB", "Linear", "REPEAT", None),
+    ("Non-Color", "Closest", "REPEAT", None), ("Non-Color", "Linear", "REPEAT", None),
+    ("float", "Linear", "REPEAT", None),
+    ("sRGB", "Linear", "CLIP", WIDE_UVS), ("Non-Color", "Closest", "EXTEND", WIDE_UVS),
+    ("Non-Color", "Linear", "MIRROR", WIDE_UVS), ("Non-Color", "Cubic", "REPEAT", WIDE_UVS),
+    ("sRGB", "Smart", "EXTEND", WIDE_UVS),
+])
+def test_decoded_texels_match_cycles(colorspace, interpolation, extension, uvs, tmp_path):
     """An Emission plane with an 8x8 image: Cycles' pixels equal the exported texture sampled by
-    the core at the exported UVs within 1 % (+0.002 for the darkest texels). For sRGB with
-    Linear interpolation this holds only because both decode after interpolating: decoding the
-    texels first is off by far more between texels (checked too). 64 Cycles samples (see below)."""
+    the core at the exported UVs within 1 % (+0.002 for the darkest texels), for each colour
+    space, interpolation and extension (UVs beyond [0, 1] where the extension matters). For sRGB
+    with Linear interpolation this holds only because both decode after interpolating: decoding
+    the texels first is off by far more between texels (checked too). 64 Cycles samples (see
+    below)."""
     top_down_scene()
     px = checker_pixels(seed=3)
     if colorspace == "float":
         img = image("img", px * 1.7, colorspace="Linear Rec.709", float_buffer=True)
     else:
         img = image("img", px, colorspace=colorspace, path=tmp_path / "img.png")
-    uv_plane(textured_material("emit", img, interpolation=interpolation))
+    mat = textured_material("emit", img, interpolation=interpolation, extension=extension)
+    uv_plane(mat) if uvs is None else uv_plane(mat, uvs=uvs)
     ex = export()
     s = ex.scene
+    assert s.texture_extension[0] == TextureExtension[extension]
     want = expected_colours(s, pixel_hits(prepare(s)))
-    # Cycles' samples of a Linear lookup scatter about the bilinear value (4 samples: a few pixels
+    # Cycles' samples of an interpolated lookup scatter about its value (4 samples: a few pixels
     # 5 % off); at 64 the mean is within 0.002 of it
     got = render_cycles(tmp_path, samples=64)
     np.testing.assert_allclose(got, want, rtol=0.01, atol=0.002)
-    if colorspace == "sRGB" and interpolation == "Linear":
+    if colorspace == "sRGB" and interpolation == "Linear" and extension == "REPEAT":
         decoded_first = np.where(px[..., :3] <= 0.04045, px[..., :3] / 12.92, ((px[..., :3] + 0.055) / 1.055) ** 2.4)
         alt = np.concatenate([decoded_first, px[..., 3:]], axis=2)
         s2_want = expected_colours(type(s)(**{**s.__dict__, "textures": [alt],
