@@ -374,3 +374,21 @@ def test_npz_round_trip_and_older_files(tmp_path):
     assert o.textures == [] and o.corner_uvs.shape == (0, 3, 2)
     np.testing.assert_array_equal(o.materials.color_texture, [-1])
     o.validated()
+
+
+def test_preparation_reuse_and_the_wire_format_carry_textures():
+    """The light pass's key survives a re-preparation with the same textures and changes with a
+    texel; the Dask wire format carries the texture list unchanged."""
+    from opal_diffraction.core.distributed import from_wire, to_wire
+
+    s = scene_with_texture()
+    p = prepare(s)
+    assert prepare(s, reuse=p).key == p.key
+    t = Scene(**{**s.__dict__, "textures": [s.textures[0].copy()]})
+    t.textures[0][0, 0, 0] = 0.5
+    assert prepare(t, reuse=p).key != p.key
+    back = from_wire(to_wire(s))
+    assert len(back.textures) == 1
+    np.testing.assert_array_equal(back.textures[0], s.textures[0])
+    np.testing.assert_array_equal(back.corner_uvs, s.corner_uvs)
+    assert p.textures.images[0].flags.writeable is False and p.corner_uvs.flags.writeable is False

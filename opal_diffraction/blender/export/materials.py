@@ -97,7 +97,8 @@ class MaterialTable:
         taken off by :meth:`lookup`): one set of coordinates per material, the colour's first (a
         material whose textures read different coordinates is warned and uses those; UV before
         Generated)."""
-        refs = {slot: ref for slot, ref in surf.textures.items() if slot == "emission" or surf.kind is not None}
+        refs = {slot: ref for slot, ref in surf.textures.items()
+                if (slot == "emission" and ref.strength > 0) or (slot != "emission" and surf.kind is not None)}
         if not refs:
             return {}
         cols = {_TEXTURE_COLUMN[slot]: ref.index for slot, ref in refs.items()}
