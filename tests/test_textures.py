@@ -392,3 +392,20 @@ def test_preparation_reuse_and_the_wire_format_carry_textures():
     np.testing.assert_array_equal(back.textures[0], s.textures[0])
     np.testing.assert_array_equal(back.corner_uvs, s.corner_uvs)
     assert p.textures.images[0].flags.writeable is False and p.corner_uvs.flags.writeable is False
+
+
+def test_roughness_and_metallic_read_one_channel_where_the_material_says():
+    """roughness_channel 1: the G channel (a Separate Color node's Green); metallic_channel 3:
+    alpha; values clamped to [0, 1]."""
+    px = np.zeros((2, 2, 4), np.float32)
+    px[..., :] = [[(0.2, 0.4, 0.6, 0.9), (1.0, 1.5, 0.0, 0.1)], [(0.0, 0.3, 0.0, 0.5), (0.7, -0.2, 0.2, 1.0)]]
+    s = textured_plane([{"roughness_texture": 0, "roughness_channel": 1, "metallic_texture": 0,
+                         "metallic_channel": 3}], {"t": (px, "CLOSEST")})
+    p = prepare(s)
+    hit = hits_at(p, [[0.5, 0.5], [1.5, 0.5], [0.5, 1.5], [1.5, 1.5]])
+    texel = px.reshape(-1, 4)
+    np.testing.assert_allclose(surface_roughness(p, hit), np.clip(texel[:, 1], 0, 1), atol=1e-7)
+    np.testing.assert_allclose(surface_metallic(p, hit), texel[:, 3], atol=1e-7)
+    s.materials.roughness_channel[:] = 4
+    with pytest.raises(SceneError, match="roughness channel 4"):
+        s.validated()

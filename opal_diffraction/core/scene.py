@@ -87,6 +87,8 @@ _MATERIAL_COLUMNS = {
     "normal_texture": (np.int32, (), -1, None),
     "normal_strength": (np.float32, (), 1.0, None),
     "emission_strength": (np.float32, (), 1.0, None),
+    "roughness_channel": (np.int32, (), -1, None),
+    "metallic_channel": (np.int32, (), -1, None),
 }
 
 #: The material columns that name a texture.
@@ -121,7 +123,8 @@ class Materials:
     Image textures (docs/physics.md section 13), each an index into ``Scene.textures`` or -1:
     color_texture replaces ``color`` per hit (which keeps the texture's average for what reads
     one colour per material), roughness_texture / metallic_texture replace those values (the
-    texture's luminance), emission_texture's colour times emission_strength is the emitted
+    texture's luminance, or with roughness_channel / metallic_channel 0-3 its R, G, B or alpha,
+    as a Separate Color node reads it), emission_texture's colour times emission_strength is the emitted
     radiance (``emission`` keeps its average), normal_texture is a tangent-space normal map
     (Blender's Normal Map node) applied with normal_strength.
     """
@@ -149,6 +152,8 @@ class Materials:
     normal_texture: np.ndarray = field(default_factory=lambda: _material_column_default("normal_texture", 0))
     normal_strength: np.ndarray = field(default_factory=lambda: _material_column_default("normal_strength", 0))
     emission_strength: np.ndarray = field(default_factory=lambda: _material_column_default("emission_strength", 0))
+    roughness_channel: np.ndarray = field(default_factory=lambda: _material_column_default("roughness_channel", 0))
+    metallic_channel: np.ndarray = field(default_factory=lambda: _material_column_default("metallic_channel", 0))
 
     def __len__(self):
         return _rows(self.kind)
@@ -931,6 +936,13 @@ def _validate_materials(m: Materials) -> Materials:
             i = int(np.argmax(bad))
             raise SceneError(f"{label(i)}: {name.replace('_', ' ')} {int(out[name][i])} is not a texture index "
                              f"(-1: none)")
+    for name in ("roughness_channel", "metallic_channel"):
+        ch = out[name].astype(np.int64)
+        bad = (ch < -1) | (ch > 3)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"{label(i)}: {name.replace('_', ' ')} {int(ch[i])} is not -1 (luminance) or 0-3 "
+                             f"(R, G, B, alpha)")
     es = f64["emission_strength"]
     if (es < 0).any():
         i = int(np.argmax(es < 0))

@@ -11,8 +11,9 @@ the textured rows are looked up (:meth:`textures.PreparedTextures.lookup`).
   a reflectance is ``clip(rgb, 0, 1) @ basis`` (``SpectralConverter.reflectance_from_rgb``) and
   an emission ``max(rgb, 0) @ (basis x white illuminant)`` (``illuminant_from_rgb``).
 - A colour read into a float (roughness, metallic) is its Rec.709 luminance, as Cycles converts
-  a colour output plugged into a float socket (``linear_rgb_to_gray``, svm/convert.h), clamped to
-  [0, 1] as the Principled BSDF clamps them.
+  a colour output plugged into a float socket (``linear_rgb_to_gray``, svm/convert.h), or the
+  one channel a Separate Color node (or the Alpha output) hands on, clamped to [0, 1] as the
+  Principled BSDF clamps them.
 - Normal maps follow Cycles' Normal Map node in tangent space (``svm_node_normal_map``,
   kernel/svm/tex_coord.h): c = 2 rgb - 1, B = sign (N x T), N' = normalize(c_x T + c_y B + c_z N)
   on the triangle's outward side (flipped for back faces), then the strength s blends
@@ -69,13 +70,18 @@ def _scalar(prepared, hit, column: str, slot: str) -> np.ndarray:
     if tx.uses(slot):
         rows, rgba = tx.lookup(slot, hit.mat, hit.prim, hit.bu, hit.bv)
         if rows.size:
-            out[rows] = np.clip(rgba[:, :3] @ LUMINANCE_709, np.float32(0), np.float32(1))
+            value = rgba[:, :3] @ LUMINANCE_709
+            ch = getattr(tx, f"{slot}_channel")[hit.mat[rows]]
+            one = ch >= 0  # a Separate Color node's channel, or the alpha
+            if one.any():
+                value[one] = rgba[np.flatnonzero(one), ch[one]]
+            out[rows] = np.clip(value, np.float32(0), np.float32(1))
     return out
 
 
 def surface_roughness(prepared, hit) -> np.ndarray:
     """(B,) float32 in [0, 1]: the material's roughness (0 where the material table has none) or
-    the roughness texture's luminance at the hit."""
+    the roughness texture's luminance (or its ``roughness_channel``) at the hit."""
     return _scalar(prepared, hit, "roughness", "roughness")
 
 

@@ -187,6 +187,8 @@ class PreparedTextures:
     emission: np.ndarray          # (M,) int32
     normal: np.ndarray            # (M,) int32 tangent-space normal map
     normal_strength: np.ndarray   # (M,) float32 the Normal Map node's strength
+    roughness_channel: np.ndarray  # (M,) int32 -1: the luminance, 0-3: R, G, B, alpha
+    metallic_channel: np.ndarray  # (M,) int32
     emission_strength: np.ndarray  # (M,) float32 multiplies an emission texture's colour
     corner_uvs: np.ndarray        # (T, 3, 2) float32, or (0, 3, 2): every UV is (0, 0)
     corner_tangents: np.ndarray   # (T, 3, 4) float32 tangent + bitangent sign, or (0, 3, 4)
@@ -258,6 +260,8 @@ def prepare_textures(scene, conv) -> PreparedTextures:
         emission=_frozen(column("emission_texture", np.int32, -1)),
         normal=_frozen(column("normal_texture", np.int32, -1)),
         normal_strength=_frozen(column("normal_strength", np.float32, 1.0)),
+        roughness_channel=_frozen(column("roughness_channel", np.int32, -1)),
+        metallic_channel=_frozen(column("metallic_channel", np.int32, -1)),
         emission_strength=_frozen(column("emission_strength", np.float32, 1.0)),
         corner_uvs=_frozen(np.asarray(scene.corner_uvs, np.float32).reshape(-1, 3, 2)),
         corner_tangents=_frozen(np.asarray(scene.corner_tangents, np.float32).reshape(-1, 3, 4)),

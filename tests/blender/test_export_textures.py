@@ -386,3 +386,26 @@ def test_a_sunlit_checker_floor_renders_as_in_cycles(tmp_path):
     rmse = np.sqrt(np.mean((o - c) ** 2)) / c.mean()
     print(f"mean ratio {ratio:.4f}, 4x4-box relative RMSE {rmse:.4f}")
     assert abs(ratio - 1) < 0.02 and rmse < 0.03
+
+
+def test_separate_color_channels_bind_roughness_and_metallic(tmp_path):
+    """A glTF-style packed texture: Separate Color (RGB) Green -> Roughness, Blue -> Metallic,
+    Alpha -> nothing; the material's columns keep each channel's average."""
+    top_down_scene(16)
+    px = checker_pixels(seed=4)
+    img = image("orm", px, colorspace="Non-Color")
+    mat = bs.material("packed", "PRINCIPLED")
+    nt = mat.node_tree
+    bsdf = nt.nodes["Principled BSDF"]
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    sep = nt.nodes.new("ShaderNodeSeparateColor")
+    nt.links.new(tex.outputs["Color"], sep.inputs["Color"])
+    nt.links.new(sep.outputs["Green"], bsdf.inputs["Roughness"])
+    nt.links.new(sep.outputs["Blue"], bsdf.inputs["Metallic"])
+    uv_plane(mat)
+    ex = export()
+    m = ex.scene.materials
+    assert m.roughness_texture[0] == 0 and m.metallic_texture[0] == 0 and m.color_texture[0] == -1
+    assert m.roughness_channel[0] == 1 and m.metallic_channel[0] == 2
+    assert not any("not supported" in w for w in ex.warnings), ex.warnings

@@ -186,12 +186,18 @@ class TextureTable:
             self.extension.append(ext)
             self.encoding.append(encoding)
             lin = srgb_to_linear(px[..., :3]) if encoding == int(TextureEncoding.SRGB) else px[..., :3]
-            self._means.append(lin.reshape(-1, 3).mean(axis=0, dtype=np.float64))
+            self._means.append(np.concatenate([lin.reshape(-1, 3).mean(axis=0, dtype=np.float64),
+                                               [px[..., 3].mean(dtype=np.float64)]]))
         return self._index[key]
+
+    def mean_rgba(self, index: int) -> np.ndarray:
+        """(4,) float64 average linear Rec.709 colour (each texel decoded) and alpha of texture
+        ``index``."""
+        return self._means[index]
 
     def mean_rgb(self, index: int) -> np.ndarray:
         """(3,) float64 average linear Rec.709 colour of texture ``index`` (each texel decoded)."""
-        return self._means[index]
+        return self._means[index][:3]
 
     def scene_fields(self) -> dict:
         """The Scene fields: textures and their per-texture codes."""

@@ -106,6 +106,9 @@ class MaterialTable:
             cols["emission_strength"] = float(refs["emission"].strength)
         if "normal" in refs:
             cols["normal_strength"] = float(refs["normal"].strength)
+        for slot in ("roughness", "metallic"):
+            if slot in refs and refs[slot].channel >= 0:
+                cols[f"{slot}_channel"] = int(refs[slot].channel)
         order = [refs[s] for s in ("color", "emission", "roughness", "metallic", "normal") if s in refs]
         uv = [r for r in order if r.coords == "UV"]
         first = uv[0] if uv else order[0]

@@ -65,6 +65,7 @@ class TextureRef:
     node: str            # the Image Texture node's name, for warnings
     strength: float = 1.0  # a Normal Map node's strength, an emission's strength
     tangent_map: str | None = None  # a normal map's: the UV map of its tangents ('': the active render map)
+    channel: int = -1    # a float input's: -1 the colour's luminance, 0/1/2 R/G/B (a Separate Color node), 3 alpha
 
     def same_coordinates(self, other: "TextureRef") -> bool:
         return (self.coords, self.uv_map) == (other.coords, other.uv_map) and np.allclose(self.matrix, other.matrix)
@@ -143,12 +144,35 @@ class TextureBindings:
         """Whether input ``name`` of ``node`` takes an image texture sampled per hit."""
         return self.textures is not None and name in TEXTURE_SOCKETS.get(node.bl_idname, {})
 
-    def _bind_image(self, node, name: str, tex_node, out):
-        """Bind the Image Texture ``tex_node`` feeding input ``name`` of ``node``; return the
-        texture's average linear Rec.709 colour (what one colour per material reads), Cycles'
-        missing-image magenta for an image without pixels, or None when it cannot be bound (then
-        the caller averages it as before, with its warning)."""
-        if out.name != "Color":
+    def _bind_scalar(self, node, name: str, src_node, out):
+        """Bind what feeds the float input ``name`` of ``node``: an Image Texture's Color (its
+        luminance) or Alpha, or one channel of it through a Separate Color (RGB) / Separate RGB
+        node. Returns the average value, or None when it cannot be bound (the caller warns)."""
+        channel, tex = -1, (src_node, out)
+        if src_node.bl_idname in ("ShaderNodeSeparateColor", "ShaderNodeSeparateRGB"):
+            if getattr(src_node, "mode", "RGB") != "RGB":
+                return None
+            channel = {"Red": 0, "R": 0, "Green": 1, "G": 1, "Blue": 2, "B": 2}.get(out.name, -1)
+            tex = self.source(src_node.inputs[0])
+            if channel < 0 or tex is None or tex[0].bl_idname != "ShaderNodeTexImage" or tex[1].name != "Color":
+                return None
+        elif src_node.bl_idname != "ShaderNodeTexImage":
+            return None
+        elif out.name == "Alpha":
+            channel = 3
+        mean = self._bind_image(node, name, tex[0], tex[1], channel)
+        if mean is None:
+            return None
+        value = float(np.asarray(mean[:3]) @ _LUMINANCE) if channel < 0 else float(mean[channel])
+        return min(max(value, 0.0), 1.0)
+
+    def _bind_image(self, node, name: str, tex_node, out, channel: int = -1):
+        """Bind the Image Texture ``tex_node`` feeding input ``name`` of ``node`` (through
+        ``channel``, for a float input); return the texture's average linear Rec.709 colour and
+        alpha (4,) (what one value per material reads), Cycles' missing-image magenta for an
+        image without pixels, or None when it cannot be bound (then the caller averages it as
+        before, with its warning)."""
+        if out.name != "Color" and channel != 3:
             self.warn(f"{self.owner}: the Alpha output of image texture '{tex_node.name}' on '{name}' is not supported: "
                       "the texture is averaged")
             return None
@@ -156,7 +180,7 @@ class TextureBindings:
         if image is None:
             self.warn(f"{self.owner}: image texture '{tex_node.name}' on '{name}' has no image: rendered magenta, as "
                       "Cycles renders a missing image")
-            return np.array(_MISSING_RGB, np.float64)
+            return np.array(_MISSING_RGB + (1.0,), np.float64)
         if getattr(image, "source", "FILE") not in ("FILE", "GENERATED"):
             self.warn(f"{self.owner}: image '{image.name}' ({image.source.lower()} source) on '{name}' is read as a "
                       "single image")
@@ -169,10 +193,10 @@ class TextureBindings:
         idx = self.textures.index(image, getattr(tex_node, "interpolation", "Linear"),
                                   getattr(tex_node, "extension", "REPEAT"), self.owner)
         if idx is None:  # no pixels (warned, naming the image and the material)
-            return np.array(_MISSING_RGB, np.float64)
+            return np.array(_MISSING_RGB + (1.0,), np.float64)
         kind, uv_map, matrix = coords
-        self._bound[(node.name, name)] = TextureRef(idx, kind, uv_map, matrix, tex_node.name)
-        return self.textures.mean_rgb(idx)
+        self._bound[(node.name, name)] = TextureRef(idx, kind, uv_map, matrix, tex_node.name, channel=channel)
+        return self.textures.mean_rgba(idx)
 
     def _normal_map(self, node) -> TextureRef | None:
         """The tangent-space normal map on ``node``'s Normal input (a Normal Map node whose Color is
@@ -329,7 +353,7 @@ class NodeReader(TextureBindings):
         if n.bl_idname == "ShaderNodeTexImage" and self._bindable(node, name):
             col = self._bind_image(node, name, n, out)
             if col is not None:
-                return col
+                return np.asarray(col[:3], np.float64)
         if n.bl_idname in ("ShaderNodeTexImage", "ShaderNodeTexEnvironment") and getattr(n, "image", None):
             mean = image_mean(n.image)
             if mean is not None:
@@ -366,10 +390,10 @@ class NodeReader(TextureBindings):
         n, out = src
         if n.bl_idname == "ShaderNodeValue":
             return float(out.default_value)
-        if n.bl_idname == "ShaderNodeTexImage" and self._bindable(node, name):
-            col = self._bind_image(node, name, n, out)
-            if col is not None:  # the average, for what reads one value per material
-                return float(np.clip(np.asarray(col) @ _LUMINANCE, 0.0, 1.0))
+        if self._bindable(node, name):
+            value = self._bind_scalar(node, name, n, out)
+            if value is not None:  # the average, for what reads one value per material
+                return value
         self.warn(f"{self.owner}: '{name}' of '{node.name}' is driven by a '{n.name}' node, which is not "
                   f"supported: using the socket's own value")
         return float(sock.default_value)
