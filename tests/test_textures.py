@@ -252,9 +252,10 @@ def test_untextured_hits_are_untouched():
 
 # ------------------------------------------------------------------------------ render (eye pass)
 def test_a_checker_floor_under_a_uniform_world_renders_its_texels():
-    """A diffuse floor lit only by a uniform white world has radiance albedo x L (docs/physics.md
-    section 4.2: the world estimator is exact for an unoccluded plane), so each checker cell's
-    interior pixels show the cell's colour through the spectral round trip."""
+    """A diffuse floor lit only by a uniform white world has radiance albedo x L (the eye pass's
+    world estimator, one cosine-weighted shadow ray weighing albedo x L, is exact for an
+    unoccluded plane), so with the base colour read per hit (docs/physics.md section 13.4) each
+    checker cell's interior pixels show the cell's colour through the spectral round trip."""
     cells = np.array([[(0.8, 0.1, 0.1), (0.1, 0.7, 0.2)], [(0.2, 0.2, 0.9), (0.9, 0.9, 0.3)]], np.float32)
     px = np.ones((2, 2, 4), np.float32)
     px[..., :3] = cells
