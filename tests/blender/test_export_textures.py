@@ -305,14 +305,18 @@ def test_a_normal_mapped_plane_under_a_sun_matches_cycles(strength, mirror_v, tm
 
 
 # ------------------------------------------------------------------------------------ robustness
-def test_a_missing_image_file_warns_naming_it_and_renders_magenta_as_cycles(tmp_path):
+@pytest.mark.parametrize("case", ["missing file", "no image"])
+def test_a_missing_image_file_warns_naming_it_and_renders_magenta_as_cycles(case, tmp_path):
     top_down_scene(16)
     img = bpy.data.images.new("lost image", 4, 4)
     img.source = "FILE"
     img.filepath = str(tmp_path / "does_not_exist.png")
-    uv_plane(textured_material("lost material", img))
+    mat = textured_material("lost material", img)
+    if case == "no image":
+        mat.node_tree.nodes["lost material texture"].image = None
+    uv_plane(mat)
     ex = export()
-    msgs = [w for w in ex.warnings if "lost image" in w]
+    msgs = [w for w in ex.warnings if ("lost image" if case == "missing file" else "has no image") in w]
     assert msgs and all("lost material" in w for w in msgs), ex.warnings
     assert len(ex.scene.textures) == 0
     np.testing.assert_allclose(ex.scene.materials.emission[0], (1, 0, 1))

@@ -60,7 +60,7 @@ class TextureRef:
 
     index: int
     coords: str          # 'UV' or 'GENERATED'
-    uv_map: str          # the UV map ('': the mesh's active render map); for normal maps, the tangents' map
+    uv_map: str          # the UV map ('': the mesh's active render map) of its coordinates
     matrix: np.ndarray   # 4x4: (u, v, 0, 1) or generated (x, y, z, 1) -> the texture's (u, v) in its first two rows
     node: str            # the Image Texture node's name, for warnings
     strength: float = 1.0  # a Normal Map node's strength, an emission's strength
