@@ -19,6 +19,9 @@ __all__ = [
     "GratingDirection",
     "DispersionSampling",
     "Backend",
+    "TextureInterpolation",
+    "TextureExtension",
+    "TextureEncoding",
     "codes",
 ]
 
@@ -74,6 +77,32 @@ class Backend(IntEnum):
     AUTO = 0
     EMBREE = 1
     NUMPY = 2
+
+
+class TextureInterpolation(IntEnum):
+    """An image texture's lookup (Blender's Image Texture node; Cycles' kernel/device/cpu/image.h)."""
+
+    CLOSEST = 0
+    LINEAR = 1
+    CUBIC = 2  # Cycles' uniform cubic B-spline
+    SMART = 3  # Cycles renders Smart as Cubic (OSL's own choice aside)
+
+
+class TextureExtension(IntEnum):
+    """What an image texture shows outside [0, 1] (Blender's Image Texture node Extension)."""
+
+    REPEAT = 0
+    EXTEND = 1
+    CLIP = 2
+    MIRROR = 3
+
+
+class TextureEncoding(IntEnum):
+    """How a texture's stored colour channels are encoded: linear Rec.709, or sRGB-encoded Rec.709
+    decoded after interpolation, as Cycles keeps 8-bit sRGB images (``compress_as_srgb``)."""
+
+    LINEAR = 0
+    SRGB = 1
 
 
 def codes(enum: type[IntEnum]) -> dict[str, int]:

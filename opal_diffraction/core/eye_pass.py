@@ -22,6 +22,7 @@ from .gratings import diffracted_radiance, grating_frame
 from .lights import intersect_lights, is_delta, light_pdf, sample_light, sun_radiance
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIFFUSE
+from .surface import shading_normal, surface_emission, surface_reflectance
 from .transport import Hit, Rays, SpecularWalker
 
 __all__ = ["EyePass", "TileResult"]
@@ -112,6 +113,9 @@ class _TileTrace(SpecularWalker):
         self.hittable = ~self.delta & np.isin(kinds, [POINT, SPOT, AREA_RECT, AREA_DISK])
         self.soft_suns = np.flatnonzero(~self.delta & (kinds == SUN))
         self.mesh_lights = eye.prepared.mesh_lights
+        self.normal_maps = eye.prepared.textures.uses("normal")
+        # shading normals differ from the geometric ones: directions need both side tests
+        self.bent = eye.prepared.corner_normals is not None or self.normal_maps
         self._n_pixels = n_pixels
         self._film = self._new_film()  # light reflected by diffuse surfaces from direct lighting
         # the other parts of the film, allocated when first written (most scenes use a few):
@@ -260,6 +264,12 @@ class _TileTrace(SpecularWalker):
         live = ~st["final"]  # a final segment only gathers emission
         if not live.any():
             return
+        if self.normal_maps:  # bend the shading normal of diffuse hits (core/surface.py); scatter reuses it
+            bend = live & (kind == DIFFUSE)
+            if bend.any():
+                ns = hit.ns.copy()
+                ns[bend] = shading_normal(prepared, hit.take(bend))
+                hit.ns = ns
         if not live.all():
             rays, hit, kind = rays.take(live), hit.take(live), kind[live]
             st = rays.extra
@@ -327,12 +337,12 @@ class _TileTrace(SpecularWalker):
         if b == 0:
             return None
         wi, cos = _cosine_hemisphere(h.ns, self.rng)
-        if self.prepared.corner_normals is not None:  # about ns; a direction below the surface ends the path
+        if self.bent:  # about ns; a direction below the geometric surface ends the path
             up = np.einsum("ij,ij->i", wi, h.ng) > 0
             if not up.all():
                 r, h, wi, cos = r.take(up), h.take(up), wi[up], cos[up]
                 b = len(r)
-        albedo = self._per_ray(self.prepared.materials.reflectance, h.mat, r.lam)
+        albedo = surface_reflectance(self.prepared, h, r.lam)
         o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
         out = r.moved(o, wi, r.weighted(albedo))
         s = out.extra
@@ -430,8 +440,7 @@ class _TileTrace(SpecularWalker):
             rays, hit = rays.take(keep), hit.take(keep)
         if len(rays) == 0:
             return
-        em = self.prepared.materials.emission[hit.mat]
-        e = em if rays.lam is None else em[np.arange(len(rays)), rays.lam]
+        e = surface_emission(self.prepared, hit, rays.lam)
         pdf = rays.extra["pdf"]
         if self.mesh_lights is not None and (pdf > 0).any():
             wgt = _power_heuristic(pdf, self.mesh_lights.pdf(hit.prim, rays.o, hit.p).astype(np.float32))
@@ -458,7 +467,7 @@ class _TileTrace(SpecularWalker):
         wi = wi.astype(np.float32)
         cos_s = np.einsum("ij,ij->i", wi, hit.ns)
         ok = (cos_s > 0) & (pdf > 0)
-        if prepared.corner_normals is not None:
+        if self.bent:
             ok &= np.einsum("ij,ij->i", wi, hit.ng) > 0
         live = np.flatnonzero(ok)
         if live.size == 0:
@@ -473,7 +482,7 @@ class _TileTrace(SpecularWalker):
         cos, p_env = cos_s[live], pdf[live].astype(np.float32)
         f = cos / p_env * _power_heuristic(p_env, cos * np.float32(1 / np.pi), light_first=True)
         radiance = prepared.conv.illuminant_from_rgb(rgb[live]).astype(np.float32)
-        brdf = self._per_ray(prepared.materials.reflectance, h.mat, r.lam) * np.float32(1 / np.pi)
+        brdf = surface_reflectance(prepared, h, r.lam) * np.float32(1 / np.pi)
         if r.lam is None:
             contrib = r.weighted(brdf * radiance * f[:, None])
         else:
@@ -488,7 +497,7 @@ class _TileTrace(SpecularWalker):
         wi = wi.astype(np.float32)
         cos_s = np.einsum("ij,ij->i", wi, hit.ns)
         ok = (cos_s > 0) & (g > 0)
-        if prepared.corner_normals is not None:
+        if self.bent:
             ok &= np.einsum("ij,ij->i", wi, hit.ng) > 0
         live = np.flatnonzero(ok)
         if live.size == 0:
@@ -505,7 +514,7 @@ class _TileTrace(SpecularWalker):
         cos = cos_s[live]
         f = (g[live] * cos * _power_heuristic(pdf[live].astype(np.float32), cos * np.float32(1 / np.pi))).astype(np.float32)
         em = prepared.materials.emission[prepared.tri_material[prim[live]]]
-        brdf = self._per_ray(prepared.materials.reflectance, h.mat, r.lam) * np.float32(1 / np.pi)
+        brdf = surface_reflectance(prepared, h, r.lam) * np.float32(1 / np.pi)
         if r.lam is None:
             contrib = r.weighted(brdf * em * f[:, None])
         else:
@@ -519,7 +528,7 @@ class _TileTrace(SpecularWalker):
         if nl == 0 or b == 0:
             return
         # One sample per light per ray; all shadow rays in a single any-hit call.
-        flat = prepared.corner_normals is None
+        flat = not self.bent
         factors = np.zeros((b, nl), np.float32)
         origins, dirs, tmax, idx = [], [], [], []
         for li in range(nl):  # loop over lights (a handful), not rays
@@ -547,9 +556,10 @@ class _TileTrace(SpecularWalker):
                                  np.concatenate(tmax).astype(np.float32))
         self._rays += len(occ)
         factors.reshape(-1)[np.concatenate(idx)[occ]] = 0.0
-        if rays.lam is None and rays.w is None and self._accumulate_factored(rays.pix, hit.mat, factors, film):
+        if (rays.lam is None and rays.w is None and not prepared.textures.uses("color")
+                and self._accumulate_factored(rays.pix, hit.mat, factors, film)):
             return
-        brdf = self._per_ray(prepared.materials.reflectance, hit.mat, rays.lam) * np.float32(1 / np.pi)
+        brdf = surface_reflectance(prepared, hit, rays.lam) * np.float32(1 / np.pi)
         if rays.lam is None:
             irradiance = factors @ lights.spectrum          # (B, L) @ (L, n)
         else:
@@ -561,7 +571,7 @@ class _TileTrace(SpecularWalker):
         (looked up with a one-element jitter: a box filter over neighbouring elements)."""
         prepared = self.prepared
         irr = self.caustic_map.irradiance(hit.prim, hit.bu, hit.bv, hit.front, rng)
-        brdf = prepared.materials.reflectance[hit.mat] * np.float32(1 / np.pi)
+        brdf = surface_reflectance(prepared, hit) * np.float32(1 / np.pi)
         radiance = irr * brdf
         contrib = rays.weighted(radiance) if rays.lam is None else rays.w * radiance[np.arange(len(rays)), rays.lam]
         self._accumulate(rays, contrib, self._caustics)

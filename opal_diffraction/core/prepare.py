@@ -38,6 +38,7 @@ from .mesh_lights import MeshLights
 from .scene import Camera, Scene
 from .settings import EYE_ONLY_SETTINGS, RenderSettings
 from .spectrum import SpectralConverter, WavelengthGrid
+from .textures import PreparedTextures, prepare_textures
 
 __all__ = ["PreparedScene", "prepare", "scene_extent", "OFFSET_RELATIVE"]
 
@@ -84,6 +85,9 @@ class PreparedScene:
     world_spectrum: np.ndarray         # (n,) float32 radiance of a uniform world; with a map, the map's
     #                                    mean over the sphere (what does not sample the map yet uses)
     environment: EnvironmentMap | None  # the world map (radiance = world colour x image), or None: uniform
+    textures: PreparedTextures         # images and per-material bindings (core/textures.py, core/surface.py)
+    corner_uvs: np.ndarray             # (T, 3, 2) float32 per-corner UVs, or (0, 3, 2)
+    corner_tangents: np.ndarray        # (T, 3, 4) float32 per-corner tangent + bitangent sign, or (0, 3, 4)
     extent: float                      # metres: the scene's size (prepare.scene_extent)
     offset_base: float                 # metres: the scene-scaled part of the offsets
     light_targets: LightTargets        # what the light pass aims at and who receives
@@ -133,6 +137,8 @@ def _equal(a, b) -> bool:
     """Deep equality of scene data: arrays by value, dataclasses field by field."""
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
         return np.shape(a) == np.shape(b) and np.array_equal(a, b)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):  # Scene.textures
+        return len(a) == len(b) and all(_equal(x, y) for x, y in zip(a, b))
     if is_dataclass(a) and type(a) is type(b):
         return all(_equal(getattr(a, f.name), getattr(b, f.name)) for f in fields(a))
     return a == b
@@ -203,6 +209,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
     materials = prepare_materials(scene.materials, conv)
     lights = prepare_lights(scene.lights, conv)
     gratings = prepare_gratings(scene.materials)
+    textures = prepare_textures(scene, conv)
     same_geometry = (reuse is not None and reuse.settings.backend == settings.backend
                      and _same_geometry(reuse.scene, scene))
     if same_geometry:
@@ -267,6 +274,9 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         tri_period=np.asarray(scene.tri_period, np.float32).reshape(-1),
         world_spectrum=world_spectrum,
         environment=environment,
+        textures=textures,
+        corner_uvs=textures.corner_uvs,
+        corner_tangents=textures.corner_tangents,
         extent=extent,
         offset_base=base,
         light_targets=targets,

@@ -18,6 +18,8 @@ import numpy as np
 
 from .geometry import triangle_normals
 from .enums import GratingDirection, GratingType, Lattice, LightKind, MaterialKind, codes
+from .enums import (GratingDirection, GratingType, Lattice, LightKind, MaterialKind, TextureEncoding,
+                    TextureExtension, TextureInterpolation, codes)
 from .optics import DISPERSION_MODELS, ior_spectrum
 
 __all__ = [
@@ -27,6 +29,9 @@ __all__ = [
     "GRATING_DIRECTIONS",
     "MATERIAL_KINDS",
     "LIGHT_KINDS",
+    "TEXTURE_INTERPOLATIONS",
+    "TEXTURE_EXTENSIONS",
+    "TEXTURE_ENCODINGS",
     "Materials",
     "Lights",
     "Camera",
@@ -47,6 +52,11 @@ class SceneError(ValueError):
     def __init__(self, message="", *args):
         super().__init__(" ".join(str(message).split()), *args)
 
+
+#: Image texture settings: name -> stable code (enums.py).
+TEXTURE_INTERPOLATIONS = codes(TextureInterpolation)
+TEXTURE_EXTENSIONS = codes(TextureExtension)
+TEXTURE_ENCODINGS = codes(TextureEncoding)
 
 #: Grating enumerations: name -> stable code (enums.py).
 GRATING_TYPES = codes(GratingType)
@@ -71,7 +81,20 @@ _MATERIAL_COLUMNS = {
     "coherence_length": (np.float32, (), 10.0, None),
     "grating_direction": (np.int32, (), "UV", GRATING_DIRECTIONS),
     "rotation": (np.float32, (), 0.0, None),
+    # image textures (an index into Scene.textures, -1: none; docs/physics.md section 13)
+    "color_texture": (np.int32, (), -1, None),
+    "roughness_texture": (np.int32, (), -1, None),
+    "metallic_texture": (np.int32, (), -1, None),
+    "emission_texture": (np.int32, (), -1, None),
+    "normal_texture": (np.int32, (), -1, None),
+    "normal_strength": (np.float32, (), 1.0, None),
+    "emission_strength": (np.float32, (), 1.0, None),
+    "roughness_channel": (np.int32, (), -1, None),
+    "metallic_channel": (np.int32, (), -1, None),
 }
+
+#: The material columns that name a texture.
+TEXTURE_COLUMNS = ("color_texture", "roughness_texture", "metallic_texture", "emission_texture", "normal_texture")
 
 
 def _material_column_default(name, rows):
@@ -98,6 +121,14 @@ class Materials:
     coherence_length L (um, the slits' length), grating_direction (GRATING_DIRECTIONS: how the
     exporter found the per-triangle tangent in ``Scene.tri_tangent``), rotation (radians, about
     the normal).
+
+    Image textures (docs/physics.md section 13), each an index into ``Scene.textures`` or -1:
+    color_texture replaces ``color`` per hit (which keeps the texture's average for what reads
+    one colour per material), roughness_texture / metallic_texture replace those values (the
+    texture's luminance, or with roughness_channel / metallic_channel 0-3 its R, G, B or alpha,
+    as a Separate Color node reads it), emission_texture's colour times emission_strength is the emitted
+    radiance (``emission`` keeps its average), normal_texture is a tangent-space normal map
+    (Blender's Normal Map node) applied with normal_strength.
     """
 
     kind: np.ndarray = field(default_factory=lambda: _material_column_default("kind", 0))
@@ -116,6 +147,15 @@ class Materials:
     coherence_length: np.ndarray = field(default_factory=lambda: _material_column_default("coherence_length", 0))
     grating_direction: np.ndarray = field(default_factory=lambda: _material_column_default("grating_direction", 0))
     rotation: np.ndarray = field(default_factory=lambda: _material_column_default("rotation", 0))
+    color_texture: np.ndarray = field(default_factory=lambda: _material_column_default("color_texture", 0))
+    roughness_texture: np.ndarray = field(default_factory=lambda: _material_column_default("roughness_texture", 0))
+    metallic_texture: np.ndarray = field(default_factory=lambda: _material_column_default("metallic_texture", 0))
+    emission_texture: np.ndarray = field(default_factory=lambda: _material_column_default("emission_texture", 0))
+    normal_texture: np.ndarray = field(default_factory=lambda: _material_column_default("normal_texture", 0))
+    normal_strength: np.ndarray = field(default_factory=lambda: _material_column_default("normal_strength", 0))
+    emission_strength: np.ndarray = field(default_factory=lambda: _material_column_default("emission_strength", 0))
+    roughness_channel: np.ndarray = field(default_factory=lambda: _material_column_default("roughness_channel", 0))
+    metallic_channel: np.ndarray = field(default_factory=lambda: _material_column_default("metallic_channel", 0))
 
     def __len__(self):
         return _rows(self.kind)
@@ -340,6 +380,14 @@ class Scene:
     tint): the radiance from direction d is world_color * image(world_rotation @ d).
     ``world_rotation`` (3, 3) is orthogonal, world direction -> map direction. An empty
     (0, 0, 3) image: a uniform world.
+    Image textures (docs/physics.md section 13; empty arrays mean "none"): ``corner_uvs``
+    (T, 3, 2) texture coordinates per triangle corner, ``corner_tangents`` (T, 3, 4) per-corner
+    tangent (x, y, z, world space) and bitangent sign for tangent-space normal maps,
+    ``textures`` a list of (H, W, 4) float32 RGBA images (row 0 at the bottom, Blender's order;
+    linear Rec.709, or sRGB-encoded where ``texture_encoding`` says so), and per texture the
+    TEXTURE_INTERPOLATIONS / TEXTURE_EXTENSIONS / TEXTURE_ENCODINGS codes
+    ``texture_interpolation``, ``texture_extension``, ``texture_encoding`` (K,) (empty: LINEAR,
+    REPEAT, LINEAR for every texture). Materials bind them by index (``Materials.color_texture``...).
     """
 
     vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
@@ -355,13 +403,24 @@ class Scene:
     world_image: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3), np.float32))
     world_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
 
+    corner_uvs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 2), np.float32))
+    corner_tangents: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 4), np.float32))
+    textures: list = field(default_factory=list)
+    texture_interpolation: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    texture_extension: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    texture_encoding: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+
     # ------------------------------------------------------------------ building
-    def add_mesh(self, vertices, triangles, material: int, tangent=None, period=None, normals=None) -> None:
+    def add_mesh(self, vertices, triangles, material: int, tangent=None, period=None, normals=None, uvs=None,
+                 uv_tangents: bool = False) -> None:
         """Append a mesh (its own vertex numbering) with one material for all its triangles.
 
         ``tangent``: a grating direction (3,) for all its triangles or (T, 3) per triangle;
         ``period``: a period override in nm, scalar or (T,); ``normals``: shading normals, (V, 3)
         per vertex or (T, 3, 3) per corner (None: flat; see ``corner_normals``).
+        ``uvs``: texture coordinates, (V, 2) per vertex or (T, 3, 2) per triangle corner (meshes
+        without get (0, 0) once any mesh has UVs); ``uv_tangents``: also store per-corner tangent
+        frames from those UVs (``textures.uv_tangents``) for normal maps.
         """
         v = np.asarray(vertices, np.float32).reshape(-1, 3)
         t = np.asarray(triangles, np.int64).reshape(-1, 3) + len(self.vertices)
@@ -382,6 +441,7 @@ class Scene:
                 np.asarray(period, np.float32), (len(t),))
             self.tri_period = np.concatenate([old, new])
         self._add_corner_normals(v, t - (len(self.vertices) - len(v)), n_old, normals)
+        self._add_corner_data(v, t - (len(self.vertices) - len(v)), n_old, uvs, uv_tangents)
 
     def _add_corner_normals(self, v, t_local, n_old: int, normals) -> None:
         """Append the new mesh's corner normals; once any mesh has them, the flat ones (before or
@@ -405,6 +465,50 @@ class Scene:
             old = np.repeat(triangle_normals(self.vertices, prev)[:, None, :], 3, axis=1)
         self.corner_normals = np.concatenate([np.asarray(old, np.float32).reshape(-1, 3, 3),
                                               np.asarray(new, np.float32)])
+
+    def _add_corner_data(self, v, t_local, n_old: int, uvs, uv_tangents: bool) -> None:
+        """add_mesh's UVs and tangents, kept one row per triangle across meshes."""
+        n_new = len(t_local)
+        corner = None
+        if uvs is not None:
+            a = np.asarray(uvs, np.float32)
+            corner = a[t_local] if a.ndim == 2 and a.shape == (len(v), 2) else a.reshape(n_new, 3, 2)
+        if corner is not None or len(self.corner_uvs):
+            old = self.corner_uvs if len(self.corner_uvs) else np.zeros((n_old, 3, 2), np.float32)
+            new = np.zeros((n_new, 3, 2), np.float32) if corner is None else corner
+            self.corner_uvs = np.concatenate([np.asarray(old, np.float32).reshape(-1, 3, 2), new])
+        if (uv_tangents and corner is not None) or len(self.corner_tangents):
+            from .textures import uv_tangents as frames
+
+            old = self.corner_tangents if len(self.corner_tangents) else np.zeros((n_old, 3, 4), np.float32)
+            new = frames(v, t_local, corner) if (uv_tangents and corner is not None) else np.zeros((n_new, 3, 4),
+                                                                                                   np.float32)
+            self.corner_tangents = np.concatenate([np.asarray(old, np.float32).reshape(-1, 3, 4), new])
+
+    def add_texture(self, pixels, interpolation: str = "LINEAR", extension: str = "REPEAT",
+                    encoding: str = "LINEAR") -> int:
+        """Append an image texture (H, W, 4) (or (H, W, 3): alpha 1), row 0 at the bottom, with its
+        settings by name; returns its index for the material columns (``color_texture``, ...)."""
+        px = np.asarray(pixels, np.float32)
+        if px.ndim == 3 and px.shape[2] == 3:
+            px = np.concatenate([px, np.ones(px.shape[:2] + (1,), np.float32)], axis=2)
+        k = len(self.textures)
+        cols = {}
+        for name, value, table in (("interpolation", interpolation, TEXTURE_INTERPOLATIONS),
+                                   ("extension", extension, TEXTURE_EXTENSIONS),
+                                   ("encoding", encoding, TEXTURE_ENCODINGS)):
+            if not isinstance(value, str) or value not in table:
+                raise SceneError(f"texture {k}: unknown {name} {value!r}; expected one of {sorted(table)}")
+            old = np.asarray(getattr(self, "texture_" + name), np.int32).reshape(-1)
+            if len(old) != k:  # empty: the defaults so far
+                old = np.full(k, {"interpolation": TEXTURE_INTERPOLATIONS["LINEAR"],
+                                  "extension": TEXTURE_EXTENSIONS["REPEAT"],
+                                  "encoding": TEXTURE_ENCODINGS["LINEAR"]}[name], np.int32)
+            cols[name] = np.concatenate([old, [table[value]]]).astype(np.int32)
+        self.textures = list(self.textures) + [px]
+        for name, col in cols.items():
+            setattr(self, "texture_" + name, col)
+        return k
 
     # ------------------------------------------------------------------ validation
     def validated(self) -> tuple["Scene", list[str]]:
@@ -476,6 +580,7 @@ class Scene:
         _check_range(tp.astype(np.float64), lambda i: f"triangle {i}", "grating period", " nm", limit=PERIOD_MAX)
         tt = tt if tt.dtype == np.float32 else tt.astype(np.float32)
         tp = tp if tp.dtype == np.float32 else tp.astype(np.float32)
+        tex = _validate_textures(self, len(t), materials, tm, warns)
         t = t.astype(np.int32)
         cn = _validate_corner_normals(self.corner_normals, v, t, warns)
         if len(t):
@@ -494,6 +599,8 @@ class Scene:
                 tt = tt[keep] if len(tt) else tt
                 tp = tp[keep] if len(tp) else tp
                 cn = cn[keep] if len(cn) else cn
+                for name in ("corner_uvs", "corner_tangents"):  # per-corner data stays one row per triangle
+                    tex[name] = tex[name][keep] if len(tex[name]) else tex[name]
         if len(t) == 0:
             warns.append("the scene has no geometry: the image shows only the background")
         # a coloured or mapped world lights the scene, and so does a mesh whose material emits
@@ -503,7 +610,7 @@ class Scene:
             warns.append("the scene has no lights: only the background is lit")
         clean = replace(self, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
                         materials=materials, lights=lights, camera=camera, world_color=wc, corner_normals=cn,
-                        world_image=world_image, world_rotation=world_rotation)
+                        world_image=world_image, world_rotation=world_rotation, **tex)
         return clean, warns
 
     # ------------------------------------------------------------------ .npz
@@ -521,6 +628,16 @@ class Scene:
             "world_image": np.asarray(self.world_image, np.float32),
             "world_rotation": np.asarray(self.world_rotation, np.float64),
         }
+        if len(self.corner_uvs):
+            d["corner_uvs"] = np.asarray(self.corner_uvs, np.float32)
+        if len(self.corner_tangents):
+            d["corner_tangents"] = np.asarray(self.corner_tangents, np.float32)
+        if len(self.textures):
+            d["texture_count"] = np.array(len(self.textures))
+            for i, px in enumerate(self.textures):
+                d[f"texture_{i}"] = np.asarray(px, np.float32)
+            for name in ("interpolation", "extension", "encoding"):
+                d["texture_" + name] = np.asarray(getattr(self, "texture_" + name), np.int32)
         for f in fields(Materials):
             d["material_" + f.name] = getattr(self.materials, f.name)
         for f in fields(Lights):
@@ -605,6 +722,7 @@ class Scene:
                 # older files have no world map: a uniform world
                 world_image=read("world_image") if "world_image" in names else np.zeros((0, 0, 3), np.float32),
                 world_rotation=read("world_rotation") if "world_rotation" in names else np.eye(3),
+                **_read_textures(read, names, shown),
             )
 
 
@@ -953,8 +1071,27 @@ def _validate_materials(m: Materials) -> Materials:
     f64 = {name: out[name].astype(np.float64) for name in out
            if name != "name" and np.dtype(_MATERIAL_COLUMNS[name][0]).kind == "f"}
     # every float column: finite and within float32
-    for name in ("color", "emission", "ior", "abbe", "period", "slit_width", "coherence_length", "rotation"):
+    for name in ("color", "emission", "ior", "abbe", "period", "slit_width", "coherence_length", "rotation",
+                 "normal_strength", "emission_strength"):
         _check_range(f64[name], label, name.replace("_", " "), "")
+    for name in TEXTURE_COLUMNS:
+        bad = out[name].astype(np.int64) < -1
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"{label(i)}: {name.replace('_', ' ')} {int(out[name][i])} is not a texture index "
+                             f"(-1: none)")
+    for name in ("roughness_channel", "metallic_channel"):
+        ch = out[name].astype(np.int64)
+        bad = (ch < -1) | (ch > 3)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"{label(i)}: {name.replace('_', ' ')} {int(ch[i])} is not -1 (luminance) or 0-3 "
+                             f"(R, G, B, alpha)")
+    es = f64["emission_strength"]
+    if (es < 0).any():
+        i = int(np.argmax(es < 0))
+        raise SceneError(f"{label(i)}: emission strength {_g(es[i])} is negative")
+    _check_range(es, label, "emission strength", "", limit=EMISSION_LIMIT)
     em = f64["emission"]
     if (em < 0).any():
         i = _first_row(em < 0)
@@ -1015,6 +1152,104 @@ def _validate_materials(m: Materials) -> Materials:
     if all(clean[f.name] is getattr(m, f.name) for f in fields(Materials)):
         return m
     return Materials(**clean)
+
+
+def _validate_textures(scene: "Scene", n_tri: int, materials: Materials, tri_material: np.ndarray,
+                       warns: list) -> dict:
+    """The texture fields of ``scene`` checked (docs/physics.md section 13): every image (H, W, 4)
+    of finite numbers within float32 and MAX_SIDE / MAX_PIXELS, the codes, per-corner UVs and
+    tangents (T, 3, 2) / (T, 3, 4) or none, and the materials' texture indices within the list.
+    Returns the clean fields (the given arrays where nothing needed converting); warns where a
+    used texture has no UVs or a normal map no tangents."""
+    raw = scene.textures
+    if raw is None:
+        raw = []
+    if isinstance(raw, np.ndarray) and raw.ndim == 4:  # one stacked array: a list of its images
+        raw = list(raw)
+    if not isinstance(raw, (list, tuple)):
+        raise SceneError(f"the scene's textures must be a list of (H, W, 4) images, got {type(raw).__name__}")
+    images, same = [], isinstance(raw, list)
+    for i, px in enumerate(raw):
+        try:
+            a = np.asarray(px)
+        except Exception:
+            raise SceneError(f"texture {i} is not a regular array of numbers") from None
+        if a.dtype.kind not in "iuf":
+            raise SceneError(f"texture {i} must hold numbers, got {_DTYPE_WORDS.get(a.dtype.kind, str(a.dtype))} "
+                             f"({a.dtype})")
+        if a.ndim != 3 or a.shape[2] != 4:
+            raise SceneError(f"texture {i} must have shape (height, width, 4) (RGBA), got {a.shape}")
+        h, w = a.shape[:2]
+        if h < 1 or w < 1:
+            raise SceneError(f"texture {i} is empty ({w}x{h} pixels)")
+        if h > MAX_SIDE or w > MAX_SIDE or h * w > MAX_PIXELS:
+            raise SceneError(f"texture {i} is {w}x{h} pixels: each side must be at most {MAX_SIDE} and the "
+                             f"image at most {MAX_PIXELS / 1e6:.0f} M pixels")
+        a32 = a if a.dtype == np.float32 else a.astype(np.float32)
+        finite = np.isfinite(a32)
+        if not finite.all():
+            j = int(np.argmax(~finite.reshape(-1))) // 4
+            what = "overflows float32 (max 3.4e38)" if np.isfinite(a).all() else "is NaN or infinite"
+            raise SceneError(f"texture {i}: pixel ({j % w}, {j // w}) {what}")
+        same = same and a32 is px
+        images.append(a32)
+    k = len(images)
+    out = {"textures": raw if same else images}
+    for name, table, default in (("interpolation", TEXTURE_INTERPOLATIONS, "LINEAR"),
+                                 ("extension", TEXTURE_EXTENSIONS, "REPEAT"), ("encoding", TEXTURE_ENCODINGS, "LINEAR")):
+        what = f"texture_{name}"
+        col = _column(getattr(scene, what), what, (), kind="int", allow_empty=True)
+        if len(col) == 0 and k:
+            col = np.full(k, table[default], np.int32)
+        if len(col) != k:
+            raise SceneError(f"{what} must have one code per texture ({k}), got {len(col)}")
+        _enum_check(col, table, lambda i: f"texture {i}", name)
+        out[what] = col if col.dtype == np.int32 else col.astype(np.int32)
+    for name, width in (("corner_uvs", 2), ("corner_tangents", 4)):
+        a = _column(getattr(scene, name), name, (3, width), allow_empty=True)
+        if len(a) not in (0, n_tri):
+            raise SceneError(f"{name} must have one row of 3 corners per triangle ({n_tri}) or none, got {len(a)}")
+        if a.size:
+            bad = ~np.isfinite(a.astype(np.float64))
+            if bad.any():
+                raise SceneError(f"{name}: triangle {_first_row(bad)} has a NaN or infinite value")
+            _check_range(a.astype(np.float64), lambda i: f"triangle {i}", name.replace("_", " ")[:-1], "")
+        out[name] = a if a.dtype == np.float32 else a.astype(np.float32)
+    label = _material_label(materials.name)
+    used = np.zeros(len(materials), bool)
+    if len(tri_material):
+        used[np.unique(tri_material)] = True
+    for col in TEXTURE_COLUMNS:
+        idx = np.asarray(getattr(materials, col)).astype(np.int64)
+        bad = idx >= k
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"{label(i)}: {col.replace('_', ' ')} {int(idx[i])} but the scene has {k} texture(s)")
+        rows = np.flatnonzero(used & (idx >= 0))
+        if rows.size and not len(out["corner_uvs"]):
+            warns.append(f"{label(int(rows[0]))} has image textures but the scene has no UVs: they are read at "
+                         "UV (0, 0), as Cycles reads them without a UV map")
+        if col == "normal_texture" and rows.size and not len(out["corner_tangents"]):
+            warns.append(f"{label(int(rows[0]))} has a normal map but the scene has no tangents: the normal map is "
+                         "ignored, as Cycles does without tangents")
+    return out
+
+
+def _read_textures(read, names: set, shown) -> dict:
+    """The texture fields of a scene file (none in files written before textures existed)."""
+    out = {}
+    for name in ("corner_uvs", "corner_tangents"):
+        if name in names:
+            out[name] = read(name)
+    if "texture_count" in names:
+        count = read("texture_count")
+        if count.shape != () or count.dtype.kind not in "iu" or not 0 <= int(count) <= 1_000_000:
+            raise SceneError(f"{shown}: texture_count must be one integer, got {count.dtype} of shape {count.shape}")
+        out["textures"] = [read(f"texture_{i}") for i in range(int(count))]
+        for name in ("interpolation", "extension", "encoding"):
+            if "texture_" + name in names:
+                out["texture_" + name] = read("texture_" + name)
+    return out
 
 
 _LIGHT_COLUMNS = {  # name -> (per-row shape, canonical dtype)

@@ -8,8 +8,12 @@ vectorised product. Blender's units are kept: metres, Cycles' light units (watts
 spot and area lights, W/m^2 for the sun), colours in the blend file's linear working space,
 converted to the core's linear Rec.709.
 
-What the core cannot render yet is approximated and named in the warnings rather than failing:
-textures (averaged; a world's equirectangular Environment Texture is exported as a map), rough reflection and refraction (made smooth), volume shaders (a volume-only material's faces are left out, as Cycles draws no
+Image Texture nodes on a BSDF's colour, roughness, metallic, emission colour and (through a
+tangent-space Normal Map node) normal are exported as images (``Scene.textures``, each image read
+once), per-material bindings and per-corner UVs and tangents, sampled per hit by the core
+(docs/physics.md section 13). What the core cannot render yet is approximated and named in the
+warnings rather than failing: other textures and procedural nodes (averaged; a world's equirectangular Environment Texture is
+exported as a map), rough reflection and refraction (made smooth), volume shaders (a volume-only material's faces are left out, as Cycles draws no
 surface for it); hair (curves objects and hair particle systems), point clouds and volume
 objects are skipped with counts. Values that would overflow the tracer's float32 (an emission or
 light power up to Blender's FLT_MAX) are clamped with a warning, NaN is an error naming the
@@ -22,7 +26,8 @@ shading is exported as per-corner shading normals (``Scene.corner_normals``, wor
 One module per concept, as in BlendLuxCore's ``export`` package:
 
     colour     working space <-> Rec.709, blackbody colours, image averages
-    nodes      shader node trees -> the core's surfaces
+    images     Blender images as Cycles reads them; the export's texture table
+    nodes      shader node trees -> the core's surfaces (and their image textures)
     materials  the material table (export_materials)
     meshes     meshes, tangents, periods, instances -> arrays; the MeshCache
     lights     the light table (export_lights)
@@ -50,7 +55,7 @@ from .colour import rec709_to_working_space, working_space_to_rec709
 from .lights import LightRows, export_lights
 from .materials import MaterialTable, export_materials
 from .meshes import (GEOMETRY_TYPES, UNSUPPORTED_GEOMETRY, MeshCache, SceneMeshes, element_count, flatten,
-                     hair_systems, strand_count)
+                     flatten_corners, hair_systems, strand_count)
 from .messages import Skipped, Warnings
 from .world import export_world, export_world_light
 
@@ -134,7 +139,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
         if not inst.show_self:
             continue
         slots = materials.slots(ob)
-        mkey, md = meshes.get(ob, otype)
+        mkey, md = meshes.get(ob, otype, materials.corner_needs(slots), warn)
         if md is None or len(md.triangles) == 0:
             continue
         groups[(mkey, slots)].append(np.array(inst.matrix_world, np.float64))
@@ -144,6 +149,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
         raise ExportCancelled()
     vertices, triangles, tri_material, tri_tangent, tri_period, corner_normals = flatten(
         groups, meshes, materials.grating, warn, materials.hidden_rows())
+    corner_uvs, corner_tangents = flatten_corners(groups, meshes, materials.corners, materials.hidden_rows())
 
     skipped.report(warn)
     core_materials = materials.finish()
@@ -154,11 +160,12 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
         materials=core_materials, lights=Lights.from_list(lights.rows), camera=cam,
         world_color=world.color, tri_tangent=tri_tangent, tri_period=tri_period, corner_normals=corner_normals,
         world_image=world.image, world_rotation=world.rotation,
+        corner_uvs=corner_uvs, corner_tangents=corner_tangents, **materials.textures.scene_fields(),
     )
     meshes.done()
     stats = {
         "export_s": time.perf_counter() - t0, "objects": n_instances, "meshes": len(meshes),
         "triangles": len(triangles), "vertices": len(vertices), "lights": len(lights.rows),
-        "materials": len(materials.rows),
+        "materials": len(materials.rows), "textures": len(materials.textures),
     }
     return ExportResult(core_scene, warn.items, stats)

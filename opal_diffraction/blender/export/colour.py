@@ -1,5 +1,5 @@
-"""Colours: the blend file's linear working space <-> the core's linear Rec.709, blackbody colours,
-and the average colour of an image.
+"""Colours: the blend file's linear working space <-> the core's linear Rec.709, and blackbody
+colours (an image's average colour is ``images.image_mean``).
 
 Blender 5.0 gives each file a working space (``bpy.data.colorspace.working_space``: Linear
 Rec.709, Linear Rec.2020 or ACEScg); the core works in linear Rec.709. The 3x3 conversions come
@@ -20,7 +20,6 @@ __all__ = [
     "in_rec709",
     "blackbody_rgb",
     "BLACKBODY_MIN_K",
-    "image_mean",
 ]
 
 _COLOUR_SPACE_NAMES = {
@@ -80,22 +79,3 @@ def blackbody_rgb(temperature: float) -> np.ndarray:
     t = float(temperature)
     t = max(t, BLACKBODY_MIN_K) if 0.0 < t < float("inf") else 6500.0
     return conv.to_rgb(conv.blackbody(t)).astype(np.float64)
-
-
-def image_mean(image) -> np.ndarray | None:
-    """Average linear RGB of an image's pixels (sRGB-encoded images are decoded first)."""
-    try:
-        n = len(image.pixels)
-        if n == 0:
-            return None
-        px = np.empty(n, np.float32)
-        image.pixels.foreach_get(px)
-        ch = max(int(image.channels), 1)
-        px3 = px.reshape(-1, ch)[:, :3].astype(np.float64)
-        if px3.shape[1] < 3:
-            px3 = np.repeat(px3[:, :1], 3, axis=1)
-        if not image.is_float and image.colorspace_settings.name in ("sRGB", "sRGB 2.1"):
-            px3 = np.where(px3 <= 0.04045, px3 / 12.92, ((px3 + 0.055) / 1.055) ** 2.4)
-        return px3.mean(axis=0)
-    except Exception:  # unreadable or missing file: the caller falls back
-        return None

@@ -15,16 +15,18 @@ renders as the default surface, and NaN values are an error naming the material.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from ...core.scene import Materials, SceneError
 from .colour import in_rec709, rgb, working_space_to_rec709
+from .images import TextureTable
 from .messages import Warnings
 from .meshes import is_surface_instance
 from .nodes import MAX_INTENSITY, ROUGH_AS_DIFFUSE, NodeReader, Surface, missing_output, node_tree, output_node
 
-__all__ = ["DEFAULT_MATERIAL", "MaterialTable", "export_materials"]
+__all__ = ["DEFAULT_MATERIAL", "MaterialTable", "CornerSpec", "export_materials"]
 
 #: The largest IOR exported (larger ones are lowered, with a warning): Blender accepts up to
 #: FLT_MAX, whose square overflows the tracer's float32 Fresnel terms.
@@ -32,6 +34,26 @@ MAX_IOR = 1000.0
 
 #: Blender's default surface (no material, or an empty slot): grey diffuse, as in Cycles.
 DEFAULT_MATERIAL = {"name": "(default surface)", "kind": "DIFFUSE", "color": (0.8, 0.8, 0.8)}
+
+
+@dataclass(frozen=True)
+class CornerSpec:
+    """The per-corner data a textured material reads from its meshes: texture coordinates from
+    a UV map (``uv_map``, '' for the active render map) or Generated (object space over the
+    mesh's texture space), with a Mapping's 4x4 affine folded in (``matrix``, 16 floats, row
+    major), and for a normal map the UV map of its tangents (``tangent_map``; None: none)."""
+
+    coords: str
+    uv_map: str
+    matrix: tuple
+    tangent_map: str | None
+
+    def affine(self) -> np.ndarray:
+        return np.array(self.matrix, np.float64).reshape(4, 4)
+
+
+_TEXTURE_COLUMN = {"color": "color_texture", "roughness": "roughness_texture", "metallic": "metallic_texture",
+                   "emission": "emission_texture", "normal": "normal_texture"}
 
 
 class MaterialTable:
@@ -43,6 +65,8 @@ class MaterialTable:
         self.grating: list[dict | None] = []  # per row: grating settings or None
         self.hidden: set[int] = set()  # rows whose faces are left out (volume-only materials)
         self.warn, self.to709 = warn, to709
+        self.textures = TextureTable(warn)  # the images the rows' texture columns number
+        self.corners: list[CornerSpec | None] = []  # per row: what its textures read from meshes
 
     def lookup(self, material) -> int:
         key = "\0default" if material is None else material.name_full  # unique across linked libraries
@@ -50,9 +74,51 @@ class MaterialTable:
             return self.index[key]
         row, grating = (dict(DEFAULT_MATERIAL), None) if material is None else self._convert(material)
         self.index[key] = len(self.rows)
+        self.corners.append(row.pop("_corners", None))
         self.rows.append(row)
         self.grating.append(grating)
         return self.index[key]
+
+    def corner_needs(self, slots) -> frozenset:
+        """What meshes with these material rows must provide: ('UV', map) / ('GENERATED', '') /
+        ('TANGENT', map) items (map '': the active render UV map)."""
+        needs = set()
+        for r in slots:
+            spec = self.corners[r]
+            if spec is None:
+                continue
+            needs.add((spec.coords, spec.uv_map if spec.coords == "UV" else ""))
+            if spec.tangent_map is not None:
+                needs.add(("TANGENT", spec.tangent_map))
+        return frozenset(needs)
+
+    def _texture_columns(self, surf: Surface, owner: str) -> dict:
+        """The row's texture columns from ``surf.textures`` and its CornerSpec (key '_corners',
+        taken off by :meth:`lookup`): one set of coordinates per material, the colour's first (a
+        material whose textures read different coordinates is warned and uses those; UV before
+        Generated)."""
+        refs = {slot: ref for slot, ref in surf.textures.items()
+                if (slot == "emission" and ref.strength > 0) or (slot != "emission" and surf.kind is not None)}
+        if not refs:
+            return {}
+        cols = {_TEXTURE_COLUMN[slot]: ref.index for slot, ref in refs.items()}
+        if "emission" in refs:
+            cols["emission_strength"] = float(refs["emission"].strength)
+        if "normal" in refs:
+            cols["normal_strength"] = float(refs["normal"].strength)
+        for slot in ("roughness", "metallic"):
+            if slot in refs and refs[slot].channel >= 0:
+                cols[f"{slot}_channel"] = int(refs[slot].channel)
+        order = [refs[s] for s in ("color", "emission", "roughness", "metallic", "normal") if s in refs]
+        uv = [r for r in order if r.coords == "UV"]
+        first = uv[0] if uv else order[0]
+        others = [r for r in order if not r.same_coordinates(first)]
+        if others:
+            self.warn(f"{owner}: its image textures use different coordinates ('{others[0].node}' and "
+                      f"'{first.node}'): all read those of '{first.node}'")
+        tangent = refs["normal"].tangent_map if "normal" in refs else None
+        cols["_corners"] = CornerSpec(first.coords, first.uv_map, tuple(first.matrix.reshape(-1).tolist()), tangent)
+        return cols
 
     def slots(self, ob) -> tuple[int, ...]:
         """Row of each of ``ob``'s material slots (the default surface for no slot or an empty one)."""
@@ -82,6 +148,7 @@ class MaterialTable:
             "ior": float(surf.ior),
             "emission": tuple(float(c) for c in np.clip(surf.emission, 0.0, None)),
         }
+        row.update(self._texture_columns(surf, owner))
         opal = getattr(mat, "opal", None)
         if kind == "DIELECTRIC":
             if surf.ior != surf.ior:
@@ -128,7 +195,7 @@ class MaterialTable:
             self.warn(f"{owner}: {missing_output(nt)}: rendered black, as in Cycles")
             return Surface(None, np.zeros(3))
         sock = out.inputs.get("Surface")
-        reader = NodeReader(owner, self.warn, self.to709)
+        reader = NodeReader(owner, self.warn, self.to709, self.textures)
         surf = reader.surface(sock) if sock is not None else Surface(None, np.zeros(3))
         if reader.cycle is not None:
             self.warn(f"{owner}: its node tree has a cycle (through the link {reader.cycle}, drawn red in the node "

@@ -12,6 +12,9 @@ with them (:func:`read_corner_normals`: Blender's ``Mesh.corner_normals``, which
 account for flat and smooth faces, sharp edges, "Smooth by Angle" and custom split normals),
 taken to world space with the inverse transpose of each instance's matrix
 (:func:`world_corner_normals`); a fully flat mesh carries none.
+Textured materials get per-corner texture coordinates (a UV map, or Generated:
+object space over the mesh's texture space) and, for normal maps, MikkTSpace tangents
+(:func:`read_corners`, :func:`flatten_corners`; docs/physics.md section 13).
 
 :class:`MeshCache` keeps the meshes read between exports of one depsgraph (a rendered viewport
 re-exports after every change), dropping those whose geometry changed
@@ -50,6 +53,8 @@ __all__ = [
     "MeshCache",
     "SceneMeshes",
     "flatten",
+    "read_corners",
+    "flatten_corners",
 ]
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
@@ -108,6 +113,10 @@ class MeshData:
     face_period: np.ndarray | None = None  # (T,) per-triangle period attribute (nm), or None
     corner_normal: np.ndarray | None = None  # (T, 3, 3) float32 object-space shading normals, or None: all flat
     flat_tri: np.ndarray | None = None  # (T,) bool: triangles of flat faces (face normal), or None: none flat
+    # textures (read_corners): ('UV', map) -> (T, 3, 2) float32, ('TANGENT', map) -> (T, 3, 4) float32
+    # object space, ('GENERATED', '') -> (T, 3, 3) float32 in [0, 1] over the texture space
+    corners: dict | None = None
+    needs: frozenset = frozenset()
 
 
 def read_mesh(me, name: str, want_uv: bool) -> MeshData:
@@ -258,10 +267,13 @@ def wants_uv(ob) -> bool:
                for s in ob.material_slots)
 
 
-def mesh_for(ob, otype: str, want_uv: bool) -> MeshData | None:
-    """Triangles of an evaluated object (modifiers applied), object space; None if it has none."""
+def mesh_for(ob, otype: str, want_uv: bool, needs: frozenset = frozenset(), warn=None) -> MeshData | None:
+    """Triangles of an evaluated object (modifiers applied), object space; None if it has none.
+    ``needs``: the per-corner data its textured materials read (:func:`read_corners`)."""
     if otype == "MESH":
         md = read_mesh(ob.data, ob.name, want_uv)
+        if md is not None and needs:
+            read_corners(ob.data, md, needs, warn)
     else:
         try:
             me = ob.to_mesh()
@@ -269,6 +281,8 @@ def mesh_for(ob, otype: str, want_uv: bool) -> MeshData | None:
             return None
         try:
             md = None if me is None else read_mesh(me, ob.name, want_uv)
+            if md is not None and needs:
+                read_corners(me, md, needs, warn)
         finally:
             ob.to_mesh_clear()
     if md is not None and len(md.vertices) and not np.isfinite(md.vertices).all():
@@ -282,6 +296,7 @@ def mesh_for(ob, otype: str, want_uv: bool) -> MeshData | None:
 class _Entry:
     mesh: MeshData | None
     want_uv: bool
+    needs: frozenset          # per-corner texture data read (read_corners)
     data_name: str            # the object's original data (what a Mesh / Curve update names)
     eval_name: str            # the evaluated data's name (a modifier stack's result is "Mesh")
     size: tuple[int, int] | None  # MESH: (vertices, faces) of the data it was read from
@@ -333,7 +348,8 @@ class MeshCache:
         """Forget every mesh (after an undo, a file load, or a change of depsgraph)."""
         self._entries.clear()
 
-    def _get(self, ob, otype: str, index: int, used: set) -> MeshData | None:
+    def _get(self, ob, otype: str, index: int, used: set, needs: frozenset = frozenset(),
+             warn=None) -> MeshData | None:
         key = (ob.name_full, index)
         used.add(key)
         want_uv = wants_uv(ob)
@@ -341,9 +357,11 @@ class MeshCache:
         data = ob.data
         size = (len(data.vertices), len(data.polygons)) if otype == "MESH" and data is not None else None
         e = self._entries.get(key)
-        if e is None or (e.want_uv, e.data_name, e.eval_name, e.size) != (want_uv, data_name, eval_name, size):
+        if e is None or (e.want_uv, e.needs, e.data_name, e.eval_name, e.size) != (want_uv, needs, data_name,
+                                                                                 eval_name, size):
             self.reads += 1
-            e = self._entries[key] = _Entry(mesh_for(ob, otype, want_uv), want_uv, data_name, eval_name, size)
+            e = self._entries[key] = _Entry(mesh_for(ob, otype, want_uv, needs, warn), want_uv, needs, data_name,
+                                            eval_name, size)
         return e.mesh
 
     def _keep_only(self, used: set) -> None:
@@ -360,6 +378,7 @@ class SceneMeshes:
         self.cache = cache if cache is not None else MeshCache()
         self.meshes: dict[tuple, MeshData | None] = {}
         self._per_object: dict[str, int] = defaultdict(int)
+        self._index: dict[tuple, int] = {}
         self._used: set = set()
 
     def __len__(self) -> int:
@@ -368,14 +387,21 @@ class SceneMeshes:
     def __getitem__(self, mkey) -> MeshData | None:
         return self.meshes[mkey]
 
-    def get(self, ob, otype: str) -> tuple[tuple, MeshData | None]:
-        """(this export's key of ``ob``'s mesh, the mesh or None)."""
+    def get(self, ob, otype: str, needs: frozenset = frozenset(), warn=None) -> tuple[tuple, MeshData | None]:
+        """(this export's key of ``ob``'s mesh, the mesh or None). ``needs``: the per-corner data
+        its textured materials read (a mesh shared by objects whose materials read more is read
+        again with all of it)."""
         data = ob.data
         mkey = ("data", data.as_pointer()) if (otype == "MESH" and data is not None) else ("obj", ob.name)
         if mkey not in self.meshes:
             index = self._per_object[ob.name_full]
             self._per_object[ob.name_full] += 1
-            self.meshes[mkey] = self.cache._get(ob, otype, index, self._used)
+            self._index[mkey] = index
+            self.meshes[mkey] = self.cache._get(ob, otype, index, self._used, needs, warn)
+        else:
+            md = self.meshes[mkey]
+            if md is not None and not needs <= md.needs:
+                self.meshes[mkey] = self.cache._get(ob, otype, self._index[mkey], self._used, needs | md.needs, warn)
         return mkey, self.meshes[mkey]
 
     def done(self) -> None:
@@ -387,8 +413,10 @@ class SceneMeshes:
 def subset(md: MeshData, keep: np.ndarray) -> MeshData:
     """``md`` with only the triangles where ``keep`` is True (the vertices all kept)."""
     pick = (lambda a: None if a is None else a[keep])
+    corners = None if md.corners is None else {k: v[keep] for k, v in md.corners.items()}
     return MeshData(md.vertices, md.triangles[keep], md.slot[keep], pick(md.uv), pick(md.face_dir), md.name,
-                    pick(md.face_period), corner_normal=pick(md.corner_normal), flat_tri=pick(md.flat_tri))
+                    pick(md.face_period), corner_normal=pick(md.corner_normal), flat_tri=pick(md.flat_tri),
+                    corners=corners, needs=md.needs)
 
 
 def flatten(groups: dict, meshes: SceneMeshes, grating: list, warn, hidden: np.ndarray | None = None):
@@ -446,3 +474,152 @@ def flatten(groups: dict, meshes: SceneMeshes, grating: list, warn, hidden: np.n
     tri_tangent = np.concatenate(tan_chunks) if (any_grating and tan_chunks) else np.zeros((0, 3), np.float32)
     corner_normals = np.concatenate(normal_chunks) if normal_chunks else np.zeros((0, 3, 3), np.float32)
     return vertices, triangles, tri_material, tri_tangent, tri_period, corner_normals
+
+
+# ============================================================================ textures: per-corner data
+def _uv_layer(me, name: str):
+    """The UV layer ``name`` ('': the active render one, Cycles' default UV), or None."""
+    layers = me.uv_layers
+    if not len(layers):
+        return None
+    if name:
+        return layers.get(name)
+    for layer in layers:
+        if layer.active_render:
+            return layer
+    return layers.active
+
+
+def read_corners(me, md: MeshData, needs: frozenset, warn=None) -> None:
+    """Fill ``md.corners`` with the per-corner data textured materials read (``needs``, from
+    ``MaterialTable.corner_needs``): UVs of a UV map (``uv_layers[...].uv``, per triangle corner),
+    Generated coordinates ((co - texspace_location) / (2 texspace_size) + 1/2, Cycles' generated
+    attribute, from the evaluated positions) and MikkTSpace tangents (``calc_tangents`` on that
+    map: per corner ``tangent`` and ``bitangent_sign``). A missing UV map gives (0, 0), as Cycles
+    reads a missing attribute, with a warning; a mesh whose tangents Blender cannot compute
+    (n-gons) gets per-triangle UV tangents, with a warning."""
+    lt = me.loop_triangles
+    nt = len(lt)
+    loops = foreach(lt, "loops", nt, np.int32, 3) if nt else np.zeros((0, 3), np.int32)
+    out: dict = {}
+    say = warn if warn is not None else (lambda _m: None)
+    for kind, name in sorted(needs):
+        if kind == "UV":
+            out[(kind, name)] = _corner_uvs(me, name, loops, md.name, say)
+        elif kind == "GENERATED":
+            loc = np.array(me.texspace_location, np.float64)
+            size = np.array(me.texspace_size, np.float64)
+            size = np.where(size != 0, size, 1.0)
+            gen = (md.vertices - loc) / (2 * size) + 0.5
+            out[(kind, name)] = gen[md.triangles].astype(np.float32)
+    for kind, name in sorted(needs):
+        if kind == "TANGENT":
+            out[(kind, name)] = _corner_tangents(me, name, loops, md, out, say)
+    md.corners, md.needs = out, needs
+
+
+def _corner_uvs(me, name: str, loops: np.ndarray, obname: str, say) -> np.ndarray:
+    layer = _uv_layer(me, name)
+    if layer is None:
+        say(f"object '{obname}' has no UV map{f' {name!r}' if name else ''} for its image textures: they read "
+            "UV (0, 0), as in Cycles")
+        return np.zeros((len(loops), 3, 2), np.float32)
+    data = layer.uv if hasattr(layer, "uv") else layer.data
+    uv_all = foreach(data, "vector" if hasattr(layer, "uv") else "uv", len(me.loops), np.float32, 2)
+    return uv_all[loops]
+
+
+def _corner_tangents(me, name: str, loops: np.ndarray, md: MeshData, out: dict, say) -> np.ndarray:
+    layer = _uv_layer(me, name)
+    if layer is None:
+        say(f"object '{md.name}' has no UV map{f' {name!r}' if name else ''} for its normal map's tangents: the "
+            "normal map is ignored, as in Cycles")
+        return np.zeros((len(loops), 3, 4), np.float32)
+    try:
+        me.calc_tangents(uvmap=layer.name)
+    except RuntimeError as e:  # n-gons: Blender's MikkTSpace takes triangles and quads only
+        from ...core.textures import uv_tangents
+
+        say(f"object '{md.name}': Blender cannot compute its tangents ({str(e).strip()}): using per-triangle UV "
+            "tangents for its normal map")
+        uv = out.get(("UV", name))
+        uv = _corner_uvs(me, name, loops, md.name, say) if uv is None else uv
+        return uv_tangents(md.vertices, md.triangles, uv)
+    n = len(me.loops)
+    tan = foreach(me.loops, "tangent", n, np.float32, 3)
+    sign = foreach(me.loops, "bitangent_sign", n, np.float32)
+    if hasattr(me, "free_tangents"):
+        me.free_tangents()
+    return np.concatenate([tan[loops], sign[loops][..., None]], axis=2)
+
+
+def flatten_corners(groups: dict, meshes: SceneMeshes, corners: list, hidden: np.ndarray | None = None):
+    """World-space per-corner texture data of every instance, in :func:`flatten`'s triangle
+    order: ``corners`` is the material table's CornerSpec per row (None: untextured). Returns
+    (corner_uvs (T, 3, 2) float32 or (0, 3, 2) when no material is textured, corner_tangents
+    (T, 3, 4) float32 or (0, 3, 4) without normal maps). UVs have each material's Mapping folded
+    in; tangents are turned by the instance's normal matrix (relative to its normal's length, so
+    they need not be unit) and their sign flips with a mirroring matrix, so B = sign (N x T) is
+    the image of the object-space bitangent."""
+    if not any(c is not None for c in corners):
+        return np.zeros((0, 3, 2), np.float32), np.zeros((0, 3, 4), np.float32)
+    with_tangents = any(c is not None and c.tangent_map is not None for c in corners)
+    uv_chunks, tan_chunks = [], []
+    for (mkey, slots), mlist in groups.items():  # the same groups and triangles as flatten
+        md = meshes[mkey]
+        mats = np.stack(mlist)
+        slot_map = np.asarray(slots, np.int32)
+        tri_mat_local = slot_map[np.clip(md.slot, 0, len(slot_map) - 1)]
+        if hidden is not None and hidden[slot_map].any():
+            keep = ~hidden[tri_mat_local]
+            if not keep.any():
+                continue
+            md, tri_mat_local = subset(md, keep), tri_mat_local[keep]
+        nt, k = len(md.triangles), len(mats)
+        uv = np.zeros((nt, 3, 2), np.float32)
+        tan = np.zeros((k, nt, 3, 4), np.float32) if with_tangents else None
+        have = md.corners or {}
+        for row in np.unique(tri_mat_local):  # loop over the mesh's materials (a few)
+            spec = corners[row]
+            if spec is None:
+                continue
+            sel = tri_mat_local == row
+            src = have.get((spec.coords, spec.uv_map if spec.coords == "UV" else ""))
+            if src is not None:
+                p = src[sel].astype(np.float64)
+                if p.shape[-1] == 2:  # UV (u, v) -> the point (u, v, 0)
+                    p = np.concatenate([p, np.zeros(p.shape[:-1] + (1,))], axis=-1)
+                m = spec.affine()
+                uv[sel] = (p @ m[:3, :3].T + m[:3, 3])[..., :2].astype(np.float32)
+            if tan is not None and spec.tangent_map is not None:
+                t_obj = have.get(("TANGENT", spec.tangent_map))
+                if t_obj is not None:
+                    t_sel = t_obj[sel].astype(np.float64)
+                    # Cycles maps in object space and turns the result by the normal matrix M^-T:
+                    # M^-T T over |M^-T N| (N the face's object-space normal) keeps the tangent's
+                    # length relative to the world normal, so x T + y B + z N comes out as
+                    # Cycles' under non-uniform scale (exactly where the scale axes lie along
+                    # the tangent frame)
+                    normal_m = np.linalg.inv(mats[:, :3, :3]).transpose(0, 2, 1)
+                    face = np.cross(md.vertices[md.triangles[sel, 1]] - md.vertices[md.triangles[sel, 0]],
+                                    md.vertices[md.triangles[sel, 2]] - md.vertices[md.triangles[sel, 0]])
+                    face /= np.maximum(np.linalg.norm(face, axis=1, keepdims=True), 1e-300)
+                    n_len = np.linalg.norm(np.einsum("kij,tj->kti", normal_m, face), axis=-1)  # (k, nsel)
+                    t_w = np.einsum("kij,tcj->ktci", normal_m, t_sel[..., :3])
+                    t_w /= np.maximum(n_len, 1e-300)[:, :, None, None]
+                    flip = np.sign(np.linalg.det(mats[:, :3, :3]))[:, None, None]
+                    sign = np.broadcast_to(t_sel[None, ..., 3] * flip, t_w.shape[:-1])
+                    tan[:, sel] = np.concatenate([t_w, sign[..., None]], axis=-1)
+        uv_k = np.broadcast_to(uv, (k,) + uv.shape)
+        mirrored = np.linalg.det(mats[:, :3, :3]) < 0
+        if mirrored.any():  # flatten swaps corners 1 and 2 of a mirrored instance's triangles
+            uv_k = uv_k.copy()
+            uv_k[mirrored] = uv_k[mirrored][:, :, [0, 2, 1]]
+            if tan is not None:
+                tan[mirrored] = tan[mirrored][:, :, [0, 2, 1]]
+        uv_chunks.append(uv_k.reshape(k * nt, 3, 2))
+        if tan is not None:
+            tan_chunks.append(tan.reshape(k * nt, 3, 4))
+    corner_uvs = np.concatenate(uv_chunks) if uv_chunks else np.zeros((0, 3, 2), np.float32)
+    corner_tan = np.concatenate(tan_chunks) if tan_chunks else np.zeros((0, 3, 4), np.float32)
+    return corner_uvs, corner_tan

@@ -2,9 +2,14 @@
 
 Follows a node tree from its output node through reroutes, mix and add shaders, and evaluates
 the BSDF it finds to one of the core's surfaces (diffuse, mirror, dielectric) with a colour, an
-IOR and an emission. What the core cannot represent is approximated and named in the warnings:
-textures are averaged (:func:`colour.image_mean`), rough reflection and refraction are made
-smooth (rougher than ``ROUGH_AS_DIFFUSE``: diffuse), mixes of unlike surfaces keep the heavier.
+IOR and an emission. Image Texture nodes on a BSDF's colour, roughness, metallic or emission
+colour and, through a tangent-space Normal Map node, on its normal are bound as textures sampled
+per hit (:class:`TextureRef`, ``Surface.textures``; docs/physics.md section 13) with their
+coordinates (the UV map, or Generated) and any Mapping node folded in. What the core cannot
+represent is approximated and named in the warnings: other textures and procedural nodes are
+averaged (:func:`images.image_mean`) or use the socket's own value, rough reflection and
+refraction are made smooth (rougher than ``ROUGH_AS_DIFFUSE``: diffuse), mixes of unlike
+surfaces keep the heavier.
 
 Nothing a node tree holds can hang the export or reach the tracer as NaN or Inf: a node cycle
 (Blender marks one link of it invalid) is detected and named (:attr:`NodeReader.cycle`; the
@@ -16,17 +21,19 @@ warning, as is a negative strength.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import bpy
 import numpy as np
+from mathutils import Euler
 
 from ...core.scene import SceneError
-from .colour import blackbody_rgb, image_mean, in_rec709, rgb
+from .colour import blackbody_rgb, in_rec709, rgb
+from .images import image_mean
 from .messages import Warnings
 
-__all__ = ["ROUGH_AS_DIFFUSE", "ROUGH_WARN", "MAX_INTENSITY", "Surface", "node_tree", "output_node",
-           "missing_output", "surface_socket", "NodeReader"]
+__all__ = ["ROUGH_AS_DIFFUSE", "ROUGH_WARN", "MAX_INTENSITY", "Surface", "TextureRef", "node_tree", "output_node",
+           "missing_output", "surface_socket", "NodeReader", "TEXTURE_SOCKETS"]
 
 #: Roughness above which a glossy surface is treated as diffuse rather than as a mirror.
 ROUGH_AS_DIFFUSE = 0.5
@@ -37,9 +44,31 @@ ROUGH_WARN = 0.1
 #: to FLT_MAX (3.4e38), which overflows the tracer's float32 arithmetic into Inf pixels; 1e20
 #: leaves 18 orders of magnitude for the 1/r^2 falloff, spectral weights and sample sums.
 MAX_INTENSITY = 1e20
+#: Cycles' colour -> float conversion (linear_rgb_to_gray): Rec.709 luminance.
+_LUMINANCE = np.array([0.2126729, 0.7151522, 0.0721750])
+#: Cycles' colour for a missing image (TEX_IMAGE_MISSING_R/G/B).
+_MISSING_RGB = (1.0, 0.0, 1.0)
 #: Output node types, and what Blender calls them.
 OUTPUT_NODES = {"ShaderNodeOutputMaterial": "Material Output", "ShaderNodeOutputWorld": "World Output",
                 "ShaderNodeOutputLight": "Light Output"}
+
+
+@dataclass
+class TextureRef:
+    """An Image Texture bound to a surface input: the export's texture number
+    (:class:`images.TextureTable`), its coordinates and the Mapping folded into them."""
+
+    index: int
+    coords: str          # 'UV' or 'GENERATED'
+    uv_map: str          # the UV map ('': the mesh's active render map) of its coordinates
+    matrix: np.ndarray   # 4x4: (u, v, 0, 1) or generated (x, y, z, 1) -> the texture's (u, v) in its first two rows
+    node: str            # the Image Texture node's name, for warnings
+    strength: float = 1.0  # a Normal Map node's strength, an emission's strength
+    tangent_map: str | None = None  # a normal map's: the UV map of its tangents ('': the active render map)
+    channel: int = -1    # a float input's: -1 the colour's luminance, 0/1/2 R/G/B (a Separate Color node), 3 alpha
+
+    def same_coordinates(self, other: "TextureRef") -> bool:
+        return (self.coords, self.uv_map) == (other.coords, other.uv_map) and np.allclose(self.matrix, other.matrix)
 
 
 @dataclass
@@ -51,6 +80,22 @@ class Surface:
     ior: float = 1.5
     roughness: float = 0.0
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # image textures per slot ('color', 'roughness', 'metallic', 'emission', 'normal')
+    textures: dict = field(default_factory=dict)
+
+
+#: Shader inputs that may take an image texture, per node type: socket name -> texture slot.
+TEXTURE_SOCKETS = {
+    "ShaderNodeBsdfPrincipled": {"Base Color": "color", "Roughness": "roughness", "Metallic": "metallic",
+                                 "Emission Color": "emission", "Emission": "emission"},
+    "ShaderNodeBsdfDiffuse": {"Color": "color"},
+    "ShaderNodeBsdfGlossy": {"Color": "color", "Roughness": "roughness"},
+    "ShaderNodeBsdfAnisotropic": {"Color": "color", "Roughness": "roughness"},
+    "ShaderNodeBsdfMetallic": {"Base Color": "color", "Roughness": "roughness"},
+    "ShaderNodeBsdfGlass": {"Color": "color", "Roughness": "roughness"},
+    "ShaderNodeBsdfRefraction": {"Color": "color", "Roughness": "roughness"},
+    "ShaderNodeEmission": {"Color": "emission"},
+}
 
 
 def node_tree(id_data):
@@ -90,13 +135,169 @@ def surface_socket(nt):
     return out.inputs.get("Surface") if out is not None else None
 
 
-class NodeReader:
+class TextureBindings:
+    """The image-texture part of :class:`NodeReader`: Image Texture nodes on the inputs in
+    TEXTURE_SOCKETS (and tangent-space Normal Map nodes) become :class:`TextureRef` bindings in
+    ``Surface.textures``, sampled per hit by the core (docs/physics.md section 13)."""
+
+    def _bindable(self, node, name: str) -> bool:
+        """Whether input ``name`` of ``node`` takes an image texture sampled per hit."""
+        return self.textures is not None and name in TEXTURE_SOCKETS.get(node.bl_idname, {})
+
+    def _bind_scalar(self, node, name: str, src_node, out):
+        """Bind what feeds the float input ``name`` of ``node``: an Image Texture's Color (its
+        luminance) or Alpha, or one channel of it through a Separate Color (RGB) / Separate RGB
+        node. Returns the average value, or None when it cannot be bound (the caller warns)."""
+        channel, tex = -1, (src_node, out)
+        if src_node.bl_idname in ("ShaderNodeSeparateColor", "ShaderNodeSeparateRGB"):
+            if getattr(src_node, "mode", "RGB") != "RGB":
+                return None
+            channel = {"Red": 0, "R": 0, "Green": 1, "G": 1, "Blue": 2, "B": 2}.get(out.name, -1)
+            tex = self.source(src_node.inputs[0])
+            if channel < 0 or tex is None or tex[0].bl_idname != "ShaderNodeTexImage" or tex[1].name != "Color":
+                return None
+        elif src_node.bl_idname != "ShaderNodeTexImage":
+            return None
+        elif out.name == "Alpha":
+            channel = 3
+        mean = self._bind_image(node, name, tex[0], tex[1], channel)
+        if mean is None:
+            return None
+        value = float(np.asarray(mean[:3]) @ _LUMINANCE) if channel < 0 else float(mean[channel])
+        return min(max(value, 0.0), 1.0)
+
+    def _bind_image(self, node, name: str, tex_node, out, channel: int = -1):
+        """Bind the Image Texture ``tex_node`` feeding input ``name`` of ``node`` (through
+        ``channel``, for a float input); return the texture's average linear Rec.709 colour and
+        alpha (4,) (what one value per material reads), Cycles' missing-image magenta for an
+        image without pixels, or None when it cannot be bound (then the caller averages it as
+        before, with its warning)."""
+        if out.name != "Color" and channel != 3:
+            self.warn(f"{self.owner}: the Alpha output of image texture '{tex_node.name}' on '{name}' is not supported: "
+                      "the texture is averaged")
+            return None
+        image = getattr(tex_node, "image", None)
+        if image is None:
+            self.warn(f"{self.owner}: image texture '{tex_node.name}' on '{name}' has no image: rendered magenta, as "
+                      "Cycles renders a missing image")
+            return np.array(_MISSING_RGB + (1.0,), np.float64)
+        if getattr(image, "source", "FILE") not in ("FILE", "GENERATED"):
+            self.warn(f"{self.owner}: image '{image.name}' ({image.source.lower()} source) on '{name}' is read as a "
+                      "single image")
+        if getattr(tex_node, "projection", "FLAT") != "FLAT":
+            self.warn(f"{self.owner}: image texture '{tex_node.name}' uses {tex_node.projection.lower()} projection: "
+                      "rendered with flat projection")
+        coords = _texture_coordinates(self, tex_node)
+        if coords is None:
+            return None
+        idx = self.textures.index(image, getattr(tex_node, "interpolation", "Linear"),
+                                  getattr(tex_node, "extension", "REPEAT"), self.owner)
+        if idx is None:  # no pixels (warned, naming the image and the material)
+            return np.array(_MISSING_RGB + (1.0,), np.float64)
+        kind, uv_map, matrix = coords
+        self._bound[(node.name, name)] = TextureRef(idx, kind, uv_map, matrix, tex_node.name, channel=channel)
+        return self.textures.mean_rgba(idx)
+
+    def _normal_map(self, node) -> TextureRef | None:
+        """The tangent-space normal map on ``node``'s Normal input (a Normal Map node whose Color is
+        an Image Texture), or None; what else drives Normal is named in a warning and ignored."""
+        sock = node.inputs.get("Normal")
+        src = self.source(sock) if sock is not None else None
+        if src is None or self.textures is None:
+            return None
+        n, _ = src
+        if n.bl_idname != "ShaderNodeNormalMap":
+            self.warn(f"{self.owner}: '{n.name}' on the Normal of '{node.name}' is not supported (a Normal Map node with "
+                      "an image texture is): the normal is not perturbed")
+            return None
+        if n.space != "TANGENT":
+            self.warn(f"{self.owner}: Normal Map node '{n.name}' in {n.space.lower()} space is not supported (tangent "
+                      "space is): the normal is not perturbed")
+            return None
+        col = self.source(n.inputs.get("Color"))
+        if col is None or col[0].bl_idname != "ShaderNodeTexImage":
+            if col is not None:
+                self.warn(f"{self.owner}: the Color of Normal Map node '{n.name}' comes from '{col[0].name}', which is "
+                          "not supported (an image texture is): the normal is not perturbed")
+            return None
+        tex_node, out = col
+        image = getattr(tex_node, "image", None)
+        if out.name != "Color" or image is None:
+            self.warn(f"{self.owner}: Normal Map node '{n.name}' has no image texture colour: the normal is not perturbed")
+            return None
+        coords = _texture_coordinates(self, tex_node)
+        if coords is None:
+            return None
+        idx = self.textures.index(image, getattr(tex_node, "interpolation", "Linear"),
+                                  getattr(tex_node, "extension", "REPEAT"), self.owner)
+        if idx is None:
+            return None
+        strength = self.value(n, "Strength", 1.0)
+        if not np.isfinite(strength):
+            raise SceneError(f"{self.owner}: 'Strength' of '{n.name}' is not finite")
+        kind, uv_map, matrix = coords
+        # the tangents come from the Normal Map node's own UV map (Cycles reads its tangent attribute)
+        return TextureRef(idx, kind, uv_map, matrix, tex_node.name, float(strength), tangent_map=n.uv_map)
+
+    def _attach_textures(self, node, surf: Surface) -> None:
+        """The bindings recorded while ``node`` (a BSDF or Emission node) was read, into ``surf``."""
+        if self.textures is None:
+            return
+        for sock_name, slot in TEXTURE_SOCKETS[node.bl_idname].items():
+            ref = self._bound.get((node.name, sock_name))
+            if ref is not None and slot not in surf.textures:
+                if slot == "emission":
+                    s = node.inputs.get("Emission Strength")
+                    s = node.inputs.get("Strength") if s is None else s
+                    ref.strength = self.strength(node, s.name, 1.0) if s is not None else 1.0
+                surf.textures[slot] = ref
+        if surf.kind is not None and node.inputs.get("Normal") is not None:
+            ref = self._normal_map(node)
+            if ref is not None:
+                surf.textures["normal"] = ref
+        if node.bl_idname == "ShaderNodeBsdfPrincipled" and node.inputs.get("Alpha") is not None:
+            alpha = self.source(node.inputs["Alpha"])
+            if alpha is not None and alpha[0].bl_idname == "ShaderNodeTexImage":
+                self.warn(f"{self.owner}: image texture '{alpha[0].name}' on Alpha is not supported: rendered opaque")
+
+    def _combined_textures(self, a: Surface, b: Surface, wa: float, wb: float, node, out: Surface) -> dict:
+        """The textures of a Mix/Add of ``a`` and ``b``: each slot from the surface ``out`` kept
+        (same kind: the heavier that has one), with a warning where a texture is mixed with a
+        plain value or another texture (the texture alone is rendered)."""
+        if not a.textures and not b.textures:
+            return {}
+        first, second = (a, b) if wa >= wb else (b, a)
+        res = {}
+        for slot in sorted(set(a.textures) | set(b.textures)):
+            pick = first if slot in first.textures else second
+            if slot != "emission" and pick.kind != out.kind:
+                continue  # the surface not kept
+            ref = pick.textures[slot]
+            other = second if pick is first else first
+            if slot == "emission":
+                ref = replace(ref, strength=ref.strength * (wa if pick is a else wb))
+            elif other.kind is None and pick.kind == "DIFFUSE" and (wa if pick is a else wb) != 1.0:
+                self.warn(f"{self.owner}: '{node.name}' weighs image texture '{ref.node}' by "
+                          f"{wa if pick is a else wb:g}: the texture is rendered at full weight")
+            elif other.kind == pick.kind:
+                self.warn(f"{self.owner}: '{node.name}' mixes image texture '{ref.node}' with "
+                          f"{'another texture' if slot in other.textures else 'a plain ' + slot}: rendered with the "
+                          "texture alone")
+            res[slot] = ref
+        return res
+
+
+class NodeReader(TextureBindings):
     """Evaluates a shader node tree to a Surface, approximating what it cannot represent."""
 
-    def __init__(self, owner: str, warn: Warnings, to709: np.ndarray | None):
+    def __init__(self, owner: str, warn: Warnings, to709: np.ndarray | None, textures=None):
         self.owner, self.warn, self.to709 = owner, warn, to709
         #: The first node cycle met ("'A' -> 'B'", the link Blender marked invalid), or None.
         self.cycle: str | None = None
+        #: The export's images.TextureTable: Image Texture nodes on TEXTURE_SOCKETS are bound
+        #: (None: every texture is averaged, as before).
+        self.textures = textures
+        self._bound: dict[tuple[str, str], TextureRef] = {}  # (node name, socket) -> binding
 
     # ---------------------------------------------------------------- sockets
     def source(self, socket):
@@ -149,6 +350,10 @@ class NodeReader:
             return self._to709(rgb(out.default_value))
         if n.bl_idname == "ShaderNodeBlackbody":
             return blackbody_rgb(self.temperature(n))
+        if n.bl_idname == "ShaderNodeTexImage" and self._bindable(node, name):
+            col = self._bind_image(node, name, n, out)
+            if col is not None:
+                return np.asarray(col[:3], np.float64)
         if n.bl_idname in ("ShaderNodeTexImage", "ShaderNodeTexEnvironment") and getattr(n, "image", None):
             mean = image_mean(n.image)
             if mean is not None:
@@ -185,6 +390,10 @@ class NodeReader:
         n, out = src
         if n.bl_idname == "ShaderNodeValue":
             return float(out.default_value)
+        if self._bindable(node, name):
+            value = self._bind_scalar(node, name, n, out)
+            if value is not None:  # the average, for what reads one value per material
+                return value
         self.warn(f"{self.owner}: '{name}' of '{node.name}' is driven by a '{n.name}' node, which is not "
                   f"supported: using the socket's own value")
         return float(sock.default_value)
@@ -229,6 +438,12 @@ class NodeReader:
         return self._shader(self.source(socket), depth=0)
 
     def _shader(self, src, depth: int) -> Surface:
+        surf = self._shader_node(src, depth)
+        if src is not None and src[0].bl_idname in TEXTURE_SOCKETS and not getattr(src[0], "mute", False):
+            self._attach_textures(src[0], surf)
+        return surf
+
+    def _shader_node(self, src, depth: int) -> Surface:
         black = Surface(None, np.zeros(3))
         if src is None:
             return black
@@ -319,6 +534,11 @@ class NodeReader:
         return Surface("DIFFUSE", base, ior, rough, emission)
 
     def _combine(self, a: Surface, b: Surface, wa: float, wb: float, node) -> Surface:
+        out = self._combine_surfaces(a, b, wa, wb, node)
+        out.textures = self._combined_textures(a, b, wa, wb, node, out)
+        return out
+
+    def _combine_surfaces(self, a: Surface, b: Surface, wa: float, wb: float, node) -> Surface:
         emission = wa * a.emission + wb * b.emission
         if a.kind is None and b.kind is None:
             return Surface(None, np.zeros(3), emission=emission)
@@ -350,3 +570,70 @@ def _feeds(target, start) -> bool:
                     return True
                 stack.append(link.from_node)
     return False
+
+
+# ============================================================================ image texture coordinates
+
+
+def _mapping_matrix(node, reader: NodeReader) -> np.ndarray | None:
+    """The 4x4 affine a Mapping node applies to a point (Cycles' svm/mapping_util.h): POINT
+    T(L) R S, TEXTURE its inverse S^-1 R^T T(-L), VECTOR R S; None (with a warning) for NORMAL
+    or driven inputs."""
+    kind = getattr(node, "vector_type", "POINT")
+    vals = {}
+    for name in ("Location", "Rotation", "Scale"):
+        sock = node.inputs.get(name)
+        if sock is None or not sock.enabled:
+            vals[name] = np.zeros(3) if name != "Scale" else np.ones(3)
+            continue
+        if reader.source(sock) is not None:
+            reader.warn(f"{reader.owner}: the {name} of Mapping node '{node.name}' is driven by a node: not supported, "
+                        "the texture is averaged")
+            return None
+        vals[name] = np.array(tuple(sock.default_value), np.float64)
+    if kind == "NORMAL":
+        reader.warn(f"{reader.owner}: Mapping node '{node.name}' of type Normal on a texture's coordinates is not "
+                    "supported: the texture is averaged")
+        return None
+    rot = np.array(Euler(tuple(vals["Rotation"]), "XYZ").to_matrix(), np.float64)
+    m = np.eye(4)
+    if kind == "TEXTURE":
+        scale = vals["Scale"]
+        inv_s = np.where(scale != 0, 1.0 / np.where(scale != 0, scale, 1.0), 0.0)  # Cycles' safe_divide
+        m[:3, :3] = inv_s[:, None] * rot.T
+        m[:3, 3] = -(m[:3, :3] @ vals["Location"])
+    else:
+        m[:3, :3] = rot * vals["Scale"][None, :]
+        if kind == "POINT":
+            m[:3, 3] = vals["Location"]
+    return m
+
+
+def _texture_coordinates(reader: NodeReader, tex_node):
+    """(coords, uv map, 4x4 matrix) of an Image Texture node's Vector input: the UV map
+    (unlinked, a UV Map node, Texture Coordinate UV) or Generated (Texture Coordinate
+    Generated), through any Mapping nodes; None (with a warning naming the node) otherwise."""
+    m = np.eye(4)
+    sock = tex_node.inputs.get("Vector")
+    for _ in range(16):  # a chain of Mapping nodes, at most this long
+        src = reader.source(sock) if sock is not None else None
+        if src is None:
+            return "UV", "", m
+        n, out = src
+        idn = n.bl_idname
+        if idn == "ShaderNodeUVMap":
+            return "UV", n.uv_map, m
+        if idn == "ShaderNodeTexCoord" and out.name in ("UV", "Generated"):
+            return ("UV" if out.name == "UV" else "GENERATED"), "", m
+        if idn == "ShaderNodeMapping":
+            mm = _mapping_matrix(n, reader)
+            if mm is None:
+                return None
+            m = m @ mm
+            sock = n.inputs.get("Vector")
+            continue
+        what = f"output '{out.name}' of '{n.name}'" if idn == "ShaderNodeTexCoord" else f"'{n.name}'"
+        reader.warn(f"{reader.owner}: the coordinates of image texture '{tex_node.name}' come from {what}, which "
+                    "is not supported (UV maps and Generated are): the texture is averaged")
+        return None
+    return None
