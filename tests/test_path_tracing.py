@@ -89,3 +89,16 @@ def test_max_bounces_zero_is_direct_light_only():
     """max_bounces 0: emission seen plus one emission-only segment (direct light), E (1 + rho)."""
     rgb = render(furnace(), _settings(max_bounces=0)).rgb
     _assert_close(rgb, E * (1 + RHO), "max bounces 0")
+
+
+def test_bump_shadowing_is_the_conty_estevez_smith_term():
+    """Conty Estevez et al. 2019: G1 of GGX with alpha^2 = tan^2(theta_d) / 8 towards the light;
+    1 for an unbent normal, 0 below the interpolated surface (values by hand)."""
+    from opal_diffraction.core.eye_pass import bump_shadowing
+
+    ni = np.array([[0.0, 0.0, 1.0]] * 3, np.float32)
+    d45 = np.float32(np.sqrt(0.5))
+    ns = np.array([[0.0, 0.0, 1.0], [d45, 0.0, d45], [d45, 0.0, d45]], np.float32)
+    wi = np.array([[0.6, 0.0, 0.8], [np.sin(np.pi / 3), 0.0, 0.5], [0.6, 0.0, -0.8]], np.float32)
+    g = bump_shadowing(ni, ns, wi)
+    np.testing.assert_allclose(g, [1.0, 2 / (1 + np.sqrt(1 + 0.125 * 3.0)), 0.0], rtol=1e-5)

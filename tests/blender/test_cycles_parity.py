@@ -50,15 +50,7 @@ class ParityMismatch(Exception):
 
 #: Scenes that fail on main today, with the feature they wait for.
 MISSING = {
-    "world_env": "environment textures: the Environment Texture is averaged to a uniform world (no sun, "
-                 "no sun shadow)",
-    "textured_floor": "image textures: the checker is averaged to one colour",
-    "emissive_room": "emissive meshes as lights and indirect diffuse bounces: only the panel itself is seen",
-    "rough_metal": "GGX rough metal and area lights seen in reflections: the sphere is a mirror without "
-                   "the light's highlight",
-    "glass_sphere": "shading normals: the smooth-shaded glass sphere refracts through flat facets",
-    "mirror_area": "area lights seen in reflections: the light's image in the mirror sphere is missing",
-    "normal_mapped": "normal maps: the tangent-space bumps are ignored (a flat plane)",
+    "rough_metal": "GGX rough metal: the sphere is a mirror",
 }
 
 
