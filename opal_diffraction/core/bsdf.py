@@ -194,7 +194,8 @@ def _refract_local(wo, h, cos_oh, cos_t, eta):
 # where E changes fastest) and in z (the index axis). The 3-D tables use every other node of the
 # 2-D grid, so one pass of visible-normal geometry serves all of them.
 _N2 = 31                    # E(r, x) and E_avg(r)
-_N3 = 16                    # the 3-D tables: r x x x z
+_N3 = 16                    # the 3-D tables: r x x (x z)
+_NZ_GLASS = 32              # glass tables' z nodes (the albedo inside glass bends sharply with the index)
 _Z_MAX_GLASS = 0.98         # z = sqrt((ior - 1) / (ior + 1)): ior up to ~25 tabulated, clamped above
 _Z_MAX_SPEC = 0.99 ** 0.25  # z = F0^(1/4), F0 up to 0.99 (Cycles' ior_from_F0 clamp)
 _MU_MIN = 1e-4              # the mu = 0 column is computed here
@@ -208,11 +209,11 @@ def _vndf_block(r, mu):
     y component, and the other half mirrors it in y).
     Returns wo, h, cos(wo, h), Lambda(wo), alpha^2 per point (E * P rows) and the reflection
     weight G2 / G1(wo) with wi above the surface (0 otherwise)."""
-    alpha = np.maximum(r * r, 1e-7)
-    mu = np.maximum(mu, _MU_MIN)
+    alpha = np.maximum(r * r, 1e-7).astype(_F32)  # float32: the tables' accuracy is set by the quadrature
+    mu = np.maximum(mu, _MU_MIN).astype(_F32)
     g1 = (np.arange(_QUAD) + 0.5) / _QUAD
     g2 = ((np.arange(_QUAD // 2) + 0.5) / _QUAD - 0.25) % 1.0  # cos(phi) >= 0: p1 >= 0 is the +y half
-    u1, u2 = (x.ravel() for x in np.meshgrid(g1, g2, indexing="ij"))
+    u1, u2 = (x.ravel().astype(_F32) for x in np.meshgrid(g1, g2, indexing="ij"))
     e, p = len(r), len(u1)
     wo = np.repeat(np.stack([np.sqrt(1.0 - mu * mu), np.zeros_like(mu), mu], axis=1), p, axis=0)
     a2 = np.repeat(alpha * alpha, p)
@@ -230,7 +231,7 @@ def _tables():
     e_ss (N2, N2): single-scattering albedo of GGX reflection with F = 1, E(r, x);
     e_avg (N2,): 2 int_0^1 E mu dmu;
     s_tab (N3, N3, N3): int s(wo.h) f_ss cos of the Principled remap s (z = F0^(1/4));
-    glass_out / glass_in (N3, N3, N3): reflect + eta^2-undone transmit albedo of a rough
+    glass_out / glass_in (N3, N3, NZ_GLASS): reflect + eta^2-undone transmit albedo of a rough
     dielectric with the exact Fresnel, eta = ior > 1 and eta = 1 / ior (z = sqrt((ior-1)/(ior+1)))."""
     nodes = _grid(_N2)
     rr, xx = (a.ravel() for a in np.meshgrid(nodes, nodes, indexing="ij"))
@@ -238,8 +239,8 @@ def _tables():
     even = (np.arange(_N2)[:, None] % 2 == 0) & (np.arange(_N2)[None, :] % 2 == 0)
     even = even.ravel()
     s_tab = np.empty((_N3 * _N3, _N3))
-    glass = np.empty((2, _N3 * _N3, _N3))
-    z_spec, z_glass = _grid(_N3, _Z_MAX_SPEC), _grid(_N3, _Z_MAX_GLASS)
+    glass = np.empty((2, _N3 * _N3, _NZ_GLASS))
+    z_spec, z_glass = _grid(_N3, _Z_MAX_SPEC), _grid(_NZ_GLASS, _Z_MAX_GLASS)
     row3 = np.cumsum(even) - 1
     for start in range(0, len(rr), _CHUNK):
         sl = slice(start, start + _CHUNK)
@@ -253,14 +254,15 @@ def _tables():
         pts = (sub[:, None] * p + np.arange(p)[None, :]).ravel()
         wo, h, cos_oh, lo, a2, w = wo[pts], h[pts], cos_oh[pts], lo[pts], a2[pts], w[pts]
         rows = row3[start + sub]
-        for j in range(_N3):  # a loop over 16 index values per table
+        for j in range(_N3):  # a loop over 16 F0 values
             f0 = z_spec[j] ** 4
-            s = _principled_s(cos_oh, np.full(len(cos_oh), _ior_from_f0(f0)), f0)
+            s = _principled_s(cos_oh, np.full(len(cos_oh), _ior_from_f0(f0), _F32), _F32(f0))
             s_tab[rows, j] = (s * w).reshape(len(sub), -1).mean(axis=1)
+        for j in range(_NZ_GLASS):  # a loop over 32 indices
             zg = z_glass[j]
             ior = max((1.0 + zg * zg) / (1.0 - zg * zg), 1.0 + 1e-6)
             for t, eta_v in enumerate((ior, 1.0 / ior)):
-                eta = np.full(len(cos_oh), eta_v)
+                eta = np.full(len(cos_oh), eta_v, _F32)
                 f, cos_t = fresnel_dielectric_exact(cos_oh, eta)
                 wt = _refract_local(wo, h, cos_oh, cos_t, eta)
                 w_t = np.where((wt[:, 2] < 0) & (f < 1.0), (1.0 + lo) / (1.0 + lo + _lambda(a2, wt)), 0.0)
@@ -270,8 +272,8 @@ def _tables():
     wts = np.ones(_N2)
     wts[1:-1:2], wts[2:-1:2] = 4.0, 2.0
     e_avg = 4.0 * (e_ss * nodes ** 3 * wts).sum(axis=1) / (3.0 * (_N2 - 1))
-    shape = (_N3, _N3, _N3)
-    return e_ss, e_avg, s_tab.reshape(shape), glass[0].reshape(shape), glass[1].reshape(shape)
+    shape, gshape = (_N3, _N3, _N3), (_N3, _N3, _NZ_GLASS)
+    return e_ss, e_avg, s_tab.reshape(shape), glass[0].reshape(gshape), glass[1].reshape(gshape)
 
 
 def _grid(n, top=1.0):
@@ -657,9 +659,10 @@ def params_from_materials(materials, mat, front, lam=None, base=None, roughness=
     front = np.asarray(front, bool)
     B = len(mat)
     metallic, transmission = m.metallic[mat], m.transmission[mat]
-    if u_layer is None:
-        metal = metallic >= 0.5
-        glass = ~metal & (transmission >= 0.5)
+    if u_layer is None:  # the heaviest layer (ties: metal, then glass)
+        w_glass, w_base = (1.0 - metallic) * transmission, (1.0 - metallic) * (1.0 - transmission)
+        metal = (metallic >= w_glass) & (metallic >= w_base)
+        glass = ~metal & (w_glass >= w_base)
     else:
         u_layer = np.asarray(u_layer, np.float64)
         metal = u_layer < metallic
