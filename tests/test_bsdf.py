@@ -153,9 +153,9 @@ def _albedo(p, theta_o, seed=1):
     return x.mean(), x.std() / math.sqrt(len(x)), w, fl
 
 
-#: Accuracy of the compensation tables (bilinear / trilinear interpolation of a 64 x 32-point
-#: quadrature): measured below by test_tables_match_an_independent_quadrature.
-TABLE_TOL = 0.006
+#: Accuracy of the compensation tables (bilinear / trilinear interpolation of a 2048-point
+#: lattice quadrature): measured below by test_tables_match_an_independent_quadrature (0.3 %).
+TABLE_TOL = 0.005
 Z = norm.isf(1e-3 / 2)  # a two-sided 1e-3 test for each furnace case
 
 
@@ -317,7 +317,7 @@ def test_tables_match_an_independent_quadrature():
     """The white conductor's compensated albedo by wi-space quadrature (independent of the
     visible-normal quadrature that built the tables) is 1 within TABLE_TOL, also between nodes."""
     worst = 0.0
-    for r in (0.13, 0.37, 0.55, 0.81, 0.98):
+    for r in (0.37, 0.45, 0.55, 0.66, 0.81, 0.98):  # lobes the 400 x 200 wi quadrature resolves at grazing too
         for t in (5.0, 37.0, 63.0, 78.0):
             th = math.radians(t)
             for p in (params(B.CONDUCTOR, 1, r, base=1.0), params(B.DIELECTRIC, 1, r, eta=1.45),

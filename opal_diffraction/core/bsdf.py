@@ -199,21 +199,21 @@ _NZ_GLASS = 32              # glass tables' z nodes (the albedo inside glass ben
 _Z_MAX_GLASS = 0.98         # z = sqrt((ior - 1) / (ior + 1)): ior up to ~25 tabulated, clamped above
 _Z_MAX_SPEC = 0.99 ** 0.25  # z = F0^(1/4), F0 up to 0.99 (Cycles' ior_from_F0 clamp)
 _MU_MIN = 1e-4              # the mu = 0 column is computed here
-_QUAD = 64                  # visible-normal quadrature: _QUAD x _QUAD / 2 midpoints (y mirror symmetry)
+_QUAD_POINTS = 2048         # visible-normal quadrature: points of the Fibonacci lattice per entry
 _CHUNK = 96                 # table entries per vectorised block (memory)
 
 
 def _vndf_block(r, mu):
-    """Visible-normal quadrature for (roughness, mu) entries (E,): the midpoint grid of half the
-    sampling square, |u2 - 0| < 1/4 (wo in the x-z plane: the disk's first coordinate is the
-    y component, and the other half mirrors it in y).
-    Returns wo, h, cos(wo, h), Lambda(wo), alpha^2 per point (E * P rows) and the reflection
-    weight G2 / G1(wo) with wi above the surface (0 otherwise)."""
+    """Visible-normal quadrature for (roughness, mu) entries (E,) on a Fibonacci lattice of the
+    sampling square, u = ((i + 1/2) / N, frac(i / golden ratio)) (a rank-1 lattice: no aliasing
+    with the curve where reflections drop below the horizon, unlike a tensor grid; ~2e-4
+    against a direct wi quadrature). Returns wo, h, cos(wo, h), Lambda(wo), alpha^2 per point
+    (E * N rows) and the reflection weight G2 / G1(wo) with wi above the surface (0 otherwise)."""
     alpha = np.maximum(r * r, 1e-7).astype(_F32)  # float32: the tables' accuracy is set by the quadrature
     mu = np.maximum(mu, _MU_MIN).astype(_F32)
-    g1 = (np.arange(_QUAD) + 0.5) / _QUAD
-    g2 = ((np.arange(_QUAD // 2) + 0.5) / _QUAD - 0.25) % 1.0  # cos(phi) >= 0: p1 >= 0 is the +y half
-    u1, u2 = (x.ravel().astype(_F32) for x in np.meshgrid(g1, g2, indexing="ij"))
+    i = np.arange(_QUAD_POINTS)
+    u1 = ((i + 0.5) / _QUAD_POINTS).astype(_F32)
+    u2 = np.mod(i * 0.6180339887498949, 1.0).astype(_F32)
     e, p = len(r), len(u1)
     wo = np.repeat(np.stack([np.sqrt(1.0 - mu * mu), np.zeros_like(mu), mu], axis=1), p, axis=0)
     a2 = np.repeat(alpha * alpha, p)
