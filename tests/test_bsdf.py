@@ -106,6 +106,7 @@ def _cell_integrals(p1, wo1, n_theta=30, n_phi=60, sub=16):
     return val.sum(axis=(1, 3)), tb, pb
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cfg", CONFIGS, ids=IDS)
 def test_sampling_matches_pdf_chi_square(cfg):
     name, lobe, r, eta, kw, th = cfg
@@ -159,6 +160,7 @@ TABLE_TOL = 0.005
 Z = norm.isf(1e-3 / 2)  # a two-sided 1e-3 test for each furnace case
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("r", [0.2, 0.45, 0.7, 1.0])
 @pytest.mark.parametrize("theta_deg", [0.0, 40.0, 75.0])
 def test_white_furnace_is_one(r, theta_deg):
@@ -180,6 +182,7 @@ def test_white_furnace_is_one(r, theta_deg):
         assert abs(a - 1.0) < Z * se + TABLE_TOL, f"{name}: albedo {a:.5f} +- {se:.5f}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("r", [0.05, 0.4, 0.8])
 @pytest.mark.parametrize("theta_deg", [0.0, 60.0, 85.0])
 def test_albedo_never_exceeds_one(r, theta_deg):
@@ -203,6 +206,7 @@ def test_albedo_never_exceeds_one(r, theta_deg):
         assert np.all(a <= 1.0 + Z * se + TABLE_TOL), f"{name}: albedo {a}"
 
 
+@pytest.mark.slow
 def test_smooth_limit_is_the_analytic_fresnel():
     """At roughness just above MIN_ROUGHNESS (rough code path) and at 0 (delta events) the
     albedo is the Fresnel reflectance at mu_o: F82 for a metal, the exact dielectric Fresnel
@@ -299,6 +303,7 @@ def _quadrature_albedo(p1, wo1, n_theta=400, n_phi=200, undo_eta=True):
     return float((fc[:, 0] * scale * dA).sum())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("lobe,kw", [(B.CONDUCTOR, dict(base=0.9, edge=0.5)), (B.CONDUCTOR, dict(base=1.0)),
                                      (B.DIELECTRIC, dict(eta=1.5)), (B.DIELECTRIC, dict(eta=1 / 1.5)),
                                      (B.PLASTIC, dict(base=0.6, spec_f0=0.04)), (B.GLOSSY, dict(base=0.5)),
@@ -313,6 +318,7 @@ def test_mc_albedo_matches_quadrature(lobe, kw, r, theta_deg):
     assert abs(a - q) < Z * se + 2e-3 * q
 
 
+@pytest.mark.slow
 def test_tables_match_an_independent_quadrature():
     """The white conductor's compensated albedo by wi-space quadrature (independent of the
     visible-normal quadrature that built the tables) is 1 within TABLE_TOL, also between nodes."""

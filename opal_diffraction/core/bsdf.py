@@ -33,7 +33,7 @@ Methods (formulas in docs/physics.md section 13):
 Conventions: wo points towards the previous path vertex (the camera side), wi is the sampled
 direction; ns is the unit shading normal and ng the geometric normal, both on wo's side. A
 reflection needs wi on wo's side of both, a transmission the far side of both; other pairs
-evaluate to zero (no light leaks). Everything is float32 except the tables.
+evaluate to zero (no light leaks). Everything is float32.
 """
 
 from __future__ import annotations
