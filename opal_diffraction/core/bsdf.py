@@ -90,6 +90,11 @@ class SurfaceParams:
         return SurfaceParams(*(getattr(self, f.name)[idx] for f in fields(self)))
 
 
+def _sub(p: SurfaceParams, idx: np.ndarray) -> SurfaceParams:
+    """p.take(idx) for idx from np.flatnonzero (sorted, unique): p itself when it selects every row."""
+    return p if len(idx) == len(p) else p.take(idx)
+
+
 # ---------------------------------------------------------------------------------- Fresnel
 def fresnel_dielectric_exact(cos_i, eta):
     """Unpolarised Fresnel reflectance and the refracted cosine at a dielectric interface.
@@ -366,7 +371,7 @@ def energy_compensation(params: SurfaceParams, cos_o) -> np.ndarray:
     for code in (CONDUCTOR, GLOSSY, DIELECTRIC, PLASTIC):
         idx = np.flatnonzero((p.lobe == code) & rough)
         if len(idx):
-            out[idx] = _lobe_factor(p.take(idx), mu[idx], code)
+            out[idx] = _lobe_factor(_sub(p, idx), mu[idx], code)
     return out
 
 
@@ -420,7 +425,7 @@ def _eval_reflection_common(alpha, wo, wi):
     return fc, pdf, np.sum(wo * h, axis=1)
 
 
-def _eval_lobe(p, code, wo, wi):
+def _eval_lobe(p, code, wo, wi, terms=None):
     """f cos (B, k) and pdf (B,) of one lobe's hits in the local frame (wo.z > 0); wi.z > 0
     means reflection, < 0 transmission (the caller has checked the geometric side)."""
     B, k = p.base.shape
@@ -435,7 +440,7 @@ def _eval_lobe(p, code, wo, wi):
     if code in (CONDUCTOR, GLOSSY):
         m = np.flatnonzero(up & rough)
         if len(m):
-            q = p.take(m)
+            q = _sub(p, m)
             fc, pd, coh = _eval_reflection_common(q.alpha, wo[m], wi[m])
             f = fresnel_f82(coh, q.base, f82_b(q.base, q.edge)) if code == CONDUCTOR else q.base
             fcos[m] = f * (fc[:, None] * _lobe_factor(q, mu_o[m], code))
@@ -444,14 +449,14 @@ def _eval_lobe(p, code, wo, wi):
     if code == DIELECTRIC:
         m = np.flatnonzero(up & rough)
         if len(m):
-            q = p.take(m)
+            q = _sub(p, m)
             fc, pd, coh = _eval_reflection_common(q.alpha, wo[m], wi[m])
             f, _ = fresnel_dielectric_exact(coh, q.eta)
             fcos[m] = q.base * (f * fc * _glass_factor(q.alpha, mu_o[m], q.eta))[:, None]
             pdf[m] = f * pd
         m = np.flatnonzero(~up & rough & (np.abs(p.eta - 1.0) >= 1e-4))
         if len(m):
-            q = p.take(m)
+            q = _sub(p, m)
             a2 = q.alpha * q.alpha
             o, i, eta = wo[m], wi[m], q.eta
             h = eta[:, None] * i + o
@@ -471,7 +476,7 @@ def _eval_lobe(p, code, wo, wi):
             pdf[m] = t * d * coh * jac / (o[:, 2] * (1.0 + lo))
         return fcos, pdf
     # PLASTIC
-    f0t, eta, fac, e_spec = _plastic_terms(p, mu_o)
+    f0t, eta, fac, e_spec = _plastic_terms(p, mu_o) if terms is None else terms
     c = np.where(up, wi[:, 2], 0.0) * _INV_PI
     fcos = (p.base * (1.0 - e_spec) * c[:, None]).astype(_F32)
     ps = _plastic_p_spec(p, e_spec)
@@ -526,7 +531,7 @@ def _sample_lobe(p, code, wo, u):
         g = np.where(rough, (1.0 + lo) / (1.0 + lo + _lambda(a2, wi)), 1.0)
         fac = np.ones((B, k), _F32)
         if len(r):
-            fac[r] = _lobe_factor(p.take(r), mu_o[r], code)
+            fac[r] = _lobe_factor(_sub(p, r), mu_o[r], code)
         weight = np.where(ok[:, None], f * fac * g[:, None], 0.0).astype(_F32)
         pdf = np.where(ok, np.where(rough, _ggx_d(a2, h) / ((1.0 + lo) * 4.0 * mu_o), np.inf), 0.0).astype(_F32)
         flags = np.where(ok, GLOSSY_REFLECTION | np.where(rough, 0, SINGULAR), 0).astype(np.int32)
@@ -566,7 +571,7 @@ def _sample_lobe(p, code, wo, u):
     wi = np.where(spec[:, None], wr, wd).astype(_F32)
     ok = (wi[:, 2] > 0) & np.where(spec, cos_oh > 0, True)
     delta = spec & ~rough & ok
-    fcos, pd = _eval_lobe(p, PLASTIC, wo, wi)
+    fcos, pd = _eval_lobe(p, PLASTIC, wo, wi, (f0t, eta_l, fac, e_spec))
     good = ok & ~delta & (pd > 0)
     weight[good] = fcos[good] / pd[good, None]
     pdf[good] = pd[good]
@@ -606,7 +611,9 @@ def sample(params: SurfaceParams, wo, ns, ng, u):
     valid = wl[:, 2] > 0
     for code in (LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY):  # a loop over the 5 lobes
         idx = np.flatnonzero((params.lobe == code) & valid)
-        if len(idx):
+        if len(idx) == B:
+            wi_l, weight, pdf, flags = _sample_lobe(params, code, wl, u)
+        elif len(idx):
             wi_l[idx], weight[idx], pdf[idx], flags[idx] = _sample_lobe(params.take(idx), code, wl[idx], u[idx])
     wi = _to_world(wi_l, fu, fv, ns)
     wi /= np.maximum(np.linalg.norm(wi, axis=1, keepdims=True), 1e-30)
@@ -635,7 +642,9 @@ def evaluate(params: SurfaceParams, wo, wi, ns, ng):
     valid = (wl[:, 2] > 0) & consistent
     for code in (LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY):
         idx = np.flatnonzero((params.lobe == code) & valid)
-        if len(idx):
+        if len(idx) == B:
+            fcos, pdf = _eval_lobe(params, code, wl, il)
+        elif len(idx):
             fcos[idx], pdf[idx] = _eval_lobe(params.take(idx), code, wl[idx], il[idx])
     return fcos, pdf
 
