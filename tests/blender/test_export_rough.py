@@ -173,8 +173,8 @@ def _rgb_materials(m):
 
 
 #: Measured and not understood: seen exactly along the normal (theta_o = 0), Cycles' rough glass
-#: reflection is 2.5-3.5 % brighter than ours, while at theta_o = 5 degrees and beyond the two
-#: agree within 0.1 % (and the metals and plastics agree at theta_o = 0): a singular point of
+#: reflection is 2.4-5.3 % brighter than ours, while at theta_o = 5 degrees and beyond the two
+#: agree within 0.03 % (and the metals and plastics agree at theta_o = 0): a singular point of
 #: Cycles' glass evaluation, not a trend. Those geometries are left out for the glass rows.
 NORMAL_VIEW_GLASS = ("rough glass", "principled glass")
 
