@@ -1,4 +1,4 @@
-"""core/bsdf.py: GGX microfacet BSDFs (docs/physics.md section 13).
+"""core/bsdf.py: GGX microfacet BSDFs (docs/physics.md section 14).
 
 - sample() against evaluate()'s pdf: chi-square goodness of fit on a (theta, phi) grid of the
   whole sphere, the expected count of each cell by Gauss-Legendre integration of the pdf over it,

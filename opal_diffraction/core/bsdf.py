@@ -1,6 +1,6 @@
 """Rough surfaces: GGX microfacet BSDFs as Cycles renders them, vectorised over a batch of hits.
 
-Methods (formulas in docs/physics.md section 13):
+Methods (formulas in docs/physics.md section 14):
 - Trowbridge-Reitz (GGX) normal distribution D and the height-correlated Smith masking-shadowing
   G2 = 1 / (1 + Lambda(wo) + Lambda(wi)) (pbrt-v4, Pharr, Jakob & Humphreys 2023, section 9.6;
   Heitz 2014, "Understanding the masking-shadowing function", JCGT 3(2)).

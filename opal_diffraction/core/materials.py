@@ -5,7 +5,7 @@ specular mirror, and a smooth dielectric (Fresnel reflection, Snell refraction, 
 reflection) whose index may vary with wavelength (optics.ior_spectrum). A dielectric's colour
 tints reflected and transmitted light alike, as Blender's Glass BSDF does.
 
-Rough surfaces and Principled's layers (core/bsdf.py, docs/physics.md section 13) read the
+Rough surfaces and Principled's layers (core/bsdf.py, docs/physics.md section 14) read the
 per-material roughness, the layer weights metallic and transmission, the specular layer's F0
 (spec_f0 = ((ior - 1) / (ior + 1))^2 x 2 x IOR level, Cycles' Principled v2), the specular /
 edge tint spectrum and whether a metal uses the F82-tint Fresnel (else its colour is constant).

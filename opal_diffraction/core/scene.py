@@ -72,7 +72,7 @@ _MATERIAL_COLUMNS = {
     "coherence_length": (np.float32, (), 10.0, None),
     "grating_direction": (np.int32, (), "UV", GRATING_DIRECTIONS),
     "rotation": (np.float32, (), 0.0, None),
-    # rough surfaces and Principled's layers (docs/physics.md section 13)
+    # rough surfaces and Principled's layers (docs/physics.md section 14)
     "roughness": (np.float32, (), 0.0, None),
     "metallic": (np.float32, (), 0.0, None),
     "transmission": (np.float32, (), 0.0, None),
@@ -115,7 +115,7 @@ class Materials:
     emission: emitted radiance as linear RGB (Cycles' units: Emission colour x strength; a white
     emitter of strength 1 has the radiance of the world colour (1, 1, 1)), both sides, any kind.
 
-    Rough surfaces and Principled BSDF v2 layers (docs/physics.md section 13; core/bsdf.py):
+    Rough surfaces and Principled BSDF v2 layers (docs/physics.md section 14; core/bsdf.py):
     roughness: Blender's roughness in [0, 1] (GGX alpha = roughness^2; below bsdf.MIN_ROUGHNESS
     the surface is smooth). metallic and transmission in [0, 1]: Principled's layer weights - a
     conductor of F0 = color with weight metallic, then glass (tint color) with weight

@@ -1,4 +1,4 @@
-"""Rough surfaces through the exporter, and core/bsdf.py against Cycles (docs/physics.md section 13).
+"""Rough surfaces through the exporter, and core/bsdf.py against Cycles (docs/physics.md section 14).
 
 - The BSDF nodes' roughness, Principled's layer weights, IOR level and specular tint, and the
   metals' Fresnel reach the material columns; no smooth-surface approximation is warned about.
