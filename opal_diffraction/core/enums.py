@@ -12,6 +12,7 @@ from enum import IntEnum
 
 __all__ = [
     "MaterialKind",
+    "ConductorFresnel",
     "LightKind",
     "DispersionModel",
     "GratingType",
@@ -30,6 +31,14 @@ class MaterialKind(IntEnum):
     DIFFUSE = 0
     MIRROR = 1
     DIELECTRIC = 2
+
+
+class ConductorFresnel(IntEnum):
+    """A metal's Fresnel: CONSTANT (the colour at every angle: Glossy BSDF, and every mirror
+    before the column existed) or F82_TINT (Principled / Metallic BSDF: Schlick with an edge tint)."""
+
+    CONSTANT = 0
+    F82_TINT = 1
 
 
 class LightKind(IntEnum):

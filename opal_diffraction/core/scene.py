@@ -17,9 +17,8 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 
 from .geometry import triangle_normals
-from .enums import GratingDirection, GratingType, Lattice, LightKind, MaterialKind, codes
-from .enums import (GratingDirection, GratingType, Lattice, LightKind, MaterialKind, TextureEncoding,
-                    TextureExtension, TextureInterpolation, codes)
+from .enums import (ConductorFresnel, GratingDirection, GratingType, Lattice, LightKind, MaterialKind,
+                    TextureEncoding, TextureExtension, TextureInterpolation, codes)
 from .optics import DISPERSION_MODELS, ior_spectrum
 
 __all__ = [
@@ -28,6 +27,7 @@ __all__ = [
     "LATTICES",
     "GRATING_DIRECTIONS",
     "MATERIAL_KINDS",
+    "CONDUCTOR_FRESNELS",
     "LIGHT_KINDS",
     "TEXTURE_INTERPOLATIONS",
     "TEXTURE_EXTENSIONS",
@@ -43,6 +43,7 @@ FORMAT_VERSION = 1
 
 #: Material kinds and light kinds: name -> stable code (enums.py).
 MATERIAL_KINDS = codes(MaterialKind)
+CONDUCTOR_FRESNELS = codes(ConductorFresnel)
 LIGHT_KINDS = codes(LightKind)
 
 
@@ -91,10 +92,31 @@ _MATERIAL_COLUMNS = {
     "emission_strength": (np.float32, (), 1.0, None),
     "roughness_channel": (np.int32, (), -1, None),
     "metallic_channel": (np.int32, (), -1, None),
+    # rough surfaces and Principled's layers (docs/physics.md section 14)
+    "roughness": (np.float32, (), 0.0, None),
+    "metallic": (np.float32, (), 0.0, None),
+    "transmission": (np.float32, (), 0.0, None),
+    "specular_ior_level": (np.float32, (), 0.0, None),
+    "specular_tint": (np.float32, (3,), (1.0, 1.0, 1.0), None),
+    "conductor_fresnel": (np.int32, (), "CONSTANT", CONDUCTOR_FRESNELS),
 }
 
 #: The material columns that name a texture.
 TEXTURE_COLUMNS = ("color_texture", "roughness_texture", "metallic_texture", "emission_texture", "normal_texture")
+
+#: Unit-interval material columns (validated to [0, 1]).
+_UNIT_COLUMNS = ("roughness", "metallic", "transmission")
+
+
+def _layer_defaults(kind: np.ndarray, given: dict) -> dict:
+    """metallic / transmission a row did not give: 1 for a MIRROR / DIELECTRIC row (what those
+    kinds meant before the columns existed), else 0."""
+    out = {}
+    if "metallic" not in given:
+        out["metallic"] = (kind == MATERIAL_KINDS["MIRROR"]).astype(np.float32)
+    if "transmission" not in given:
+        out["transmission"] = (kind == MATERIAL_KINDS["DIELECTRIC"]).astype(np.float32)
+    return out
 
 
 def _material_column_default(name, rows):
@@ -115,6 +137,21 @@ class Materials:
     (used by 'NONE' and 'ABBE' dispersion). dispersion: DISPERSION_MODELS code. abbe: Abbe number V_d.
     emission: emitted radiance as linear RGB (Cycles' units: Emission colour x strength; a white
     emitter of strength 1 has the radiance of the world colour (1, 1, 1)), both sides, any kind.
+
+    Rough surfaces and Principled BSDF v2 layers (docs/physics.md section 14; core/bsdf.py):
+    roughness: Blender's roughness in [0, 1] (GGX alpha = roughness^2; below bsdf.MIN_ROUGHNESS
+    the surface is smooth). metallic and transmission in [0, 1]: Principled's layer weights - a
+    conductor of F0 = color with weight metallic, then glass (tint color) with weight
+    (1 - metallic) transmission, then the dielectric base (diffuse albedo color under a specular
+    layer) with the rest; a Glossy / Metallic BSDF is metallic 1, a Glass BSDF transmission 1,
+    a Diffuse BSDF both 0. Missing, they follow kind (1 for MIRROR / DIELECTRIC rows). kind stays
+    the heaviest layer (the smooth transport and the light pass read it). specular_ior_level:
+    Principled's IOR Level - the base's specular layer has F0 = ((ior - 1) / (ior + 1))^2 x 2 x
+    level (0.5: the physical F0 of ior; 0, the default: no layer, pure Lambert). specular_tint:
+    linear RGB, Principled's Specular Tint - the specular layer's F0 tint and, on metals, the
+    F82 edge tint (a Metallic BSDF's Edge Tint). conductor_fresnel (CONDUCTOR_FRESNELS): CONSTANT
+    (the metal reflects color at every angle: Glossy BSDF and older files) or F82_TINT (Schlick
+    from F0 = color with the edge tint: Principled and Metallic BSDF).
 
     Grating layer (docs/physics.md section 3), on top of the base kind: grating (0/1), grating_type
     (GRATING_TYPES), lattice (LATTICES), period D (nm), slit_width a (nm), slit_count N,
@@ -156,6 +193,12 @@ class Materials:
     emission_strength: np.ndarray = field(default_factory=lambda: _material_column_default("emission_strength", 0))
     roughness_channel: np.ndarray = field(default_factory=lambda: _material_column_default("roughness_channel", 0))
     metallic_channel: np.ndarray = field(default_factory=lambda: _material_column_default("metallic_channel", 0))
+    roughness: np.ndarray = field(default_factory=lambda: _material_column_default("roughness", 0))
+    metallic: np.ndarray = field(default_factory=lambda: _material_column_default("metallic", 0))
+    transmission: np.ndarray = field(default_factory=lambda: _material_column_default("transmission", 0))
+    specular_ior_level: np.ndarray = field(default_factory=lambda: _material_column_default("specular_ior_level", 0))
+    specular_tint: np.ndarray = field(default_factory=lambda: _material_column_default("specular_tint", 0))
+    conductor_fresnel: np.ndarray = field(default_factory=lambda: _material_column_default("conductor_fresnel", 0))
 
     def __len__(self):
         return _rows(self.kind)
@@ -195,13 +238,20 @@ class Materials:
         for i, r in enumerate(rows):
             if "color" not in r and out["kind"][i] == MATERIAL_KINDS["DIELECTRIC"]:
                 out["color"][i] = 1.0
+            for name, col in _layer_defaults(out["kind"][i:i + 1], r).items():
+                out[name][i] = col[0]
         return cls(**out)
 
     @classmethod
     def from_columns(cls, columns: dict, rows: int) -> "Materials":
-        """Build from stored columns, filling columns an older file lacks with their defaults."""
-        return cls(**{name: np.asarray(columns[name]) if name in columns else _material_column_default(name, rows)
-                      for name in _MATERIAL_COLUMNS})
+        """Build from stored columns, filling columns an older file lacks with their defaults
+        (metallic / transmission from the kind, as ``from_list`` does)."""
+        out = {name: np.asarray(columns[name]) if name in columns else _material_column_default(name, rows)
+               for name in _MATERIAL_COLUMNS}
+        kind = np.asarray(out["kind"])
+        if kind.shape == (rows,) and kind.dtype.kind in "iu":  # else validation names the problem
+            out.update(_layer_defaults(kind, columns))
+        return cls(**out)
 
 
 @dataclass
@@ -1061,7 +1111,8 @@ def _validate_materials(m: Materials) -> Materials:
         return m if all(out[k] is getattr(m, k) for k in out) else Materials(**out)
     _enum_check(kind, MATERIAL_KINDS, label, "kind")
     _enum_check(out["dispersion"], DISPERSION_MODELS, label, "dispersion")
-    for name, enum in (("grating_type", GRATING_TYPES), ("lattice", LATTICES), ("grating_direction", GRATING_DIRECTIONS)):
+    for name, enum in (("grating_type", GRATING_TYPES), ("lattice", LATTICES), ("grating_direction", GRATING_DIRECTIONS),
+                       ("conductor_fresnel", CONDUCTOR_FRESNELS)):
         _enum_check(out[name], enum, label, name.replace("_", " "))
     g = out["grating"].astype(np.int64)
     bad = (g != 0) & (g != 1)
@@ -1072,7 +1123,8 @@ def _validate_materials(m: Materials) -> Materials:
            if name != "name" and np.dtype(_MATERIAL_COLUMNS[name][0]).kind == "f"}
     # every float column: finite and within float32
     for name in ("color", "emission", "ior", "abbe", "period", "slit_width", "coherence_length", "rotation",
-                 "normal_strength", "emission_strength"):
+                 "normal_strength", "emission_strength", "roughness", "metallic", "transmission",
+                 "specular_ior_level", "specular_tint"):
         _check_range(f64[name], label, name.replace("_", " "), "")
     for name in TEXTURE_COLUMNS:
         bad = out[name].astype(np.int64) < -1
@@ -1092,15 +1144,24 @@ def _validate_materials(m: Materials) -> Materials:
         i = int(np.argmax(es < 0))
         raise SceneError(f"{label(i)}: emission strength {_g(es[i])} is negative")
     _check_range(es, label, "emission strength", "", limit=EMISSION_LIMIT)
+    for name in _UNIT_COLUMNS:
+        bad = ~((f64[name] >= 0.0) & (f64[name] <= 1.0))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"{label(i)}: {name} must be between 0 and 1, got {_g(f64[name][i])}")
+    for name in ("specular_ior_level", "specular_tint"):
+        _check_range(f64[name], label, name.replace("_", " "), "", nonneg=True)
     em = f64["emission"]
     if (em < 0).any():
         i = _first_row(em < 0)
         raise SceneError(f"{label(i)}: emission {em[i].tolist()} is negative")
     _check_range(em, label, "emission", "", limit=EMISSION_LIMIT)
     k = kind
+    # the IOR is read by glass and by a specular layer
     diel = k == MATERIAL_KINDS["DIELECTRIC"]
+    uses_ior = diel | (f64["transmission"] > 0) | (f64["specular_ior_level"] > 0)
     ior = f64["ior"]
-    bad_ior = diel & ~((ior >= 1.0) & (ior <= IOR_MAX))
+    bad_ior = uses_ior & ~((ior >= 1.0) & (ior <= IOR_MAX))
     if bad_ior.any():
         i = int(np.argmax(bad_ior))
         if ior[i] < 1.0:

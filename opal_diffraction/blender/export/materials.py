@@ -24,7 +24,7 @@ from .colour import in_rec709, rgb, working_space_to_rec709
 from .images import TextureTable
 from .messages import Warnings
 from .meshes import is_surface_instance
-from .nodes import MAX_INTENSITY, ROUGH_AS_DIFFUSE, NodeReader, Surface, missing_output, node_tree, output_node
+from .nodes import MAX_INTENSITY, NodeReader, Surface, missing_output, node_tree, output_node
 
 __all__ = ["DEFAULT_MATERIAL", "MaterialTable", "CornerSpec", "export_materials"]
 
@@ -137,20 +137,30 @@ class MaterialTable:
             col = in_rec709(rgb(mat.diffuse_color), self.to709)
             if np.isnan(col).any():
                 raise SceneError(f"{owner}: its viewport colour is NaN")
-            surf = Surface("MIRROR" if mat.metallic >= 0.5 and mat.roughness < ROUGH_AS_DIFFUSE else "DIFFUSE",
-                           np.minimum(col, MAX_INTENSITY))
+            metallic = min(max(float(mat.metallic), 0.0), 1.0)
+            surf = Surface("MIRROR" if metallic >= 0.5 else "DIFFUSE", np.minimum(col, MAX_INTENSITY),
+                           roughness=min(max(float(mat.roughness), 0.0), 1.0), metallic=metallic, transmission=0.0,
+                           conductor_fresnel="F82_TINT")
         kind = surf.kind or "DIFFUSE"
         color = surf.color if surf.kind is not None else np.zeros(3)
+        metallic, transmission = surf.layers() if surf.kind is not None else (0.0, 0.0)
         row = {
             "name": mat.name[:63],
             "kind": kind,
             "color": tuple(float(c) for c in np.clip(color, 0.0, None)),
             "ior": float(surf.ior),
             "emission": tuple(float(c) for c in np.clip(surf.emission, 0.0, None)),
+            "roughness": float(np.clip(surf.roughness, 0.0, 1.0)),
+            "metallic": float(np.clip(metallic, 0.0, 1.0)),
+            "transmission": float(np.clip(transmission, 0.0, 1.0)),
+            "specular_ior_level": float(max(surf.specular_ior_level, 0.0)) if surf.kind is not None else 0.0,
+            "specular_tint": tuple(float(c) for c in np.clip(surf.specular_tint, 0.0, MAX_INTENSITY)),
+            "conductor_fresnel": surf.conductor_fresnel,
         }
         row.update(self._texture_columns(surf, owner))
         opal = getattr(mat, "opal", None)
-        if kind == "DIELECTRIC":
+        uses_ior = kind == "DIELECTRIC" or row["transmission"] > 0 or row["specular_ior_level"] > 0
+        if uses_ior:
             if surf.ior != surf.ior:
                 raise SceneError(f"{owner}: its IOR is NaN")
             if not surf.ior >= 1.0:
@@ -159,6 +169,7 @@ class MaterialTable:
             elif surf.ior > MAX_IOR:
                 self.warn(f"{owner}: IOR {surf.ior:.3g} above {MAX_IOR:g} is lowered to {MAX_IOR:g}")
                 row["ior"] = MAX_IOR
+        if kind == "DIELECTRIC":  # dispersion: where glass is the heaviest layer (the transport's split)
             if opal is not None:
                 row["dispersion"] = opal.dispersion
                 row["abbe"] = float(opal.abbe_number)

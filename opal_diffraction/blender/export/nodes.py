@@ -2,14 +2,16 @@
 
 Follows a node tree from its output node through reroutes, mix and add shaders, and evaluates
 the BSDF it finds to one of the core's surfaces (diffuse, mirror, dielectric) with a colour, an
-IOR and an emission. Image Texture nodes on a BSDF's colour, roughness, metallic or emission
-colour and, through a tangent-space Normal Map node, on its normal are bound as textures sampled
-per hit (:class:`TextureRef`, ``Surface.textures``; docs/physics.md section 13) with their
-coordinates (the UV map, or Generated) and any Mapping node folded in. What the core cannot
-represent is approximated and named in the warnings: other textures and procedural nodes are
-averaged (:func:`images.image_mean`) or use the socket's own value, rough reflection and
-refraction are made smooth (rougher than ``ROUGH_AS_DIFFUSE``: diffuse), mixes of unlike
-surfaces keep the heavier.
+IOR, an emission and the rough-surface columns (core/bsdf.py: roughness, Principled's metallic /
+transmission weights, IOR level, specular tint, the metal's Fresnel). Image Texture nodes on a
+BSDF's colour, roughness, metallic or emission colour and, through a tangent-space Normal Map
+node, on its normal are bound as textures sampled per hit (:class:`TextureRef`,
+``Surface.textures``; docs/physics.md section 13) with their coordinates (the UV map, or
+Generated) and any Mapping node folded in. What the core cannot represent is approximated and
+named in the warnings: other textures and procedural nodes are averaged
+(:func:`images.image_mean`) or use the socket's own value, mixes of unlike surfaces keep the
+heavier, anisotropy is dropped, a Diffuse BSDF's (Oren-Nayar) roughness is Lambertian, a
+physical-conductor Metallic BSDF is fitted with the F82-tint model.
 
 Nothing a node tree holds can hang the export or reach the tracer as NaN or Inf: a node cycle
 (Blender marks one link of it invalid) is detected and named (:attr:`NodeReader.cycle`; the
@@ -32,13 +34,9 @@ from .colour import blackbody_rgb, in_rec709, rgb
 from .images import image_mean
 from .messages import Warnings
 
-__all__ = ["ROUGH_AS_DIFFUSE", "ROUGH_WARN", "MAX_INTENSITY", "Surface", "TextureRef", "node_tree", "output_node",
-           "missing_output", "surface_socket", "NodeReader", "TEXTURE_SOCKETS"]
+__all__ = ["MAX_INTENSITY", "Surface", "TextureRef", "node_tree", "output_node", "missing_output",
+           "surface_socket", "NodeReader", "TEXTURE_SOCKETS"]
 
-#: Roughness above which a glossy surface is treated as diffuse rather than as a mirror.
-ROUGH_AS_DIFFUSE = 0.5
-#: Roughness above which smooth-surface approximations are worth a warning.
-ROUGH_WARN = 0.1
 #: The largest emission (colour x strength, W/(m^2 sr) per colour unit) and light power (W, or
 #: W/m^2 for a sun) exported; larger values are clamped with a warning. Blender's fields accept up
 #: to FLT_MAX (3.4e38), which overflows the tracer's float32 arithmetic into Inf pixels; 1e20
@@ -75,13 +73,25 @@ class TextureRef:
 class Surface:
     """What a shader evaluates to, in the core's terms."""
 
-    kind: str | None  # 'DIFFUSE' | 'MIRROR' | 'DIELECTRIC'; None: no BSDF (emission only or black)
+    kind: str | None  # 'DIFFUSE' | 'MIRROR' | 'DIELECTRIC' (the heaviest layer); None: no BSDF (emission only or black)
     color: np.ndarray
     ior: float = 1.5
     roughness: float = 0.0
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     # image textures per slot ('color', 'roughness', 'metallic', 'emission', 'normal')
     textures: dict = field(default_factory=dict)
+    metallic: float | None = None       # layer weights (core Materials); None: from the kind
+    transmission: float | None = None
+    specular_ior_level: float = 0.0     # the base's specular layer (Principled); 0: none
+    specular_tint: np.ndarray = field(default_factory=lambda: np.ones(3))
+    conductor_fresnel: str = "CONSTANT"  # 'CONSTANT' (Glossy BSDF) | 'F82_TINT' (Principled, Metallic BSDF)
+
+    def layers(self) -> tuple[float, float]:
+        """(metallic, transmission), from the kind where not given."""
+        m = self.metallic if self.metallic is not None else float(self.kind == "MIRROR")
+        t = self.transmission if self.transmission is not None else float(self.kind == "DIELECTRIC")
+        return m, t
+
 
 
 #: Shader inputs that may take an image texture, per node type: socket name -> texture slot.
@@ -458,18 +468,21 @@ class NodeReader(TextureBindings):
         if idn == "ShaderNodeBsdfPrincipled":
             return self._principled(node)
         if idn == "ShaderNodeBsdfDiffuse":
-            return Surface("DIFFUSE", self.color(node, "Color"))
-        if idn in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic", "ShaderNodeBsdfMetallic"):
-            col = self.color(node, "Base Color" if idn == "ShaderNodeBsdfMetallic" else "Color")
-            rough = self.value(node, "Roughness", 0.5)
-            return self._glossy(node, col, rough)
+            if self.value(node, "Roughness", 0.0) > 0.0:
+                self.warn(f"{self.owner}: the roughness of '{node.name}' (Oren-Nayar) is rendered Lambertian")
+            return Surface("DIFFUSE", self.color(node, "Color"), metallic=0.0, transmission=0.0)
+        if idn in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
+            self._microfacet_options(node, "Anisotropy")
+            return Surface("MIRROR", self.color(node, "Color"), roughness=self._roughness(node, 0.5),
+                           metallic=1.0, transmission=0.0)
+        if idn == "ShaderNodeBsdfMetallic":
+            return self._metallic(node)
         if idn in ("ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction"):
-            rough = self.value(node, "Roughness", 0.0)
-            if rough > ROUGH_WARN:
-                self.warn(f"{self.owner}: rough glass (roughness {rough:.2f}) is rendered perfectly smooth")
+            self._microfacet_options(node, None)
             if idn == "ShaderNodeBsdfRefraction":
                 self.warn(f"{self.owner}: Refraction BSDF is rendered as glass (with Fresnel reflection)")
-            return Surface("DIELECTRIC", self.color(node, "Color", (1, 1, 1)), self.value(node, "IOR", 1.5), rough)
+            return Surface("DIELECTRIC", self.color(node, "Color", (1, 1, 1)), self.value(node, "IOR", 1.5),
+                           self._roughness(node, 0.0), metallic=0.0, transmission=1.0)
         if idn == "ShaderNodeEmission":
             strength = self.strength(node, "Strength", 1.0)
             color = self.color(node, "Color", (1, 1, 1))
@@ -497,21 +510,68 @@ class NodeReader(TextureBindings):
                   f"surface{' of its colour' if col is not None else ''}")
         return Surface("DIFFUSE", col if col is not None else np.full(3, 0.8))
 
-    def _glossy(self, node, col, rough) -> Surface:
-        if rough >= ROUGH_AS_DIFFUSE:
-            self.warn(f"{self.owner}: '{node.name}' roughness {rough:.2f} is rendered as a diffuse surface")
-            return Surface("DIFFUSE", col, roughness=rough)
-        if rough > ROUGH_WARN:
-            self.warn(f"{self.owner}: '{node.name}' roughness {rough:.2f} is rendered as a perfect mirror")
-        return Surface("MIRROR", col, roughness=rough)
+    def _roughness(self, node, default: float, name: str = "Roughness") -> float:
+        """A roughness input clamped to [0, 1], as Cycles clamps it."""
+        return min(max(self.value(node, name, default), 0.0), 1.0)
+
+    def _microfacet_options(self, node, aniso: str | None) -> None:
+        """Warnings for what a microfacet node sets that is rendered otherwise: anisotropy
+        (isotropic here), a distribution other than Multiscatter GGX (rendered as it)."""
+        if aniso is not None and node.inputs.get(aniso) is not None and abs(self.value(node, aniso, 0.0)) > 0.0:
+            self.warn(f"{self.owner}: the anisotropy of '{node.name}' is not rendered (isotropic roughness)")
+        dist = getattr(node, "distribution", "MULTI_GGX")
+        if dist not in ("MULTI_GGX", "MULTI_GGX_GLASS"):
+            self.warn(f"{self.owner}: '{node.name}' uses the {dist} distribution: rendered as Multiscatter GGX")
+
+    def _vector(self, node, name: str, default) -> np.ndarray:
+        """A vector input's own value (a link is not followed: warned, the socket's value used)."""
+        sock = node.inputs.get(name)
+        if sock is None:
+            return np.asarray(default, np.float64)
+        if self.source(sock) is not None:
+            self.warn(f"{self.owner}: '{name}' of '{node.name}' is driven by a node, which is not supported: "
+                      "using the socket's own value")
+        v = np.asarray(tuple(sock.default_value)[:3], np.float64)
+        if np.isnan(v).any():
+            raise SceneError(f"{self.owner}: '{name}' of '{node.name}' is NaN")
+        return v
+
+    def _metallic(self, node) -> Surface:
+        """Metallic BSDF: F82 (Base Color = F0, Edge Tint) as Cycles; a physical conductor (n, k)
+        as the F82-tint fit through its reflectance at 0 and ~82 degrees (the fit Cycles itself
+        uses for its energy compensation)."""
+        self._microfacet_options(node, "Anisotropy")
+        rough = self._roughness(node, 0.5)
+        if getattr(node, "fresnel_type", "F82") == "PHYSICAL_CONDUCTOR":
+            n = np.maximum(self._vector(node, "IOR", (2.757, 2.513, 2.231)), 0.0)
+            k = np.maximum(self._vector(node, "Extinction", (3.867, 3.404, 3.009)), 0.0)
+            f0, f82 = _conductor_fresnel(1.0, n, k), _conductor_fresnel(1.0 / 7.0, n, k)
+            schlick = f0 + (1.0 - f0) * (6.0 / 7.0) ** 5
+            tint = np.clip(f82 / np.maximum(schlick, 1e-6), 0.0, 1.0)
+            self.warn(f"{self.owner}: the physical conductor of '{node.name}' is rendered with the F82-tint fit "
+                      f"(F0 {np.round(f0, 3).tolist()}, edge tint {np.round(tint, 3).tolist()})")
+            base = f0
+        else:
+            base = self.color(node, "Base Color", (0.617, 0.577, 0.540))
+            tint = self.color(node, "Edge Tint", (0.695, 0.726, 0.770))
+        return Surface("MIRROR", base, roughness=rough, metallic=1.0, transmission=0.0,
+                       specular_tint=np.clip(tint, 0.0, 1.0), conductor_fresnel="F82_TINT")
 
     def _principled(self, node) -> Surface:
+        """Principled BSDF v2: the metal (F0 = Base Color, F82 edge tint = Specular Tint), glass
+        and the dielectric base (diffuse under a specular layer of IOR, IOR Level and Specular
+        Tint), with the layer weights Metallic and Transmission Weight carried to the core (which
+        samples between the layers). The table's kind is the heaviest layer."""
         base = self.color(node, "Base Color")
-        metallic = self.value(node, "Metallic", 0.0)
-        rough = self.value(node, "Roughness", 0.5)
+        metallic = min(max(self.value(node, "Metallic", 0.0), 0.0), 1.0)
+        rough = self._roughness(node, 0.5)
         trans_name = "Transmission Weight" if node.inputs.get("Transmission Weight") else "Transmission"
-        trans = self.value(node, trans_name, 0.0)
+        trans = min(max(self.value(node, trans_name, 0.0), 0.0), 1.0)
         ior = self.value(node, "IOR", 1.5)
+        level_name = next((n for n in ("Specular IOR Level", "IOR Level") if node.inputs.get(n)), None)
+        level = max(self.value(node, level_name, 0.5), 0.0) if level_name else 0.5
+        tint = self.color(node, "Specular Tint", (1, 1, 1)) if node.inputs.get("Specular Tint") is not None \
+            and getattr(node.inputs["Specular Tint"], "type", "") == "RGBA" else np.ones(3)
         strength = self.strength(node, "Emission Strength", 0.0) if node.inputs.get("Emission Strength") else 1.0
         emission = self.color(node, "Emission Color" if node.inputs.get("Emission Color") else "Emission", (0, 0, 0))
         emission = self.emission(emission, strength, node)
@@ -520,18 +580,13 @@ class NodeReader(TextureBindings):
         for layer in ("Subsurface Weight", "Coat Weight", "Sheen Weight"):
             if node.inputs.get(layer) is not None and self.value(node, layer, 0.0) > 0.0:
                 self.warn(f"{self.owner}: the Principled BSDF's {layer.split()[0].lower()} layer is not rendered")
-        if 0.0 < metallic < 1.0 or 0.0 < trans < 1.0:
-            self.warn(f"{self.owner}: partial metallic/transmission ({metallic:.2f}/{trans:.2f}) is rounded to "
-                      "the nearest of diffuse, mirror and glass")
-        if trans >= 0.5 and metallic < 0.5:
-            if rough > ROUGH_WARN:
-                self.warn(f"{self.owner}: rough glass (roughness {rough:.2f}) is rendered perfectly smooth")
-            return Surface("DIELECTRIC", base, ior, rough, emission)
-        if metallic >= 0.5:
-            s = self._glossy(node, base, rough)
-            s.emission = emission
-            return s
-        return Surface("DIFFUSE", base, ior, rough, emission)
+        if node.inputs.get("Diffuse Roughness") is not None and self.value(node, "Diffuse Roughness", 0.0) > 0.0:
+            self.warn(f"{self.owner}: the Principled BSDF's diffuse roughness (Oren-Nayar) is rendered Lambertian")
+        self._microfacet_options(node, "Anisotropic")
+        weights = {"MIRROR": metallic, "DIELECTRIC": (1.0 - metallic) * trans, "DIFFUSE": (1.0 - metallic) * (1.0 - trans)}
+        kind = max(weights, key=weights.get)  # ties: metal, then glass
+        return Surface(kind, base, ior, rough, emission, metallic=metallic, transmission=trans,
+                       specular_ior_level=level, specular_tint=np.clip(tint, 0.0, None), conductor_fresnel="F82_TINT")
 
     def _combine(self, a: Surface, b: Surface, wa: float, wb: float, node) -> Surface:
         out = self._combine_surfaces(a, b, wa, wb, node)
@@ -544,15 +599,41 @@ class NodeReader(TextureBindings):
             return Surface(None, np.zeros(3), emission=emission)
         if a.kind is None or b.kind is None:
             s, w = (b, wb) if a.kind is None else (a, wa)
-            return Surface(s.kind, s.color * (w if s.kind == "DIFFUSE" else 1.0), s.ior, s.roughness, emission)
+            out = _copy(s, emission)
+            out.color = s.color * (w if s.kind == "DIFFUSE" else 1.0)
+            return out
         if a.kind == b.kind:
             t = wb / max(wa + wb, 1e-12)
             col = wa * a.color + wb * b.color if node.bl_idname == "ShaderNodeAddShader" else (1 - t) * a.color + t * b.color
-            return Surface(a.kind, col, (1 - t) * a.ior + t * b.ior, (1 - t) * a.roughness + t * b.roughness, emission)
+            (ma, ta), (mb, tb) = a.layers(), b.layers()
+            return Surface(a.kind, col, (1 - t) * a.ior + t * b.ior, (1 - t) * a.roughness + t * b.roughness, emission,
+                           metallic=(1 - t) * ma + t * mb, transmission=(1 - t) * ta + t * tb,
+                           specular_ior_level=(1 - t) * a.specular_ior_level + t * b.specular_ior_level,
+                           specular_tint=(1 - t) * a.specular_tint + t * b.specular_tint,
+                           conductor_fresnel=(a if t < 0.5 else b).conductor_fresnel)
         keep = a if wa >= wb else b
         self.warn(f"{self.owner}: '{node.name}' mixes {a.kind.lower()} and {b.kind.lower()} surfaces: rendered as "
                   f"{keep.kind.lower()}")
-        return Surface(keep.kind, keep.color, keep.ior, keep.roughness, emission)
+        return _copy(keep, emission)
+
+
+def _copy(s: Surface, emission) -> Surface:
+    return Surface(s.kind, s.color, s.ior, s.roughness, emission, metallic=s.metallic, transmission=s.transmission,
+                   specular_ior_level=s.specular_ior_level, specular_tint=s.specular_tint,
+                   conductor_fresnel=s.conductor_fresnel)
+
+
+def _conductor_fresnel(cos: float, n: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Unpolarised reflectance of a conductor n + ik in vacuum (Born & Wolf section 14.4.1)."""
+    c2 = cos * cos
+    s2 = 1.0 - c2
+    t0 = n * n - k * k - s2
+    a2b2 = np.sqrt(t0 * t0 + 4.0 * n * n * k * k)
+    a = np.sqrt(np.maximum(0.5 * (a2b2 + t0), 0.0))
+    rs = (a2b2 + c2 - 2.0 * a * cos) / (a2b2 + c2 + 2.0 * a * cos)
+    t1, t2 = a2b2 * c2 + s2 * s2, 2.0 * a * cos * s2
+    rp = rs * (t1 - t2) / np.maximum(t1 + t2, 1e-30)
+    return 0.5 * (rs + rp)
 
 
 def _feeds(target, start) -> bool:
