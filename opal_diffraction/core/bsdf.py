@@ -48,7 +48,7 @@ from .geometry import orthonormal_basis
 __all__ = [
     "LAMBERT", "CONDUCTOR", "DIELECTRIC", "PLASTIC", "GLOSSY",
     "DIFFUSE_REFLECTION", "GLOSSY_REFLECTION", "TRANSMISSION", "SINGULAR",
-    "MIN_ROUGHNESS", "SurfaceParams", "params_from_materials", "sample", "evaluate",
+    "MIN_ROUGHNESS", "SurfaceParams", "params_from_materials", "sample", "evaluate", "microfacet_materials",
     "energy_compensation", "fresnel_f82", "f82_b", "fresnel_dielectric_exact",
 ]
 
@@ -698,3 +698,22 @@ def params_from_materials(materials, mat, front, lam=None, base=None, roughness=
     return SurfaceParams(lobe, np.ascontiguousarray(b, _F32), np.broadcast_to(edge, (B, k)).astype(_F32),
                          alpha.astype(_F32), eta.astype(_F32), spec_f0,
                          np.broadcast_to(tint, (B, k)).astype(_F32))
+
+
+def microfacet_materials(materials, textures=None) -> np.ndarray:
+    """(M,) bool: the materials the eye pass shades with this module rather than with the delta
+    mirror / glass code or the plain Lambertian path: rough mirrors and glass (roughness at least
+    MIN_ROUGHNESS, or a roughness texture), Principled's layered mixes (0 < metallic < 1, glass
+    with transmission below 1), and diffuse bases with a specular layer (PLASTIC) or a metal or
+    glass layer. Files without these columns keep their old meaning (nothing is microfacet)."""
+    from .materials import DIELECTRIC as K_DIELECTRIC, DIFFUSE as K_DIFFUSE, MIRROR as K_MIRROR
+
+    m = materials
+    kind = np.asarray(m.kind)
+    rough = np.asarray(m.roughness) >= MIN_ROUGHNESS
+    if textures is not None and len(textures.roughness):
+        rough = rough | (np.asarray(textures.roughness) >= 0)
+    metallic, transmission = np.asarray(m.metallic), np.asarray(m.transmission)
+    return (((kind == K_MIRROR) & (rough | (metallic < 1)))
+            | ((kind == K_DIELECTRIC) & (rough | (transmission < 1) | (metallic > 0)))
+            | ((kind == K_DIFFUSE) & ((np.asarray(m.spec_f0) > 0) | (metallic > 0) | (transmission > 0))))

@@ -22,8 +22,9 @@ from .gratings import diffracted_radiance, grating_frame
 from .lights import intersect_lights, is_delta, light_pdf, sample_light, sun_radiance
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIFFUSE
-from .surface import shading_normal, surface_emission, surface_reflectance
-from .transport import Hit, Rays, SpecularWalker, shading_normals
+from .surface import shading_normal, surface_emission, surface_reflectance, surface_roughness
+from .transport import MICROFACET, Hit, Rays, SpecularWalker, shading_normals
+from . import bsdf
 
 __all__ = ["EyePass", "TileResult"]
 
@@ -114,6 +115,7 @@ class _TileTrace(SpecularWalker):
         self.soft_suns = np.flatnonzero(~self.delta & (kinds == SUN))
         self.mesh_lights = eye.prepared.mesh_lights
         self.normal_maps = eye.prepared.textures.uses("normal")
+        self._micro = None  # (hit, mask, SurfaceParams) of the microfacet hits on_hit shaded
         # shading normals differ from the geometric ones: directions need both side tests
         self.bent = eye.prepared.corner_normals is not None or self.normal_maps
         self._n_pixels = n_pixels
@@ -265,11 +267,22 @@ class _TileTrace(SpecularWalker):
         if not live.any():
             return
         if self.normal_maps:  # bend the shading normal of diffuse hits (core/surface.py); scatter reuses it
-            bend = live & (kind == DIFFUSE)
+            bend = live & ((kind == DIFFUSE) | (kind == MICROFACET))
             if bend.any():
                 ns = hit.ns.copy()
                 ns[bend] = shading_normal(prepared, hit.take(bend))
                 hit.ns = ns
+        self._micro = None
+        if self.any_microfacet:  # rough and layered surfaces: core/bsdf.py, one lobe drawn per hit
+            micro = live & self.microfacet[hit.mat]
+            if rays.lam is None:  # white rays at a dispersive glass split first; their children shade
+                micro &= ~prepared.materials.dispersive[hit.mat]
+            if micro.any():
+                rm, hm = rays.take(micro), hit.take(micro)
+                params = self._surface_params(rm, hm, rng)
+                self._micro = (hit, micro, params)  # for scatter(): the same lobe for light and bounce
+                self._shade_microfacet(rm, hm, params, rng)
+            kind = np.where(micro, -1, kind)  # shaded: not Lambertian below
         if not live.all():
             rays, hit, kind = rays.take(live), hit.take(live), kind[live]
             st = rays.extra
@@ -327,9 +340,15 @@ class _TileTrace(SpecularWalker):
         last, emission-only segment ('final'), so light sources and the world that the next
         event estimation does not sample are still seen once (and MIS stays whole)."""
         st = rays.extra
+        micro_out = None
+        if self._micro is not None and self._micro[0] is hit:
+            _, micro, params = self._micro
+            self._micro = None
+            micro_out = self._scatter_microfacet(rays, hit, micro, params, can_bounce)
+            kind = np.where(micro, -1, kind)
         sel = (kind == DIFFUSE) & ~st["final"]
         if not sel.any():
-            return None
+            return micro_out
         # roulette applies to the bounce; a path that loses it takes no segment at all
         sel &= can_bounce | (rays.depth >= self.limits[0])
         r, h = rays.take(sel), hit.take(sel)
@@ -354,7 +373,123 @@ class _TileTrace(SpecularWalker):
         s["pdf"] = (cos * np.float32(1 / np.pi)).astype(np.float32)
         s["caustic"] = np.full(b, 1 if self.caustic_map is not None else 0, np.int8)
         s["final"] = (s["diffuse"] > self.limits[1]) | (out.depth > self.limits[0])
-        return out
+        return out if micro_out is None or not len(micro_out) else Rays.concat(out, micro_out)
+
+    # ----------------------------------------------------------------- microfacet surfaces
+    def _surface_params(self, rays: Rays, hit: Hit, rng) -> "bsdf.SurfaceParams":
+        """core/bsdf.py's parameters of these hits: base colour and roughness per hit (textures),
+        the side (entering or leaving glass), one Principled layer drawn per hit."""
+        prepared = self.prepared
+        base = surface_reflectance(prepared, hit, rays.lam)
+        if rays.lam is not None:
+            base = base[:, None]
+        return bsdf.params_from_materials(prepared.materials, hit.mat, hit.front, rays.lam, base=base,
+                                          roughness=surface_roughness(prepared, hit), u_layer=rng.random(len(rays)))
+
+    def _shade_microfacet(self, rays: Rays, hit: Hit, params, rng):
+        """Next-event estimation at rough and layered surfaces: every light, the emissive meshes
+        and the world map, each weighted against BSDF sampling by the power heuristic; and the
+        caustic map on a diffuse base (its diffuse lobe, approximately: base colour / pi)."""
+        first = rays.extra["nd"] == 0
+        if first.any():
+            self._denoising_features(rays.take(first), hit.take(first))
+        for sel, film in ((first, self._film), (~first, None)):
+            if sel.any():
+                r, h = rays.take(sel), hit.take(sel)
+                p = params.take(np.flatnonzero(sel)) if not sel.all() else params
+                self._nee_microfacet(r, h, p, rng, self._film if film is not None else self._part("indirect"))
+        if self.caustic_map is not None:
+            base = self.prepared.materials.kind[hit.mat] == DIFFUSE
+            if base.any():
+                self._caustic_light(rays.take(base), hit.take(base), rng)
+
+    def _nee_microfacet(self, rays: Rays, hit: Hit, params, rng, film):
+        prepared = self.prepared
+        lights = prepared.lights
+        wo = -rays.d
+        b = len(rays)
+        samples = []  # (wi, dist, scalar (B,), spectrum (n,) or (B, n), light pdf (B,) or None, tmax pad)
+        for li in range(len(lights)):  # the lights (a handful)
+            wi, dist, g = sample_light(lights, li, hit.p, rng)
+            pl = None if self.delta[li] else light_pdf(lights, li, hit.p, wi)
+            samples.append((np.asarray(wi, np.float32), dist, g, lights.spectrum[li], pl, 0.0))
+        if self.mesh_lights is not None:
+            wi, dist, g, prim, pdf = self.mesh_lights.sample(hit.p, rng)
+            em = prepared.materials.emission[prepared.tri_material[prim]]
+            samples.append((wi.astype(np.float32), dist, g, em, pdf.astype(np.float32), 2 * prepared.tri_offset[prim]))
+        if prepared.environment is not None:
+            wi, pdf, rgb = prepared.environment.sample(rng.random(b), rng.random(b))
+            with np.errstate(divide="ignore"):
+                g = np.where(pdf > 0, 1.0 / pdf, 0.0)
+            radiance = prepared.conv.illuminant_from_rgb(rgb).astype(np.float32)
+            samples.append((wi.astype(np.float32), np.full(b, np.inf, np.float32), g, radiance,
+                            pdf.astype(np.float32), 0.0))
+        for wi, dist, g, spectrum, p_light, pad in samples:
+            f_cos, p_bsdf = bsdf.evaluate(params, wo, wi, hit.ns, hit.ng)
+            scale = np.asarray(g, np.float32)
+            if p_light is not None:
+                scale = scale * _power_heuristic(p_light, p_bsdf, light_first=True)
+            live = np.flatnonzero((scale > 0) & (f_cos.max(axis=1) > 0))
+            if live.size == 0:
+                continue
+            side = np.where(np.einsum("ij,ij->i", wi[live], hit.ng[live]) > 0, 1.0, -1.0).astype(np.float32)
+            eps = hit.eps[live]
+            o = (hit.p[live] + (side * eps)[:, None] * hit.ng[live]).astype(np.float32)
+            d = np.asarray(dist, np.float32)[live]
+            tmax = np.where(np.isinf(d), np.inf, d - 2 * eps - np.asarray(pad if np.ndim(pad) == 0 else pad[live]))
+            occ = prepared.accel.occluded(o, wi[live], tmax.astype(np.float32))
+            self._rays += len(occ)
+            live = live[~occ]
+            if live.size == 0:
+                continue
+            r = rays.take(live)
+            spec = spectrum if np.ndim(spectrum) == 1 else spectrum[live]
+            val = f_cos[live] * scale[live, None]
+            if r.lam is None:
+                contrib = r.weighted(val * spec)
+            else:
+                lam_spec = spec[r.lam] if np.ndim(spec) == 1 else spec[np.arange(len(r)), r.lam]
+                contrib = r.w * val[:, 0] * lam_spec
+            self._accumulate(r, contrib, film)
+
+    def _scatter_microfacet(self, rays: Rays, hit: Hit, micro: np.ndarray, params, can_bounce) -> Rays | None:
+        """The bounce at rough and layered surfaces: a direction from core/bsdf.py's sampler,
+        counted as Cycles counts it (diffuse, glossy or transmission); a delta event (a layer
+        smoother than MIN_ROUGHNESS) continues like a mirror or glass bounce."""
+        idx = np.flatnonzero(micro)
+        go = can_bounce[idx] | (rays.depth[idx] >= self.limits[0])
+        idx, params = idx[go], params.take(np.flatnonzero(go)) if not go.all() else params
+        if idx.size == 0:
+            return None
+        r, h = rays.take(idx), hit.take(idx)
+        wi, weight, pdf, flags = bsdf.sample(params, -r.d, h.ns, h.ng, self.rng.random((len(r), 3), np.float32))
+        ok = flags != 0
+        if not ok.all():
+            r, h, wi, weight, pdf, flags = r.take(ok), h.take(ok), wi[ok], weight[ok], pdf[ok], flags[ok]
+        if len(r) == 0:
+            return None
+        side = np.where(np.einsum("ij,ij->i", wi, h.ng) > 0, 1.0, -1.0).astype(np.float32)
+        o = (h.p + (h.eps * side)[:, None] * h.ng).astype(np.float32)
+        out = r.moved(o, wi, r.weighted(weight) if r.lam is None else r.w * weight[:, 0])
+        s = out.extra
+        singular = (flags & bsdf.SINGULAR) != 0
+        diffuse = (flags & bsdf.DIFFUSE_REFLECTION) != 0
+        transmitted = (flags & bsdf.TRANSMISSION) != 0
+        glossy = ~diffuse & ~transmitted
+        s["diffuse"] = s["diffuse"] + diffuse
+        s["glossy"] = s["glossy"] + glossy
+        s["transmission"] = s["transmission"] + transmitted
+        s["nd"] = np.where(singular, s["nd"], np.minimum(s["nd"] + 1, 100)).astype(np.int8)
+        s["pdf"] = np.where(singular, np.float32(0.0), pdf).astype(np.float32)
+        receiver = diffuse & (self.prepared.materials.kind[h.mat] == DIFFUSE) & (self.caustic_map is not None)
+        s["caustic"] = np.where(singular, np.where(s["caustic"] == 1, np.int8(2), s["caustic"]),
+                                receiver.astype(np.int8)).astype(np.int8)
+        over = ((s["diffuse"] > self.limits[1]) | (s["glossy"] > self.limits[2])
+                | (s["transmission"] > self.limits[3]) | (out.depth > self.limits[0]))
+        # over a limit: a delta bounce ends; a scattering one takes its emission-only segment
+        keep = ~(over & singular)
+        s["final"] = over & ~singular
+        return out.take(keep)
 
     # ----------------------------------------------------------------- films
     def _denoising_features(self, rays: Rays, hit: Hit):

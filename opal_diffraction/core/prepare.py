@@ -256,6 +256,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         targets, key = reuse.light_targets, reuse.key
     else:
         targets = find_light_targets(v, t, tri_material, materials, gratings, lights, conv, settings.light_paths,
+                                     textures=textures,
                                      mesh_lights=mesh_lights, world_spectrum=world_spectrum)
         key = next(_keys)
     prepared = PreparedScene(

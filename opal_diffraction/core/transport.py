@@ -39,10 +39,15 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .geometry import interpolate_corners
-from .materials import DIELECTRIC, MIRROR
+from .bsdf import microfacet_materials
+from .materials import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
 from .optics import fresnel_dielectric, reflect, refract
 
-__all__ = ["Rays", "Hit", "SpecularWalker", "shading_normals", "valid_specular_normal"]
+__all__ = ["Rays", "Hit", "SpecularWalker", "shading_normals", "valid_specular_normal", "MICROFACET"]
+
+#: The kind a hit on a rough (or layered) mirror or glass gets in the walk: not a delta bounce;
+#: the eye pass shades it with core/bsdf.py, the light pass ends its path there.
+MICROFACET = 99
 
 
 @dataclass
@@ -177,6 +182,8 @@ class SpecularWalker:
         self.n = prepared.grid.n
         self.rng = rng
         self._rays = 0  # rays cast
+        self.microfacet = microfacet_materials(prepared.materials, prepared.textures)
+        self.any_microfacet = bool(self.microfacet.any())
 
     # hooks ----------------------------------------------------------------------------------
     def on_segment(self, rays: Rays, t: np.ndarray) -> None:
@@ -240,6 +247,9 @@ class SpecularWalker:
             return rays.take(np.zeros(len(rays), bool)), None, None
 
         kind = prepared.materials.kind[hit.mat]
+        micro = self.microfacet[hit.mat] if self.any_microfacet else None
+        if micro is not None:  # rough mirrors and glass leave the delta code; diffuse bases keep their kind
+            kind = np.where(micro & (kind != DIFFUSE_KIND), MICROFACET, kind)
         self.on_hit(rays, hit, kind, rng)
 
         can_bounce = self.survives(rays, rng)
@@ -250,9 +260,11 @@ class SpecularWalker:
             r = self._mirror(rays.take(mirror), hit.take(mirror))
             out.append(self.after_delta(r, np.zeros(len(r), bool)))
         diel = (kind == DIELECTRIC) & can_bounce
-        if diel.any():
+        # white rays split at every dispersive glass, smooth or rough (mono children go on)
+        white_split = (diel | ((kind == MICROFACET) & can_bounce)) if rays.lam is None else diel
+        if white_split.any():
             if rays.lam is None:
-                disp = diel & prepared.materials.dispersive[hit.mat]
+                disp = white_split & prepared.materials.dispersive[hit.mat]
                 if disp.any():
                     children, child_hits = self._split(rays.take(disp), hit.take(disp), rng)
                 diel = diel & ~disp

@@ -49,9 +49,7 @@ class ParityMismatch(Exception):
 
 
 #: Scenes that fail on main today, with the feature they wait for.
-MISSING = {
-    "rough_metal": "GGX rough metal: the sphere is a mirror",
-}
+MISSING: dict[str, str] = {}
 
 
 def _param(name):
