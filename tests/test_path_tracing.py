@@ -102,3 +102,24 @@ def test_bump_shadowing_is_the_conty_estevez_smith_term():
     wi = np.array([[0.6, 0.0, 0.8], [np.sin(np.pi / 3), 0.0, 0.5], [0.6, 0.0, -0.8]], np.float32)
     g = bump_shadowing(ni, ns, wi)
     np.testing.assert_allclose(g, [1.0, 2 / (1 + np.sqrt(1 + 0.125 * 3.0)), 0.0], rtol=1e-5)
+
+
+def test_glass_in_the_furnace_with_the_light_pass_counts_each_path_once():
+    """The same glass ball in the furnace with the light pass on: it emits from the glowing walls
+    through the glass onto the walls (caustic paths, read from its map), and the eye pass leaves
+    those paths out, so the radiance is still E / (1 - rho). The light pass's map is shared by
+    all pixels of a render, so the tolerance comes from independent renders (seeds), not pixels."""
+    s = furnace(glass=True, pixels=16)
+    means = []
+    for seed in range(4):
+        res = render(s, _settings(diffuse_bounces=200, glossy_bounces=200, transmission_bounces=200,
+                                  max_bounces=200, samples=32, light_paths=100_000, seed=seed))
+        assert res.plan.light_pass and res.passes["Caustics"].max() > 0  # the split is exercised
+        means.append(float(res.rgb.mean()))
+    means = np.array(means)
+    expected = E / (1 - RHO) * (1 - RHO**202)
+    err = means.std(ddof=1) / np.sqrt(len(means))
+    z = (means.mean() - expected) / max(err, 1e-5 * expected)
+    print(f"with the light pass: {means.mean():.5f} +- {err:.5f} (expected {expected:.5f}, z {z:+.2f})")
+    # four renders: a t-distribution with 3 degrees of freedom; |t| < 9 has probability 0.997
+    assert abs(z) < 9 and abs(means.mean() - expected) < 0.02 * expected

@@ -43,7 +43,8 @@ def plan_render(prepared) -> RenderPlan:
     light_pass = False
     if not specular:
         notes.append("light pass skipped: no mirror or glass in the scene")
-    elif len(prepared.lights) == 0 and not prepared.light_targets.world_budget > 0:
+    elif len(prepared.lights) == 0 and not (prepared.light_targets.world_budget > 0
+                                            or prepared.light_targets.mesh_budget > 0):
         notes.append("light pass skipped: no lights")
     elif settings.light_paths <= 0:
         notes.append("light pass skipped: light paths set to 0")
