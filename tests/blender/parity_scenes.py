@@ -294,7 +294,7 @@ def rough_metal(image_dir):
     bs.plane("floor", half=4.0, mat=bs.material("floor", "DIFFUSE", (0.5, 0.5, 0.5)))
     metal = bs.material("metal", "PRINCIPLED", (0.95, 0.7, 0.4), Metallic=1.0, Roughness=0.3)
     _smooth_sphere("sphere", 0.8, (0.0, 0.0, 0.8), metal)
-    bs.light("AREA", (-1.0, -1.5, 3.0), 400.0, shape="SQUARE", size=1.0,
+    bs.light("AREA", (-1.0, -1.5, 3.0), 400.0, shape="SQUARE", size=2.0,
              rotation=(math.radians(20), math.radians(-15), 0))
     look_at((0.0, -4.0, 1.8), (0.0, 0.0, 0.7))
     return sc

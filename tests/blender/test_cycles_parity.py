@@ -38,6 +38,10 @@ cp = load_script("tools/cycles_parity.py")
 
 REF_SPP = 512
 OUR_SPP = 32
+#: Scenes whose noise needs more of our samples to test at the tolerance: the rough metal
+#: sphere's glossy caustic on the floor (light -> rough metal -> floor) is a spiky path for
+#: any path tracer (Cycles too).
+SCENE_SPP = {"rough_metal": 128}
 MEAN_TOLERANCE = 0.05
 RMSE_TOLERANCE = 0.10
 MAX_NOISE_FLOOR = 0.03
@@ -65,7 +69,7 @@ SCENE_NAMES = list(cp.scenes_module().SCENES)
 @pytest.mark.slow
 @pytest.mark.parametrize("scene", [_param(n) for n in SCENE_NAMES])
 def test_scene_matches_cycles(scene, tmp_path):
-    c = cp.measure(scene, OUR_SPP, REF_SPP, work_dir=str(tmp_path), cache_dir=None)
+    c = cp.measure(scene, SCENE_SPP.get(scene, OUR_SPP), REF_SPP, work_dir=str(tmp_path), cache_dir=None)
     print(cp.TABLE_HEAD)
     print(c.row(), f"bias {c.bias:.3f}")
     assert cp.luminance(c.ref.image).mean() > 0.01, f"{scene}: Cycles renders it black: bad test scene"

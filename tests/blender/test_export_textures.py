@@ -115,7 +115,7 @@ def pixel_hits(prepared, pixels=PIXELS, size=2.0) -> Hit:
     h = prepared.accel.intersect(o, d)
     assert (h.prim >= 0).all()
     ng = prepared.tri_normal[h.prim]
-    return Hit(o + h.t[:, None] * d, ng, np.ones(len(o), np.float32), np.ones(len(o), bool),
+    return Hit(o + h.t[:, None] * d, ng, ng, np.ones(len(o), np.float32), np.ones(len(o), bool),
                prepared.tri_material[h.prim], prepared.tri_offset[h.prim], h.prim, h.u, h.v)
 
 
