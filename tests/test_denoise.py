@@ -163,3 +163,24 @@ def test_cli_adaptive_flags_reach_the_render(tmp_path):
     assert int(line[0].split()[4]) <= 32
     code, err = run_main(base + ["-o", str(tmp_path / "b.exr"), "--adaptive-threshold", "2"])
     assert code == 2 and err.startswith("error: adaptive threshold") and "between 0 (off) and 1" in err, err
+
+
+def test_the_denoise_extra_is_the_requirements_pin_and_this_venv_runs_it():
+    """pyproject.toml's extra "denoise" and requirements-denoise.txt (what ./setup.sh installs)
+    agree, and the venv has exactly those pins."""
+    import importlib.metadata as md
+    import os
+    import tomllib
+
+    from packaging.requirements import Requirement
+
+    from opal_diffraction._scripts import REPO_ROOT
+
+    with open(os.path.join(REPO_ROOT, "pyproject.toml"), "rb") as f:
+        (extra,) = [Requirement(r) for r in tomllib.load(f)["project"]["optional-dependencies"]["denoise"]]
+    with open(os.path.join(REPO_ROOT, "requirements-denoise.txt")) as f:
+        pinned = [Requirement(line.strip()) for line in f if line.strip() and not line.startswith("#")]
+    assert (extra.name, str(extra.specifier)) == (pinned[0].name, str(pinned[0].specifier))
+    for r in pinned:
+        assert str(r.specifier).startswith("=="), r
+        assert md.version(r.name) == str(r.specifier)[2:], r.name
