@@ -1,4 +1,4 @@
-"""Adaptive sampling (core/adaptive.py, Cycles' Noise Threshold; docs/physics.md section 11.1):
+"""Adaptive sampling (core/adaptive.py, Cycles' Noise Threshold; docs/physics.md section 10.5):
 the error estimate is an unbiased estimate of the mean's error for equal and unequal halves,
 Cycles' parameters, the 3 x 3 dilation, the settings' validation, and on a scene with a noise-free
 region (the world seen directly), a quiet one (a plane far from a wall) and a noisy one (the

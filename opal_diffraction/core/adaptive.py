@@ -11,7 +11,7 @@ samples of the even rounds, N_A of them). The error estimate is
 
 which is Cycles' formula when the halves are equal (N_A = N_B = N / 2: Cycles writes 2 A); the
 factor sqrt(N_A / N_B) keeps e an estimate of the whole mean's standard error (of its absolute
-value) when a pixel's halves differ, after a pixel skipped rounds (docs/physics.md section 11.1).
+value) when a pixel's halves differ, after a pixel skipped rounds (docs/physics.md section 10.5).
 A pixel converges when e < 5 t (Cycles multiplies the user's threshold t by 5), once it has at
 least the minimum samples, max(4, N_min), N_min = 0 meaning Cycles' automatic
 ceil(16 / t ** 0.3) (64 at t = 0.01). Pixels next to one that has not converged keep sampling

@@ -12,7 +12,8 @@ the denoiser works on RGB only. Negative RGB values (colours outside the Rec.709
 clipped to 0 for the denoiser, which takes non-negative HDR input.
 
 ``pyoidn`` is optional (requirements-denoise.txt): ``available()`` says whether it imports, and
-``denoise`` raises DenoiserUnavailable, a SceneError with the install line, when it does not.
+``denoise_rgb`` raises DenoiserUnavailable, a SceneError with the install line, when it does not
+(docs/physics.md section 10.6).
 """
 
 from __future__ import annotations

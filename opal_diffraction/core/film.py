@@ -12,7 +12,7 @@ Normal are Cycles' feature passes (intern/cycles/kernel/film/denoising_passes.h)
 a pixel's samples of the first diffuse surface's albedo (linear RGB, times the throughput of the
 mirrors and glass before it) and of its shading normal in Cycles' camera space (x right, y up,
 z forward; not renormalised after averaging, zero where a sample saw no diffuse surface), which
-is what OpenImageDenoise and Blender's Denoise node take.
+is what OpenImageDenoise and Blender's Denoise node take (docs/physics.md section 10.6).
 
 With adaptive sampling (core/adaptive.py) the film also keeps the RGB sum of the samples of the
 even rounds (the "A" half of Cycles' adaptive buffer) and each pixel's state: a round's tile may
