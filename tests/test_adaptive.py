@@ -23,7 +23,7 @@ from opal_diffraction.core.prepare import prepare
 from opal_diffraction.core.render import render
 from opal_diffraction.core.scene import Materials, Scene, SceneError
 from opal_diffraction.core.settings import EYE_ONLY_SETTINGS, RenderSettings
-from opal_diffraction.core.tiles import EyeWork, trace_tile
+from opal_diffraction.core.tiles import EyeWork, adaptive_rounds, trace_tile
 
 from scenes import top_down_camera
 
@@ -108,6 +108,20 @@ def test_pixels_sample_until_the_minimum_and_stay_active_beside_unconverged_ones
     new = next_active(act, err, np.full((5, 5), 64), 0.01, 64)
     assert new.sum() == 9 and new[1:4, 1:4].all()
     assert next_active(act, np.zeros((5, 5)), np.full((5, 5), 32), 0.01, 64).all()  # below the minimum
+
+
+def test_rounds_past_the_minimum_grow_by_a_quarter_within_the_cap():
+    for spp, per, floor, cap in [(1024, 8, 64, 4096), (4096, 8, 64, 256), (100, 16, 32, 4096), (7, 8, 64, 64)]:
+        r = np.array(adaptive_rounds(spp, per, floor, cap))
+        taken = np.concatenate([[0], np.cumsum(r)[:-1]])
+        assert r.sum() == spp and (r > 0).all()
+        assert (r[taken < floor] == np.minimum(per, spp - taken[taken < floor])).all()
+        late = taken >= floor
+        assert (r[late] <= np.maximum(per, np.minimum(cap, taken[late] // 4))).all()  # overshoot <= 1/4
+        assert r.max() <= max(per, cap)
+    assert len(adaptive_rounds(1024, 8, 64, 4096)) < 25  # not 128 rounds of 8
+    work = EyeWork.of(prepare(wall_scene(8), RenderSettings(samples=20, round_samples=8, tile_size=8)))
+    assert work.rounds == (8, 8, 4)  # adaptive sampling off: the rounds of the setting
 
 
 # ------------------------------------------------------------------------------ settings

@@ -18,7 +18,9 @@ ceil(16 / t ** 0.3) (64 at t = 0.01). Pixels next to one that has not converged 
 (Cycles' two-pass box filter: a 3 x 3 dilation of the unconverged set), here within the tile, so
 a tile's mask depends on its own pixels only and a cluster can check it as soon as the tile's
 round is added. A tile whose pixels have all converged takes no more samples: that is what saves
-time in a tile renderer; the others trace only their active pixels.
+time in a tile renderer; the others trace only their active pixels, in rounds that grow past the
+minimum (tiles.adaptive_rounds) so a few pixels left do not pay the tracer's fixed cost per
+round many times.
 """
 
 from __future__ import annotations

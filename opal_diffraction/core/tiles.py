@@ -21,7 +21,7 @@ from .camera import FilterSampler, generate_rays, pixel_samples
 from .settings import RenderSettings
 
 __all__ = ["EYE_PASS_STREAM", "LIGHT_PASS_SHARE", "MAX_TILE_RAYS", "round_size", "tiles_of", "EyeWork",
-           "trace_tile", "is_half_a", "adaptive_of"]
+           "trace_tile", "is_half_a", "adaptive_of", "adaptive_rounds"]
 
 EYE_PASS_STREAM = 1  # stream ids keep the passes' random numbers independent
 LIGHT_PASS_SHARE = 0.25  # of the progress bar, when the light pass runs
@@ -46,6 +46,21 @@ def adaptive_of(settings: RenderSettings):
 
     t = float(settings.adaptive_threshold)
     return None if t <= 0 else (t, min_samples(t, int(settings.adaptive_min_samples)))
+
+
+def adaptive_rounds(spp: int, per_round: int, min_spp: int, cap: int) -> tuple[int, ...]:
+    """Round sizes with adaptive sampling: ``per_round`` samples up to the minimum, then rounds
+    of a quarter of the samples taken so far (at least ``per_round``, at most ``cap``), so the
+    pixels that go on sampling do so in a few larger rounds (each round of a tile is one call of
+    the tracer, whose fixed cost dominates when few pixels are left), overshooting what they
+    need by at most a quarter."""
+    rounds, taken = [], 0
+    while taken < spp:
+        n = per_round if taken < min_spp else max(per_round, min(cap, taken // 4))
+        n = min(n, spp - taken)
+        rounds.append(n)
+        taken += n
+    return tuple(rounds)
 
 
 def tiles_of(width: int, height: int, size: int, region):
@@ -78,7 +93,11 @@ class EyeWork:
         settings, cam = prepared.settings, prepared.scene.camera
         region = tuple(region) if region is not None else (0, 0, int(cam.width), int(cam.height))
         spp, per_round = int(settings.samples), round_size(settings)
-        rounds = tuple(min(per_round, spp - s) for s in range(0, spp, per_round))
+        adaptive = adaptive_of(settings)
+        if adaptive is None:
+            rounds = tuple(min(per_round, spp - s) for s in range(0, spp, per_round))
+        else:
+            rounds = adaptive_rounds(spp, per_round, adaptive[1], MAX_TILE_RAYS // int(settings.tile_size) ** 2)
         tiles = tuple(tiles_of(int(cam.width), int(cam.height), int(settings.tile_size), region))
         return cls(rounds, tiles, region, int(settings.seed))
 
