@@ -155,3 +155,19 @@ def test_noise_threshold_settings_reach_the_core_as_cycles_reads_them(last_rende
     assert counts.min() == 16 and counts.max() <= 64 and counts.min() < counts.max()  # it adapted
     assert SAMPLE_COUNT_PASS in last_render["result_passes"]
     assert last_render["stats"]["samples_min"] == 16
+
+
+def test_the_sampling_panel_draws_noise_threshold_and_denoise():
+    import types
+
+    from opal_diffraction.blender import ui
+    from test_properties_ui import _context, _Layout
+
+    bs.empty_scene()
+    for adaptive in (False, True):
+        bpy.context.scene.opal.use_adaptive_sampling = adaptive
+        log = []
+        ui.OPAL_RENDER_PT_sampling.draw(types.SimpleNamespace(layout=_Layout(log)), _context(bs.ENGINE))
+        props = [e[1] for e in log if e[0] == "prop"]
+        assert {"use_adaptive_sampling", "adaptive_threshold", "adaptive_min_samples", "use_denoising",
+                "samples"} <= set(props), props
