@@ -32,6 +32,7 @@ import sys
 import time
 import traceback
 from contextlib import nullcontext
+from dataclasses import replace
 
 import bpy
 import numpy as np
@@ -46,8 +47,8 @@ from .settings import render_settings
 from . import viewport
 from .viewport import ViewportSession
 
-__all__ = ["OpalRenderEngine", "AOV_PASSES", "VECTOR_PASSES", "NOISY_PASS", "SAMPLE_COUNT_PASS", "DENOISER_MISSING", "render_settings", "output_path", "warning_summary", "last_render",
-           "register", "unregister"]
+__all__ = ["OpalRenderEngine", "AOV_PASSES", "VECTOR_PASSES", "NOISY_PASS", "SAMPLE_COUNT_PASS", "DENOISER_MISSING",
+           "render_settings", "output_path", "warning_summary", "last_render", "register", "unregister"]
 
 ENGINE_ID = "OPAL_DIFFRACTION"
 #: Passes besides Combined, in the order the core fills them.
@@ -270,8 +271,9 @@ class OpalRenderEngine(bpy.types.RenderEngine):
                 except SceneError:
                     self.end_result(result, cancel=True)
                     raise
-            else:
+            else:  # the image stays noisy; the Noisy Image pass holds it all the same
                 denoise_warning = DENOISER_MISSING
+                rr = replace(rr, passes={**rr.passes, NOISY_PASS: rr.rgb})
         self._fill(result, rr, to_working)
         self.end_result(result)
 

@@ -130,6 +130,7 @@ def test_denoise_without_pyoidn_warns_and_renders_the_noisy_image(tmp_path, last
     assert DENOISER_MISSING in last_render["warnings"]
     assert "Denoise node" in DENOISER_MISSING and "Denoising Normal" in DENOISER_MISSING
     np.testing.assert_array_equal(again, plain)
+    np.testing.assert_array_equal(last_render["passes"][NOISY_PASS], last_render["rgb"])
 
 
 def test_noise_threshold_settings_reach_the_core_as_cycles_reads_them(last_render):
