@@ -25,11 +25,12 @@ if [ ! -x .venv/bin/python ]; then
 fi
 # pip runs again only when a requirements file or pyproject.toml changed since the last install
 stamp=.venv/.requirements.sha
-want=$(sha256sum requirements.txt requirements-dask.txt pyproject.toml | sha256sum | cut -d" " -f1)
+want=$(sha256sum requirements.txt requirements-dask.txt requirements-denoise.txt pyproject.toml | sha256sum | cut -d" " -f1)
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   .venv/bin/python -m pip install -q --upgrade pip
-  # the optional Dask cluster rendering too, so its tests (tests/test_distributed.py) run here
-  .venv/bin/python -m pip install -q -r requirements.txt -r requirements-dask.txt
+  # the optional Dask cluster rendering and Open Image Denoise too, so their tests
+  # (tests/test_distributed.py, tests/test_denoise.py) run here
+  .venv/bin/python -m pip install -q -r requirements.txt -r requirements-dask.txt -r requirements-denoise.txt
   # the project itself, editable (its dependencies are the pins above): tests, examples,
   # benchmarks and tools import opal_diffraction from this checkout without touching sys.path
   .venv/bin/python -m pip install -q --no-deps -e .

@@ -3,7 +3,10 @@
     python -m opal_diffraction render SCENE.npz -o OUT.exr [--spp N] [--seed S] [--wavelength-step NM] ...
 
 Writes a float RGB EXR, an 8-bit PNG preview next to it (or at ``--preview``), and optionally a
-spectral EXR. Same seed, same image.
+spectral EXR. Same seed, same image. ``--adaptive-threshold T`` stops sampling pixels whose noise
+is below T (Cycles' Noise Threshold, core/adaptive.py); ``--denoise`` runs Open Image Denoise
+(the optional pyoidn wheel, core/denoise.py) on the RGB image, guided by the albedo and normal
+feature passes, and writes the noisy image beside it as OUT.noisy.exr.
 
 Everything the user gives is checked before the render starts: the arguments, the scene file
 (a missing, empty, corrupted or malformed file, wrong arrays), the settings, the output paths
@@ -109,6 +112,14 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"), help="override the camera's resolution")
     r.add_argument("--spectral-exr", default="", help="also write a spectral EXR (JCGT 2021 layout) here")
     r.add_argument("--time-limit", type=float, default=0.0, help="seconds; 0: none")
+    r.add_argument("--adaptive-threshold", type=float, default=0.0, metavar="T",
+                   help="adaptive sampling as Cycles' Noise Threshold: pixels stop sampling once their noise is "
+                        "below T (Cycles' default 0.01); 0: off (default)")
+    r.add_argument("--adaptive-min-samples", type=int, default=0, metavar="N",
+                   help="samples every pixel takes before adaptive sampling may stop it; 0: automatic as Cycles "
+                        "(64 at T = 0.01)")
+    r.add_argument("--denoise", action="store_true", help="denoise the RGB image with Open Image Denoise (needs "
+                   "requirements-denoise.txt: pyoidn); the noisy image is written as OUT.noisy.exr")
     r.add_argument("--threads", type=int, default=0, help="0: all cores")
     r.add_argument("--backend", choices=["auto", "embree", "numpy"], default="auto")
     r.add_argument("--scheduler", default="", help="render on a Dask cluster, the same image: tcp://HOST:PORT of "
@@ -176,18 +187,20 @@ def _remove_created(created: list) -> None:
 
 
 def _output_paths(args, created: list) -> dict:
-    """{'exr': path, 'png': path or None, 'spectral': path or None}, checked (CliError)."""
+    """{'exr': path, 'png': path or None, 'spectral': path or None, 'noisy': path or None},
+    checked (CliError)."""
     out = args.output
     if not out.lower().endswith(".exr"):
         raise CliError(f"output {out!r} must end in .exr (the RGB image is an OpenEXR file; the PNG preview "
                        f"is written beside it)")
+    noisy = os.path.splitext(out)[0] + ".noisy.exr" if args.denoise else None
     png = None if args.no_preview else (args.preview or os.path.splitext(out)[0] + ".png")
     if png is not None and not png.lower().endswith(".png"):
         raise CliError(f"preview {png!r} must end in .png")
     spectral = args.spectral_exr or None
     if spectral is not None and not spectral.lower().endswith(".exr"):
         raise CliError(f"spectral EXR {spectral!r} must end in .exr")
-    named = [("output", out), ("preview", png), ("spectral EXR", spectral)]
+    named = [("output", out), ("preview", png), ("spectral EXR", spectral), ("noisy image", noisy)]
     for i, (wa, a) in enumerate(named):
         if a is None:
             continue
@@ -199,7 +212,7 @@ def _output_paths(args, created: list) -> dict:
     for what, path in named:
         if path is not None:
             _check_writable(path, what, created)
-    return {"exr": out, "png": png, "spectral": spectral}
+    return {"exr": out, "png": png, "spectral": spectral, "noisy": noisy}
 
 
 def _physical_memory() -> int | None:
@@ -320,6 +333,12 @@ def _render(args, sig: _Signals, created: list) -> int:
     if not math.isfinite(args.exposure) or abs(args.exposure) > 100:
         raise CliError(f"exposure must be a finite number of stops within +-100, got {args.exposure}")
     paths = _output_paths(args, created)
+    if args.denoise:
+        from .core.denoise import available, INSTALL_HINT
+
+        if not available():  # before the render, not after it
+            raise CliError(f"--denoise needs Open Image Denoise's Python binding pyoidn, which is not installed: "
+                           f"{INSTALL_HINT}")
     try:
         scene = Scene.load(args.scene)
         if args.resolution:
@@ -333,7 +352,8 @@ def _render(args, sig: _Signals, created: list) -> int:
             glossy_bounces=args.glossy_bounces, transmission_bounces=args.transmission_bounces,
             dispersion_sampling=args.dispersion_sampling, light_paths=args.light_paths,
             spectral_exr=args.spectral_exr, time_limit=args.time_limit, threads=args.threads,
-            backend=args.backend,
+            backend=args.backend, adaptive_threshold=args.adaptive_threshold,
+            adaptive_min_samples=args.adaptive_min_samples,
         )
         settings.validate()
         sig.phase = "prepare"
@@ -372,8 +392,19 @@ def _render(args, sig: _Signals, created: list) -> int:
     for w in result.warnings:
         print(f"warning: {w}", file=sys.stderr)
 
+    if args.denoise and result.samples > 0:
+        from .core.denoise import denoise_result
+
+        sig.phase = "denoise"
+        try:
+            result = denoise_result(result)
+        except SceneError as e:
+            raise CliError(str(e)) from None
+
     sig.phase = "write"
     try:
+        if paths["noisy"] and "Noisy Image" in result.passes:
+            write_rgb_exr(paths["noisy"], result.passes["Noisy Image"])
         write_rgb_exr(paths["exr"], result.rgb)
         if paths["png"]:
             write_png(paths["png"], result.rgb, args.exposure)
@@ -383,7 +414,7 @@ def _render(args, sig: _Signals, created: list) -> int:
         _error(f"cannot write the image: {e.strerror or e} ({e.filename or paths['exr']})")
         return EXIT_FAILURE
     sig.phase = "done"
-    written = " and ".join(p for p in (paths["exr"], paths["png"], paths["spectral"]) if p)
+    written = " and ".join(p for p in (paths["exr"], paths["noisy"], paths["png"], paths["spectral"]) if p)
     if interrupted:
         print(f"interrupted: wrote the partial image ({result.samples} of {settings.samples} samples per pixel) to "
               f"{written}", file=sys.stderr)
@@ -393,4 +424,7 @@ def _render(args, sig: _Signals, created: list) -> int:
         print(f"{result.plan.summary()}", file=sys.stderr)
         print(f"wrote {written}: {s['render_s']:.2f} s, {s['rays'] / 1e6:.2f} M rays "
               f"({s['mrays_per_s']:.2f} Mrays/s, {s['backend']})", file=sys.stderr)
+        if settings.adaptive_threshold > 0:
+            print(f"adaptive sampling: {s['samples_min']} to {s['samples_max']} samples per pixel, "
+                  f"{s['samples_mean']:.1f} on average", file=sys.stderr)
     return EXIT_OK

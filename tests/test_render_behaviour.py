@@ -126,7 +126,7 @@ def test_passes_split_direct_light_from_the_world():
     assert not lit.passes["Caustics"].any() and not lit.passes["Diffraction"].any()
     world = render(glass_in_uniform_world({"kind": "DIELECTRIC", "ior": 1.5}, pixels=8), RenderSettings(samples=2))
     np.testing.assert_allclose(world.passes["Direct"], 0.0, atol=1e-5)
-    assert set(lit.passes) == {"Direct", "Indirect", "Caustics", "Diffraction"}
+    assert set(lit.passes) == {"Direct", "Indirect", "Caustics", "Diffraction", "Denoising Albedo", "Denoising Normal"}
 
 
 def test_region_renders_the_same_pixels_as_the_full_image():

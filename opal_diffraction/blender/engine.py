@@ -5,7 +5,11 @@ One render: export the evaluated depsgraph (polling Esc), hand the scene to the 
 Blender's render result with ``foreach_set`` on float32 arrays (rows flipped: the core's row 0
 is the top of the image, Blender's the bottom). Combined is in the blend file's linear working
 space, so Blender's colour management (view transform, look, exposure) applies as for Cycles.
-Direct, Indirect, Caustics and Diffraction are registered as passes for the compositor.
+Direct, Indirect, Caustics and Diffraction are registered as passes for the compositor, with
+Cycles' Denoising Albedo and Denoising Normal (same names, so a compositor Denoise node links to
+them), Noisy Image when the render is denoised (``scene.opal.use_denoising``: Open Image Denoise
+through pyoidn, core/denoise.py; without pyoidn a warning says so and the image stays noisy), and
+Debug Sample Count (samples per pixel) with adaptive sampling.
 
 Errors in the scene are reported once with ``report({'ERROR'}, message)`` (the status bar, the
 Info editor, the operator's RuntimeError from a script) and shown in the render window's stats
@@ -28,10 +32,12 @@ import sys
 import time
 import traceback
 from contextlib import nullcontext
+from dataclasses import replace
 
 import bpy
 import numpy as np
 
+from ..core import denoise as _denoise
 from ..core.distributed import connect
 from ..core.output import write_spectral_exr
 from ..core.render import render as core_render
@@ -41,12 +47,21 @@ from .settings import render_settings
 from . import viewport
 from .viewport import ViewportSession
 
-__all__ = ["OpalRenderEngine", "AOV_PASSES", "render_settings", "output_path", "warning_summary", "last_render",
-           "register", "unregister"]
+__all__ = ["OpalRenderEngine", "AOV_PASSES", "VECTOR_PASSES", "NOISY_PASS", "SAMPLE_COUNT_PASS", "DENOISER_MISSING",
+           "render_settings", "output_path", "warning_summary", "last_render", "register", "unregister"]
 
 ENGINE_ID = "OPAL_DIFFRACTION"
 #: Passes besides Combined, in the order the core fills them.
-AOV_PASSES = ("Direct", "Indirect", "Caustics", "Diffraction")
+AOV_PASSES = ("Direct", "Indirect", "Caustics", "Diffraction", "Denoising Albedo", "Denoising Normal")
+#: Passes that hold vectors, not colours (no colour-space conversion; Blender's type VECTOR)
+VECTOR_PASSES = ("Denoising Normal",)
+NOISY_PASS = _denoise.NOISY_PASS  # Cycles' name of the image before denoising
+SAMPLE_COUNT_PASS = "Debug Sample Count"  # Cycles' name: samples each pixel took
+#: The fallback's warning when use_denoising is on and pyoidn cannot be imported in Blender's Python
+DENOISER_MISSING = ("denoising needs Open Image Denoise's Python binding pyoidn in Blender's Python, which is not "
+                    "installed: the image is not denoised. Install it into Blender's Python (pip install "
+                    "pyoidn==2.5.1.0), or denoise in the compositor: a Denoise node with Image from Combined, "
+                    "Normal from Denoising Normal and Albedo from Denoising Albedo")
 
 #: What the last render did, for scripts and tests (Blender's Render Result image cannot be read
 #: back in background mode): status 'FINISHED' | 'CANCELLED' | 'ERROR', message, warnings,
@@ -135,7 +150,15 @@ class OpalRenderEngine(bpy.types.RenderEngine):
     def update_render_passes(self, scene=None, renderlayer=None):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
         for name in AOV_PASSES:
-            self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
+            if name in VECTOR_PASSES:
+                self.register_pass(scene, renderlayer, name, 3, "XYZ", "VECTOR")
+            else:
+                self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
+        opal = getattr(scene, "opal", None)
+        if opal is not None and opal.use_denoising:
+            self.register_pass(scene, renderlayer, NOISY_PASS, 4, "RGBA", "COLOR")
+        if opal is not None and opal.use_adaptive_sampling:
+            self.register_pass(scene, renderlayer, SAMPLE_COUNT_PASS, 1, "X", "VALUE")
 
     # ---------------------------------------------------------------- render
     def render(self, depsgraph):
@@ -239,10 +262,22 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         except BaseException:
             self.end_result(result, cancel=True)
             raise
+        denoise_warning = ""
+        if opal.use_denoising and rr.samples > 0:
+            if _denoise.available():
+                self._status("Denoising")
+                try:
+                    rr = _denoise.denoise_result(rr)
+                except SceneError:
+                    self.end_result(result, cancel=True)
+                    raise
+            else:  # the image stays noisy; the Noisy Image pass holds it all the same
+                denoise_warning = DENOISER_MISSING
+                rr = replace(rr, passes={**rr.passes, NOISY_PASS: rr.rgb})
         self._fill(result, rr, to_working)
         self.end_result(result)
 
-        core_warnings = list(rr.warnings)
+        core_warnings = list(rr.warnings) + ([denoise_warning] if denoise_warning else [])
         message = ""
         if rr.cancelled:  # the core says where it stopped: the render's message, not a warning
             notes = [w for w in core_warnings if w.startswith("cancelled")]
@@ -271,6 +306,7 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         last_render.update(
             status="CANCELLED" if rr.cancelled else "FINISHED", message=message, warnings=warnings, stats=stats,
             samples=rr.samples, rgb=rr.rgb, passes=rr.passes, plan=rr.plan.summary(), region=region,
+            sample_counts=rr.sample_counts,
             spectral_exr=stats.get("spectral_exr", ""), partial_updates=state["round"],
             plan_gratings=bool(getattr(rr.plan, "gratings", False)),
         )
@@ -286,15 +322,18 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         combined[..., :3] = rgb[::-1]
         combined[..., 3] = 1.0
         layer.passes["Combined"].rect.foreach_set(combined.ravel())
-        for name in AOV_PASSES:
+        for name in AOV_PASSES + (NOISY_PASS, SAMPLE_COUNT_PASS):
             try:
                 rp = layer.passes[name]
             except KeyError:
                 continue
-            img = rr.passes.get(name)
+            img = rr.sample_counts[..., None] if name == SAMPLE_COUNT_PASS else rr.passes.get(name)
             if img is None:
                 continue
-            img = img if to_working is None else img @ to_working.T.astype(np.float32)
+            if to_working is not None and name not in VECTOR_PASSES and name != SAMPLE_COUNT_PASS:
+                img = img @ to_working.T.astype(np.float32)
+            if name == NOISY_PASS:  # RGBA, as Combined
+                img = np.concatenate([img, np.ones((h, w, 1), np.float32)], axis=-1)
             rp.rect.foreach_set(np.ascontiguousarray(img[::-1], np.float32).ravel())
 
 

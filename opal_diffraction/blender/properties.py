@@ -191,6 +191,27 @@ class OpalRenderSettings(PropertyGroup):
         "frame number, '//' is relative to the .blend file. Empty: off", default="", subtype="FILE_PATH",
         options=_PATH_OPTIONS,
     )
+    use_adaptive_sampling: BoolProperty(
+        name="Noise Threshold", description="Adaptive sampling, as Cycles': pixels whose noise is below the "
+        "threshold stop taking samples, and tiles whose pixels all have are not rendered again (Cycles has it "
+        "on by default; here it is off, so existing renders stay as they were)", default=False,
+    )
+    adaptive_threshold: FloatProperty(
+        name="Noise Threshold", description="Noise level at which a pixel stops sampling, as Cycles' (lower: "
+        "less noise, longer renders); 0: automatic, max(0.001, 1 / samples), as Cycles", default=0.01, min=0.0,
+        max=1.0, soft_max=0.1, precision=4, step=0.1,
+    )
+    adaptive_min_samples: IntProperty(
+        name="Min Samples", description="Samples every pixel takes before adaptive sampling may stop it; "
+        "0: automatic from the noise threshold, as Cycles (64 at 0.01)", default=0, min=0, max=1 << 24,
+        soft_max=4096,
+    )
+    use_denoising: BoolProperty(
+        name="Denoise", description="Denoise the final render with Intel Open Image Denoise, guided by the "
+        "Denoising Albedo and Denoising Normal passes; the noisy image is kept in the Noisy Image pass. Needs "
+        "the pyoidn package in Blender's Python (otherwise a warning says so: the passes are still written "
+        "for the compositor's Denoise node). Off by default (Cycles has it on)", default=False,
+    )
     time_limit: FloatProperty(
         name="Time Limit", description="Stop after this many seconds (at the end of a progressive round); "
         "0: no limit", default=0.0, min=0.0, step=100.0, unit="TIME_ABSOLUTE",

@@ -8,7 +8,17 @@ from __future__ import annotations
 
 from ..core.settings import RenderSettings
 
-__all__ = ["render_settings"]
+__all__ = ["render_settings", "adaptive_threshold"]
+
+
+def adaptive_threshold(opal) -> float:
+    """The core's adaptive threshold from ``scene.opal``: 0 (off) unless Noise Threshold is
+    checked; a threshold of 0 with the box checked is Cycles' automatic one,
+    max(0.001, 1 / samples) (intern/cycles/scene/integrator.cpp)."""
+    if not opal.use_adaptive_sampling:
+        return 0.0
+    t = float(opal.adaptive_threshold)
+    return t if t > 0 else max(0.001, 1.0 / max(int(opal.samples), 1))
 
 
 def render_settings(opal, scene, spectral_path: str = "") -> RenderSettings:
@@ -21,5 +31,6 @@ def render_settings(opal, scene, spectral_path: str = "") -> RenderSettings:
         glossy_bounces=int(opal.glossy_bounces), transmission_bounces=int(opal.transmission_bounces), seed=max(seed, 0), dispersion_sampling=opal.dispersion_sampling,
         spectral_exr=spectral_path, time_limit=float(opal.time_limit), threads=int(scene.render.threads),
         backend=opal.backend.lower(), tile_size=int(opal.tile_size), round_samples=int(opal.round_samples),
-        filter_width=float(opal.filter_width),
+        filter_width=float(opal.filter_width), adaptive_threshold=adaptive_threshold(opal),
+        adaptive_min_samples=int(opal.adaptive_min_samples),
     )

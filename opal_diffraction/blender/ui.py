@@ -48,10 +48,23 @@ class OPAL_RENDER_PT_sampling(OpalButtonsPanel, Panel):
         layout = _split(self.layout)
         opal = context.scene.opal
         col = layout.column(align=True)
-        col.prop(opal, "samples")
+        # Cycles' layout: Noise Threshold as a checkbox beside its value
+        heading = layout.column(align=True, heading="Noise Threshold")
+        row = heading.row(align=True)
+        row.prop(opal, "use_adaptive_sampling", text="")
+        sub = row.row()
+        sub.active = opal.use_adaptive_sampling
+        sub.prop(opal, "adaptive_threshold", text="")
+        col = layout.column(align=True)
+        col.prop(opal, "samples", text="Max Samples" if opal.use_adaptive_sampling else "Samples")
+        sub = col.column(align=True)
+        sub.active = opal.use_adaptive_sampling
+        sub.prop(opal, "adaptive_min_samples", text="Min Samples")
         col.prop(opal, "round_samples")
         col = layout.column(align=True)
         col.prop(opal, "time_limit")
+        col = layout.column(align=True, heading="Denoise")
+        col.prop(opal, "use_denoising", text="")
         row = layout.row(align=True)
         row.prop(opal, "seed")
         row.prop(opal, "use_animated_seed", text="", icon="TIME")

@@ -63,7 +63,7 @@ from .plan import plan_render
 from .prepare import prepare
 from .scene import Camera, Lights, Materials, Scene, SceneError
 from .settings import RenderSettings
-from .tiles import LIGHT_PASS_SHARE, EyeWork, trace_tile
+from .tiles import LIGHT_PASS_SHARE, EyeWork, adaptive_of, is_half_a, trace_tile
 
 __all__ = ["render_on_cluster", "connect", "ClusterError", "to_wire", "from_wire", "RETRIES", "LOCAL_PREFIX"]
 
@@ -301,13 +301,15 @@ def light_batch_task(job: dict, index: int) -> dict:
             "elements": work.layout.total}
 
 
-def tile_task(job: dict, light: dict | None, r_index: int, t_index: int) -> dict:
-    """Trace tile ``t_index`` of round ``r_index``, reading the scattered light-pass maps; its
-    spectral sums and its non-Direct parts already in RGB (Film.add_converted)."""
+def tile_task(job: dict, light: dict | None, r_index: int, t_index: int, pixels=None) -> dict:
+    """Trace tile ``t_index`` of round ``r_index`` (only its flat pixel indices ``pixels``, for
+    adaptive sampling; None: all), reading the scattered light-pass maps; its spectral sums,
+    its non-Direct parts already in RGB and its denoising features (Film.add_converted)."""
     frame = _frame(job)
     eye = EyePass(frame.prepared, frame.light(light))
-    tile = trace_tile(eye, frame.filt, frame.eye_work, r_index, t_index)
-    return {"film": tile.film, "parts": tile_parts_rgb(frame.prepared.conv, tile), "rays": int(tile.rays)}
+    tile = trace_tile(eye, frame.filt, frame.eye_work, r_index, t_index, pixels)
+    return {"film": tile.film, "parts": tile_parts_rgb(frame.prepared.conv, tile), "rays": int(tile.rays),
+            "albedo": tile.albedo, "normal": tile.normal}
 
 
 class _ModuleRef:
@@ -453,7 +455,8 @@ def render_on_cluster(client, scene: Scene, settings: RenderSettings, prepared, 
     settings = prepared.settings
     plan = plan_render(prepared)
     warnings = list(prepared.warnings) + list(plan.warnings)
-    (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv)
+    (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv,
+                                                 adaptive_of(settings) is not None)
     stats = {"rays": 0, "prepare_s": prepared.prepare_s, "backend": prepared.accel.name,
              "triangles": len(prepared.scene.triangles), "scheduler": str(client.scheduler.address)}
     deadline = t_start + settings.time_limit if settings.time_limit else None
@@ -574,31 +577,53 @@ def _light_pass(client, job_f, prepared, progress, should_cancel, deadline, uid,
 def _eye_pass(client, job_f, light_f, prepared, film, plan, stats, region, progress, should_cancel, on_round,
               deadline, uid, threads, finish, scattered: _Replicas) -> str:
     """The eye pass as one task per (round, tile), added to the film in the local order. Returns
-    why it stopped early: "cancel", "time" or ""."""
+    why it stopped early: "cancel", "time" or "". With adaptive sampling a tile's round is
+    submitted once the film holds the tile's previous round (its pixels follow from it), and a
+    tile whose pixels have all converged gets no task."""
     work = EyeWork.of(prepared, region)
+    adaptive = adaptive_of(prepared.settings)
     n_tiles = len(work.tiles)
     units = [(r, t) for r in range(len(work.rounds)) for t in range(n_tiles)]
     window = max(16, 4 * threads)  # tasks in flight ahead of the one the film needs next
+    if adaptive is not None:
+        window = min(window, n_tiles)  # a tile's next round waits for its previous one
     finished = _Finished()
     pending: dict[int, object] = {}
     results: dict[int, dict] = {}  # finished tiles the film cannot add yet
-    submitted = cursor = completed = received = 0
+    pixels_of: dict[int, object] = {}  # the pixels each submitted unit traces (None: all)
+    submitted = cursor = completed = received = tasks = 0
     stop = ""
     base = LIGHT_PASS_SHARE if plan.light_pass else 0.0
     try:
         while cursor < len(units) and not stop:
             while submitted < len(units) and submitted - cursor < window:
                 r, t = units[submitted]
-                pending[submitted] = finished.watch(client.submit(TILE_TASK, job_f, light_f, r, t,
-                                                                  key=f"opal-tile-{uid}-{r}-{t}", retries=RETRIES))
+                px = film.active_pixels(*work.tiles[t][:4]) if adaptive is not None else None
+                pixels_of[submitted] = px
+                if px is not None and len(px) == 0:  # converged: nothing to trace
+                    results[submitted] = None
+                else:
+                    pending[submitted] = finished.watch(client.submit(TILE_TASK, job_f, light_f, r, t, px,
+                                                                      key=f"opal-tile-{uid}-{r}-{t}",
+                                                                      retries=RETRIES))
+                    tasks += 1
                 submitted += 1
             while cursor in results and not stop:  # the film adds tiles in the local render's order
                 r_index, t_index = units[cursor]
                 res = results.pop(cursor)
+                px = pixels_of.pop(cursor)
                 x0, y0, x1, y1, _ = work.tiles[t_index]
-                film.add_converted(x0, y0, x1, y1, res["film"], res["parts"], work.rounds[r_index])
-                stats["rays"] += res["rays"]
+                if res is not None:
+                    film.add_converted(x0, y0, x1, y1, res["film"], res["parts"], work.rounds[r_index],
+                                       res["albedo"], res["normal"], px, is_half_a(r_index))
+                    if adaptive is not None:
+                        film.update_active(x0, y0, x1, y1, *adaptive)
+                    stats["rays"] += res["rays"]
                 cursor += 1
+                if res is None:
+                    if t_index == n_tiles - 1 and on_round:
+                        on_round(finish(False))
+                    continue  # a skipped unit: no time passed, nothing to poll
                 if should_cancel and should_cancel():
                     stop = "cancel"
                 elif deadline is not None and r_index > 0 and time.perf_counter() > deadline:
@@ -610,6 +635,8 @@ def _eye_pass(client, job_f, light_f, prepared, film, plan, stats, region, progr
                         stop = "time"
             if stop or cursor == len(units):
                 break
+            if cursor >= submitted:
+                continue  # everything submitted so far was skipped: submit more
             if should_cancel and should_cancel():
                 stop = "cancel"
                 break
@@ -626,6 +653,6 @@ def _eye_pass(client, job_f, light_f, prepared, film, plan, stats, region, progr
                              f"rays, {threads} worker thread(s)")
     finally:
         _cancel(client, pending)
-    stats["eye_tasks"] = submitted
+    stats["eye_tasks"] = tasks
     stats["received_tile_bytes"] = received
     return stop

@@ -7,7 +7,17 @@ partial image after a cancel or a time limit is a correct mean of the samples th
 Passes (AOVs for the compositor, (H, W, 3) linear Rec.709): Direct (light reaching diffuse
 surfaces by shadow rays, also seen through mirrors and glass), Caustics (the light pass),
 Diffraction (gratings). Combined = Direct + Caustics + Diffraction + emitted light seen (the
-world and emissive surfaces, directly or via specular paths).
+world and emissive surfaces, directly or via specular paths). Denoising Albedo and Denoising
+Normal are Cycles' feature passes (intern/cycles/kernel/film/denoising_passes.h), the mean over
+a pixel's samples of the first diffuse surface's albedo (linear RGB, times the throughput of the
+mirrors and glass before it) and of its shading normal in Cycles' camera space (x right, y up,
+z forward; not renormalised after averaging, zero where a sample saw no diffuse surface), which
+is what OpenImageDenoise and Blender's Denoise node take (docs/physics.md section 10.6).
+
+With adaptive sampling (core/adaptive.py) the film also keeps the RGB sum of the samples of the
+even rounds (the "A" half of Cycles' adaptive buffer) and each pixel's state: a round's tile may
+cover only its active pixels (``pixels``), and ``update_active`` decides which pixels sample in
+the tile's next round.
 """
 
 from __future__ import annotations
@@ -16,11 +26,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import adaptive as _adaptive
 from .plan import RenderPlan
 from .scene import SceneError
 from .spectrum import SpectralConverter
 
-__all__ = ["Film", "RenderResult", "tile_parts_rgb"]
+__all__ = ["Film", "RenderResult", "tile_parts_rgb", "camera_space_rotation", "FEATURE_PASSES"]
+
+#: Cycles' names of the denoising feature passes (a compositor Denoise node links to them)
+FEATURE_PASSES = ("Denoising Albedo", "Denoising Normal")
 
 PARTS = ("background", "indirect", "caustics", "diffraction")  # a TileResult's non-Direct parts
 
@@ -40,44 +54,111 @@ class RenderResult:
     plan: RenderPlan
     warnings: list[str] = field(default_factory=list)
     stats: dict = field(default_factory=dict)
-    passes: dict = field(default_factory=dict)  # 'Direct', 'Indirect', 'Caustics', 'Diffraction': (H, W, 3)
+    passes: dict = field(default_factory=dict)  # 'Direct', 'Indirect', 'Caustics', 'Diffraction',
+    #                                             'Denoising Albedo', 'Denoising Normal': (H, W, 3)
+    sample_counts: np.ndarray | None = None  # (H, W) float32 samples each pixel took (adaptive sampling varies them)
+
+
+def camera_space_rotation(camera) -> np.ndarray:
+    """(3, 3) world -> Cycles camera space (x right, y up, z the view direction: Blender's camera
+    axes with z flipped, intern/cycles/blender/camera.cpp blender_camera_matrix), for normals."""
+    m = np.asarray(camera.matrix, np.float64)[:3, :3]
+    rot = m / np.linalg.norm(m, axis=0, keepdims=True)
+    return (rot * np.array([1.0, 1.0, -1.0])).T.astype(np.float32)
 
 
 class Film:
-    """Accumulates tiles of one render (``height`` x ``width`` pixels, ``conv``'s grid)."""
+    """Accumulates tiles of one render (``height`` x ``width`` pixels, ``conv``'s grid).
 
-    def __init__(self, width: int, height: int, conv: SpectralConverter):
+    ``to_camera``: the (3, 3) world -> camera rotation of the Denoising Normal pass (identity if
+    None). ``adaptive``: keep the half buffer and pixel states of adaptive sampling."""
+
+    def __init__(self, width: int, height: int, conv: SpectralConverter, to_camera=None, adaptive: bool = False):
         self.conv = conv
         self.spectral = np.zeros((height, width, conv.grid.n), np.float32)
         # RGB sums of the parts of the spectral sum that are not Direct light
         self.parts = {name: np.zeros((height, width, 3), np.float32) for name in PARTS}
         self.counts = np.zeros((height, width), np.float32)  # samples per pixel so far
+        self.albedo = np.zeros((height, width, 3), np.float32)  # denoising feature sums
+        self.normal = np.zeros((height, width, 3), np.float32)
+        self.to_camera = np.eye(3, dtype=np.float32) if to_camera is None else np.asarray(to_camera, np.float32)
+        self.adaptive = bool(adaptive)
+        if self.adaptive:
+            self.rgb_a = np.zeros((height, width, 3), np.float32)  # RGB sum of the even rounds' samples
+            self.counts_a = np.zeros((height, width), np.float32)
+            self.active = np.ones((height, width), bool)  # pixels that sample in their tile's next round
 
     @classmethod
-    def for_region(cls, camera, region, conv: SpectralConverter):
+    def for_region(cls, camera, region, conv: SpectralConverter, adaptive: bool = False):
         """((x0, y0, x1, y1), an empty Film) for ``region`` of ``camera``'s image (None: all of
         it; rows from the top). SceneError for a region outside the image."""
         w, h = int(camera.width), int(camera.height)
         x0, y0, x1, y1 = region if region is not None else (0, 0, w, h)
         if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h):
             raise SceneError(f"render region {region} is outside the {camera.width}x{camera.height} image")
-        return (x0, y0, x1, y1), cls(x1 - x0, y1 - y0, conv)
+        return (x0, y0, x1, y1), cls(x1 - x0, y1 - y0, conv, camera_space_rotation(camera), adaptive)
 
-    def add_tile(self, x0: int, y0: int, x1: int, y1: int, tile, samples: int) -> None:
-        """Add an eye_pass.TileResult covering pixels [x0, x1) x [y0, y1) with ``samples`` each."""
-        self.add_converted(x0, y0, x1, y1, tile.film, tile_parts_rgb(self.conv, tile), samples)
+    def add_tile(self, x0: int, y0: int, x1: int, y1: int, tile, samples: int, pixels=None,
+                 half_a: bool = False) -> None:
+        """Add an eye_pass.TileResult covering pixels [x0, x1) x [y0, y1) with ``samples`` each
+        (``pixels``: the tile's flat pixel indices it traced, None: all; ``half_a``: its samples
+        belong to adaptive sampling's half A)."""
+        self.add_converted(x0, y0, x1, y1, tile.film, tile_parts_rgb(self.conv, tile), samples, tile.albedo,
+                           tile.normal, pixels, half_a)
 
     def add_converted(self, x0: int, y0: int, x1: int, y1: int, film: np.ndarray, parts_rgb: dict,
-                      samples: int) -> None:
+                      samples: int, albedo=None, normal=None, pixels=None, half_a: bool = False) -> None:
         """``add_tile`` for a tile whose non-Direct parts are already RGB (``tile_parts_rgb``;
-        a Dask worker converts them, so only the spectral sums and RGB parts cross the wire)."""
+        a Dask worker converts them, so only the spectral sums, RGB parts and the denoising
+        features cross the wire)."""
         h, w = y1 - y0, x1 - x0
-        self.spectral[y0:y1, x0:x1] += film.reshape(h, w, -1)
+        if pixels is None:
+            where = (slice(y0, y1), slice(x0, x1))
+            shape = (h, w)
+        else:  # a subset of the tile's pixels (distinct indices: fancy-index += is exact)
+            pixels = np.asarray(pixels, np.int64)
+            where = (y0 + pixels // w, x0 + pixels % w)
+            shape = (len(pixels),)
+        self.spectral[where] += film.reshape(*shape, -1)
         for name, arr in self.parts.items():
             part = parts_rgb.get(name)
             if part is not None:
-                arr[y0:y1, x0:x1] += part.reshape(h, w, 3)
-        self.counts[y0:y1, x0:x1] += samples
+                arr[where] += part.reshape(*shape, 3)
+        for arr, feature in ((self.albedo, albedo), (self.normal, normal)):
+            if feature is not None:
+                arr[where] += feature.reshape(*shape, 3)
+        self.counts[where] += samples
+        if self.adaptive and half_a:
+            self.rgb_a[where] += self.conv.to_rgb(film).reshape(*shape, 3)
+            self.counts_a[where] += samples
+
+    def active_pixels(self, x0: int, y0: int, x1: int, y1: int):
+        """The tile's flat indices of the pixels that sample in its next round (None: all of
+        them, or no adaptive sampling)."""
+        if not self.adaptive:
+            return None
+        act = self.active[y0:y1, x0:x1]
+        return None if act.all() else np.flatnonzero(act)
+
+    def update_active(self, x0: int, y0: int, x1: int, y1: int, threshold: float, min_spp: int) -> int:
+        """After a tile's round: which of its pixels go on sampling (core/adaptive.py); returns
+        how many."""
+        tile = (slice(y0, y1), slice(x0, x1))
+        act = self.active[tile]
+        if not act.any():
+            return 0
+        rgb = self.conv.to_rgb(self.spectral[tile])
+        err = _adaptive.error_estimate(rgb, self.counts[tile], self.rgb_a[tile], self.counts_a[tile])
+        new = _adaptive.next_active(act, err, self.counts[tile], threshold, min_spp)
+        self.active[tile] = new
+        return int(new.sum())
+
+    def sample_stats(self) -> dict:
+        """Samples per pixel taken: min, mean, max."""
+        c = self.counts
+        if not c.size:
+            return {"samples_min": 0, "samples_mean": 0.0, "samples_max": 0}
+        return {"samples_min": int(c.min()), "samples_mean": float(c.mean()), "samples_max": int(c.max())}
 
     def result(self, plan: RenderPlan, cancelled: bool, warnings, stats) -> RenderResult:
         """The mean image so far, with its passes."""
@@ -88,7 +169,10 @@ class Film:
         diffraction = self.parts["diffraction"] * scale
         indirect = self.parts["indirect"] * scale
         passes = {"Direct": rgb - self.parts["background"] * scale - indirect - diffraction - caustics,
-                  "Indirect": indirect, "Caustics": caustics, "Diffraction": diffraction}
+                  "Indirect": indirect, "Caustics": caustics, "Diffraction": diffraction,
+                  "Denoising Albedo": self.albedo * scale,
+                  "Denoising Normal": (self.normal * scale) @ self.to_camera.T}
         samples = int(self.counts.min()) if self.counts.size else 0
+        stats = dict(stats, **self.sample_stats())
         return RenderResult(spectral, rgb, self.conv.grid.wavelengths.copy(), samples, cancelled, plan,
-                            list(warnings), dict(stats), passes)
+                            list(warnings), stats, passes, self.counts.copy())

@@ -12,7 +12,10 @@ moves. The image is split into tiles and the samples into progressive rounds (ti
 round, tile])``, and writes only its own pixels, so the image is identical whatever the number
 of threads, or machines: ``render(..., client=dask_client)`` runs the same units on a Dask
 cluster (distributed.py, imported only then); rounds make time limits, cancellation and partial
-previews cheap.
+previews cheap. With adaptive sampling (``settings.adaptive_threshold``, core/adaptive.py) a
+tile's round traces only the pixels that have not converged, and a tile whose pixels all have
+takes no more rounds; which pixels follows from the film after the tile's earlier rounds, so the
+image is still the same for any thread count or cluster.
 """
 
 from __future__ import annotations
@@ -31,7 +34,8 @@ from .prepare import PreparedScene, prepare
 from .scene import Scene
 from .settings import RenderSettings
 from .spectrum import SpectralConverter
-from .tiles import EYE_PASS_STREAM, LIGHT_PASS_SHARE, MAX_TILE_RAYS, EyeWork, round_size, trace_tile  # noqa: F401
+from .tiles import (EYE_PASS_STREAM, LIGHT_PASS_SHARE, MAX_TILE_RAYS, EyeWork, adaptive_of, is_half_a,  # noqa: F401
+                    round_size, trace_tile)
 
 __all__ = ["RenderResult", "render", "render_prepared"]
 
@@ -111,7 +115,8 @@ def render_prepared(
     settings = prepared.settings
     plan = plan_render(prepared)
     warnings = list(prepared.warnings) + list(plan.warnings)
-    (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv)
+    adaptive = adaptive_of(settings)
+    (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv, adaptive is not None)
     stats = {"rays": 0, "prepare_s": prepared.prepare_s, "backend": prepared.accel.name,
              "triangles": len(prepared.scene.triangles)}
 
@@ -136,8 +141,8 @@ def render_prepared(
     threads = prepared.threads
     total_work = work.units
 
-    def run_tile(r_index, r_spp, t_index):
-        return t_index, trace_tile(eye, filt, work, r_index, t_index)
+    def run_tile(r_index, t_index, pixels):
+        return t_index, pixels, trace_tile(eye, filt, work, r_index, t_index, pixels)
 
     def finish():
         return film.result(plan, cancelled, warnings, stats)
@@ -148,17 +153,25 @@ def render_prepared(
         for r_index, r_spp in enumerate(rounds):
             if stop:
                 break
+            # adaptive sampling: each tile's pixels that have not converged (None: all of them)
+            jobs = [(ti, film.active_pixels(*tiles[ti][:4])) for ti in range(len(tiles))]
+            jobs = [(ti, px) for ti, px in jobs if px is None or len(px)]
+            work_done += len(tiles) - len(jobs)  # converged tiles: nothing left to do
+            if not jobs:
+                break  # every pixel has converged
             if threads > 1:
-                pending = [pool.submit(run_tile, r_index, r_spp, ti) for ti in range(len(tiles))]
+                pending = [pool.submit(run_tile, r_index, ti, px) for ti, px in jobs]
             else:  # in the calling thread: simpler to profile and debug
-                pending = [_Inline(run_tile, r_index, r_spp, ti) for ti in range(len(tiles))]
+                pending = [_Inline(run_tile, r_index, ti, px) for ti, px in jobs]
             for fut in pending:
                 if stop:
                     fut.cancel()
                     continue
-                t_index, res = fut.result()
+                t_index, pixels, res = fut.result()
                 x0, y0, x1, y1, _ = tiles[t_index]
-                film.add_tile(x0, y0, x1, y1, res, r_spp)
+                film.add_tile(x0, y0, x1, y1, res, r_spp, pixels, is_half_a(r_index))
+                if adaptive is not None:
+                    film.update_active(x0, y0, x1, y1, *adaptive)
                 stats["rays"] += res.rays
                 work_done += 1
                 if progress:

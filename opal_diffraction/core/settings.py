@@ -26,7 +26,8 @@ BACKENDS = ("auto", "embree", "numpy", "brute")
 
 #: Settings only the eye pass reads: changing them keeps a prepared scene and its light pass.
 EYE_ONLY_SETTINGS = frozenset({"samples", "round_samples", "tile_size", "filter_width", "time_limit", "spectral_exr",
-                               "diffuse_bounces", "glossy_bounces", "transmission_bounces"})
+                               "diffuse_bounces", "glossy_bounces", "transmission_bounces", "adaptive_threshold",
+                               "adaptive_min_samples"})
 
 #: The wavelength grid holds 2 to 4001 samples (360-830 nm at 0.1175 nm at most); below 16 the
 #: colours are coarse (a warning, not an error).
@@ -44,14 +45,17 @@ _INT_RANGES = {
     "threads": (0, 1024),
     "tile_size": (1, 65536),
     "round_samples": (1, 1 << 16),
+    "adaptive_min_samples": (0, 1 << 24),
 }
-_FLOAT_FIELDS = ("element_size", "wavelength_min", "wavelength_max", "wavelength_step", "time_limit", "filter_width")
+_FLOAT_FIELDS = ("element_size", "wavelength_min", "wavelength_max", "wavelength_step", "time_limit", "filter_width",
+                 "adaptive_threshold")
 _WORDS = {"samples": "samples", "light_paths": "light paths", "max_bounces": "max bounces", "seed": "seed",
           "diffuse_bounces": "diffuse bounces", "glossy_bounces": "glossy bounces",
           "transmission_bounces": "transmission bounces",
           "threads": "threads", "tile_size": "tile size", "round_samples": "round samples",
           "element_size": "element size", "wavelength_min": "wavelength min", "wavelength_max": "wavelength max",
-          "wavelength_step": "wavelength step", "time_limit": "time limit", "filter_width": "filter width"}
+          "wavelength_step": "wavelength step", "time_limit": "time limit", "filter_width": "filter width",
+          "adaptive_threshold": "adaptive threshold", "adaptive_min_samples": "adaptive min samples"}
 FILTER_WIDTH_MAX = 100.0  # pixels
 
 
@@ -61,10 +65,11 @@ def _wavelength_count(lo: float, hi: float, step: float) -> float:
 
 
 def film_bytes(width: int, height: int, wavelengths: int) -> int:
-    """Memory (bytes) of a render's film: the (H, W, n) float32 spectral sums, the RGB parts
-    and the counts, plus the finished image's spectral and RGB copies."""
+    """Memory (bytes) of a render's film: the (H, W, n) float32 spectral sums, the RGB parts,
+    the denoising features, adaptive sampling's half buffer and the counts, plus the finished
+    image's spectral and RGB copies."""
     px = int(width) * int(height)
-    return px * (2 * 4 * int(wavelengths) + 4 * 3 * 6 + 4)
+    return px * (2 * 4 * int(wavelengths) + 4 * 3 * 11 + 4 * 3)
 
 
 @dataclass(frozen=True)
@@ -90,6 +95,11 @@ class RenderSettings:
     tile_size: int = 64               # pixels per tile side
     round_samples: int = 8            # samples per pixel per progressive round
     filter_width: float = 1.5         # Blackman-Harris reconstruction filter width (pixels)
+    # adaptive sampling (Cycles' Noise Threshold, core/adaptive.py): pixels stop sampling once
+    # their error estimate is below the threshold; 0: off (every pixel takes every sample).
+    # Cycles' default when on is 0.01. Min samples 0: automatic, as Cycles (64 at 0.01)
+    adaptive_threshold: float = 0.0
+    adaptive_min_samples: int = 0
 
     def __post_init__(self):
         # normalise number types only (never raise here: validate() names what is wrong)
@@ -174,6 +184,9 @@ class RenderSettings:
             raise SceneError("time limit must be >= 0 seconds")
         if not 0 <= vals["filter_width"] <= FILTER_WIDTH_MAX:
             raise SceneError(f"filter width must be between 0 and {FILTER_WIDTH_MAX:g} pixels, got {vals['filter_width']}")
+        if not 0 <= vals["adaptive_threshold"] <= 1:
+            raise SceneError(f"adaptive threshold (noise threshold) must be between 0 (off) and 1, got "
+                             f"{vals['adaptive_threshold']} (Cycles' default is 0.01)")
         if not isinstance(self.dispersion_sampling, str) or self.dispersion_sampling not in DISPERSION_SAMPLING:
             raise SceneError(f"dispersion sampling must be SPLIT or SAMPLE, got {self.dispersion_sampling!r}")
         if not isinstance(self.spectral_exr, (str, os.PathLike)):

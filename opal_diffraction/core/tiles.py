@@ -5,7 +5,10 @@ draws its random numbers from its own stream, ``SeedSequence([seed, EYE_PASS_STR
 tile])``, and writes only its own pixels; the film adds the units round by round, so the image
 is the same whatever runs them: threads here (render.py) or Dask workers (distributed.py).
 ``EyeWork`` is the split (a pure function of the prepared scene and the region), ``trace_tile``
-runs one unit.
+runs one unit. With adaptive sampling (core/adaptive.py) a unit may trace only some of its
+tile's pixels: which ones follows from the film after the tile's earlier rounds, so it is the
+same wherever the units run; the even rounds are the "A" half of the error estimate
+(``is_half_a``).
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ from .camera import FilterSampler, generate_rays, pixel_samples
 from .settings import RenderSettings
 
 __all__ = ["EYE_PASS_STREAM", "LIGHT_PASS_SHARE", "MAX_TILE_RAYS", "round_size", "tiles_of", "EyeWork",
-           "trace_tile"]
+           "trace_tile", "is_half_a", "adaptive_of", "adaptive_rounds"]
 
 EYE_PASS_STREAM = 1  # stream ids keep the passes' random numbers independent
 LIGHT_PASS_SHARE = 0.25  # of the progress bar, when the light pass runs
@@ -30,6 +33,34 @@ def round_size(settings: RenderSettings) -> int:
     MAX_TILE_RAYS camera rays (a round is the unit of memory and of time-limit checks)."""
     tile_pixels = int(settings.tile_size) ** 2
     return max(1, min(int(settings.round_samples), MAX_TILE_RAYS // tile_pixels))
+
+
+def is_half_a(r_index: int) -> bool:
+    """Whether round ``r_index``'s samples go into adaptive sampling's half A (the even rounds)."""
+    return r_index % 2 == 0
+
+
+def adaptive_of(settings: RenderSettings):
+    """(threshold, min samples) of adaptive sampling, or None when it is off."""
+    from .adaptive import min_samples
+
+    t = float(settings.adaptive_threshold)
+    return None if t <= 0 else (t, min_samples(t, int(settings.adaptive_min_samples)))
+
+
+def adaptive_rounds(spp: int, per_round: int, min_spp: int, cap: int) -> tuple[int, ...]:
+    """Round sizes with adaptive sampling: ``per_round`` samples up to the minimum, then rounds
+    of a quarter of the samples taken so far (at least ``per_round``, at most ``cap``), so the
+    pixels that go on sampling do so in a few larger rounds (each round of a tile is one call of
+    the tracer, whose fixed cost dominates when few pixels are left), overshooting what they
+    need by at most a quarter."""
+    rounds, taken = [], 0
+    while taken < spp:
+        n = per_round if taken < min_spp else max(per_round, min(cap, taken // 4))
+        n = min(n, spp - taken)
+        rounds.append(n)
+        taken += n
+    return tuple(rounds)
 
 
 def tiles_of(width: int, height: int, size: int, region):
@@ -62,7 +93,11 @@ class EyeWork:
         settings, cam = prepared.settings, prepared.scene.camera
         region = tuple(region) if region is not None else (0, 0, int(cam.width), int(cam.height))
         spp, per_round = int(settings.samples), round_size(settings)
-        rounds = tuple(min(per_round, spp - s) for s in range(0, spp, per_round))
+        adaptive = adaptive_of(settings)
+        if adaptive is None:
+            rounds = tuple(min(per_round, spp - s) for s in range(0, spp, per_round))
+        else:
+            rounds = adaptive_rounds(spp, per_round, adaptive[1], MAX_TILE_RAYS // int(settings.tile_size) ** 2)
         tiles = tuple(tiles_of(int(cam.width), int(cam.height), int(settings.tile_size), region))
         return cls(rounds, tiles, region, int(settings.seed))
 
@@ -71,14 +106,18 @@ class EyeWork:
         return len(self.rounds) * len(self.tiles)
 
 
-def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: int):
+def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: int, pixels=None):
     """Trace tile ``t_index`` of round ``r_index`` with ``eye`` (an eye_pass.EyePass):
-    its eye_pass.TileResult."""
+    its eye_pass.TileResult. ``pixels``: the tile's flat pixel indices (row-major) to sample,
+    the others take no sample this round (adaptive sampling); the result's rows are those
+    pixels, in that order. None: every pixel (the same stream either way)."""
     x0, y0, x1, y1, stream = work.tiles[t_index]
     rx0, ry0 = work.region[:2]
     rng = np.random.default_rng(np.random.SeedSequence([work.seed, EYE_PASS_STREAM, r_index, stream]))
     ys, xs = np.mgrid[y0 + ry0:y1 + ry0, x0 + rx0:x1 + rx0]
-    sx, sy, sl, pidx = pixel_samples(xs.ravel().astype(np.float64), ys.ravel().astype(np.float64),
-                                     work.rounds[r_index], rng, filt)
+    xs, ys = xs.ravel(), ys.ravel()
+    if pixels is not None:
+        xs, ys = xs[pixels], ys[pixels]
+    sx, sy, sl, pidx = pixel_samples(xs.astype(np.float64), ys.astype(np.float64), work.rounds[r_index], rng, filt)
     o, d = generate_rays(eye.prepared.scene.camera, sx, sy)
-    return eye.trace(o, d, pidx, (y1 - y0) * (x1 - x0), rng, u_lambda=sl)
+    return eye.trace(o, d, pidx, len(xs), rng, u_lambda=sl)

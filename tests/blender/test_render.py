@@ -94,8 +94,10 @@ def test_passes_reach_the_compositor(tmp_path):
 def test_result_holds_all_passes(last_render):
     _box_scene()
     bpy.ops.render.render()
-    assert last_render["result_passes"] == ["Combined", "Direct", "Caustics", "Diffraction"]
-    np.testing.assert_allclose(last_render["passes"]["Direct"], last_render["rgb"], atol=1e-5)
+    assert last_render["result_passes"] == ["Combined", "Direct", "Indirect", "Caustics", "Diffraction",
+                                            "Denoising Albedo", "Denoising Normal"]
+    np.testing.assert_allclose(last_render["passes"]["Direct"] + last_render["passes"]["Indirect"], last_render["rgb"],
+                               atol=1e-5)
     assert np.abs(last_render["passes"]["Caustics"]).max() == 0.0
 
 
