@@ -118,7 +118,7 @@ def prepare_lights(lights: Lights, conv: SpectralConverter) -> PreparedLights:
 
     pointlike = np.isin(kind, [POINT, SPOT])
     radius = np.where(pointlike, np.maximum(np.asarray(getattr(lights, "radius", np.zeros(n)), np.float64), 0.0), 0.0)
-    with np.errstate(divide="ignore", over="ignore"):
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):  # a black light of radius 0: 0/0
         peak = spectrum.max(axis=1, initial=0.0).astype(np.float64) / (np.pi * radius**2)
     radius = np.where((radius > 0) & (peak <= _MAX_RADIANCE_SCALE), radius, 0.0)
     soft = np.asarray(getattr(lights, "soft_falloff", np.zeros(n)), np.int64) != 0
