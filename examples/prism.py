@@ -1,6 +1,7 @@
 """The first example: a dispersive glass prism on a floor, in front of a striped wall, under a
-point light. Looking through the prism, the stripes' edges split into rainbow fringes
-(dispersion in the eye pass).
+point light and a daylight sky (an environment map with a sun). Looking through the prism, the
+stripes' edges split into rainbow fringes (dispersion in the eye pass); the lamp and the sun
+throw spectral caustics through it onto the floor (the light pass); the sky fills the shadows.
 
     python examples/prism.py [--spp 32] [--out out/prism]
 
@@ -16,8 +17,13 @@ import sys
 
 import numpy as np
 
+from opal_diffraction._scripts import load_example
 from opal_diffraction.core import primitives
 from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+
+
+#: The sky's strength (a multiplier of examples/environments.py's sky).
+SKY_STRENGTH = 0.025
 
 
 def build_scene(width=640, height=400) -> Scene:
@@ -40,7 +46,10 @@ def build_scene(width=640, height=400) -> Scene:
     s.add_mesh(*primitives.prism((0, 0, 0.75), side=1.2, length=2.4, axis="X", rotation_deg=180.0), material=3)
     s.lights = Lights.from_list([{"kind": "POINT", "position": (2.0, -3.0, 5.0), "power": 1500.0}])
     s.camera = Camera.look_at((0.0, -5.5, 3.6), (0.0, 0.5, 1.1), lens=50.0, width=width, height=height)
-    s.world_color = np.array([0.05, 0.05, 0.06], np.float32)
+    # a daylight sky (examples/environments.py) at a tenth of its strength, with a low sun in
+    # front to the right: it lights the scene beside the lamp and throws its own prism caustic
+    s.world_image = load_example("environments").sky(256, 128)
+    s.world_color = np.full(3, SKY_STRENGTH, np.float32)
     return s
 
 

@@ -6,7 +6,7 @@
 Builds the scene of ``examples/prism.py`` as a Blender scene - a 60-degree dense-flint prism
 (Glass BSDF, IOR 1.72, dispersion 'IOR + Abbe Number' with V_d 29) lying along X with its apex
 down, a floor, a wall of horizontal stripes (N_STRIPES, 8 m in all) alternating white and black 3 m behind it,
-a point light, and a camera at (0, -5.5, 3.6) looking at (0, 0.5, 1.1) - then renders it with
+a point light, a daylight sky (an Environment Texture with a sun), and a camera at (0, -5.5, 3.6) looking at (0, 0.5, 1.1) - then renders it with
 ``bpy.ops.render.render(write_still=True)`` as F12 would. Writes ``out/render_example.png`` and
 ``out/render_example.blend``; the .blend renders the same with Blender itself once the extension
 is installed:
@@ -21,6 +21,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+
+import numpy as np
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 
@@ -95,12 +97,23 @@ def build_scene(width: int = 640, height: int = 400, spp: int = 32, light_paths:
     scene.collection.objects.link(cob)
     scene.camera = cob
 
+    # the daylight sky of examples/prism.py: an Environment Texture of a packed float image
+    from opal_diffraction._scripts import load_example
+
+    prism = load_example("prism")
+    sky = load_example("environments").sky(256, 128)
+    image = bpy.data.images.new("Sky", sky.shape[1], sky.shape[0], float_buffer=True)
+    image.pixels.foreach_set(np.concatenate([sky, np.ones(sky.shape[:2] + (1,), np.float32)], axis=2).ravel())
+    image.pack()
     world = bpy.data.worlds.new("World")
     if bpy.app.version < (5, 0, 0):
         world.use_nodes = True
-    bg = world.node_tree.nodes.get("Background")
-    bg.inputs["Color"].default_value = (0.05, 0.05, 0.06, 1.0)
-    bg.inputs["Strength"].default_value = 1.0
+    nt = world.node_tree
+    bg = nt.nodes.get("Background")
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = image
+    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
+    bg.inputs["Strength"].default_value = prism.SKY_STRENGTH
     world.color = (0.05, 0.05, 0.06)
     scene.world = world
 
