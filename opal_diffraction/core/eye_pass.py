@@ -403,13 +403,17 @@ class _TileTrace(SpecularWalker):
             if base.any():
                 self._caustic_light(rays.take(base), hit.take(base), rng)
 
-    def _nee_microfacet(self, rays: Rays, hit: Hit, params, rng, film):
+    def _nee_microfacet(self, rays: Rays, hit: Hit, params, rng, film, analytic: bool = True):
+        """One sample of each light (``analytic``), of the emissive meshes (core/mesh_lights.py:
+        power-proportional points) and of the world map (its luminance distribution), each by
+        shadow ray and weighted against BSDF sampling by the power heuristic; the BSDF is
+        core/bsdf.py's (``params``), with Cycles' bump-terminator term on Lambertian lobes."""
         prepared = self.prepared
         lights = prepared.lights
         wo = -rays.d
         b = len(rays)
         samples = []  # (wi, dist, scalar (B,), spectrum (n,) or (B, n), light pdf (B,) or None, tmax pad)
-        for li in range(len(lights)):  # the lights (a handful)
+        for li in range(len(lights) if analytic else 0):  # the lights (a handful)
             wi, dist, g = sample_light(lights, li, hit.p, rng)
             pl = None if self.delta[li] else light_pdf(lights, li, hit.p, wi)
             samples.append((np.asarray(wi, np.float32), dist, g, lights.spectrum[li], pl, 0.0))
@@ -424,9 +428,12 @@ class _TileTrace(SpecularWalker):
             radiance = prepared.conv.illuminant_from_rgb(rgb).astype(np.float32)
             samples.append((wi.astype(np.float32), np.full(b, np.inf, np.float32), g, radiance,
                             pdf.astype(np.float32), 0.0))
+        lambert = params.lobe == bsdf.LAMBERT
         for wi, dist, g, spectrum, p_light, pad in samples:
             f_cos, p_bsdf = bsdf.evaluate(params, wo, wi, hit.ns, hit.ng)
             scale = np.asarray(g, np.float32)
+            if self.normal_maps and lambert.any():
+                scale = scale * np.where(lambert, self._bump(hit, wi), np.float32(1.0))
             if p_light is not None:
                 scale = scale * _power_heuristic(p_light, p_bsdf, light_first=True)
             live = np.flatnonzero((scale > 0) & (f_cos.max(axis=1) > 0))
@@ -601,78 +608,12 @@ class _TileTrace(SpecularWalker):
         return np.where(bent, bump_shadowing(ni, hit.ns, wi), np.float32(1.0))
 
     def _next_events(self, rays: Rays, hit: Hit, rng, film):
-        """Next-event estimation at diffuse vertices: every light, and the emissive meshes."""
+        """Next-event estimation at Lambertian vertices: every light (with the factored fast path
+        of ``_direct_light``), then the emissive meshes and the world map as at any other
+        surface (``_nee_microfacet`` with the Lambertian lobe)."""
         self._direct_light(rays, hit, rng, film)
-        if self.mesh_lights is not None:
-            self._mesh_light_nee(rays, hit, rng, film)
-        if self.prepared.environment is not None:
-            self._environment_nee(rays, hit, rng, film)
-
-    def _environment_nee(self, rays: Rays, hit: Hit, rng, film):
-        """One direction from the world map's luminance distribution per vertex
-        (core/environment.py), by shadow ray, weighted against BSDF sampling by the power
-        heuristic: a small bright sun in a map lights the scene without noise."""
-        prepared = self.prepared
-        env = prepared.environment
-        b = len(rays)
-        wi, pdf, rgb = env.sample(rng.random(b), rng.random(b))
-        wi = wi.astype(np.float32)
-        cos_s = np.einsum("ij,ij->i", wi, hit.ns)
-        ok = (cos_s > 0) & (pdf > 0)
-        if self.bent:
-            ok &= np.einsum("ij,ij->i", wi, hit.ng) > 0
-        live = np.flatnonzero(ok)
-        if live.size == 0:
-            return
-        o = (hit.p[live] + hit.eps[live, None] * hit.ng[live]).astype(np.float32)
-        occ = prepared.accel.occluded(o, wi[live], np.full(live.size, np.inf, np.float32))
-        self._rays += len(occ)
-        live = live[~occ]
-        if live.size == 0:
-            return
-        r, h = rays.take(live), hit.take(live)
-        cos, p_env = cos_s[live], pdf[live].astype(np.float32)
-        f = cos / p_env * _power_heuristic(p_env, cos * np.float32(1 / np.pi), light_first=True) * self._bump(h, wi[live])
-        radiance = prepared.conv.illuminant_from_rgb(rgb[live]).astype(np.float32)
-        brdf = surface_reflectance(prepared, h, r.lam) * np.float32(1 / np.pi)
-        if r.lam is None:
-            contrib = r.weighted(brdf * radiance * f[:, None])
-        else:
-            contrib = r.w * brdf * radiance[np.arange(len(r)), r.lam] * f
-        self._accumulate(r, contrib, film)
-
-    def _mesh_light_nee(self, rays: Rays, hit: Hit, rng, film):
-        """One power-proportional point on the emissive triangles per vertex (core/mesh_lights.py),
-        by shadow ray, weighted against BSDF sampling by the power heuristic."""
-        prepared = self.prepared
-        wi, dist, g, prim, pdf = self.mesh_lights.sample(hit.p, rng)
-        wi = wi.astype(np.float32)
-        cos_s = np.einsum("ij,ij->i", wi, hit.ns)
-        ok = (cos_s > 0) & (g > 0)
-        if self.bent:
-            ok &= np.einsum("ij,ij->i", wi, hit.ng) > 0
-        live = np.flatnonzero(ok)
-        if live.size == 0:
-            return
-        eps = hit.eps[live]
-        o = (hit.p[live] + eps[:, None] * hit.ng[live]).astype(np.float32)
-        tmax = (dist[live] - 2 * eps - 2 * prepared.tri_offset[prim[live]]).astype(np.float32)
-        occ = prepared.accel.occluded(o, wi[live], tmax)
-        self._rays += len(occ)
-        live = live[~occ]
-        if live.size == 0:
-            return
-        r, h = rays.take(live), hit.take(live)
-        cos = cos_s[live]
-        f = (g[live] * cos * _power_heuristic(pdf[live].astype(np.float32), cos * np.float32(1 / np.pi))
-             * self._bump(h, wi[live])).astype(np.float32)
-        em = prepared.materials.emission[prepared.tri_material[prim[live]]]
-        brdf = surface_reflectance(prepared, h, r.lam) * np.float32(1 / np.pi)
-        if r.lam is None:
-            contrib = r.weighted(brdf * em * f[:, None])
-        else:
-            contrib = r.w * brdf * em[np.arange(len(r)), r.lam] * f
-        self._accumulate(r, contrib, film)
+        if self.mesh_lights is not None or self.prepared.environment is not None:
+            self._nee_microfacet(rays, hit, self._surface_params(rays, hit, rng), rng, film, analytic=False)
 
     def _direct_light(self, rays: Rays, hit: Hit, rng, film):
         prepared = self.prepared
