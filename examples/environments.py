@@ -11,7 +11,7 @@ import numpy as np
 
 from opal_diffraction.core.environment import uv_to_direction
 
-__all__ = ["texel_directions", "sky", "studio"]
+__all__ = ["texel_directions", "sky", "studio", "blender_world"]
 
 
 def texel_directions(width: int, height: int) -> np.ndarray:
@@ -58,3 +58,24 @@ def studio(width: int = 512, height: int = 256) -> np.ndarray:
                                                      (70.0, 100.0, 20.0, 12.0), (10.0, 60.0, 3.0, 200.0)):
         rgb += radiance * _disk(d, _direction(elevation, azimuth), half_angle)[..., None]
     return rgb.astype(np.float32)
+
+
+def blender_world(bpy, rgb: np.ndarray, strength: float, name: str = "World"):
+    """A Blender world whose Background shows ``rgb`` (an (H, W, 3) map of this module) through
+    an Environment Texture node, at ``strength``: the image is a packed float image, so the
+    .blend needs no file beside it. Returns the world (assign it to ``scene.world``)."""
+    image = bpy.data.images.new(name + " map", rgb.shape[1], rgb.shape[0], float_buffer=True)
+    rgba = np.concatenate([rgb, np.ones(rgb.shape[:2] + (1,), np.float32)], axis=2)
+    image.pixels.foreach_set(rgba.astype(np.float32).ravel())
+    image.pack()
+    world = bpy.data.worlds.new(name)
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
+    nt = world.node_tree
+    bg = nt.nodes.get("Background")
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = image
+    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
+    bg.inputs["Strength"].default_value = float(strength)
+    world.color = tuple(float(c) for c in rgb.reshape(-1, 3).mean(axis=0) * strength)
+    return world

@@ -4,7 +4,8 @@
 
 Adds an opal with ``bpy.ops.mesh.primitive_opal_add`` (an oval cabochon with the "Black opal"
 preset: a near-black body under Voronoi domains of a hexagonal lattice, periods from silica
-sphere diameters of 200-330 nm), lays it on a dark cloth under a small light, and renders it
+sphere diameters of 200-330 nm), lays it on a dark cloth under a small light and a dim daylight
+sky (an Environment Texture; examples/environments.py), and renders it
 with ``bpy.ops.render.render(write_still=True)`` as F12 would, to ``docs/opal.png``; then moves
 the light and renders ``docs/opal_light_moved.png``: other domains light up in other colours
 (the play of colour). Prints the render times and the time the rendered viewport's first (1/8
@@ -21,6 +22,9 @@ import sys
 import time
 
 ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+
+#: The sky's strength (a multiplier of examples/environments.py's sky): a dim fill beside the lamp.
+SKY_STRENGTH = 0.01
 
 #: Where the light sits for the two images (metres; the opal is 2 m long, centred at the origin).
 LIGHT_FIRST = (-3.0, -9.0, 12.0)
@@ -58,7 +62,11 @@ def build_scene(width: int = 512, height: int = 512, spp: int = 16, seed: int = 
     sc.opal.round_samples = spp
     sc.opal.wavelength_step = 10.0
     sc.opal.seed = 1
-    sc.world = None  # a dark room
+    # a dark room with a window: a dim daylight sky (examples/environments.py) beside the lamp
+    from opal_diffraction._scripts import load_example
+
+    environments = load_example("environments")
+    sc.world = environments.blender_world(bpy, environments.sky(256, 128), SKY_STRENGTH)
 
     # the cloth: a dark blue-black velvet
     bpy.ops.mesh.primitive_plane_add(size=40.0)

@@ -22,8 +22,6 @@ import argparse
 import os
 import sys
 
-import numpy as np
-
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 
 #: The striped wall: stripes of WALL_HEIGHT / N_STRIPES metres, alternating white and black.
@@ -100,21 +98,8 @@ def build_scene(width: int = 640, height: int = 400, spp: int = 32, light_paths:
     # the daylight sky of examples/prism.py: an Environment Texture of a packed float image
     from opal_diffraction._scripts import load_example
 
-    prism = load_example("prism")
-    sky = load_example("environments").sky(256, 128)
-    image = bpy.data.images.new("Sky", sky.shape[1], sky.shape[0], float_buffer=True)
-    image.pixels.foreach_set(np.concatenate([sky, np.ones(sky.shape[:2] + (1,), np.float32)], axis=2).ravel())
-    image.pack()
-    world = bpy.data.worlds.new("World")
-    if bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    nt = world.node_tree
-    bg = nt.nodes.get("Background")
-    env = nt.nodes.new("ShaderNodeTexEnvironment")
-    env.image = image
-    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
-    bg.inputs["Strength"].default_value = prism.SKY_STRENGTH
-    world.color = (0.05, 0.05, 0.06)
+    environments = load_example("environments")
+    world = environments.blender_world(bpy, environments.sky(256, 128), load_example("prism").SKY_STRENGTH)
     scene.world = world
 
     scene.render.engine = "OPAL_DIFFRACTION"

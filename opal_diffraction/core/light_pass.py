@@ -508,26 +508,9 @@ def _emit(prepared, li: int, b: int, rng):
     if k in (POINT, SPOT) and lights.radius[li] > 0:
         return _emit_sized_point(prepared, li, b, rng)
     if k == SUN:
-        d = lights.direction[li]
-        u, v = orthonormal_basis(d[None, :])
-        u, v = u[0], v[0]
-        area = np.pi * obj.radius**2
-        prob = area / area.sum()
-        pick = np.minimum((rng.random((b, 1)) > np.cumsum(prob)[None, :]).sum(axis=1), len(obj) - 1)
-        r = obj.radius[pick] * np.sqrt(rng.random(b))
-        phi = 2 * np.pi * rng.random(b)
-        c = obj.centre[pick]
-        c_plane = c - (c @ d)[:, None] * d  # project centres on the plane through 0 normal to d
-        pts = c_plane + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
-        # mixture pdf per unit area over the disks of all objects
-        cp = obj.centre - (obj.centre @ d)[:, None] * d
-        dist2 = np.sum((pts[:, None, :] - cp[None, :, :]) ** 2, axis=2)
-        pdf = np.sum(np.where(dist2 <= obj.radius**2, prob / area, 0.0), axis=1)
-        # start well outside the scene, in its own units (an absolute distance would swamp a
-        # millimetre scene's coordinates in float32)
-        far = 4.0 * (np.max(np.abs(prepared.scene.vertices)) + prepared.extent)
-        o = pts - far * d
-        return o, np.broadcast_to(d, (b, 3)).copy(), np.where(pdf > 0, 1.0 / np.maximum(pdf, 1e-300), 0.0)
+        d = np.broadcast_to(lights.direction[li], (b, 3))
+        pts, pdf = _caster_disk_points(obj, d, rng)
+        return pts - _far_distance(prepared) * d, d.copy(), np.where(pdf > 0, 1.0 / np.maximum(pdf, 1e-300), 0.0)
     if k in (POINT, SPOT):
         origin = np.broadcast_to(lights.position[li], (b, 3))
         axis, cos_max, omega = _cones(lights.position[li][None, :], obj)
@@ -566,6 +549,29 @@ def _far_distance(prepared) -> float:
     return 4.0 * (float(np.max(np.abs(prepared.scene.vertices))) + prepared.extent)
 
 
+def _caster_disk_points(obj: CasterObjects, d: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Points for parallel light along unit directions d (B, 3): an object chosen by the area of
+    the disk its bounding sphere casts across d, a uniform point on that disk (in the plane
+    through the origin normal to d), and the mixture pdf per unit area over all objects' disks
+    (they overlap for some d). The suns' and the world's path starts share it."""
+    b = len(d)
+    area = np.pi * obj.radius**2
+    prob = area / area.sum()
+    pick = np.minimum((rng.random((b, 1)) > np.cumsum(prob)[None, :]).sum(axis=1), len(obj) - 1)
+    r = obj.radius[pick] * np.sqrt(rng.random(b))
+    phi = 2 * np.pi * rng.random(b)
+    u, v = orthonormal_basis(d)
+    c = obj.centre[pick]
+    c_plane = c - np.einsum("ij,ij->i", c, d)[:, None] * d
+    pts = c_plane + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
+    # |pts - proj(centre)|^2 = |pts - centre|^2 - ((pts - centre) . d)^2 (pts . d = 0), every object at once
+    cd = d @ obj.centre.T  # (B, C)
+    dist2 = (np.sum(pts**2, axis=1)[:, None] - 2 * pts @ obj.centre.T + np.sum(obj.centre**2, axis=1)[None, :]
+             - cd**2)
+    pdf = np.sum(np.where(dist2 <= obj.radius**2 * (1 + 1e-9), prob / area, 0.0), axis=1)
+    return pts, pdf
+
+
 def _emit_sun_cone(prepared, li: int, b: int, rng):
     """A sun with an angle: a direction uniform in its cone (pdf 1 / (2 pi (1 - cos h))), then
     a point on the disk one caster's sphere casts across that direction (object chosen by its
@@ -576,20 +582,7 @@ def _emit_sun_cone(prepared, li: int, b: int, rng):
     lights, obj = prepared.lights, prepared.light_targets.objects
     omc = float(lights.sun_omc[li])
     d = _sample_cone(lights.direction[li], omc, rng, b)  # travel directions (B, 3)
-    u, v = orthonormal_basis(d)
-    area = np.pi * obj.radius**2
-    prob = area / area.sum()
-    pick = np.minimum((rng.random((b, 1)) > np.cumsum(prob)[None, :]).sum(axis=1), len(obj) - 1)
-    r = obj.radius[pick] * np.sqrt(rng.random(b))
-    phi = 2 * np.pi * rng.random(b)
-    c = obj.centre[pick]
-    c_plane = c - np.einsum("ij,ij->i", c, d)[:, None] * d  # on the plane through 0 normal to d
-    pts = c_plane + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
-    # |pts - proj(centre)|^2 = |pts - centre|^2 - ((pts - centre) . d)^2, for every object at once
-    cd = d @ obj.centre.T  # (B, C)
-    dist2 = (np.sum(pts**2, axis=1)[:, None] - 2 * pts @ obj.centre.T + np.sum(obj.centre**2, axis=1)[None, :]
-             - cd**2)
-    pdf = np.sum(np.where(dist2 <= obj.radius**2 * (1 + 1e-9), prob / area, 0.0), axis=1)
+    pts, pdf = _caster_disk_points(obj, d, rng)
     weight = np.where(pdf > 0, (2.0 / (2.0 - omc)) / np.maximum(pdf, 1e-300), 0.0)
     return pts - _far_distance(prepared) * d, d, weight
 
@@ -669,18 +662,7 @@ def _emit_world(prepared, b: int, rng):
         towards_sky, pdf, rgb = env.sample(rng.random(b), rng.random(b))
         inv = np.where(pdf > 0, 1.0 / np.where(pdf > 0, pdf, 1.0), 0.0)
         spectral = prepared.conv.illuminant_from_rgb(rgb) * inv[:, None]
-    area = np.pi * obj.radius**2
-    prob = area / area.sum()
-    pick = np.minimum((rng.random((b, 1)) > np.cumsum(prob)[None, :]).sum(axis=1), len(obj) - 1)
-    r = obj.radius[pick] * np.sqrt(rng.random(b))
-    phi = 2 * np.pi * rng.random(b)
-    u, v = orthonormal_basis(towards_sky)
-    # every object's centre projected on the plane through 0 normal to w: (B, C, 3)
-    cp = obj.centre[None, :, :] - (towards_sky @ obj.centre.T)[:, :, None] * towards_sky[:, None, :]
-    pts = cp[np.arange(b), pick] + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
-    # mixture pdf per unit area over the disks of all objects (they overlap for some w)
-    dist2 = np.sum((pts[:, None, :] - cp) ** 2, axis=2)
-    pdf_a = np.sum(np.where(dist2 <= obj.radius**2, prob / area, 0.0), axis=1)
+    pts, pdf_a = _caster_disk_points(obj, towards_sky, rng)
     o = pts + _far_distance(prepared) * towards_sky
     weight = np.where(pdf_a > 0, 1.0 / np.maximum(pdf_a, 1e-300), 0.0)
     return o, -towards_sky, spectral * weight[:, None]
