@@ -335,8 +335,9 @@ class _TileTrace(SpecularWalker):
         return rays.take(ok)
 
     def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
-        """Diffuse bounces: a cosine-weighted direction (the Lambertian BRDF's importance
-        sampling, weight = albedo). A path at its diffuse or total bounce limit still takes one
+        """The bounces at non-specular surfaces: rough and layered ones through core/bsdf.py
+        (``_scatter_microfacet``, with the lobe on_hit drew), Lambertian ones by a
+        cosine-weighted direction (the BRDF's importance sampling, weight = albedo). A path at its diffuse or total bounce limit still takes one
         last, emission-only segment ('final'), so light sources and the world that the next
         event estimation does not sample are still seen once (and MIS stays whole)."""
         st = rays.extra
@@ -354,7 +355,7 @@ class _TileTrace(SpecularWalker):
         r, h = rays.take(sel), hit.take(sel)
         b = len(r)
         if b == 0:
-            return None
+            return micro_out
         wi, cos = _cosine_hemisphere(h.ns, self.rng)
         if self.bent:  # about ns; a direction below the geometric surface ends the path
             up = np.einsum("ij,ij->i", wi, h.ng) > 0
