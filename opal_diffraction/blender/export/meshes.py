@@ -419,6 +419,26 @@ def subset(md: MeshData, keep: np.ndarray) -> MeshData:
                     corners=corners, needs=md.needs)
 
 
+def instance_groups(groups: dict, meshes: SceneMeshes, hidden: np.ndarray | None = None):
+    """The instance groups :func:`flatten` and :func:`flatten_corners` walk, in the same order:
+    for each (mesh key, material rows of its slots) -> world matrices, yields (the mesh with the
+    triangles of ``hidden`` rows left out, the (K, 4, 4) matrices, each triangle's material row);
+    a group whose triangles are all hidden is skipped, a NaN or infinite matrix an error."""
+    for (mkey, slots), mlist in groups.items():
+        md = meshes[mkey]
+        mats = np.stack(mlist)
+        if not np.isfinite(mats).all():
+            raise SceneError(f"object '{md.name}': its transform is NaN or infinite")
+        slot_map = np.asarray(slots, np.int32)
+        tri_mat_local = slot_map[np.clip(md.slot, 0, len(slot_map) - 1)]
+        if hidden is not None and hidden[slot_map].any():
+            keep = ~hidden[tri_mat_local]
+            if not keep.any():
+                continue
+            md, tri_mat_local = subset(md, keep), tri_mat_local[keep]
+        yield md, mats, tri_mat_local
+
+
 def flatten(groups: dict, meshes: SceneMeshes, grating: list, warn, hidden: np.ndarray | None = None):
     """World-space arrays of every instance: ``groups`` maps (mesh key, material rows of its
     slots) to the instances' world matrices; ``grating`` is the material table's grating
@@ -432,18 +452,7 @@ def flatten(groups: dict, meshes: SceneMeshes, grating: list, warn, hidden: np.n
     smooth = any(meshes[mkey] is not None and meshes[mkey].corner_normal is not None for mkey, _ in groups)
     normal_chunks = []
     n_verts = 0
-    for (mkey, slots), mlist in groups.items():
-        md = meshes[mkey]
-        mats = np.stack(mlist)
-        if not np.isfinite(mats).all():
-            raise SceneError(f"object '{md.name}': its transform is NaN or infinite")
-        slot_map = np.asarray(slots, np.int32)
-        tri_mat_local = slot_map[np.clip(md.slot, 0, len(slot_map) - 1)]
-        if hidden is not None and hidden[slot_map].any():
-            keep = ~hidden[tri_mat_local]
-            if not keep.any():
-                continue
-            md, tri_mat_local = subset(md, keep), tri_mat_local[keep]
+    for md, mats, tri_mat_local in instance_groups(groups, meshes, hidden):
         verts, tris, det = transform(md, mats)
         if smooth:
             normal_chunks.append(world_corner_normals(md, mats, verts, tris))
@@ -565,16 +574,7 @@ def flatten_corners(groups: dict, meshes: SceneMeshes, corners: list, hidden: np
         return np.zeros((0, 3, 2), np.float32), np.zeros((0, 3, 4), np.float32)
     with_tangents = any(c is not None and c.tangent_map is not None for c in corners)
     uv_chunks, tan_chunks = [], []
-    for (mkey, slots), mlist in groups.items():  # the same groups and triangles as flatten
-        md = meshes[mkey]
-        mats = np.stack(mlist)
-        slot_map = np.asarray(slots, np.int32)
-        tri_mat_local = slot_map[np.clip(md.slot, 0, len(slot_map) - 1)]
-        if hidden is not None and hidden[slot_map].any():
-            keep = ~hidden[tri_mat_local]
-            if not keep.any():
-                continue
-            md, tri_mat_local = subset(md, keep), tri_mat_local[keep]
+    for md, mats, tri_mat_local in instance_groups(groups, meshes, hidden):  # flatten's triangle order
         nt, k = len(md.triangles), len(mats)
         uv = np.zeros((nt, 3, 2), np.float32)
         tan = np.zeros((k, nt, 3, 4), np.float32) if with_tangents else None
