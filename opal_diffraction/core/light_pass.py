@@ -53,7 +53,6 @@ from .elements import ElementLayout, IlluminationMap
 from .geometry import orthonormal_basis, triangle_areas
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIELECTRIC, DIFFUSE, MIRROR
-from .bsdf import microfacet_materials
 from .transport import Hit, Rays, SpecularWalker
 
 __all__ = ["CasterObjects", "caster_objects", "LightTargets", "find_light_targets", "LightPassResult",
@@ -221,15 +220,16 @@ class LightTargets:
 
 
 def find_light_targets(vertices, triangles, tri_material, materials, gratings, lights, conv,
-                       light_paths: int = 1, mesh_lights=None, world_spectrum=None, textures=None) -> LightTargets:
+                       light_paths: int = 1, mesh_lights=None, world_spectrum=None, microfacet=None) -> LightTargets:
     """The light pass's targets for a scene (prepared materials, gratings, lights, emissive
     meshes, and ``world_spectrum`` (n,) the world's mean radiance, or None: a black world).
     Without light paths or any emitter there is nothing to aim, so the casters are not grouped
-    at all. Rough and layered mirrors and glass (bsdf.microfacet_materials) are not casters: the
-    eye pass shades them, and a light path ends there."""
+    at all. Rough and layered mirrors and glass (``microfacet`` (M,) bool, bsdf.microfacet_materials;
+    None: none) are not casters: the eye pass shades them, and a light path ends there."""
     mk = materials.kind[tri_material] if len(tri_material) else np.zeros(0, np.int32)
-    micro = microfacet_materials(materials, textures)
-    caster = np.isin(mk, [MIRROR, DIELECTRIC]) & ~(micro[tri_material] if len(tri_material) else np.zeros(0, bool))
+    caster = np.isin(mk, [MIRROR, DIELECTRIC])
+    if microfacet is not None and len(tri_material):
+        caster &= ~np.asarray(microfacet)[tri_material]
     grating = gratings.enabled[tri_material] if len(tri_material) else np.zeros(0, bool)
     world_lum = 0.0 if world_spectrum is None else float(np.asarray(world_spectrum, np.float64) @ conv.cmf_weights[:, 1])
     emitters = len(lights) > 0 or mesh_lights is not None or world_lum > 0

@@ -34,6 +34,7 @@ from .gratings import PreparedGratings, prepare_gratings, triangle_tangents
 from .light_pass import LightTargets, find_light_targets
 from .lights import PreparedLights, prepare_lights
 from .materials import PreparedMaterials, prepare_materials
+from .bsdf import microfacet_materials
 from .mesh_lights import MeshLights
 from .scene import Camera, Scene
 from .settings import EYE_ONLY_SETTINGS, RenderSettings
@@ -96,6 +97,8 @@ class PreparedScene:
     prepare_s: float                   # seconds spent validating and preparing
     key: int                           # identity of the geometry, materials and lights
     corner_normals: np.ndarray | None = None  # (T, 3, 3) float32 unit shading normals per corner; None: flat
+    # (M,) bool: rough and layered materials, shaded with core/bsdf.py (bsdf.microfacet_materials)
+    microfacet: np.ndarray | None = None
 
     @property
     def grid(self) -> WavelengthGrid:
@@ -252,12 +255,12 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         world_spectrum = conv.illuminant_from_rgb(environment.mean_rgb()).astype(np.float32)
     same_for_light = (same_geometry and _same_shading(reuse.scene, scene) and _same_for_light_pass(reuse.scene, scene)
                       and _light_pass_settings(reuse.settings) == _light_pass_settings(settings))
+    microfacet = microfacet_materials(materials, textures)
     if same_for_light:
         targets, key = reuse.light_targets, reuse.key
     else:
         targets = find_light_targets(v, t, tri_material, materials, gratings, lights, conv, settings.light_paths,
-                                     textures=textures,
-                                     mesh_lights=mesh_lights, world_spectrum=world_spectrum)
+                                     mesh_lights=mesh_lights, world_spectrum=world_spectrum, microfacet=microfacet)
         key = next(_keys)
     prepared = PreparedScene(
         scene=scene,
@@ -286,6 +289,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         prepare_s=0.0,
         key=key,
         corner_normals=corner_normals,
+        microfacet=microfacet,
     )
     frozen = {f.name: _read_only(getattr(prepared, f.name)) for f in fields(prepared)}
     frozen["prepare_s"] = time.perf_counter() - t0

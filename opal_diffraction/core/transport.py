@@ -39,7 +39,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .geometry import interpolate_corners
-from .bsdf import microfacet_materials
 from .materials import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
 from .optics import fresnel_dielectric, reflect, refract
 
@@ -182,7 +181,7 @@ class SpecularWalker:
         self.n = prepared.grid.n
         self.rng = rng
         self._rays = 0  # rays cast
-        self.microfacet = microfacet_materials(prepared.materials, prepared.textures)
+        self.microfacet = prepared.microfacet  # (M,) bool, once per prepared scene
         self.any_microfacet = bool(self.microfacet.any())
 
     # hooks ----------------------------------------------------------------------------------
