@@ -178,7 +178,9 @@ def test_converged_pixels_stop_early_and_the_noisy_ones_go_on(renders):
         print(f"{name}: mean {counts[sl].mean():.1f} samples per pixel")
     assert (counts[REGIONS["world"]] == floor).all()  # no noise at all: the minimum, exactly
     assert counts[REGIONS["far plane"]].mean() < 1.2 * floor
-    assert counts[REGIONS["near the wall"]].mean() > 1.5 * floor
+    # the penumbra goes on well past the minimum (with the stratified numbers of core/sampler.py
+    # it is less noisy than with random ones: 86 samples where it took over 96)
+    assert counts[REGIONS["near the wall"]].mean() > 1.25 * floor
     assert all(r.stats["samples_max"] <= BASE["samples"] and r.stats["samples_min"] == floor for r in adaptive)
     assert all(r.stats["samples_mean"] < 0.6 * BASE["samples"] for r in adaptive)
 

@@ -169,5 +169,6 @@ def test_a_uniform_world_lights_diffuse_surfaces():
     mean = blocks.mean(axis=0)
     sigma = blocks.std(axis=0, ddof=1) / np.sqrt(len(blocks))
     z = norm.isf(0.001 / (2 * len(mean)))
-    assert np.all(np.abs(mean - expected) <= z * sigma + 1e-6 * expected), (mean / expected)
+    # + 1e-5 relative: float32 accumulation (the stratified estimate leaves almost no noise here)
+    assert np.all(np.abs(mean - expected) <= z * sigma + 1e-5 * expected), (mean / expected)
     assert res.rgb.min() > 0

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .scene import Camera
+from .sampler import sobol_owen_2d
 
 __all__ = ["FilterSampler", "camera_frame", "pixel_samples", "generate_rays"]
 
@@ -72,7 +73,8 @@ def _shift_extent(cam: Camera) -> float:
 
 
 def pixel_samples(
-    pixel_x: np.ndarray, pixel_y: np.ndarray, spp: int, rng: np.random.Generator, filt: FilterSampler
+    pixel_x: np.ndarray, pixel_y: np.ndarray, spp: int, rng: np.random.Generator, filt: FilterSampler,
+    qmc: tuple[np.ndarray, int, int] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``spp`` stratified, filter-distributed samples per pixel.
 
@@ -80,8 +82,21 @@ def pixel_samples(
     top edge, pixel centres at i + 0.5), u_lambda a third stratified dimension in [0, 1) for
     choosing a wavelength (so a pixel's samples cover the spectrum evenly), and pixel_index the
     position in the input pixel arrays.
+
+    ``qmc`` = (pixel ids (P,), first sample number, seed): the positions and u_lambda are the
+    pixels' Sobol-Burley points (core/sampler.py, pairs 0 and 1) numbered from the first sample
+    number on; None: N-rooks with ``rng``.
     """
     p = len(pixel_x)
+    if qmc is not None:
+        ids, first, seed = qmc
+        pix = np.repeat(np.asarray(ids), spp)
+        num = np.tile(np.arange(first, first + spp), p)
+        ux, uy = sobol_owen_2d(pix, num, 0, seed)
+        ul, _ = sobol_owen_2d(pix, num, 1, seed)
+        x = np.repeat(pixel_x, spp) + 0.5 + filt.offsets(ux)
+        y = np.repeat(pixel_y, spp) + 0.5 + filt.offsets(uy)
+        return x, y, ul, np.repeat(np.arange(p), spp)
     strata = np.arange(spp, dtype=np.float64)[None, :]
     # N-rooks: x strata in order, y strata in a random permutation per pixel.
     strata_rows = np.broadcast_to(np.arange(spp, dtype=np.float64), (p, spp))

@@ -19,6 +19,7 @@ import numpy as np
 
 from .geometry import orthonormal_basis
 from .gratings import diffracted_radiance, grating_frame
+from .sampler import SLOT_BOUNCE, SLOT_LIGHT, SLOT_PARAMS, SLOT_WIDTH, PixelSampler, vertex_pair
 from .lights import intersect_lights, is_delta, light_pdf, sample_light, sun_radiance
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIFFUSE
@@ -60,15 +61,21 @@ class EyePass:
         self.record_map = None if light is None else light.grating_records
 
     def trace(self, origins, directions, pix, n_pixels: int, rng: np.random.Generator,
-              u_lambda: np.ndarray | None = None) -> TileResult:
+              u_lambda: np.ndarray | None = None, sampler_ids=None) -> TileResult:
         """Trace camera rays (one per sample) and return the per-pixel sum of their radiance.
 
         ``u_lambda`` (B,) in [0, 1): stratified numbers for the SAMPLE wavelength choice
-        (uniform random if omitted).
+        (uniform random if omitted). ``sampler_ids`` = (pixel ids (B,), sample numbers (B,),
+        seed): the path vertices' numbers come from core/sampler.py's Sobol-Burley points of
+        those pixels and samples; None: pseudo-random (``rng``).
         """
         if u_lambda is None:
             u_lambda = rng.random(len(pix))
-        return _TileTrace(self, n_pixels, rng).run(origins, directions, pix, u_lambda)
+        tr = _TileTrace(self, n_pixels, rng)
+        if sampler_ids is None:
+            return tr.run(origins, directions, pix, u_lambda)
+        tr.sampler_seed = int(sampler_ids[2])
+        return tr.run(origins, directions, pix, u_lambda, ids=sampler_ids[:2])
 
     def trace_escapes(self, origins, directions, rng: np.random.Generator, wavelength_index=None) -> dict:
         """Follow rays through the scene's specular surfaces and report the ones that leave it.
@@ -102,6 +109,7 @@ class _TileTrace(SpecularWalker):
     def __init__(self, eye: EyePass, n_pixels: int, rng: np.random.Generator):
         super().__init__(eye.prepared, rng)
         self.caustic_map, self.record_map = eye.caustic_map, eye.record_map
+        self.sampler_seed = None  # set by EyePass.trace when the tile numbers its samples
         s = eye.prepared.settings
         self.limits = (s.max_bounces, s.diffuse_bounces, s.glossy_bounces, s.transmission_bounces)
         # which emitters' caustic paths (diffuse <- specular... <- emitter) the light pass has
@@ -162,20 +170,25 @@ class _TileTrace(SpecularWalker):
         camera ray or a specular bounce - no MIS partner); caustic: 0, 1 = the last diffuse vertex
         receives the light pass's caustics, 2 = and specular bounces followed it (a caustic path,
         counted by the light pass); final: the bounce limit was reached - this segment only
-        gathers emitted light (for MIS), nothing more; origin: the last diffuse vertex."""
+        gathers emitted light (for MIS), nothing more; pid, sid: the pixel and sample numbers
+        of core/sampler.py's points (``_numbers``)."""
         return {"nd": np.zeros(b, np.int8), "diffuse": np.zeros(b, np.int16), "glossy": np.zeros(b, np.int16),
                 "transmission": np.zeros(b, np.int16), "pdf": np.zeros(b, np.float32),
-                "caustic": np.zeros(b, np.int8), "final": np.zeros(b, bool)}
+                "caustic": np.zeros(b, np.int8), "final": np.zeros(b, bool),
+                "pid": np.zeros(b, np.uint32), "sid": np.zeros(b, np.uint32)}
 
     def empty_mono(self) -> Rays:
         r = super().empty_mono()
         r.extra = self._new_state(0)
         return r
 
-    def run(self, origins, directions, pix, u_lambda, wavelength_index=None) -> TileResult:
+    def run(self, origins, directions, pix, u_lambda, wavelength_index=None, ids=None) -> TileResult:
         n, b = self.n, len(pix)
         rays = Rays(origins, directions, pix.astype(np.int64), None, None,
                      np.zeros(b, np.int32), np.asarray(u_lambda, np.float64), self._new_state(b))
+        if ids is not None:
+            rays.extra["pid"][:] = ids[0]
+            rays.extra["sid"][:] = ids[1]
         mono = self.empty_mono()
         if wavelength_index is not None:  # start monochromatic (tools and tests)
             lam = np.broadcast_to(np.asarray(wavelength_index, np.int64), (b,)).copy()
@@ -221,6 +234,17 @@ class _TileTrace(SpecularWalker):
         if not self.caustics_cover_lights:
             return np.ones(len(rays), bool)
         return rays.extra["caustic"] != 2
+
+    def _numbers(self, rays: Rays, slot: int):
+        """The random numbers of one decision (``slot``: sampler.SLOT_LIGHT, SLOT_PARAMS or
+        SLOT_BOUNCE) at these path vertices: core/sampler.py's Sobol-Burley points of their
+        pixels and samples, a fresh range of dimension pairs per vertex and decision (so no two
+        decisions on one path share numbers); the tile's pseudo-random stream without ids."""
+        if self.sampler_seed is None or len(rays) == 0:
+            return self.rng
+        st = rays.extra
+        return PixelSampler(self.rng, st["pid"], st["sid"], vertex_pair(rays.depth, slot), self.sampler_seed,
+                            pairs=SLOT_WIDTH[slot])
 
     def _add_by_vertices(self, rays: Rays, contrib):
         """Accumulate light found at the end of a path segment into the part its diffuse-vertex
@@ -279,7 +303,7 @@ class _TileTrace(SpecularWalker):
                 micro &= ~prepared.materials.dispersive[hit.mat]
             if micro.any():
                 rm, hm = rays.take(micro), hit.take(micro)
-                params = self._surface_params(rm, hm, rng)
+                params = self._surface_params(rm, hm, self._numbers(rm, SLOT_PARAMS))
                 self._micro = (hit, micro, params)  # for scatter(): the same lobe for light and bounce
                 self._shade_microfacet(rm, hm, params, rng)
             kind = np.where(micro, -1, kind)  # shaded: not Lambertian below
@@ -297,11 +321,11 @@ class _TileTrace(SpecularWalker):
             if first.any():
                 self._denoising_features(r.take(first), h.take(first))
             if first.all():
-                self._next_events(r, h, rng, self._film)
+                self._next_events(r, h, self._film)
             else:
                 if first.any():
-                    self._next_events(r.take(first), h.take(first), rng, self._film)
-                self._next_events(r.take(~first), h.take(~first), rng, self._part("indirect"))
+                    self._next_events(r.take(first), h.take(first), self._film)
+                self._next_events(r.take(~first), h.take(~first), self._part("indirect"))
             if self.caustic_map is not None:
                 self._caustic_light(r, h, rng)
 
@@ -356,7 +380,7 @@ class _TileTrace(SpecularWalker):
         b = len(r)
         if b == 0:
             return micro_out
-        wi, cos = _cosine_hemisphere(h.ns, self.rng)
+        wi, cos = _cosine_hemisphere(h.ns, self._numbers(r, SLOT_BOUNCE))
         if self.bent:  # about ns; a direction below the geometric surface ends the path
             up = np.einsum("ij,ij->i", wi, h.ng) > 0
             if not up.all():
@@ -398,7 +422,8 @@ class _TileTrace(SpecularWalker):
             if sel.any():
                 r, h = rays.take(sel), hit.take(sel)
                 p = params.take(np.flatnonzero(sel)) if not sel.all() else params
-                self._nee_microfacet(r, h, p, rng, self._film if film is not None else self._part("indirect"))
+                self._nee_microfacet(r, h, p, self._numbers(r, SLOT_LIGHT),
+                                     self._film if film is not None else self._part("indirect"))
         if self.caustic_map is not None:
             base = self.prepared.materials.kind[hit.mat] == DIFFUSE
             if base.any():
@@ -470,7 +495,8 @@ class _TileTrace(SpecularWalker):
         if idx.size == 0:
             return None
         r, h = rays.take(idx), hit.take(idx)
-        wi, weight, pdf, flags = bsdf.sample(params, -r.d, h.ns, h.ng, self.rng.random((len(r), 3), np.float32))
+        wi, weight, pdf, flags = bsdf.sample(params, -r.d, h.ns, h.ng,
+                                             self._numbers(r, SLOT_BOUNCE).random((len(r), 3), np.float32))
         ok = flags != 0
         if not ok.all():
             r, h, wi, weight, pdf, flags = r.take(ok), h.take(ok), wi[ok], weight[ok], pdf[ok], flags[ok]
@@ -608,13 +634,15 @@ class _TileTrace(SpecularWalker):
             prepared.corner_normals, hit.prim, hit.bu, hit.bv, hit.ng)  # the normal before the map bent it
         return np.where(bent, bump_shadowing(ni, hit.ns, wi), np.float32(1.0))
 
-    def _next_events(self, rays: Rays, hit: Hit, rng, film):
+    def _next_events(self, rays: Rays, hit: Hit, film):
         """Next-event estimation at Lambertian vertices: every light (with the factored fast path
         of ``_direct_light``), then the emissive meshes and the world map as at any other
         surface (``_nee_microfacet`` with the Lambertian lobe)."""
+        rng = self._numbers(rays, SLOT_LIGHT)
         self._direct_light(rays, hit, rng, film)
         if self.mesh_lights is not None or self.prepared.environment is not None:
-            self._nee_microfacet(rays, hit, self._surface_params(rays, hit, rng), rng, film, analytic=False)
+            params = self._surface_params(rays, hit, self._numbers(rays, SLOT_PARAMS))
+            self._nee_microfacet(rays, hit, params, rng, film, analytic=False)
 
     def _direct_light(self, rays: Rays, hit: Hit, rng, film):
         prepared = self.prepared

@@ -118,6 +118,12 @@ def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: i
     xs, ys = xs.ravel(), ys.ravel()
     if pixels is not None:
         xs, ys = xs[pixels], ys[pixels]
-    sx, sy, sl, pidx = pixel_samples(xs.astype(np.float64), ys.astype(np.float64), work.rounds[r_index], rng, filt)
+    # low-discrepancy numbers per pixel (core/sampler.py), numbered on across rounds
+    ids = (ys.astype(np.int64) * int(eye.prepared.scene.camera.width) + xs).astype(np.uint32)
+    first = int(sum(work.rounds[:r_index]))
+    sx, sy, sl, pidx = pixel_samples(xs.astype(np.float64), ys.astype(np.float64), work.rounds[r_index], rng, filt,
+                                     qmc=(ids, first, work.seed))
     o, d = generate_rays(eye.prepared.scene.camera, sx, sy)
-    return eye.trace(o, d, pidx, len(xs), rng, u_lambda=sl)
+    spp = work.rounds[r_index]
+    return eye.trace(o, d, pidx, len(xs), rng, u_lambda=sl,
+                     sampler_ids=(ids[pidx], np.tile(np.arange(first, first + spp), len(xs)), work.seed))

@@ -1,0 +1,165 @@
+"""Low-discrepancy random numbers per pixel: Owen-scrambled, shuffled Sobol' (0,2)-points.
+
+Method: Burley 2020, "Practical Hash-based Owen Scrambling" (JCGT 9(4)), which Cycles uses as its
+default sampler ("Sobol-Burley", intern/cycles/kernel/sample/sobol_burley.h). A pixel's samples
+are the points 0, 1, 2, ... of the 2-D Sobol' sequence (van der Corput in x, Sobol's second
+dimension in y: a (0,2)-sequence, so the first 2^k points put exactly one point in every
+elementary interval of area 2^-k); each pair of dimensions of a path takes its own shuffle of
+the sample index and its own nested uniform (Owen) scramble of each coordinate, both keyed by a
+hash of (seed, pixel, pair). Every number is therefore uniform on [0, 1) and pairs are
+independent of one another across dimensions and pixels, while within one pixel and one pair
+the samples stay stratified in 2-D: the error of smooth integrands (soft shadows, sky light on
+a diffuse floor, antialiased texture edges) falls faster than random sampling's 1/sqrt(N).
+The Owen scramble is Laine & Karras's hash permutation applied to the bit-reversed value (with
+Burley's constants): a bit changes only with the bits above it, as nested uniform scrambling
+requires (docs/physics.md section 6.5).
+
+``PixelSampler`` offers the one method of ``numpy.random.Generator`` the sampling routines use,
+``random(size, dtype)``: each call for the sampler's batch size takes the next dimension (two
+consecutive calls form one 2-D pair), any other call falls through to the pseudo-random
+generator. Numbers are multiples of 2^-24, so they stay below 1 in float32 as well.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["sobol_owen_2d", "PixelSampler", "CAMERA_PAIRS", "PAIRS_PER_VERTEX", "SLOT_LIGHT", "SLOT_PARAMS",
+           "SLOT_BOUNCE", "SLOT_WIDTH", "vertex_pair"]
+
+#: Pairs the camera uses: 0 the pixel position (x, y), 1 the wavelength number (its x).
+CAMERA_PAIRS = 2
+#: Pairs reserved per path vertex (slots: next-event estimation 0-7, surface parameters 8-9,
+#: the bounce 10-15): a vertex never reuses another vertex's or another decision's numbers.
+PAIRS_PER_VERTEX = 16
+SLOT_LIGHT, SLOT_PARAMS, SLOT_BOUNCE = 0, 8, 10
+#: How many pairs each slot may use before its numbers fall back to pseudo-random ones.
+SLOT_WIDTH = {SLOT_LIGHT: 8, SLOT_PARAMS: 2, SLOT_BOUNCE: 6}
+
+_U32 = np.uint32
+
+
+def _sobol_dim1_tables() -> np.ndarray:
+    """Sobol's second dimension as four 256-entry XOR tables (one per byte of the index): the
+    direction numbers are v_0 = 2^31, v_i = v_{i-1} xor (v_{i-1} >> 1) (polynomial x + 1)."""
+    v = np.zeros(32, np.uint64)
+    v[0] = 1 << 31
+    for i in range(1, 32):
+        v[i] = v[i - 1] ^ (v[i - 1] >> np.uint64(1))
+    tables = np.zeros((4, 256), np.uint64)
+    for byte in range(4):
+        for value in range(256):
+            acc = 0
+            for bit in range(8):
+                if value >> bit & 1:
+                    acc ^= int(v[byte * 8 + bit])
+            tables[byte, value] = acc
+    return tables.astype(_U32)
+
+
+_DIM1 = _sobol_dim1_tables()
+
+
+def _reverse_bits(x: np.ndarray) -> np.ndarray:
+    x = x.astype(_U32, copy=True)
+    x = ((x >> _U32(1)) & _U32(0x55555555)) | ((x & _U32(0x55555555)) << _U32(1))
+    x = ((x >> _U32(2)) & _U32(0x33333333)) | ((x & _U32(0x33333333)) << _U32(2))
+    x = ((x >> _U32(4)) & _U32(0x0F0F0F0F)) | ((x & _U32(0x0F0F0F0F)) << _U32(4))
+    x = ((x >> _U32(8)) & _U32(0x00FF00FF)) | ((x & _U32(0x00FF00FF)) << _U32(8))
+    return (x >> _U32(16)) | (x << _U32(16))
+
+
+def _hash(x: np.ndarray) -> np.ndarray:
+    """A 32-bit integer finaliser (lowbias32, Wellons 2018): well mixed keys for the scrambles."""
+    x = x.astype(_U32, copy=True)
+    x ^= x >> _U32(16)
+    x *= _U32(0x7FEB352D)
+    x ^= x >> _U32(15)
+    x *= _U32(0x846CA68B)
+    x ^= x >> _U32(16)
+    return x
+
+
+def _owen(x: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """Nested uniform scramble of 32-bit fixed-point values (Burley 2020, listing 3)."""
+    x = _reverse_bits(x)
+    x += seed
+    x ^= x * _U32(0x6C50B47C)
+    x ^= x * _U32(0xB82F1E52)
+    x ^= x * _U32(0xC7AFE638)
+    x ^= x * _U32(0x8D22F6E6)
+    return _reverse_bits(x)
+
+
+def _sobol_2d(index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    x = _reverse_bits(index)
+    i = index.astype(_U32)
+    y = (_DIM1[0][i & _U32(0xFF)] ^ _DIM1[1][(i >> _U32(8)) & _U32(0xFF)]
+         ^ _DIM1[2][(i >> _U32(16)) & _U32(0xFF)] ^ _DIM1[3][i >> _U32(24)])
+    return x, y
+
+
+def _key(seed: int, pixel: np.ndarray, pair: np.ndarray) -> np.ndarray:
+    with np.errstate(over="ignore"):
+        k = _hash(np.asarray(pixel, np.uint64).astype(_U32) ^ _hash(np.full(1, seed & 0xFFFFFFFF, _U32)))
+        return _hash(k ^ _hash(np.asarray(pair, np.int64).astype(_U32) * _U32(0x9E3779B9)))
+
+
+def sobol_owen_2d(pixel, sample, pair, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The 2-D point of ``sample`` (B,) in pixel ``pixel`` (B,) for dimension pair ``pair``
+    (scalar or (B,)): two float64 arrays in [0, 1), multiples of 2^-24."""
+    pixel = np.asarray(pixel)
+    sample = np.asarray(sample, np.int64).astype(_U32)
+    pair = np.broadcast_to(np.asarray(pair, np.int64), sample.shape)
+    with np.errstate(over="ignore"):
+        key = _key(seed, pixel, pair)
+        index = _owen(sample, key)  # the shuffle: each pair visits the points in its own order
+        x, y = _sobol_2d(index)
+        x = _owen(x, _hash(key ^ _U32(0x68BC21EB)))
+        y = _owen(y, _hash(key ^ _U32(0x02E5BE93)))
+    scale = 1.0 / (1 << 24)
+    return (x >> _U32(8)).astype(np.float64) * scale, (y >> _U32(8)).astype(np.float64) * scale
+
+
+def vertex_pair(depth: np.ndarray, slot: int) -> np.ndarray:
+    """The first dimension pair of a decision ``slot`` at path vertices of bounce ``depth``."""
+    return CAMERA_PAIRS + np.asarray(depth, np.int64) * PAIRS_PER_VERTEX + slot
+
+
+class PixelSampler:
+    """``random(size, dtype)`` for one batch of path vertices: Sobol-Burley numbers where the
+    call asks for one number (or a row of numbers) per vertex, ``rng`` otherwise. ``pixel`` and
+    ``sample`` (B,) identify each vertex's pixel and sample; ``pair`` (B,) its first pair."""
+
+    def __init__(self, rng: np.random.Generator, pixel, sample, pair, seed: int, pairs: int = 1 << 30):
+        self._rng = rng
+        self._left = int(pairs)  # pairs this sampler may still use
+        self._pixel = np.asarray(pixel)
+        self._sample = np.asarray(sample)
+        self._pair = np.asarray(pair, np.int64)
+        self._seed = int(seed)
+        self._spare = None  # the second coordinate of the current pair
+
+    def __len__(self) -> int:
+        return len(self._pixel)
+
+    def _next(self) -> np.ndarray:
+        if self._spare is not None:
+            out, self._spare = self._spare, None
+            self._pair = self._pair + 1
+            return out
+        out, self._spare = sobol_owen_2d(self._pixel, self._sample, self._pair, self._seed)
+        self._left -= 1
+        return out
+
+    def random(self, size=None, dtype=np.float64, out=None):
+        shape = (size,) if isinstance(size, (int, np.integer)) else (None if size is None else tuple(size))
+        if (out is not None or shape is None or len(shape) > 2 or shape[0] != len(self) or len(self) == 0
+                or 2 * self._left + (self._spare is not None) < (1 if len(shape) == 1 else shape[1])):
+            return self._rng.random(size, dtype, out=out) if out is not None else self._rng.random(size, dtype)
+        if len(shape) == 1:
+            return self._next().astype(dtype)
+        return np.stack([self._next() for _ in range(shape[1])], axis=1).astype(dtype)
+
+    def __getattr__(self, name):  # the rest of the Generator interface: pseudo-random
+        return getattr(self._rng, name)

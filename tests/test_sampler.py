@@ -1,0 +1,67 @@
+"""core/sampler.py: Owen-scrambled shuffled Sobol' points (docs/physics.md section 6.5).
+
+Checked against their definitions, not against our own output: every power-of-two prefix of a
+pixel's points is a (0, k, 2)-net (one point in each elementary interval), the numbers are
+uniform over pixels (chi-square) and independent between dimension pairs, and a smooth
+integrand's pixel estimate is unbiased and converges faster than 1/sqrt(N).
+"""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from opal_diffraction.core.sampler import PixelSampler, sobol_owen_2d, vertex_pair
+
+
+@pytest.mark.parametrize("k", [2, 5, 8])
+@pytest.mark.parametrize("pixel,pair", [(0, 0), (4097, 3), (123456, 41)])
+def test_every_prefix_is_a_net(k, pixel, pair):
+    n = 1 << k
+    x, y = sobol_owen_2d(np.full(n, pixel), np.arange(n), pair, seed=11)
+    for i in range(k + 1):  # elementary intervals 2^-i x 2^-(k-i)
+        cells = (np.floor(x * (1 << i)).astype(np.int64) << (k - i)) + np.floor(y * (1 << (k - i))).astype(np.int64)
+        assert len(np.unique(cells)) == n
+
+
+def test_uniform_over_pixels_and_independent_pairs():
+    m = 200_000
+    pix = np.arange(m)
+    x, y = sobol_owen_2d(pix, np.full(m, 5), 7, seed=2)
+    x2, _ = sobol_owen_2d(pix, np.full(m, 5), 8, seed=2)
+    # a 16 x 16 histogram of (x, y) and of (x, x2): uniform (two chi-square tests, Bonferroni)
+    for a, b in ((x, y), (x, x2)):
+        h, _, _ = np.histogram2d(a, b, bins=16, range=[[0, 1], [0, 1]])
+        p = stats.chisquare(h.ravel()).pvalue
+        assert p > 0.01 / 2
+    assert x.max() < 1 and x.min() >= 0
+    assert np.float32(x.max()) < 1  # below 1 in float32 too
+
+
+def test_smooth_integrand_unbiased_and_faster_than_random():
+    """f(x, y) = exp(x) sin(pi y) has the integral (e - 1) 2 / pi. Over 4096 pixels of 64 samples
+    the mean is unbiased (Z-test), and the per-pixel RMS error is far below random sampling's
+    sigma / 8 (the error of 64 independent samples)."""
+    exact = (np.e - 1) * 2 / np.pi
+    pixels, spp = 4096, 64
+    pix = np.repeat(np.arange(pixels), spp)
+    x, y = sobol_owen_2d(pix, np.tile(np.arange(spp), pixels), 3, seed=9)
+    est = (np.exp(x) * np.sin(np.pi * y)).reshape(pixels, spp).mean(axis=1)
+    sigma_random = np.sqrt(np.mean(np.exp(2 * np.linspace(0, 1, 100001))) * 0.5 - exact**2)
+    err = est - exact
+    assert abs(err.mean()) < 4 * err.std(ddof=1) / np.sqrt(pixels)
+    assert np.sqrt(np.mean(err**2)) < 0.25 * sigma_random / np.sqrt(spp)
+
+
+def test_pixel_sampler_counts_dimensions_and_falls_back():
+    rng = np.random.default_rng(0)
+    b = 1000
+    s = PixelSampler(rng, np.arange(b), np.zeros(b, np.int64), vertex_pair(np.zeros(b), 0), seed=1, pairs=2)
+    a1, a2 = s.random(b), s.random(b, np.float32)
+    ex, ey = sobol_owen_2d(np.arange(b), np.zeros(b), vertex_pair(np.zeros(b), 0), 1)
+    assert np.array_equal(a1, ex) and np.array_equal(a2, ey.astype(np.float32))
+    rows = s.random((b, 2))  # the second pair
+    fx, fy = sobol_owen_2d(np.arange(b), np.zeros(b), vertex_pair(np.zeros(b), 0) + 1, 1)
+    assert np.array_equal(rows, np.stack([fx, fy], axis=1))
+    # pairs used up, and other sizes: the pseudo-random stream
+    assert not np.isin(s.random(b), np.concatenate([ex, ey, fx, fy])).all()
+    assert s.random(7).shape == (7,)
