@@ -60,6 +60,16 @@ class _Parser(argparse.ArgumentParser):
         raise _UsageExit(message)
 
 
+def _light_paths(text: str) -> int | None:
+    """--light-paths: a whole number >= 0, or 'auto' (None: sized to the image)."""
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number or 'auto', got {text!r}") from None
+
+
 class _ProgressBar:
     """A one-line progress bar on stderr (redrawn at most ten times a second)."""
 
@@ -107,7 +117,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--diffuse-bounces", type=int, default=4)
     r.add_argument("--glossy-bounces", type=int, default=4)
     r.add_argument("--transmission-bounces", type=int, default=12)
-    r.add_argument("--light-paths", type=int, default=1_000_000, help="light-pass paths for caustics (0: off)")
+    r.add_argument("--light-paths", type=_light_paths, default=None, metavar="N|auto",
+                   help="light-pass paths for caustics (0: off; default auto: 16 per pixel, 65 536 to 1 000 000)")
     r.add_argument("--dispersion-sampling", choices=["SPLIT", "SAMPLE"], default="SAMPLE")
     r.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"), help="override the camera's resolution")
     r.add_argument("--spectral-exr", default="", help="also write a spectral EXR (JCGT 2021 layout) here")

@@ -269,3 +269,20 @@ def test_more_receiving_triangles_than_the_map_can_hold_is_a_warning_not_a_hang(
     res = render(floor, RenderSettings(samples=1, light_paths=20_000, wavelength_step=1.0))
     assert any("receiving triangles are too many for the caustic map" in w for w in res.warnings)
     assert np.isfinite(res.spectral).all() and res.rgb.mean() > 0
+
+
+def test_automatic_light_paths_follow_the_image_size():
+    """light_paths=None (the default) sizes the light pass to the image: 16 paths per pixel
+    within 65 536 - 1 000 000 (settings.auto_light_paths); an explicit count is kept."""
+    from dataclasses import replace as _replace
+
+    from opal_diffraction.core.settings import auto_light_paths
+
+    assert RenderSettings().light_paths is None
+    assert auto_light_paths(64, 64) == 65_536 and auto_light_paths(100, 100) == 160_000
+    assert auto_light_paths(640, 400) == 1_000_000
+    scene = slab_scene()
+    for (w, h), expected in (((64, 64), 65_536), ((120, 100), 192_000), ((800, 600), 1_000_000)):
+        s = _replace(scene, camera=_replace(scene.camera, width=w, height=h))
+        assert prepare(s, RenderSettings()).settings.light_paths == expected
+        assert prepare(s, RenderSettings(light_paths=1234)).settings.light_paths == 1234

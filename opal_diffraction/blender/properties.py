@@ -135,10 +135,16 @@ class OpalRenderSettings(PropertyGroup):
         name="Samples", description="Eye samples per pixel: more samples, less noise", default=16, min=1,
         max=1 << 24, soft_max=4096,
     )
+    light_paths_auto: BoolProperty(
+        name="Automatic Light Paths", description="Size the light pass to the image: 16 light paths per pixel, "
+        "between 65 536 and 1 000 000 (off: the number below)",
+        default=True,
+    )
     light_paths: IntProperty(
         name="Light Paths", description="Paths traced from the lights in the light pass (caustics and light "
-        "reaching gratings through glass); the light pass is skipped when the scene needs none",
+        "reaching gratings through glass) when Automatic is off; the light pass is skipped when the scene needs none",
         default=1_000_000, min=0, soft_max=100_000_000,
+        update=lambda self, _context: setattr(self, "light_paths_auto", False),  # a number typed in is meant
     )
     wavelength_min: FloatProperty(
         name="Wavelength Min", description="Shortest wavelength simulated (the CIE observer covers 360-830 nm)",

@@ -25,7 +25,7 @@ def render_settings(opal, scene, spectral_path: str = "") -> RenderSettings:
     """Core RenderSettings from ``scene.opal`` (names copied one to one) and Blender's threads."""
     seed = int(opal.seed) + (int(scene.frame_current) if opal.use_animated_seed else 0)
     return RenderSettings(
-        samples=int(opal.samples), light_paths=int(opal.light_paths), wavelength_min=float(opal.wavelength_min),
+        samples=int(opal.samples), light_paths=None if opal.light_paths_auto else int(opal.light_paths), wavelength_min=float(opal.wavelength_min),
         wavelength_max=float(opal.wavelength_max), wavelength_step=float(opal.wavelength_step),
         max_bounces=int(opal.max_bounces), diffuse_bounces=int(opal.diffuse_bounces),
         glossy_bounces=int(opal.glossy_bounces), transmission_bounces=int(opal.transmission_bounces), seed=max(seed, 0), dispersion_sampling=opal.dispersion_sampling,

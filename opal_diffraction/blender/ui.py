@@ -107,7 +107,11 @@ class OPAL_RENDER_PT_light_paths(OpalButtonsPanel, Panel):
         col = layout.column(align=True, heading="Max Bounces")
         for name in ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces"):
             col.prop(opal, name)
-        layout.prop(opal, "light_paths")
+        col = layout.column(align=True, heading="Light Paths")
+        col.prop(opal, "light_paths_auto", text="Automatic")
+        sub = col.column()
+        sub.active = not opal.light_paths_auto
+        sub.prop(opal, "light_paths")
 
 
 class OPAL_RENDER_PT_film(OpalButtonsPanel, Panel):

@@ -37,7 +37,7 @@ from .materials import PreparedMaterials, prepare_materials
 from .bsdf import microfacet_materials
 from .mesh_lights import MeshLights
 from .scene import Camera, Scene
-from .settings import EYE_ONLY_SETTINGS, RenderSettings
+from .settings import AUTO_LIGHT_PATHS_RANGE, EYE_ONLY_SETTINGS, RenderSettings, auto_light_paths
 from .spectrum import SpectralConverter, WavelengthGrid
 from .textures import PreparedTextures, prepare_textures
 
@@ -200,6 +200,10 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
     settings = settings or RenderSettings()
     settings.validate()
     scene, warnings = scene.validated()
+    if settings.light_paths is None:  # automatic: sized to the image (settings.auto_light_paths)
+        cam = scene.camera
+        settings = replace(settings, light_paths=auto_light_paths(cam.width, cam.height) if cam is not None
+                           else AUTO_LIGHT_PATHS_RANGE[1])
     check(stopped)
     grid = settings.grid()
     if conv is None and reuse is not None:

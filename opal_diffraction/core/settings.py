@@ -19,7 +19,8 @@ from .scene import COORD_LIMIT, SceneError, _g, _number
 from .spectrum import _MAX_NM, _MIN_NM, WavelengthGrid
 
 __all__ = ["RenderSettings", "DISPERSION_SAMPLING", "EYE_ONLY_SETTINGS", "BACKENDS", "MAX_WAVELENGTHS",
-           "MIN_WAVELENGTHS", "FEW_WAVELENGTHS", "film_bytes"]
+           "MIN_WAVELENGTHS", "FEW_WAVELENGTHS", "film_bytes", "AUTO_LIGHT_PATHS_PER_PIXEL",
+           "AUTO_LIGHT_PATHS_RANGE", "auto_light_paths"]
 
 DISPERSION_SAMPLING = ("SPLIT", "SAMPLE")
 BACKENDS = ("auto", "embree", "numpy", "brute")
@@ -58,6 +59,18 @@ _WORDS = {"samples": "samples", "light_paths": "light paths", "max_bounces": "ma
           "adaptive_threshold": "adaptive threshold", "adaptive_min_samples": "adaptive min samples"}
 FILTER_WIDTH_MAX = 100.0  # pixels
 
+#: light_paths=None (automatic): this many light paths per pixel of the image, within the range.
+#: A caustic's noise per pixel goes with the light paths landing in it, so a small image needs
+#: few (64 x 64: 65 536 paths, about a tenth of a second) and 640 x 400 and up take the 1 M cap.
+AUTO_LIGHT_PATHS_PER_PIXEL = 16
+AUTO_LIGHT_PATHS_RANGE = (65_536, 1_000_000)
+
+
+def auto_light_paths(width: int, height: int) -> int:
+    """The light paths of an automatic setting for a ``width`` x ``height`` image."""
+    lo, hi = AUTO_LIGHT_PATHS_RANGE
+    return int(min(max(AUTO_LIGHT_PATHS_PER_PIXEL * int(width) * int(height), lo), hi))
+
 
 def _wavelength_count(lo: float, hi: float, step: float) -> float:
     """Samples lo + i * step <= hi (as WavelengthGrid counts them), in float so it cannot overflow."""
@@ -75,7 +88,7 @@ def film_bytes(width: int, height: int, wavelengths: int) -> int:
 @dataclass(frozen=True)
 class RenderSettings:
     samples: int = 16                 # eye samples per pixel
-    light_paths: int = 1_000_000      # light-pass paths (caustics)
+    light_paths: int | None = None    # light-pass paths (caustics); None: automatic (auto_light_paths)
     element_size: float = 0.0         # illumination-map element edge (m); 0: automatic from the paths
     wavelength_min: float = 400.0     # nm
     wavelength_max: float = 700.0     # nm
@@ -168,6 +181,8 @@ class RenderSettings:
         backend (known, and importable)."""
         vals = {}
         for name, (lo, hi) in _INT_RANGES.items():
+            if name == "light_paths" and self.light_paths is None:
+                continue  # automatic
             v = _number(getattr(self, name), _WORDS[name], integer=True)
             if v < lo:
                 rule = {"samples": "at least 1", "tile_size": "at least 1", "round_samples": "at least 1"}.get(name, ">= 0")

@@ -232,3 +232,16 @@ def test_dispersion_preset_operator():
         bpy.ops.opal.dispersion_preset(preset="DIAMOND")
     assert mat.opal.dispersion == "DIAMOND"
     assert not bpy.ops.opal.dispersion_preset.poll()  # no material in this context
+
+
+def test_light_paths_are_automatic_until_a_number_is_set():
+    """Automatic light paths (sized to the image) by default: the core gets None; setting a count
+    (as a user typing it, or a script) turns Automatic off and the count is used exactly."""
+    from opal_diffraction.blender.settings import render_settings
+
+    sc = bs.empty_scene()
+    assert sc.opal.light_paths_auto
+    assert render_settings(sc.opal, sc).light_paths is None
+    sc.opal.light_paths = 0
+    assert not sc.opal.light_paths_auto
+    assert render_settings(sc.opal, sc).light_paths == 0
