@@ -60,13 +60,15 @@ def _sobol_dim1_tables() -> np.ndarray:
 _DIM1 = _sobol_dim1_tables()
 
 
+_REVERSED_BYTE = np.array([int(f"{b:08b}"[::-1], 2) for b in range(256)], np.uint32)
+
+
 def _reverse_bits(x: np.ndarray) -> np.ndarray:
-    x = x.astype(_U32, copy=True)
-    x = ((x >> _U32(1)) & _U32(0x55555555)) | ((x & _U32(0x55555555)) << _U32(1))
-    x = ((x >> _U32(2)) & _U32(0x33333333)) | ((x & _U32(0x33333333)) << _U32(2))
-    x = ((x >> _U32(4)) & _U32(0x0F0F0F0F)) | ((x & _U32(0x0F0F0F0F)) << _U32(4))
-    x = ((x >> _U32(8)) & _U32(0x00FF00FF)) | ((x & _U32(0x00FF00FF)) << _U32(8))
-    return (x >> _U32(16)) | (x << _U32(16))
+    """The 32 bits of x in reverse order (four byte lookups)."""
+    x = x.astype(_U32, copy=False)
+    t = _REVERSED_BYTE
+    return ((t[x & _U32(0xFF)] << _U32(24)) | (t[(x >> _U32(8)) & _U32(0xFF)] << _U32(16))
+            | (t[(x >> _U32(16)) & _U32(0xFF)] << _U32(8)) | t[x >> _U32(24)])
 
 
 def _hash(x: np.ndarray) -> np.ndarray:
@@ -80,23 +82,27 @@ def _hash(x: np.ndarray) -> np.ndarray:
     return x
 
 
-def _owen(x: np.ndarray, seed: np.ndarray) -> np.ndarray:
-    """Nested uniform scramble of 32-bit fixed-point values (Burley 2020, listing 3)."""
-    x = _reverse_bits(x)
-    x += seed
+def _laine_karras(x: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """Laine & Karras's hash permutation with Burley's constants: bit i of the result depends on
+    bits 0..i of x only (Burley 2020, listing 2)."""
+    x = x + seed
     x ^= x * _U32(0x6C50B47C)
     x ^= x * _U32(0xB82F1E52)
     x ^= x * _U32(0xC7AFE638)
     x ^= x * _U32(0x8D22F6E6)
-    return _reverse_bits(x)
+    return x
 
 
-def _sobol_2d(index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    x = _reverse_bits(index)
-    i = index.astype(_U32)
-    y = (_DIM1[0][i & _U32(0xFF)] ^ _DIM1[1][(i >> _U32(8)) & _U32(0xFF)]
-         ^ _DIM1[2][(i >> _U32(16)) & _U32(0xFF)] ^ _DIM1[3][i >> _U32(24)])
-    return x, y
+def _owen(x: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """Nested uniform scramble of 32-bit fixed-point values (Burley 2020, listing 3)."""
+    return _reverse_bits(_laine_karras(_reverse_bits(x), seed))
+
+
+def _sobol_y(index: np.ndarray) -> np.ndarray:
+    """Sobol's second dimension of ``index`` (uint32), from the byte tables."""
+    i = index
+    return (_DIM1[0][i & _U32(0xFF)] ^ _DIM1[1][(i >> _U32(8)) & _U32(0xFF)]
+            ^ _DIM1[2][(i >> _U32(16)) & _U32(0xFF)] ^ _DIM1[3][i >> _U32(24)])
 
 
 def _key(seed: int, pixel: np.ndarray, pair: np.ndarray) -> np.ndarray:
@@ -114,9 +120,10 @@ def sobol_owen_2d(pixel, sample, pair, seed: int = 0) -> tuple[np.ndarray, np.nd
     with np.errstate(over="ignore"):
         key = _key(seed, pixel, pair)
         index = _owen(sample, key)  # the shuffle: each pair visits the points in its own order
-        x, y = _sobol_2d(index)
-        x = _owen(x, _hash(key ^ _U32(0x68BC21EB)))
-        y = _owen(y, _hash(key ^ _U32(0x02E5BE93)))
+        # Sobol's x is the reversed index, so its Owen scramble reverse(LK(reverse(x))) needs
+        # only the final reversal
+        x = _reverse_bits(_laine_karras(index, _hash(key ^ _U32(0x68BC21EB))))
+        y = _owen(_sobol_y(index), _hash(key ^ _U32(0x02E5BE93)))
     scale = 1.0 / (1 << 24)
     return (x >> _U32(8)).astype(np.float64) * scale, (y >> _U32(8)).astype(np.float64) * scale
 
