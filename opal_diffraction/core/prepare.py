@@ -202,7 +202,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
     scene, warnings = scene.validated()
     if settings.light_paths is None:  # automatic: sized to the image (settings.auto_light_paths)
         cam = scene.camera
-        settings = replace(settings, light_paths=auto_light_paths(cam.width, cam.height) if cam is not None
+        settings = replace(settings, light_paths=auto_light_paths(cam.width, cam.height, settings.samples) if cam is not None
                            else AUTO_LIGHT_PATHS_RANGE[1])
     check(stopped)
     grid = settings.grid()
