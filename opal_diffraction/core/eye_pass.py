@@ -712,7 +712,7 @@ class _TileTrace(SpecularWalker):
                 # light that reached the grating through mirrors and glass: every directional lobe
                 # of the light pass's records (grating_records.py, docs/physics.md section 3.5),
                 # on the viewer's side (h.ng faces it) for reflection, the far side for transmission
-                hit_of, irr, src = self.record_map.lobes(h.prim, h.bu, h.bv, rng)
+                hit_of, irr, src = self.record_map.lobes(h.prim, h.bu, h.bv, rng, at=h.p)
                 cos_l = np.einsum("ij,ij->i", src, h.ng[hit_of])
                 keep = (cos_l < 0) if g.transmission[m] else (cos_l > 0)
                 hit_of, irr, src = hit_of[keep], irr[keep], src[keep]

@@ -9,23 +9,36 @@ cache (Jensen, *Realistic Image Synthesis Using Photon Mapping*, 2001, ch. 7; th
 octahedral map of the sphere, Engelhardt & Dachsbacher 2008 / Cigolle et al. 2014 "A survey of
 efficient representations for independent unit vectors"):
 
-- a *lobe* is one (element, direction bin, wavelength band) triple: the direction bin is a cell
+- a *lobe* is one (element, side, wavelength band, direction bin): the direction bin is a cell
   of a G x G grid over the octahedral map of the unit direction towards the source (G = 8: 64
   cells of ~0.2 sr); the band is 0 for white paths (the whole spectrum travelled together) and
   1 + one of NB bands of the wavelength grid for mono paths (dispersion came first, so each band
   has its own direction);
 - each lobe holds its spectral flux (n,), the flux-weighted sum of the unit directions towards
-  the source (3,) and its deposit count; the eye pass diffracts every lobe of the element with
-  the lobe's mean direction and irradiance flux / element area;
-- storage is sparse: only occupied lobes, as sorted int64 keys ``cell * S + lobe`` with rows of
+  the source (3,), its deposit count, and the flux-weighted moments of the deposit points p and
+  directions d (sum w, w p, w p p^T, w d p^T): a first-order model of the direction across the
+  element, d(x) = d_mean + J (x - p_mean) with J = Cov(d, p) Cov(p, p)^+ (least squares in the
+  element's plane; the irradiance-gradient idea of Ward & Heckbert 1992 and of Jarosz et al.
+  2008 applied to the direction). A virtual point source at distance r turns its direction by
+  ~ element / r across an element, which moves a sharp order by far more than its width
+  lambda / (N D); the model makes the direction exact to first order at the shading point
+  (itself, not the jittered lookup point), so neither the element size nor the lookup filter
+  shifts the orders. Lobes with fewer than MIN_GRADIENT_DEPOSITS deposits use the mean only;
+- the eye pass diffracts every lobe of the element with the lobe's direction at the shading
+  point and its irradiance flux / element area;
+- storage is sparse: only occupied lobes, as sorted int64 keys
+  ``cell * S + (side * (NB + 1) + band) * G^2 + bin`` with rows of
   flux, direction and count. Deposits go to a pending buffer, compacted (one stable sort of the
   keys, np.bincount sums in arrival order) when the buffer outgrows the store, so memory stays
   O(occupied lobes) and the result depends only on the order of the deposit calls (lanes and
   the distributed replay give the same bits);
-- side-agnostic: the stored direction says which side the light arrived on (the sign of its
-  cosine with the normal), so the eye pass keeps the lobes on the viewer's side for a reflection
-  grating and those on the far side for a transmission grating. Storing by arrival side and
-  looking up by viewing side (the earlier record) never finds light for a transmission grating;
+- both sides in one lookup: the lobe key holds the side the light arrived on (so a lobe never
+  averages light from both sides: every direction in it has the same sign of cosine with the
+  normal, and so has their mean), and the lookup returns the lobes of both sides; the eye pass
+  keeps those on the viewer's side for a reflection grating and those on the far side for a
+  transmission grating, by the sign of the lobe direction's cosine with the normal. Storing by
+  arrival side and looking up only the viewing side (the earlier record) never finds light for
+  a transmission grating;
 - elements sized where grating flux lands (``record_layout``): a pilot light pass of a few
   percent of the paths (its own random stream) counts the grating hits per triangle and
   estimates the lit part of each triangle from the finest power-of-two subdivision at which the
@@ -55,6 +68,9 @@ PILOT_MAX_PATHS = 1 << 20  # ... and at most this many
 PILOT_PER_CELL = 4        # pilot hits per occupied cell at the level that measures the lit area
 PILOT_STREAM = 3          # random stream id of the pilot (eye pass 1, light pass 2)
 MAX_LOBE_PAIRS = 1 << 16  # (hit, lobe) pairs the eye pass diffracts per call, to bound memory
+MIN_GRADIENT_DEPOSITS = 8  # deposits a lobe needs before its direction gradient is used
+MAX_GRADIENT_TURN = 0.25   # largest change of the unit direction the gradient may make
+_MOMENTS = 19              # sum w, w p (3), w p p^T (6: xx yy zz xy xz yz), w d p^T (9)
 _CAP_FLOATS = 32_000_000  # rows x wavelengths the record layout aims to stay under
 
 
@@ -88,7 +104,7 @@ class GratingRecords:
     the flux-weighted sum of directions towards the source, and the deposit count.
 
     The light pass calls ``deposit`` (the interface of elements.IlluminationMap.deposit, element
-    indices of ``layout`` with their side bit, which is dropped); lanes add with ``+=``; the eye
+    indices of ``layout`` with their side bit: the side the light arrived on); lanes add with ``+=``; the eye
     pass calls ``lobes``.
     """
 
@@ -99,12 +115,15 @@ class GratingRecords:
         self.n = int(n)
         self.grid = int(grid)
         self.bands = int(min(bands, self.n))
-        self.stride = (self.bands + 1) * self.grid * self.grid  # lobe keys per element
+        self.stride = 2 * (self.bands + 1) * self.grid * self.grid  # lobe keys per element (both sides)
         self._keys = np.zeros(0, np.int64)
         self._flux = np.zeros((0, self.n), np.float32)
         self._dir = np.zeros((0, 3), np.float32)
         self._count = np.zeros(0, np.int64)
-        # (keys, flux (B, n) or (B,), lam or None, flux-weighted dirs (B, 3), deposit counts or None: 1 each)
+        self._mom = np.zeros((0, _MOMENTS), np.float64)
+        self._model = None  # cached (p_mean, d_mean, J, use) of the lobes, after a compaction
+        # (keys, flux (B, n) or (B,), lam or None, flux-weighted dirs (B, 3), deposit counts or None: 1 each,
+        #  moments (B, _MOMENTS) or None)
         self._pending: list[tuple] = []
         self._pending_rows = 0
 
@@ -114,15 +133,17 @@ class GratingRecords:
 
     # -- the light pass ------------------------------------------------------------------------
     def deposit(self, elements: np.ndarray, flux: np.ndarray, lam: np.ndarray | None = None,
-                towards_source: np.ndarray | None = None) -> None:
+                towards_source: np.ndarray | None = None, at: np.ndarray | None = None) -> None:
         """Add flux (B, n) of white paths, or (B,) of mono paths at wavelength indices ``lam``,
         arriving along unit ``towards_source`` (B, 3) (from the element to the source) at
-        ``elements`` (B,) of ``layout`` (either side: the side bit is dropped)."""
+        ``elements`` (B,) of ``layout`` (their low bit: the side the light arrived on), at the
+        world points ``at`` (B, 3) (None: no direction gradient for these deposits)."""
         if len(elements) == 0:
             return
         if towards_source is None:
             raise ValueError("grating records need the direction towards the source")
-        cell = np.asarray(elements, np.int64) >> 1
+        elements = np.asarray(elements, np.int64)
+        cell, side = elements >> 1, elements & 1
         d = np.asarray(towards_source, np.float32)
         if lam is None:
             flux = np.asarray(flux, np.float32)
@@ -132,8 +153,19 @@ class GratingRecords:
             flux = np.asarray(flux, np.float32).reshape(-1)
             weight = flux
             band = 1 + np.asarray(lam, np.int64) * self.bands // self.n
+        band = side * (self.bands + 1) + band
         keys = cell * self.stride + band * (self.grid * self.grid) + octahedral_bin(d, self.grid)
-        self._pending.append((keys, flux, None if lam is None else np.asarray(lam, np.int64), d * weight[:, None], None))
+        mom = None
+        if at is not None:
+            pw = np.asarray(at, np.float64)
+            w = weight.astype(np.float64)
+            d64 = d.astype(np.float64)
+            pp = np.stack([pw[:, 0] * pw[:, 0], pw[:, 1] * pw[:, 1], pw[:, 2] * pw[:, 2],
+                           pw[:, 0] * pw[:, 1], pw[:, 0] * pw[:, 2], pw[:, 1] * pw[:, 2]], 1)
+            dp = (d64[:, :, None] * pw[:, None, :]).reshape(-1, 9)
+            mom = np.concatenate([np.ones((len(w), 1)), pw, pp, dp], axis=1) * w[:, None]
+        self._pending.append((keys, flux, None if lam is None else np.asarray(lam, np.int64), d * weight[:, None],
+                              None, mom))
         self._pending_rows += len(keys)
         if self._pending_rows > max(1 << 16, len(self._keys)):  # amortised: the store at most doubles
             self._compact()
@@ -149,9 +181,9 @@ class GratingRecords:
         ukeys, inv = np.unique(keys, return_inverse=True)
         inv = inv.reshape(-1)
         m, old = len(ukeys), len(self._keys)
-        idx, val, dirs, cnt = [], [], [], []
+        idx, val, dirs, cnt, moms = [], [], [], [], []
         at = old
-        for k, f, lam, wd, c in self._pending:  # loop over deposit calls (a few per batch), not rays
+        for k, f, lam, wd, c, mo in self._pending:  # loop over deposit calls (a few per batch), not rays
             rows = inv[at:at + len(k)]
             at += len(k)
             if lam is None:
@@ -162,26 +194,32 @@ class GratingRecords:
                 val.append(f)
             dirs.append(wd)
             cnt.append(np.ones(len(k), np.int64) if c is None else c)
+            moms.append(np.zeros((len(k), _MOMENTS)) if mo is None else mo)
         new_rows = inv[old:]
         flux = np.bincount(np.concatenate(idx), weights=np.concatenate(val).astype(np.float64),
                            minlength=m * n).reshape(m, n)
         d = np.concatenate(dirs).astype(np.float64)
         direction = np.stack([np.bincount(new_rows, weights=d[:, c], minlength=m) for c in range(3)], axis=1)
         count = np.bincount(new_rows, weights=np.concatenate(cnt).astype(np.float64), minlength=m)
+        mo = np.concatenate(moms)
+        mom = np.stack([np.bincount(new_rows, weights=mo[:, c], minlength=m) for c in range(_MOMENTS)], axis=1)
         if old:  # the store's rows (unique keys: a plain scatter)
             mine = inv[:old]
             flux[mine] += self._flux
             direction[mine] += self._dir
             count[mine] += self._count
+            mom[mine] += self._mom
         self._flux, self._dir = flux.astype(np.float32), direction.astype(np.float32)
         self._count = count.astype(np.int64)
+        self._mom = mom
         self._keys = ukeys.astype(np.int64)
         self._pending, self._pending_rows = [], 0
+        self._model = None
 
     def __iadd__(self, other: "GratingRecords") -> "GratingRecords":
         other._compact()
         if len(other._keys):  # the other's lobes as pending rows (after this one's: a fixed order)
-            self._pending.append((other._keys, other._flux, None, other._dir, other._count))
+            self._pending.append((other._keys, other._flux, None, other._dir, other._count, other._mom))
             self._pending_rows += len(other._keys)
             self._compact()
         return self
@@ -191,11 +229,13 @@ class GratingRecords:
         self._compact()
         self._flux *= np.float32(factor)
         self._dir *= np.float32(factor)
+        self._mom *= float(factor)
+        self._model = None
 
     # -- views -----------------------------------------------------------------------------------
     @property
     def keys(self) -> np.ndarray:
-        """(M,) sorted lobe keys: cell * stride + band * G^2 + direction bin."""
+        """(M,) sorted lobe keys: cell * stride + (side * (NB + 1) + band) * G^2 + direction bin."""
         self._compact()
         return self._keys
 
@@ -221,13 +261,14 @@ class GratingRecords:
         """The store as plain arrays (for the wire: core/distributed.py), exact to the bit."""
         self._compact()
         return {"n": self.n, "grid": self.grid, "bands": self.bands, "keys": self._keys, "flux": self._flux,
-                "direction": self._dir, "count": self._count}
+                "direction": self._dir, "count": self._count, "moments": self._mom}
 
     @classmethod
     def from_arrays(cls, layout: ElementLayout, d: dict) -> "GratingRecords":
         rec = cls(layout, d["n"], d["grid"], d["bands"])
         rec._keys, rec._flux = np.asarray(d["keys"], np.int64), np.asarray(d["flux"], np.float32)
         rec._dir, rec._count = np.asarray(d["direction"], np.float32), np.asarray(d["count"], np.int64)
+        rec._mom = np.asarray(d["moments"], np.float64)
         return rec
 
     def stats(self) -> dict:
@@ -240,10 +281,33 @@ class GratingRecords:
                 "record_deposits_per_occupied": deposits / max(len(cells), 1)}
 
     # -- the eye pass ----------------------------------------------------------------------------
-    def lobes(self, prim, bu, bv, rng=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Every lobe of the element at each hit: (hit index (P,), spectral irradiance (P, n),
-        unit direction towards the source (P, 3)), P >= 0 pairs over the B hits. With ``rng`` the
-        lookup point is jittered by up to one element (a box filter over neighbours)."""
+    def _direction_model(self):
+        """(p_mean (M, 3), d_mean (M, 3), J (M, 3, 3), use (M,) bool) of the lobes: the least-
+        squares first-order model of the unit direction across the element."""
+        if self._model is None:
+            mo = self._mom
+            w = mo[:, 0]
+            use = (self._count >= MIN_GRADIENT_DEPOSITS) & (w > 0)
+            inv = np.where(use, 1.0 / np.where(w > 0, w, 1.0), 0.0)
+            pm = mo[:, 1:4] * inv[:, None]
+            dm = self._dir.astype(np.float64) * inv[:, None]
+            xx, yy, zz, xy, xz, yz = (mo[:, 4 + c] * inv for c in range(6))
+            spp = np.stack([np.stack([xx, xy, xz], 1), np.stack([xy, yy, yz], 1), np.stack([xz, yz, zz], 1)], 1)
+            cpp = spp - pm[:, :, None] * pm[:, None, :]
+            cdp = mo[:, 10:19].reshape(-1, 3, 3) * inv[:, None, None] - dm[:, :, None] * pm[:, None, :]
+            jac = np.zeros_like(cpp)
+            if use.any():  # the points lie in a plane: Cov(p, p) has rank 2, so the pseudo-inverse
+                jac[use] = cdp[use] @ np.linalg.pinv(cpp[use], rcond=1e-6, hermitian=True)
+            self._model = (pm, dm, jac, use)
+        return self._model
+
+    def lobes(self, prim, bu, bv, rng=None, at=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every lobe of the element at each hit, light from either side: (hit index (P,), spectral
+        irradiance (P, n), unit direction towards the source (P, 3)), P >= 0 pairs over the B
+        hits (the caller keeps the side it needs by the direction's cosine). With ``rng`` the
+        lookup point is jittered by up to one element (a box filter over neighbours); with
+        ``at`` (B, 3), the hits' world points, each lobe's direction is its first-order model
+        evaluated there."""
         self._compact()
         prim = np.asarray(prim, np.int64)
         b = len(prim)
@@ -262,6 +326,13 @@ class GratingRecords:
         area = self.layout.element_area[prim[hit]].astype(np.float32)
         irr = self._flux[row] / area[:, None]
         d = self._dir[row]
+        if at is not None and len(row):
+            pm, dm, jac, use = self._direction_model()
+            x = np.asarray(at, np.float64)[hit]
+            turn = np.einsum("pij,pj->pi", jac[row], x - pm[row])
+            size = np.linalg.norm(turn, axis=1)
+            turn *= np.minimum(1.0, MAX_GRADIENT_TURN / np.maximum(size, 1e-300))[:, None]
+            d = np.where(use[row][:, None], dm[row] + turn, d).astype(np.float32)  # normalised below
         norm = np.linalg.norm(d, axis=1)
         ok = norm > 0
         return hit[ok], irr[ok], (d[ok] / norm[ok, None]).astype(np.float32)
@@ -336,7 +407,7 @@ class _PilotHits:
         self._bv.append(np.asarray(bv, np.float64))
         return ids, self.mask[prim]
 
-    def deposit(self, elements, flux, lam=None, towards_source=None) -> None:
+    def deposit(self, elements, flux, lam=None, towards_source=None, at=None) -> None:
         self._used.append(np.asarray(elements, np.int64))
 
     def hits(self):

@@ -165,11 +165,11 @@ class _LightTrace(SpecularWalker):
                 r, h = rays.take(at_grating), hit.take(at_grating)
                 idx, valid = self.records.layout.index(h.prim, h.bu, h.bv, h.front)
                 if valid.any():
-                    src = -r.d[valid]
+                    src, at = -r.d[valid], h.p[valid]
                     if r.lam is None:
-                        self.records.deposit(idx[valid], r.dense_w(self.n)[valid], towards_source=src)
+                        self.records.deposit(idx[valid], r.dense_w(self.n)[valid], towards_source=src, at=at)
                     else:
-                        self.records.deposit(idx[valid], r.w[valid], r.lam[valid], towards_source=src)
+                        self.records.deposit(idx[valid], r.w[valid], r.lam[valid], towards_source=src, at=at)
         land = (kind == DIFFUSE) & (rays.depth >= 1)
         if not land.any():
             return
@@ -405,11 +405,11 @@ class DepositLog:
 
     def __init__(self, layout: ElementLayout | None):
         self.layout = layout
-        self.calls: list[tuple] = []  # (elements, flux, lam, towards_source), in call order
+        self.calls: list[tuple] = []  # (elements, flux, lam, towards_source, at), in call order
 
-    def deposit(self, elements, flux, lam=None, towards_source=None) -> None:
+    def deposit(self, elements, flux, lam=None, towards_source=None, at=None) -> None:
         if len(elements):
-            self.calls.append((elements, flux, lam, towards_source))
+            self.calls.append((elements, flux, lam, towards_source, at))
 
     def replay(self, target: IlluminationMap) -> None:
         self.replay_calls(self.calls, target)
@@ -417,8 +417,11 @@ class DepositLog:
     @staticmethod
     def replay_calls(calls, target: IlluminationMap) -> None:
         """Add recorded ``calls`` (a DepositLog's ``calls``, e.g. sent back by a worker) to ``target``."""
-        for elements, flux, lam, towards_source in calls:
-            target.deposit(elements, flux, lam, towards_source)
+        for elements, flux, lam, towards_source, at in calls:
+            if at is None:  # caustic maps take no points
+                target.deposit(elements, flux, lam, towards_source)
+            else:
+                target.deposit(elements, flux, lam, towards_source, at=at)
 
 
 def finish_light_pass(prepared, work: LightWork, maps, counts, t0: float, timed_out: bool = False,
