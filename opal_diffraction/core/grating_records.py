@@ -427,16 +427,13 @@ class _NoSink:
         pass
 
 
-def record_layout(prepared, n_paths: int, mask) -> tuple[ElementLayout, str, dict]:
-    """Grating-record elements for a light pass of ``n_paths`` paths: from a pilot pass (its own
-    random stream, PILOT_STREAM) when the element size is automatic, else elements of the
-    user's size (light_pass.element_layout). Returns (layout, warning or "", pilot stats)."""
-    from .light_pass import BATCH_PATHS, LightBatch, element_layout, trace_batch
+def record_layout(prepared, n_paths: int, mask, trace, batch_paths: int) -> tuple[ElementLayout, str, dict]:
+    """Grating-record elements for a light pass of ``n_paths`` paths, sized by a pilot pass.
 
+    ``trace(light, batch, start, light_paths, illum, records)`` traces one batch of the pilot
+    (light_pass.trace_batch on the PILOT_STREAM: the light pass hands it in, so this module does
+    not import it) in batches of ``batch_paths``. Returns (layout, warning or "", pilot stats)."""
     mask = np.asarray(mask, bool)
-    if float(prepared.settings.element_size or 0.0) > 0 or n_paths <= 0:
-        layout, warning = element_layout(prepared, n_paths, mask, "grating-record")
-        return layout, warning, {}
     area = triangle_areas(prepared.scene.vertices, prepared.scene.triangles)
     pilot = int(min(n_paths, max(PILOT_MIN_PATHS, PILOT_FRACTION * n_paths), PILOT_MAX_PATHS))
     budgets = prepared.light_targets.budgets
@@ -445,8 +442,8 @@ def record_layout(prepared, n_paths: int, mask) -> tuple[ElementLayout, str, dic
     sink = _PilotHits(mask)
     nothing = _NoSink(_subdivide_all(area, prepared.light_targets.receiver_mask, 1))
     for li, n_l in enumerate(per_light):  # loop over lights (a handful), then their batches
-        for bi, start in enumerate(range(0, int(n_l), BATCH_PATHS)):
-            trace_batch(prepared, LightBatch(li, bi, start, int(n_l)), nothing, sink, stream=PILOT_STREAM)
+        for bi, start in enumerate(range(0, int(n_l), batch_paths)):
+            trace(li, bi, start, int(n_l), nothing, sink)
     prim, bu, bv = sink.hits()
     traced = int(per_light.sum())
     layout = layout_from_hits(area, mask, prim, bu, bv, n_paths / max(traced, 1), n=prepared.grid.n)

@@ -50,7 +50,7 @@ from types import MappingProxyType
 import numpy as np
 
 from .elements import ElementLayout, IlluminationMap
-from .grating_records import GratingRecords, record_layout
+from .grating_records import PILOT_STREAM, GratingRecords, record_layout
 from .geometry import orthonormal_basis, triangle_areas
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIELECTRIC, DIFFUSE, MIRROR
@@ -315,6 +315,20 @@ def element_layout(prepared, n_paths: int, mask, what: str = "caustic") -> tuple
         target *= 2.0  # terminates: with k = 1 everywhere the count is 2 * receivers <= cap
 
 
+def _record_layout(prepared, n_paths: int, mask) -> tuple[ElementLayout, str, dict]:
+    """Grating-record elements: of the user's element size if set, else sized by where the
+    grating flux lands, from a pilot pass on its own stream (grating_records.record_layout,
+    docs/physics.md section 3.5). Returns (layout, warning or "", pilot stats)."""
+    if float(prepared.settings.element_size or 0.0) > 0 or n_paths <= 0:
+        layout, warning = element_layout(prepared, n_paths, mask, "grating-record")
+        return layout, warning, {}
+
+    def trace(light, batch, start, light_paths, illum, records):
+        trace_batch(prepared, LightBatch(light, batch, start, light_paths), illum, records, stream=PILOT_STREAM)
+
+    return record_layout(prepared, n_paths, mask, trace, BATCH_PATHS)
+
+
 @dataclass(frozen=True)
 class LightBatch:
     """One batch of light paths: ``paths`` paths of light ``light`` (its ``batch``-th), starting at
@@ -353,7 +367,7 @@ class LightWork:
         n_paths = int(prepared.settings.light_paths if n_paths is None else n_paths)
         targets: LightTargets = prepared.light_targets
         layout, warning = element_layout(prepared, n_paths, targets.receiver_mask)
-        rec_layout, rec_warning, rec_info = (record_layout(prepared, n_paths, targets.grating_mask)
+        rec_layout, rec_warning, rec_info = (_record_layout(prepared, n_paths, targets.grating_mask)
                                              if targets.grating_mask.any() else (None, "", {}))
         warning = "; ".join(dict.fromkeys(w for w in (warning, rec_warning) if w))
         budgets = targets.budgets  # the lights, then the emissive meshes (index L), the world (L + 1)
