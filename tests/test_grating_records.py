@@ -226,3 +226,13 @@ def test_record_elements_hold_the_target_deposits_whatever_the_path_count():
         st = light.stats
         assert st["pilot_grating_hits"] > 0
         assert 0.5 * RECORD_DEPOSITS < st["record_deposits_per_occupied"] < 2 * RECORD_DEPOSITS, (paths, dict(st))
+
+
+def test_records_are_the_same_bits_whatever_the_threads():
+    """The lanes' records add in lane order and the pilot runs once, so the thread count does not
+    change a bit (docs/physics.md section 9.2)."""
+    maps = [run_light_pass(prepare(two_mirror_scene(8), RenderSettings(light_paths=3 * 32768, threads=t))).grating_records
+            for t in (1, 2)]
+    for name in ("keys", "flux", "direction", "count"):
+        assert getattr(maps[0], name).tobytes() == getattr(maps[1], name).tobytes(), name
+    assert maps[0].arrays()["moments"].tobytes() == maps[1].arrays()["moments"].tobytes()
