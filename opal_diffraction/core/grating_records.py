@@ -100,12 +100,14 @@ def jitter_barycentrics(k, bu, bv, rng):
 
 class GratingRecords:
     """Sparse directional records of the light that reached grating elements through specular
-    paths: per lobe (element, direction bin, band) the spectral flux (W per wavelength sample),
-    the flux-weighted sum of directions towards the source, and the deposit count.
+    paths: per lobe (element, arrival side, band, direction bin) the spectral flux (W per
+    wavelength sample), the flux-weighted sum of directions towards the source, the deposit
+    count and the moments of the direction model.
 
-    The light pass calls ``deposit`` (the interface of elements.IlluminationMap.deposit, element
-    indices of ``layout`` with their side bit: the side the light arrived on); lanes add with ``+=``; the eye
-    pass calls ``lobes``.
+    The light pass calls ``deposit`` (IlluminationMap.deposit's interface plus the hit points:
+    element indices of ``layout`` with their side bit, the side the light arrived on); lanes
+    add with ``+=``; the eye pass calls ``lobes`` (read-only but for a cached direction model:
+    safe from several threads, which at worst compute the same cache twice).
     """
 
     max_pairs = MAX_LOBE_PAIRS  # the eye pass diffracts (hit, lobe) pairs in chunks of this many
