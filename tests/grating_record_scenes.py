@@ -93,3 +93,44 @@ def mirror_transmission_scene(pixels=40):
 def virtual_transmission_scene(pixels=40, reflectance=1.0):
     return grating_scene([IMAGE_TRANS], [POWER * reflectance], transmission=True,
                          occluder_at=LIGHT_TRANS + [0, 0, 0.05], pixels=pixels)
+
+
+WEDGE_ALPHA = np.radians(20.0)
+
+
+def wedge(w=0.2, z_top=0.6, alpha=WEDGE_ALPHA):
+    """A glass wedge along y: a horizontal top face at ``z_top`` over x, y in [-w, w], a vertical
+    face at x = -w and a bottom face tilted by ``alpha`` (outward normal (sin a, 0, -cos a)).
+    Triangles wound with outward normals."""
+    a = np.array([-w, z_top])
+    b = np.array([w, z_top])
+    c = np.array([-w, z_top - 2 * w * np.tan(alpha)])
+    v = np.array([[p[0], y, p[1]] for y in (-w, w) for p in (a, b, c)], float)  # 0 1 2 at -w, 3 4 5 at +w
+    tris = np.array([[0, 2, 1], [3, 4, 5],                # ends
+                     [0, 1, 4], [0, 4, 3],                # top
+                     [1, 2, 5], [1, 5, 4],                # tilted bottom
+                     [2, 0, 3], [2, 3, 5]], np.int64)     # vertical side
+    centre = v.mean(axis=0)
+    n = np.cross(v[tris[:, 1]] - v[tris[:, 0]], v[tris[:, 2]] - v[tris[:, 0]])
+    out = np.einsum("ij,ij->i", n, v[tris].mean(axis=1) - centre) > 0
+    tris[~out] = tris[~out][:, [0, 2, 1]]  # make every normal point outwards
+    return v, tris
+
+
+def sun_through_wedge_scene():
+    """A sun straight down through a BK7 wedge onto a large reflection grating at z = 0: the
+    light enters the top face at normal incidence and leaves the tilted face refracted by
+    Snell's law, a parallel beam per wavelength."""
+    mats = Materials.from_list([
+        {"kind": "DIFFUSE", "color": (0, 0, 0), "grating": 1, "grating_type": "REFLECTION", "lattice": "LINES",
+         "period": D_NM, "slit_width": A_NM, "slit_count": N_SLITS, "coherence_length": L_UM},
+        {"kind": "DIELECTRIC", "ior": 1.5168, "dispersion": "BK7", "color": (1, 1, 1)},
+    ])
+    s = Scene(materials=mats)
+    s.add_mesh(*primitives.quad((0, 0, 0), (1.6, 0, 0), (0, 1.6, 0)), material=0, tangent=(1, 0, 0))
+    s.add_mesh(*wedge(), material=1)
+    s.lights = Lights.from_list([{"kind": "SUN", "direction": (0.0, 0.0, -1.0), "power": 1.0}])
+    m = np.eye(4)
+    m[2, 3] = 2.0
+    s.camera = Camera(matrix=m, lens=40.0, sensor_width=36.0, width=8, height=8)
+    return s

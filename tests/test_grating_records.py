@@ -236,3 +236,42 @@ def test_records_are_the_same_bits_whatever_the_threads():
     for name in ("keys", "flux", "direction", "count"):
         assert getattr(maps[0], name).tobytes() == getattr(maps[1], name).tobytes(), name
     assert maps[0].arrays()["moments"].tobytes() == maps[1].arrays()["moments"].tobytes()
+
+
+def test_a_prism_before_the_grating_leaves_each_band_its_own_snell_direction():
+    """Sun light through a glass wedge reaches the grating as one parallel beam per wavelength,
+    turned by Snell's law at the tilted exit face (the entry face is at normal incidence). The
+    records keep a direction per wavelength band: each band's lobe points along the flux-weighted
+    mean of the Snell directions of its wavelengths, and the bands spread as the glass disperses
+    (one mean direction per element would give every wavelength the same direction)."""
+    from grating_record_scenes import WEDGE_ALPHA, sun_through_wedge_scene
+
+    prepared = prepare(sun_through_wedge_scene(), RenderSettings(light_paths=60_000, threads=1))
+    rec = run_light_pass(prepared).grating_records
+    n_glass = prepared.materials.ior[1].astype(np.float64)
+    # Snell at the exit face: incidence alpha inside the glass, outward normal (sin a, 0, -cos a);
+    # the direction of travel turns away from the normal to theta_t = asin(n sin a)
+    theta_t = np.arcsin(n_glass * np.sin(WEDGE_ALPHA))
+    # (the normal leans towards +x, so the ray, bent away from it, leaves at theta_t - alpha from
+    # straight down towards -x)
+    dev = theta_t - WEDGE_ALPHA
+    towards_source = np.stack([np.sin(dev), np.zeros_like(dev), np.cos(dev)], 1)
+    band = (rec.keys % rec.stride) // (DIRECTION_GRID**2)
+    mono = (band >= 1) & (band <= rec.bands)  # front side, mono bands (the wedge disperses)
+    flux, d = rec.flux[mono].astype(np.float64), rec.direction[mono].astype(np.float64)
+    # the primary beam (no internal reflection): lobes within 2 degrees of the 550 nm direction
+    k550 = int(np.argmin(np.abs(prepared.grid.wavelengths - 550)))
+    d_unit = d / np.linalg.norm(d, axis=1, keepdims=True)
+    primary = d_unit @ towards_source[k550] > np.cos(np.radians(2.0))
+    assert primary.sum() > 50
+    expected = flux[primary] @ towards_source  # per lobe: sum over wavelengths of flux x direction
+    expected /= np.linalg.norm(expected, axis=1, keepdims=True)
+    err = np.degrees(np.arccos(np.clip(np.sum(expected * d_unit[primary], axis=1), -1, 1)))
+    assert err.max() < 0.01, err.max()
+    # and the bands do spread: the blue-most and red-most lobes differ as Snell says
+    b = band[mono][primary]
+    spread = np.degrees(np.arccos(np.clip(d_unit[primary][b == b.min()][0] @ d_unit[primary][b == b.max()][0], -1, 1)))
+    lam_mean = [(flux[primary][b == x][0] * np.arange(len(n_glass))).sum() / flux[primary][b == x][0].sum()
+                for x in (b.min(), b.max())]
+    want = np.degrees(abs(np.interp(lam_mean[0], np.arange(len(dev)), dev) - np.interp(lam_mean[1], np.arange(len(dev)), dev)))
+    assert want > 0.3 and spread == pytest.approx(want, rel=0.02), (spread, want)
