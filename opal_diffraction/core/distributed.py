@@ -57,6 +57,7 @@ import numpy as np
 from .camera import FilterSampler
 from .elements import ElementLayout, IlluminationMap
 from .eye_pass import EyePass
+from .grating_records import GratingRecords
 from .film import Film, RenderResult, tile_parts_rgb
 from .light_pass import LANES, DepositLog, LightPassResult, LightWork, finish_light_pass, trace_batch
 from .plan import plan_render
@@ -141,12 +142,14 @@ def from_wire(x):
     return x
 
 
-def pack_map(m: IlluminationMap | None) -> dict | None:
-    """An illumination map as plain data, only its rows that hold something (a caustic map is
+def pack_map(m: IlluminationMap | GratingRecords | None) -> dict | None:
+    """An illumination map (or grating records: their sparse lobes) as plain data, only its rows that hold something (a caustic map is
     mostly empty: 6 % of the prism example's rows), exact to the bit (rows are chosen by their
     bits, so even a -0.0 survives)."""
     if m is None:
         return None
+    if isinstance(m, GratingRecords):  # sparse already: its occupied lobes, as they are
+        return {"layout": to_wire(m.layout), "records": m.arrays()}
     bits = np.any(m.flux.view(np.uint32) != 0, axis=1)
     if m.direction is not None:
         bits |= np.any(m.direction.view(np.uint32) != 0, axis=1)
@@ -156,10 +159,12 @@ def pack_map(m: IlluminationMap | None) -> dict | None:
             "direction": None if m.direction is None else np.ascontiguousarray(m.direction[rows])}
 
 
-def unpack_map(d: dict | None) -> IlluminationMap | None:
+def unpack_map(d: dict | None) -> IlluminationMap | GratingRecords | None:
     """The inverse of ``pack_map``."""
     if d is None:
         return None
+    if "records" in d:
+        return GratingRecords.from_arrays(from_wire(d["layout"]), d["records"])
     flux = np.zeros(tuple(d["shape"]), np.float32)
     flux[d["rows"]] = d["flux"]
     direction = None

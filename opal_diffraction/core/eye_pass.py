@@ -737,16 +737,20 @@ class _TileTrace(SpecularWalker):
                 contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(idx)), sub.lam]
                 self._accumulate(sub, contrib, self._diffraction)
             if self.record_map is not None:
-                # light that reached the grating through mirrors and glass (the light pass's records)
-                irr, src, ok = self.record_map.incoming(h.prim, h.bu, h.bv, h.front)
-                cos_l = np.einsum("ij,ij->i", src, h.ng)
-                ok &= (cos_l < 0) if g.transmission[m] else (cos_l > 0)
-                idx = np.flatnonzero(ok)
-                if idx.size:
-                    rad = diffracted_radiance(g, m, w_o[idx], src[idx], t[idx], s[idx], h.ng[idx], period[idx], edges, rng)
-                    spec = rad * irr[idx]
-                    sub = r.take(idx)
-                    contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(idx)), sub.lam]
+                # light that reached the grating through mirrors and glass: every directional lobe
+                # of the light pass's records (grating_records.py, docs/physics.md section 3.5),
+                # on the viewer's side (h.ng faces it) for reflection, the far side for transmission
+                hit_of, irr, src = self.record_map.lobes(h.prim, h.bu, h.bv, rng, at=h.p)
+                cos_l = np.einsum("ij,ij->i", src, h.ng[hit_of])
+                keep = (cos_l < 0) if g.transmission[m] else (cos_l > 0)
+                hit_of, irr, src = hit_of[keep], irr[keep], src[keep]
+                chunk = self.record_map.max_pairs
+                for c0 in range(0, len(hit_of), chunk):  # (hit, lobe) pairs in bounded chunks
+                    j, sl = hit_of[c0:c0 + chunk], slice(c0, c0 + chunk)
+                    rad = diffracted_radiance(g, m, w_o[j], src[sl], t[j], s[j], h.ng[j], period[j], edges, rng)
+                    spec = rad * irr[sl]
+                    sub = r.take(j)
+                    contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(j)), sub.lam]
                     self._accumulate(sub, contrib, self._diffraction)
 
 

@@ -6,9 +6,9 @@ paths carry the whole spectrum from each light, are aimed at the objects that ca
 Fresnel, dispersion and Russian roulette (transport.SpecularWalker), and where a path that has
 been specular at least once lands on a diffuse surface its spectral flux is added to that
 surface element of the illumination map (elements.py). Where such a path reaches a grating, the
-grating's element records the incoming spectral flux and the direction it came from, for the eye
-pass to diffract (one flux-weighted mean direction per element: a known deviation,
-docs/physics.md section 3.5). Direct light stays the eye pass's job, so a path that reaches a
+grating's element records the incoming spectral flux by the direction it came from and its
+wavelength band (grating_records.GratingRecords: sparse directional lobes, on elements a pilot
+pass sizes where grating flux lands; docs/physics.md section 3.5), for the eye pass to diffract. Direct light stays the eye pass's job, so a path that reaches a
 diffuse surface or grating first deposits nothing: no double counting. On smooth-shaded casters
 the paths bend about the shading normals (transport.py, docs/physics.md section 4.6); deposits
 and records stay indexed by the geometric hit (triangle, barycentrics, side).
@@ -44,12 +44,13 @@ import threading
 import time
 from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 
 import numpy as np
 
 from .elements import ElementLayout, IlluminationMap
+from .grating_records import PILOT_STREAM, GratingRecords, record_layout
 from .geometry import orthonormal_basis, triangle_areas
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIELECTRIC, DIFFUSE, MIRROR
@@ -151,7 +152,7 @@ def _sample_cones(origin, weights, axis, cos_max, omega, rng):
 class _LightTrace(SpecularWalker):
     """Light paths: deposit at diffuse surfaces after a specular bounce, Russian roulette."""
 
-    def __init__(self, prepared, rng, illum: IlluminationMap, records: IlluminationMap | None):
+    def __init__(self, prepared, rng, illum: IlluminationMap, records: GratingRecords | None):
         super().__init__(prepared, rng)
         self.illum = illum
         self.records = records
@@ -164,11 +165,11 @@ class _LightTrace(SpecularWalker):
                 r, h = rays.take(at_grating), hit.take(at_grating)
                 idx, valid = self.records.layout.index(h.prim, h.bu, h.bv, h.front)
                 if valid.any():
-                    src = -r.d[valid]
+                    src, at = -r.d[valid], h.p[valid]
                     if r.lam is None:
-                        self.records.deposit(idx[valid], r.dense_w(self.n)[valid], towards_source=src)
+                        self.records.deposit(idx[valid], r.dense_w(self.n)[valid], towards_source=src, at=at)
                     else:
-                        self.records.deposit(idx[valid], r.w[valid], r.lam[valid], towards_source=src)
+                        self.records.deposit(idx[valid], r.w[valid], r.lam[valid], towards_source=src, at=at)
         land = (kind == DIFFUSE) & (rays.depth >= 1)
         if not land.any():
             return
@@ -273,7 +274,7 @@ class LightPassResult:
     """What the light pass hands to the eye pass; ``key`` is the prepared scene's it belongs to."""
 
     caustics: IlluminationMap | None          # flux on diffuse elements, or None (no light pass)
-    grating_records: IlluminationMap | None   # flux and direction at grating elements, or None
+    grating_records: GratingRecords | None    # directional flux lobes at grating elements, or None
     stats: Mapping[str, float]                # light_paths, light_deposits, light_rays, elements, light_pass_s
     warnings: tuple[str, ...]
     cancelled: bool
@@ -314,6 +315,20 @@ def element_layout(prepared, n_paths: int, mask, what: str = "caustic") -> tuple
         target *= 2.0  # terminates: with k = 1 everywhere the count is 2 * receivers <= cap
 
 
+def _record_layout(prepared, n_paths: int, mask) -> tuple[ElementLayout, str, dict]:
+    """Grating-record elements: of the user's element size if set, else sized by where the
+    grating flux lands, from a pilot pass on its own stream (grating_records.record_layout,
+    docs/physics.md section 3.5). Returns (layout, warning or "", pilot stats)."""
+    if float(prepared.settings.element_size or 0.0) > 0 or n_paths <= 0:
+        layout, warning = element_layout(prepared, n_paths, mask, "grating-record")
+        return layout, warning, {}
+
+    def trace(light, batch, start, light_paths, illum, records):
+        trace_batch(prepared, LightBatch(light, batch, start, light_paths), illum, records, stream=PILOT_STREAM)
+
+    return record_layout(prepared, n_paths, mask, trace, BATCH_PATHS)
+
+
 @dataclass(frozen=True)
 class LightBatch:
     """One batch of light paths: ``paths`` paths of light ``light`` (its ``batch``-th), starting at
@@ -345,14 +360,15 @@ class LightWork:
     warning: str                          # from element_layout, or ""
     batches: tuple[LightBatch, ...]
     total: int                            # paths planned
+    record_info: Mapping[str, float] = field(default_factory=dict)  # the record layout's pilot pass
 
     @classmethod
     def of(cls, prepared, n_paths: int | None = None) -> "LightWork":
         n_paths = int(prepared.settings.light_paths if n_paths is None else n_paths)
         targets: LightTargets = prepared.light_targets
         layout, warning = element_layout(prepared, n_paths, targets.receiver_mask)
-        rec_layout, rec_warning = (element_layout(prepared, n_paths, targets.grating_mask, "grating-record")
-                                   if targets.grating_mask.any() else (None, ""))
+        rec_layout, rec_warning, rec_info = (_record_layout(prepared, n_paths, targets.grating_mask)
+                                             if targets.grating_mask.any() else (None, "", {}))
         warning = "; ".join(dict.fromkeys(w for w in (warning, rec_warning) if w))
         budgets = targets.budgets  # the lights, then the emissive meshes (index L), the world (L + 1)
         share = budgets / max(budgets.sum(), 1e-300)
@@ -360,25 +376,26 @@ class LightWork:
         jobs = [LightBatch(li, bi, start, int(n_l)) for li, n_l in enumerate(paths_per_light)
                 for bi, start in enumerate(range(0, int(n_l), BATCH_PATHS))]
         jobs.sort(key=lambda j: (j.start / max(j.light_paths, 1), j.light))
-        return cls(layout, rec_layout, warning, tuple(jobs), int(paths_per_light.sum()))
+        return cls(layout, rec_layout, warning, tuple(jobs), int(paths_per_light.sum()), MappingProxyType(rec_info))
 
     def lane(self, k: int) -> tuple[int, ...]:
         """Indices into ``batches`` of lane k, in the order its maps add them."""
         return tuple(range(k, len(self.batches), LANES))
 
-    def empty_maps(self, n: int) -> tuple[IlluminationMap, IlluminationMap | None]:
+    def empty_maps(self, n: int) -> tuple[IlluminationMap, GratingRecords | None]:
         """One lane's (caustic map, grating records), zero."""
         return (IlluminationMap.empty(self.layout, n),
-                IlluminationMap.empty(self.record_layout, n, with_direction=True) if self.record_layout else None)
+                GratingRecords.empty(self.record_layout, n) if self.record_layout else None)
 
 
-def trace_batch(prepared, job: LightBatch, illum, records) -> dict:
+def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_PASS_STREAM) -> dict:
     """Trace one batch of light paths, depositing into ``illum`` and ``records`` (objects with a
     ``layout`` and IlluminationMap's ``deposit``: maps, or DepositLogs; ``records`` None
-    without gratings). Returns its counts: paths, deposits, rays."""
+    without gratings). ``stream``: the random stream id (the records' pilot pass has its own).
+    Returns its counts: paths, deposits, rays."""
     seed = int(prepared.settings.seed)
     b = job.paths
-    rng = np.random.default_rng(np.random.SeedSequence([seed, LIGHT_PASS_STREAM, job.light, job.batch]))
+    rng = np.random.default_rng(np.random.SeedSequence([seed, stream, job.light, job.batch]))
     if job.light >= len(prepared.lights):  # the emissive meshes or the world: a spectrum per path
         emit = _emit_mesh if job.light == len(prepared.lights) else _emit_world
         o, d, wspec = emit(prepared, b, rng)
@@ -402,11 +419,11 @@ class DepositLog:
 
     def __init__(self, layout: ElementLayout | None):
         self.layout = layout
-        self.calls: list[tuple] = []  # (elements, flux, lam, towards_source), in call order
+        self.calls: list[tuple] = []  # (elements, flux, lam, towards_source, at), in call order
 
-    def deposit(self, elements, flux, lam=None, towards_source=None) -> None:
+    def deposit(self, elements, flux, lam=None, towards_source=None, at=None) -> None:
         if len(elements):
-            self.calls.append((elements, flux, lam, towards_source))
+            self.calls.append((elements, flux, lam, towards_source, at))
 
     def replay(self, target: IlluminationMap) -> None:
         self.replay_calls(self.calls, target)
@@ -414,8 +431,11 @@ class DepositLog:
     @staticmethod
     def replay_calls(calls, target: IlluminationMap) -> None:
         """Add recorded ``calls`` (a DepositLog's ``calls``, e.g. sent back by a worker) to ``target``."""
-        for elements, flux, lam, towards_source in calls:
-            target.deposit(elements, flux, lam, towards_source)
+        for elements, flux, lam, towards_source, at in calls:
+            if at is None:  # caustic maps take no points
+                target.deposit(elements, flux, lam, towards_source)
+            else:
+                target.deposit(elements, flux, lam, towards_source, at=at)
 
 
 def finish_light_pass(prepared, work: LightWork, maps, counts, t0: float, timed_out: bool = False,
@@ -435,13 +455,15 @@ def finish_light_pass(prepared, work: LightWork, maps, counts, t0: float, timed_
             scale = np.float32(total / traced)
             illum.flux *= scale
             if records is not None:
-                records.flux *= scale
-                records.direction *= scale
+                records.scale(scale)
         warnings.append(f"time limit reached during the light pass: caustics from {traced / 1e6:.2f} M of "
                         f"{total / 1e6:.2f} M light paths")
     stats = {"light_paths": traced, "light_deposits": sum(c["deposits"] for c in counts),
              "light_rays": sum(c["rays"] for c in counts), "elements": work.layout.total,
              "light_pass_s": time.perf_counter() - t0}
+    if records is not None:
+        stats.update(records.stats())
+        stats.update(work.record_info)
     if cancelled:
         stats["cancelled"] = True
     return LightPassResult(illum, records, MappingProxyType(stats), tuple(warnings), cancelled, prepared.key)
