@@ -1,4 +1,4 @@
-"""Opal volume domains (opal_diffraction.core.opal.volume; docs/physics.md section 5.7): the weighted
+"""Opal volume domains (opal_diffraction.core.opal.volume; docs/physics.md section 5.4): the weighted
 Voronoi lookup against brute force, seeds inside the volume (analytic solids), reproducibility,
 the orientation distributions (chi-square), the world transform, and the Scene's domain columns."""
 

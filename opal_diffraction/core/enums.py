@@ -65,6 +65,7 @@ class GratingType(IntEnum):
 class Lattice(IntEnum):
     LINES = 0
     HEXAGONAL = 1
+    BRAGG = 2  # FCC opal: Bragg reflection from 3-D (111) domains (docs/physics.md section 5.2)
 
 
 class GratingDirection(IntEnum):

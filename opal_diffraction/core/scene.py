@@ -99,6 +99,12 @@ _MATERIAL_COLUMNS = {
     "specular_ior_level": (np.float32, (), 0.0, None),
     "specular_tint": (np.float32, (3,), (1.0, 1.0, 1.0), None),
     "conductor_fresnel": (np.int32, (), "CONSTANT", CONDUCTOR_FRESNELS),
+    # the BRAGG lattice (FCC opal; docs/physics.md section 5.2)
+    "sphere_diameter": (np.float32, (), 250.0, None),
+    "sphere_ior": (np.float32, (), 1.45, None),
+    "void_ior": (np.float32, (), 1.0, None),
+    "layers": (np.int32, (), 40, None),
+    "mosaic_spread": (np.float32, (), 3.0, None),
 }
 
 #: The material columns that name a texture.
@@ -199,6 +205,11 @@ class Materials:
     specular_ior_level: np.ndarray = field(default_factory=lambda: _material_column_default("specular_ior_level", 0))
     specular_tint: np.ndarray = field(default_factory=lambda: _material_column_default("specular_tint", 0))
     conductor_fresnel: np.ndarray = field(default_factory=lambda: _material_column_default("conductor_fresnel", 0))
+    sphere_diameter: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_diameter", 0))
+    sphere_ior: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_ior", 0))
+    void_ior: np.ndarray = field(default_factory=lambda: _material_column_default("void_ior", 0))
+    layers: np.ndarray = field(default_factory=lambda: _material_column_default("layers", 0))
+    mosaic_spread: np.ndarray = field(default_factory=lambda: _material_column_default("mosaic_spread", 0))
 
     def __len__(self):
         return _rows(self.kind)
@@ -459,7 +470,7 @@ class Scene:
     texture_interpolation: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     texture_extension: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     texture_encoding: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
-    # opal volume domains (core/opal/volume.py; docs/physics.md section 5.7), world space; empty: none
+    # opal volume domains (core/opal/volume.py; docs/physics.md section 5.4), world space; empty: none
     domain_seeds: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float64))
     domain_weight: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
     domain_axis: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))

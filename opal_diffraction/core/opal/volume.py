@@ -1,7 +1,7 @@
 """Opal domains in the volume: additively weighted 3-D Voronoi cells, each an FCC crystallite with its
 own (111) orientation and sphere diameter.
 
-Method (docs/physics.md section 5.7). Precious opal is a mosaic of ordered domains of silica
+Method (docs/physics.md section 5.4). Precious opal is a mosaic of ordered domains of silica
 spheres grown in the volume (Sanders 1964); Yokota et al. (2024, The Visual Computer) model them as
 3-D Voronoi cells. Here seeds are drawn uniformly in the object's volume (rejection sampling in
 the bounding box with a ray-parity inside test) and a point p belongs to the cell
