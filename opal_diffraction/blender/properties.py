@@ -25,7 +25,8 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorPro
                        StringProperty)
 from bpy.types import PropertyGroup
 
-from ..core.enums import Backend, DispersionModel, DispersionSampling, GratingDirection, GratingType, Lattice
+from ..core.enums import (Backend, DispersionModel, DispersionSampling, DomainOrientation, GratingDirection, GratingType,
+                          Lattice)
 from ..core.spectrum import WavelengthGrid
 
 __all__ = [
@@ -108,11 +109,11 @@ LATTICE_ITEMS = _items(Lattice, {
                     "domains of close-packed silica spheres; the colour moves towards blue as the stone tilts"),
 })
 
-DOMAIN_ORIENTATION_ITEMS = [
-    ("RANDOM", "Random", "Each domain's (111) planes face a random direction", 0),
-    ("LAYERED", "Layered", "The domains' (111) planes lean towards the object's Z axis (opal grows in layers): "
-     "most flashes face up", 1),
-]
+DOMAIN_ORIENTATION_ITEMS = _items(DomainOrientation, {
+    DomainOrientation.RANDOM: ("Random", "Each domain's (111) planes face a random direction"),
+    DomainOrientation.LAYERED: ("Layered", "The domains' (111) planes lean towards the object's Z axis (opal grows "
+                                "in layers): most flashes face up"),
+})
 
 GRATING_DIRECTION_ITEMS = _items(GratingDirection, {
     GratingDirection.UV: ("UV Map", "Across the slits along the active UV map's U direction; the object's local X "

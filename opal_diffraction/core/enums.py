@@ -18,6 +18,7 @@ __all__ = [
     "GratingType",
     "Lattice",
     "GratingDirection",
+    "DomainOrientation",
     "DispersionSampling",
     "Backend",
     "TextureInterpolation",
@@ -72,6 +73,14 @@ class GratingDirection(IntEnum):
     UV = 0
     OBJECT_X = 1
     ATTRIBUTE = 2
+
+
+class DomainOrientation(IntEnum):
+    """How opal volume domains' (111) normals are drawn (core/opal/volume.py); stored in .blend
+    files only (``material.opal.domain_orientation``), the core takes the name."""
+
+    RANDOM = 0
+    LAYERED = 1
 
 
 class DispersionSampling(IntEnum):

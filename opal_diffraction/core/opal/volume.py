@@ -32,6 +32,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..enums import DomainOrientation
+
 __all__ = [
     "VolumeDomains",
     "inside_mesh",
@@ -42,7 +44,7 @@ __all__ = [
 ]
 
 #: Orientation distributions of the (111) normals.
-ORIENTATIONS = ("RANDOM", "LAYERED")
+ORIENTATIONS = tuple(m.name for m in DomainOrientation)
 #: Nearest seeds a lookup starts with (doubled for the points where they do not decide).
 _K_START = 8
 
