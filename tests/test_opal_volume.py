@@ -233,3 +233,27 @@ def test_scene_rejects_bad_domains():
     sc.add_domains(np.zeros((2, 3)), np.array([0.0, np.nan]), np.ones((2, 3)), np.full(2, 250.0))
     with pytest.raises(SceneError, match="weight"):
         sc.validated()
+
+
+def _hue(rgb):
+    r, g, b = np.asarray(rgb, np.float64).T
+    return np.degrees(np.arctan2(np.sqrt(3) * (g - b), 2 * r - g - b)) % 360
+
+
+def test_bragg_preview_colour_is_the_hue_of_the_bragg_wavelength():
+    """The preview of spheres D is the colour of lambda = 2 sqrt(2/3) D n_eff (docs/physics.md section
+    5.2): its hue within 12 degrees of colour-science's monochromatic light at that wavelength
+    (CIE 1931 -> linear sRGB, clipped as the preview clips), for water voids (a narrow band)."""
+    import colour
+
+    from opal_diffraction.core.opal import bragg_colors, bragg_wavelength
+
+    d = np.array([195.0, 210.0, 225.0, 240.0, 255.0, 270.0])
+    rgba = bragg_colors(d, 1.45, 1.33)
+    assert rgba.shape == (6, 4) and (rgba[:, 3] == 1).all() and np.allclose(rgba[:, :3].max(axis=1), 1.0)
+    lam = bragg_wavelength(d, 0.0, 1.45, 1.33)
+    xyz = colour.wavelength_to_XYZ(lam)
+    ref = np.clip(colour.XYZ_to_RGB(xyz, colour.RGB_COLOURSPACES["sRGB"], apply_cctf_encoding=False), 0, None)
+    diff = np.abs((_hue(rgba[:, :3]) - _hue(ref) + 180) % 360 - 180)
+    assert diff.max() < 12, (lam, _hue(rgba[:, :3]), _hue(ref))
+    assert (bragg_colors(np.array([0.0]))[0, :3] == 0.5).all()  # no diameter: grey

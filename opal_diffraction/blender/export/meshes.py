@@ -211,7 +211,9 @@ def tangents(md: MeshData, gratings: list, tri_mat_local: np.ndarray, warn) -> n
     them onto each triangle and applies the material's rotation)."""
     v = md.vertices[md.triangles]
     e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
-    modes = np.array([g["grating_direction"] if g else "" for g in gratings], dtype=object)[tri_mat_local]
+    # a BRAGG lattice has no surface direction (its (111) planes are the volume domains')
+    modes = np.array([g["grating_direction"] if g and g.get("lattice") != "BRAGG" else "" for g in gratings],
+                     dtype=object)[tri_mat_local]
     t = np.zeros((len(md.triangles), 3))
     t[:] = (1.0, 0.0, 0.0)
     if (modes == "UV").any() and md.uv is None:
