@@ -12,6 +12,7 @@ from opal_diffraction.core import primitives
 from opal_diffraction.core.opal import cabochon
 from opal_diffraction.core.opal.volume import (
     VolumeDomains,
+    bragg_domains,
     cells_of,
     generate_volume_domains,
     inside_mesh,
@@ -257,3 +258,40 @@ def test_bragg_preview_colour_is_the_hue_of_the_bragg_wavelength():
     diff = np.abs((_hue(rgba[:, :3]) - _hue(ref) + 180) % 360 - 180)
     assert diff.max() < 12, (lam, _hue(rgba[:, :3]), _hue(ref))
     assert (bragg_colors(np.array([0.0]))[0, :3] == 0.5).all()  # no diameter: grey
+
+
+def test_bragg_domains_take_the_cell_or_the_face_and_keep_the_normals_hemisphere():
+    rng = np.random.default_rng(3)
+    seeds = rng.random((30, 3))
+    axis = rng.normal(size=(30, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    vd = VolumeDomains(seeds, np.zeros(30), axis.astype(np.float32), np.full(30, 260.0, np.float32),
+                       np.zeros(30, np.int32), np.array([0, 0, -1], np.int32))
+    tri_normal = np.array([[0, 0, 1.0], [0, 0, -1.0], [1.0, 0, 0]], np.float32)
+    pts = rng.random((500, 3))
+    prim = rng.integers(0, 3, 500)
+    ax, dia = bragg_domains(vd, pts, prim, tri_normal, 240.0)
+    cell = vd.cell(pts, prim)
+    inside = prim < 2
+    np.testing.assert_allclose(np.abs(np.sum(ax[inside] * axis[cell[inside]], axis=1)), 1.0, atol=1e-6)
+    assert (np.sum(ax[inside] * tri_normal[prim[inside]], axis=1) >= 0).all()
+    assert (dia[inside] == 260).all() and (dia[~inside] == 240).all()
+    np.testing.assert_array_equal(ax[~inside], tri_normal[prim[~inside]])
+    # no domains at all: every hit one domain parallel to its face
+    ax0, dia0 = bragg_domains(None, pts, prim, tri_normal, np.full(500, 250.0))
+    np.testing.assert_array_equal(ax0, tri_normal[prim])
+    assert (dia0 == 250).all()
+
+
+def test_prepared_scene_carries_the_domains():
+    from opal_diffraction.core.prepare import prepare
+    from opal_diffraction.core.settings import RenderSettings
+
+    st = RenderSettings(samples=1, light_paths=0)
+    sc = _scene()
+    assert prepare(sc, st).opal_domains is None
+    sc.add_domains(np.zeros((3, 3)) + [0.01, 0, 0], np.zeros(3), np.tile([0, 0, 1.0], (3, 1)), np.full(3, 250.0),
+                   triangles=slice(0, 12))
+    vd = prepare(sc, st).opal_domains
+    assert isinstance(vd, VolumeDomains) and len(vd) == 3
+    assert (vd.tri_group[:12] == 0).all() and (vd.tri_group[12:] == -1).all()

@@ -70,6 +70,7 @@ def write_domains(ob, d: ObjectDomains) -> None:
         "axis": np.ascontiguousarray(d.axis, np.float32).reshape(-1),
         "diameter": np.ascontiguousarray(d.diameter, np.float32).reshape(-1),
     }
+    ob.update_tag()  # a custom property is not a depsgraph change by itself: the rendered viewport re-exports
 
 
 def clear_domains(ob) -> None:

@@ -378,6 +378,19 @@ def test_set_domain_changes_only_the_cells_of_the_selected_faces(kw):
         assert not moved[~np.isin(cells, target)].any() and moved[sel].all()
 
 
+def test_select_domain_grows_the_selection_to_whole_volume_cells():
+    ob = _add_bragg_opal(resolution=12, count=40, seed=6)
+    cells = _cells_brute(_face_centres(ob.data), read_domains(ob))
+    sel = np.zeros(len(ob.data.polygons), bool)
+    sel[[10, 300]] = True
+    _select_faces(ob, sel)
+    assert bpy.ops.opal.select_domain() == {"FINISHED"}
+    bpy.ops.object.mode_set(mode="OBJECT")
+    now = np.empty(len(ob.data.polygons), bool)
+    ob.data.polygons.foreach_get("select", now)
+    np.testing.assert_array_equal(now, np.isin(cells, cells[sel]))
+
+
 def test_set_domain_needs_volume_domains_edit_mode_and_faces():
     ob = _add_bragg_opal(count=10)
     assert not bpy.ops.opal.set_domain.poll()  # Object Mode

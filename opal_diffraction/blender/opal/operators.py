@@ -20,7 +20,7 @@ from ...core import opal as core_opal
 from ..opal_domains import bragg_material, read_domains
 from ..opal_presets import PRESET_ITEMS, new_opal_material
 from .attributes import FaceData, read_faces, show_preview, write_field
-from .volume_ops import OPAL_OT_set_domain, generate_object_domains, write_bragg_preview
+from .volume_ops import OPAL_OT_set_domain, face_cells, generate_object_domains, write_bragg_preview
 
 __all__ = [
     "is_mesh",
@@ -480,7 +480,8 @@ class OPAL_OT_merge_domains(_EditOp, bpy.types.Operator):
 
 
 class OPAL_OT_select_domain(_EditOp, bpy.types.Operator):
-    """Select every face of the domains that have a selected face"""
+    """Select every face of the domains that have a selected face (volume domains: the faces whose
+    centres lie in the same cells)"""
 
     bl_idname = "opal.select_domain"
     bl_label = "Select Domains"
@@ -490,7 +491,12 @@ class OPAL_OT_select_domain(_EditOp, bpy.types.Operator):
         ob, faces, field = self._begin(context)
         if field is None:
             return {"CANCELLED"}
-        want = _domains_of(field, faces.selected)
+        vol = read_domains(ob)
+        if vol is not None and (bragg_material(ob) is not None or faces.field is None):
+            cells = face_cells(faces, vol)
+            want = np.isin(cells, np.unique(cells[faces.selected]))
+        else:
+            want = _domains_of(field, faces.selected)
         bm = bmesh.from_edit_mesh(ob.data)
         bm.faces.ensure_lookup_table()
         for i in np.flatnonzero(want & ~faces.selected).tolist():

@@ -36,6 +36,7 @@ from ..enums import DomainOrientation
 
 __all__ = [
     "VolumeDomains",
+    "bragg_domains",
     "inside_mesh",
     "generate_volume_domains",
     "transform_domains",
@@ -49,33 +50,44 @@ ORIENTATIONS = tuple(m.name for m in DomainOrientation)
 _K_START = 8
 
 
+class _Group:
+    """One group's seeds with their k-d tree (built once) and largest weight."""
+
+    def __init__(self, seeds, weight):
+        from scipy.spatial import cKDTree
+
+        self.seeds = np.asarray(seeds, np.float64).reshape(-1, 3)
+        self.weight = np.asarray(weight, np.float64).reshape(-1)
+        self.tree = cKDTree(self.seeds) if len(self.seeds) > 1 else None
+        self.wmax = float(self.weight.max()) if len(self.weight) else 0.0
+
+    def argmin(self, points, k_start: int = _K_START) -> np.ndarray:
+        """Index (B,) of argmin_s |p - s| - w_s for every point; exact (see the module)."""
+        n = len(self.seeds)
+        out = np.zeros(len(points), np.int64)
+        if n <= 1 or len(points) == 0:
+            return out
+        todo = np.arange(len(points))
+        k = min(k_start, n)
+        while len(todo):
+            d, j = self.tree.query(points[todo], k=k)
+            d, j = d.reshape(len(todo), k), j.reshape(len(todo), k)
+            val = d - self.weight[j]
+            best = np.argmin(val, axis=1)
+            rows = np.arange(len(todo))
+            out[todo] = j[rows, best]
+            if k >= n:
+                break
+            # no seed beyond the k-th can beat the best: its value is at least d_k - max weight
+            decided = d[:, -1] - self.wmax >= val[rows, best]
+            todo = todo[~decided]
+            k = min(2 * k, n)
+        return out
+
+
 def _weighted_argmin(points, seeds, weight, k_start: int = _K_START) -> np.ndarray:
     """Index (B,) into ``seeds`` of argmin_s |p - s| - w_s for every point; exact (see module)."""
-    from scipy.spatial import cKDTree
-
-    n = len(seeds)
-    out = np.zeros(len(points), np.int64)
-    if n == 0 or len(points) == 0:
-        return out
-    if n == 1:
-        return out
-    tree = cKDTree(seeds)
-    wmax = float(np.max(weight))
-    todo = np.arange(len(points))
-    k = min(k_start, n)
-    while len(todo):
-        d, j = tree.query(points[todo], k=k)
-        d, j = d.reshape(len(todo), k), j.reshape(len(todo), k)
-        val = d - weight[j]
-        best = np.argmin(val, axis=1)
-        rows = np.arange(len(todo))
-        out[todo] = j[rows, best]
-        if k >= n:
-            break
-        decided = d[:, -1] - wmax >= val[rows, best]
-        todo = todo[~decided]
-        k = min(2 * k, n)
-    return out
+    return _Group(seeds, weight).argmin(np.asarray(points, np.float64).reshape(-1, 3), k_start)
 
 
 @dataclass(frozen=True)
@@ -104,11 +116,13 @@ class VolumeDomains:
     def groups(self) -> int:
         return int(self.group.max()) + 1 if len(self.group) else 0
 
-    def _of_group(self, g: int) -> np.ndarray:
-        m = self._members.get(g)
-        if m is None:
-            m = self._members[g] = np.flatnonzero(self.group == g)
-        return m
+    def _of_group(self, g: int):
+        """(members (S_g,) global seed indices, _Group), built on first use and kept."""
+        entry = self._members.get(g)
+        if entry is None:
+            m = np.flatnonzero(self.group == g)
+            entry = self._members[g] = (m, _Group(self.seeds[m], self.weight[m]))
+        return entry
 
     def cell(self, points, prim) -> np.ndarray:
         """Global seed index (B,) of each point's cell, -1 where its triangle has no domains."""
@@ -119,11 +133,11 @@ class VolumeDomains:
         g = np.full(len(p), -1, np.int64)
         g[ok] = self.tri_group[prim[ok]]
         for gi in np.unique(g[g >= 0]).tolist():  # a loop over opal objects (a handful)
-            members = self._of_group(gi)
+            members, grp = self._of_group(gi)
             if len(members) == 0:
                 continue
             sel = np.flatnonzero(g == gi)
-            out[sel] = members[_weighted_argmin(p[sel], self.seeds[members], self.weight[members])]
+            out[sel] = members[grp.argmin(p[sel])]
         return out
 
     def lookup(self, points, prim):
@@ -137,6 +151,27 @@ class VolumeDomains:
         axis[found] = self.axis[c[found]]
         diameter[found] = self.diameter[c[found]]
         return axis, diameter, found
+
+
+def bragg_domains(domains: "VolumeDomains | None", points, prim, tri_normal, default_diameter):
+    """The (111) normal and sphere diameter at hit points, for the BRAGG lattice's shading:
+    (axis (B, 3) float32 unit, diameter (B,) float32 nm). Inside a volume domain: the cell's
+    normal, turned into the hemisphere of the triangle's normal (an axis: n and -n are the same
+    planes), and its diameter; elsewhere (no domains for that triangle) one domain whose planes
+    are parallel to the face - the triangle's normal ``tri_normal[prim]`` - and
+    ``default_diameter`` (the material's, scalar or (B,))."""
+    prim = np.asarray(prim, np.int64).reshape(-1)
+    nrm = np.asarray(tri_normal, np.float32)[np.clip(prim, 0, max(len(tri_normal) - 1, 0))]
+    diameter = np.broadcast_to(np.asarray(default_diameter, np.float32), prim.shape).copy()
+    axis = nrm.astype(np.float32, copy=True)
+    if domains is None or len(domains) == 0:
+        return axis, diameter
+    a, d, found = domains.lookup(points, prim)
+    flip = np.sum(a * nrm, axis=1) < 0
+    a[flip] *= -1.0
+    axis[found] = a[found]
+    diameter[found] = d[found]
+    return axis, diameter
 
 
 def cells_of(points, seeds, weight) -> np.ndarray:
