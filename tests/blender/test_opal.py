@@ -261,7 +261,28 @@ def test_glass_preset_sets_dispersion_and_node_ior():
     assert mat.node_tree.nodes["Principled BSDF"].inputs["IOR"].default_value == pytest.approx(2.4175)
 
 
+def test_shipped_glass_presets_are_the_named_glasses():
+    """One shipped glass preset per DISPERSION_PRESETS entry (what opal.dispersion_preset applies), same values."""
+    from opal_diffraction.blender.properties import DISPERSION_PRESETS
+
+    files = {read_preset(p)["node_ior"]: read_preset(p) for p in preset_files(opal_presets.GLASS_SUBDIR).values()}
+    for _ident, _name, model, n_d, abbe in DISPERSION_PRESETS:
+        p = files[n_d]
+        assert (p["dispersion"], p["abbe_number"]) == (model, abbe)
+
+
 def test_preset_menus_draw_shipped_and_user_entries():
+    for cls, add in ((opal_presets.OPAL_MT_opal_presets, "opal.opal_preset_add"),
+                     (opal_presets.OPAL_MT_glass_presets, "opal.glass_preset_add")):
+        calls = []
+        fake = types.SimpleNamespace(preset_subdir=cls.preset_subdir, preset_operator=cls.preset_operator,
+                                     preset_add_operator=cls.preset_add_operator,
+                                     path_menu=lambda dirs, op, **kw: calls.append((dirs, op, kw)))
+        cls.draw(fake, bpy.context)
+        (dirs, op, kw), = calls
+        assert op == "script.execute_preset" and kw["add_operator"] == add
+        assert os.path.isdir(dirs[0]) and dirs[0].startswith(opal_presets.SHIPPED)
+        assert dirs[1:] == list(bpy.utils.preset_paths(cls.preset_subdir))
     names = {n for n in preset_files()}
     assert {"Black", "White", "Crystal", "Boulder", "Harlequin", "Pinfire", "Paper Model"} <= names
     assert len(preset_files(opal_presets.GLASS_SUBDIR)) >= 10
