@@ -46,7 +46,8 @@ __all__ = [
 
 #: Orientation distributions of the (111) normals.
 ORIENTATIONS = tuple(m.name for m in DomainOrientation)
-#: Nearest seeds a lookup starts with (doubled for the points where they do not decide).
+#: Nearest seeds a lookup starts with where the weights differ (doubled for the points where
+#: they do not decide); unweighted cells need the nearest seed only.
 _K_START = 8
 
 
@@ -68,7 +69,7 @@ class _Group:
         if n <= 1 or len(points) == 0:
             return out
         todo = np.arange(len(points))
-        k = min(k_start, n)
+        k = 1 if self.wmax == float(self.weight.min()) else min(k_start, n)  # equal weights: the nearest
         while len(todo):
             d, j = self.tree.query(points[todo], k=k)
             d, j = d.reshape(len(todo), k), j.reshape(len(todo), k)
