@@ -812,7 +812,7 @@ class _Recorder:
     def __getattr__(self, name):
         if name in ("row", "column", "box", "split"):
             return lambda *a, **k: _Recorder(self.log)
-        if name in ("label", "separator", "menu"):
+        if name in ("label", "separator", "menu", "context_pointer_set"):
             return lambda *a, **k: self.log.append((name, a, k))
         raise AttributeError(name)
 
@@ -846,7 +846,8 @@ def test_redo_panels_menus_and_sidebar_draw():
         if issubclass(cls, bpy.types.Operator) and "draw" in cls.__dict__:
             cls.draw(_fake_operator(cls, log), bpy.context)
     names = {e[1] for e in log if e[0] == "prop"}
-    assert {"count", "seed", "low", "high", "direction", "angle", "period", "preset", "resolution"} <= names
+    assert {"count", "seed", "low", "high", "direction", "angle", "period", "preset", "resolution", "size_spread",
+            "orientation", "axis_spread", "domain_type", "diameter", "tilt"} <= names
     for mode in ("OBJECT", "EDIT_MESH"):
         ctx = types.SimpleNamespace(mode=mode, active_object=ob)
         panel = types.SimpleNamespace(layout=_Recorder(log))
@@ -855,4 +856,6 @@ def test_redo_panels_menus_and_sidebar_draw():
         opal_ops.VIEW3D_MT_opal_edit.draw(panel, ctx)
     ops = {e[1] for e in log if e[0] == "operator"}
     assert {"opal.assign_grating", "opal.jitter_period", "opal.split_domain", "opal.merge_domains",
-            "opal.generate_domains", "mesh.primitive_opal_add"} <= ops
+            "opal.generate_domains", "mesh.primitive_opal_add", "opal.set_domain"} <= ops
+    # the sidebar's preset menu runs on the object's material (presets read bpy.context.material)
+    assert ("context_pointer_set", ("material", ob.active_material), {}) in log

@@ -82,6 +82,7 @@ class VIEW3D_PT_opal_tools(bpy.types.Panel):
         if mat is not None:
             row = layout.row(align=True)
             row.label(text=mat.name, icon="MATERIAL")
+            row.context_pointer_set("material", mat)  # the presets run on bpy.context.material
             row.menu("OPAL_MT_opal_presets", text="", icon="PRESET")
         layout.operator(OPAL_OT_generate_domains.bl_idname, icon="MOD_TRIANGULATE")
         layout.operator(OPAL_OT_update_preview.bl_idname, icon="COLOR")
