@@ -449,6 +449,11 @@ class Scene:
     TEXTURE_INTERPOLATIONS / TEXTURE_EXTENSIONS / TEXTURE_ENCODINGS codes
     ``texture_interpolation``, ``texture_extension``, ``texture_encoding`` (K,) (empty: LINEAR,
     REPEAT, LINEAR for every texture). Materials bind them by index (``Materials.color_texture``...).
+    Opal volume domains (docs/physics.md section 5.4; empty: none), world space:
+    ``domain_seeds`` (S, 3) m, ``domain_weight`` (S,) m (additive Voronoi weights),
+    ``domain_axis`` (S, 3) unit (111) normals, ``domain_diameter`` (S,) nm, ``domain_group``
+    (S,) (one group per opal object instance) and ``tri_domain_group`` (T,) (-1: a triangle
+    without domains); built with :meth:`add_domains`, read with :meth:`volume_domains`.
     """
 
     vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
