@@ -295,3 +295,19 @@ def test_prepared_scene_carries_the_domains():
     vd = prepare(sc, st).opal_domains
     assert isinstance(vd, VolumeDomains) and len(vd) == 3
     assert (vd.tri_group[:12] == 0).all() and (vd.tri_group[12:] == -1).all()
+
+
+@pytest.mark.parametrize("column, value, words", [
+    ("sphere_diameter", 0.0, "sphere diameter"), ("void_ior", 0.9, "void ior"), ("sphere_ior", np.nan, "sphere ior"),
+    ("mosaic_spread", 91.0, "mosaic spread"), ("layers", 0, "layers"),
+])
+def test_bragg_material_columns_are_validated(column, value, words):
+    """The BRAGG lattice's material columns (the interface with the Bragg renderer): defaults
+    250 nm, 1.45, 1.0, 40 layers, 3 degrees; impossible values are a one-line SceneError."""
+    m = Materials.from_list([{"kind": "DIFFUSE", "grating": 1, "lattice": "BRAGG"}])
+    assert (float(m.sphere_diameter[0]), float(m.sphere_ior[0]), float(m.void_ior[0]), int(m.layers[0]),
+            float(m.mosaic_spread[0])) == pytest.approx((250.0, 1.45, 1.0, 40, 3.0))
+    sc = _scene()
+    sc.materials = Materials.from_list([{"kind": "DIFFUSE", "grating": 1, "lattice": "BRAGG", column: value}])
+    with pytest.raises(SceneError, match=words):
+        sc.validated()

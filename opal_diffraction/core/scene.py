@@ -839,6 +839,23 @@ class Scene:
             )
 
 
+def _check_bragg(f64: dict, layers, label) -> None:
+    """The BRAGG lattice's columns (docs/physics.md section 5.2): D_s > 0 nm, indices >= 1,
+    at least one layer, a mosaic spread of 0-90 degrees."""
+    for name, ok, rule in (("sphere_diameter", lambda x: (x > 0) & (x <= PERIOD_MAX), "must be > 0 nm"),
+                           ("sphere_ior", lambda x: x >= 1.0, "must be at least 1"),
+                           ("void_ior", lambda x: x >= 1.0, "must be at least 1"),
+                           ("mosaic_spread", lambda x: (x >= 0.0) & (x <= 90.0), "must be 0-90 degrees")):
+        bad = ~ok(f64[name])
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"{label(i)}: {name.replace('_', ' ')} {_g(f64[name][i])} {rule}")
+    lay = np.asarray(layers, np.int64)
+    if (lay < 1).any():
+        i = int(np.argmax(lay < 1))
+        raise SceneError(f"{label(i)}: layers must be at least 1, got {int(lay[i])}")
+
+
 #: The opal volume domain columns (Scene.add_domains), saved only when there are domains.
 _DOMAIN_FIELDS = ("domain_seeds", "domain_weight", "domain_axis", "domain_diameter", "domain_group",
                   "tri_domain_group")
@@ -1223,8 +1240,9 @@ def _validate_materials(m: Materials) -> Materials:
     # every float column: finite and within float32
     for name in ("color", "emission", "ior", "abbe", "period", "slit_width", "coherence_length", "rotation",
                  "normal_strength", "emission_strength", "roughness", "metallic", "transmission",
-                 "specular_ior_level", "specular_tint"):
+                 "specular_ior_level", "specular_tint", "sphere_diameter", "sphere_ior", "void_ior", "mosaic_spread"):
         _check_range(f64[name], label, name.replace("_", " "), "")
+    _check_bragg(f64, out["layers"], label)
     for name in TEXTURE_COLUMNS:
         bad = out[name].astype(np.int64) < -1
         if bad.any():
