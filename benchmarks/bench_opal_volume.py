@@ -45,10 +45,10 @@ def main(argv=None) -> int:
             times.append(time.perf_counter() - t0)
         from scipy.spatial import cKDTree
 
-        d, j = cKDTree(seeds).query(pts, k=min(8, count))
+        d, j = cKDTree(seeds).query(pts, k=min(4, count))
         d, j = d.reshape(len(pts), -1), j.reshape(len(pts), -1)
         val = d - weight[j]
-        widened = float(np.mean(d[:, -1] - weight.max() < val.min(axis=1))) if count > 8 else 0.0
+        widened = float(np.mean(d[:, -1] - weight.max() < val.min(axis=1))) if count > 4 else 0.0
         print(f"{name:10s} {count:5d} domains: generate {gen:.3f} s, tree {build * 1e3:.1f} ms, lookup "
               f"{min(times):.3f} s ({min(times) / len(pts) * 1e9:.0f} ns/point), widened {widened:.1%}")
     return 0

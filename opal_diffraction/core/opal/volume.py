@@ -47,8 +47,9 @@ __all__ = [
 #: Orientation distributions of the (111) normals.
 ORIENTATIONS = tuple(m.name for m in DomainOrientation)
 #: Nearest seeds a lookup starts with where the weights differ (doubled for the points where
-#: they do not decide); unweighted cells need the nearest seed only.
-_K_START = 8
+#: they do not decide; measured: 4 is 20-30 % faster than 2 or 8 on the presets' layouts);
+#: unweighted cells need the nearest seed only.
+_K_START = 4
 
 
 class _Group:
