@@ -1,16 +1,25 @@
-"""A black opal on dark velvet, built with bpy and rendered headless through the OPAL_DIFFRACTION engine.
+"""A real-size opal cabochon on dark velvet, built with bpy and rendered headless through the OPAL_DIFFRACTION engine.
 
-    .venv/bin/python examples/opal.py [--resolution 512 512] [--spp 16] [--out docs] [--no-moved]
+    .venv/bin/python examples/opal.py [--preset black] [--resolution 512 512] [--spp 16] [--out docs]
+    .venv/bin/python examples/opal.py --all-presets            # docs/opal_<preset>.png for every preset
+    .venv/bin/python examples/opal.py --preset harlequin --no-orbit
 
-Adds an opal with ``bpy.ops.mesh.primitive_opal_add`` (an oval cabochon with the "Black opal"
-preset: a near-black body under Voronoi domains of a hexagonal lattice, periods from silica
-sphere diameters of 200-330 nm), lays it on a dark cloth under a small light and a dim daylight
-sky (an Environment Texture; examples/environments.py), and renders it
-with ``bpy.ops.render.render(write_still=True)`` as F12 would, to ``docs/opal.png``; then moves
-the light and renders ``docs/opal_light_moved.png``: other domains light up in other colours
-(the play of colour). Prints the render times and the time the rendered viewport's first (1/8
-resolution) image takes; ``--blend out/opal.blend`` also saves the scene, which renders the same
-with Blender once the extension is installed.
+Adds an opal with ``bpy.ops.mesh.primitive_opal_add`` (*Add > Mesh > Opal*: an 18 x 13 x 6 mm
+cabochon, volume domains of the preset's FCC opal: docs/opal.md), lays it on a dark cloth under
+a small lamp and a dim daylight sky (an Environment Texture; examples/environments.py), and
+renders it with ``bpy.ops.render.render(write_still=True)`` as F12 would.
+
+- The default (``--preset black``) writes ``docs/opal.png`` and, orbiting the camera 5 degrees
+  down and up about the stone (the view tilts against the domains' (111) planes: the flashes
+  move towards blue as the angle to the planes grows), ``docs/opal_orbit_minus5.png`` and
+  ``docs/opal_orbit_plus5.png``.
+- ``--preset NAME`` writes ``docs/opal_<name>.png`` (and its two orbit frames
+  ``opal_<name>_orbit_minus5.png`` / ``_plus5.png`` unless ``--no-orbit``); ``--all-presets``
+  writes ``docs/opal_<name>.png`` for every shipped preset (no orbit frames).
+
+Prints the render times and the time the rendered viewport's first (1/8 resolution) image takes;
+``--blend out/opal.blend`` also saves the scene, which renders the same with Blender once the
+extension is installed.
 """
 
 from __future__ import annotations
@@ -26,11 +35,20 @@ ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)),
 #: The sky's strength (a multiplier of examples/environments.py's sky): a dim fill beside the lamp.
 SKY_STRENGTH = 0.01
 
-#: Where the light sits for the two images (metres; the opal is 2 m long, centred at the origin).
-LIGHT_FIRST = (-3.0, -9.0, 12.0)
-LIGHT_MOVED = (7.0, 1.0, 12.0)
-CAMERA = (0.0, -4.6, 4.9)
-TARGET = (0.0, 0.05, 0.12)
+#: The stone: 18 x 13 x 6 mm, centred at the origin on the cloth (z = 0).
+SIZE = (0.018, 0.013, 0.006)
+#: The camera looks at the dome's centre from 70 mm, 40 degrees above the cloth (a 100 mm lens
+#: frames about 25 mm); the lamp hangs 35 cm away on the other side, 50 degrees up, so the
+#: domains whose (111) planes lie near the surface send their first-order flash towards the
+#: camera (and the polished dome a small highlight).
+TARGET = (0.0, 0.0, 0.0025)
+CAMERA_DISTANCE = 0.07
+CAMERA_ELEVATION = 40.0   # degrees above the cloth, seen from -Y
+LAMP_DISTANCE = 0.35
+LAMP_ELEVATION = 50.0     # degrees above the cloth, from +Y
+LAMP_POWER = 20.0         # W (Blender's point-light power)
+#: The orbit: the camera's elevation moved by these many degrees (two extra frames).
+ORBIT = (-5.0, 5.0)
 
 
 def _material(bpy, name, color):
@@ -46,10 +64,22 @@ def _material(bpy, name, color):
     return mat
 
 
-def build_scene(width: int = 512, height: int = 512, spp: int = 16, seed: int = 7):
+def camera_location(elevation_deg: float = CAMERA_ELEVATION):
+    """The camera on a circle of CAMERA_DISTANCE about TARGET in the YZ plane, ``elevation_deg`` up."""
+    e = math.radians(elevation_deg)
+    return (TARGET[0], TARGET[1] - CAMERA_DISTANCE * math.cos(e), TARGET[2] + CAMERA_DISTANCE * math.sin(e))
+
+
+def place_camera(cam, elevation_deg: float = CAMERA_ELEVATION) -> None:
+    from mathutils import Vector
+
+    cam.location = camera_location(elevation_deg)
+    cam.rotation_euler = (Vector(TARGET) - Vector(cam.location)).to_track_quat("-Z", "Y").to_euler()
+
+
+def build_scene(width: int = 512, height: int = 512, spp: int = 16, seed: int = 7, preset: str = "BLACK"):
     """Build the opal scene in the current (emptied) Blender file; return (scene, opal, light)."""
     import bpy
-    from mathutils import Vector
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     sc = bpy.context.scene
@@ -58,6 +88,7 @@ def build_scene(width: int = 512, height: int = 512, spp: int = 16, seed: int = 
     sc.render.resolution_percentage = 100
     sc.view_settings.view_transform = "Standard"
     sc.view_settings.exposure = -1.0
+    sc.unit_settings.length_unit = "MILLIMETERS"
     sc.opal.samples = spp
     sc.opal.round_samples = spp
     sc.opal.wavelength_step = 10.0
@@ -69,29 +100,30 @@ def build_scene(width: int = 512, height: int = 512, spp: int = 16, seed: int = 
     sc.world = environments.blender_world(bpy, environments.sky(256, 128), SKY_STRENGTH)
 
     # the cloth: a dark blue-black velvet
-    bpy.ops.mesh.primitive_plane_add(size=40.0)
+    bpy.ops.mesh.primitive_plane_add(size=0.4)
     bpy.context.active_object.data.materials.append(_material(bpy, "velvet", (0.004, 0.004, 0.006)))
 
-    # the opal
-    bpy.ops.mesh.primitive_opal_add(size_x=2.0, size_y=1.5, height=0.38, resolution=96, preset="BLACK",
-                                    count=400, seed=seed, low=200.0, high=330.0, show_preview=False)
+    # the opal: Add > Mesh > Opal at its real size, the preset's material and volume domains
+    bpy.ops.mesh.primitive_opal_add(size_x=SIZE[0], size_y=SIZE[1], height=SIZE[2], resolution=96,
+                                    preset=preset.upper(), seed=seed, show_preview=False)
     opal = bpy.context.active_object
     opal.rotation_euler = (0.0, 0.0, math.radians(8.0))
 
     cam_data = bpy.data.cameras.new("camera")
     cam_data.lens = 100.0
+    cam_data.clip_start = 0.001
     cam = bpy.data.objects.new("camera", cam_data)
     sc.collection.objects.link(cam)
-    cam.location = CAMERA
-    cam.rotation_euler = (Vector(TARGET) - Vector(CAMERA)).to_track_quat("-Z", "Y").to_euler()
+    place_camera(cam)
     sc.camera = cam
 
     light_data = bpy.data.lights.new("lamp", "POINT")
-    light_data.energy = 60000.0
+    light_data.energy = LAMP_POWER
     light_data.shadow_soft_size = 0.0
     light = bpy.data.objects.new("lamp", light_data)
     sc.collection.objects.link(light)
-    light.location = LIGHT_FIRST
+    e = math.radians(LAMP_ELEVATION)
+    light.location = (TARGET[0], TARGET[1] + LAMP_DISTANCE * math.cos(e), TARGET[2] + LAMP_DISTANCE * math.sin(e))
     return sc, opal, light
 
 
@@ -131,43 +163,76 @@ def viewport_first_image(width: int, height: int) -> float:
     return time.perf_counter() - t0
 
 
+def _report(path: str, t: float, args) -> bool:
+    from opal_diffraction.blender.engine import last_render
+
+    if last_render.get("status") != "FINISHED":
+        print(f"render failed: {last_render.get('message')}", file=sys.stderr)
+        return False
+    s = last_render["stats"]
+    print(f"{path}: {args.resolution[0]}x{args.resolution[1]}, {args.spp} spp, {t:.1f} s "
+          f"(export {s.get('export_export_s', 0):.2f} s, prepare {s.get('prepare_s', 0):.2f} s, "
+          f"{s.get('triangles', 0)} triangles, {s.get('rays', 0) / 1e6:.1f} M rays)")
+    return True
+
+
+def _render_preset(preset: str, stem: str, args, orbit: bool) -> bool:
+    import bpy
+
+    sc, _opal, _light = build_scene(*args.resolution, spp=args.spp, seed=args.seed, preset=preset)
+    if args.blend:
+        bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(args.blend))
+    path = os.path.join(args.out, f"{stem}.png")
+    if not _report(path, render(path), args):
+        return False
+    if orbit:
+        for step in ORBIT:
+            place_camera(sc.camera, CAMERA_ELEVATION + step)
+            path = os.path.join(args.out, f"{stem}_orbit_{'minus' if step < 0 else 'plus'}{abs(step):g}.png")
+            if not _report(path, render(path), args):
+                return False
+        place_camera(sc.camera)
+    return True
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--preset", default="black", help="an opal preset (black, white, crystal, boulder, harlequin, "
+                    "pinfire, paper)")
+    ap.add_argument("--all-presets", action="store_true", help="render docs/opal_<preset>.png for every preset")
+    ap.add_argument("--no-orbit", action="store_true", help="skip the two orbit frames (+-5 degrees)")
     ap.add_argument("--resolution", type=int, nargs=2, default=(512, 512))
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--seed", type=int, default=7, help="domain layout seed")
     ap.add_argument("--out", default=os.path.join(ROOT, "docs"))
     ap.add_argument("--blend", default="", help="also save the scene as this .blend file")
-    ap.add_argument("--no-moved", action="store_true", help="skip the second image (light moved)")
+    ap.add_argument("--no-viewport", action="store_true", help="skip timing the viewport's first image")
     args = ap.parse_args(argv)
 
-    import bpy
-
     import opal_diffraction
-    from opal_diffraction.blender.engine import last_render
 
     opal_diffraction.register()
     try:
+        from opal_diffraction.blender.opal_presets import PRESET_ITEMS
+
+        idents = [i[0] for i in PRESET_ITEMS]
         os.makedirs(args.out, exist_ok=True)
-        sc, opal, light = build_scene(*args.resolution, spp=args.spp, seed=args.seed)
-        if args.blend:
-            bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(args.blend))
-        first = os.path.join(args.out, "opal.png")
-        t = render(first)
-        if last_render.get("status") != "FINISHED":
-            print(f"render failed: {last_render.get('message')}", file=sys.stderr)
-            return 1
-        s = last_render["stats"]
-        print(f"{first}: {args.resolution[0]}x{args.resolution[1]}, {args.spp} spp, {t:.1f} s "
-              f"(export {s.get('export_export_s', 0):.2f} s, prepare {s.get('prepare_s', 0):.2f} s, "
-              f"{s.get('triangles', 0)} triangles, {s.get('rays', 0) / 1e6:.1f} M rays)")
-        if not args.no_moved:
-            light.location = LIGHT_MOVED
-            moved = os.path.join(args.out, "opal_light_moved.png")
-            t = render(moved)
-            print(f"{moved}: {t:.1f} s")
-        fv = viewport_first_image(*args.resolution)
-        print(f"viewport first image ({args.resolution[0] // 8}x{args.resolution[1] // 8}, 1 spp): {fv:.2f} s")
+        if args.all_presets:
+            for ident in idents:
+                if not _render_preset(ident, f"opal_{ident.lower()}", args, orbit=False):
+                    return 1
+        else:
+            ident = args.preset.upper()
+            if ident not in idents:
+                print(f"unknown preset {args.preset!r}; expected one of {[i.lower() for i in idents]}",
+                      file=sys.stderr)
+                return 2
+            stem = "opal" if ident == "BLACK" else f"opal_{ident.lower()}"
+            if not _render_preset(ident, stem, args, orbit=not args.no_orbit):
+                return 1
+        if not args.no_viewport:
+            fv = viewport_first_image(*args.resolution)
+            print(f"viewport first image ({args.resolution[0] // 8}x{args.resolution[1] // 8}, 1 spp): {fv:.2f} s")
     finally:
         opal_diffraction.unregister()
     return 0

@@ -4,8 +4,9 @@
     export      depsgraph -> core Scene
     engine      the OPAL_DIFFRACTION render engine
     operators   export to .npz, dispersion presets
-    opal_presets  opal material presets (Paper model, Precious, Black, Crystal opal)
-    opal        Add Opal, grating domains, Edit Mode grating placement (opal_ops: its former name)
+    opal_presets  opal and glass presets through Blender's preset system (shipped in ../presets)
+    opal_domains  an object's opal volume domains, stored in object space
+    opal        Add Opal, volume and grating domains, Edit Mode tools (opal_ops: its former name)
     mesh_io     mesh data -> NumPy, the face attributes the opal tools and the exporter share
     viewport    the engine's rendered viewport (progressive, drawn with the gpu module)
     ui          panels, and Blender's own panels enabled for the engine

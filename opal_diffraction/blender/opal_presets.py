@@ -1,134 +1,152 @@
-"""Opal material presets: "Paper model", "Precious opal", "Black opal", "Crystal opal".
+"""Opal and glass presets through Blender's preset system (as Cycles' sampling presets).
 
-A preset sets a material's body (a Principled BSDF: base colour, roughness, transmission, IOR,
-which the exporter reads as a diffuse or glass base) and its grating layer (``material.opal``),
-with the direction and period read from the per-face attributes the opal tools write
-(``grating_direction = 'ATTRIBUTE'``; the material's period is the fall-back for faces without
-one). Each preset also names the domain layout that suits it, which Add Opal uses:
+A preset is a Python file of ``opal.<property> = value`` lines (``opal`` being
+``bpy.context.material.opal``), run by ``script.execute_preset``; *Add Preset* (the + in the
+menu) writes the material's current values to the user's ``scripts/presets/<subdir>`` with
+``bl_operators.presets.AddPresetBase`` and - removes them. The shipped presets are read from
+the extension's own folder (``opal_diffraction/presets/{opal,glass}``, read-only: a user preset
+of the same name is listed beside it, and shipped ones cannot be removed).
 
-- Paper model: the source paper's opal (Kobayashi & Kawai, docs/physics.md section 5.1), every
-  triangle one grating, all oriented consistently (the object's X axis projected onto each
-  face), one period; parallel slits.
-- Precious opal: a milky body under domains of a hexagonal lattice (the close-packed silica
-  spheres seen from the (111) face), periods from sphere diameters of 200-330 nm through the
-  Bragg law (docs/physics.md section 5.2; air voids, and see section 5.5 for the hexagonal
-  lattice's first orders); few coherent rows (24), so each lit domain flashes one
-  colour over a broad range of angles.
-- Black opal: the same lattice over a near-black body (dark potch), the most saturated colours.
-- Crystal opal: the same lattice on a transparent body (glass, IOR 1.45).
+The body tone lives in the material's Principled BSDF; the presets set it through
+``material.opal.body_color`` / ``body_roughness`` / ``body_transmission`` / ``node_ior``,
+properties without storage that read and write the node (blender/properties.py).
+
+Opal presets (each file states its physics in its header; docs/opal.md has the table):
+
+- Black, White, Crystal, Boulder, Harlequin (few large domains), Pinfire (many small): the BRAGG
+  lattice (FCC opal, docs/physics.md section 5.2) - sphere diameter D_s and its spread, the void
+  index (water 1.33, silica cement 1.40, air 1.0), ordered layers, mosaic spread, and the
+  volume-domain layout Add Opal / Generate Domains use (count, size spread, orientation).
+- Paper Model: the source paper's surface grating (Kobayashi & Kawai, docs/physics.md section
+  5.1), LINES, one aligned domain, 550 nm.
+
+Glass presets: the named glasses of the Dispersion panel (dispersion model, Abbe number, n_d
+set on the material's BSDF nodes).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import ast
+import os
 
 import bpy
+from bl_operators.presets import AddPresetBase
 from bpy.props import EnumProperty
+from bpy.types import Menu, Operator
 
-__all__ = ["OpalPreset", "PRESETS", "PRESET_ITEMS", "apply_preset", "new_opal_material", "OPAL_OT_opal_preset",
-           "OPAL_MT_opal_presets", "register", "unregister"]
+__all__ = [
+    "OPAL_SUBDIR", "GLASS_SUBDIR", "SHIPPED", "OPAL_PRESET_VALUES", "GLASS_PRESET_VALUES",
+    "preset_files", "read_preset", "preset_file", "apply_preset", "new_opal_material", "PRESET_ITEMS",
+    "OPAL_OT_opal_preset", "OPAL_OT_opal_preset_add", "OPAL_OT_glass_preset_add", "OPAL_MT_opal_presets",
+    "OPAL_MT_glass_presets", "register", "unregister",
+]
 
+#: Preset subfolders (of the user's scripts/presets and of SHIPPED).
+OPAL_SUBDIR = "opal_diffraction/opal"
+GLASS_SUBDIR = "opal_diffraction/glass"
+#: The shipped presets: <package>/presets/opal, <package>/presets/glass.
+SHIPPED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "presets")
 
-@dataclass(frozen=True)
-class OpalPreset:
-    ident: str
-    name: str
-    description: str
-    # body (Principled BSDF)
-    base_color: tuple
-    roughness: float
-    transmission: float
-    ior: float
-    # grating layer (material.opal)
-    lattice: str
-    period: float          # nm, the fall-back for faces without a period attribute
-    slit_ratio: float      # slit width / period
-    slit_count: int
-    coherence_length: float  # um
-    # domain layout for Add Opal / Generate Domains
-    direction_mode: str    # 'RANDOM' | 'ALIGNED'
-    domain_count: int
-    period_mode: str       # 'SPHERES' | 'PERIOD'
-    low: float             # sphere diameter (or period) range, nm
-    high: float
-
-
-PRESETS = {
-    "PAPER": OpalPreset(
-        "PAPER", "Paper model", "The source paper's opal: every triangle one grating, all oriented consistently "
-        "(parallel slits, one period)", (0.12, 0.12, 0.13), 0.3, 0.0, 1.45, "LINES", 550.0, 0.5, 100, 2.0,
-        "ALIGNED", 1, "PERIOD", 550.0, 550.0),
-    "PRECIOUS": OpalPreset(
-        "PRECIOUS", "Precious opal", "Milky body, domains of a hexagonal lattice with periods from silica sphere "
-        "diameters (200-330 nm, Bragg law): Bragg-like patches of colour", (0.22, 0.23, 0.25), 0.3, 0.0, 1.45,
-        "HEXAGONAL", 550.0, 0.5, 24, 0.5, "RANDOM", 400, "SPHERES", 200.0, 330.0),
-    "BLACK": OpalPreset(
-        "BLACK", "Black opal", "Near-black body under domains of a hexagonal lattice (sphere diameters 200-330 nm): "
-        "the most saturated play of colour", (0.005, 0.005, 0.006), 0.3, 0.0, 1.45, "HEXAGONAL", 550.0, 0.5, 24,
-        0.5, "RANDOM", 400, "SPHERES", 200.0, 330.0),
-    "CRYSTAL": OpalPreset(
-        "CRYSTAL", "Crystal opal", "Transparent body (glass, IOR 1.45) under domains of a hexagonal lattice "
-        "(sphere diameters 200-330 nm)", (0.97, 0.97, 0.98), 0.02, 1.0, 1.45, "HEXAGONAL", 550.0, 0.5, 24, 0.5,
-        "RANDOM", 400, "SPHERES", 200.0, 330.0),
-}
-
-#: EnumProperty items (identifier, name, description, stable index).
-PRESET_ITEMS = [(p.ident, p.name, p.description, i) for i, p in enumerate(PRESETS.values())]
+#: What an opal preset saves (material.opal's names: the grating, the BRAGG lattice, the
+#: volume-domain layout, the body through the Principled BSDF).
+OPAL_PRESET_VALUES = [
+    "opal.grating", "opal.grating_type", "opal.lattice", "opal.grating_direction", "opal.rotation", "opal.period",
+    "opal.slit_width", "opal.slit_count", "opal.coherence_length",
+    "opal.sphere_diameter", "opal.sphere_ior", "opal.void_ior", "opal.layers", "opal.mosaic_spread",
+    "opal.domain_count", "opal.domain_size_spread", "opal.domain_orientation", "opal.domain_axis_spread",
+    "opal.diameter_spread",
+    "opal.body_color", "opal.body_roughness", "opal.body_transmission", "opal.node_ior", "opal.dispersion",
+]
+GLASS_PRESET_VALUES = ["opal.dispersion", "opal.abbe_number", "opal.node_ior"]
 
 
-def _principled(mat):
-    """The material's Principled BSDF feeding its output (created, with the output, if missing)."""
-    if bpy.app.version < (5, 0, 0) and not mat.use_nodes:
-        mat.use_nodes = True  # always on (and deprecated) from Blender 5.0
-    nt = mat.node_tree
-    out = nt.get_output_node("ALL") or nt.get_output_node("CYCLES")
-    if out is None:
-        out = nt.nodes.new("ShaderNodeOutputMaterial")
-        out.location = (300, 0)
-    sock = out.inputs["Surface"]
-    if sock.is_linked and sock.links[0].from_node.bl_idname == "ShaderNodeBsdfPrincipled":
-        return sock.links[0].from_node
-    node = nt.nodes.new("ShaderNodeBsdfPrincipled")
-    node.location = (0, 0)
-    nt.links.new(node.outputs[0], sock)
-    return node
+def _shipped_dir(subdir: str) -> str:
+    return os.path.join(SHIPPED, subdir.rsplit("/", 1)[-1])
 
 
-def apply_preset(mat, ident: str) -> OpalPreset:
-    """Set ``mat``'s body and grating layer to the preset ``ident`` (see PRESETS)."""
-    p = PRESETS[ident]
-    node = _principled(mat)
-    node.inputs["Base Color"].default_value = (*p.base_color, 1.0)
-    node.inputs["Roughness"].default_value = p.roughness
-    node.inputs["Metallic"].default_value = 0.0
-    trans = "Transmission Weight" if node.inputs.get("Transmission Weight") else "Transmission"
-    node.inputs[trans].default_value = p.transmission
-    node.inputs["IOR"].default_value = p.ior
-    mat.diffuse_color = (*p.base_color, 1.0)  # Solid mode's material colour
-    o = mat.opal
-    o.grating = True
-    o.grating_type = "REFLECTION"
-    o.lattice = p.lattice
-    o.period = p.period
-    o.slit_width = p.period * p.slit_ratio
-    o.slit_count = p.slit_count
-    o.coherence_length = p.coherence_length
-    o.grating_direction = "ATTRIBUTE"
-    o.rotation = 0.0
-    o.dispersion = "NONE"  # opal's silica disperses little; glass-like bodies refract at the node's IOR
-    return p
+def preset_files(subdir: str = OPAL_SUBDIR) -> dict[str, str]:
+    """{display name: path} of the presets in ``subdir``: shipped first, then the user's."""
+    out = {}
+    for d in [_shipped_dir(subdir)] + list(bpy.utils.preset_paths(subdir)):
+        if not os.path.isdir(d):
+            continue
+        for f in sorted(os.listdir(d)):
+            if f.endswith(".py") and not f.startswith("_"):
+                out.setdefault(bpy.path.display_name(f[:-3], title_case=False), os.path.join(d, f))
+    return out
+
+
+def read_preset(path: str) -> dict:
+    """The ``opal.<name> = literal`` assignments of a preset file, without running it."""
+    out = {}
+    with open(path, encoding="utf-8") as fh:
+        tree = ast.parse(fh.read(), path)
+    for node in tree.body:
+        if (isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Attribute)
+                and isinstance(node.targets[0].value, ast.Name) and node.targets[0].value.id == "opal"):
+            out[node.targets[0].attr] = ast.literal_eval(node.value)
+    return out
+
+
+def _ident(name: str) -> str:
+    return name.split(" ")[0].upper()  # "Black" -> BLACK, "Paper Model" -> PAPER
+
+
+def preset_file(ident_or_name: str, subdir: str = OPAL_SUBDIR) -> str:
+    """The file of a preset given by its identifier (BLACK) or display name (Black)."""
+    files = preset_files(subdir)
+    for name, path in files.items():
+        if ident_or_name in (name, _ident(name)):
+            return path
+    raise KeyError(f"no preset {ident_or_name!r} (have {sorted(files)})")
+
+
+def apply_preset(mat, ident_or_name: str, subdir: str = OPAL_SUBDIR) -> str:
+    """Run a preset on ``mat`` (as the preset menu does on the active material); its path."""
+    path = preset_file(ident_or_name, subdir)
+    with bpy.context.temp_override(material=mat):
+        bpy.utils.execfile(path)
+    return path
 
 
 def new_opal_material(ident: str = "BLACK"):
-    """A new material named after the preset, with the preset applied."""
-    mat = bpy.data.materials.new(f"Opal ({PRESETS[ident].name})")
+    """A new material named after the opal preset, with the preset applied."""
+    name = next(n for n in preset_files() if ident in (n, _ident(n)))
+    mat = bpy.data.materials.new(f"Opal ({name})")
     apply_preset(mat, ident)
     return mat
 
 
-class OPAL_OT_opal_preset(bpy.types.Operator):
-    """Set the material's body and diffraction grating to an opal preset (the grating direction and
-    period come from the face attributes that Add Opal and Generate Domains write)"""
+#: The shipped opal presets' order in menus: the physical opals, then the paper's grating.
+_ORDER = ("Black", "White", "Crystal", "Boulder", "Harlequin", "Pinfire", "Paper Model")
+
+
+def _shipped_items():
+    d = _shipped_dir(OPAL_SUBDIR)
+    names = [bpy.path.display_name(f[:-3], title_case=False) for f in os.listdir(d) if f.endswith(".py")]
+    names.sort(key=lambda n: (_ORDER.index(n) if n in _ORDER else len(_ORDER), n))
+    out = []
+    for i, n in enumerate(names):
+        with open(os.path.join(d, n.replace(" ", "_") + ".py"), encoding="utf-8") as fh:
+            first = fh.readline().lstrip("# ").strip()
+        out.append((_ident(n), n, first[:200], i))
+    return out
+
+
+#: EnumProperty items of the shipped opal presets (identifier, name, description, index).
+PRESET_ITEMS = _shipped_items()
+
+
+def _target_material(context):
+    mat = getattr(context, "material", None)
+    if mat is None:
+        ob = getattr(context, "object", None)
+        mat = getattr(ob, "active_material", None) if ob is not None else None
+    return mat
+
+
+class OPAL_OT_opal_preset(Operator):
+    """Apply a shipped opal preset to the material (body, lattice, volume-domain layout)"""
 
     bl_idname = "opal.opal_preset"
     bl_label = "Opal Preset"
@@ -142,29 +160,68 @@ class OPAL_OT_opal_preset(bpy.types.Operator):
 
     def execute(self, context):
         mat = _target_material(context)
-        p = apply_preset(mat, self.preset)
-        self.report({"INFO"}, f"{mat.name}: {p.name}")
+        apply_preset(mat, self.preset)
+        self.report({"INFO"}, f"{mat.name}: {self.preset.title()}")
         return {"FINISHED"}
 
 
-def _target_material(context):
-    mat = getattr(context, "material", None)
-    if mat is None:
-        ob = getattr(context, "object", None)
-        mat = getattr(ob, "active_material", None) if ob is not None else None
-    return mat
+class _PresetMenu(Menu):
+    """A preset menu over the shipped folder and the user's presets, with + / - (Menu.draw_preset
+    searches only the script paths)."""
 
-
-class OPAL_MT_opal_presets(bpy.types.Menu):
-    bl_label = "Opal Presets"
-    bl_idname = "OPAL_MT_opal_presets"
+    preset_operator = "script.execute_preset"
 
     def draw(self, context):
-        for ident, name, _desc, _i in PRESET_ITEMS:
-            self.layout.operator(OPAL_OT_opal_preset.bl_idname, text=name).preset = ident
+        dirs = [_shipped_dir(self.preset_subdir)] + list(bpy.utils.preset_paths(self.preset_subdir))
+        self.path_menu(dirs, self.preset_operator, filter_ext=lambda ext: ext.lower() == ".py",
+                       add_operator=self.preset_add_operator,
+                       display_name=lambda name: bpy.path.display_name(name, title_case=False))
 
 
-classes = (OPAL_OT_opal_preset, OPAL_MT_opal_presets)
+class OPAL_MT_opal_presets(_PresetMenu):
+    bl_label = "Opal Presets"
+    bl_idname = "OPAL_MT_opal_presets"
+    preset_subdir = OPAL_SUBDIR
+    preset_add_operator = "opal.opal_preset_add"
+
+
+class OPAL_MT_glass_presets(_PresetMenu):
+    bl_label = "Glass Presets"
+    bl_idname = "OPAL_MT_glass_presets"
+    preset_subdir = GLASS_SUBDIR
+    preset_add_operator = "opal.glass_preset_add"
+
+
+class _MaterialPresetAdd(AddPresetBase):
+    preset_defines = ["opal = bpy.context.material.opal"]
+
+    @classmethod
+    def poll(cls, context):
+        return getattr(context, "material", None) is not None
+
+
+class OPAL_OT_opal_preset_add(_MaterialPresetAdd, Operator):
+    """Add (or remove) an opal preset: the material's grating, Bragg lattice, domain layout and body"""
+
+    bl_idname = "opal.opal_preset_add"
+    bl_label = "Add Opal Preset"
+    preset_menu = "OPAL_MT_opal_presets"
+    preset_subdir = OPAL_SUBDIR
+    preset_values = OPAL_PRESET_VALUES
+
+
+class OPAL_OT_glass_preset_add(_MaterialPresetAdd, Operator):
+    """Add (or remove) a glass preset: the material's dispersion, Abbe number and IOR"""
+
+    bl_idname = "opal.glass_preset_add"
+    bl_label = "Add Glass Preset"
+    preset_menu = "OPAL_MT_glass_presets"
+    preset_subdir = GLASS_SUBDIR
+    preset_values = GLASS_PRESET_VALUES
+
+
+classes = (OPAL_OT_opal_preset, OPAL_OT_opal_preset_add, OPAL_OT_glass_preset_add, OPAL_MT_opal_presets,
+           OPAL_MT_glass_presets)
 
 
 register, unregister = bpy.utils.register_classes_factory(classes)

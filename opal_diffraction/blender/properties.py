@@ -21,10 +21,12 @@ import math
 from enum import IntEnum
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty,
+                       StringProperty)
 from bpy.types import PropertyGroup
 
-from ..core.enums import Backend, DispersionModel, DispersionSampling, GratingDirection, GratingType, Lattice
+from ..core.enums import (Backend, DispersionModel, DispersionSampling, DomainOrientation, GratingDirection, GratingType,
+                          Lattice)
 from ..core.spectrum import WavelengthGrid
 
 __all__ = [
@@ -35,6 +37,8 @@ __all__ = [
     "MIN_GOOD_WAVELENGTHS",
     "MIN_PERIOD_NM",
     "MIN_COHERENCE_UM",
+    "DOMAIN_ORIENTATION_ITEMS",
+    "principled_node",
     "register",
     "unregister",
 ]
@@ -101,6 +105,14 @@ GRATING_TYPE_ITEMS = _items(GratingType, {
 LATTICE_ITEMS = _items(Lattice, {
     Lattice.LINES: ("Lines", "Parallel slits (a 1D ruled grating)"),
     Lattice.HEXAGONAL: ("Hexagonal", "A 2D hexagonal lattice of scatterers (opal's close-packed spheres)"),
+    Lattice.BRAGG: ("Bragg (FCC Opal)", "Precious opal as it is: Bragg reflection from the (111) planes of 3D "
+                    "domains of close-packed silica spheres; the colour moves towards blue as the stone tilts"),
+})
+
+DOMAIN_ORIENTATION_ITEMS = _items(DomainOrientation, {
+    DomainOrientation.RANDOM: ("Random", "Each domain's (111) planes face a random direction"),
+    DomainOrientation.LAYERED: ("Layered", "The domains' (111) planes lean towards the object's Z axis (opal grows "
+                                "in layers): most flashes face up"),
 })
 
 GRATING_DIRECTION_ITEMS = _items(GratingDirection, {
@@ -284,6 +296,97 @@ class OpalRenderSettings(PropertyGroup):
 
 
 # ---------------------------------------------------------------------------- material.opal
+_TRANSMISSION = "Transmission Weight"  # Principled v2's name (Blender 4.0+)
+_IOR_NODES = ("ShaderNodeBsdfPrincipled", "ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction")
+
+
+def principled_node(mat, create: bool = False):
+    """The Principled BSDF feeding ``mat``'s output (created, with the output, when ``create``)."""
+    if create and bpy.app.version < (5, 0, 0) and not mat.use_nodes:
+        mat.use_nodes = True  # always on (and deprecated) from Blender 5.0
+    nt = mat.node_tree
+    if nt is None:
+        return None
+    out = nt.get_output_node("ALL") or nt.get_output_node("CYCLES")
+    if out is None:
+        if not create:
+            return None
+        out = nt.nodes.new("ShaderNodeOutputMaterial")
+        out.location = (300, 0)
+    sock = out.inputs["Surface"]
+    if sock.is_linked and sock.links[0].from_node.bl_idname == "ShaderNodeBsdfPrincipled":
+        return sock.links[0].from_node
+    if not create:
+        return None
+    node = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    node.location = (0, 0)
+    nt.links.new(node.outputs[0], sock)
+    return node
+
+
+def _body_get(self, name, default):
+    node = principled_node(self.id_data)
+    sock = node.inputs.get(name) if node is not None else None
+    if sock is None:
+        return default
+    v = sock.default_value
+    return tuple(v[:3]) if name == "Base Color" else float(v)
+
+
+def _body_set(self, name, value):
+    mat = self.id_data
+    node = principled_node(mat, create=True)
+    sock = node.inputs.get(name) or (node.inputs.get("Transmission") if name == _TRANSMISSION else None)
+    if sock is not None:
+        sock.default_value = value
+    if name == "Base Color":
+        mat.diffuse_color = value  # Solid mode's material colour
+
+
+# named functions: Blender evaluates the (string) annotations, and lambdas made there lose this module
+def _body_color_get(self):
+    return _body_get(self, "Base Color", (0.8, 0.8, 0.8))
+
+
+def _body_color_set(self, value):
+    _body_set(self, "Base Color", (*value, 1.0))
+
+
+def _body_roughness_get(self):
+    return _body_get(self, "Roughness", 0.5)
+
+
+def _body_roughness_set(self, value):
+    _body_set(self, "Roughness", value)
+
+
+def _body_transmission_get(self):
+    return _body_get(self, _TRANSMISSION, 0.0)
+
+
+def _body_transmission_set(self, value):
+    _body_set(self, _TRANSMISSION, value)
+
+
+def _node_ior_get(self):
+    nt = self.id_data.node_tree
+    for node in (nt.nodes if nt is not None else ()):
+        sock = node.inputs.get("IOR") if node.bl_idname in _IOR_NODES else None
+        if sock is not None and not sock.is_linked:
+            return float(sock.default_value)
+    return 1.45
+
+
+def _node_ior_set(self, value):
+    mat = self.id_data
+    if mat.node_tree is None:
+        principled_node(mat, create=True)
+    for node in mat.node_tree.nodes:
+        sock = node.inputs.get("IOR") if node.bl_idname in _IOR_NODES else None
+        if sock is not None and not sock.is_linked:
+            sock.default_value = value
+
+
 class OpalMaterialSettings(PropertyGroup):
     """``material.opal``: dispersion and the diffraction grating of a material."""
 
@@ -336,6 +439,70 @@ class OpalMaterialSettings(PropertyGroup):
         "above", default=0.0, subtype="ANGLE",
     )
 
+    # the BRAGG lattice (FCC opal; docs/physics.md section 5.2)
+    sphere_diameter: FloatProperty(
+        name="Sphere Diameter", description="Diameter D_s of the silica spheres (nm); the (111) planes are "
+        "sqrt(2/3) D_s apart and reflect lambda = 2 d111 n_eff at normal incidence (250 nm in air: 550 nm). "
+        "Volume domains draw theirs around it (Diameter Spread)", default=250.0, min=MIN_PERIOD_NM,
+        soft_min=150.0, soft_max=350.0, subtype=_NM, precision=1,
+    )
+    sphere_ior: FloatProperty(
+        name="Sphere IOR", description="Refractive index of the spheres (silica: 1.45)", default=1.45, min=1.0,
+        soft_max=2.0, precision=3,
+    )
+    void_ior: FloatProperty(
+        name="Void IOR", description="Refractive index of the voids between the spheres: air 1.0 (synthetic, "
+        "dried), water 1.33, silica cement 1.40-1.43 (natural opal: a smaller contrast gives narrower bands)",
+        default=1.0, min=1.0, soft_max=2.0, precision=3,
+    )
+    layers: IntProperty(
+        name="Layers", description="Ordered (111) layers that reflect coherently: more layers, a brighter and "
+        "narrower band", default=40, min=1, soft_max=1000,
+    )
+    mosaic_spread: FloatProperty(
+        name="Mosaic Spread", description="Spread of the (111) normals within a domain (degrees): the angular "
+        "width of a flash", default=3.0, min=0.0, max=90.0, soft_max=20.0, precision=2,
+    )
+    # the layout Generate Domains and Add Opal use for volume domains (presets set them)
+    domain_count: IntProperty(
+        name="Domains", description="Number of volume domains Generate Domains makes in the stone (harlequin: "
+        "few and large; pinfire: many and small)", default=300, min=1, soft_max=20000,
+    )
+    domain_size_spread: FloatProperty(
+        name="Size Spread", description="Spread of the domain sizes (additive Voronoi weights, in units of the "
+        "mean domain spacing): 0 similar sizes, 1 about a factor of two", default=0.5, min=0.0, soft_max=3.0,
+    )
+    domain_orientation: EnumProperty(
+        name="Orientation", description="How the domains' (111) planes are oriented", items=DOMAIN_ORIENTATION_ITEMS,
+        default="LAYERED",
+    )
+    domain_axis_spread: FloatProperty(
+        name="Axis Spread", description="Layered: largest angle between a domain's (111) normal and the object's "
+        "Z axis (degrees)", default=25.0, min=0.0, max=180.0, precision=1,
+    )
+    diameter_spread: FloatProperty(
+        name="Diameter Spread", description="Volume domains draw their sphere diameter uniformly in Sphere "
+        "Diameter +- this (nm): the range of colours", default=40.0, min=0.0, soft_max=150.0, subtype=_NM,
+        precision=1,
+    )
+    # the body (the material's Principled BSDF), for presets: not stored here
+    body_color: FloatVectorProperty(
+        name="Body Colour", description="Base Color of the material's Principled BSDF (the opal's body tone)",
+        size=3, subtype="COLOR", min=0.0, max=1.0, get=_body_color_get, set=_body_color_set, options=set(),
+    )
+    body_roughness: FloatProperty(
+        name="Body Roughness", description="Roughness of the material's Principled BSDF", min=0.0, max=1.0,
+        get=_body_roughness_get, set=_body_roughness_set, options=set(),
+    )
+    body_transmission: FloatProperty(
+        name="Body Transmission", description="Transmission of the material's Principled BSDF (crystal opal: 1)",
+        min=0.0, max=1.0, get=_body_transmission_get, set=_body_transmission_set, options=set(),
+    )
+    node_ior: FloatProperty(
+        name="IOR", description="The IOR of the material's Principled, Glass and Refraction BSDF nodes (a glass "
+        "preset sets it to n_d)", min=1.0, max=10.0, get=_node_ior_get, set=_node_ior_set, options=set(),
+    )
+
     def grating_problems(self) -> list[str]:
         """Readable reasons why the grating settings cannot work (empty when they can). The fields'
         minimums exclude most of them; values from older files, scripts or drivers (0, NaN) are
@@ -355,6 +522,14 @@ class OpalMaterialSettings(PropertyGroup):
             problems.append(f"grating coherence length must be > 0 µm (got {coherence:g} µm)")
         if not math.isfinite(self.rotation):
             problems.append(f"grating rotation must be a finite angle (got {self.rotation:g})")
+        if self.lattice == "BRAGG":
+            d, ns, nv = float(self.sphere_diameter), float(self.sphere_ior), float(self.void_ior)
+            if not 0.0 < d < finite:
+                problems.append(f"sphere diameter must be > 0 nm (got {d:g} nm)")
+            if not (1.0 <= ns < finite and 1.0 <= nv < finite):
+                problems.append(f"sphere and void IOR must be at least 1 (got {ns:g}, {nv:g})")
+            if not 0.0 <= float(self.mosaic_spread) <= 90.0:
+                problems.append(f"mosaic spread must be 0-90 degrees (got {self.mosaic_spread:g})")
         return problems
 
     @classmethod

@@ -15,8 +15,8 @@ from bpy.types import Menu, Panel
 from ..core.optics import SELLMEIER_PRESETS
 from .engine import ENGINE_ID
 from .export.nodes import missing_output, output_node
-from .opal_presets import OPAL_MT_opal_presets
-from .operators import OPAL_OT_dispersion_preset, OPAL_OT_export_scene
+from .opal_presets import OPAL_MT_glass_presets, OPAL_MT_opal_presets
+from .operators import OPAL_OT_export_scene
 from .properties import DISPERSION_PRESETS, MIN_GOOD_WAVELENGTHS
 
 __all__ = ["register", "unregister", "builtin_panels", "classes"]
@@ -195,17 +195,6 @@ class OPAL_MATERIAL_PT_surface(OpalButtonsPanel, Panel):
             layout.prop(mat, "diffuse_color")
 
 
-class OPAL_MT_dispersion_presets(Menu):
-    bl_label = "Dispersion Presets"
-    bl_idname = "OPAL_MT_dispersion_presets"
-
-    def draw(self, context):
-        layout = self.layout
-        for ident, name, _model, n_d, abbe in DISPERSION_PRESETS:
-            op = layout.operator(OPAL_OT_dispersion_preset.bl_idname, text=f"{name}  (n {n_d:g}, V {abbe:g})")
-            op.preset = ident
-
-
 class OPAL_MATERIAL_PT_dispersion(OpalButtonsPanel, Panel):
     bl_label = "Dispersion"
     bl_context = "material"
@@ -215,7 +204,7 @@ class OPAL_MATERIAL_PT_dispersion(OpalButtonsPanel, Panel):
         return _material_poll(cls, context)
 
     def draw_header_preset(self, context):
-        self.layout.menu(OPAL_MT_dispersion_presets.bl_idname, text="", icon="PRESET")
+        self.layout.menu(OPAL_MT_glass_presets.bl_idname, text="", icon="PRESET")
 
     def draw(self, context):
         layout = _split(self.layout)
@@ -228,6 +217,31 @@ class OPAL_MATERIAL_PT_dispersion(OpalButtonsPanel, Panel):
             layout.label(text="The glass's own index replaces the node's IOR", icon="INFO")
         elif opal.dispersion != "NONE":
             layout.label(text="Applies to Glass BSDF or transmissive Principled BSDF", icon="INFO")
+
+
+def _draw_bragg(layout, opal) -> None:
+    """The BRAGG lattice's settings, its normal-incidence colour, and the volume-domain layout."""
+    from ..core.opal.bragg import bragg_wavelength, effective_index
+
+    col = layout.column(align=True)
+    col.prop(opal, "sphere_diameter")
+    col.prop(opal, "sphere_ior")
+    col.prop(opal, "void_ior")
+    col = layout.column(align=True)
+    col.prop(opal, "layers")
+    col.prop(opal, "mosaic_spread")
+    ns, nv = float(opal.sphere_ior), float(opal.void_ior)
+    lo, hi = (float(bragg_wavelength(max(opal.sphere_diameter + k * opal.diameter_spread, 1.0), 0.0, ns, nv))
+              for k in (-1, 1))
+    layout.label(text=f"n_eff {effective_index(ns, nv):.3f}; normal incidence {lo:.0f}-{hi:.0f} nm", icon="INFO")
+    col = layout.column(align=True, heading="Volume Domains")
+    col.prop(opal, "domain_count")
+    col.prop(opal, "domain_size_spread")
+    col.prop(opal, "diameter_spread")
+    col.prop(opal, "domain_orientation")
+    sub = col.row()
+    sub.active = opal.domain_orientation == "LAYERED"
+    sub.prop(opal, "domain_axis_spread")
 
 
 class OPAL_MATERIAL_PT_grating(OpalButtonsPanel, Panel):
@@ -250,20 +264,23 @@ class OPAL_MATERIAL_PT_grating(OpalButtonsPanel, Panel):
         layout.active = opal.grating
         layout.prop(opal, "grating_type")
         layout.prop(opal, "lattice")
-        col = layout.column(align=True)
-        col.prop(opal, "period")
-        col.prop(opal, "slit_width")
-        col.prop(opal, "slit_count")
-        layout.prop(opal, "coherence_length", text="Coherence Length (µm)")
-        col = layout.column(align=True)
-        col.prop(opal, "grating_direction")
-        col.prop(opal, "rotation")
+        if opal.lattice == "BRAGG":
+            _draw_bragg(layout, opal)
+        else:
+            col = layout.column(align=True)
+            col.prop(opal, "period")
+            col.prop(opal, "slit_width")
+            col.prop(opal, "slit_count")
+            layout.prop(opal, "coherence_length", text="Coherence Length (µm)")
+            col = layout.column(align=True)
+            col.prop(opal, "grating_direction")
+            col.prop(opal, "rotation")
         if opal.grating:
             for problem in opal.grating_problems():
                 box = layout.box()
                 box.alert = True
                 box.label(text=problem[0].upper() + problem[1:], icon="ERROR")
-            if opal.grating_direction == "ATTRIBUTE":
+            if opal.grating_direction == "ATTRIBUTE" and opal.lattice != "BRAGG":
                 layout.label(text="Direction and period: the faces' opal attributes", icon="INFO")
 
 
@@ -292,7 +309,6 @@ classes = (
     OPAL_RENDER_PT_film,
     OPAL_RENDER_PT_output,
     OPAL_RENDER_PT_performance,
-    OPAL_MT_dispersion_presets,
     OPAL_MATERIAL_PT_surface,
     OPAL_MATERIAL_PT_dispersion,
     OPAL_MATERIAL_PT_grating,

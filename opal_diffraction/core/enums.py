@@ -18,6 +18,7 @@ __all__ = [
     "GratingType",
     "Lattice",
     "GratingDirection",
+    "DomainOrientation",
     "DispersionSampling",
     "Backend",
     "TextureInterpolation",
@@ -65,12 +66,21 @@ class GratingType(IntEnum):
 class Lattice(IntEnum):
     LINES = 0
     HEXAGONAL = 1
+    BRAGG = 2  # FCC opal: Bragg reflection from 3-D (111) domains (docs/physics.md section 5.2)
 
 
 class GratingDirection(IntEnum):
     UV = 0
     OBJECT_X = 1
     ATTRIBUTE = 2
+
+
+class DomainOrientation(IntEnum):
+    """How opal volume domains' (111) normals are drawn (core/opal/volume.py); stored in .blend
+    files only (``material.opal.domain_orientation``), the core takes the name."""
+
+    RANDOM = 0
+    LAYERED = 1
 
 
 class DispersionSampling(IntEnum):

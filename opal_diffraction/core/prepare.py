@@ -36,6 +36,7 @@ from .lights import PreparedLights, prepare_lights
 from .materials import PreparedMaterials, prepare_materials
 from .bsdf import microfacet_materials
 from .mesh_lights import MeshLights
+from .opal.volume import VolumeDomains
 from .scene import Camera, Scene
 from .settings import AUTO_LIGHT_PATHS_RANGE, EYE_ONLY_SETTINGS, RenderSettings, auto_light_paths
 from .spectrum import SpectralConverter, WavelengthGrid
@@ -99,6 +100,8 @@ class PreparedScene:
     corner_normals: np.ndarray | None = None  # (T, 3, 3) float32 unit shading normals per corner; None: flat
     # (M,) bool: rough and layered materials, shaded with core/bsdf.py (bsdf.microfacet_materials)
     microfacet: np.ndarray | None = None
+    # opal volume domains (core/opal/volume.py: lookup(points, prim)); None: the scene has none
+    opal_domains: VolumeDomains | None = None
 
     @property
     def grid(self) -> WavelengthGrid:
@@ -294,6 +297,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         key=key,
         corner_normals=corner_normals,
         microfacet=microfacet,
+        opal_domains=scene.volume_domains(),
     )
     frozen = {f.name: _read_only(getattr(prepared, f.name)) for f in fields(prepared)}
     frozen["prepare_s"] = time.perf_counter() - t0

@@ -99,6 +99,12 @@ _MATERIAL_COLUMNS = {
     "specular_ior_level": (np.float32, (), 0.0, None),
     "specular_tint": (np.float32, (3,), (1.0, 1.0, 1.0), None),
     "conductor_fresnel": (np.int32, (), "CONSTANT", CONDUCTOR_FRESNELS),
+    # the BRAGG lattice (FCC opal; docs/physics.md section 5.2)
+    "sphere_diameter": (np.float32, (), 250.0, None),
+    "sphere_ior": (np.float32, (), 1.45, None),
+    "void_ior": (np.float32, (), 1.0, None),
+    "layers": (np.int32, (), 40, None),
+    "mosaic_spread": (np.float32, (), 3.0, None),
 }
 
 #: The material columns that name a texture.
@@ -199,6 +205,11 @@ class Materials:
     specular_ior_level: np.ndarray = field(default_factory=lambda: _material_column_default("specular_ior_level", 0))
     specular_tint: np.ndarray = field(default_factory=lambda: _material_column_default("specular_tint", 0))
     conductor_fresnel: np.ndarray = field(default_factory=lambda: _material_column_default("conductor_fresnel", 0))
+    sphere_diameter: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_diameter", 0))
+    sphere_ior: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_ior", 0))
+    void_ior: np.ndarray = field(default_factory=lambda: _material_column_default("void_ior", 0))
+    layers: np.ndarray = field(default_factory=lambda: _material_column_default("layers", 0))
+    mosaic_spread: np.ndarray = field(default_factory=lambda: _material_column_default("mosaic_spread", 0))
 
     def __len__(self):
         return _rows(self.kind)
@@ -438,6 +449,11 @@ class Scene:
     TEXTURE_INTERPOLATIONS / TEXTURE_EXTENSIONS / TEXTURE_ENCODINGS codes
     ``texture_interpolation``, ``texture_extension``, ``texture_encoding`` (K,) (empty: LINEAR,
     REPEAT, LINEAR for every texture). Materials bind them by index (``Materials.color_texture``...).
+    Opal volume domains (docs/physics.md section 5.4; empty: none), world space:
+    ``domain_seeds`` (S, 3) m, ``domain_weight`` (S,) m (additive Voronoi weights),
+    ``domain_axis`` (S, 3) unit (111) normals, ``domain_diameter`` (S,) nm, ``domain_group``
+    (S,) (one group per opal object instance) and ``tri_domain_group`` (T,) (-1: a triangle
+    without domains); built with :meth:`add_domains`, read with :meth:`volume_domains`.
     """
 
     vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
@@ -459,8 +475,48 @@ class Scene:
     texture_interpolation: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     texture_extension: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     texture_encoding: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    # opal volume domains (core/opal/volume.py; docs/physics.md section 5.4), world space; empty: none
+    domain_seeds: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float64))
+    domain_weight: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
+    domain_axis: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    domain_diameter: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    domain_group: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    tri_domain_group: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
 
     # ------------------------------------------------------------------ building
+    def add_domains(self, seeds, weight, axis, diameter, triangles=None) -> int:
+        """Append one group of opal volume domains (an opal object: seeds (S, 3) m, additive
+        weights (S,) m, (111) normals (S, 3), sphere diameters (S,) nm, world space) whose cells
+        the ``triangles`` lie in (a slice, index array or (T,) mask of the triangles added so
+        far; None: all). Returns the group's index. Call it after the object's ``add_mesh``."""
+        s = np.asarray(seeds, np.float64).reshape(-1, 3)
+        g = int(np.max(self.domain_group)) + 1 if len(self.domain_group) else 0
+        self.domain_seeds = np.concatenate([np.asarray(self.domain_seeds, np.float64).reshape(-1, 3), s])
+        self.domain_weight = np.concatenate([np.asarray(self.domain_weight, np.float64).reshape(-1),
+                                             np.broadcast_to(np.asarray(weight, np.float64), (len(s),))])
+        self.domain_axis = np.concatenate([np.asarray(self.domain_axis, np.float32).reshape(-1, 3),
+                                           np.asarray(axis, np.float32).reshape(-1, 3)])
+        self.domain_diameter = np.concatenate([np.asarray(self.domain_diameter, np.float32).reshape(-1),
+                                               np.broadcast_to(np.asarray(diameter, np.float32), (len(s),))])
+        self.domain_group = np.concatenate([np.asarray(self.domain_group, np.int32).reshape(-1),
+                                            np.full(len(s), g, np.int32)])
+        n = len(self.triangles)
+        tg = np.asarray(self.tri_domain_group, np.int32).reshape(-1)
+        tg = np.concatenate([tg, np.full(n - len(tg), -1, np.int32)]) if len(tg) < n else tg.copy()
+        tg[slice(None) if triangles is None else triangles] = g
+        self.tri_domain_group = tg
+        return g
+
+    def volume_domains(self):
+        """The scene's opal volume domains as a core.opal.volume.VolumeDomains, or None."""
+        if not len(self.domain_seeds):
+            return None
+        from .opal.volume import VolumeDomains
+
+        return VolumeDomains(np.asarray(self.domain_seeds, np.float64), np.asarray(self.domain_weight, np.float64),
+                             np.asarray(self.domain_axis, np.float32), np.asarray(self.domain_diameter, np.float32),
+                             np.asarray(self.domain_group, np.int32), np.asarray(self.tri_domain_group, np.int32))
+
     def add_mesh(self, vertices, triangles, material: int, tangent=None, period=None, normals=None, uvs=None,
                  uv_tangents: bool = False) -> None:
         """Append a mesh (its own vertex numbering) with one material for all its triangles.
@@ -631,6 +687,7 @@ class Scene:
         tt = tt if tt.dtype == np.float32 else tt.astype(np.float32)
         tp = tp if tp.dtype == np.float32 else tp.astype(np.float32)
         tex = _validate_textures(self, len(t), materials, tm, warns)
+        dom = _validate_domains(self, len(t))
         t = t.astype(np.int32)
         cn = _validate_corner_normals(self.corner_normals, v, t, warns)
         if len(t):
@@ -649,6 +706,8 @@ class Scene:
                 tt = tt[keep] if len(tt) else tt
                 tp = tp[keep] if len(tp) else tp
                 cn = cn[keep] if len(cn) else cn
+                dom["tri_domain_group"] = dom["tri_domain_group"][keep] if len(dom["tri_domain_group"]) else \
+                    dom["tri_domain_group"]
                 for name in ("corner_uvs", "corner_tangents"):  # per-corner data stays one row per triangle
                     tex[name] = tex[name][keep] if len(tex[name]) else tex[name]
         if len(t) == 0:
@@ -660,7 +719,7 @@ class Scene:
             warns.append("the scene has no lights: only the background is lit")
         clean = replace(self, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
                         materials=materials, lights=lights, camera=camera, world_color=wc, corner_normals=cn,
-                        world_image=world_image, world_rotation=world_rotation, **tex)
+                        world_image=world_image, world_rotation=world_rotation, **tex, **dom)
         return clean, warns
 
     # ------------------------------------------------------------------ .npz
@@ -678,6 +737,9 @@ class Scene:
             "world_image": np.asarray(self.world_image, np.float32),
             "world_rotation": np.asarray(self.world_rotation, np.float64),
         }
+        if len(self.domain_seeds):
+            for name in _DOMAIN_FIELDS:
+                d[name] = np.asarray(getattr(self, name))
         if len(self.corner_uvs):
             d["corner_uvs"] = np.asarray(self.corner_uvs, np.float32)
         if len(self.corner_tangents):
@@ -773,7 +835,61 @@ class Scene:
                 world_image=read("world_image") if "world_image" in names else np.zeros((0, 0, 3), np.float32),
                 world_rotation=read("world_rotation") if "world_rotation" in names else np.eye(3),
                 **_read_textures(read, names, shown),
+                **{name: read(name) for name in _DOMAIN_FIELDS if name in names},
             )
+
+
+def _check_bragg(f64: dict, layers, label) -> None:
+    """The BRAGG lattice's columns (docs/physics.md section 5.2): D_s > 0 nm, indices >= 1,
+    at least one layer, a mosaic spread of 0-90 degrees."""
+    for name, ok, rule in (("sphere_diameter", lambda x: (x > 0) & (x <= PERIOD_MAX), "must be > 0 nm"),
+                           ("sphere_ior", lambda x: x >= 1.0, "must be at least 1"),
+                           ("void_ior", lambda x: x >= 1.0, "must be at least 1"),
+                           ("mosaic_spread", lambda x: (x >= 0.0) & (x <= 90.0), "must be 0-90 degrees")):
+        bad = ~ok(f64[name])
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"{label(i)}: {name.replace('_', ' ')} {_g(f64[name][i])} {rule}")
+    lay = np.asarray(layers, np.int64)
+    if (lay < 1).any():
+        i = int(np.argmax(lay < 1))
+        raise SceneError(f"{label(i)}: layers must be at least 1, got {int(lay[i])}")
+
+
+#: The opal volume domain columns (Scene.add_domains), saved only when there are domains.
+_DOMAIN_FIELDS = ("domain_seeds", "domain_weight", "domain_axis", "domain_diameter", "domain_group",
+                  "tri_domain_group")
+
+
+def _validate_domains(sc, n_tri: int) -> dict:
+    """The domain columns checked (shapes, finite, unit axes, positive diameters, groups in range)."""
+    s = _column(sc.domain_seeds, "domain_seeds", (3,), allow_empty=True).astype(np.float64)
+    k = len(s)
+    w = _column(sc.domain_weight, "domain_weight", (), rows=k, allow_empty=k == 0).astype(np.float64)
+    a = _column(sc.domain_axis, "domain_axis", (3,), rows=k, allow_empty=k == 0).astype(np.float64)
+    d = _column(sc.domain_diameter, "domain_diameter", (), rows=k, allow_empty=k == 0).astype(np.float64)
+    g = _column(sc.domain_group, "domain_group", (), rows=k, kind="int", allow_empty=k == 0).astype(np.int32)
+    tg = _column(sc.tri_domain_group, "tri_domain_group", (), kind="int", allow_empty=True).astype(np.int32)
+    if not np.isfinite(s).all() or not np.isfinite(w).all():
+        raise SceneError("an opal domain seed or weight is NaN or infinite")
+    _check_range(s, lambda i: f"opal domain {i}", "seed", " m", limit=COORD_LIMIT)
+    length = np.linalg.norm(a, axis=1)
+    bad = ~(np.isfinite(length) & (length > 1e-12))
+    if bad.any():
+        raise SceneError(f"opal domain {int(np.argmax(bad))}: its (111) axis is zero, NaN or infinite")
+    bad = ~(np.isfinite(d) & (d > 0) & (d < PERIOD_MAX))
+    if bad.any():
+        raise SceneError(f"opal domain {int(np.argmax(bad))}: sphere diameter {d[bad][0]:g} nm must be > 0")
+    n_groups = int(g.max()) + 1 if k else 0
+    if k and g.min() < 0:
+        raise SceneError("opal domain groups must be >= 0")
+    if k and len(tg) < n_tri:  # triangles added after the last add_domains have none
+        tg = np.concatenate([tg, np.full(n_tri - len(tg), -1, np.int32)])
+    if len(tg) not in (0, n_tri) or (len(tg) and (tg.min() < -1 or tg.max() >= n_groups)):
+        raise SceneError(f"tri_domain_group must have one entry per triangle ({n_tri}), each -1 or one of the "
+                         f"{n_groups} domain groups")
+    return {"domain_seeds": s, "domain_weight": w, "domain_axis": (a / np.where(bad, 1.0, length)[:, None]).astype(
+        np.float32), "domain_diameter": d.astype(np.float32), "domain_group": g, "tri_domain_group": tg}
 
 
 # ---------------------------------------------------------------------------------- validation
@@ -1124,8 +1240,9 @@ def _validate_materials(m: Materials) -> Materials:
     # every float column: finite and within float32
     for name in ("color", "emission", "ior", "abbe", "period", "slit_width", "coherence_length", "rotation",
                  "normal_strength", "emission_strength", "roughness", "metallic", "transmission",
-                 "specular_ior_level", "specular_tint"):
+                 "specular_ior_level", "specular_tint", "sphere_diameter", "sphere_ior", "void_ior", "mosaic_spread"):
         _check_range(f64[name], label, name.replace("_", " "), "")
+    _check_bragg(f64, out["layers"], label)
     for name in TEXTURE_COLUMNS:
         bad = out[name].astype(np.int64) < -1
         if bad.any():

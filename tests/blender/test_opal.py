@@ -1,11 +1,16 @@
-"""The opal tools through bpy: Add Opal, grating domains, Edit Mode placement with undo, presets,
-save/load of the attributes, the export and render reading them, and the rendered viewport's
-logic (schedule, camera, pixels, progressive thread, view_update/view_draw with mocks)."""
+"""The opal tools through bpy: Add Opal (a real-size BRAGG cabochon), volume domains (generation,
+save/load, the transform, the Set Domain tool, export to the Scene), presets through Blender's
+preset system (shipped, added, removed; opal and glass), the BRAGG properties exported to the
+material columns, surface grating domains, Edit Mode placement with undo, save/load of the
+attributes, the export and render reading them, and the rendered viewport's logic (schedule,
+camera, pixels, progressive thread, view_update/view_draw with mocks)."""
 
 from __future__ import annotations
 
 import math
+import os
 import types
+import uuid
 
 import bmesh
 import bpy
@@ -16,7 +21,10 @@ import blender_scenes as bs
 from opal_diffraction.blender import opal_ops, viewport
 from opal_diffraction.blender.engine import OpalRenderEngine
 from opal_diffraction.blender.export import export_scene
-from opal_diffraction.blender.opal_presets import PRESETS
+from opal_diffraction.blender import opal_presets
+from opal_diffraction.blender.opal_domains import read_domains
+from opal_diffraction.blender.opal_presets import PRESET_ITEMS, preset_file, preset_files, read_preset
+from opal_diffraction.core import enums as core_enums
 from opal_diffraction.core import opal as core_opal
 from opal_diffraction.core.camera import generate_rays
 from opal_diffraction.core.prepare import prepare
@@ -28,8 +36,19 @@ ATTRS = {"opal_grating_direction": ("FLOAT_VECTOR", "FACE"), "opal_grating_perio
 
 
 def _add_opal(**kw):
+    """A surface-grating opal (the paper's preset) covered with 25 grating domains."""
     bs.empty_scene()
-    args = dict(resolution=10, count=25, seed=3)
+    args = dict(resolution=10, preset="PAPER")
+    args.update(kw)
+    count, seed = args.pop("count", 25), args.pop("seed", 3)
+    assert bpy.ops.mesh.primitive_opal_add(**args) == {"FINISHED"}
+    assert bpy.ops.opal.generate_domains(domain_type="SURFACE", count=count, seed=seed) == {"FINISHED"}
+    return bpy.context.active_object
+
+
+def _add_bragg_opal(**kw):
+    bs.empty_scene()
+    args = dict(resolution=12)
     args.update(kw)
     assert bpy.ops.mesh.primitive_opal_add(**args) == {"FINISHED"}
     return bpy.context.active_object
@@ -70,10 +89,340 @@ def test_add_opal_creates_mesh_material_and_attributes():
         assert a is not None and (a.data_type, a.domain) == (dtype, domain), name
     assert me.color_attributes.active_color.name == "opal_preview"
     mat = me.materials[0]
-    assert mat.opal.grating and mat.opal.grating_direction == "ATTRIBUTE" and mat.opal.lattice == "HEXAGONAL"
-    principled = mat.node_tree.nodes["Principled BSDF"]
-    assert principled.inputs["Base Color"].default_value[0] < 0.05  # black opal body
+    assert mat.opal.grating and mat.opal.grating_direction == "ATTRIBUTE" and mat.opal.lattice == "LINES"
     assert opal_ops._menu_add in bpy.types.VIEW3D_MT_mesh_add._dyn_ui_initialize()  # Add > Mesh > Opal
+
+
+def test_default_add_opal_is_a_real_size_black_bragg_cabochon():
+    bs.empty_scene()
+    assert bpy.ops.mesh.primitive_opal_add() == {"FINISHED"}
+    ob = bpy.context.active_object
+    for got, want in zip(ob.dimensions, (0.018, 0.013, 0.006)):
+        assert abs(got - want) <= 0.1 * want, (tuple(ob.dimensions), want)
+    mat = ob.data.materials[0]
+    black = read_preset(preset_file("BLACK"))
+    o = mat.opal
+    assert o.grating and o.lattice == "BRAGG" == black["lattice"]
+    for name in ("sphere_diameter", "sphere_ior", "void_ior", "layers", "mosaic_spread", "domain_count"):
+        assert getattr(o, name) == pytest.approx(black[name]), name
+    node = mat.node_tree.nodes["Principled BSDF"]
+    assert tuple(node.inputs["Base Color"].default_value)[:3] == pytest.approx(black["body_color"])
+    assert o.grating_problems() == []
+    d = read_domains(ob)
+    assert len(d) == black["domain_count"]
+    lo, hi = black["sphere_diameter"] - black["diameter_spread"], black["sphere_diameter"] + black["diameter_spread"]
+    assert d.diameter.min() >= lo - 1e-3 and d.diameter.max() <= hi + 1e-3
+    # every seed inside the half ellipsoid of the cabochon (which contains the mesh)
+    a, b, h = 0.009, 0.0065, 0.006
+    assert ((d.seeds[:, 0] / a) ** 2 + (d.seeds[:, 1] / b) ** 2 + (d.seeds[:, 2] / h) ** 2 <= 1 + 1e-9).all()
+    assert ob.data.color_attributes.active_color.name == "opal_preview"
+
+
+def _face_colors(me):
+    """Per-face preview colour (the first corner's)."""
+    col = me.color_attributes["opal_preview"]
+    rgba = np.empty(len(me.loops) * 4, np.float32)
+    col.data.foreach_get("color", rgba)
+    starts = np.empty(len(me.polygons), np.int32)
+    me.polygons.foreach_get("loop_start", starts)
+    return rgba.reshape(-1, 4)[starts]
+
+
+def _face_centres(me):
+    c = np.empty(len(me.polygons) * 3, np.float32)
+    me.polygons.foreach_get("center", c)
+    return c.reshape(-1, 3).astype(np.float64)
+
+
+def _cells_brute(points, d):
+    """The cell of each point by the definition: argmin |p - seed| - weight over every seed."""
+    dist = np.linalg.norm(points[:, None, :] - d.seeds[None], axis=2) - d.weight[None]
+    return np.argmin(dist, axis=1)
+
+
+def test_bragg_preview_shows_each_cells_colour_at_normal_incidence():
+    """Faces of one cell share one colour; cells of small spheres preview blue, of large ones red:
+    lambda = 2 sqrt(2/3) D n_eff with water voids (n_eff 1.4198) is below 470 nm for D < 203 nm
+    and above 610 nm for D > 263 nm."""
+    ob = _add_bragg_opal(resolution=16, count=60, seed=2)
+    me = ob.data
+    d = read_domains(ob)
+    # the polygons' centres are area-weighted in Blender too; the cells the faces lie in
+    cells = _cells_brute(_face_centres(me), d)
+    rgb = _face_colors(me)[:, :3]
+    for c in np.unique(cells):
+        assert np.ptp(rgb[cells == c], axis=0).max() < 1e-6
+    dia = d.diameter[cells]
+    small, large = dia < 203, dia > 263
+    assert small.any() and large.any()
+    assert (rgb[small, 2] > rgb[small, 0]).all() and (rgb[large, 0] > rgb[large, 2]).all()
+
+
+def test_bragg_properties_export_to_the_material_columns():
+    ob = _add_bragg_opal()
+    o = ob.data.materials[0].opal
+    o.sphere_diameter, o.sphere_ior, o.void_ior, o.layers, o.mosaic_spread = 271.5, 1.44, 1.38, 77, 4.5
+    ob.data.materials[0].update_tag()  # a script's change: the depsgraph copies the material again
+    bs.camera(location=(0, 0, 0.1))
+    m = export_scene(bpy.context.evaluated_depsgraph_get(), width=8, height=8).scene.materials
+    row = [i for i, n in enumerate(m.name) if n.startswith("Opal")][0]
+    assert int(m.lattice[row]) == int(core_enums.Lattice.BRAGG) and int(m.grating[row]) == 1
+    assert m.sphere_diameter[row] == pytest.approx(271.5) and m.sphere_ior[row] == pytest.approx(1.44)
+    assert m.void_ior[row] == pytest.approx(1.38) and int(m.layers[row]) == 77
+    assert m.mosaic_spread[row] == pytest.approx(4.5)
+    o.void_ior = 0.5  # below the field's minimum: clamped to 1 (air)
+    assert o.void_ior == 1.0 and o.grating_problems() == []
+
+
+@pytest.mark.parametrize("ident", [i[0] for i in PRESET_ITEMS])
+def test_shipped_presets_set_body_and_lattice_and_state_their_physics(ident):
+    bs.empty_scene()
+    mat = bs.material("m", "PRINCIPLED")
+    with bpy.context.temp_override(material=mat):
+        assert bpy.ops.opal.opal_preset(preset=ident) == {"FINISHED"}
+    path = preset_file(ident)
+    p = read_preset(path)
+    assert mat.opal.grating and mat.opal.lattice == p["lattice"]
+    node = mat.node_tree.nodes["Principled BSDF"]
+    assert tuple(node.inputs["Base Color"].default_value)[:3] == pytest.approx(p["body_color"])
+    assert mat.opal.grating_problems() == []
+    if p["lattice"] == "BRAGG":
+        # the header's stated colour range is the Bragg law's (docs/physics.md section 5.2)
+        with open(path, encoding="utf-8") as fh:
+            head = fh.read(800)
+        n_eff = math.sqrt(0.74 * p["sphere_ior"] ** 2 + 0.26 * p["void_ior"] ** 2)
+        lo, hi = (2 * math.sqrt(2 / 3) * (p["sphere_diameter"] + k * p["diameter_spread"]) * n_eff for k in (-1, 1))
+        assert f"{lo:.0f}-{hi:.0f} nm" in head and f"n_eff {n_eff:.4f}" in head
+        assert f"n_void {p['void_ior']:g}" in head and f"D_s = {p['sphere_diameter']:g}" in head
+
+
+def test_harlequin_has_large_domains_and_pinfire_small():
+    count = {i: read_preset(preset_file(i))["domain_count"] for i in ("HARLEQUIN", "BLACK", "PINFIRE")}
+    assert count["HARLEQUIN"] * 5 <= count["BLACK"] and count["BLACK"] * 5 <= count["PINFIRE"]
+
+
+def _execute_preset(mat, path, menu):
+    with bpy.context.temp_override(material=mat):
+        assert bpy.ops.script.execute_preset(filepath=path, menu_idname=menu) == {"FINISHED"}
+
+
+@pytest.mark.parametrize("kind", ["opal", "glass"])
+def test_presets_add_and_remove_through_the_preset_operator(kind):
+    """A user preset: + writes the material's values to the user's presets folder (listed in the
+    menu beside the shipped ones), the menu's entry applies it to another material, - removes it."""
+    bs.empty_scene()
+    subdir = opal_presets.OPAL_SUBDIR if kind == "opal" else opal_presets.GLASS_SUBDIR
+    menu = "OPAL_MT_opal_presets" if kind == "opal" else "OPAL_MT_glass_presets"
+    add = bpy.ops.opal.opal_preset_add if kind == "opal" else bpy.ops.opal.glass_preset_add
+    src = bs.material("src", "PRINCIPLED")
+    o = src.opal
+    if kind == "opal":
+        opal_presets.apply_preset(src, "BLACK")
+        o.sphere_diameter, o.void_ior, o.layers, o.mosaic_spread, o.domain_count = 262.0, 1.41, 55, 2.5, 123
+        o.body_color = (0.2, 0.1, 0.05)
+    else:
+        o.dispersion, o.abbe_number, o.node_ior = "ABBE", 33.3, 1.654
+    name = f"Test Stone {uuid.uuid4().hex[:8]}"
+    with bpy.context.temp_override(material=src):
+        assert add(name=name) == {"FINISHED"}
+    files = preset_files(subdir)
+    assert name in files and os.path.isfile(files[name])
+    try:
+        assert files[name].startswith(bpy.utils.user_resource("SCRIPTS", path="presets"))
+        dst = bs.material("dst", "PRINCIPLED")
+        _execute_preset(dst, files[name], menu)
+        if kind == "opal":
+            d = dst.opal
+            assert (d.lattice, d.layers, d.domain_count) == ("BRAGG", 55, 123)
+            assert d.sphere_diameter == pytest.approx(262.0) and d.void_ior == pytest.approx(1.41)
+            node = dst.node_tree.nodes["Principled BSDF"]
+            assert tuple(node.inputs["Base Color"].default_value)[:3] == pytest.approx((0.2, 0.1, 0.05))
+        else:
+            assert dst.opal.dispersion == "ABBE" and dst.opal.abbe_number == pytest.approx(33.3)
+            assert dst.node_tree.nodes["Principled BSDF"].inputs["IOR"].default_value == pytest.approx(1.654)
+        with bpy.context.temp_override(material=src):
+            assert add(name=os.path.basename(files[name])[:-3], remove_name=True) == {"FINISHED"}
+        assert name not in preset_files(subdir) and not os.path.exists(files[name])
+    finally:
+        if os.path.exists(files[name]):
+            os.remove(files[name])
+    # the shipped presets cannot be removed (they live in the extension's folder)
+    shipped = next(iter(preset_files(subdir)))
+    with bpy.context.temp_override(material=src):
+        assert add(name=shipped, remove_name=True) == {"CANCELLED"}
+    assert shipped in preset_files(subdir)
+
+
+def test_glass_preset_sets_dispersion_and_node_ior():
+    bs.empty_scene()
+    mat = bs.material("g", "PRINCIPLED")
+    _execute_preset(mat, preset_file("Diamond", opal_presets.GLASS_SUBDIR), "OPAL_MT_glass_presets")
+    assert mat.opal.dispersion == "DIAMOND" and mat.opal.abbe_number == pytest.approx(55.3)
+    assert mat.node_tree.nodes["Principled BSDF"].inputs["IOR"].default_value == pytest.approx(2.4175)
+
+
+def test_shipped_glass_presets_are_the_named_glasses():
+    """One shipped glass preset per DISPERSION_PRESETS entry (what opal.dispersion_preset applies), same values."""
+    from opal_diffraction.blender.properties import DISPERSION_PRESETS
+
+    files = {read_preset(p)["node_ior"]: read_preset(p) for p in preset_files(opal_presets.GLASS_SUBDIR).values()}
+    for _ident, _name, model, n_d, abbe in DISPERSION_PRESETS:
+        p = files[n_d]
+        assert (p["dispersion"], p["abbe_number"]) == (model, abbe)
+
+
+def test_preset_menus_draw_shipped_and_user_entries():
+    for cls, add in ((opal_presets.OPAL_MT_opal_presets, "opal.opal_preset_add"),
+                     (opal_presets.OPAL_MT_glass_presets, "opal.glass_preset_add")):
+        calls = []
+        fake = types.SimpleNamespace(preset_subdir=cls.preset_subdir, preset_operator=cls.preset_operator,
+                                     preset_add_operator=cls.preset_add_operator,
+                                     path_menu=lambda dirs, op, **kw: calls.append((dirs, op, kw)))
+        cls.draw(fake, bpy.context)
+        (dirs, op, kw), = calls
+        assert op == "script.execute_preset" and kw["add_operator"] == add
+        assert os.path.isdir(dirs[0]) and dirs[0].startswith(opal_presets.SHIPPED)
+        assert dirs[1:] == list(bpy.utils.preset_paths(cls.preset_subdir))
+    names = {n for n in preset_files()}
+    assert {"Black", "White", "Crystal", "Boulder", "Harlequin", "Pinfire", "Paper Model"} <= names
+    assert len(preset_files(opal_presets.GLASS_SUBDIR)) >= 10
+
+
+# ---------------------------------------------------------------------------- volume domains
+def test_volume_domains_survive_save_and_reload_and_transform_with_the_object(tmp_path):
+    ob = _add_bragg_opal(count=40, seed=4)
+    ob.location = (0.3, -0.1, 0.05)
+    ob.rotation_euler = (0.4, -0.2, 1.1)
+    ob.scale = (2.0, 2.0, 2.0)
+    bs.camera(location=(0.3, -0.1, 1.0))
+    before = read_domains(ob)
+    name = ob.name
+    path = str(tmp_path / "opal.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    ob = bpy.data.objects[name]
+    after = read_domains(ob)
+    for f in ("seeds", "weight", "axis", "diameter"):
+        np.testing.assert_array_equal(getattr(before, f), getattr(after, f), err_msg=f)
+    s = export_scene(bpy.context.evaluated_depsgraph_get(), width=8, height=8).scene
+    m = np.array(ob.matrix_world)
+    np.testing.assert_allclose(s.domain_seeds, after.seeds @ m[:3, :3].T + m[:3, 3], atol=1e-9)
+    np.testing.assert_allclose(s.domain_weight, 2.0 * after.weight, rtol=1e-6)  # a float32 matrix
+    rot = m[:3, :3] / 2.0
+    np.testing.assert_allclose(s.domain_axis, after.axis @ rot.T, atol=1e-5)
+    assert (s.tri_domain_group == 0).all() and len(s.tri_domain_group) == len(s.triangles)
+    # a world point lies in the cell of its object-space point
+    clean, _ = s.validated()
+    vd = clean.volume_domains()
+    rng = np.random.default_rng(1)
+    local = rng.uniform((-0.008, -0.006, 0.0), (0.008, 0.006, 0.005), (500, 3))
+    world = local @ m[:3, :3].T + m[:3, 3]
+    _, dia, found = vd.lookup(world, np.zeros(len(world), np.int64))
+    assert found.all()
+    np.testing.assert_array_equal(dia, after.diameter[_cells_brute(local, after)])
+
+
+def test_export_gives_each_instance_its_group_and_plain_objects_none():
+    ob = _add_bragg_opal(count=10, seed=1)
+    dup = ob.copy()  # a linked duplicate (the same mesh), its own domains, moved
+    bpy.context.scene.collection.objects.link(dup)
+    dup.location = (0.05, 0.0, 0.0)
+    bpy.ops.mesh.primitive_plane_add(size=0.1, location=(0, 0, -0.01))
+    bs.camera(location=(0, 0, 1.0))
+    s = export_scene(bpy.context.evaluated_depsgraph_get(), width=8, height=8).scene
+    assert len(s.domain_seeds) == 20 and set(np.unique(s.domain_group)) == {0, 1}
+    groups, counts = np.unique(s.tri_domain_group, return_counts=True)
+    nt = len(ob.data.loop_triangles)
+    assert dict(zip(groups.tolist(), counts.tolist())) == {-1: 2, 0: nt, 1: nt}
+    moved = s.domain_seeds[s.domain_group == 1] - s.domain_seeds[s.domain_group == 0]
+    np.testing.assert_allclose(moved, np.broadcast_to([0.05, 0, 0], moved.shape), atol=1e-9)
+
+
+def test_generate_volume_domains_operator_is_seeded_and_needs_a_closed_mesh():
+    ob = _add_bragg_opal()
+    assert bpy.ops.opal.generate_domains(count=50, seed=7) == {"FINISHED"}
+    a = read_domains(ob)
+    assert len(a) == 50
+    bpy.ops.opal.generate_domains(count=50, seed=8)
+    assert not np.allclose(read_domains(ob).seeds, a.seeds)
+    bpy.ops.opal.generate_domains(count=50, seed=7)
+    np.testing.assert_array_equal(read_domains(ob).seeds, a.seeds)
+    # unset values come from the material: its domain count and diameter range
+    mat = ob.data.materials[0]
+    mat.opal.domain_count, mat.opal.sphere_diameter, mat.opal.diameter_spread = 33, 300.0, 5.0
+    bpy.ops.opal.generate_domains(seed=1)
+    d = read_domains(ob)
+    assert len(d) == 33 and d.diameter.min() >= 295.0 - 1e-3 and d.diameter.max() <= 305.0 + 1e-3
+    bpy.ops.mesh.primitive_plane_add(size=0.01)  # open: no volume
+    with pytest.raises(RuntimeError, match="closed"):
+        bpy.ops.opal.generate_domains(domain_type="VOLUME", count=5)
+
+
+@pytest.mark.parametrize("kw", [
+    dict(orientation="AXIS", axis=(1.0, 0.0, 0.0), set_diameter=True, diameter=301.0),
+    dict(orientation="NORMAL"),
+    dict(orientation="KEEP", set_diameter=True, diameter=199.0),
+    dict(orientation="RANDOM", seed=3),
+])
+def test_set_domain_changes_only_the_cells_of_the_selected_faces(kw):
+    ob = _add_bragg_opal(resolution=12, count=80, seed=5)
+    me = ob.data
+    before = read_domains(ob)
+    colors_before = _face_colors(me)
+    cells = _cells_brute(_face_centres(me), before)
+    sel = np.zeros(len(me.polygons), bool)
+    sel[[3, 40, 41, 200, 500]] = True
+    target = np.unique(cells[sel])
+    _select_faces(ob, sel)
+    assert bpy.ops.opal.set_domain(**kw) == {"FINISHED"}
+    bpy.ops.object.mode_set(mode="OBJECT")
+    after = read_domains(ob)
+    changed = (np.abs(after.axis - before.axis).max(axis=1) > 1e-7) | (after.diameter != before.diameter)
+    np.testing.assert_array_equal(np.flatnonzero(changed), target)
+    np.testing.assert_array_equal(after.seeds, before.seeds)
+    np.testing.assert_allclose(np.linalg.norm(after.axis, axis=1), 1.0, atol=1e-6)
+    if kw["orientation"] == "AXIS":
+        np.testing.assert_allclose(after.axis[target], np.broadcast_to([1, 0, 0], (len(target), 3)), atol=1e-6)
+    if kw["orientation"] == "NORMAL":
+        n = np.empty(len(me.polygons) * 3, np.float32)
+        me.polygons.foreach_get("normal", n)
+        area = np.empty(len(me.polygons), np.float32)
+        me.polygons.foreach_get("area", area)
+        mean = (n.reshape(-1, 3)[sel] * area[sel, None]).sum(axis=0)
+        np.testing.assert_allclose(after.axis[target], np.broadcast_to(mean / np.linalg.norm(mean),
+                                                                        (len(target), 3)), atol=1e-5)
+    if kw.get("set_diameter"):
+        assert (after.diameter[target] == np.float32(kw["diameter"])).all()
+        # the preview changed exactly on the faces of those cells
+        moved = np.abs(_face_colors(me) - colors_before).max(axis=1) > 1e-6
+        assert not moved[~np.isin(cells, target)].any() and moved[sel].all()
+
+
+def test_select_domain_grows_the_selection_to_whole_volume_cells():
+    ob = _add_bragg_opal(resolution=12, count=40, seed=6)
+    cells = _cells_brute(_face_centres(ob.data), read_domains(ob))
+    sel = np.zeros(len(ob.data.polygons), bool)
+    sel[[10, 300]] = True
+    _select_faces(ob, sel)
+    assert bpy.ops.opal.select_domain() == {"FINISHED"}
+    bpy.ops.object.mode_set(mode="OBJECT")
+    now = np.empty(len(ob.data.polygons), bool)
+    ob.data.polygons.foreach_get("select", now)
+    np.testing.assert_array_equal(now, np.isin(cells, cells[sel]))
+
+
+def test_set_domain_needs_volume_domains_edit_mode_and_faces():
+    ob = _add_bragg_opal(count=10)
+    assert not bpy.ops.opal.set_domain.poll()  # Object Mode
+    _select_faces(ob, np.zeros(len(ob.data.polygons), bool))
+    assert bpy.ops.opal.set_domain.poll()
+    with pytest.raises(RuntimeError, match="no faces selected"):
+        bpy.ops.opal.set_domain(orientation="AXIS")
+    with pytest.raises(RuntimeError, match="no 3D view"):
+        _select_faces(ob, np.ones(len(ob.data.polygons), bool))
+        bpy.ops.opal.set_domain(orientation="VIEW")
+    bpy.ops.object.mode_set(mode="OBJECT")
 
 
 def test_domains_cover_every_face_with_unit_directions_in_the_face_plane_and_ranged_periods():
@@ -105,26 +454,14 @@ def test_the_seed_reproduces_the_domains():
 
 
 def test_paper_model_preset_is_one_aligned_domain():
-    ob = _add_opal(preset="PAPER")
+    bs.empty_scene()
+    assert bpy.ops.mesh.primitive_opal_add(resolution=10, preset="PAPER") == {"FINISHED"}
+    ob = bpy.context.active_object
     domain, direction, period = _field(ob)
-    assert (domain == 0).all() and np.allclose(period, PRESETS["PAPER"].period)
+    assert (domain == 0).all() and np.allclose(period, read_preset(preset_file("PAPER"))["period"])
     n = _normals(ob.data)
     np.testing.assert_allclose(direction, core_opal.aligned_directions(n), atol=1e-5)
-    assert ob.data.materials[0].opal.lattice == "LINES"
-
-
-@pytest.mark.parametrize("ident", list(PRESETS))
-def test_presets_set_body_and_grating(ident):
-    bs.empty_scene()
-    mat = bs.material("m", "PRINCIPLED")
-    with bpy.context.temp_override(material=mat):
-        assert bpy.ops.opal.opal_preset(preset=ident) == {"FINISHED"}
-    p = PRESETS[ident]
-    assert mat.opal.grating and mat.opal.lattice == p.lattice and mat.opal.grating_direction == "ATTRIBUTE"
-    assert mat.opal.slit_width == pytest.approx(p.period * p.slit_ratio)
-    node = mat.node_tree.nodes["Principled BSDF"]
-    assert tuple(node.inputs["Base Color"].default_value)[:3] == pytest.approx(p.base_color)
-    assert mat.opal.grating_problems() == []
+    assert ob.data.materials[0].opal.lattice == "LINES" and read_domains(ob) is None
 
 
 # ---------------------------------------------------------------------------- Edit Mode
@@ -475,7 +812,7 @@ class _Recorder:
     def __getattr__(self, name):
         if name in ("row", "column", "box", "split"):
             return lambda *a, **k: _Recorder(self.log)
-        if name in ("label", "separator", "menu"):
+        if name in ("label", "separator", "menu", "context_pointer_set"):
             return lambda *a, **k: self.log.append((name, a, k))
         raise AttributeError(name)
 
@@ -509,7 +846,8 @@ def test_redo_panels_menus_and_sidebar_draw():
         if issubclass(cls, bpy.types.Operator) and "draw" in cls.__dict__:
             cls.draw(_fake_operator(cls, log), bpy.context)
     names = {e[1] for e in log if e[0] == "prop"}
-    assert {"count", "seed", "low", "high", "direction", "angle", "period", "preset", "resolution"} <= names
+    assert {"count", "seed", "low", "high", "direction", "angle", "period", "preset", "resolution", "size_spread",
+            "orientation", "axis_spread", "domain_type", "diameter", "tilt"} <= names
     for mode in ("OBJECT", "EDIT_MESH"):
         ctx = types.SimpleNamespace(mode=mode, active_object=ob)
         panel = types.SimpleNamespace(layout=_Recorder(log))
@@ -518,4 +856,6 @@ def test_redo_panels_menus_and_sidebar_draw():
         opal_ops.VIEW3D_MT_opal_edit.draw(panel, ctx)
     ops = {e[1] for e in log if e[0] == "operator"}
     assert {"opal.assign_grating", "opal.jitter_period", "opal.split_domain", "opal.merge_domains",
-            "opal.generate_domains", "mesh.primitive_opal_add"} <= ops
+            "opal.generate_domains", "mesh.primitive_opal_add", "opal.set_domain"} <= ops
+    # the sidebar's preset menu runs on the object's material (presets read bpy.context.material)
+    assert ("context_pointer_set", ("material", ob.active_material), {}) in log

@@ -21,6 +21,8 @@ SCENE_CONTRACT = ["samples", "light_paths", "wavelength_min", "wavelength_max", 
                   "seed", "dispersion_sampling", "spectral_exr", "time_limit"]
 MATERIAL_CONTRACT = ["grating", "grating_type", "lattice", "period", "slit_width", "slit_count", "coherence_length",
                      "grating_direction", "rotation", "dispersion", "abbe_number"]
+#: The BRAGG lattice's names (scripts and tests rely on them; drawn only for that lattice).
+BRAGG_CONTRACT = ["sphere_diameter", "sphere_ior", "void_ior", "layers", "mosaic_spread"]
 
 
 def test_engine_id_and_contract_names():
@@ -32,12 +34,12 @@ def test_engine_id_and_contract_names():
         assert rna[name].description, f"{name} has no tooltip"
     mat = bpy.data.materials.new("m")
     rna = mat.opal.bl_rna.properties
-    for name in MATERIAL_CONTRACT:
+    for name in MATERIAL_CONTRACT + BRAGG_CONTRACT:
         assert name in rna, name
         assert rna[name].description, f"{name} has no tooltip"
     assert set(sc.opal.bl_rna.properties["dispersion_sampling"].enum_items.keys()) == {"SPLIT", "SAMPLE"}
     assert set(rna["grating_type"].enum_items.keys()) == {"REFLECTION", "TRANSMISSION"}
-    assert set(rna["lattice"].enum_items.keys()) == {"LINES", "HEXAGONAL"}
+    assert set(rna["lattice"].enum_items.keys()) == {"LINES", "HEXAGONAL", "BRAGG"}
     assert set(rna["grating_direction"].enum_items.keys()) == {"UV", "OBJECT_X", "ATTRIBUTE"}
 
 
@@ -61,7 +63,7 @@ def test_enum_items_have_stable_explicit_indices():
     m = bpy.types.Material.bl_rna.properties["opal"].fixed_type.properties
     assert {i.identifier: i.value for i in m["dispersion"].enum_items} == DISPERSION_MODELS
     assert {i.identifier: i.value for i in m["grating_type"].enum_items} == {"REFLECTION": 0, "TRANSMISSION": 1}
-    assert {i.identifier: i.value for i in m["lattice"].enum_items} == {"LINES": 0, "HEXAGONAL": 1}
+    assert {i.identifier: i.value for i in m["lattice"].enum_items} == {"LINES": 0, "HEXAGONAL": 1, "BRAGG": 2}
     assert {i.identifier: i.value for i in m["grating_direction"].enum_items} == {"UV": 0, "OBJECT_X": 1, "ATTRIBUTE": 2}
     s = bpy.types.Scene.bl_rna.properties["opal"].fixed_type.properties
     assert {i.identifier: i.value for i in s["dispersion_sampling"].enum_items} == {"SAMPLE": 0, "SPLIT": 1}
@@ -78,6 +80,7 @@ ENUM_PROPERTIES = {
     ("Material", "grating_type"): enums.GratingType,
     ("Material", "lattice"): enums.Lattice,
     ("Material", "grating_direction"): enums.GratingDirection,
+    ("Material", "domain_orientation"): enums.DomainOrientation,
 }
 
 
@@ -180,6 +183,13 @@ def test_panels_show_only_for_the_engine_and_draw_existing_properties():
     labels = " ".join(str(e[2].get("text", "")) for e in drawn if e[0] == "label")
     assert "period must be > 0" in labels
     assert ("operator", "opal.export_scene") in drawn
+    assert not set(BRAGG_CONTRACT) & props  # a LINES grating: the Bragg settings are not drawn
+    mat.opal.lattice = "BRAGG"
+    log = []
+    ui.OPAL_MATERIAL_PT_grating.draw(types.SimpleNamespace(layout=_Layout(log)),
+                                     _context(ENGINE_ID, material=mat, world=world))
+    props = {e[1] for e in log if e[0] == "prop"}
+    assert set(BRAGG_CONTRACT) <= props and "period" not in props
 
 
 def _labels(cls, ctx) -> str:

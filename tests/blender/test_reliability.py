@@ -471,7 +471,8 @@ def test_minimums_exclude_values_that_can_only_fail_later():
 
 #: Properties that are lengths, and how each says its unit.
 LENGTHS = {("Scene", "wavelength_min"), ("Scene", "wavelength_max"), ("Scene", "wavelength_step"),
-           ("Material", "period"), ("Material", "slit_width"), ("Material", "coherence_length")}
+           ("Material", "period"), ("Material", "slit_width"), ("Material", "coherence_length"),
+           ("Material", "sphere_diameter"), ("Material", "diameter_spread")}
 
 
 def test_every_length_says_its_unit():

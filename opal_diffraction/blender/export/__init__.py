@@ -52,6 +52,7 @@ from ...core.scene import Lights, Scene
 from ..mesh_io import GRATING_ATTRIBUTE, PERIOD_ATTRIBUTE
 from .camera import export_camera, render_region, render_size
 from .colour import rec709_to_working_space, working_space_to_rec709
+from .domains import flatten_domains, instance_domains
 from .lights import LightRows, export_lights
 from .materials import MaterialTable, export_materials
 from .meshes import (GEOMETRY_TYPES, UNSUPPORTED_GEOMETRY, MeshCache, SceneMeshes, element_count, flatten,
@@ -114,6 +115,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     materials = MaterialTable(warn, to709)
     meshes = SceneMeshes(mesh_cache)
     groups: dict = defaultdict(list)  # (mesh key, material tuple) -> matrices
+    domains: dict = defaultdict(list)  # the same keys -> each instance's opal volume domains or None
     lights = LightRows(warn, to709)
     skipped = Skipped()
     n_instances = 0
@@ -143,6 +145,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
         if md is None or len(md.triangles) == 0:
             continue
         groups[(mkey, slots)].append(np.array(inst.matrix_world, np.float64))
+        domains[(mkey, slots)].append(instance_domains(ob))
         n_instances += 1
 
     if test_break is not None and test_break():
@@ -150,6 +153,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     vertices, triangles, tri_material, tri_tangent, tri_period, corner_normals = flatten(
         groups, meshes, materials.grating, warn, materials.hidden_rows())
     corner_uvs, corner_tangents = flatten_corners(groups, meshes, materials.corners, materials.hidden_rows())
+    domain_fields = flatten_domains(groups, domains, meshes, materials.hidden_rows())
 
     skipped.report(warn)
     core_materials = materials.finish()
@@ -160,7 +164,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
         materials=core_materials, lights=Lights.from_list(lights.rows), camera=cam,
         world_color=world.color, tri_tangent=tri_tangent, tri_period=tri_period, corner_normals=corner_normals,
         world_image=world.image, world_rotation=world.rotation,
-        corner_uvs=corner_uvs, corner_tangents=corner_tangents, **materials.textures.scene_fields(),
+        corner_uvs=corner_uvs, corner_tangents=corner_tangents, **materials.textures.scene_fields(), **domain_fields,
     )
     meshes.done()
     stats = {

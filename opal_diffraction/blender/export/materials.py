@@ -189,6 +189,10 @@ class MaterialTable:
                 "grating_direction": opal.grating_direction,
                 # one turn at most (Blender accepts up to FLT_MAX radians, whose float32 sine is noise)
                 "rotation": math.remainder(float(opal.rotation), math.tau),
+                # the BRAGG lattice's columns (docs/physics.md section 5.2)
+                "sphere_diameter": float(opal.sphere_diameter), "sphere_ior": float(opal.sphere_ior),
+                "void_ior": float(opal.void_ior), "layers": int(opal.layers),
+                "mosaic_spread": float(opal.mosaic_spread),
             }
             row.update(grating)
         return row, grating

@@ -211,7 +211,9 @@ def tangents(md: MeshData, gratings: list, tri_mat_local: np.ndarray, warn) -> n
     them onto each triangle and applies the material's rotation)."""
     v = md.vertices[md.triangles]
     e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
-    modes = np.array([g["grating_direction"] if g else "" for g in gratings], dtype=object)[tri_mat_local]
+    # a BRAGG lattice has no surface direction (its (111) planes are the volume domains')
+    modes = np.array([g["grating_direction"] if g and g.get("lattice") != "BRAGG" else "" for g in gratings],
+                     dtype=object)[tri_mat_local]
     t = np.zeros((len(md.triangles), 3))
     t[:] = (1.0, 0.0, 0.0)
     if (modes == "UV").any() and md.uv is None:
@@ -419,11 +421,12 @@ def subset(md: MeshData, keep: np.ndarray) -> MeshData:
                     corners=corners, needs=md.needs)
 
 
-def instance_groups(groups: dict, meshes: SceneMeshes, hidden: np.ndarray | None = None):
+def instance_groups(groups: dict, meshes: SceneMeshes, hidden: np.ndarray | None = None, with_key: bool = False):
     """The instance groups :func:`flatten` and :func:`flatten_corners` walk, in the same order:
     for each (mesh key, material rows of its slots) -> world matrices, yields (the mesh with the
     triangles of ``hidden`` rows left out, the (K, 4, 4) matrices, each triangle's material row);
-    a group whose triangles are all hidden is skipped, a NaN or infinite matrix an error."""
+    a group whose triangles are all hidden is skipped, a NaN or infinite matrix an error.
+    ``with_key``: each item starts with the group's key (export/domains.py)."""
     for (mkey, slots), mlist in groups.items():
         md = meshes[mkey]
         mats = np.stack(mlist)
@@ -436,7 +439,7 @@ def instance_groups(groups: dict, meshes: SceneMeshes, hidden: np.ndarray | None
             if not keep.any():
                 continue
             md, tri_mat_local = subset(md, keep), tri_mat_local[keep]
-        yield md, mats, tri_mat_local
+        yield ((mkey, slots), md, mats, tri_mat_local) if with_key else (md, mats, tri_mat_local)
 
 
 def flatten(groups: dict, meshes: SceneMeshes, grating: list, warn, hidden: np.ndarray | None = None):

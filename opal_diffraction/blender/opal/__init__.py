@@ -2,6 +2,7 @@
 
     attributes  a mesh's faces <-> arrays, the per-face grating attributes and preview colours
     operators   Add Opal, Generate Domains, the Edit Mode grating operators, Update Preview
+    volume_ops  volume (BRAGG) domains: generation, the Bragg-colour preview, Set Domain
     ui          the Add Mesh, Face and Object menu entries and the sidebar's "Opal" tab
 
 The logic lives in :mod:`opal_diffraction.core.opal` (pure NumPy on mesh arrays); these modules
@@ -32,6 +33,7 @@ from .operators import (
     OPAL_OT_merge_domains,
     OPAL_OT_select_domain,
     OPAL_OT_split_domain,
+    OPAL_OT_set_domain,
     OPAL_OT_update_preview,
     operators,
 )
@@ -42,7 +44,7 @@ __all__ = [
     "FaceData", "read_faces", "write_field", "show_preview",
     "MESH_OT_primitive_opal_add", "OPAL_OT_generate_domains", "OPAL_OT_assign_grating", "OPAL_OT_jitter_period",
     "OPAL_OT_split_domain", "OPAL_OT_merge_domains", "OPAL_OT_select_domain", "OPAL_OT_update_preview",
-    "VIEW3D_MT_opal_edit", "VIEW3D_PT_opal_tools", "classes",
+    "OPAL_OT_set_domain", "VIEW3D_MT_opal_edit", "VIEW3D_PT_opal_tools", "classes",
     "register", "unregister",
 ]
 

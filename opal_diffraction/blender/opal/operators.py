@@ -14,15 +14,19 @@ import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty
 from bpy_extras import object_utils
 
+from ..properties import DOMAIN_ORIENTATION_ITEMS
+
 from ...core import opal as core_opal
-from ..opal_presets import PRESET_ITEMS, PRESETS, new_opal_material
+from ..opal_domains import bragg_material, read_domains
+from ..opal_presets import PRESET_ITEMS, new_opal_material
 from .attributes import FaceData, read_faces, show_preview, write_field
+from .volume_ops import OPAL_OT_set_domain, face_cells, generate_object_domains, write_bragg_preview
 
 __all__ = [
     "is_mesh",
     "MESH_OT_primitive_opal_add", "OPAL_OT_generate_domains", "OPAL_OT_assign_grating", "OPAL_OT_jitter_period",
     "OPAL_OT_split_domain", "OPAL_OT_merge_domains", "OPAL_OT_select_domain", "OPAL_OT_update_preview",
-    "operators",
+    "OPAL_OT_set_domain", "operators",
 ]
 
 
@@ -57,7 +61,39 @@ def _domain_props():
         high=FloatProperty(name="Max", description="Largest sphere diameter (or period), nm", default=330.0,
                            min=1.0, soft_min=100.0, soft_max=2000.0, precision=1),
         direction_mode=EnumProperty(name="Directions", items=_DIRECTION_MODE_ITEMS, default="RANDOM"),
+        # volume (BRAGG) domains; unset: the material's layout (its preset's)
+        size_spread=FloatProperty(name="Size Spread", description="Volume domains: spread of the sizes (additive "
+                                  "weights in units of the mean spacing; unset: the material's)", default=0.5,
+                                  min=0.0, soft_max=3.0),
+        orientation=EnumProperty(name="Orientation", items=DOMAIN_ORIENTATION_ITEMS, default="LAYERED",
+                                 description="Volume domains: how the (111) planes are oriented (unset: the "
+                                 "material's)"),
+        axis_spread=FloatProperty(name="Axis Spread", description="Volume domains, layered: largest angle of a "
+                                  "(111) normal from the object's Z axis, degrees (unset: the material's)",
+                                  default=25.0, min=0.0, max=180.0),
     )
+
+
+def _volume_given(op) -> dict:
+    """The volume-layout properties the caller set (the rest come from the material)."""
+    names = {"count": "count", "size_spread": "size_spread", "orientation": "orientation",
+             "axis_spread": "axis_spread", "low": "low", "high": "high"}
+    return {k: getattr(op, a) if op.properties.is_property_set(a) else None for k, a in names.items()}
+
+
+def _draw_volume_props(layout, op):
+    layout.label(text="Unset values: the material's (its preset's)", icon="INFO")
+    col = layout.column(align=True)
+    col.prop(op, "count")
+    col.prop(op, "seed")
+    col = layout.column(align=True)
+    col.prop(op, "low", text="Sphere Diameter Min")
+    col.prop(op, "high", text="Max")
+    layout.prop(op, "size_spread")
+    layout.prop(op, "orientation")
+    row = layout.row()
+    row.active = op.orientation == "LAYERED"
+    row.prop(op, "axis_spread")
 
 
 def _draw_domain_props(layout, op):
@@ -103,12 +139,13 @@ class MESH_OT_primitive_opal_add(bpy.types.Operator, object_utils.AddObjectHelpe
     bl_label = "Add Opal"
     bl_options = {"REGISTER", "UNDO", "PRESET"}
 
-    size_x: FloatProperty(name="Length", description="Length of the oval base (X)", default=2.0, min=1e-4,
-                          soft_max=10.0, unit="LENGTH")
-    size_y: FloatProperty(name="Width", description="Width of the oval base (Y)", default=1.5, min=1e-4,
-                          soft_max=10.0, unit="LENGTH")
-    height: FloatProperty(name="Height", description="Height of the dome", default=0.5, min=1e-4, soft_max=10.0,
-                          unit="LENGTH")
+    # a real cabochon: 18 x 13 x 6 mm
+    size_x: FloatProperty(name="Length", description="Length of the oval base (X)", default=0.018, min=1e-5,
+                          soft_max=1.0, unit="LENGTH", precision=4)
+    size_y: FloatProperty(name="Width", description="Width of the oval base (Y)", default=0.013, min=1e-5,
+                          soft_max=1.0, unit="LENGTH", precision=4)
+    height: FloatProperty(name="Height", description="Height of the dome", default=0.006, min=1e-5, soft_max=1.0,
+                          unit="LENGTH", precision=4)
     resolution: IntProperty(name="Resolution", description="Rings from the top to the rim (6 r^2 triangles)",
                             default=48, min=2, max=256)
     preset: EnumProperty(name="Preset", items=PRESET_ITEMS, default="BLACK",
@@ -129,7 +166,11 @@ class MESH_OT_primitive_opal_add(bpy.types.Operator, object_utils.AddObjectHelpe
         col.prop(self, "height")
         layout.prop(self, "resolution")
         layout.prop(self, "preset")
-        if self.preset != "PAPER":
+        if self.preset == "PAPER":
+            pass
+        elif _preset_is_bragg(self.preset):
+            _draw_volume_props(layout, self)
+        else:
             _draw_domain_props(layout, self)
         layout.prop(self, "show_preview")
         layout.prop(self, "align")
@@ -145,14 +186,16 @@ class MESH_OT_primitive_opal_add(bpy.types.Operator, object_utils.AddObjectHelpe
         me.materials.append(new_opal_material(self.preset))
         faces = read_faces(ob)
         dome = faces.geometry.normal[:, 2] > -0.5  # seeds on the visible dome, not the base
-        if self.preset == "PAPER":
-            p = PRESETS["PAPER"]
+        if bragg_material(ob) is not None:
+            generate_object_domains(ob, faces, self.seed, **_volume_given(self))
+        elif self.preset == "PAPER":
+            period = float(me.materials[0].opal.period)
             field = core_opal.generate_domains(faces.vertices, faces.triangles, 1, self.seed, faces.tri_face,
-                                               faces.n_faces, period_mode="PERIOD", low=p.low, high=p.high,
+                                               faces.n_faces, period_mode="PERIOD", low=period, high=period,
                                                direction_mode="ALIGNED")
+            write_field(ob, field, normals=faces.geometry.normal)
         else:
-            field = _generate(faces, self, seed_mask=dome)
-        write_field(ob, field, normals=faces.geometry.normal)
+            write_field(ob, _generate(faces, self, seed_mask=dome), normals=faces.geometry.normal)
         if self.show_preview:
             show_preview(context)
         return {"FINISHED"}
@@ -167,6 +210,13 @@ class OPAL_OT_generate_domains(bpy.types.Operator):
     bl_label = "Generate Grating Domains"
     bl_options = {"REGISTER", "UNDO"}
 
+    domain_type: EnumProperty(name="Domains", items=[
+        ("AUTO", "Automatic", "Volume domains when a material of the object has the Bragg lattice, else surface "
+         "grating domains", 0),
+        ("VOLUME", "Volume (Bragg)", "3D domains in the object's volume (a closed mesh), each with a (111) "
+         "orientation and a sphere diameter", 1),
+        ("SURFACE", "Surface Gratings", "Voronoi grating domains over the faces (LINES / HEXAGONAL)", 2),
+    ], default="AUTO")
     only_selected: BoolProperty(name="Selected Faces Only", description="In Edit Mode, cover only the selected "
                                 "faces (new domain ids; other faces keep theirs)", default=True)
     show_preview: BoolProperty(name="Show Preview", description="Show the domains' preview colours in Solid mode",
@@ -179,6 +229,11 @@ class OPAL_OT_generate_domains(bpy.types.Operator):
     def draw(self, context):
         layout = self.layout
         layout.use_property_split = True
+        layout.prop(self, "domain_type")
+        if _wants_volume(self, context.active_object):
+            _draw_volume_props(layout, self)
+            layout.prop(self, "show_preview")
+            return
         _draw_domain_props(layout, self)
         if context.mode == "EDIT_MESH":
             layout.prop(self, "only_selected")
@@ -190,6 +245,20 @@ class OPAL_OT_generate_domains(bpy.types.Operator):
         if faces.n_faces == 0:
             self.report({"ERROR"}, "the mesh has no faces")
             return {"CANCELLED"}
+        if _wants_volume(self, ob):
+            try:
+                d = generate_object_domains(ob, faces, self.seed, **_volume_given(self))
+            except ValueError as e:  # not a closed mesh
+                self.report({"ERROR"}, f"object '{ob.name}': {e}")
+                return {"CANCELLED"}
+            if bragg_material(ob) is None:
+                self.report({"WARNING"}, "no material of this object has the Bragg lattice: the render ignores "
+                            "the volume domains (use an opal preset)")
+            if self.show_preview:
+                show_preview(context)
+            self.report({"INFO"}, f"{len(d)} volume domains, sphere diameters {d.diameter.min():.0f}-"
+                        f"{d.diameter.max():.0f} nm")
+            return {"FINISHED"}
         only = None
         if ob.data.is_editmode and self.only_selected:
             if not faces.selected.any():
@@ -204,6 +273,20 @@ class OPAL_OT_generate_domains(bpy.types.Operator):
         n = len(np.unique(field.domain if only is None else field.domain[only]))
         self.report({"INFO"}, f"{n} domains, periods {field.period.min():.0f}-{field.period.max():.0f} nm")
         return {"FINISHED"}
+
+
+def _wants_volume(op, ob) -> bool:
+    """Generate Domains makes volume domains: asked for, or automatic with a BRAGG material."""
+    return op.domain_type == "VOLUME" or (op.domain_type == "AUTO" and bragg_material(ob) is not None)
+
+
+def _preset_is_bragg(ident: str) -> bool:
+    from ..opal_presets import preset_file, read_preset
+
+    try:
+        return read_preset(preset_file(ident)).get("lattice") == "BRAGG"
+    except (KeyError, OSError, SyntaxError, ValueError):
+        return False
 
 
 def _warn_material(op, ob) -> None:
@@ -397,7 +480,8 @@ class OPAL_OT_merge_domains(_EditOp, bpy.types.Operator):
 
 
 class OPAL_OT_select_domain(_EditOp, bpy.types.Operator):
-    """Select every face of the domains that have a selected face"""
+    """Select every face of the domains that have a selected face (volume domains: the faces whose
+    centres lie in the same cells)"""
 
     bl_idname = "opal.select_domain"
     bl_label = "Select Domains"
@@ -407,7 +491,12 @@ class OPAL_OT_select_domain(_EditOp, bpy.types.Operator):
         ob, faces, field = self._begin(context)
         if field is None:
             return {"CANCELLED"}
-        want = _domains_of(field, faces.selected)
+        vol = read_domains(ob)
+        if vol is not None and (bragg_material(ob) is not None or faces.field is None):
+            cells = face_cells(faces, vol)
+            want = np.isin(cells, np.unique(cells[faces.selected]))
+        else:
+            want = _domains_of(field, faces.selected)
         bm = bmesh.from_edit_mesh(ob.data)
         bm.faces.ensure_lookup_table()
         for i in np.flatnonzero(want & ~faces.selected).tolist():
@@ -431,6 +520,11 @@ class OPAL_OT_update_preview(bpy.types.Operator):
     def execute(self, context):
         ob = context.active_object
         faces = read_faces(ob)
+        vol = read_domains(ob)
+        if vol is not None:
+            write_bragg_preview(ob, vol, faces)
+            show_preview(context)
+            return {"FINISHED"}
         if faces.field is None:
             self.report({"ERROR"}, "the mesh has no grating attributes: generate domains first")
             return {"CANCELLED"}
@@ -453,4 +547,5 @@ operators = (
     OPAL_OT_merge_domains,
     OPAL_OT_select_domain,
     OPAL_OT_update_preview,
+    OPAL_OT_set_domain,
 )

@@ -15,6 +15,7 @@ from .operators import (
     OPAL_OT_merge_domains,
     OPAL_OT_select_domain,
     OPAL_OT_split_domain,
+    OPAL_OT_set_domain,
     OPAL_OT_update_preview,
     is_mesh,
 )
@@ -34,6 +35,11 @@ class VIEW3D_MT_opal_edit(bpy.types.Menu):
 
     def draw(self, context):
         layout = self.layout
+        layout.operator(OPAL_OT_set_domain.bl_idname, text="Domain Faces the Surface").orientation = "NORMAL"
+        layout.operator(OPAL_OT_set_domain.bl_idname, text="Domain Faces the View").orientation = "VIEW"
+        op = layout.operator(OPAL_OT_set_domain.bl_idname, text="Set Domain Sphere Diameter")
+        op.orientation, op.set_diameter = "KEEP", True
+        layout.separator()
         layout.operator(OPAL_OT_assign_grating.bl_idname, text="Assign from View").direction = "VIEW"
         layout.operator(OPAL_OT_assign_grating.bl_idname, text="Assign from Active Edge").direction = "ACTIVE_EDGE"
         op = layout.operator(OPAL_OT_assign_grating.bl_idname, text="Assign at Angle")
@@ -56,7 +62,7 @@ class VIEW3D_PT_opal_tools(bpy.types.Panel):
     """The opal tools in the 3D View's sidebar (N), tab "Opal"."""
 
     bl_idname = "VIEW3D_PT_opal_tools"
-    bl_label = "Opal Gratings"
+    bl_label = "Opal"
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = "Opal"
@@ -76,12 +82,19 @@ class VIEW3D_PT_opal_tools(bpy.types.Panel):
         if mat is not None:
             row = layout.row(align=True)
             row.label(text=mat.name, icon="MATERIAL")
+            row.context_pointer_set("material", mat)  # the presets run on bpy.context.material
             row.menu("OPAL_MT_opal_presets", text="", icon="PRESET")
         layout.operator(OPAL_OT_generate_domains.bl_idname, icon="MOD_TRIANGULATE")
         layout.operator(OPAL_OT_update_preview.bl_idname, icon="COLOR")
         if context.mode != "EDIT_MESH":
-            layout.label(text="Edit Mode: assign gratings to faces", icon="INFO")
+            layout.label(text="Edit Mode: set the domains of faces", icon="INFO")
             return
+        col = layout.column(align=True)
+        col.label(text="Volume Domains of the Selected Faces")
+        col.operator(OPAL_OT_set_domain.bl_idname, text="Face the Surface").orientation = "NORMAL"
+        col.operator(OPAL_OT_set_domain.bl_idname, text="Face the View").orientation = "VIEW"
+        op = col.operator(OPAL_OT_set_domain.bl_idname, text="Set Sphere Diameter")
+        op.orientation, op.set_diameter = "KEEP", True
         col = layout.column(align=True)
         col.label(text="Selected Faces")
         col.operator(OPAL_OT_assign_grating.bl_idname, text="Direction from View").direction = "VIEW"

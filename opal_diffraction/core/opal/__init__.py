@@ -32,7 +32,9 @@ face's plane (object space), ``period`` (F,) float32 nm. A grating's direction i
     surface    face geometry, tangent bases, projection and transport of tangents
     domains    DomainField, Voronoi domains with their directions and periods
     editing    assigning, rotating, jittering, splitting and merging on selected faces
-    preview    the preview colours
+    preview    the preview colours (surface gratings, and the Bragg colour of volume domains)
+    volume     volume domains: additively weighted 3-D Voronoi cells with (111) normals
+               (imported as ``core.opal.volume``)
 """
 
 from __future__ import annotations
@@ -68,7 +70,7 @@ from .editing import (
     set_period,
     split_domains,
 )
-from .preview import preview_colors
+from .preview import bragg_band_width, bragg_colors, preview_colors
 from .surface import FaceGeometry, face_geometry, project_to_planes, tangent_basis, transport_tangents
 
 __all__ = [
@@ -103,4 +105,6 @@ __all__ = [
     "split_domains",
     "merge_domains",
     "preview_colors",
+    "bragg_band_width",
+    "bragg_colors",
 ]
