@@ -306,3 +306,30 @@ def test_white_furnace_transmission_grating_on_glass_is_unbiased():
     z_crit = norm.isf(0.01 / (2 * ctx.grid.n))  # two-sided, 1 % family-wise over the bins
     assert np.abs(z).max() < z_crit, np.abs(z).max()
     assert ratio.max() <= 1 + 1e-5
+
+
+def test_hexagonal_harvey_shack_factor_matches_an_order_loop():
+    """K = f / sum over propagating (m1, m2) of f^2 [2 J1(x)/x]^2, orders enumerated one by one from
+    the rows construction's reciprocal lattice b1 = (1, -1/sqrt 3) / D, b2 = (0, 2/sqrt 3) / D."""
+    from scipy.special import j1
+
+    from opal_diffraction.core.diffraction import hexagonal_harvey_shack_factor
+
+    rng = np.random.default_rng(5)
+    for d, ratio in ((250.0, 0.5), (550.0, 0.9), (1200.0, 0.3)):
+        alpha = rng.uniform(-1, 1, 25)
+        beta = rng.uniform(-1, 1, 25) * np.sqrt(1 - alpha**2)
+        lam = rng.uniform(380, 780, 25)
+        got = hexagonal_harvey_shack_factor(alpha, beta, lam, ratio, d)
+        fill = np.pi * ratio**2 / (2 * np.sqrt(3))
+        b1, b2 = np.array([1.0, -1 / np.sqrt(3)]) / d, np.array([0.0, 2 / np.sqrt(3)]) / d
+        for i in range(25):
+            total = 0.0
+            for p in range(-12, 13):
+                for q in range(-12, 13):
+                    g_vec = p * b1 + q * b2
+                    h = g_vec * lam[i]
+                    if (h[0] - alpha[i]) ** 2 + (h[1] - beta[i]) ** 2 <= 1.0:
+                        x = np.pi * ratio * d * np.linalg.norm(g_vec)
+                        total += fill**2 * (1.0 if x == 0 else (2 * j1(x) / x) ** 2)
+            assert got[i] == pytest.approx(fill / total, rel=1e-9), (d, i)

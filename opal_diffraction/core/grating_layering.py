@@ -84,7 +84,7 @@ def zeroth_order_efficiency(g: PreparedGratings, mat: int, w_i, t, s, period, wa
     d = np.asarray(period, np.float64)[:, None]
     ratio = g.slit_width[mat] / g.period[mat]
     if g.hexagonal[mat]:
-        return eta * hexagonal_harvey_shack_factor(alpha, beta, wavelength, ratio * d, d)
+        return eta * hexagonal_harvey_shack_factor(alpha, beta, wavelength, ratio, d)
     return eta * harvey_shack_factor(alpha, beta, wavelength, ratio, d)
 
 

@@ -178,5 +178,5 @@ def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, p
     factor = area**2 * n * n / ((lam * NM) ** 2 * cell)
     if renormalise:
         factor = factor * hexagonal_harvey_shack_factor(np.sum(w_i * t, axis=1)[:, None],
-                                                        np.sum(w_i * s, axis=1)[:, None], lam, a, d)
+                                                        np.sum(w_i * s, axis=1)[:, None], lam, ratio, d)
     return (factor * p).astype(np.float32)
