@@ -333,3 +333,32 @@ def test_hexagonal_harvey_shack_factor_matches_an_order_loop():
                         x = np.pi * ratio * d * np.linalg.norm(g_vec)
                         total += fill**2 * (1.0 if x == 0 else (2 * j1(x) / x) ** 2)
             assert got[i] == pytest.approx(fill / total, rel=1e-9), (d, i)
+
+
+def test_mirror_base_sees_a_sized_light_once_in_the_zeroth_order():
+    """A sphere light seen in a white mirror with a reflection grating: the zeroth order comes
+    only through the specular continuation, weighted (a/D)^2 K (the diffraction leaves it out),
+    so the pixels that see the light's reflection equal the plain mirror's times (a/D)^2 K of
+    the mirror direction; before the layering they got the mirror's full image plus the
+    diffracted zeroth order on top (docs/physics.md section 3.3)."""
+    from opal_diffraction.core.scene import Lights
+
+    def scene(grating):
+        base = {"kind": "MIRROR", "color": (1, 1, 1)}
+        mat = dict(base, grating=1, grating_type="REFLECTION", period=D_F, slit_width=A_F, slit_count=300,
+                   coherence_length=100.0) if grating else base
+        s = Scene(materials=Materials.from_list([mat]))
+        s.add_mesh(*primitives.quad((0, 0, 0), (40.0, 0, 0), (0, 40.0, 0)), material=0, tangent=(1, 0, 0))
+        s.lights = Lights.from_list([{"kind": "POINT", "position": (0.0, 0.5, 1.0), "power": 10.0, "radius": 0.4}])
+        s.camera = Camera.look_at((0.0, -0.5, 1.0), (0, 0, 0), lens=50, width=16, height=16)
+        return s
+
+    st = RenderSettings(samples=1, threads=1, filter_width=0.0, light_paths=0)
+    plain = render(scene(False), st).spectral.reshape(-1, prepare(scene(False), st).grid.n)
+    res = render(scene(True), st)
+    layered = res.spectral.reshape(plain.shape)
+    seen = plain.max(axis=1) > 0
+    assert 10 < seen.sum() < len(seen)  # the light's reflection covers part of the view
+    o, d = pixel_centre_rays(scene(True).camera)
+    expected = zeroth_efficiency_reference(d[seen] * np.array([1, 1, -1.0]), prepare(scene(True), st).grid.wavelengths)
+    np.testing.assert_allclose(layered[seen], plain[seen] * expected, rtol=1e-3, atol=1e-6 * plain.max())
