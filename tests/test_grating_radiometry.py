@@ -362,3 +362,22 @@ def test_mirror_base_sees_a_sized_light_once_in_the_zeroth_order():
     o, d = pixel_centre_rays(scene(True).camera)
     expected = zeroth_efficiency_reference(d[seen] * np.array([1, 1, -1.0]), prepare(scene(True), st).grid.wavelengths)
     np.testing.assert_allclose(layered[seen], plain[seen] * expected, rtol=1e-3, atol=1e-6 * plain.max())
+
+
+def test_exclude_zeroth_removes_only_the_zeroth_order_period():
+    """fraunhofer_pattern_binned(..., exclude_zeroth=True): 0 where every wavelength of the bin has
+    |u| < lambda / (2 D) (the zeroth order's period of the N-slit factor), the full pattern
+    where none has, and in between no more than the full pattern."""
+    from opal_diffraction.core.diffraction import fraunhofer_pattern_binned
+
+    d, a, n, length = 1600.0, 800.0, 500, 2e4
+    edges = np.array([540.0, 545.0, 550.0])
+    u = np.linspace(-0.9, 0.9, 20001)
+    v = np.zeros_like(u)
+    full = fraunhofer_pattern_binned(u, v, edges, a, d, n, length)
+    cut = fraunhofer_pattern_binned(u, v, edges, a, d, n, length, exclude_zeroth=True)
+    inner = np.abs(u) < 539.0 / (2 * d)
+    outer = np.abs(u) > 551.0 / (2 * d)
+    assert full[inner].max() > 0.5 and np.abs(cut[inner]).max() < 1e-12
+    np.testing.assert_allclose(cut[outer], full[outer], rtol=1e-9, atol=1e-15)
+    assert (cut <= full + 1e-12).all() and (cut >= 0).all()
