@@ -125,8 +125,8 @@ def test_energy_transmission_grating_normal_incidence():
     env = sinc2(np.pi * a * uc / lam)
     vmax = np.sqrt(1 - uc**2)
     v_int = lam / (np.pi * length) * 2 * sinc2_integral(np.pi * length * vmax / lam)
-    factor_cos = grating_radiance_factor(lam, a, d, n, length, 1.0)  # cos(theta_o) cancels
-    total = factor_cos * np.sum(env * ms * v_int * du)
+    # du dv = cos(theta_o) d(omega): the radiance itself is integrated in direction cosines
+    total = grating_radiance_factor(lam, a, d, n, length) * np.sum(env * ms * v_int * du)
     m = np.arange(-int(d / lam), int(d / lam) + 1)
     propagating = (a / d) ** 2 * np.sum(sinc2(np.pi * a * m / d))  # Parseval: sum over all m = D / a
     assert total == pytest.approx(propagating, rel=0.01)
@@ -156,5 +156,18 @@ def test_stress_no_nan_inf_negative_and_float32_agrees(n, ratio, d, u, v, length
 
 
 def test_grazing_exit_is_bounded():
-    f = grating_radiance_factor(550e-9, 1e-6, 2e-6, 1000, 1e-4, np.array([0.0, 1e-9, -1e-12]))
-    assert np.all(np.isfinite(f)) and np.all(f > 0)
+    """No 1/cos(theta_o) (docs/physics.md section 3.2): an exit in the surface's plane is finite and
+    no larger than the radiance factor times the Harvey-Shack bound 1 / (a / D)."""
+    from opal_diffraction.core.gratings import PreparedGratings, diffracted_radiance
+
+    g = PreparedGratings(np.array([True]), np.array([False]), np.array([False]), np.array([2000.0]),
+                         np.array([1000.0]), np.array([1000]), np.array([1e5]), np.ones(1), np.zeros(1))
+    b = 3
+    n = np.tile([0.0, 0.0, 1.0], (b, 1))
+    t = np.tile([1.0, 0.0, 0.0], (b, 1))
+    s = np.cross(n, t)
+    w_i = np.tile([0.0, 0.0, 1.0], (b, 1))
+    w_o = np.array([[1.0, 0.0, 0.0], [np.cos(1e-9), 0.0, np.sin(1e-9)], [0.55 / 2, np.sqrt(1 - 0.275**2), 0.0]])
+    rad = diffracted_radiance(g, 0, w_o, w_i, t, s, n, np.full(b, 2000.0), np.array([549.0, 551.0]), None)
+    bound = grating_radiance_factor(549e-9, 1e-6, 2e-6, 1000, 1e-4) * 2.0
+    assert np.all(np.isfinite(rad)) and np.all(rad >= 0) and np.all(rad <= bound)

@@ -65,11 +65,31 @@ def brute_force_row(ctx, bin_index):
     lam = np.linspace(lo, hi, 4001)
     p = fraunhofer_pattern(u[:, None], v[:, None], lam[None, :], A, D, N, L_UM * 1e3)
     mean = np.trapz(p / (lam * 1e-9) ** 2, lam, axis=1) / (hi - lo)
-    # the code's radiance factor, with its 1/cos(theta_o): a known deviation from docs/physics.md
-    # section 3.2; this reference changes together with the code
-    factor = (A * 1e-9) ** 2 * (L_UM * 1e-6) * N / ((D * 1e-9) * cos_o)
+    # docs/physics.md section 3.2: no 1/cos(theta_o); the Harvey-Shack factor (on by default)
+    # rescales the propagating orders to carry a / D, counted here order by order at the bin centre
+    factor = (A * 1e-9) ** 2 * (L_UM * 1e-6) * N / (D * 1e-9)
     intensity = 1.0  # W/sr: power 4 pi
-    return intensity * e_geo * factor * mean * ctx.lights.spectrum[0, bin_index]
+    return intensity * e_geo * factor * harvey_shack_reference(0.5 * (lo + hi)) * mean * ctx.lights.spectrum[0, bin_index]
+
+
+def harvey_shack_reference(lam):
+    """(a/D) / sum over propagating orders of (a/D)^2 sinc^2(pi m a/D), per centre-row pixel:
+    order m leaves with direction cosine m lambda / D - alpha_i (beta_i = 0 on the centre row)."""
+    light = LIGHT_DIST * np.array([np.sin(INCIDENCE), 0.0, -np.cos(INCIDENCE)])
+    half = 18.0 / 18.0
+    xs = (2 * (np.arange(W) + 0.5) / W - 1) * half * CAM_H
+    out = np.empty(W)
+    rho = A / D
+    for i, x in enumerate(xs):  # a reference: plain loops
+        w_i = light - np.array([x, 0.0, 0.0])
+        alpha = w_i[0] / np.linalg.norm(w_i)
+        total = 0.0
+        for m in range(-20, 21):
+            if abs(m * lam / D - alpha) <= 1.0:
+                arg = np.pi * m * rho
+                total += rho**2 * (1.0 if m == 0 else (np.sin(arg) / arg) ** 2)
+        out[i] = rho / total
+    return out
 
 
 def test_row_matches_brute_force_fraunhofer(rendered):

@@ -49,6 +49,9 @@ __all__ = [
     "fraunhofer_pattern",
     "fraunhofer_pattern_binned",
     "grating_radiance_factor",
+    "propagating_power",
+    "harvey_shack_factor",
+    "hexagonal_harvey_shack_factor",
 ]
 
 #: Up to this slit count the exact O(N) integral is used, beyond it the asymptotic form.
@@ -180,7 +183,8 @@ def fraunhofer_pattern(u, v, wavelength, a, d, n, length) -> np.ndarray:
     return sinc2(np.pi * a * u / lam) * multislit(np.pi * d * u / lam, n) * sinc2(np.pi * length * v / lam)
 
 
-def fraunhofer_pattern_binned(u, v, edges, a, d, n, length, subdivisions: int = 2, lam_power: int = 0) -> np.ndarray:
+def fraunhofer_pattern_binned(u, v, edges, a, d, n, length, subdivisions: int = 2, lam_power: int = 0,
+                              exclude_zeroth: bool = False) -> np.ndarray:
     """The mean of P over each wavelength bin [edges[k], edges[k+1]], for every (u, v).
 
     u, v: (B,); edges: (K+1,) in the unit of a, d, length. Returns (B, K). Each bin is split into
@@ -190,6 +194,9 @@ def fraunhofer_pattern_binned(u, v, edges, a, d, n, length, subdivisions: int = 
     their width in lambda. The error against fine quadrature is bounded in the tests.
     ``lam_power`` multiplies each part by lambda^lam_power (the radiance factor's 1/lambda^2 is
     averaged with the pattern this way). a and d may be scalars or (B, 1) arrays.
+    ``exclude_zeroth``: leave out the zeroth order, i.e. the N-slit factor's period
+    |eta| < pi/2 (|u| < lambda / (2 D)), where another lobe carries it (a mirror base's specular
+    continuation, docs/physics.md section 3.3); its closed-form integral is subtracted.
     """
     u = np.asarray(u, np.float64)[:, None]
     v = np.asarray(v, np.float64)[:, None]
@@ -207,8 +214,12 @@ def fraunhofer_pattern_binned(u, v, edges, a, d, n, length, subdivisions: int = 
     width = np.diff(eta, axis=1)
     narrow = np.abs(width) * n_f < _MIDPOINT_NETA
     ms = np.diff(c, axis=1) / (n_f * n_f * np.where(narrow, 1.0, width))
+    if exclude_zeroth:  # the part of each interval inside |eta| < pi/2 carries the zeroth order
+        ec = np.clip(eta, -np.pi / 2, np.pi / 2)
+        ms -= np.diff(multislit_integral(ec, n), axis=1) / (n_f * n_f * np.where(narrow, 1.0, width))
     if narrow.any():  # tiny intervals (near u = 0): the midpoint value, computed only there
-        ms[narrow] = multislit(0.5 * (eta[:, 1:] + eta[:, :-1])[narrow], n_f)
+        mid = 0.5 * (eta[:, 1:] + eta[:, :-1])[narrow]
+        ms[narrow] = multislit(mid, n_f) * ((np.abs(mid) >= np.pi / 2) if exclude_zeroth else 1.0)
     ms = np.clip(ms, 0.0, 1.0)
     # slit-length factor sinc^2(zeta), likewise
     zeta = np.pi * length * v * inv[None, :]
@@ -226,15 +237,100 @@ def fraunhofer_pattern_binned(u, v, edges, a, d, n, length, subdivisions: int = 
     return parts.reshape(len(u), k, subdivisions).mean(axis=2)
 
 
-def grating_radiance_factor(wavelength, a, d, n, length, cos_theta_o) -> np.ndarray:
-    """a^2 L N / (lambda^2 D cos(theta_o)): L_o = E_i * factor * P.
+def grating_radiance_factor(wavelength, a, d, n, length) -> np.ndarray:
+    """a^2 L N / (lambda^2 D): L_o = E_i * factor * P (docs/physics.md section 3.2).
 
-    Known deviation (docs/physics.md section 3.2): the specification has no 1/cos(theta_o) here
-    (it breaks energy conservation); tracked by the [diffraction] issue.
-
-    Lengths in metres give radiance per unit irradiance in 1/sr. cos(theta_o) is clamped below
-    at 1e-3 so grazing exits stay finite (the pattern itself vanishes there for physical orders).
+    The pattern lives in direction cosines and du dv = cos(theta_o) d(omega_o), so there is no
+    1/cos(theta_o): the hemispherical integral of L_o cos(theta_o) is E_i * a / D (Parseval)
+    times the fraction of the orders that propagate. Lengths in metres give radiance per unit
+    irradiance in 1/sr.
     """
     lam = np.asarray(wavelength, np.float64)
-    c = np.maximum(np.abs(np.asarray(cos_theta_o, np.float64)), 1e-3)
-    return a * a * length * n / (lam * lam * d * c)
+    return a * a * length * n / (lam * lam * d)
+
+
+def _sinc2_cumsum_table(ratio: float, m_max: int) -> np.ndarray:
+    """T[j] = sum_{m=-m_max}^{j-m_max-1} sinc^2(pi m ratio), j = 0 .. 2 m_max + 1 (T[0] = 0)."""
+    m = np.arange(-m_max, m_max + 1, dtype=np.float64)
+    return np.concatenate([[0.0], np.cumsum(sinc2(np.pi * m * ratio))])
+
+
+def propagating_power(alpha_i, beta_i, wavelength, ratio, d) -> np.ndarray:
+    """The fraction of the incident power a LINES grating sends into its propagating orders:
+    sum over m with (m lambda / D - alpha_i)^2 + beta_i^2 <= 1 of (a/D)^2 sinc^2(pi m a / D).
+
+    alpha_i = w_i . t and beta_i = w_i . s are the incident direction cosines; order m leaves
+    with direction cosines (m lambda / D - alpha_i, -beta_i) (docs/physics.md section 3.2). The
+    orders' own widths (lambda / (N D) in u, lambda / L in v) are neglected. Broadcasts alpha_i,
+    beta_i, wavelength, d (d and wavelength in one unit); ``ratio`` = a / D, a scalar.
+    """
+    alpha = np.asarray(alpha_i, np.float64)
+    beta = np.asarray(beta_i, np.float64)
+    lam = np.asarray(wavelength, np.float64)
+    d = np.asarray(d, np.float64)
+    r = np.sqrt(np.maximum(1.0 - beta * beta, 0.0))
+    scale = d / lam
+    lo = np.ceil((alpha - r) * scale - 1e-12)
+    hi = np.floor((alpha + r) * scale + 1e-12)
+    m_max = int(np.ceil(2.0 * float(np.max(scale)))) + 1
+    table = _sinc2_cumsum_table(float(ratio), m_max)
+    lo_i = np.clip(lo + m_max, 0, 2 * m_max).astype(np.int64)
+    hi_i = np.clip(hi + m_max + 1, 0, 2 * m_max + 1).astype(np.int64)
+    return float(ratio) ** 2 * np.maximum(table[hi_i] - table[lo_i], 0.0)
+
+
+def harvey_shack_factor(alpha_i, beta_i, wavelength, ratio, d) -> np.ndarray:
+    """Harvey-Shack renormalisation of a LINES grating: K = (a/D) / propagating_power >= 1.
+
+    Scalar theory in direction cosines puts (a/D)^2 sinc^2(pi m a/D) into order m, and by
+    Parseval the orders together carry a/D; the evanescent ones (outside the unit circle of
+    direction cosines) carry nothing away. Harvey et al. (Appl. Opt. 38, 6469, 1999; Harvey &
+    Pfisterer, Opt. Eng. 58(8) 087105, 2019) rescale the propagating orders by K so the grating
+    delivers the whole a/D, which reproduces the Rayleigh (Wood) anomalies - the jumps in the
+    efficiency of the remaining orders as one turns evanescent. Ratios between propagating orders
+    are unchanged. docs/physics.md section 3.2.
+    """
+    return float(ratio) / np.maximum(propagating_power(alpha_i, beta_i, wavelength, ratio, d), 1e-300)
+
+
+def hexagonal_harvey_shack_factor(alpha_i, beta_i, wavelength, ratio, d) -> np.ndarray:
+    """Harvey-Shack renormalisation of the HEXAGONAL lattice (disks of diameter a = ratio * D,
+    nearest neighbours D apart, lattice vectors D t and D t2, t2 = t rotated by 60 degrees).
+
+    Order (m1, m2) sits at the tangential vector h with h . t = m1 lambda / D and h . t2 =
+    m2 lambda / D, i.e. (h_t, h_s) = (m1, (2 m2 - m1) / sqrt 3) lambda / D, and carries
+    f^2 [2 J1(x)/x]^2 with x = pi a |h| / lambda = pi ratio |(m1, (2 m2 - m1) / sqrt 3)| (the same
+    for every wavelength) and f = pi ratio^2 / (2 sqrt 3) the fill fraction; by Parseval all
+    orders carry f (a <= D). It propagates where |h - w_i,tangential| <= 1: for each row m1 that
+    is an interval of m2, summed from a cumulative table (a loop over the few rows, not over
+    orders or rays). K = f / (the propagating orders' sum). docs/physics.md sections 3.2, 3.4.
+    """
+    from scipy.special import j1
+
+    alpha = np.asarray(alpha_i, np.float64)
+    beta = np.asarray(beta_i, np.float64)
+    scale = np.asarray(d, np.float64) / np.asarray(wavelength, np.float64)  # D / lambda
+    shape = np.broadcast_shapes(alpha.shape, beta.shape, scale.shape)
+    ratio = float(ratio)
+    fill = np.pi * ratio * ratio / (2 * np.sqrt(3))
+    s_max = float(np.max(scale))
+    m1_max = int(np.ceil(2 * s_max)) + 1  # |h_t| <= 2
+    m2_max = int(np.ceil((m1_max + 2 * np.sqrt(3) * s_max) / 2)) + 1  # |h_s| <= 2
+    m1 = np.arange(-m1_max, m1_max + 1)[:, None]
+    m2 = np.arange(-m2_max, m2_max + 1)[None, :]
+    x = np.pi * ratio * np.hypot(m1, (2 * m2 - m1) / np.sqrt(3))
+    safe = np.where(x < 1e-9, 1.0, x)
+    airy = np.where(x < 1e-9, 1.0, (2 * j1(safe) / safe) ** 2)
+    table = np.concatenate([np.zeros((len(m1), 1)), np.cumsum(airy, axis=1)], axis=1)
+    total = np.zeros(shape)
+    for row, k in enumerate(range(-m1_max, m1_max + 1)):  # rows of the reciprocal lattice
+        c = k / scale - alpha  # exit direction cosine along t
+        r = np.sqrt(np.maximum(1.0 - c * c, 0.0))
+        ok = c * c <= 1.0
+        # (2 m2 - k) / sqrt 3 / scale in [beta - r, beta + r]
+        lo = np.ceil((k + np.sqrt(3) * (beta - r) * scale) / 2 - 1e-12)
+        hi = np.floor((k + np.sqrt(3) * (beta + r) * scale) / 2 + 1e-12)
+        lo_i = np.clip(lo + m2_max, 0, 2 * m2_max + 1).astype(np.int64)
+        hi_i = np.clip(hi + m2_max + 1, 0, 2 * m2_max + 1).astype(np.int64)
+        total += np.where(ok, np.maximum(table[row, hi_i] - table[row, lo_i], 0.0), 0.0)
+    return 1.0 / np.maximum(fill * total, 1e-300)

@@ -20,6 +20,7 @@ import numpy as np
 from .geometry import orthonormal_basis
 from .gratings import diffracted_radiance, grating_frame
 from .sampler import SLOT_BOUNCE, SLOT_LIGHT, SLOT_PARAMS, SLOT_WIDTH, PixelSampler, vertex_pair
+from . import grating_layering
 from .lights import intersect_lights, is_delta, light_pdf, sample_light, sun_radiance
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIFFUSE
@@ -135,6 +136,7 @@ class _TileTrace(SpecularWalker):
         self._albedo = np.zeros((n_pixels, 3), np.float32)
         self._normal = np.zeros((n_pixels, 3), np.float32)
         self._albedo_rgb = np.asarray(eye.prepared.scene.materials.color, np.float32).reshape(-1, 3)
+        self.layers = grating_layering.active(eye.prepared)  # gratings take their power from the base (section 3.3)
 
     def _new_film(self) -> np.ndarray:
         return np.zeros(self._n_pixels * self.n, np.float32)
@@ -303,6 +305,8 @@ class _TileTrace(SpecularWalker):
                 micro &= ~prepared.materials.dispersive[hit.mat]
             if micro.any():
                 rm, hm = rays.take(micro), hit.take(micro)
+                if self.layers:
+                    rm = grating_layering.scale_base(prepared, rm, hm)
                 params = self._surface_params(rm, hm, self._numbers(rm, SLOT_PARAMS))
                 self._micro = (hit, micro, params)  # for scatter(): the same lobe for light and bounce
                 self._shade_microfacet(rm, hm, params, rng)
@@ -317,6 +321,8 @@ class _TileTrace(SpecularWalker):
         diffuse = kind == DIFFUSE
         if diffuse.any():
             r, h = rays.take(diffuse), hit.take(diffuse)
+            if self.layers:
+                r = grating_layering.scale_base(prepared, r, h)
             first = r.extra["nd"] == 0
             if first.any():
                 self._denoising_features(r.take(first), h.take(first))
@@ -392,6 +398,8 @@ class _TileTrace(SpecularWalker):
         if np.ndim(bump):
             albedo = albedo * (bump[:, None] if r.lam is None else bump)
         out = r.moved(o, wi, r.weighted(albedo))
+        if self.layers:
+            out = grating_layering.scale_base(self.prepared, out, h)
         s = out.extra
         s["nd"] = np.minimum(s["nd"] + 1, 100).astype(np.int8)
         s["diffuse"] = s["diffuse"] + 1
@@ -399,6 +407,16 @@ class _TileTrace(SpecularWalker):
         s["caustic"] = np.full(b, 1 if self.caustic_map is not None else 0, np.int8)
         s["final"] = (s["diffuse"] > self.limits[1]) | (out.depth > self.limits[0])
         return out if micro_out is None or not len(micro_out) else Rays.concat(out, micro_out)
+
+    def _mirror(self, rays: Rays, hit: Hit) -> Rays:
+        out = super()._mirror(rays, hit)  # a grating's zeroth order, or the base's share (section 3.3)
+        return grating_layering.continue_specular(self.prepared, out, hit, None) if self.layers else out
+
+    def _dielectric(self, rays: Rays, hit: Hit, rng):
+        out, transmitted = super()._dielectric(rays, hit, rng)
+        if self.layers:
+            out = grating_layering.continue_specular(self.prepared, out, hit, transmitted)
+        return out, transmitted
 
     # ----------------------------------------------------------------- microfacet surfaces
     def _surface_params(self, rays: Rays, hit: Hit, rng) -> "bsdf.SurfaceParams":
@@ -505,6 +523,8 @@ class _TileTrace(SpecularWalker):
         side = np.where(np.einsum("ij,ij->i", wi, h.ng) > 0, 1.0, -1.0).astype(np.float32)
         o = (h.p + (h.eps * side)[:, None] * h.ng).astype(np.float32)
         out = r.moved(o, wi, r.weighted(weight) if r.lam is None else r.w * weight[:, 0])
+        if self.layers:
+            out = grating_layering.scale_base(self.prepared, out, h)
         s = out.extra
         singular = (flags & bsdf.SINGULAR) != 0
         diffuse = (flags & bsdf.DIFFUSE_REFLECTION) != 0

@@ -4,28 +4,34 @@ The model is the source paper's (Kobayashi & Kawai; docs/physics.md section 3): 
 slits (period D, width a, length L) under spectral irradiance E_i(lambda) from direction w_i
 sends, towards w_o,
 
-    L_o(lambda) = E_i(lambda) * a^2 L N / (lambda^2 D cos theta_o) * P(u, v, lambda),
+    L_o(lambda) = E_i(lambda) * a^2 L N / (lambda^2 D) * P(u, v, lambda),
     u = (w_o + w_i) . t,  v = (w_o + w_i) . s,  s = n x t,
 
 with P the normalised Fraunhofer pattern of ``diffraction.py``, averaged over each wavelength
-bin in closed form (so orders narrower than a bin are neither missed nor flickering).
-Known deviation: the specification's radiance has no 1/cos theta_o (docs/physics.md section
-3.2, tracked by the [diffraction] issue); the factors below still have it.
+bin in closed form (so orders narrower than a bin are neither missed nor flickering). The pattern
+lives in direction cosines (du dv = cos theta_o d omega_o), so there is no 1/cos theta_o
+(docs/physics.md section 3.2; Harvey et al., Appl. Opt. 38, 6469, 1999): the orders together
+carry a / D of the incident power. With ``renormalise`` (the default, HARVEY_SHACK) the
+propagating orders are rescaled by the Harvey-Shack factor so that they carry all of it
+(diffraction.harvey_shack_factor).
 
 A HEXAGONAL lattice (opal-like) is the product of two N-slit factors along t and t rotated by
 60 degrees, with the Airy envelope of disk apertures of diameter a: P = [2 J1(x)/x]^2 *
 F_N(eta_1) * F_N(eta_2), x = pi a q / lambda, q = |(w_o + w_i) tangential|; its radiance factor
-is A^2 N^2 / (lambda^2 A_cell cos theta_o) with A = pi a^2 / 4 and A_cell = (sqrt 3 / 2) D^2
-(the same Fraunhofer normalisation as the slits: the pattern integrates to the power through
-the openings). The product of two sharp factors has no closed-form bin average, so each bin
-takes one stratified random wavelength per sample: unbiased, it converges with the samples
-per pixel (the LINES case is exact per sample). Its first orders sit at
-|q| = 2 lambda / (sqrt 3 D) (docs/physics.md section 3.4).
+is A^2 N^2 / (lambda^2 A_cell) with A = pi a^2 / 4 and A_cell = (sqrt 3 / 2) D^2 (the same
+Fraunhofer normalisation as the slits: the pattern integrates to the power through the
+openings, the fill fraction A / A_cell). The product of two sharp factors has no closed-form bin
+average, so each bin takes one stratified random wavelength per sample: unbiased, it converges
+with the samples per pixel (the LINES case is exact per sample). Nearest neighbours are D apart
+and rows (sqrt 3 / 2) D, so its first orders sit at |q| = 2 lambda / (sqrt 3 D) (docs/physics.md
+section 3.4; tests/test_grating_radiometry.py checks it against a phasor sum over a patch).
 
 A reflection grating diffracts light arriving on the viewer's side, a transmission grating light
-arriving from the other side; the grating is layered on the base material, whose own response
-(diffuse, glass, ...) is computed as usual (known deviation: docs/physics.md section 3.3 takes
-the diffracted power from the base instead).
+arriving from the other side. Its layering on the base material (grating_layering.py,
+docs/physics.md section 3.3): where the base's specular lobe is the zeroth order (a mirror under a
+reflection grating, glass under a transmission grating) the diffraction here leaves the zeroth
+order out and the base's continuation carries it; elsewhere the base keeps 1 - a/D of its
+response and the grating diffracts all its orders.
 """
 
 from __future__ import annotations
@@ -36,9 +42,18 @@ import numpy as np
 from scipy.special import j1
 
 from .enums import GratingType, Lattice
-from .diffraction import fraunhofer_pattern_binned, multislit
+from .diffraction import (
+    fraunhofer_pattern_binned, harvey_shack_factor, hexagonal_harvey_shack_factor, multislit,
+)
 
-__all__ = ["PreparedGratings", "prepare_gratings", "triangle_tangents", "grating_frame", "diffracted_radiance"]
+__all__ = ["PreparedGratings", "prepare_gratings", "triangle_tangents", "grating_frame", "diffracted_radiance",
+           "HARVEY_SHACK"]
+
+#: Harvey-Shack renormalisation of the evanescent orders' power into the propagating ones, on by
+#: default: the grating then delivers exactly the power its layering takes from the surface
+#: budget (a / D), and energy does not silently vanish where an order turns evanescent
+#: (docs/physics.md section 3.2 argues the choice).
+HARVEY_SHACK = True
 
 NM = 1e-9
 UM = 1e-6
@@ -55,6 +70,9 @@ class PreparedGratings:
     length: np.ndarray        # (M,) nm (coherence length)
     cos_rot: np.ndarray       # (M,)
     sin_rot: np.ndarray       # (M,)
+    # the layering on the base (grating_layering.attach_layering; None until prepare sets it):
+    # the zeroth order is the base's specular continuation, so the diffraction leaves it out
+    zeroth_in_base: np.ndarray | None = None  # (M,) bool
 
     @property
     def any(self) -> bool:
@@ -114,36 +132,51 @@ def _airy(x):
     return np.where(small, 1.0, (2 * j1(safe) / safe) ** 2)
 
 
-def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, period, edges_nm, rng):
+def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, period, edges_nm, rng,
+                        renormalise: bool = HARVEY_SHACK, exclude_zeroth: bool | None = None):
     """Radiance per unit irradiance (1/sr) towards w_o, per wavelength bin: (B, K).
 
     ``mat``: the material (one grating's parameters per call); w_o, w_i, t, s, normal: (B, 3);
     ``period``: (B,) nm (a per-triangle override, else the material's); the slit width keeps the
-    material's ratio a / D. ``edges_nm``: (K + 1,) bin edges.
+    material's ratio a / D. ``edges_nm``: (K + 1,) bin edges. ``renormalise``: the Harvey-Shack
+    factor (per sample and bin, at the bin's centre wavelength for LINES). ``exclude_zeroth``:
+    leave the zeroth order out (None: as the material's layering says, ``g.zeroth_in_base``).
     """
+    if exclude_zeroth is None:
+        exclude_zeroth = g.zeroth_in_base is not None and bool(g.zeroth_in_base[mat])
     d = np.asarray(period, np.float64)[:, None]
-    a = d * (g.slit_width[mat] / g.period[mat])
+    ratio = g.slit_width[mat] / g.period[mat]
+    a = d * ratio
     n = int(g.slit_count[mat])
-    h = np.asarray(w_o, np.float64) + np.asarray(w_i, np.float64)
-    cos_o = np.abs(np.sum(np.asarray(w_o, np.float64) * normal, axis=1))[:, None]
-    cos_o = np.maximum(cos_o, 1e-3)  # grazing exits stay finite
+    w_i = np.asarray(w_i, np.float64)
+    h = np.asarray(w_o, np.float64) + w_i
     u = np.sum(h * t, axis=1)
     edges = np.asarray(edges_nm, np.float64)
     if not g.hexagonal[mat]:
         v = np.sum(h * s, axis=1)
         length = g.length[mat]
         # the bin mean of P / lambda^2 (lambda in nm), then the factor's lengths in metres
-        p = fraunhofer_pattern_binned(u, v, edges, a, d, n, length, lam_power=-2) / NM**2
-        factor = (a * NM) ** 2 * (length * NM) * n / ((d * NM) * cos_o)
+        p = fraunhofer_pattern_binned(u, v, edges, a, d, n, length, lam_power=-2,
+                                      exclude_zeroth=exclude_zeroth) / NM**2
+        factor = (a * NM) ** 2 * (length * NM) * n / (d * NM)
+        if renormalise:
+            centre = 0.5 * (edges[1:] + edges[:-1])[None, :]
+            factor = factor * harvey_shack_factor(np.sum(w_i * t, axis=1)[:, None], np.sum(w_i * s, axis=1)[:, None],
+                                                  centre, ratio, d)
         return (factor * p).astype(np.float32)
     # hexagonal lattice: one stratified random wavelength per bin and sample
     t2 = 0.5 * t + (np.sqrt(3) / 2) * np.cross(normal, t)
     u2 = np.sum(h * t2, axis=1)
     q = np.linalg.norm(h - np.sum(h * normal, axis=1, keepdims=True) * normal, axis=1)
     lam = edges[:-1][None, :] + (edges[1:] - edges[:-1])[None, :] * rng.random((len(u), len(edges) - 1))
-    p = (_airy(np.pi * a * q[:, None] / lam) * multislit(np.pi * d * u[:, None] / lam, n)
-         * multislit(np.pi * d * u2[:, None] / lam, n))
+    eta1, eta2 = np.pi * d * u[:, None] / lam, np.pi * d * u2[:, None] / lam
+    p = _airy(np.pi * a * q[:, None] / lam) * multislit(eta1, n) * multislit(eta2, n)
+    if exclude_zeroth:  # the (0, 0) order's cell of the reciprocal lattice
+        p = np.where((np.round(eta1 / np.pi) == 0) & (np.round(eta2 / np.pi) == 0), 0.0, p)
     area = np.pi * (a * NM) ** 2 / 4
     cell = np.sqrt(3) / 2 * (d * NM) ** 2
-    factor = area**2 * n * n / ((lam * NM) ** 2 * cell * cos_o)
+    factor = area**2 * n * n / ((lam * NM) ** 2 * cell)
+    if renormalise:
+        factor = factor * hexagonal_harvey_shack_factor(np.sum(w_i * t, axis=1)[:, None],
+                                                        np.sum(w_i * s, axis=1)[:, None], lam, ratio, d)
     return (factor * p).astype(np.float32)

@@ -31,6 +31,7 @@ from .cancel import check, run_cancellable
 from .environment import EnvironmentMap
 from .geometry import triangle_normals
 from .gratings import PreparedGratings, prepare_gratings, triangle_tangents
+from .grating_layering import attach_layering
 from .light_pass import LightTargets, find_light_targets
 from .lights import PreparedLights, prepare_lights
 from .materials import PreparedMaterials, prepare_materials
@@ -263,6 +264,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
     same_for_light = (same_geometry and _same_shading(reuse.scene, scene) and _same_for_light_pass(reuse.scene, scene)
                       and _light_pass_settings(reuse.settings) == _light_pass_settings(settings))
     microfacet = microfacet_materials(materials, textures)
+    gratings = attach_layering(gratings, materials.kind, microfacet)  # docs/physics.md section 3.3
     if same_for_light:
         targets, key = reuse.light_targets, reuse.key
     else:
