@@ -1,0 +1,318 @@
+"""Gratings in the light pass (docs/physics.md section 3.10): core/grating_sampling.py.
+
+- The order sampler against the efficiencies: a chi-square over the order histogram per
+  incidence angle, wavelength, period, slit ratio and side (reflection / transmission / into
+  glass), the expected counts from the grating equation and (a/D)^2 sinc^2(pi m a/D) computed
+  here independently (a loop over candidate orders with the sine condition), cells expecting
+  < 5 pooled, the threshold Bonferroni-corrected (Mitsuba 3's chi2.py idea for discrete
+  orders); every sample's direction satisfies the grating equation for its order and its
+  weight is the sum of the propagating efficiencies (docs/physics.md section 3.2's power).
+- The slit-length spread against sinc^2(pi x) integrated over each cell by quadrature.
+- A transmission grating (600 lines/mm, a = D/2) under a sun, a white screen 1 m behind: the
+  caustic map's flux centroid per wavelength and order sits at tan(asin(sin theta_i + m lambda/D))
+  within one element, at normal and 45 degrees incidence; the flux of orders +-1 over order 0
+  is sinc^2(pi a/D) (Z-test with the compound-Poisson variance of the deposits, and within 3 %);
+  the zeroth order's absolute flux is E A cos theta_i (a/D)^2 (Z-test).
+"""
+
+from __future__ import annotations
+
+import zlib
+
+import numpy as np
+import pytest
+from scipy import integrate
+from scipy.stats import chi2 as chi2_dist
+from scipy.stats import norm
+
+from opal_diffraction.core import primitives
+from opal_diffraction.core.grating_sampling import SPREAD_LOBES, sample_orders, sample_sinc2
+from opal_diffraction.core.light_pass import LightWork, trace_batch, DepositLog
+from opal_diffraction.core.prepare import prepare
+from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+from opal_diffraction.core.settings import RenderSettings
+
+# (theta_i deg, lambda nm, D nm, a/D, side): side 'R' reflection, 'T' transmission, 'G' into glass n = 1.5
+CASES = [(th, lam, d, r, side) for th in (0.0, 30.0, 60.0) for lam in (450.0, 650.0)
+         for d, r in ((1600.0, 0.5), (740.0, 0.3), (5000.0, 0.4)) for side in ("R", "T", "G")]
+IDS = [f"th{c[0]:.0f}-lam{c[1]:.0f}-D{c[2]:.0f}-r{c[3]}-{c[4]}" for c in CASES]
+SIGNIFICANCE = 0.01 / len(CASES)
+N_SAMPLES = 40_000
+
+
+def frame_at(theta_deg, phi_deg=20.0):
+    """A tilted grating frame (n, t, s) and an incoming direction w_i at theta from n, its plane
+    at phi from t (so the slit direction sees a nonzero v too)."""
+    n = np.array([0.2, -0.3, 0.93])
+    n /= np.linalg.norm(n)
+    t = np.cross(n, [0.0, 0.0, 1.0]) + np.array([0.1, 0.2, 0.0])
+    t -= (t @ n) * n
+    t /= np.linalg.norm(t)
+    s = np.cross(n, t)
+    th, ph = np.radians(theta_deg), np.radians(phi_deg)
+    w_i = np.cos(th) * n + np.sin(th) * (np.cos(ph) * t + np.sin(ph) * s)
+    return n, t, s, w_i
+
+
+def expected_orders(w_i, n, t, s, lam, d, ratio, eta_i, eta_o):
+    """{m: efficiency} of the propagating orders, by brute force over candidate m."""
+    ut, vs = -(w_i @ t) * eta_i, -(w_i @ s) * eta_i
+    out = {}
+    for m in range(-400, 401):
+        uo, vo = (ut + m * lam / d) / eta_o, vs / eta_o
+        if uo * uo + vo * vo < 1:
+            x = np.pi * m * ratio
+            out[m] = ratio**2 * (1.0 if m == 0 else (np.sin(x) / x) ** 2)
+    return out
+
+
+@pytest.mark.parametrize("case", CASES, ids=IDS)
+def test_order_sampler_chi2(case):
+    th, lam, d, ratio, side = case
+    n, t, s, w_i = frame_at(th)
+    eta_i, eta_o = (1.0, 1.5) if side == "G" else (1.0, 1.0)
+    trans = side != "R"
+    rng = np.random.default_rng(zlib.crc32(repr(case).encode()))
+    b = N_SAMPLES
+    rep = lambda x: np.tile(x, (b, 1))  # noqa: E731
+    smp = sample_orders(rep(w_i), rep(n), rep(t), rep(s), np.full(b, d), np.full(b, d * ratio), np.full(b, lam),
+                        trans, rng, eta_i=eta_i, eta_o=eta_o)
+    eff = expected_orders(w_i, n, t, s, lam, d, ratio, eta_i, eta_o)
+    total = sum(eff.values())
+    assert np.allclose(smp.weight, total, rtol=1e-9)
+    # every sample's direction: unit, tangential cosines from the grating equation, right side
+    m = smp.order
+    assert set(np.unique(m)) <= set(eff)
+    u_exp = (-(w_i @ t) * eta_i + m * lam / d) / eta_o
+    assert np.allclose(smp.direction @ t, u_exp, atol=1e-9)
+    assert np.allclose(smp.direction @ s, -(w_i @ s) * eta_i / eta_o, atol=1e-9)
+    assert np.allclose(np.linalg.norm(smp.direction, axis=1), 1.0, atol=1e-9)
+    assert ((smp.direction @ n < 0) == trans).all()
+    if not trans:  # the zeroth reflected order is the mirror direction
+        zero = m == 0
+        assert np.allclose(smp.direction[zero], 2 * (w_i @ n) * n - w_i, atol=1e-9)
+    if side == "G":  # the zeroth transmitted order into glass is Snell's refraction
+        zero = m == 0
+        cos_t = np.sqrt(1 - (1 - (w_i @ n) ** 2) / 1.5**2)
+        snell = -w_i / 1.5 + ((w_i @ n) / 1.5 - cos_t) * n
+        assert np.allclose(smp.direction[zero], snell, atol=1e-9)
+    orders = sorted(eff)
+    expected = np.array([b * eff[k] / total for k in orders])
+    observed = np.array([(m == k).sum() for k in orders], np.float64)
+    small = expected < 5
+    obs = np.append(observed[~small], observed[small].sum())
+    exp = np.append(expected[~small], expected[small].sum())
+    if exp[-1] == 0:
+        assert obs[-1] == 0
+        obs, exp = obs[:-1], exp[:-1]
+    stat = float(np.sum((obs - exp) ** 2 / exp))
+    dof = len(obs) - 1
+    pval = chi2_dist.sf(stat, dof) if dof > 0 else 1.0
+    print(f"{case}: {len(orders)} orders, total {total:.4f}, chi2 {stat:.1f} dof {dof} p {pval:.3g}")
+    assert pval > SIGNIFICANCE, f"chi2 {stat:.1f} with {dof} dof: p = {pval:.3g}"
+
+
+def test_power_table_of_section_3_2():
+    """docs/physics.md section 3.2's table (D = 1600 nm, a = 800 nm, lambda = 550 nm, in air):
+    the sampler's weight is the integrated power 0.4526, 0.4639, 0.3666 at 0, 30, 60 degrees."""
+    rng = np.random.default_rng(1)
+    for th, power in ((0.0, 0.4526), (30.0, 0.4639), (60.0, 0.3666)):
+        n, t, s, _ = frame_at(0.0)
+        w_i = np.cos(np.radians(th)) * n + np.sin(np.radians(th)) * t  # incidence plane across the slits
+        smp = sample_orders(w_i[None], n[None], t[None], s[None], 1600.0, 800.0, 550.0, False, rng)
+        assert abs(smp.weight[0] - power) < 6e-5, (th, smp.weight[0])
+
+
+def test_slit_length_spread_chi2():
+    """x from sample_sinc2 against the density sinc^2(pi x) / int sinc^2 over |x| <= SPREAD_LOBES,
+    each cell's probability by adaptive quadrature."""
+    rng = np.random.default_rng(7)
+    b = 400_000
+    x = sample_sinc2(rng.random(b))
+    assert np.abs(x).max() <= SPREAD_LOBES
+    f = lambda y: np.sinc(y) ** 2  # noqa: E731
+    norm_total = 2 * sum(integrate.quad(f, k, k + 1, limit=200)[0] for k in range(SPREAD_LOBES))
+    edges = np.concatenate([[-SPREAD_LOBES], np.arange(-6.0, 6.0 + 1e-9, 0.25), [SPREAD_LOBES]])
+    prob = np.array([sum(integrate.quad(f, lo, hi, limit=400, points=None)[0]
+                         for lo, hi in _pieces(a0, a1)) for a0, a1 in zip(edges[:-1], edges[1:])]) / norm_total
+    observed = np.histogram(x, edges)[0].astype(np.float64)
+    expected = prob * b
+    assert abs(prob.sum() - 1) < 1e-6
+    stat = float(np.sum((observed - expected) ** 2 / expected))
+    dof = len(observed) - 1
+    pval = chi2_dist.sf(stat, dof)
+    print(f"sinc^2 spread: chi2 {stat:.1f} dof {dof} p {pval:.3g}")
+    assert pval > 0.01
+
+
+def _pieces(a0, a1):
+    """[a0, a1] cut at the integers (quadrature over one lobe at a time)."""
+    cuts = np.concatenate([[a0], np.arange(np.ceil(a0), np.floor(a1) + 1), [a1]])
+    cuts = np.unique(cuts)
+    return list(zip(cuts[:-1], cuts[1:]))
+
+
+# ------------------------------------------------------------------ a spectrum on a screen
+PERIOD = 1e6 / 600.0  # 600 lines/mm
+APERTURE = 0.01       # grating edge (m)
+SCREEN_Z = -1.0
+SCREEN_X = (-1.6, 3.2)  # the screen's extent along x (m)
+ELEMENT = 0.001
+
+
+def strip(x0, x1, z, height):
+    """A strip of square quads (height x height) from x0 to x1 at depth z, normal +z: square
+    triangles, so the map's elements are about square too."""
+    n = int(round((x1 - x0) / height))
+    xs = np.linspace(x0, x1, n + 1)
+    top, bottom = np.stack([xs, np.full_like(xs, height / 2), np.full_like(xs, z)], 1), \
+        np.stack([xs, np.full_like(xs, -height / 2), np.full_like(xs, z)], 1)
+    v = np.concatenate([bottom, top])
+    i = np.arange(n)
+    tris = np.concatenate([np.stack([i, i + 1, n + 2 + i], 1), np.stack([i, n + 2 + i, n + 1 + i], 1)])
+    return v, tris.astype(np.int32)
+
+
+def screen_scene(theta_deg: float, ratio: float = 0.5) -> Scene:
+    """A 1 cm transmission grating (black diffuse base, a/D = ratio) in the z = 0 plane under a
+    sun at theta_deg in the xz plane, a white screen 1 m behind it (z = -1), 2 cm tall."""
+    mats = Materials.from_list([
+        {"name": "grating", "kind": "DIFFUSE", "color": (0, 0, 0), "grating": 1, "grating_type": "TRANSMISSION",
+         "period": PERIOD, "slit_width": PERIOD * ratio, "slit_count": 6000, "coherence_length": 10000.0},
+        {"name": "screen", "kind": "DIFFUSE", "color": (0.8, 0.8, 0.8)}])
+    s = Scene(materials=mats)
+    s.add_mesh(*primitives.quad((0, 0, 0), (APERTURE, 0, 0), (0, APERTURE, 0)), material=0, tangent=(1, 0, 0))
+    s.add_mesh(*strip(SCREEN_X[0], SCREEN_X[1], SCREEN_Z, 0.02), material=1)
+    th = np.radians(theta_deg)
+    s.lights = Lights.from_list([{"kind": "SUN", "direction": (np.sin(th), 0, -np.cos(th)), "power": 1.0}])
+    s.camera = Camera.look_at((0, -1, 0.5), (0, 0, -1), width=8, height=8)
+    return s
+
+
+def deposits(theta_deg, paths, ratio=0.5, seed=0):
+    """Every caustic deposit of the light pass: (x of the element centre, flux, wavelength
+    index), the prepared scene."""
+    p = prepare(screen_scene(theta_deg, ratio), RenderSettings(light_paths=paths, element_size=ELEMENT, seed=seed))
+    work = LightWork.of(p)
+    log = DepositLog(work.layout)
+    for job in work.batches:
+        trace_batch(p, job, log, None)
+    tri, bu, bv = work.layout.barycentric_centres()
+    v, t = p.scene.vertices, p.scene.triangles
+    x_el = (1 - bu - bv) * v[t[tri, 0], 0] + bu * v[t[tri, 1], 0] + bv * v[t[tri, 2], 0]
+    el = np.concatenate([c[0] for c in log.calls])
+    flux = np.concatenate([c[1] for c in log.calls]).astype(np.float64)
+    lam = np.concatenate([c[2] for c in log.calls])
+    return x_el[el], flux, lam, p
+
+
+def order_x(theta_deg, m, lam_nm):
+    """Where order m lands on the screen: x = |z| tan(asin(sin theta_i + m lambda / D)), nan if evanescent."""
+    sn = np.sin(np.radians(theta_deg)) + m * np.asarray(lam_nm, np.float64) / PERIOD
+    with np.errstate(invalid="ignore"):
+        return np.where(np.abs(sn) < 1, -SCREEN_Z * np.tan(np.arcsin(sn)), np.nan)
+
+
+@pytest.fixture(scope="module", params=[0.0, 45.0], ids=["normal", "45deg"])
+def screen(request):
+    th = request.param
+    return th, deposits(th, 600_000)
+
+
+def _order_masks(th, x, lam, grid):
+    """Per order m (-2..2): the deposits within one aperture of the order's band on the screen, and
+    which wavelength bins the order reaches in full (the whole bin propagating and on the screen)."""
+    edges = grid.bin_edges
+    out = {}
+    on = lambda xs: np.isfinite(xs) & (xs > SCREEN_X[0] + 0.03) & (xs < SCREEN_X[1] - 0.03)  # noqa: E731
+    for m in range(-2, 3):
+        with np.errstate(invalid="ignore"):
+            x_lo, x_hi = order_x(th, m, edges[:-1]), order_x(th, m, edges[1:])
+            full = on(x_lo) & on(x_hi)
+        if not full.any():
+            continue
+        ends = np.concatenate([x_lo[full], x_hi[full]])
+        band_lo, band_hi = ends.min() - APERTURE, ends.max() + APERTURE
+        sel = (x > band_lo) & (x < band_hi) & full[lam]
+        out[m] = (sel, full)
+    return out
+
+
+def test_projected_spectrum_positions(screen):
+    """The flux centroid per wavelength bin of each order on the screen vs the grating equation
+    (averaged over the bin, as the light pass draws the wavelength uniformly inside it): within
+    one element (1 mm) plus four standard deviations of the centroid's Monte Carlo error (which
+    matters only where an order is near grazing and a 5 nm bin smears over centimetres), and a
+    median error below half an element; the first orders are 0.25 - 3 m from the zeroth."""
+    th, (x, flux, lam, p) = screen
+    grid = p.grid
+    errors = []
+    for m, (sel, full) in _order_masks(th, x, lam, grid).items():
+        if m == 0 or abs(m) == 2:  # zeroth: every bin at one place; +-2: no flux at a = D/2
+            continue
+        f_bin = np.bincount(lam[sel], flux[sel], minlength=grid.n)
+        c_bin = np.bincount(lam[sel], flux[sel] * x[sel], minlength=grid.n)
+        for k in np.flatnonzero(full & (f_bin > 0)):  # loop over wavelength bins (61)
+            lo, hi = grid.bin_edges[k], grid.bin_edges[k + 1]
+            expect = np.mean(order_x(th, m, np.linspace(lo, hi, 201)))  # the bin's mean position
+            mean = c_bin[k] / f_bin[k]
+            mine = sel & (lam == k)
+            # the centroid's Monte Carlo error (compound Poisson, delta method)
+            noise = np.sqrt(np.sum(flux[mine] ** 2 * (x[mine] - mean) ** 2)) / f_bin[k]
+            err = abs(mean - expect)
+            errors.append(err)
+            assert err <= ELEMENT + 4 * noise, (m, grid.wavelengths[k], err, noise)
+    # the zeroth order: straight through, at tan(theta_i)
+    sel0 = _order_masks(th, x, lam, grid)[0][0]
+    c0 = np.sum(flux[sel0] * x[sel0]) / np.sum(flux[sel0])
+    assert abs(c0 - order_x(th, 0, 550.0)) <= ELEMENT
+    print(f"theta {th}: {len(errors)} (order, bin) centroids, median error {np.median(errors) * 1e3:.3f} mm, "
+          f"worst {max(errors) * 1e3:.3f} mm; zeroth {abs(c0 - order_x(th, 0, 550.0)) * 1e3:.3f} mm")
+    assert len(errors) >= 61 * (2 if th == 0 else 1)
+    assert np.median(errors) < ELEMENT / 2
+
+
+def test_order_flux_ratios(screen):
+    """Flux of order +-1 over order 0, over the wavelength bins both reach in full: sinc^2(pi a/D)
+    = 0.4053 (a = D/2), Z-test (compound-Poisson variance: sum of squared deposits) and within
+    3 %; order +-2 carries nothing (sinc^2(pi) = 0); the zeroth order's absolute flux is
+    E A cos theta_i (a/D)^2 per wavelength sample (E the sun's spectrum)."""
+    th, (x, flux, lam, p) = screen
+    grid = p.grid
+    masks = _order_masks(th, x, lam, grid)
+    sel0 = masks[0][0]
+    want = np.sinc(0.5) ** 2  # (sin(pi/2) / (pi/2))^2, numpy's normalised sinc
+    checked_3pc = []
+    for m in (-1, 1):
+        if m not in masks:
+            continue
+        sel, full = masks[m]
+        both = full[lam]
+        f1, f0 = flux[sel & both].sum(), flux[sel0 & both].sum()
+        v1, v0 = np.sum(flux[sel & both] ** 2), np.sum(flux[sel0 & both] ** 2)
+        ratio = f1 / f0
+        sigma = ratio * np.sqrt(v1 / f1**2 + v0 / f0**2)
+        z = (ratio - want) / sigma
+        print(f"theta {th} m {m}: ratio {ratio:.4f} +- {sigma:.4f} (sinc^2 {want:.4f}, z {z:.2f}, "
+              f"{full.sum()} bins)")
+        assert abs(z) < norm.isf(0.001 / 8), z
+        if sigma < 0.01 * want:  # (at 45 degrees order +1 reaches the screen in one or two bins only)
+            assert abs(ratio / want - 1) < 0.03
+            checked_3pc.append(m)
+    assert checked_3pc
+    for m in (-2, 2):
+        if m in masks:
+            sel, _ = masks[m]
+            # the +-2 band may hold the +-3 order's blue end; at a = D/2 the +-2 order itself is empty
+            x2 = order_x(th, m, grid.wavelengths)
+            x3 = order_x(th, 3 * np.sign(m), grid.wavelengths)
+            own = sel & ~((x > np.nanmin(x3) - 0.02) & (x < np.nanmax(x3) + 0.02)) if np.isfinite(x3).any() else sel
+            assert flux[own].sum() < 1e-3 * flux[sel0].sum(), (m, np.nanmin(x2))
+    # absolute zeroth order: flux per wavelength sample = E_k A cos theta (a/D)^2
+    e = p.lights.spectrum[0].astype(np.float64)
+    f0 = flux[sel0].sum()
+    expect = e.sum() * APERTURE**2 * np.cos(np.radians(th)) * 0.25
+    sigma = np.sqrt(np.sum(flux[sel0] ** 2))
+    z = (f0 - expect) / sigma
+    print(f"theta {th}: zeroth order {f0:.4e} W vs {expect:.4e} (z {z:.2f})")
+    assert abs(z) < norm.isf(0.001 / 8)
