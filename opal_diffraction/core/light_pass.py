@@ -8,7 +8,10 @@ been specular at least once lands on a diffuse surface its spectral flux is adde
 surface element of the illumination map (elements.py). Where such a path reaches a grating, the
 grating's element records the incoming spectral flux and the direction it came from, for the eye
 pass to diffract (one flux-weighted mean direction per element: a known deviation,
-docs/physics.md section 3.5). Direct light stays the eye pass's job, so a path that reaches a
+docs/physics.md section 3.5). Line gratings are casters as well: a path that meets one is
+diffracted (kind GRATING from ``classify``, the order sampled by core/grating_sampling.py in
+``scatter``) and goes on as a specular path, so the orders land on diffuse surfaces as
+caustics (docs/physics.md section 3.10). Direct light stays the eye pass's job, so a path that reaches a
 diffuse surface or grating first deposits nothing: no double counting. On smooth-shaded casters
 the paths bend about the shading normals (transport.py, docs/physics.md section 4.6); deposits
 and records stay indexed by the geometric hit (triangle, barycentrics, side).
