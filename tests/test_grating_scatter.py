@@ -189,21 +189,27 @@ def screen_scene(theta_deg: float, ratio: float = 0.5) -> Scene:
     return s
 
 
-def deposits(theta_deg, paths, ratio=0.5, seed=0):
-    """Every caustic deposit of the light pass: (x of the element centre, flux, wavelength
-    index), the prepared scene."""
-    p = prepare(screen_scene(theta_deg, ratio), RenderSettings(light_paths=paths, element_size=ELEMENT, seed=seed))
+def scene_deposits(scene, paths, seed=0):
+    """Every caustic deposit of the light pass over ``scene``: (element centre (B, 3), flux,
+    wavelength index), the prepared scene."""
+    p = prepare(scene, RenderSettings(light_paths=paths, element_size=ELEMENT, seed=seed))
     work = LightWork.of(p)
     log = DepositLog(work.layout)
     for job in work.batches:
         trace_batch(p, job, log, None)
     tri, bu, bv = work.layout.barycentric_centres()
-    v, t = p.scene.vertices, p.scene.triangles
-    x_el = (1 - bu - bv) * v[t[tri, 0], 0] + bu * v[t[tri, 1], 0] + bv * v[t[tri, 2], 0]
+    v, t = p.scene.vertices.astype(np.float64), p.scene.triangles
+    centre = (1 - bu - bv)[:, None] * v[t[tri, 0]] + bu[:, None] * v[t[tri, 1]] + bv[:, None] * v[t[tri, 2]]
     el = np.concatenate([c[0] for c in log.calls])
     flux = np.concatenate([c[1] for c in log.calls]).astype(np.float64)
     lam = np.concatenate([c[2] for c in log.calls])
-    return x_el[el], flux, lam, p
+    return centre[el], flux, lam, p
+
+
+def deposits(theta_deg, paths, ratio=0.5, seed=0):
+    """The screen scene's deposits: (x of the element centre, flux, wavelength index), the prepared scene."""
+    pos, flux, lam, p = scene_deposits(screen_scene(theta_deg, ratio), paths, seed)
+    return pos[:, 0], flux, lam, p
 
 
 def order_x(theta_deg, m, lam_nm):
@@ -316,3 +322,122 @@ def test_order_flux_ratios(screen):
     z = (f0 - expect) / sigma
     print(f"theta {th}: zeroth order {f0:.4e} W vs {expect:.4e} (z {z:.2f})")
     assert abs(z) < norm.isf(0.001 / 8)
+
+
+# ------------------------------------------------------------------ layering on mirror and glass
+def vertical_strip(x, z0, z1, height):
+    """A strip of square quads in the plane x = const, from z0 to z1, ``height`` wide in y."""
+    n = int(round((z1 - z0) / height))
+    zs = np.linspace(z0, z1, n + 1)
+    v = np.concatenate([np.stack([np.full_like(zs, x), np.full_like(zs, -height / 2), zs], 1),
+                        np.stack([np.full_like(zs, x), np.full_like(zs, height / 2), zs], 1)])
+    i = np.arange(n)
+    return v, np.concatenate([np.stack([i, n + 2 + i, i + 1], 1), np.stack([i, n + 1 + i, n + 2 + i], 1)]).astype(np.int32)
+
+
+def _z_test(measured, sigma, expected, what):
+    z = (measured - expected) / sigma
+    print(f"{what}: {measured:.5e} vs {expected:.5e} (z {z:.2f}, {sigma / expected:.2%})")
+    assert abs(z) < norm.isf(0.001 / 12), (what, z)
+
+
+@pytest.mark.parametrize("ratio", [0.5, 1.0])
+def test_mirror_base_grating_is_the_mirror(ratio):
+    """A reflection grating over a mirror base under a sun at 30 degrees, a vertical white screen
+    at x = 1 m: every path diffracts (the order replaces the mirror bounce, weight sum_prop e,
+    not divided by a/D). Zeroth order flux = E A cos theta (a/D)^2 x the mirror's reflectance,
+    at z = cot(theta_r); order +1 = that with sinc^2(pi a/D). In the mirror limit a = D the
+    grating is the mirror: all the reflected power is in the specular direction."""
+    th = 30.0
+    mats = Materials.from_list([
+        {"name": "grating", "kind": "MIRROR", "color": (1, 1, 1), "grating": 1, "grating_type": "REFLECTION",
+         "period": PERIOD, "slit_width": PERIOD * ratio, "slit_count": 6000, "coherence_length": 10000.0},
+        {"name": "screen", "kind": "DIFFUSE", "color": (0.8, 0.8, 0.8)}])
+    s = Scene(materials=mats)
+    s.add_mesh(*primitives.quad((0, 0, 0), (APERTURE, 0, 0), (0, APERTURE, 0)), material=0, tangent=(1, 0, 0))
+    s.add_mesh(*vertical_strip(1.0, 0.02, 2.4, 0.02), material=1)
+    t = np.radians(th)
+    s.lights = Lights.from_list([{"kind": "SUN", "direction": (np.sin(t), 0, -np.cos(t)), "power": 1.0}])
+    s.camera = Camera.look_at((0, -1, 0.5), (0, 0, 0), width=8, height=8)
+    pos, flux, lam, p = scene_deposits(s, 400_000)
+    z = pos[:, 2]
+    e_inc = p.lights.spectrum[0].astype(np.float64) * APERTURE**2 * np.cos(t) * p.materials.reflectance[0]
+
+    def z_of(m, lam_nm):
+        u = np.sin(t) + m * np.asarray(lam_nm, np.float64) / PERIOD
+        with np.errstate(invalid="ignore"):
+            return np.where((u > 0) & (u < 1), np.sqrt(1 - u * u) / np.maximum(u, 1e-12), np.nan)
+
+    z0 = float(z_of(0, 550.0))
+    sel0 = np.abs(z - z0) < 0.03
+    _z_test(flux[sel0].sum(), np.sqrt(np.sum(flux[sel0] ** 2)), e_inc.sum() * ratio**2, f"a/D {ratio} zeroth")
+    c0 = np.sum(flux[sel0] * z[sel0]) / flux[sel0].sum()
+    assert abs(c0 - z0) < ELEMENT, (c0, z0)
+    edges = p.grid.bin_edges
+    lo, hi = z_of(1, edges[1:]), z_of(1, edges[:-1])  # +1 lands lower for longer wavelengths
+    full = np.isfinite(lo) & np.isfinite(hi) & (lo > 0.05)
+    sel1 = (z > np.nanmin(lo[full]) - 0.02) & (z < np.nanmax(hi[full]) + 0.02) & full[lam]
+    e1 = ratio**2 * np.sinc(ratio) ** 2
+    if ratio < 1:
+        _z_test(flux[sel1].sum(), np.sqrt(np.sum(flux[sel1] ** 2)), e_inc[full].sum() * e1, f"a/D {ratio} order +1")
+    else:  # the mirror limit: nothing but the specular direction
+        assert flux.sum() == pytest.approx(flux[sel0].sum(), rel=1e-12)
+
+
+def glass_slab_scene() -> Scene:
+    """A 2 x 2 cm glass slab (n = 1.5, 2 mm thick) whose top face is a transmission grating
+    (600 lines/mm, a = D/2), under a sun at normal incidence through a 1 cm aperture in a black
+    card 1 mm above; the white screen 1 m below the slab."""
+    mats = Materials.from_list([
+        {"name": "grating glass", "kind": "DIELECTRIC", "ior": 1.5, "color": (1, 1, 1), "grating": 1,
+         "grating_type": "TRANSMISSION", "period": PERIOD, "slit_width": PERIOD / 2, "slit_count": 6000,
+         "coherence_length": 10000.0},
+        {"name": "glass", "kind": "DIELECTRIC", "ior": 1.5, "color": (1, 1, 1)},
+        {"name": "screen", "kind": "DIFFUSE", "color": (0.8, 0.8, 0.8)},
+        {"name": "card", "kind": "DIFFUSE", "color": (0, 0, 0)}])
+    s = Scene(materials=mats)
+    s.add_mesh(*primitives.box((0, 0, -0.001), (0.02, 0.02, 0.002)), material=1, tangent=(1, 0, 0))
+    s.tri_material[[1, 7]] = 0  # the box's +z face (its quads' triangles 1 and 7) is the grating
+    h, outer, zc = APERTURE / 2, 0.2, 0.001
+    for centre, u, v in (((0, (outer + h) / 2, zc), (2 * outer, 0, 0), (0, outer - h, 0)),
+                         ((0, -(outer + h) / 2, zc), (2 * outer, 0, 0), (0, outer - h, 0)),
+                         (((outer + h) / 2, 0, zc), (outer - h, 0, 0), (0, 2 * h, 0)),
+                         ((-(outer + h) / 2, 0, zc), (outer - h, 0, 0), (0, 2 * h, 0))):
+        s.add_mesh(*primitives.quad(centre, u, v), material=3)
+    s.add_mesh(*strip(-0.8, 0.8, SCREEN_Z - 0.002, 0.02), material=2)
+    s.lights = Lights.from_list([{"kind": "SUN", "direction": (0, 0, -1.0), "power": 1.0}])
+    s.camera = Camera.look_at((0, -1, 0.5), (0, 0, -1), width=8, height=8)
+    return s
+
+
+def _fresnel(cos_i, n_i, n_t):
+    """Unpolarised Fresnel reflectance from the s and p amplitudes (Hecht section 4.6.2)."""
+    sin_t = n_i / n_t * np.sqrt(1 - cos_i**2)
+    cos_t = np.sqrt(1 - sin_t**2)
+    rs = (n_i * cos_i - n_t * cos_t) / (n_i * cos_i + n_t * cos_t)
+    rp = (n_t * cos_i - n_i * cos_t) / (n_t * cos_i + n_i * cos_t)
+    return 0.5 * (rs**2 + rp**2)
+
+
+def test_glass_base_orders_replace_the_refraction():
+    """Over glass, Fresnel picks reflection or transmission and the transmission grating's orders
+    replace the refraction (the zeroth order is Snell's): order m leaves the slab at sin theta =
+    m lambda / D (the slab keeps the tangential momentum) with flux
+    E A (1 - F_0) e_m / (1 + F_m), F_m the glass-air reflectance at sin theta_g = m lambda / (n D)
+    (the geometric series of internal reflections, (1 - F) / (1 - F^2)); Z-tests per order."""
+    s = glass_slab_scene()
+    pos, flux, lam, p = scene_deposits(s, 600_000)
+    assert p.materials.clear[[0, 1]].all() and p.materials.ior[0].min() == p.materials.ior[0].max() == 1.5
+    x = pos[:, 0]
+    on_screen = pos[:, 2] < SCREEN_Z
+    e_sun = p.lights.spectrum[0].astype(np.float64) * APERTURE**2
+    f0 = _fresnel(1.0, 1.0, 1.5)
+    edges = p.grid.bin_edges
+    for m in (-1, 0, 1):
+        lam_fine = edges[:-1, None] + (edges[1:] - edges[:-1])[:, None] * (np.arange(11) + 0.5)[None, :] / 11
+        sin_g = m * lam_fine / (1.5 * PERIOD)
+        fm = _fresnel(np.sqrt(1 - sin_g**2), 1.5, 1.0).mean(axis=1)  # the bin's mean
+        want = np.sum(e_sun * (1 - f0) * 0.25 * np.sinc(m * 0.5) ** 2 / (1 + fm))
+        xm = (SCREEN_Z - 0.001) * -np.tan(np.arcsin(m * lam_fine / PERIOD))
+        sel = on_screen & (x > xm.min() - APERTURE) & (x < xm.max() + APERTURE)
+        _z_test(flux[sel].sum(), np.sqrt(np.sum(flux[sel] ** 2)), want, f"glass order {m}")
