@@ -145,6 +145,50 @@ def test_slit_length_spread_chi2():
     assert pval > 0.01
 
 
+def test_orders_spread_along_the_slits_chi2():
+    """sample_orders with a slit length L: each order's direction cosine along s is the
+    incoming one plus x lambda / L (over eta_o), x distributed as sinc^2(pi x), and a spread past
+    grazing ends the path (weight 0). Per order m = -1, 0, 1: the histogram of x recovered from
+    the sampled directions, plus one cell for the ended paths, against sinc^2 integrated over
+    each cell by quadrature (the propagating interval of x computed here from the grating
+    equation). L = 20 um, lambda = 550 nm: lambda / L = 0.0275."""
+    rng = np.random.default_rng(11)
+    b = 200_000
+    n, t, s, w_i = frame_at(20.0)
+    rep = lambda x: np.tile(x, (b, 1))  # noqa: E731
+    lam, length = 550.0, 20_000.0
+    smp = sample_orders(rep(w_i), rep(n), rep(t), rep(s), PERIOD, PERIOD / 2, lam, True, rng, length=length)
+    f = lambda y: np.sinc(y) ** 2  # noqa: E731
+    total = 2 * sum(integrate.quad(f, k, k + 1, limit=200)[0] for k in range(SPREAD_LOBES))
+
+    def cell(a0, a1):
+        return sum(integrate.quad(f, lo, hi, limit=400)[0] for lo, hi in _pieces(a0, a1)) / total
+
+    v_in = -(w_i @ s)
+    for m in (-1, 0, 1):
+        mine = smp.order == m
+        u_o = -(w_i @ t) + m * lam / PERIOD
+        r = np.sqrt(1 - u_o**2)
+        x_lo, x_hi = (-r - v_in) * length / lam, (r - v_in) * length / lam
+        edges = np.concatenate([[x_lo], np.arange(-4.0, 4.0 + 1e-9, 0.5), [x_hi]])
+        prob = np.array([cell(a0, a1) for a0, a1 in zip(edges[:-1], edges[1:])])
+        prob = np.append(prob, 1 - prob.sum())  # the ended paths
+        ok = mine & (smp.weight > 0)
+        x = (smp.direction[ok] @ s - v_in) * length / lam
+        observed = np.append(np.histogram(x, edges)[0], (mine & (smp.weight == 0)).sum()).astype(np.float64)
+        assert observed[:-1].sum() == ok.sum()  # every survivor inside the propagating interval
+        expected = prob * mine.sum()
+        small = expected < 5
+        obs, exp = observed[~small], expected[~small]
+        if small.any():
+            obs, exp = np.append(obs, observed[small].sum()), np.append(exp, expected[small].sum())
+        stat = float(np.sum((obs - exp) ** 2 / exp))
+        pval = chi2_dist.sf(stat, len(obs) - 1)
+        print(f"order {m} spread: x in [{x_lo:.1f}, {x_hi:.1f}], ended {observed[-1]:.0f} vs {expected[-1]:.1f}, "
+              f"chi2 {stat:.1f} dof {len(obs) - 1} p {pval:.3g}")
+        assert pval > 0.01 / 3
+
+
 def _pieces(a0, a1):
     """[a0, a1] cut at the integers (quadrature over one lobe at a time)."""
     cuts = np.concatenate([[a0], np.arange(np.ceil(a0), np.floor(a1) + 1), [a1]])
