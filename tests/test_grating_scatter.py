@@ -376,7 +376,8 @@ def vertical_strip(x, z0, z1, height):
     v = np.concatenate([np.stack([np.full_like(zs, x), np.full_like(zs, -height / 2), zs], 1),
                         np.stack([np.full_like(zs, x), np.full_like(zs, height / 2), zs], 1)])
     i = np.arange(n)
-    return v, np.concatenate([np.stack([i, n + 2 + i, i + 1], 1), np.stack([i, n + 1 + i, n + 2 + i], 1)]).astype(np.int32)
+    tris = np.concatenate([np.stack([i, n + 2 + i, i + 1], 1), np.stack([i, n + 1 + i, n + 2 + i], 1)])
+    return v, tris.astype(np.int32)
 
 
 def _z_test(measured, sigma, expected, what):
@@ -427,7 +428,8 @@ def test_reflection_grating_on_a_wall(ratio, base):
     sel1 = (z > np.nanmin(lo[full]) - 0.02) & (z < np.nanmax(hi[full]) + 0.02) & full[lam]
     e1 = ratio**2 * np.sinc(ratio) ** 2
     if ratio < 1:
-        _z_test(flux[sel1].sum(), np.sqrt(np.sum(flux[sel1] ** 2)), e_inc[full].sum() * e1, f"{base} a/D {ratio} order +1")
+        _z_test(flux[sel1].sum(), np.sqrt(np.sum(flux[sel1] ** 2)), e_inc[full].sum() * e1,
+                f"{base} a/D {ratio} order +1")
     else:  # the mirror limit: nothing but the specular direction
         assert flux.sum() == pytest.approx(flux[sel0].sum(), rel=1e-12)
 
@@ -508,3 +510,19 @@ def test_split_dispersion_sampling_at_gratings():
             want = e * 0.25 * np.sinc(m * 0.5) ** 2
             got = flux[sel].sum()
             _z_test(got, np.sqrt(np.sum(flux[sel] ** 2) + (got * rel_hit) ** 2), want, f"SPLIT order {m}")
+
+
+def test_a_line_grating_alone_runs_the_light_pass():
+    """Line gratings are light-pass casters (paths are aimed at them) and a scene whose only
+    caster is a grating runs the light pass; a HEXAGONAL grating is not scattered, so not aimed at."""
+    from opal_diffraction.core.plan import plan_render
+
+    p = prepare(screen_scene(0.0), RenderSettings(light_paths=1000))
+    grating_tris = p.tri_material == 0
+    assert p.light_targets.caster_mask[grating_tris].all() and not p.light_targets.caster_mask[~grating_tris].any()
+    assert plan_render(p).light_pass
+    s = screen_scene(0.0)
+    s.materials.lattice[0] = 1  # HEXAGONAL
+    p = prepare(s, RenderSettings(light_paths=1000))
+    assert p.gratings.hexagonal[0] and not p.light_targets.caster_mask.any()
+    assert not plan_render(p).light_pass

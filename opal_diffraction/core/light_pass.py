@@ -54,6 +54,7 @@ import numpy as np
 
 from .elements import ElementLayout, IlluminationMap
 from .geometry import orthonormal_basis, triangle_areas
+from .grating_sampling import diffracting, scatter_at_gratings
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIELECTRIC, DIFFUSE, MIRROR
 from .transport import GRATING, Hit, Rays, SpecularWalker
@@ -190,8 +191,6 @@ class _LightTrace(SpecularWalker):
         kind GRATING: they neither bounce off the base nor land on it."""
         if not self.prepared.gratings.any:
             return kind
-        from .grating_sampling import diffracting
-
         return np.where(diffracting(self.prepared, hit, kind, rng), GRATING, kind)
 
     def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
@@ -200,8 +199,6 @@ class _LightTrace(SpecularWalker):
         sel = (kind == GRATING) & can_bounce
         if not sel.any():
             return None
-        from .grating_sampling import scatter_at_gratings
-
         return scatter_at_gratings(self, rays.take(sel), hit.take(sel), rng)
 
     def survives(self, rays: Rays, rng) -> np.ndarray:
