@@ -217,7 +217,7 @@ def strip(x0, x1, z, height):
     return v, tris.astype(np.int32)
 
 
-def screen_scene(theta_deg: float, ratio: float = 0.5) -> Scene:
+def screen_scene(theta_deg: float, ratio: float = 0.5, screen_x=SCREEN_X) -> Scene:
     """A 1 cm transmission grating (black diffuse base, a/D = ratio) in the z = 0 plane under a
     sun at theta_deg in the xz plane, a white screen 1 m behind it (z = -1), 2 cm tall."""
     mats = Materials.from_list([
@@ -226,7 +226,7 @@ def screen_scene(theta_deg: float, ratio: float = 0.5) -> Scene:
         {"name": "screen", "kind": "DIFFUSE", "color": (0.8, 0.8, 0.8)}])
     s = Scene(materials=mats)
     s.add_mesh(*primitives.quad((0, 0, 0), (APERTURE, 0, 0), (0, APERTURE, 0)), material=0, tangent=(1, 0, 0))
-    s.add_mesh(*strip(SCREEN_X[0], SCREEN_X[1], SCREEN_Z, 0.02), material=1)
+    s.add_mesh(*strip(screen_x[0], screen_x[1], SCREEN_Z, 0.02), material=1)
     th = np.radians(theta_deg)
     s.lights = Lights.from_list([{"kind": "SUN", "direction": (np.sin(th), 0, -np.cos(th)), "power": 1.0}])
     s.camera = Camera.look_at((0, -1, 0.5), (0, 0, -1), width=8, height=8)
@@ -526,3 +526,39 @@ def test_a_line_grating_alone_runs_the_light_pass():
     p = prepare(s, RenderSettings(light_paths=1000))
     assert p.gratings.hexagonal[0] and not p.light_targets.caster_mask.any()
     assert not plan_render(p).light_pass
+
+
+def test_rendered_spectrum_on_the_screen():
+    """Through the whole renderer (light pass, then the eye pass's caustic lookup): a narrow spot
+    lights the 600 lines/mm grating only (the screen stays in its shadow, so all it shows is
+    diffracted light); an orthographic camera looks straight at the screen's first order, 1 mm per
+    pixel. The centroid of every wavelength bin of the rendered spectral image sits within one
+    pixel of the bin's mean of tan(asin(lambda / D)) (1 m behind the grating)."""
+    from opal_diffraction.core.render import render
+
+    s = screen_scene(0.0, screen_x=(0.1, 0.6))  # the first order only
+    s.lights = Lights.from_list([{"kind": "SPOT", "position": (0, 0, 1.0), "direction": (0, 0, -1.0),
+                                  "power": 1000.0, "spot_size": 2 * np.arctan(0.004), "spot_blend": 0.0}])
+    width, height, scale, cx = 300, 10, 0.3, 0.35
+    m = np.eye(4)
+    m[:3, 3] = (cx, 0.0, -0.5)
+    s.camera = Camera(matrix=m, kind="ORTHO", ortho_scale=scale, width=width, height=height)
+    res = render(s, RenderSettings(samples=4, light_paths=2_000_000, element_size=ELEMENT, diffuse_bounces=0))
+    assert res.plan.light_pass
+    row = res.spectral.sum(axis=0).astype(np.float64)  # (W, n)
+    x_pix = cx + ((np.arange(width) + 0.5) * 2 / width - 1) * scale / 2  # pixel centres on the screen
+    pixel = scale / width
+    edges = res.wavelengths[0] - 2.5 + 5.0 * np.arange(len(res.wavelengths) + 1)
+    errors = []
+    for k in range(len(res.wavelengths)):  # loop over wavelength bins
+        expect = np.mean(order_x(0.0, 1, np.linspace(edges[k], edges[k + 1], 201)))
+        if not (x_pix[0] + 0.02 < expect < x_pix[-1] - 0.02):
+            continue
+        near = np.abs(x_pix - expect) < 0.03  # this order's spot (about 16 mm wide) and its margin
+        c = np.sum(row[near, k] * x_pix[near]) / np.sum(row[near, k])
+        errors.append(abs(c - expect))
+    errors = np.array(errors)
+    print(f"rendered first order: {len(errors)} bins, median error {np.median(errors) / pixel:.3f} px, "
+          f"worst {errors.max() / pixel:.3f} px")
+    assert len(errors) == len(res.wavelengths)
+    assert errors.max() < pixel
