@@ -7,13 +7,18 @@
   < 5 pooled, the threshold Bonferroni-corrected (Mitsuba 3's chi2.py idea for discrete
   orders); every sample's direction satisfies the grating equation for its order and its
   weight is the sum of the propagating efficiencies (docs/physics.md section 3.2's power).
-- The slit-length spread against sinc^2(pi x) integrated over each cell by quadrature.
+- The slit-length spread against sinc^2(pi x) integrated over each cell by quadrature, alone
+  and through the order sampler (with the paths a spread past grazing ends).
 - A transmission grating (600 lines/mm, a = D/2) under a sun, a white screen 1 m behind: the
   caustic map's flux centroid per wavelength and order sits at tan(asin(sin theta_i + m lambda/D))
   within one element, at normal and 45 degrees incidence; the flux of orders +-1 over order 0
   is sinc^2(pi a/D) (Z-test with the compound-Poisson variance of the deposits, and within 3 %);
-  the zeroth order's absolute flux is E A cos theta_i (a/D)^2 (Z-test).
-"""
+  the zeroth order's absolute flux is E A cos theta_i (a/D)^2 (Z-test). Rendered (spectral
+  image of an orthographic camera): the first order's centroid per wavelength within a pixel.
+- Layering: a reflection grating over a mirror and over a diffuse base throws E A cos theta (a/D)^2
+  sinc^2(pi m a/D) on a wall (a = D: the mirror); over glass, Fresnel and the orders replacing
+  the refraction (an independent Fresnel and the internal-reflection series); SPLIT agrees.
+""""""
 
 from __future__ import annotations
 

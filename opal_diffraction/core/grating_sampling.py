@@ -51,7 +51,7 @@ from .materials import DIELECTRIC, DIFFUSE, MIRROR
 from .optics import fresnel_dielectric, reflect, refract
 
 __all__ = ["OrderSample", "order_efficiencies", "sample_orders", "sample_sinc2", "SPREAD_LOBES",
-           "diffracting", "scatter_at_gratings"]
+           "scattering_materials", "diffracting", "scatter_at_gratings"]
 
 #: The slit-length spread is sampled over |x| <= SPREAD_LOBES lobes of sinc^2(pi x).
 SPREAD_LOBES = 256
@@ -158,6 +158,20 @@ def sample_orders(w_i, n, t, s, period, slit_width, wavelength, transmission, rn
 
 def _slit_ratio(g, mat):
     return g.slit_width[mat] / g.period[mat]
+
+
+def scattering_materials(gratings, material_kind, microfacet=None) -> np.ndarray:
+    """(M,) bool: the materials whose grating the light pass scatters (``diffracting``): LINES
+    gratings over a smooth mirror or glass or a diffuse base (rough and layered mirrors and
+    glass, ``microfacet`` (M,) and not DIFFUSE, are kind MICROFACET in the walk). The light
+    pass aims at them; an eye pass that reads the caustic map must leave out its own
+    diffuse -> grating -> light paths at them (docs/physics.md section 3.10)."""
+    kind = np.asarray(material_kind)
+    ok = np.asarray(gratings.enabled, bool) & ~np.asarray(gratings.hexagonal, bool)
+    ok &= (kind == MIRROR) | (kind == DIELECTRIC) | (kind == DIFFUSE)
+    if microfacet is not None:
+        ok &= ~(np.asarray(microfacet, bool) & (kind != DIFFUSE))
+    return ok
 
 
 def diffracting(prepared, hit, kind: np.ndarray, rng) -> np.ndarray:

@@ -54,7 +54,7 @@ import numpy as np
 
 from .elements import ElementLayout, IlluminationMap
 from .geometry import orthonormal_basis, triangle_areas
-from .grating_sampling import diffracting, scatter_at_gratings
+from .grating_sampling import diffracting, scatter_at_gratings, scattering_materials
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIELECTRIC, DIFFUSE, MIRROR
 from .transport import GRATING, Hit, Rays, SpecularWalker
@@ -249,10 +249,10 @@ def find_light_targets(vertices, triangles, tri_material, materials, gratings, l
     mk = materials.kind[tri_material] if len(tri_material) else np.zeros(0, np.int32)
     grating = gratings.enabled[tri_material] if len(tri_material) else np.zeros(0, bool)
     caster = np.isin(mk, [MIRROR, DIELECTRIC])
-    if len(tri_material):
-        caster |= grating & ~gratings.hexagonal[tri_material] & (mk == DIFFUSE)
     if microfacet is not None and len(tri_material):
         caster &= ~np.asarray(microfacet)[tri_material]
+    if len(tri_material):
+        caster |= scattering_materials(gratings, materials.kind, microfacet)[tri_material]
     world_lum = 0.0 if world_spectrum is None else float(np.asarray(world_spectrum, np.float64) @ conv.cmf_weights[:, 1])
     emitters = len(lights) > 0 or mesh_lights is not None or world_lum > 0
     aimed = caster if light_paths > 0 and emitters else np.zeros_like(caster)
