@@ -18,7 +18,7 @@
 - Layering: a reflection grating over a mirror and over a diffuse base throws E A cos theta (a/D)^2
   sinc^2(pi m a/D) on a wall (a = D: the mirror); over glass, Fresnel and the orders replacing
   the refraction (an independent Fresnel and the internal-reflection series); SPLIT agrees.
-""""""
+"""
 
 from __future__ import annotations
 
