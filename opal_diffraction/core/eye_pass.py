@@ -21,6 +21,7 @@ from .geometry import orthonormal_basis
 from .gratings import diffracted_radiance, grating_frame
 from .sampler import SLOT_BOUNCE, SLOT_LIGHT, SLOT_PARAMS, SLOT_WIDTH, PixelSampler, vertex_pair
 from . import grating_layering
+from .grating_sampling import scattering_materials
 from .lights import intersect_lights, is_delta, light_pdf, sample_light, sun_radiance
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIFFUSE
@@ -137,6 +138,11 @@ class _TileTrace(SpecularWalker):
         self._normal = np.zeros((n_pixels, 3), np.float32)
         self._albedo_rgb = np.asarray(eye.prepared.scene.materials.color, np.float32).reshape(-1, 3)
         self.layers = grating_layering.active(eye.prepared)  # gratings take their power from the base (section 3.3)
+        # gratings the light pass scatters (section 3.10): the caustic map holds their diffracted
+        # light on diffuse surfaces, and at a diffuse base only the base's share already
+        pm = eye.prepared
+        self.scattering = (scattering_materials(pm.gratings, pm.materials.kind, pm.microfacet)
+                           if self.caustic_map is not None and pm.gratings.any else None)
 
     def _new_film(self) -> np.ndarray:
         return np.zeros(self._n_pixels * self.n, np.float32)
@@ -316,11 +322,14 @@ class _TileTrace(SpecularWalker):
             st = rays.extra
         if prepared.gratings.any:
             on_grating = prepared.gratings.enabled[hit.mat]
+            if self.scattering is not None:  # diffuse -> grating -> light: the light pass's caustic
+                on_grating &= ~(self.scattering[hit.mat] & (st["caustic"] == 1))
             if on_grating.any():
                 self._grating_light(rays.take(on_grating), hit.take(on_grating), rng)
         diffuse = kind == DIFFUSE
         if diffuse.any():
             r, h = rays.take(diffuse), hit.take(diffuse)
+            r_full = r
             if self.layers:
                 r = grating_layering.scale_base(prepared, r, h)
             first = r.extra["nd"] == 0
@@ -333,6 +342,10 @@ class _TileTrace(SpecularWalker):
                     self._next_events(r.take(first), h.take(first), self._film)
                 self._next_events(r.take(~first), h.take(~first), self._part("indirect"))
             if self.caustic_map is not None:
+                if self.scattering is not None and self.scattering[h.mat].any():
+                    own = self.scattering[h.mat]  # the map holds the base's share there already
+                    self._caustic_light(r_full.take(own), h.take(own), rng)
+                    r, h = r.take(~own), h.take(~own)
                 self._caustic_light(r, h, rng)
 
     def survives(self, rays: Rays, rng) -> np.ndarray:

@@ -8,7 +8,11 @@ been specular at least once lands on a diffuse surface its spectral flux is adde
 surface element of the illumination map (elements.py). Where such a path reaches a grating, the
 grating's element records the incoming spectral flux by the direction it came from and its
 wavelength band (grating_records.GratingRecords: sparse directional lobes, on elements a pilot
-pass sizes where grating flux lands; docs/physics.md section 3.5), for the eye pass to diffract. Direct light stays the eye pass's job, so a path that reaches a
+pass sizes where grating flux lands; docs/physics.md section 3.5), for the eye pass to diffract.
+Line gratings are casters as well: a path that meets one is diffracted (kind GRATING from
+``classify``, the order sampled by core/grating_sampling.py in ``scatter``) and goes on as a
+specular path, so the orders land on diffuse surfaces as caustics (docs/physics.md section
+3.10). Direct light stays the eye pass's job, so a path that reaches a
 diffuse surface or grating first deposits nothing: no double counting. On smooth-shaded casters
 the paths bend about the shading normals (transport.py, docs/physics.md section 4.6); deposits
 and records stay indexed by the geometric hit (triangle, barycentrics, side).
@@ -52,9 +56,10 @@ import numpy as np
 from .elements import ElementLayout, IlluminationMap
 from .grating_records import PILOT_STREAM, GratingRecords, record_layout
 from .geometry import orthonormal_basis, triangle_areas
+from .grating_sampling import diffracting, scatter_at_gratings, scattering_materials
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIELECTRIC, DIFFUSE, MIRROR
-from .transport import Hit, Rays, SpecularWalker
+from .transport import GRATING, Hit, Rays, SpecularWalker
 
 __all__ = ["CasterObjects", "caster_objects", "LightTargets", "find_light_targets", "LightPassResult",
            "element_layout", "run_light_pass", "LIGHT_PASS_STREAM", "BATCH_PATHS", "LANES", "LightBatch",
@@ -183,6 +188,21 @@ class _LightTrace(SpecularWalker):
         else:
             self.illum.deposit(idx[valid], r.w[valid], r.lam[valid])
 
+    def classify(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> np.ndarray:
+        """Paths a grating diffracts (core/grating_sampling.py, docs/physics.md section 3.10) are
+        kind GRATING: they neither bounce off the base nor land on it."""
+        if not self.prepared.gratings.any:
+            return kind
+        return np.where(diffracting(self.prepared, hit, kind, rng), GRATING, kind)
+
+    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
+        """The orders of the gratings' paths (mono rays; section 3.10): diffracted paths are
+        specular ones, so they deposit caustics where they land on diffuse surfaces."""
+        sel = (kind == GRATING) & can_bounce
+        if not sel.any():
+            return None
+        return scatter_at_gratings(self, rays.take(sel), hit.take(sel), rng)
+
     def survives(self, rays: Rays, rng) -> np.ndarray:
         ok = rays.depth < self.prepared.settings.max_bounces
         deep = ok & (rays.depth >= RR_START_DEPTH)
@@ -199,7 +219,7 @@ class _LightTrace(SpecularWalker):
 class LightTargets:
     """What the light pass aims at and who receives its light (part of the prepared scene)."""
 
-    caster_mask: np.ndarray    # (T,) bool: mirror and glass triangles (light bends there)
+    caster_mask: np.ndarray    # (T,) bool: mirror, glass and grating triangles (light bends or diffracts there)
     receiver_mask: np.ndarray  # (T,) bool: diffuse triangles (caustics land there)
     grating_mask: np.ndarray   # (T,) bool: grating triangles (records land there)
     objects: CasterObjects     # bounding spheres of the connected caster objects
@@ -226,12 +246,15 @@ def find_light_targets(vertices, triangles, tri_material, materials, gratings, l
     meshes, and ``world_spectrum`` (n,) the world's mean radiance, or None: a black world).
     Without light paths or any emitter there is nothing to aim, so the casters are not grouped
     at all. Rough and layered mirrors and glass (``microfacet`` (M,) bool, bsdf.microfacet_materials;
-    None: none) are not casters: the eye pass shades them, and a light path ends there."""
+    None: none) are not casters: the eye pass shades them, and a light path ends there. Line
+    gratings are casters: their orders go on (docs/physics.md section 3.10)."""
     mk = materials.kind[tri_material] if len(tri_material) else np.zeros(0, np.int32)
+    grating = gratings.enabled[tri_material] if len(tri_material) else np.zeros(0, bool)
     caster = np.isin(mk, [MIRROR, DIELECTRIC])
     if microfacet is not None and len(tri_material):
         caster &= ~np.asarray(microfacet)[tri_material]
-    grating = gratings.enabled[tri_material] if len(tri_material) else np.zeros(0, bool)
+    if len(tri_material):
+        caster |= scattering_materials(gratings, materials.kind, microfacet)[tri_material]
     world_lum = 0.0 if world_spectrum is None else float(np.asarray(world_spectrum, np.float64) @ conv.cmf_weights[:, 1])
     emitters = len(lights) > 0 or mesh_lights is not None or world_lum > 0
     aimed = caster if light_paths > 0 and emitters else np.zeros_like(caster)

@@ -36,12 +36,14 @@ def plan_render(prepared) -> RenderPlan:
     used = np.unique(prepared.tri_material) if len(prepared.tri_material) else np.zeros(0, np.int64)
     kinds = prepared.materials.kind[used] if len(used) else np.zeros(0, np.int32)
     specular = bool(np.isin(kinds, [MIRROR, DIELECTRIC]).any())
+    # line gratings scatter their orders in the light pass too (docs/physics.md section 3.10)
+    scatters = specular or bool(prepared.light_targets.caster_mask.any())
     dispersion = bool(prepared.materials.dispersive[used].any()) if len(used) else False
     notes = [f"eye pass: {prepared.grid.n} wavelengths, {settings.samples} samples/pixel"]
     if dispersion:
         notes.append(f"dispersion: {settings.dispersion_sampling}")
     light_pass = False
-    if not specular:
+    if not scatters:
         notes.append("light pass skipped: no mirror or glass in the scene")
     elif len(prepared.lights) == 0 and not (prepared.light_targets.world_budget > 0
                                             or prepared.light_targets.mesh_budget > 0):
@@ -53,7 +55,7 @@ def plan_render(prepared) -> RenderPlan:
     else:
         light_pass = True
         notes.append(f"light pass: {settings.light_paths / 1e6:.2f} M paths aimed at "
-                     f"{len(prepared.light_targets.objects)} mirror/glass object(s)")
+                     f"{len(prepared.light_targets.objects)} mirror/glass/grating object(s)")
     n_gratings = int(prepared.gratings.enabled[used].sum()) if len(used) else 0
     if n_gratings:
         notes.append(f"gratings: {n_gratings} material(s), direct light diffracted in the eye pass")

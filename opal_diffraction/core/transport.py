@@ -42,11 +42,14 @@ from .geometry import interpolate_corners
 from .materials import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
 from .optics import fresnel_dielectric, reflect, refract
 
-__all__ = ["Rays", "Hit", "SpecularWalker", "shading_normals", "valid_specular_normal", "MICROFACET"]
+__all__ = ["Rays", "Hit", "SpecularWalker", "shading_normals", "valid_specular_normal", "MICROFACET", "GRATING"]
 
 #: The kind a hit on a rough (or layered) mirror or glass gets in the walk: not a delta bounce;
 #: the eye pass shades it with core/bsdf.py, the light pass ends its path there.
 MICROFACET = 99
+#: The kind the light pass gives a hit where its path is diffracted by a grating
+#: (core/grating_sampling.py): neither a delta bounce nor a landing; ``scatter`` sends it on.
+GRATING = 98
 
 
 @dataclass
@@ -183,6 +186,7 @@ class SpecularWalker:
         self._rays = 0  # rays cast
         self.microfacet = prepared.microfacet  # (M,) bool, once per prepared scene
         self.any_microfacet = bool(self.microfacet.any())
+        self._spawned: list[Rays] = []
 
     # hooks ----------------------------------------------------------------------------------
     def on_segment(self, rays: Rays, t: np.ndarray) -> None:
@@ -206,8 +210,14 @@ class SpecularWalker:
 
     def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
         """Rays continuing from the non-specular surfaces (diffuse, rough): None by default (the
-        light pass ends its paths there; the eye pass samples a BSDF)."""
+        light pass ends its paths there; the eye pass samples a BSDF). Mono rays returned for a
+        white population (a grating's orders) join the mono population."""
         return None
+
+    def classify(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> np.ndarray:
+        """The kind per hit the walk uses (default: the material's, rough ones MICROFACET); the
+        light pass marks the paths a grating diffracts GRATING."""
+        return kind
 
     # the loop -------------------------------------------------------------------------------
     @staticmethod
@@ -218,8 +228,12 @@ class SpecularWalker:
     def walk(self, rays: Rays, mono: Rays) -> None:
         """Follow both populations until every path has ended."""
         rng = self.rng
+        self._spawned = []  # mono rays a white population's scatter made (grating orders)
         while len(rays) or len(mono):
             rays, children, child_hits = self._step(rays, None, rng)
+            for r in self._spawned:
+                mono = Rays.concat(mono, r)
+            self._spawned = []
             mono, _, _ = self._step(mono, (children, child_hits), rng)
 
     # ----------------------------------------------------------------- one bounce
@@ -249,6 +263,7 @@ class SpecularWalker:
         micro = self.microfacet[hit.mat] if self.any_microfacet else None
         if micro is not None:  # rough mirrors and glass leave the delta code; diffuse bases keep their kind
             kind = np.where(micro & (kind != DIFFUSE_KIND), MICROFACET, kind)
+        kind = self.classify(rays, hit, kind, rng)
         self.on_hit(rays, hit, kind, rng)
 
         can_bounce = self.survives(rays, rng)
@@ -272,7 +287,10 @@ class SpecularWalker:
                 out.append(self.after_delta(r, transmitted))
         scattered = self.scatter(rays, hit, kind, can_bounce, rng)
         if scattered is not None and len(scattered):
-            out.append(scattered)
+            if (scattered.lam is None) == (rays.lam is None):
+                out.append(scattered)
+            else:  # a white population's mono rays: traced with the mono population
+                self._spawned.append(scattered)
         out = [r for r in out if len(r)]
         if not out:
             return rays.take(np.zeros(len(rays), bool)), children, child_hits
