@@ -17,7 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import footprint
 from .geometry import orthonormal_basis
+from .grating_directions import tangents_at
 from .gratings import diffracted_radiance, grating_frame
 from .lights import intersect_lights, is_delta, light_pdf, sample_light, sun_radiance
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
@@ -58,17 +60,21 @@ class EyePass:
         self.prepared = prepared
         self.caustic_map = None if light is None else light.caustics
         self.record_map = None if light is None else light.grating_records
+        # camera rays carry ray differentials (core/footprint.py) only to integrate gratings
+        self.wants_differentials = bool(prepared.gratings.any and getattr(prepared.settings, "grating_footprint", True))
 
     def trace(self, origins, directions, pix, n_pixels: int, rng: np.random.Generator,
-              u_lambda: np.ndarray | None = None) -> TileResult:
+              u_lambda: np.ndarray | None = None, differentials: np.ndarray | None = None) -> TileResult:
         """Trace camera rays (one per sample) and return the per-pixel sum of their radiance.
 
         ``u_lambda`` (B,) in [0, 1): stratified numbers for the SAMPLE wavelength choice
-        (uniform random if omitted).
+        (uniform random if omitted). ``differentials`` (B, 4, 3): the rays' differentials per
+        pixel step (``footprint.camera_differentials``), used where ``wants_differentials``;
+        None: point samples.
         """
         if u_lambda is None:
             u_lambda = rng.random(len(pix))
-        return _TileTrace(self, n_pixels, rng).run(origins, directions, pix, u_lambda)
+        return _TileTrace(self, n_pixels, rng).run(origins, directions, pix, u_lambda, differentials=differentials)
 
     def trace_escapes(self, origins, directions, rng: np.random.Generator, wavelength_index=None) -> dict:
         """Follow rays through the scene's specular surfaces and report the ones that leave it.
@@ -119,6 +125,7 @@ class _TileTrace(SpecularWalker):
         # shading normals differ from the geometric ones: directions need both side tests
         self.bent = eye.prepared.corner_normals is not None or self.normal_maps
         self._n_pixels = n_pixels
+        self.footprints = eye.wants_differentials  # rays carry differentials (core/footprint.py)
         self._film = self._new_film()  # light reflected by diffuse surfaces from direct lighting
         # the other parts of the film, allocated when first written (most scenes use a few):
         self._parts: dict[str, np.ndarray] = {}  # 'background' (world and emitters seen),
@@ -170,12 +177,17 @@ class _TileTrace(SpecularWalker):
     def empty_mono(self) -> Rays:
         r = super().empty_mono()
         r.extra = self._new_state(0)
+        if self.footprints:
+            r.extra[footprint.KEY] = footprint.zero_differentials(0)
         return r
 
-    def run(self, origins, directions, pix, u_lambda, wavelength_index=None) -> TileResult:
+    def run(self, origins, directions, pix, u_lambda, wavelength_index=None, differentials=None) -> TileResult:
         n, b = self.n, len(pix)
         rays = Rays(origins, directions, pix.astype(np.int64), None, None,
                      np.zeros(b, np.int32), np.asarray(u_lambda, np.float64), self._new_state(b))
+        if self.footprints:
+            rays.extra[footprint.KEY] = (footprint.zero_differentials(b) if differentials is None
+                                         else np.asarray(differentials, np.float32).reshape(b, 4, 3))
         mono = self.empty_mono()
         if wavelength_index is not None:  # start monochromatic (tools and tests)
             lam = np.broadcast_to(np.asarray(wavelength_index, np.int64), (b,)).copy()
@@ -681,7 +693,8 @@ class _TileTrace(SpecularWalker):
             sel = hit.mat == m
             r, h = rays.take(sel), hit.take(sel)
             b = len(r)
-            t, s = grating_frame(prepared.tri_grating_tangent[h.prim], h.ng, np.full(b, g.cos_rot[m]), np.full(b, g.sin_rot[m]))
+            t, s = grating_frame(tangents_at(prepared.corner_grating_tangent, prepared.tri_grating_tangent, h.prim,
+                                             h.bu, h.bv, h.ng), h.ng, np.full(b, g.cos_rot[m]), np.full(b, g.sin_rot[m]))
             over = prepared.tri_period[h.prim] if len(prepared.tri_period) else np.zeros(b, np.float32)
             period = np.where(over > 0, over, g.period[m])
             w_o = -r.d
@@ -702,7 +715,8 @@ class _TileTrace(SpecularWalker):
                 idx = idx[~occ]
                 if idx.size == 0:
                     continue
-                rad = diffracted_radiance(g, m, w_o[idx], wi[idx], t[idx], s[idx], h.ng[idx], period[idx], edges, rng)
+                rad = diffracted_radiance(g, m, w_o[idx], wi[idx], t[idx], s[idx], h.ng[idx], period[idx], edges, rng,
+                                          footprint=_footprint(r, h, idx, t, s, wi, dist))
                 e = (gfac[idx] * np.abs(cos_l[idx])).astype(np.float32)
                 spec = rad * e[:, None] * lights.spectrum[li][None, :]
                 sub = r.take(idx)
@@ -715,12 +729,22 @@ class _TileTrace(SpecularWalker):
                 ok &= (cos_l < 0) if g.transmission[m] else (cos_l > 0)
                 idx = np.flatnonzero(ok)
                 if idx.size:
-                    rad = diffracted_radiance(g, m, w_o[idx], src[idx], t[idx], s[idx], h.ng[idx], period[idx], edges, rng)
+                    rad = diffracted_radiance(g, m, w_o[idx], src[idx], t[idx], s[idx], h.ng[idx], period[idx], edges,
+                                              rng, footprint=_footprint(r, h, idx, t, s, src, None))
                     spec = rad * irr[idx]
                     sub = r.take(idx)
                     contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(idx)), sub.lam]
                     self._accumulate(sub, contrib, self._diffraction)
 
+
+def _footprint(rays: Rays, hit: Hit, idx, t, s, wi, dist):
+    """(du, dv) of rays[idx]'s pixel footprints at their grating hits (core/footprint.py), or
+    None where the rays carry no differentials."""
+    rd = None if rays.extra is None else rays.extra.get(footprint.KEY)
+    if rd is None:
+        return None
+    return footprint.grating_footprint(rd[idx], rays.o[idx], rays.d[idx], hit.p[idx], hit.ng[idx], t[idx], s[idx],
+                                       wi[idx], None if dist is None else dist[idx])
 
 
 def _cosine_hemisphere(n: np.ndarray, rng: np.random.Generator):

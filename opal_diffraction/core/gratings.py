@@ -36,7 +36,7 @@ import numpy as np
 from scipy.special import j1
 
 from .enums import GratingType, Lattice
-from .diffraction import fraunhofer_pattern_binned, multislit
+from .diffraction import fraunhofer_pattern_binned, fraunhofer_pattern_footprint, multislit
 
 __all__ = ["PreparedGratings", "prepare_gratings", "triangle_tangents", "grating_frame", "diffracted_radiance"]
 
@@ -114,12 +114,16 @@ def _airy(x):
     return np.where(small, 1.0, (2 * j1(safe) / safe) ** 2)
 
 
-def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, period, edges_nm, rng):
+def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, period, edges_nm, rng,
+                        footprint=None):
     """Radiance per unit irradiance (1/sr) towards w_o, per wavelength bin: (B, K).
 
     ``mat``: the material (one grating's parameters per call); w_o, w_i, t, s, normal: (B, 3);
     ``period``: (B,) nm (a per-triangle override, else the material's); the slit width keeps the
-    material's ratio a / D. ``edges_nm``: (K + 1,) bin edges.
+    material's ratio a / D. ``edges_nm``: (K + 1,) bin edges. ``footprint``: (du, dv), each (B,),
+    the extent of each sample's pixel footprint in (u, v) (core/footprint.py): the LINES pattern
+    is then averaged over it as well (docs/physics.md section 3.7); None: at the point (u, v).
+    The HEXAGONAL lattice ignores it.
     """
     d = np.asarray(period, np.float64)[:, None]
     a = d * (g.slit_width[mat] / g.period[mat])
@@ -133,7 +137,10 @@ def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, p
         v = np.sum(h * s, axis=1)
         length = g.length[mat]
         # the bin mean of P / lambda^2 (lambda in nm), then the factor's lengths in metres
-        p = fraunhofer_pattern_binned(u, v, edges, a, d, n, length, lam_power=-2) / NM**2
+        if footprint is not None and (np.any(footprint[0]) or np.any(footprint[1])):
+            p = fraunhofer_pattern_footprint(u, v, footprint[0], footprint[1], edges, a, d, n, length, lam_power=-2) / NM**2
+        else:
+            p = fraunhofer_pattern_binned(u, v, edges, a, d, n, length, lam_power=-2) / NM**2
         factor = (a * NM) ** 2 * (length * NM) * n / ((d * NM) * cos_o)
         return (factor * p).astype(np.float32)
     # hexagonal lattice: one stratified random wavelength per bin and sample

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import FilterSampler, generate_rays, pixel_samples
+from .footprint import camera_differentials
 from .settings import RenderSettings
 
 __all__ = ["EYE_PASS_STREAM", "LIGHT_PASS_SHARE", "MAX_TILE_RAYS", "round_size", "tiles_of", "EyeWork",
@@ -119,5 +120,7 @@ def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: i
     if pixels is not None:
         xs, ys = xs[pixels], ys[pixels]
     sx, sy, sl, pidx = pixel_samples(xs.astype(np.float64), ys.astype(np.float64), work.rounds[r_index], rng, filt)
-    o, d = generate_rays(eye.prepared.scene.camera, sx, sy)
-    return eye.trace(o, d, pidx, len(xs), rng, u_lambda=sl)
+    cam = eye.prepared.scene.camera
+    o, d = generate_rays(cam, sx, sy)
+    rd = camera_differentials(cam, d) if eye.wants_differentials else None
+    return eye.trace(o, d, pidx, len(xs), rng, u_lambda=sl, differentials=rd)
