@@ -46,7 +46,11 @@ def zero_differentials(b: int) -> np.ndarray:
     return np.zeros((b, 4, 3), np.float32)
 
 
-def camera_differentials(cam, directions: np.ndarray) -> np.ndarray:
+#: The footprint of a sample spans this many pixel steps (1: a pixel's area).
+PIXEL_SPREAD = 1.0
+
+
+def camera_differentials(cam, directions: np.ndarray, spread: float | None = None) -> np.ndarray:
     """(B, 4, 3) float32 differentials of camera rays per pixel step (core/camera.py's
     projection: the image-plane point moves by 2 hx / width per pixel in x and by -2 hy / height
     per pixel in y, at distance 1 for a perspective camera, in metres for an orthographic one)."""
@@ -54,8 +58,9 @@ def camera_differentials(cam, directions: np.ndarray) -> np.ndarray:
     hx, hy = camera_frame(cam)
     m = np.asarray(cam.matrix, np.float64)
     rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
-    step_x = rot[:, 0] * (2.0 * hx / w)   # world-space image-plane step per pixel in x
-    step_y = -rot[:, 1] * (2.0 * hy / h)  # y grows downwards in the image
+    k = PIXEL_SPREAD if spread is None else float(spread)
+    step_x = rot[:, 0] * (2.0 * hx / w * k)   # world-space image-plane step per pixel in x
+    step_y = -rot[:, 1] * (2.0 * hy / h * k)  # y grows downwards in the image
     d = np.asarray(directions, np.float64)
     out = np.zeros((len(d), 4, 3), np.float64)
     if cam.kind == "ORTHO":
