@@ -57,7 +57,7 @@ def cd_scene(width=480, height=360, slit_count=1000) -> Scene:
     mats = Materials.from_list([
         {"name": "table", "kind": "DIFFUSE", "color": (0.08, 0.08, 0.09)},
         {"name": "CD", "kind": "DIFFUSE", "color": (0.25, 0.25, 0.27), "grating": 1, "grating_type": "REFLECTION",
-         "period": 1600.0, "slit_width": 800.0, "slit_count": slit_count, "coherence_length": 10.0},
+         "period": 1600.0, "slit_width": 800.0, "slit_count": slit_count, "coherence_length": 1000.0},
     ])
     s = Scene(materials=mats)
     s.add_mesh(*primitives.quad((0, 0, -0.002), (1.0, 0, 0), (0, 1.0, 0)), material=0)

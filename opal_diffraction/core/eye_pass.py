@@ -68,7 +68,7 @@ class EyePass:
         """Trace camera rays (one per sample) and return the per-pixel sum of their radiance.
 
         ``u_lambda`` (B,) in [0, 1): stratified numbers for the SAMPLE wavelength choice
-        (uniform random if omitted). ``differentials`` (B, 4, 3): the rays' differentials per
+        (uniform random if omitted). ``differentials`` (B, 5, 3): the rays' differentials per
         pixel step (``footprint.camera_differentials``), used where ``wants_differentials``;
         None: point samples.
         """
@@ -187,7 +187,7 @@ class _TileTrace(SpecularWalker):
                      np.zeros(b, np.int32), np.asarray(u_lambda, np.float64), self._new_state(b))
         if self.footprints:
             rays.extra[footprint.KEY] = (footprint.zero_differentials(b) if differentials is None
-                                         else np.asarray(differentials, np.float32).reshape(b, 4, 3))
+                                         else np.asarray(differentials, np.float32).reshape(b, 5, 3))
         mono = self.empty_mono()
         if wavelength_index is not None:  # start monochromatic (tools and tests)
             lam = np.broadcast_to(np.asarray(wavelength_index, np.int64), (b,)).copy()

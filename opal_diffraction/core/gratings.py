@@ -121,8 +121,9 @@ def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, p
     ``mat``: the material (one grating's parameters per call); w_o, w_i, t, s, normal: (B, 3);
     ``period``: (B,) nm (a per-triangle override, else the material's); the slit width keeps the
     material's ratio a / D. ``edges_nm``: (K + 1,) bin edges. ``footprint``: (du, dv), each (B,),
-    the extent of each sample's pixel footprint in (u, v) (core/footprint.py): the LINES pattern
-    is then averaged over it as well (docs/physics.md section 3.7); None: at the point (u, v).
+    the extent of each sample's pixel footprint in (u, v) (core/footprint.py), optionally with
+    (su, sv), each (B,), the shift from the sample's (u, v) to the footprint's centre: the LINES
+    pattern is then averaged over it as well (docs/physics.md section 3.7); None: at the point (u, v).
     The HEXAGONAL lattice ignores it.
     """
     d = np.asarray(period, np.float64)[:, None]
@@ -135,6 +136,8 @@ def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, p
     edges = np.asarray(edges_nm, np.float64)
     if not g.hexagonal[mat]:
         v = np.sum(h * s, axis=1)
+        if footprint is not None and len(footprint) == 4:  # the footprint's centre (core/footprint.py)
+            u, v = u + footprint[2], v + footprint[3]
         length = g.length[mat]
         # the bin mean of P / lambda^2 (lambda in nm), then the factor's lengths in metres
         if footprint is not None and (np.any(footprint[0]) or np.any(footprint[1])):

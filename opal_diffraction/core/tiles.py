@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import FilterSampler, generate_rays, pixel_samples
-from .footprint import camera_differentials
+from .footprint import camera_differentials, filter_box_width
 from .settings import RenderSettings
 
 __all__ = ["EYE_PASS_STREAM", "LIGHT_PASS_SHARE", "MAX_TILE_RAYS", "round_size", "tiles_of", "EyeWork",
@@ -122,5 +122,7 @@ def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: i
     sx, sy, sl, pidx = pixel_samples(xs.astype(np.float64), ys.astype(np.float64), work.rounds[r_index], rng, filt)
     cam = eye.prepared.scene.camera
     o, d = generate_rays(cam, sx, sy)
-    rd = camera_differentials(cam, d) if eye.wants_differentials else None
+    rd = None
+    if eye.wants_differentials:  # ray differentials for gratings (core/footprint.py)
+        rd = camera_differentials(cam, d, (sx - xs[pidx] - 0.5, sy - ys[pidx] - 0.5), filter_box_width(filt.width))
     return eye.trace(o, d, pidx, len(xs), rng, u_lambda=sl, differentials=rd)
