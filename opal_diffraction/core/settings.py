@@ -194,6 +194,8 @@ class RenderSettings:
             raise SceneError(f"dispersion sampling must be SPLIT or SAMPLE, got {self.dispersion_sampling!r}")
         if not isinstance(self.spectral_exr, (str, os.PathLike)):
             raise SceneError(f"spectral EXR must be a path (a string), got {type(self.spectral_exr).__name__}")
+        if not isinstance(self.grating_footprint, (bool, np.bool_)):
+            raise SceneError(f"grating footprint must be True or False, got {self.grating_footprint!r}")
         _validate_backend(self.backend)
         self._validate_grid()
 
