@@ -4,8 +4,10 @@
   transmission grating (period 1.6 um) between a point light at 10 degrees incidence and the
   camera; the camera sees the zeroth order (the light through the grating) and the spectra of
   the orders beside it.
-- ``cd``: a compact disc (track pitch 1.6 um, circular grooves, so the grating vector is radial)
-  under a point light: the rainbow arcs of the first orders.
+- ``cd``: a compact disc (track pitch 1.6 um, circular grooves, so the grating vector is radial,
+  tracks coherent over L = 1000 um) under a point light: the rainbow arcs of the first orders.
+  The footprint integral (docs/physics.md section 3.7) keeps such long tracks free of speckle,
+  and the per-facet radial directions are smoothed across the 256 segments (section 3.1).
 
     python examples/gratings.py [--which fig5 cd] [--spp 16] [--out docs]
 """

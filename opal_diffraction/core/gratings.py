@@ -22,6 +22,10 @@ takes one stratified random wavelength per sample: unbiased, it converges with t
 per pixel (the LINES case is exact per sample). Its first orders sit at
 |q| = 2 lambda / (sqrt 3 D) (docs/physics.md section 3.4).
 
+With a ``footprint`` (core/footprint.py: ray differentials), the LINES pattern is averaged over
+each sample's pixel footprint in (u, v) as well, in closed form
+(``diffraction.fraunhofer_pattern_footprint``; docs/physics.md section 3.7).
+
 A reflection grating diffracts light arriving on the viewer's side, a transmission grating light
 arriving from the other side; the grating is layered on the base material, whose own response
 (diffuse, glass, ...) is computed as usual (known deviation: docs/physics.md section 3.3 takes
