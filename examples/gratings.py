@@ -4,8 +4,10 @@
   transmission grating (period 1.6 um) between a point light at 10 degrees incidence and the
   camera; the camera sees the zeroth order (the light through the grating) and the spectra of
   the orders beside it.
-- ``cd``: a compact disc (track pitch 1.6 um, circular grooves, so the grating vector is radial)
-  under a point light: the rainbow arcs of the first orders.
+- ``cd``: a compact disc (track pitch 1.6 um, circular grooves, so the grating vector is radial,
+  tracks coherent over L = 1000 um) under a point light: the rainbow arcs of the first orders.
+  The footprint integral (docs/physics.md section 3.7) keeps such long tracks free of speckle,
+  and the per-facet radial directions are smoothed across the 256 segments (section 3.1).
 
     python examples/gratings.py [--which fig5 cd] [--spp 16] [--out docs]
 """
@@ -57,7 +59,7 @@ def cd_scene(width=480, height=360, slit_count=1000) -> Scene:
     mats = Materials.from_list([
         {"name": "table", "kind": "DIFFUSE", "color": (0.08, 0.08, 0.09)},
         {"name": "CD", "kind": "DIFFUSE", "color": (0.25, 0.25, 0.27), "grating": 1, "grating_type": "REFLECTION",
-         "period": 1600.0, "slit_width": 800.0, "slit_count": slit_count, "coherence_length": 10.0},
+         "period": 1600.0, "slit_width": 800.0, "slit_count": slit_count, "coherence_length": 1000.0},
     ])
     s = Scene(materials=mats)
     s.add_mesh(*primitives.quad((0, 0, -0.002), (1.0, 0, 0), (0, 1.0, 0)), material=0)

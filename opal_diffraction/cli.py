@@ -131,6 +131,8 @@ def _parser() -> argparse.ArgumentParser:
                         "(64 at T = 0.01)")
     r.add_argument("--denoise", action="store_true", help="denoise the RGB image with Open Image Denoise (needs "
                    "requirements-denoise.txt: pyoidn); the noisy image is written as OUT.noisy.exr")
+    r.add_argument("--no-grating-footprint", action="store_true", help="point-sample grating patterns instead of "
+                   "integrating them over each pixel's footprint (docs/physics.md section 3.7)")
     r.add_argument("--threads", type=int, default=0, help="0: all cores")
     r.add_argument("--backend", choices=["auto", "embree", "numpy"], default="auto")
     r.add_argument("--scheduler", default="", help="render on a Dask cluster, the same image: tcp://HOST:PORT of "
@@ -364,7 +366,7 @@ def _render(args, sig: _Signals, created: list) -> int:
             dispersion_sampling=args.dispersion_sampling, light_paths=args.light_paths,
             spectral_exr=args.spectral_exr, time_limit=args.time_limit, threads=args.threads,
             backend=args.backend, adaptive_threshold=args.adaptive_threshold,
-            adaptive_min_samples=args.adaptive_min_samples,
+            adaptive_min_samples=args.adaptive_min_samples, grating_footprint=not args.no_grating_footprint,
         )
         settings.validate()
         sig.phase = "prepare"

@@ -53,7 +53,8 @@ def centre_row_geometry():
 @pytest.fixture(scope="module")
 def rendered():
     s = fig5_scene()
-    st = RenderSettings(samples=1, filter_width=0.0, threads=1)
+    # point samples at the pixel centres (the footprint integral is tested in test_grating_footprint.py)
+    st = RenderSettings(samples=1, filter_width=0.0, threads=1, grating_footprint=False)
     res = render(s, st)
     ctx = prepare(s, st)
     return res, ctx

@@ -230,6 +230,11 @@ class OpalRenderSettings(PropertyGroup):
         "the pyoidn package in Blender's Python (otherwise a warning says so: the passes are still written "
         "for the compositor's Denoise node). Off by default (Cycles has it on)", default=False,
     )
+    grating_footprint: BoolProperty(
+        name="Grating Footprint", description="Integrate diffraction gratings' patterns over each pixel's "
+        "footprint (ray differentials), so narrow orders and long tracks render without speckle; off: "
+        "point samples, which converge only with many samples", default=True,
+    )
     time_limit: FloatProperty(
         name="Time Limit", description="Stop after this many seconds (at the end of a progressive round); "
         "0: no limit", default=0.0, min=0.0, step=100.0, unit="TIME_ABSOLUTE",

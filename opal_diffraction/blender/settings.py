@@ -32,5 +32,5 @@ def render_settings(opal, scene, spectral_path: str = "") -> RenderSettings:
         spectral_exr=spectral_path, time_limit=float(opal.time_limit), threads=int(scene.render.threads),
         backend=opal.backend.lower(), tile_size=int(opal.tile_size), round_samples=int(opal.round_samples),
         filter_width=float(opal.filter_width), adaptive_threshold=adaptive_threshold(opal),
-        adaptive_min_samples=int(opal.adaptive_min_samples),
+        adaptive_min_samples=int(opal.adaptive_min_samples), grating_footprint=bool(opal.grating_footprint),
     )

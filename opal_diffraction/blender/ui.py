@@ -84,6 +84,7 @@ class OPAL_RENDER_PT_spectrum(OpalButtonsPanel, Panel):
         col.prop(opal, "wavelength_min", text="Wavelength Min")
         col.prop(opal, "wavelength_max", text="Max")
         col.prop(opal, "wavelength_step", text="Step")
+        layout.prop(opal, "grating_footprint")
         n = opal.wavelength_count()
         if n is None:
             layout.label(text="Min must be below Max" if opal.wavelength_min >= opal.wavelength_max

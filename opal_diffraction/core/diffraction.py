@@ -52,6 +52,9 @@ __all__ = [
     "propagating_power",
     "harvey_shack_factor",
     "hexagonal_harvey_shack_factor",
+    "box_mean_product",
+    "fraunhofer_pattern_footprint",
+    "multislit_mean_without_zeroth",
 ]
 
 #: Up to this slit count the exact O(N) integral is used, beyond it the asymptotic form.
@@ -334,3 +337,87 @@ def hexagonal_harvey_shack_factor(alpha_i, beta_i, wavelength, ratio, d) -> np.n
         hi_i = np.clip(hi + m2_max + 1, 0, 2 * m2_max + 1).astype(np.int64)
         total += np.where(ok, np.maximum(table[row, hi_i] - table[row, lo_i], 0.0), 0.0)
     return 1.0 / np.maximum(fill * total, 1e-300)
+
+
+def box_mean_product(mean_fn, c, x0, x1, k0, k1, nodes: int = 2) -> np.ndarray:
+    """Mean of f(c x k) over the rectangle x in [x0, x1], k in [k0, k1] (both uniform).
+
+    ``mean_fn(lo, hi)`` is f's closed-form mean over an argument interval (``multislit_mean``,
+    ``sinc2_mean``). At fixed k the x-mean is f's mean over [c x0 k, c x1 k] exactly, and at
+    fixed x the k-mean likewise; the mean is taken exactly in the dimension whose argument range
+    is the wider (per element) and by a ``nodes``-point midpoint rule in the other
+    (docs/physics.md section 3.7). Every node carries its exact share of f's integral, so the
+    approximation only reshapes a peak's profile within the narrower range (a staircase for a
+    ramp), never its area. Arrays broadcast together.
+    """
+    x0, x1, k0, k1 = (np.asarray(z, np.float64) for z in (x0, x1, k0, k1))
+    c = np.asarray(c, np.float64)
+    wx = np.abs(c * (x1 - x0) * 0.5 * (k0 + k1))
+    wk = np.abs(c * 0.5 * (x0 + x1) * (k1 - k0))
+    exact_x = wx >= wk
+    out = 0.0
+    for j in range(nodes):  # a loop over the few quadrature nodes, not rays
+        f = (j + 0.5) / nodes
+        kj = k0 + f * (k1 - k0)
+        xj = x0 + f * (x1 - x0)
+        lo = np.where(exact_x, c * x0 * kj, c * xj * k0)
+        hi = np.where(exact_x, c * x1 * kj, c * xj * k1)
+        out = out + mean_fn(lo, hi)
+    return out / nodes
+
+
+def multislit_mean_without_zeroth(eta0, eta1, n) -> np.ndarray:
+    """``multislit_mean`` with the zeroth order's period |eta| < pi/2 left out (its closed-form
+    integral subtracted; a narrow interval takes its midpoint value outside that period only)."""
+    eta0 = np.asarray(eta0, np.float64)
+    eta1 = np.asarray(eta1, np.float64)
+    n_f = float(int(n))
+    width = eta1 - eta0
+    narrow = np.abs(width) * n_f < _MIDPOINT_NETA
+    safe_w = np.where(narrow, 1.0, width)
+    c0, c1 = (np.clip(x, -np.pi / 2, np.pi / 2) for x in (eta0, eta1))
+    inside = (multislit_integral(c1, n) - multislit_integral(c0, n)) / (n_f * n_f * safe_w)
+    mid = 0.5 * (eta0 + eta1)
+    out = np.where(narrow, multislit(mid, n_f) * (np.abs(mid) >= np.pi / 2), multislit_mean(eta0, eta1, n) - inside)
+    return np.clip(out, 0.0, 1.0)
+
+
+def fraunhofer_pattern_footprint(u, v, du, dv, edges, a, d, n, length, subdivisions: int = 2, lam_power: int = 0,
+                                 nodes: int = 2, exclude_zeroth: bool = False) -> np.ndarray:
+    """The mean of P over u in [u - du/2, u + du/2], v in [v - dv/2, v + dv/2] and each wavelength
+    bin [edges[k], edges[k+1]] (docs/physics.md section 3.7): (B, K).
+
+    The pixel footprint's extent (du, dv) (B,) comes from ray differentials (core/footprint.py);
+    du = dv = 0 gives ``fraunhofer_pattern_binned``'s value. As there, each bin is split into
+    ``subdivisions`` parts, the slit envelope sinc^2(xi) is taken at the part's centre (and at the
+    footprint's centre u), and ``lam_power`` weights each part by its centre wavelength to that
+    power. In each part, the N-slit factor F(pi D u / lambda) is averaged over the rectangle
+    (u-interval) x (1/lambda-interval) and the slit-length factor sinc^2(pi L v / lambda) over
+    (v-interval) x (1/lambda-interval), each by ``box_mean_product`` (closed form in the wider
+    direction, ``nodes`` midpoints in the other); the two means are multiplied (the pattern is
+    separable in u and v; within a part their common 1/lambda dependence is neglected, as in
+    ``fraunhofer_pattern_binned``). Errors against brute-force quadrature of P over the whole box
+    are bounded in tests/test_grating_footprint.py. ``exclude_zeroth``: as in
+    ``fraunhofer_pattern_binned`` (the zeroth order carried by the base's continuation).
+    """
+    u = np.asarray(u, np.float64)[:, None]
+    v = np.asarray(v, np.float64)[:, None]
+    hu = 0.5 * np.abs(np.asarray(du, np.float64))[:, None]
+    hv = 0.5 * np.abs(np.asarray(dv, np.float64))[:, None]
+    e = np.asarray(edges, np.float64)
+    k = len(e) - 1
+    t = np.linspace(0.0, 1.0, subdivisions + 1)
+    bounds = np.concatenate([(e[:-1, None] + (e[1:] - e[:-1])[:, None] * t[None, :-1]).ravel(), e[-1:]])
+    inv = 1.0 / bounds
+    k0, k1 = inv[None, :-1], inv[None, 1:]
+    mid_lam = 2.0 / (inv[:-1] + inv[1:])
+    n_i = int(n)
+    mean = multislit_mean_without_zeroth if exclude_zeroth else multislit_mean
+    ms = box_mean_product(lambda lo, hi: mean(lo, hi, n_i), np.pi * np.asarray(d, np.float64),
+                          u - hu, u + hu, k0, k1, nodes)
+    zf = box_mean_product(sinc2_mean, np.pi * float(length), v - hv, v + hv, k0, k1, nodes)
+    env = sinc2(np.pi * a * u / mid_lam[None, :])
+    parts = env * ms * zf
+    if lam_power:
+        parts = parts * mid_lam[None, :] ** lam_power
+    return parts.reshape(len(u), k, subdivisions).mean(axis=2)

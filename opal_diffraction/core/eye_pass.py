@@ -17,7 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import footprint
 from .geometry import orthonormal_basis
+from .grating_directions import tangents_at
 from .gratings import diffracted_radiance, grating_frame
 from .sampler import SLOT_BOUNCE, SLOT_LIGHT, SLOT_PARAMS, SLOT_WIDTH, PixelSampler, vertex_pair
 from . import grating_layering
@@ -61,23 +63,28 @@ class EyePass:
         self.prepared = prepared
         self.caustic_map = None if light is None else light.caustics
         self.record_map = None if light is None else light.grating_records
+        # camera rays carry ray differentials (core/footprint.py) only to integrate gratings
+        self.wants_differentials = bool(prepared.gratings.any and getattr(prepared.settings, "grating_footprint", True))
 
     def trace(self, origins, directions, pix, n_pixels: int, rng: np.random.Generator,
-              u_lambda: np.ndarray | None = None, sampler_ids=None) -> TileResult:
+              u_lambda: np.ndarray | None = None, sampler_ids=None,
+              differentials: np.ndarray | None = None) -> TileResult:
         """Trace camera rays (one per sample) and return the per-pixel sum of their radiance.
 
         ``u_lambda`` (B,) in [0, 1): stratified numbers for the SAMPLE wavelength choice
         (uniform random if omitted). ``sampler_ids`` = (pixel ids (B,), sample numbers (B,),
         seed): the path vertices' numbers come from core/sampler.py's Sobol-Burley points of
-        those pixels and samples; None: pseudo-random (``rng``).
+        those pixels and samples; None: pseudo-random (``rng``). ``differentials`` (B, 5, 3):
+        the rays' differentials per pixel step (``footprint.camera_differentials``), used where
+        ``wants_differentials``; None: point samples.
         """
         if u_lambda is None:
             u_lambda = rng.random(len(pix))
         tr = _TileTrace(self, n_pixels, rng)
         if sampler_ids is None:
-            return tr.run(origins, directions, pix, u_lambda)
+            return tr.run(origins, directions, pix, u_lambda, differentials=differentials)
         tr.sampler_seed = int(sampler_ids[2])
-        return tr.run(origins, directions, pix, u_lambda, ids=sampler_ids[:2])
+        return tr.run(origins, directions, pix, u_lambda, ids=sampler_ids[:2], differentials=differentials)
 
     def trace_escapes(self, origins, directions, rng: np.random.Generator, wavelength_index=None) -> dict:
         """Follow rays through the scene's specular surfaces and report the ones that leave it.
@@ -129,6 +136,7 @@ class _TileTrace(SpecularWalker):
         # shading normals differ from the geometric ones: directions need both side tests
         self.bent = eye.prepared.corner_normals is not None or self.normal_maps
         self._n_pixels = n_pixels
+        self.footprints = eye.wants_differentials  # rays carry differentials (core/footprint.py)
         self._film = self._new_film()  # light reflected by diffuse surfaces from direct lighting
         # the other parts of the film, allocated when first written (most scenes use a few):
         self._parts: dict[str, np.ndarray] = {}  # 'background' (world and emitters seen),
@@ -188,15 +196,20 @@ class _TileTrace(SpecularWalker):
     def empty_mono(self) -> Rays:
         r = super().empty_mono()
         r.extra = self._new_state(0)
+        if self.footprints:
+            r.extra[footprint.KEY] = footprint.zero_differentials(0)
         return r
 
-    def run(self, origins, directions, pix, u_lambda, wavelength_index=None, ids=None) -> TileResult:
+    def run(self, origins, directions, pix, u_lambda, wavelength_index=None, ids=None, differentials=None) -> TileResult:
         n, b = self.n, len(pix)
         rays = Rays(origins, directions, pix.astype(np.int64), None, None,
                      np.zeros(b, np.int32), np.asarray(u_lambda, np.float64), self._new_state(b))
         if ids is not None:
             rays.extra["pid"][:] = ids[0]
             rays.extra["sid"][:] = ids[1]
+        if self.footprints:
+            rays.extra[footprint.KEY] = (footprint.zero_differentials(b) if differentials is None
+                                         else np.asarray(differentials, np.float32).reshape(b, 5, 3))
         mono = self.empty_mono()
         if wavelength_index is not None:  # start monochromatic (tools and tests)
             lam = np.broadcast_to(np.asarray(wavelength_index, np.int64), (b,)).copy()
@@ -742,7 +755,8 @@ class _TileTrace(SpecularWalker):
             sel = hit.mat == m
             r, h = rays.take(sel), hit.take(sel)
             b = len(r)
-            t, s = grating_frame(prepared.tri_grating_tangent[h.prim], h.ng, np.full(b, g.cos_rot[m]), np.full(b, g.sin_rot[m]))
+            t, s = grating_frame(tangents_at(prepared.corner_grating_tangent, prepared.tri_grating_tangent, h.prim,
+                                             h.bu, h.bv, h.ng), h.ng, np.full(b, g.cos_rot[m]), np.full(b, g.sin_rot[m]))
             over = prepared.tri_period[h.prim] if len(prepared.tri_period) else np.zeros(b, np.float32)
             period = np.where(over > 0, over, g.period[m])
             w_o = -r.d
@@ -763,7 +777,8 @@ class _TileTrace(SpecularWalker):
                 idx = idx[~occ]
                 if idx.size == 0:
                     continue
-                rad = diffracted_radiance(g, m, w_o[idx], wi[idx], t[idx], s[idx], h.ng[idx], period[idx], edges, rng)
+                rad = diffracted_radiance(g, m, w_o[idx], wi[idx], t[idx], s[idx], h.ng[idx], period[idx], edges, rng,
+                                          footprint=_footprint(r, h, idx, t, s, wi, dist))
                 e = (gfac[idx] * np.abs(cos_l[idx])).astype(np.float32)
                 spec = rad * e[:, None] * lights.spectrum[li][None, :]
                 sub = r.take(idx)
@@ -780,12 +795,23 @@ class _TileTrace(SpecularWalker):
                 chunk = self.record_map.max_pairs
                 for c0 in range(0, len(hit_of), chunk):  # (hit, lobe) pairs in bounded chunks
                     j, sl = hit_of[c0:c0 + chunk], slice(c0, c0 + chunk)
-                    rad = diffracted_radiance(g, m, w_o[j], src[sl], t[j], s[j], h.ng[j], period[j], edges, rng)
+                    rad = diffracted_radiance(g, m, w_o[j], src[sl], t[j], s[j], h.ng[j], period[j], edges, rng,
+                                              footprint=_footprint(r, h, j, t, s, src[sl], None, aligned=True))
                     spec = rad * irr[sl]
                     sub = r.take(j)
                     contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(j)), sub.lam]
                     self._accumulate(sub, contrib, self._diffraction)
 
+
+def _footprint(rays: Rays, hit: Hit, idx, t, s, wi, dist, aligned: bool = False):
+    """(du, dv) of rays[idx]'s pixel footprints at their grating hits (core/footprint.py), or
+    None where the rays carry no differentials. ``aligned``: ``wi`` is already one row per
+    entry of ``idx`` (the records' lobes, several per hit)."""
+    rd = None if rays.extra is None else rays.extra.get(footprint.KEY)
+    if rd is None:
+        return None
+    return footprint.grating_footprint(rd[idx], rays.o[idx], rays.d[idx], hit.p[idx], hit.ng[idx], t[idx], s[idx],
+                                       wi if aligned else wi[idx], None if dist is None else dist[idx])
 
 
 def _cosine_hemisphere(n: np.ndarray, rng: np.random.Generator):

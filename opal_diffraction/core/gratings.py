@@ -26,6 +26,10 @@ with the samples per pixel (the LINES case is exact per sample). Nearest neighbo
 and rows (sqrt 3 / 2) D, so its first orders sit at |q| = 2 lambda / (sqrt 3 D) (docs/physics.md
 section 3.4; tests/test_grating_radiometry.py checks it against a phasor sum over a patch).
 
+With a ``footprint`` (core/footprint.py: ray differentials), the LINES pattern is averaged over
+each sample's pixel footprint in (u, v) as well, in closed form
+(``diffraction.fraunhofer_pattern_footprint``; docs/physics.md section 3.7).
+
 A reflection grating diffracts light arriving on the viewer's side, a transmission grating light
 arriving from the other side. Its layering on the base material (grating_layering.py,
 docs/physics.md section 3.3): where the base's specular lobe is the zeroth order (a mirror under a
@@ -43,7 +47,8 @@ from scipy.special import j1
 
 from .enums import GratingType, Lattice
 from .diffraction import (
-    fraunhofer_pattern_binned, harvey_shack_factor, hexagonal_harvey_shack_factor, multislit,
+    fraunhofer_pattern_binned, fraunhofer_pattern_footprint, harvey_shack_factor, hexagonal_harvey_shack_factor,
+    multislit,
 )
 
 __all__ = ["PreparedGratings", "prepare_gratings", "triangle_tangents", "grating_frame", "diffracted_radiance",
@@ -133,7 +138,7 @@ def _airy(x):
 
 
 def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, period, edges_nm, rng,
-                        renormalise: bool = HARVEY_SHACK, exclude_zeroth: bool | None = None):
+                        renormalise: bool = HARVEY_SHACK, exclude_zeroth: bool | None = None, footprint=None):
     """Radiance per unit irradiance (1/sr) towards w_o, per wavelength bin: (B, K).
 
     ``mat``: the material (one grating's parameters per call); w_o, w_i, t, s, normal: (B, 3);
@@ -141,6 +146,10 @@ def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, p
     material's ratio a / D. ``edges_nm``: (K + 1,) bin edges. ``renormalise``: the Harvey-Shack
     factor (per sample and bin, at the bin's centre wavelength for LINES). ``exclude_zeroth``:
     leave the zeroth order out (None: as the material's layering says, ``g.zeroth_in_base``).
+    ``footprint``: (du, dv), each (B,), the extent of each sample's pixel footprint in (u, v)
+    (core/footprint.py), optionally with (su, sv), each (B,), the shift from the sample's (u, v)
+    to the footprint's centre: the LINES pattern is then averaged over it as well
+    (docs/physics.md section 3.7); None: at the point (u, v). The HEXAGONAL lattice ignores it.
     """
     if exclude_zeroth is None:
         exclude_zeroth = g.zeroth_in_base is not None and bool(g.zeroth_in_base[mat])
@@ -154,10 +163,16 @@ def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, p
     edges = np.asarray(edges_nm, np.float64)
     if not g.hexagonal[mat]:
         v = np.sum(h * s, axis=1)
+        if footprint is not None and len(footprint) == 4:  # the footprint's centre (core/footprint.py)
+            u, v = u + footprint[2], v + footprint[3]
         length = g.length[mat]
         # the bin mean of P / lambda^2 (lambda in nm), then the factor's lengths in metres
-        p = fraunhofer_pattern_binned(u, v, edges, a, d, n, length, lam_power=-2,
-                                      exclude_zeroth=exclude_zeroth) / NM**2
+        if footprint is not None and (np.any(footprint[0]) or np.any(footprint[1])):
+            p = fraunhofer_pattern_footprint(u, v, footprint[0], footprint[1], edges, a, d, n, length, lam_power=-2,
+                                             exclude_zeroth=exclude_zeroth) / NM**2
+        else:
+            p = fraunhofer_pattern_binned(u, v, edges, a, d, n, length, lam_power=-2,
+                                          exclude_zeroth=exclude_zeroth) / NM**2
         factor = (a * NM) ** 2 * (length * NM) * n / (d * NM)
         if renormalise:
             centre = 0.5 * (edges[1:] + edges[:-1])[None, :]

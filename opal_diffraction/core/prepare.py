@@ -32,6 +32,7 @@ from .environment import EnvironmentMap
 from .geometry import triangle_normals
 from .gratings import PreparedGratings, prepare_gratings, triangle_tangents
 from .grating_layering import attach_layering
+from .grating_directions import smooth_corner_tangents
 from .light_pass import LightTargets, find_light_targets
 from .lights import PreparedLights, prepare_lights
 from .materials import PreparedMaterials, prepare_materials
@@ -103,6 +104,8 @@ class PreparedScene:
     microfacet: np.ndarray | None = None
     # opal volume domains (core/opal/volume.py: lookup(points, prim)); None: the scene has none
     opal_domains: VolumeDomains | None = None
+    # (T, 3, 3) float32 smooth grating tangents per corner (core/grating_directions.py), or None
+    corner_grating_tangent: np.ndarray | None = None
 
     @property
     def grid(self) -> WavelengthGrid:
@@ -246,8 +249,11 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
     if gratings.any:  # only a scene with gratings pays for their frames
         nrm64 = triangle_normals(v, t) if nrm64 is None else nrm64
         tri_grating_tangent = triangle_tangents(nrm64, scene.tri_tangent)
+        corner_grating_tangent = smooth_corner_tangents(v, t, nrm64, tri_grating_tangent, tri_material,
+                                                        gratings.enabled[tri_material])
     else:
         tri_grating_tangent = np.zeros((0, 3), np.float32)
+        corner_grating_tangent = None
     if len(scene.corner_normals) == 0:
         corner_normals = None
     elif same_geometry and reuse.corner_normals is not None and _same_shading(reuse.scene, scene):
@@ -300,6 +306,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         corner_normals=corner_normals,
         microfacet=microfacet,
         opal_domains=scene.volume_domains(),
+        corner_grating_tangent=corner_grating_tangent,
     )
     frozen = {f.name: _read_only(getattr(prepared, f.name)) for f in fields(prepared)}
     frozen["prepare_s"] = time.perf_counter() - t0

@@ -28,7 +28,7 @@ BACKENDS = ("auto", "embree", "numpy", "brute")
 #: Settings only the eye pass reads: changing them keeps a prepared scene and its light pass.
 EYE_ONLY_SETTINGS = frozenset({"samples", "round_samples", "tile_size", "filter_width", "time_limit", "spectral_exr",
                                "diffuse_bounces", "glossy_bounces", "transmission_bounces", "adaptive_threshold",
-                               "adaptive_min_samples"})
+                               "adaptive_min_samples", "grating_footprint"})
 
 #: The wavelength grid holds 2 to 4001 samples (360-830 nm at 0.1175 nm at most); below 16 the
 #: colours are coarse (a warning, not an error).
@@ -117,6 +117,9 @@ class RenderSettings:
     # Cycles' default when on is 0.01. Min samples 0: automatic, as Cycles (64 at 0.01)
     adaptive_threshold: float = 0.0
     adaptive_min_samples: int = 0
+    # gratings: average the pattern over each sample's pixel footprint (ray differentials,
+    # docs/physics.md section 3.7); False: point-sample it at the sample's (u, v)
+    grating_footprint: bool = True
 
     def __post_init__(self):
         # normalise number types only (never raise here: validate() names what is wrong)
@@ -210,6 +213,8 @@ class RenderSettings:
             raise SceneError(f"dispersion sampling must be SPLIT or SAMPLE, got {self.dispersion_sampling!r}")
         if not isinstance(self.spectral_exr, (str, os.PathLike)):
             raise SceneError(f"spectral EXR must be a path (a string), got {type(self.spectral_exr).__name__}")
+        if not isinstance(self.grating_footprint, (bool, np.bool_)):
+            raise SceneError(f"grating footprint must be True or False, got {self.grating_footprint!r}")
         _validate_backend(self.backend)
         self._validate_grid()
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import FilterSampler, generate_rays, pixel_samples
+from .footprint import camera_differentials, filter_box_width
 from .settings import RenderSettings
 
 __all__ = ["EYE_PASS_STREAM", "LIGHT_PASS_SHARE", "MAX_TILE_RAYS", "round_size", "tiles_of", "EyeWork",
@@ -119,11 +120,16 @@ def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: i
     if pixels is not None:
         xs, ys = xs[pixels], ys[pixels]
     # low-discrepancy numbers per pixel (core/sampler.py), numbered on across rounds
-    ids = (ys.astype(np.int64) * int(eye.prepared.scene.camera.width) + xs).astype(np.uint32)
+    cam = eye.prepared.scene.camera
+    ids = (ys.astype(np.int64) * int(cam.width) + xs).astype(np.uint32)
     first = int(sum(work.rounds[:r_index]))
-    sx, sy, sl, pidx = pixel_samples(xs.astype(np.float64), ys.astype(np.float64), work.rounds[r_index], rng, filt,
-                                     qmc=(ids, first, work.seed))
-    o, d = generate_rays(eye.prepared.scene.camera, sx, sy)
     spp = work.rounds[r_index]
+    sx, sy, sl, pidx = pixel_samples(xs.astype(np.float64), ys.astype(np.float64), spp, rng, filt,
+                                     qmc=(ids, first, work.seed))
+    o, d = generate_rays(cam, sx, sy)
+    rd = None
+    if eye.wants_differentials:  # ray differentials for gratings (core/footprint.py)
+        rd = camera_differentials(cam, d, (sx - xs[pidx] - 0.5, sy - ys[pidx] - 0.5), filter_box_width(filt.width))
     return eye.trace(o, d, pidx, len(xs), rng, u_lambda=sl,
-                     sampler_ids=(ids[pidx], np.tile(np.arange(first, first + spp), len(xs)), work.seed))
+                     sampler_ids=(ids[pidx], np.tile(np.arange(first, first + spp), len(xs)), work.seed),
+                     differentials=rd)

@@ -38,6 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from . import footprint
 from .geometry import interpolate_corners
 from .materials import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
 from .optics import fresnel_dielectric, reflect, refract
@@ -287,6 +288,9 @@ class SpecularWalker:
                 out.append(self.after_delta(r, transmitted))
         scattered = self.scatter(rays, hit, kind, can_bounce, rng)
         if scattered is not None and len(scattered):
+            if scattered.extra is not None and footprint.KEY in scattered.extra:
+                # a diffuse or rough bounce: no footprint any more (a point sample)
+                scattered.extra[footprint.KEY] = footprint.zero_differentials(len(scattered))
             if (scattered.lam is None) == (rays.lam is None):
                 out.append(scattered)
             else:  # a white population's mono rays: traced with the mono population
@@ -333,9 +337,14 @@ class SpecularWalker:
         return valid_specular_normal(-rays.d, hit.ng, hit.ns)
 
     def _mirror(self, rays: Rays, hit: Hit) -> Rays:
-        d = reflect(rays.d, self._specular_normal(rays, hit))
+        ns = self._specular_normal(rays, hit)
+        d = reflect(rays.d, ns)
         o = hit.p + hit.eps[:, None] * hit.ng
-        return rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit))
+        out = rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit))
+        if out.extra is not None and footprint.KEY in out.extra:  # ray differentials (core/footprint.py)
+            out.extra[footprint.KEY] = footprint.reflect_differentials(rays.extra[footprint.KEY], rays.o, rays.d,
+                                                                       hit.p, ns)
+        return out
 
     def _dielectric(self, rays: Rays, hit: Hit, rng) -> tuple[Rays, np.ndarray]:
         """Fresnel-sampled reflection or refraction: (the rays going on, refracted (B,) bool)."""
@@ -357,7 +366,11 @@ class SpecularWalker:
         # offset to the side the new direction leaves on (a refraction about ng can be a TIR)
         side = np.where(np.einsum("ij,ij->i", d, hit.ng) > 0, 1.0, -1.0).astype(np.float32)
         o = hit.p + (hit.eps * side)[:, None] * hit.ng
-        return rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit)), side < 0
+        out = rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit))
+        if out.extra is not None and footprint.KEY in out.extra:  # ray differentials (core/footprint.py)
+            out.extra[footprint.KEY] = footprint.refract_differentials(rays.extra[footprint.KEY], rays.o, rays.d,
+                                                                       hit.p, ns, d, eta)
+        return out, side < 0
 
     def _split(self, rays: Rays, hit: Hit, rng):
         """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit."""
