@@ -349,8 +349,10 @@ def test_mirror_base_sees_a_sized_light_once_in_the_zeroth_order():
                    coherence_length=100.0) if grating else base
         s = Scene(materials=Materials.from_list([mat]))
         s.add_mesh(*primitives.quad((0, 0, 0), (40.0, 0, 0), (0, 40.0, 0)), material=0, tangent=(1, 0, 0))
-        s.lights = Lights.from_list([{"kind": "POINT", "position": (0.0, 0.5, 1.0), "power": 10.0, "radius": 0.4}])
-        s.camera = Camera.look_at((0.0, -0.5, 1.0), (0, 0, 0), lens=50, width=16, height=16)
+        # radius 0.15 m: the light spans |u| < 0.3 about its mirror image, so no other order of it
+        # (the first at u = lambda / D >= 0.54) falls on the pixels that see its reflection
+        s.lights = Lights.from_list([{"kind": "POINT", "position": (0.0, 0.5, 1.0), "power": 10.0, "radius": 0.15}])
+        s.camera = Camera.look_at((0.0, -0.5, 1.0), (0, 0, 0), lens=50, width=40, height=40)
         return s
 
     st = RenderSettings(samples=1, threads=1, filter_width=0.0, light_paths=0)

@@ -246,7 +246,9 @@ def test_a_prism_before_the_grating_leaves_each_band_its_own_snell_direction():
     (one mean direction per element would give every wavelength the same direction)."""
     from grating_record_scenes import WEDGE_ALPHA, sun_through_wedge_scene
 
-    prepared = prepare(sun_through_wedge_scene(), RenderSettings(light_paths=60_000, threads=1))
+    # three bounces: through the wedge (2) onto the grating, whose diffracted light (the light
+    # pass scatters at gratings, docs/physics.md section 3.10) then stops before it can come back
+    prepared = prepare(sun_through_wedge_scene(), RenderSettings(light_paths=60_000, threads=1, max_bounces=3))
     rec = run_light_pass(prepared).grating_records
     n_glass = prepared.materials.ior[1].astype(np.float64)
     # Snell at the exit face: incidence alpha inside the glass, outward normal (sin a, 0, -cos a);

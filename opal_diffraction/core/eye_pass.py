@@ -590,6 +590,8 @@ class _TileTrace(SpecularWalker):
     def _accumulate(self, rays: Rays, contrib, film=None):
         """Add per-ray contributions to their pixels: (B, n) for white rays, (B,) for mono."""
         n = self.n
+        if len(rays) == 0:
+            return
         film = self._film if film is None else film
         if rays.lam is not None:
             np.add.at(film, rays.pix * n + rays.lam, contrib)
