@@ -101,6 +101,7 @@ GRATING_TYPE_ITEMS = _items(GratingType, {
 LATTICE_ITEMS = _items(Lattice, {
     Lattice.LINES: ("Lines", "Parallel slits (a 1D ruled grating)"),
     Lattice.HEXAGONAL: ("Hexagonal", "A 2D hexagonal lattice of scatterers (opal's close-packed spheres)"),
+    Lattice.BRAGG: ("Bragg (FCC Opal)", "Volume Bragg reflection from the (111) planes of an FCC lattice of spheres"),
 })
 
 GRATING_DIRECTION_ITEMS = _items(GratingDirection, {

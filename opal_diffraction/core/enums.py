@@ -65,6 +65,7 @@ class GratingType(IntEnum):
 class Lattice(IntEnum):
     LINES = 0
     HEXAGONAL = 1
+    BRAGG = 2  # FCC opal: volume Bragg reflection from the (111) planes (core/opal/bragg_bsdf.py)
 
 
 class GratingDirection(IntEnum):

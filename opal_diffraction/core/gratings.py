@@ -64,7 +64,7 @@ class PreparedGratings:
 def prepare_gratings(m) -> PreparedGratings:
     rot = np.asarray(m.rotation, np.float64)
     return PreparedGratings(
-        enabled=np.asarray(m.grating) != 0,
+        enabled=(np.asarray(m.grating) != 0) & (np.asarray(m.lattice) != Lattice.BRAGG),  # BRAGG: a volume lobe
         transmission=np.asarray(m.grating_type) == GratingType.TRANSMISSION,
         hexagonal=np.asarray(m.lattice) == Lattice.HEXAGONAL,
         period=np.asarray(m.period, np.float64),
