@@ -317,9 +317,10 @@ def test_sampler_matches_pdf_chi_square(theta, tilt, spread):
     theta_max = min(np.pi, np.radians(6 * spread * 1.4) + 0.1)
     _, _, total = chi2_directions(dirs[:10], pdf, mirror, theta_max=theta_max, n_theta=24, n_phi=24, sub=24)
     z = (ok.sum() - n * total) / np.sqrt(n * total * (1 - total) + 1e-12)
-    assert abs(z) < norm.isf(ALPHA / 2) + 0.01 * n / np.sqrt(n * total * (1 - total) + 1e-12) * 0.1, (ok.mean(), total)
+    assert abs(z) < norm.isf(ALPHA / 2), (ok.mean(), total, z)
     pval, info, _ = chi2_directions(dirs, lambda d: pdf(d) / total, mirror, theta_max=theta_max, n_theta=24,
                                     n_phi=24, sub=24)
+    print(f"theta {theta} tilt {tilt} spread {spread}: leaves {ok.mean():.4f} vs {total:.4f}; {info}")
     assert pval > ALPHA, info
 
 
@@ -399,3 +400,37 @@ def test_render_shows_the_band_and_its_blue_shift(renders):
     assert abs(c1 / expect1 - 1) < 0.02, (c1, expect1)
     assert abs((c1 / c0) / (expect1 / expect0) - 1) < 0.02
     assert c1 < 0.95 * c0
+
+
+@pytest.mark.parametrize("world_map", [False, True])
+def test_world_light_through_the_lobe_is_its_albedo(world_map):
+    """A black BRAGG plane (mosaic 10 degrees) in a uniform white world, seen by an orthographic
+    camera at 30 degrees: the radiance is A(wo, lambda) x the world's radiance, A the lobe's
+    albedo by quadrature of evaluate(). With a uniform world only the lobe's sampled continuation
+    finds it; with a (constant) world map next-event estimation and the continuation share it by
+    the power heuristic (docs/physics.md section 5.8): both sum to the same (Z-test over pixels
+    of the band-integrated radiance, 4.5 sigma, plus 1 % for the quadrature)."""
+    from opal_diffraction.core.prepare import prepare
+    mats = Materials.from_list([{"kind": "DIFFUSE", "color": (0, 0, 0), "grating": 1, "lattice": "BRAGG",
+                                 "sphere_diameter": 250.0, "mosaic_spread": 10.0}])
+    s = Scene(materials=mats)
+    s.add_mesh(*primitives.quad((0, 0, 0), (10.0, 0, 0), (0, 10.0, 0)), material=0)
+    th = np.radians(30.0)
+    s.camera = Camera.look_at(3.0 * np.array([-np.sin(th), 0, np.cos(th)]), (0, 0, 0), up=(0, 1, 0), kind="ORTHO",
+                              ortho_scale=0.2, width=8, height=8)
+    s.world_color = np.ones(3, np.float32)
+    if world_map:
+        s.world_image = np.ones((16, 32, 3), np.float32)
+    st = RenderSettings(samples=32, threads=1, filter_width=0.0, light_paths=0)
+    res = render(s, st)
+    prep = prepare(s, st)
+    edges = prep.grid.bin_edges
+    wo = np.array([-np.sin(th), 0, np.cos(th)])
+    tab = band_table(N_S, 1.0, 40)
+    lb = BraggLobe(Z[None, :], np.array([250.0]), np.array([tab.n_eff]), np.array([kappa_from_spread(10.0)]), [tab],
+                   np.zeros(1, np.int64))
+    expect = float(np.sum(quadrature_albedo(lb, wo, edges, n_t=600, n_p=600) * prep.world_spectrum))
+    per_pixel = res.spectral.reshape(-1, len(res.wavelengths)).sum(axis=1)
+    mean, se = per_pixel.mean(), per_pixel.std(ddof=1) / np.sqrt(len(per_pixel))
+    print(f"world map {world_map}: {mean:.5g} +- {se:.2g}, expected {expect:.5g}")
+    assert abs(mean - expect) < 4.5 * se + 0.01 * expect, (mean, se, expect)
