@@ -434,3 +434,77 @@ def test_world_light_through_the_lobe_is_its_albedo(world_map):
     mean, se = per_pixel.mean(), per_pixel.std(ddof=1) / np.sqrt(len(per_pixel))
     print(f"world map {world_map}: {mean:.5g} +- {se:.2g}, expected {expect:.5g}")
     assert abs(mean - expect) < 4.5 * se + 0.01 * expect, (mean, se, expect)
+
+
+def flash_scene():
+    """A white floor lit by a point light and by its Bragg flash off a vertical black BRAGG panel
+    (mosaic 15 degrees) beside it, seen from above (the panel edge-on, so only the floor is in
+    view); the floor's only indirect light is the flash."""
+    mats = Materials.from_list([{"kind": "DIFFUSE", "color": (0.8, 0.8, 0.8)},
+                                {"kind": "DIFFUSE", "color": (0, 0, 0), "grating": 1, "lattice": "BRAGG",
+                                 "sphere_diameter": 250.0, "mosaic_spread": 15.0}])
+    s = Scene(materials=mats)
+    s.add_mesh(*primitives.quad((0, 0, 0), (8.0, 0, 0), (0, 8.0, 0)), material=0)
+    s.add_mesh(*primitives.quad((0.6, 0, 0.25), (0, 0, 0.4), (0, 0.6, 0)), material=1)  # faces -x
+    s.lights = Lights.from_list([{"kind": "POINT", "position": (0.0, 0.0, 0.8), "power": 100.0}])
+    m = np.eye(4)
+    m[:3, 3] = (-0.5, 0, 5.0)
+    s.camera = Camera(matrix=m, kind="ORTHO", ortho_scale=2.4, width=24, height=24)
+    return s
+
+
+def predicted_flash_rgb(prep, n=2_000_000, seed=0):
+    """Sum over the image's pixels of the floor's radiance from the flash alone, by Monte Carlo
+    from the light's side written here: uniform points on the panel, the point light's
+    irradiance I cos / r^2 there (I = the prepared light's spectral intensity, docs/physics.md
+    section 7.1), one lobe direction each (weight f cos / pdf), kept where it lands on the floor
+    inside the image; radiance summed over pixels = (rho / pi) flux / pixel area."""
+    rng = np.random.default_rng(seed)
+    y, z = rng.uniform(-0.3, 0.3, n), rng.uniform(0.05, 0.45, n)
+    p = np.stack([np.full(n, 0.6), y, z], 1)
+    d = np.array([0.0, 0.0, 0.8]) - p
+    r2 = (d * d).sum(1)
+    wl = d / np.sqrt(r2)[:, None]
+    nrm = np.tile([-1.0, 0, 0], (n, 1))
+    lb = lobe(n, axis=[-1.0, 0, 0], spread=15.0)
+    wo, weight, _, ok = lb.sample(wl, nrm, rng.random((n, 2)), prep.grid.bin_edges)
+    down = ok & (wo[:, 2] < 0)
+    x = p + (-p[:, 2] / np.where(down, wo[:, 2], -1.0))[:, None] * wo
+    seen = down & (x[:, 0] > -1.7) & (x[:, 0] < 0.7) & (np.abs(x[:, 1]) < 1.2)
+    flux = ((-wl @ np.array([1.0, 0, 0])) / r2 * 0.24 / n * seen)[:, None] * weight
+    radiance_sum = 0.8 / np.pi * flux.sum(0) / (2.4 / 24) ** 2 * prep.lights.spectrum[0]
+    return float(prep.conv.to_rgb(radiance_sum[None])[0].sum())
+
+
+@pytest.mark.slow
+def test_light_pass_flash_matches_the_light_side_prediction():
+    """docs/physics.md section 5.8: the light pass scatters light paths off the BRAGG planes; the
+    flash it deposits on the floor (the Caustics pass, summed over the image) against
+    predicted_flash_rgb, within 5 % (about 4 x the render-to-render scatter, 1.6 % measured over
+    four seeds at 300 000 paths). The eye pass leaves those paths out (no second count in Indirect beyond the flash's
+    own second-order light, which the prediction does not hold)."""
+    from opal_diffraction.core.prepare import prepare
+    s = flash_scene()
+    st = RenderSettings(samples=16, threads=1, light_paths=1_000_000, filter_width=0.0)
+    lp = render(s, st)
+    got = float(lp.passes["Caustics"].sum())
+    expect = predicted_flash_rgb(prepare(s, st))
+    print(f"flash: light pass {got:.4g}, light-side prediction {expect:.4g}")
+    assert abs(got / expect - 1) < 0.05, (got, expect)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(reason="open: the eye pass's own estimate of the flash (floor bounce, next-event "
+                          "estimation through the lobe) is 4-5 % above the light pass and the light-side "
+                          "prediction, for mosaic 5-40 degrees (docs/physics.md section 12)", strict=False)
+def test_eye_pass_flash_matches_the_light_side_prediction():
+    """The same flash from the eye pass alone (no light pass; glossy bounces 0 so only light ->
+    panel -> floor -> eye): eight renders' mean within 4 standard errors + 1 % of the prediction."""
+    from opal_diffraction.core.prepare import prepare
+    s = flash_scene()
+    eye = [float(render(s, RenderSettings(samples=64, threads=1, light_paths=0, filter_width=0.0, seed=k,
+                                          glossy_bounces=0)).passes["Indirect"].sum()) for k in range(8)]
+    mean, se = np.mean(eye), np.std(eye, ddof=1) / np.sqrt(len(eye))
+    expect = predicted_flash_rgb(prepare(s, RenderSettings(light_paths=0)))
+    print(f"flash: eye pass {mean:.4g} +- {se:.2g}, light-side prediction {expect:.4g}")
+    assert abs(mean - expect) < 4 * se + 0.01 * expect, (mean, se, expect)

@@ -55,6 +55,7 @@ class PreparedGratings:
     length: np.ndarray        # (M,) nm (coherence length)
     cos_rot: np.ndarray       # (M,)
     sin_rot: np.ndarray       # (M,)
+    bragg: np.ndarray | None = None  # (M,) bool: the BRAGG lattice (core/opal/bragg_shading.py), not a surface grating
 
     @property
     def any(self) -> bool:
@@ -73,6 +74,7 @@ def prepare_gratings(m) -> PreparedGratings:
         length=np.asarray(m.coherence_length, np.float64) * 1e3,  # um -> nm
         cos_rot=np.cos(rot),
         sin_rot=np.sin(rot),
+        bragg=(np.asarray(m.grating) != 0) & (np.asarray(m.lattice) == Lattice.BRAGG),
     )
 
 

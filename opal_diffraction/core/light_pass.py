@@ -53,6 +53,7 @@ from .elements import ElementLayout, IlluminationMap
 from .geometry import orthonormal_basis, triangle_areas
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIELECTRIC, DIFFUSE, MIRROR
+from .opal.bragg_shading import BraggShading
 from .transport import Hit, Rays, SpecularWalker
 
 __all__ = ["CasterObjects", "caster_objects", "LightTargets", "find_light_targets", "LightPassResult",
@@ -156,6 +157,10 @@ class _LightTrace(SpecularWalker):
         self.illum = illum
         self.records = records
         self.deposited = 0
+        self.bragg = BraggShading.for_prepared(prepared)  # FCC opal lobes scatter light paths on
+
+    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
+        return None if self.bragg is None else self.bragg.scatter_light(rays, hit, can_bounce, rng)
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
         if self.records is not None:
@@ -230,6 +235,8 @@ def find_light_targets(vertices, triangles, tri_material, materials, gratings, l
     caster = np.isin(mk, [MIRROR, DIELECTRIC])
     if microfacet is not None and len(tri_material):
         caster &= ~np.asarray(microfacet)[tri_material]
+    if getattr(gratings, "bragg", None) is not None and len(tri_material):  # opal flashes light the table
+        caster |= gratings.bragg[tri_material]
     grating = gratings.enabled[tri_material] if len(tri_material) else np.zeros(0, bool)
     world_lum = 0.0 if world_spectrum is None else float(np.asarray(world_spectrum, np.float64) @ conv.cmf_weights[:, 1])
     emitters = len(lights) > 0 or mesh_lights is not None or world_lum > 0

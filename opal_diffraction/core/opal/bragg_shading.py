@@ -111,7 +111,14 @@ class BraggShading:
             return
         r, h = rays.take(sel), hit.take(sel)
         lobe = self.lobe(h)
-        self._next_events(trace, r, h, lobe, rng)
+        # a path from a caustic receiver (through mirrors, glass or other opal) to a light via
+        # these planes is the light pass's (it scatters off BRAGG planes, scatter_light)
+        nee = r.extra["caustic"] == 0 if trace.caustics_cover_lights else np.ones(len(r), bool)
+        if nee.all():
+            self._next_events(trace, r, h, lobe, rng)
+        elif nee.any():
+            k = np.flatnonzero(nee)
+            self._next_events(trace, r.take(nee), h.take(nee), lobe.take(k), rng)
         wo = -np.asarray(r.d, np.float64)
         body = 1.0 - self._clamped_albedo(lobe, wo, h.ns, r.lam)
         n = len(self.edges) - 1
@@ -155,13 +162,38 @@ class BraggShading:
         s["nd"] = np.minimum(s["nd"] + 1, 100).astype(np.int8)
         s["glossy"] = s["glossy"] + 1
         s["pdf"] = pdf.astype(np.float32)
-        s["caustic"] = np.zeros(len(nxt), np.int8)
+        # like a specular bounce: after a caustic receiver, a caustic path (the light pass's)
+        s["caustic"] = np.where(s["caustic"] >= 1, np.int8(2), np.int8(0)).astype(np.int8)
         lim = trace.limits
         s["final"] = ((s["diffuse"] > lim[1]) | (s["glossy"] > lim[2]) | (s["transmission"] > lim[3])
                       | (nxt.depth > lim[0]))
         if out is None or not len(out):
             return nxt
         return Rays.concat(out, nxt)
+
+    def scatter_light(self, rays, hit, can_bounce, rng):
+        """The light pass's bounce at BRAGG planes (core/light_pass.py): light arriving from
+        outside the stone goes on along a direction drawn from the lobe, its flux times the
+        lobe's f cos / pdf (the lobe is reciprocal, so sampling it from the light's side is
+        light tracing's own sampling); counted as a specular bounce, so what it lights is a
+        caustic. The body's share (1 - albedo) is not taken from the light that enters a clear
+        body (docs/physics.md section 12)."""
+        from ..transport import Rays  # noqa: F401  (the walker's type)
+        sel = self.mask[hit.mat] & hit.front & can_bounce
+        if rays.lam is None:
+            sel &= ~self.prepared.materials.dispersive[hit.mat]
+        if not sel.any():
+            return None
+        r, h = rays.take(sel), hit.take(sel)
+        lobe = self.lobe(h)
+        wi, weight, _, ok = lobe.sample(-np.asarray(r.d, np.float64), np.asarray(h.ns, np.float64),
+                                        rng.random((len(r), 2)), self.edges, r.lam)
+        ok &= (weight.max(axis=1) > 0) if r.lam is None else (weight > 0)
+        if not ok.any():
+            return None
+        r, h, wi, weight = r.take(ok), h.take(ok), wi[ok], weight[ok]
+        o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
+        return r.moved(o, wi, r.weighted(weight).astype(np.float32))
 
     def _next_events(self, trace, rays, hit, lobe, rng) -> None:
         """One sample of every light, of the emissive meshes and of the world map, each by shadow
