@@ -26,6 +26,7 @@ import numpy as np
 
 from ..enums import Lattice
 from ..lights import light_pdf, sample_light
+from ..transport import Rays
 from .bragg import effective_index
 from .bragg_bsdf import BraggLobe, kappa_from_spread
 from .multilayer import band_table
@@ -35,6 +36,15 @@ __all__ = ["BraggShading", "bragg_materials"]
 #: The body keeps at least this share of the throughput (1 - albedo is divided out again for the
 #: lobe's own continuation, after Russian roulette rescaled the weights).
 _MIN_BODY = 1e-3
+
+
+def _light_weight(p_light, p_lobe) -> np.ndarray:
+    """Veach's power heuristic for a light sample against the lobe's sampling (as the eye pass's
+    _power_heuristic with light_first; not imported from it: the eye pass imports this module)."""
+    a, b = np.asarray(p_light, np.float64), np.asarray(p_lobe, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = np.where(a * a + b * b > 0, a * a / (a * a + b * b), 1.0)
+    return np.where(np.isfinite(w), w, 1.0).astype(np.float32)
 
 
 def bragg_materials(materials) -> np.ndarray:
@@ -133,7 +143,6 @@ class BraggShading:
 
     def continue_paths(self, trace, rays, hit, can_bounce, out):
         """``out`` (the body's bounces, or None) joined with the lobe's sampled continuations."""
-        from ..transport import Rays
         pending, self._pending = self._pending, None
         if pending is None or pending[0] is not hit:
             return out
@@ -178,7 +187,6 @@ class BraggShading:
         light tracing's own sampling); counted as a specular bounce, so what it lights is a
         caustic. The body's share (1 - albedo) is not taken from the light that enters a clear
         body (docs/physics.md section 12)."""
-        from ..transport import Rays  # noqa: F401  (the walker's type)
         sel = self.mask[hit.mat] & hit.front & can_bounce
         if rays.lam is None:
             sel &= ~self.prepared.materials.dispersive[hit.mat]
@@ -199,7 +207,6 @@ class BraggShading:
         """One sample of every light, of the emissive meshes and of the world map, each by shadow
         ray, the lobe evaluated there (power heuristic against the lobe's sampling where the light
         can also be found by it); into the film part of the path's vertex count + 1."""
-        from ..eye_pass import _power_heuristic
         prepared = self.prepared
         lights = prepared.lights
         wo = -np.asarray(rays.d, np.float64)
@@ -226,7 +233,7 @@ class BraggShading:
             f_cos, p_lobe = lobe.evaluate(wo, wi, ns, self.edges, rays.lam)
             scale = np.asarray(g, np.float32)
             if p_light is not None:
-                scale = scale * _power_heuristic(p_light, p_lobe, light_first=True)
+                scale = scale * _light_weight(p_light, p_lobe)
             peak = f_cos.max(axis=1) if rays.lam is None else f_cos
             live = np.flatnonzero((scale > 0) & (peak > 0))
             if live.size == 0:
