@@ -37,7 +37,7 @@ def test_engine_id_and_contract_names():
         assert rna[name].description, f"{name} has no tooltip"
     assert set(sc.opal.bl_rna.properties["dispersion_sampling"].enum_items.keys()) == {"SPLIT", "SAMPLE"}
     assert set(rna["grating_type"].enum_items.keys()) == {"REFLECTION", "TRANSMISSION"}
-    assert set(rna["lattice"].enum_items.keys()) == {"LINES", "HEXAGONAL"}
+    assert set(rna["lattice"].enum_items.keys()) == {"LINES", "HEXAGONAL", "BRAGG"}
     assert set(rna["grating_direction"].enum_items.keys()) == {"UV", "OBJECT_X", "ATTRIBUTE"}
 
 
@@ -61,7 +61,7 @@ def test_enum_items_have_stable_explicit_indices():
     m = bpy.types.Material.bl_rna.properties["opal"].fixed_type.properties
     assert {i.identifier: i.value for i in m["dispersion"].enum_items} == DISPERSION_MODELS
     assert {i.identifier: i.value for i in m["grating_type"].enum_items} == {"REFLECTION": 0, "TRANSMISSION": 1}
-    assert {i.identifier: i.value for i in m["lattice"].enum_items} == {"LINES": 0, "HEXAGONAL": 1}
+    assert {i.identifier: i.value for i in m["lattice"].enum_items} == {"LINES": 0, "HEXAGONAL": 1, "BRAGG": 2}
     assert {i.identifier: i.value for i in m["grating_direction"].enum_items} == {"UV": 0, "OBJECT_X": 1, "ATTRIBUTE": 2}
     s = bpy.types.Scene.bl_rna.properties["opal"].fixed_type.properties
     assert {i.identifier: i.value for i in s["dispersion_sampling"].enum_items} == {"SAMPLE": 0, "SPLIT": 1}
