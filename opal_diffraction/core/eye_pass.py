@@ -30,6 +30,7 @@ from .materials import DIFFUSE
 from .surface import shading_normal, surface_emission, surface_reflectance, surface_roughness
 from .transport import MICROFACET, Hit, Rays, SpecularWalker, shading_normals
 from . import bsdf
+from .opal.bragg_shading import BraggShading
 
 __all__ = ["EyePass", "TileResult"]
 
@@ -133,6 +134,7 @@ class _TileTrace(SpecularWalker):
         self.mesh_lights = eye.prepared.mesh_lights
         self.normal_maps = eye.prepared.textures.uses("normal")
         self._micro = None  # (hit, mask, SurfaceParams) of the microfacet hits on_hit shaded
+        self.bragg = BraggShading.for_prepared(eye.prepared)  # FCC opal lobes (None: no BRAGG material)
         # shading normals differ from the geometric ones: directions need both side tests
         self.bent = eye.prepared.corner_normals is not None or self.normal_maps
         self._n_pixels = n_pixels
@@ -317,6 +319,8 @@ class _TileTrace(SpecularWalker):
                 ns = hit.ns.copy()
                 ns[bend] = shading_normal(prepared, hit.take(bend))
                 hit.ns = ns
+        if self.bragg is not None:  # the opal lobe, before its body is shaded (core/opal/bragg_shading.py)
+            self.bragg.shade(self, rays, hit, live, rng)
         self._micro = None
         if self.any_microfacet:  # rough and layered surfaces: core/bsdf.py, one lobe drawn per hit
             micro = live & self.microfacet[hit.mat]
@@ -391,6 +395,10 @@ class _TileTrace(SpecularWalker):
         return rays.take(ok)
 
     def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
+        out = self._scatter_body(rays, hit, kind, can_bounce, rng)
+        return out if self.bragg is None else self.bragg.continue_paths(self, rays, hit, can_bounce, out)
+
+    def _scatter_body(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
         """The bounces at non-specular surfaces: rough and layered ones through core/bsdf.py
         (``_scatter_microfacet``, with the lobe on_hit drew), Lambertian ones by a
         cosine-weighted direction (the BRDF's importance sampling, weight = albedo). A path at its diffuse or total bounce limit still takes one

@@ -78,6 +78,7 @@ class PreparedGratings:
     # the layering on the base (grating_layering.attach_layering; None until prepare sets it):
     # the zeroth order is the base's specular continuation, so the diffraction leaves it out
     zeroth_in_base: np.ndarray | None = None  # (M,) bool
+    bragg: np.ndarray | None = None  # (M,) bool: the BRAGG lattice (core/opal/bragg_shading.py), not a surface grating
 
     @property
     def any(self) -> bool:
@@ -87,7 +88,7 @@ class PreparedGratings:
 def prepare_gratings(m) -> PreparedGratings:
     rot = np.asarray(m.rotation, np.float64)
     return PreparedGratings(
-        enabled=np.asarray(m.grating) != 0,
+        enabled=(np.asarray(m.grating) != 0) & (np.asarray(m.lattice) != Lattice.BRAGG),  # BRAGG: a volume lobe
         transmission=np.asarray(m.grating_type) == GratingType.TRANSMISSION,
         hexagonal=np.asarray(m.lattice) == Lattice.HEXAGONAL,
         period=np.asarray(m.period, np.float64),
@@ -96,6 +97,7 @@ def prepare_gratings(m) -> PreparedGratings:
         length=np.asarray(m.coherence_length, np.float64) * 1e3,  # um -> nm
         cos_rot=np.cos(rot),
         sin_rot=np.sin(rot),
+        bragg=(np.asarray(m.grating) != 0) & (np.asarray(m.lattice) == Lattice.BRAGG),
     )
 
 

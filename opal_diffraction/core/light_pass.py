@@ -59,6 +59,7 @@ from .geometry import orthonormal_basis, triangle_areas
 from .grating_sampling import diffracting, scatter_at_gratings, scattering_materials
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIELECTRIC, DIFFUSE, MIRROR
+from .opal.bragg_shading import BraggShading
 from .transport import GRATING, Hit, Rays, SpecularWalker
 
 __all__ = ["CasterObjects", "caster_objects", "LightTargets", "find_light_targets", "LightPassResult",
@@ -162,6 +163,7 @@ class _LightTrace(SpecularWalker):
         self.illum = illum
         self.records = records
         self.deposited = 0
+        self.bragg = BraggShading.for_prepared(prepared)  # FCC opal lobes scatter light paths on
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
         if self.records is not None:
@@ -198,10 +200,19 @@ class _LightTrace(SpecularWalker):
     def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
         """The orders of the gratings' paths (mono rays; section 3.10): diffracted paths are
         specular ones, so they deposit caustics where they land on diffuse surfaces."""
+        opal = None if self.bragg is None else self.bragg.scatter_light(rays, hit, can_bounce, rng)  # FCC opal lobes
         sel = (kind == GRATING) & can_bounce
         if not sel.any():
-            return None
-        return scatter_at_gratings(self, rays.take(sel), hit.take(sel), rng)
+            return opal
+        orders = scatter_at_gratings(self, rays.take(sel), hit.take(sel), rng)
+        if opal is None or not len(opal):
+            return orders
+        if orders is None or not len(orders):
+            return opal
+        if (orders.lam is None) == (opal.lam is None):
+            return Rays.concat(opal, orders)
+        self._spawned.append(orders)  # white paths' orders are mono rays: traced with the mono population
+        return opal
 
     def survives(self, rays: Rays, rng) -> np.ndarray:
         ok = rays.depth < self.prepared.settings.max_bounces
@@ -255,6 +266,8 @@ def find_light_targets(vertices, triangles, tri_material, materials, gratings, l
         caster &= ~np.asarray(microfacet)[tri_material]
     if len(tri_material):
         caster |= scattering_materials(gratings, materials.kind, microfacet)[tri_material]
+    if getattr(gratings, "bragg", None) is not None and len(tri_material):  # opal flashes light the table
+        caster |= gratings.bragg[tri_material]
     world_lum = 0.0 if world_spectrum is None else float(np.asarray(world_spectrum, np.float64) @ conv.cmf_weights[:, 1])
     emitters = len(lights) > 0 or mesh_lights is not None or world_lum > 0
     aimed = caster if light_paths > 0 and emitters else np.zeros_like(caster)

@@ -36,6 +36,8 @@ def plan_render(prepared) -> RenderPlan:
     used = np.unique(prepared.tri_material) if len(prepared.tri_material) else np.zeros(0, np.int64)
     kinds = prepared.materials.kind[used] if len(used) else np.zeros(0, np.int32)
     specular = bool(np.isin(kinds, [MIRROR, DIELECTRIC]).any())
+    bragg = getattr(prepared.gratings, "bragg", None)  # FCC opal planes send light paths on too
+    specular |= bool(bragg is not None and len(used) and bragg[used].any())
     # line gratings scatter their orders in the light pass too (docs/physics.md section 3.10)
     scatters = specular or bool(prepared.light_targets.caster_mask.any())
     dispersion = bool(prepared.materials.dispersive[used].any()) if len(used) else False

@@ -99,13 +99,17 @@ _MATERIAL_COLUMNS = {
     "specular_ior_level": (np.float32, (), 0.0, None),
     "specular_tint": (np.float32, (3,), (1.0, 1.0, 1.0), None),
     "conductor_fresnel": (np.int32, (), "CONSTANT", CONDUCTOR_FRESNELS),
-    # the BRAGG lattice (FCC opal; docs/physics.md section 5.2)
+    # the BRAGG (FCC opal) lattice (docs/physics.md section 5.7; core/opal/bragg_bsdf.py)
     "sphere_diameter": (np.float32, (), 250.0, None),
     "sphere_ior": (np.float32, (), 1.45, None),
     "void_ior": (np.float32, (), 1.0, None),
     "layers": (np.int32, (), 40, None),
     "mosaic_spread": (np.float32, (), 3.0, None),
 }
+
+#: Valid ranges of the BRAGG lattice's columns (checked on grating rows with lattice BRAGG).
+BRAGG_RANGES = {"sphere_diameter": (100.0, 500.0, " nm"), "sphere_ior": (1.0, 3.0, ""), "void_ior": (1.0, 3.0, ""),
+                "layers": (1, 10000, ""), "mosaic_spread": (0.0, 45.0, " degrees")}
 
 #: The material columns that name a texture.
 TEXTURE_COLUMNS = ("color_texture", "roughness_texture", "metallic_texture", "emission_texture", "normal_texture")
@@ -163,7 +167,10 @@ class Materials:
     (GRATING_TYPES), lattice (LATTICES), period D (nm), slit_width a (nm), slit_count N,
     coherence_length L (um, the slits' length), grating_direction (GRATING_DIRECTIONS: how the
     exporter found the per-triangle tangent in ``Scene.tri_tangent``), rotation (radians, about
-    the normal).
+    the normal). With lattice BRAGG the layer is not a surface grating but FCC opal's volume
+    Bragg reflection (docs/physics.md section 5.7): sphere_diameter D_s (nm, 100-500), sphere_ior
+    and void_ior (1-3), layers (ordered (111) periods, 1-10000) and mosaic_spread (degrees, 0-45:
+    the spread of the plane normals about the domain's axis); the base kind is the body tone.
 
     Image textures (docs/physics.md section 13), each an index into ``Scene.textures`` or -1:
     color_texture replaces ``color`` per hit (which keeps the texture's average for what reads
@@ -1296,7 +1303,15 @@ def _validate_materials(m: Materials) -> Materials:
             raise SceneError(f"{label(i)}: Abbe number {_g(abbe[i])} with IOR {_g(ior[i])} gives an index of "
                              f"{_g(n_ends[1])} at {_OBSERVER_NM[1]:g} nm and {_g(n_ends[0])} at "
                              f"{_OBSERVER_NM[0]:g} nm, outside 1-{IOR_MAX:g} (use a larger Abbe number)")
-    on = g != 0
+    bragg = (g != 0) & (out["lattice"] == LATTICES["BRAGG"])
+    for col, (lo, hi, unit) in BRAGG_RANGES.items():
+        val = out[col].astype(np.float64)
+        bad = bragg & ~((val >= lo) & (val <= hi))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"{label(i)}: opal {col.replace('_', ' ')} must be between {lo:g} and {hi:g}{unit}, "
+                             f"got {_g(val[i])}")
+    on = (g != 0) & ~bragg  # the surface-grating columns (a BRAGG layer does not read them)
     for col, what, unit, limit in (("period", "period", " nm", PERIOD_MAX), ("slit_width", "slit width", " nm", PERIOD_MAX),
                                    ("coherence_length", "coherence length", " um", COHERENCE_MAX)):
         val = f64[col]
