@@ -1249,7 +1249,6 @@ def _validate_materials(m: Materials) -> Materials:
                  "normal_strength", "emission_strength", "roughness", "metallic", "transmission",
                  "specular_ior_level", "specular_tint", "sphere_diameter", "sphere_ior", "void_ior", "mosaic_spread"):
         _check_range(f64[name], label, name.replace("_", " "), "")
-    _check_bragg(f64, out["layers"], label)
     for name in TEXTURE_COLUMNS:
         bad = out[name].astype(np.int64) < -1
         if bad.any():
@@ -1311,6 +1310,7 @@ def _validate_materials(m: Materials) -> Materials:
             i = int(np.argmax(bad))
             raise SceneError(f"{label(i)}: opal {col.replace('_', ' ')} must be between {lo:g} and {hi:g}{unit}, "
                              f"got {_g(val[i])}")
+    _check_bragg(f64, out["layers"], label)  # every row (a BRAGG row has been held to its ranges above)
     on = (g != 0) & ~bragg  # the surface-grating columns (a BRAGG layer does not read them)
     for col, what, unit, limit in (("period", "period", " nm", PERIOD_MAX), ("slit_width", "slit width", " nm", PERIOD_MAX),
                                    ("coherence_length", "coherence length", " um", COHERENCE_MAX)):
