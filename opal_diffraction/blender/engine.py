@@ -39,6 +39,7 @@ import numpy as np
 
 from ..core import denoise as _denoise
 from ..core.distributed import connect
+from ..core.enums import Lattice
 from ..core.output import write_spectral_exr
 from ..core.render import render as core_render
 from ..core.scene import SceneError
@@ -284,7 +285,9 @@ class OpalRenderEngine(bpy.types.RenderEngine):
             core_warnings = [w for w in core_warnings if w not in notes]
             message = notes[0] if notes else "cancelled"
         warnings += core_warnings
-        if (np.asarray(exported.scene.materials.grating) != 0).any() and not getattr(rr.plan, "gratings", False):
+        mats = exported.scene.materials
+        surface_gratings = (np.asarray(mats.grating) != 0) & (np.asarray(mats.lattice) != Lattice.BRAGG)
+        if surface_gratings.any() and not getattr(rr.plan, "gratings", False):
             warnings.append("diffraction gratings are not rendered yet: surfaces with a grating render without it")
         stats = dict(rr.stats, **{"export_" + k: v for k, v in exported.stats.items()})
         stats["total_s"] = time.perf_counter() - t0
