@@ -1,8 +1,8 @@
 # Harlequin opal preset (harlequin: few large angular domains of well-ordered spheres on a dark body).
 # Spheres D_s = 240 +- 45 nm of silica (n_s 1.45), voids n_void 1.33 (water):
 # n_eff 1.4198, Bragg colour at normal incidence 452-661 nm (lambda = 2 d111 n_eff,
-# d111 = sqrt(2/3) D_s; docs/physics.md section 5.2); 80 ordered layers, mosaic spread 2 deg;
-# 25 volume domains, layered (111) normals within 45 deg of the object's Z axis.
+# d111 = sqrt(2/3) D_s; docs/physics.md section 5.2); 80 ordered layers, mosaic spread 5 deg;
+# 25 volume domains, layered (111) normals within 20 deg of the object's Z axis.
 import bpy
 opal = bpy.context.material.opal
 
@@ -17,11 +17,11 @@ opal.sphere_diameter = 240.0
 opal.sphere_ior = 1.45
 opal.void_ior = 1.33
 opal.layers = 80
-opal.mosaic_spread = 2.0
+opal.mosaic_spread = 5.0
 opal.domain_count = 25
 opal.domain_size_spread = 0.3
 opal.domain_orientation = 'LAYERED'
-opal.domain_axis_spread = 45.0
+opal.domain_axis_spread = 20.0
 opal.diameter_spread = 45.0
 opal.body_color = [0.01, 0.01, 0.012]
 opal.body_roughness = 0.05
