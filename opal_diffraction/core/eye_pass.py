@@ -487,25 +487,8 @@ class _TileTrace(SpecularWalker):
         shadow ray and weighted against BSDF sampling by the power heuristic; the BSDF is
         core/bsdf.py's (``params``), with Cycles' bump-terminator term on Lambertian lobes."""
         prepared = self.prepared
-        lights = prepared.lights
         wo = -rays.d
-        b = len(rays)
-        samples = []  # (wi, dist, scalar (B,), spectrum (n,) or (B, n), light pdf (B,) or None, tmax pad)
-        for li in range(len(lights) if analytic else 0):  # the lights (a handful)
-            wi, dist, g = sample_light(lights, li, hit.p, rng)
-            pl = None if self.delta[li] else light_pdf(lights, li, hit.p, wi)
-            samples.append((np.asarray(wi, np.float32), dist, g, lights.spectrum[li], pl, 0.0))
-        if self.mesh_lights is not None:
-            wi, dist, g, prim, pdf = self.mesh_lights.sample(hit.p, rng)
-            em = prepared.materials.emission[prepared.tri_material[prim]]
-            samples.append((wi.astype(np.float32), dist, g, em, pdf.astype(np.float32), 2 * prepared.tri_offset[prim]))
-        if prepared.environment is not None:
-            wi, pdf, rgb = prepared.environment.sample(rng.random(b), rng.random(b))
-            with np.errstate(divide="ignore"):
-                g = np.where(pdf > 0, 1.0 / pdf, 0.0)
-            radiance = prepared.conv.illuminant_from_rgb(rgb).astype(np.float32)
-            samples.append((wi.astype(np.float32), np.full(b, np.inf, np.float32), g, radiance,
-                            pdf.astype(np.float32), 0.0))
+        samples = self.light_samples(hit, rng, analytic)
         lambert = params.lobe == bsdf.LAMBERT
         for wi, dist, g, spectrum, p_light, pad in samples:
             f_cos, p_bsdf = bsdf.evaluate(params, wo, wi, hit.ns, hit.ng)
@@ -536,6 +519,32 @@ class _TileTrace(SpecularWalker):
                 lam_spec = spec[r.lam] if np.ndim(spec) == 1 else spec[np.arange(len(r)), r.lam]
                 contrib = r.w * val[:, 0] * lam_spec
             self._accumulate(r, contrib, film)
+
+    def light_samples(self, hit: Hit, rng, analytic: bool = True) -> list:
+        """One next-event sample per emitter at the hits: every light (``analytic``), the emissive
+        meshes (core/mesh_lights.py: power-proportional points) and the world map (its luminance
+        distribution). Each is (wi (B, 3), distance (B,), scalar weight (B,), spectrum (n,) or
+        (B, n), light pdf (B,) or None for delta lights, shadow-ray end pad)."""
+        prepared = self.prepared
+        lights = prepared.lights
+        b = len(hit.p)
+        samples = []
+        for li in range(len(lights) if analytic else 0):  # the lights (a handful)
+            wi, dist, g = sample_light(lights, li, hit.p, rng)
+            pl = None if self.delta[li] else light_pdf(lights, li, hit.p, wi)
+            samples.append((np.asarray(wi, np.float32), dist, g, lights.spectrum[li], pl, 0.0))
+        if self.mesh_lights is not None:
+            wi, dist, g, prim, pdf = self.mesh_lights.sample(hit.p, rng)
+            em = prepared.materials.emission[prepared.tri_material[prim]]
+            samples.append((wi.astype(np.float32), dist, g, em, pdf.astype(np.float32), 2 * prepared.tri_offset[prim]))
+        if prepared.environment is not None:
+            wi, pdf, rgb = prepared.environment.sample(rng.random(b), rng.random(b))
+            with np.errstate(divide="ignore"):
+                g = np.where(pdf > 0, 1.0 / pdf, 0.0)
+            radiance = prepared.conv.illuminant_from_rgb(rgb).astype(np.float32)
+            samples.append((wi.astype(np.float32), np.full(b, np.inf, np.float32), g, radiance,
+                            pdf.astype(np.float32), 0.0))
+        return samples
 
     def _scatter_microfacet(self, rays: Rays, hit: Hit, micro: np.ndarray, params, can_bounce) -> Rays | None:
         """The bounce at rough and layered surfaces: a direction from core/bsdf.py's sampler,

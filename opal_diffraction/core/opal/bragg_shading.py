@@ -25,7 +25,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..enums import Lattice
-from ..lights import light_pdf, sample_light
 from ..transport import Rays
 from .bragg import effective_index
 from .bragg_bsdf import BraggLobe, kappa_from_spread
@@ -208,26 +207,9 @@ class BraggShading:
         ray, the lobe evaluated there (power heuristic against the lobe's sampling where the light
         can also be found by it); into the film part of the path's vertex count + 1."""
         prepared = self.prepared
-        lights = prepared.lights
         wo = -np.asarray(rays.d, np.float64)
         ns = np.asarray(hit.ns, np.float64)
-        b = len(rays)
-        samples = []  # (wi, dist, g, spectrum (n,) or (B, n), light pdf or None, tmax pad)
-        for li in range(len(lights)):  # the lights (a handful)
-            wi, dist, g = sample_light(lights, li, hit.p, rng)
-            pl = None if trace.delta[li] else light_pdf(lights, li, hit.p, wi)
-            samples.append((np.asarray(wi, np.float32), dist, g, lights.spectrum[li], pl, 0.0))
-        if trace.mesh_lights is not None:
-            wi, dist, g, prim, pdf = trace.mesh_lights.sample(hit.p, rng)
-            em = prepared.materials.emission[prepared.tri_material[prim]]
-            samples.append((wi.astype(np.float32), dist, g, em, pdf.astype(np.float32), 2 * prepared.tri_offset[prim]))
-        if prepared.environment is not None:
-            wi, pdf, rgb = prepared.environment.sample(rng.random(b), rng.random(b))
-            with np.errstate(divide="ignore"):
-                g = np.where(pdf > 0, 1.0 / pdf, 0.0)
-            radiance = prepared.conv.illuminant_from_rgb(rgb).astype(np.float32)
-            samples.append((wi.astype(np.float32), np.full(b, np.inf, np.float32), g, radiance,
-                            pdf.astype(np.float32), 0.0))
+        samples = trace.light_samples(hit, rng)  # the eye pass's one sample per emitter
         nd = rays.extra["nd"]
         for wi, dist, g, spectrum, p_light, pad in samples:
             f_cos, p_lobe = lobe.evaluate(wo, wi, ns, self.edges, rays.lam)
