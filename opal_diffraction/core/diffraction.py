@@ -54,7 +54,6 @@ __all__ = [
     "hexagonal_harvey_shack_factor",
     "box_mean_product",
     "fraunhofer_pattern_footprint",
-    "multislit_mean_without_zeroth",
 ]
 
 #: Up to this slit count the exact O(N) integral is used, beyond it the asymptotic form.
@@ -141,17 +140,26 @@ def multislit_integral(eta, n) -> np.ndarray:
     return n_int * eta + rem
 
 
-def multislit_mean(eta0, eta1, n) -> np.ndarray:
-    """Mean of [sin(N eta) / (N sin eta)]^2 over [eta0, eta1] (either order), exact in closed form."""
+def multislit_mean(eta0, eta1, n, exclude_zeroth: bool = False) -> np.ndarray:
+    """Mean of [sin(N eta) / (N sin eta)]^2 over [eta0, eta1] (either order), exact in closed form.
+
+    ``exclude_zeroth``: leave out the zeroth order's period |eta| < pi/2 (its closed-form integral
+    subtracted; a narrow interval takes its midpoint value outside that period only), where the
+    base's specular continuation carries it (docs/physics.md section 3.3)."""
     eta0 = np.asarray(eta0, np.float64)
     eta1 = np.asarray(eta1, np.float64)
     n_f = float(int(n))
     width = eta1 - eta0
     narrow = np.abs(width) * n_f < _MIDPOINT_NETA
     safe_w = np.where(narrow, 1.0, width)
-    mean = (multislit_integral(eta1, n) - multislit_integral(eta0, n)) / (n_f * n_f * safe_w)
-    mid = multislit(0.5 * (eta0 + eta1), n_f)
-    return np.clip(np.where(narrow, mid, mean), 0.0, 1.0)
+    integral = multislit_integral(eta1, n) - multislit_integral(eta0, n)
+    mid_eta = 0.5 * (eta0 + eta1)
+    mid = multislit(mid_eta, n_f)
+    if exclude_zeroth:
+        c0, c1 = (np.clip(x, -np.pi / 2, np.pi / 2) for x in (eta0, eta1))
+        integral = integral - (multislit_integral(c1, n) - multislit_integral(c0, n))
+        mid = mid * (np.abs(mid_eta) >= np.pi / 2)
+    return np.clip(np.where(narrow, mid, integral / (n_f * n_f * safe_w)), 0.0, 1.0)
 
 
 def sinc2(x) -> np.ndarray:
@@ -366,22 +374,6 @@ def box_mean_product(mean_fn, c, x0, x1, k0, k1, nodes: int = 2) -> np.ndarray:
     return out / nodes
 
 
-def multislit_mean_without_zeroth(eta0, eta1, n) -> np.ndarray:
-    """``multislit_mean`` with the zeroth order's period |eta| < pi/2 left out (its closed-form
-    integral subtracted; a narrow interval takes its midpoint value outside that period only)."""
-    eta0 = np.asarray(eta0, np.float64)
-    eta1 = np.asarray(eta1, np.float64)
-    n_f = float(int(n))
-    width = eta1 - eta0
-    narrow = np.abs(width) * n_f < _MIDPOINT_NETA
-    safe_w = np.where(narrow, 1.0, width)
-    c0, c1 = (np.clip(x, -np.pi / 2, np.pi / 2) for x in (eta0, eta1))
-    inside = (multislit_integral(c1, n) - multislit_integral(c0, n)) / (n_f * n_f * safe_w)
-    mid = 0.5 * (eta0 + eta1)
-    out = np.where(narrow, multislit(mid, n_f) * (np.abs(mid) >= np.pi / 2), multislit_mean(eta0, eta1, n) - inside)
-    return np.clip(out, 0.0, 1.0)
-
-
 def fraunhofer_pattern_footprint(u, v, du, dv, edges, a, d, n, length, subdivisions: int = 2, lam_power: int = 0,
                                  nodes: int = 2, exclude_zeroth: bool = False) -> np.ndarray:
     """The mean of P over u in [u - du/2, u + du/2], v in [v - dv/2, v + dv/2] and each wavelength
@@ -412,8 +404,7 @@ def fraunhofer_pattern_footprint(u, v, du, dv, edges, a, d, n, length, subdivisi
     k0, k1 = inv[None, :-1], inv[None, 1:]
     mid_lam = 2.0 / (inv[:-1] + inv[1:])
     n_i = int(n)
-    mean = multislit_mean_without_zeroth if exclude_zeroth else multislit_mean
-    ms = box_mean_product(lambda lo, hi: mean(lo, hi, n_i), np.pi * np.asarray(d, np.float64),
+    ms = box_mean_product(lambda lo, hi: multislit_mean(lo, hi, n_i, exclude_zeroth), np.pi * np.asarray(d, np.float64),
                           u - hu, u + hu, k0, k1, nodes)
     zf = box_mean_product(sinc2_mean, np.pi * float(length), v - hv, v + hv, k0, k1, nodes)
     env = sinc2(np.pi * a * u / mid_lam[None, :])
