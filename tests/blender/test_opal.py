@@ -201,6 +201,23 @@ def test_harlequin_has_large_domains_and_pinfire_small():
     assert count["HARLEQUIN"] * 5 <= count["BLACK"] and count["BLACK"] * 5 <= count["PINFIRE"]
 
 
+def _existing_folders(root: str, subdir: str) -> set[str]:
+    """The folders from ``root`` down to ``root/subdir`` that exist now."""
+    parts = subdir.split("/")
+    paths = [os.path.join(root, *parts[:i]) for i in range(len(parts) + 1)]
+    return {p for p in paths if os.path.isdir(p)}
+
+
+def _remove_empty_folders(root: str, subdir: str, keep: set[str]) -> None:
+    """Remove the empty folders from ``root/subdir`` upwards that were not in ``keep``."""
+    parts = subdir.split("/")
+    for i in range(len(parts), -1, -1):
+        p = os.path.join(root, *parts[:i])
+        if p in keep or not os.path.isdir(p) or os.listdir(p):
+            return
+        os.rmdir(p)
+
+
 def _execute_preset(mat, path, menu):
     with bpy.context.temp_override(material=mat):
         assert bpy.ops.script.execute_preset(filepath=path, menu_idname=menu) == {"FINISHED"}
@@ -223,6 +240,8 @@ def test_presets_add_and_remove_through_the_preset_operator(kind):
     else:
         o.dispersion, o.abbe_number, o.node_ior = "ABBE", 33.3, 1.654
     name = f"Test Stone {uuid.uuid4().hex[:8]}"
+    user_presets = bpy.utils.user_resource("SCRIPTS", path="presets")
+    existed = _existing_folders(user_presets, subdir)
     with bpy.context.temp_override(material=src):
         assert add(name=name) == {"FINISHED"}
     files = preset_files(subdir)
@@ -246,6 +265,7 @@ def test_presets_add_and_remove_through_the_preset_operator(kind):
     finally:
         if os.path.exists(files[name]):
             os.remove(files[name])
+        _remove_empty_folders(user_presets, subdir, existed)  # leave the user's config as it was
     # the shipped presets cannot be removed (they live in the extension's folder)
     shipped = next(iter(preset_files(subdir)))
     with bpy.context.temp_override(material=src):
