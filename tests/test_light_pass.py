@@ -5,7 +5,7 @@ import pytest
 
 from opal_diffraction._scripts import load_example
 from opal_diffraction.core import primitives
-from opal_diffraction.core.elements import ElementLayout
+from opal_diffraction.core.elements import ElementLayout, IlluminationMap
 from opal_diffraction.core.light_pass import run_light_pass
 from opal_diffraction.core.optics import ior_spectrum
 from opal_diffraction.core.prepare import prepare
@@ -43,6 +43,24 @@ def test_element_index_is_a_bijection_with_equal_areas():
     idx, ok = lay.index(np.zeros(1000, int), u, w, np.ones(1000, bool))
     k = lay.k[0]
     assert ok.all() and idx.max() < 2 * k * k and np.all(idx % 2 == 0)
+
+
+def test_lit_triangles_are_exactly_those_holding_flux():
+    """The eye pass looks the caustic map up only on lit triangles: every triangle with flux on
+    any element (either side) is lit, none other, including triangles outside the map."""
+    rng = np.random.default_rng(1)
+    v, t = primitives.icosphere((0, 0, 0), 1.0, 2)
+    receivers = rng.random(len(t)) < 0.7
+    lay = ElementLayout.build(v, t, receivers, 0.002)
+    illum = IlluminationMap.empty(lay, 3)
+    tri, bu, bv = lay.barycentric_centres()
+    pick = rng.random(lay.total) < 0.01  # a few elements of a few triangles, front or back
+    idx, ok = lay.index(tri[pick], bu[pick], bv[pick], rng.random(pick.sum()) < 0.5)
+    illum.deposit(idx[ok], np.ones((ok.sum(), 3), np.float32))
+    expected = np.zeros(len(t), bool)
+    expected[tri[pick]] = True
+    assert expected.any() and not expected.all()
+    assert np.array_equal(illum.lit_triangles(), expected)
 
 
 def slab_scene(ior=1.5, dispersion="NONE"):

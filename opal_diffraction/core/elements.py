@@ -125,6 +125,18 @@ class IlluminationMap:
         starts = np.flatnonzero(np.concatenate([[True], e[1:] != e[:-1]]))
         self.flux[e[starts]] += np.add.reduceat(f, starts, axis=0)
 
+    def lit_triangles(self) -> np.ndarray:
+        """(T,) bool: the triangles with flux on any of their elements (a finished map's hits
+        elsewhere need no lookup: they receive no caustic)."""
+        lay = self.layout
+        lit = np.zeros(len(lay.k), bool)
+        held = np.flatnonzero(lay.k > 0)
+        if len(held) and lay.total:
+            has = np.any(self.flux != 0, axis=1)
+            counts = np.add.reduceat(has.astype(np.int64), lay.offset[held])  # held triangles' elements are contiguous
+            lit[held] = counts > 0
+        return lit
+
     def irradiance(self, prim, bu, bv, front, rng=None) -> np.ndarray:
         """Spectral irradiance (B, n) at hits: the element's flux over its area (0 off the map).
 

@@ -63,6 +63,8 @@ class EyePass:
             raise ValueError("the light-pass result belongs to another prepared scene")
         self.prepared = prepared
         self.caustic_map = None if light is None else light.caustics
+        # the triangles the caustic map holds flux on: the lookup runs only for hits there
+        self.caustic_lit = None if self.caustic_map is None else self.caustic_map.lit_triangles()
         self.record_map = None if light is None else light.grating_records
         # camera rays carry ray differentials (core/footprint.py) only to integrate gratings
         self.wants_differentials = bool(prepared.gratings.any and getattr(prepared.settings, "grating_footprint", True))
@@ -119,6 +121,7 @@ class _TileTrace(SpecularWalker):
     def __init__(self, eye: EyePass, n_pixels: int, rng: np.random.Generator):
         super().__init__(eye.prepared, rng)
         self.caustic_map, self.record_map = eye.caustic_map, eye.record_map
+        self.caustic_lit = eye.caustic_lit
         self.sampler_seed = None  # set by EyePass.trace when the tile numbers its samples
         s = eye.prepared.settings
         self.limits = (s.max_bounces, s.diffuse_bounces, s.glossy_bounces, s.transmission_bounces)
@@ -758,6 +761,11 @@ class _TileTrace(SpecularWalker):
         """Caustic radiance at diffuse hits: the illumination map's irradiance * albedo / pi
         (looked up with a one-element jitter: a box filter over neighbouring elements)."""
         prepared = self.prepared
+        lit = self.caustic_lit[hit.prim]
+        if not lit.all():
+            rays, hit = rays.take(lit), hit.take(lit)
+        if not len(rays):
+            return
         irr = self.caustic_map.irradiance(hit.prim, hit.bu, hit.bv, hit.front, rng)
         brdf = surface_reflectance(prepared, hit) * np.float32(1 / np.pi)
         radiance = irr * brdf
