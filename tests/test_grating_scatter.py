@@ -101,6 +101,13 @@ def test_order_sampler_chi2(case):
         cos_t = np.sqrt(1 - (1 - (w_i @ n) ** 2) / 1.5**2)
         snell = -w_i / 1.5 + ((w_i @ n) / 1.5 - cos_t) * n
         assert np.allclose(smp.direction[zero], snell, atol=1e-9)
+    assert_orders_chi2(m, eff, case)
+
+
+def assert_orders_chi2(m, eff, case):
+    """The sampled orders ``m`` against probabilities eff[k] / sum(eff) (cells with expected < 5
+    pooled), at the family-wise SIGNIFICANCE."""
+    b, total = len(m), sum(eff.values())
     orders = sorted(eff)
     expected = np.array([b * eff[k] / total for k in orders])
     observed = np.array([(m == k).sum() for k in orders], np.float64)
@@ -115,6 +122,25 @@ def test_order_sampler_chi2(case):
     pval = chi2_dist.sf(stat, dof) if dof > 0 else 1.0
     print(f"{case}: {len(orders)} orders, total {total:.4f}, chi2 {stat:.1f} dof {dof} p {pval:.3g}")
     assert pval > SIGNIFICANCE, f"chi2 {stat:.1f} with {dof} dof: p = {pval:.3g}"
+
+
+@pytest.mark.parametrize("case", [(0.0, 450.0, 1600.0, 0.5, "R"), (30.0, 650.0, 1600.0, 0.3, "R"),
+                                  (60.0, 450.0, 740.0, 0.5, "R")], ids=str)
+def test_order_sampler_without_the_zeroth_order_chi2(case):
+    """``exclude_zeroth`` (a mirror base carrying m = 0, docs/physics.md section 3.11): m = 0 is
+    never drawn, the others in proportion to e_m, and the weight is the propagating sum less e_0."""
+    th, lam, d, ratio, side = case
+    n, t, s, w_i = frame_at(th)
+    rng = np.random.default_rng(zlib.crc32(repr(case).encode()))
+    b = N_SAMPLES
+    rep = lambda x: np.tile(x, (b, 1))  # noqa: E731
+    smp = sample_orders(rep(w_i), rep(n), rep(t), rep(s), np.full(b, d), np.full(b, d * ratio), np.full(b, lam),
+                        False, rng, exclude_zeroth=True)
+    eff = expected_orders(w_i, n, t, s, lam, d, ratio, 1.0, 1.0)
+    eff.pop(0)
+    assert len(eff) >= 2 and not np.any(smp.order == 0)
+    assert np.allclose(smp.weight, sum(eff.values()), rtol=1e-9)
+    assert_orders_chi2(smp.order, eff, case)
 
 
 def test_power_table_of_section_3_2():

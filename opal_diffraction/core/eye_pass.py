@@ -24,6 +24,7 @@ from .gratings import diffracted_radiance, grating_frame
 from .sampler import SLOT_BOUNCE, SLOT_LIGHT, SLOT_PARAMS, SLOT_WIDTH, PixelSampler, vertex_pair
 from . import grating_layering
 from .grating_sampling import scattering_materials
+from .grating_world import diffracts_world, world_through_grating
 from .lights import intersect_lights, is_delta, light_pdf, sample_light, sun_radiance
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIFFUSE
@@ -122,6 +123,7 @@ class _TileTrace(SpecularWalker):
         super().__init__(eye.prepared, rng)
         self.caustic_map, self.record_map = eye.caustic_map, eye.record_map
         self.caustic_lit = eye.caustic_lit
+        self.world_gratings = diffracts_world(eye.prepared)
         self.sampler_seed = None  # set by EyePass.trace when the tile numbers its samples
         s = eye.prepared.settings
         self.limits = (s.max_bounces, s.diffuse_bounces, s.glossy_bounces, s.transmission_bounces)
@@ -787,6 +789,12 @@ class _TileTrace(SpecularWalker):
             over = prepared.tri_period[h.prim] if len(prepared.tri_period) else np.zeros(b, np.float32)
             period = np.where(over > 0, over, g.period[m])
             w_o = -r.d
+            if self.world_gratings[m]:  # the world, orders sampled from the viewer (docs/physics.md section 3.11)
+                seen = world_through_grating(prepared, r, h, int(m), t, s, period, rng)
+                if seen is not None:
+                    sub, contrib, casts = seen
+                    self._rays += casts
+                    self._accumulate(sub, contrib, self._diffraction)
             for li in range(len(lights)):  # loop over lights, not rays
                 wi, dist, gfac = sample_light(lights, li, h.p, rng)
                 cos_l = np.einsum("ij,ij->i", wi, h.ng)

@@ -96,7 +96,7 @@ class OrderSample:
 
 
 def sample_orders(w_i, n, t, s, period, slit_width, wavelength, transmission, rng, *, eta_i=1.0, eta_o=1.0,
-                  length=None) -> OrderSample:
+                  length=None, exclude_zeroth: bool = False) -> OrderSample:
     """Sample an outgoing order of a LINES grating for B incoming directions.
 
     ``w_i`` (B, 3): unit directions from the surface towards where the light came from; ``n``
@@ -106,7 +106,8 @@ def sample_orders(w_i, n, t, s, period, slit_width, wavelength, transmission, rn
     ``eta_o``: (B,) or scalar indices of the incident side and of the side the order leaves into;
     ``length`` (B,) nm slit length for the sinc^2 spread along s (None or 0: no spread).
     m is drawn with probability e_m / sum_prop e over the orders with (w_o . t)^2 + (w_o . s)^2 < 1
-    at the unspread v; the weight is sum_prop e (docs/physics.md section 3.10).
+    at the unspread v; the weight is sum_prop e (docs/physics.md section 3.10). ``exclude_zeroth``:
+    m = 0 is neither drawn nor summed (a base whose specular lobe carries it, section 3.3).
     """
     w_i = np.asarray(w_i, np.float64)
     b = len(w_i)
@@ -135,6 +136,8 @@ def sample_orders(w_i, n, t, s, period, slit_width, wavelength, transmission, rn
             sl = slice(c0, c0 + rows)
             m = m_lo[sl, None] + np.arange(k_max)[None, :]
             e = np.where(np.arange(k_max)[None, :] < count[sl, None], order_efficiencies(m, ratio[sl, None]), 0.0)
+            if exclude_zeroth:
+                e = np.where(m == 0, 0.0, e)
             cdf = np.cumsum(e, axis=1)
             tot = cdf[:, -1]
             pick = np.minimum((cdf < (u_draw[sl] * tot)[:, None]).sum(axis=1), np.maximum(count[sl] - 1, 0))
