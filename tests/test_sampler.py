@@ -65,3 +65,14 @@ def test_pixel_sampler_counts_dimensions_and_falls_back():
     # pairs used up, and other sizes: the pseudo-random stream
     assert not np.isin(s.random(b), np.concatenate([ex, ey, fx, fy])).all()
     assert s.random(7).shape == (7,)
+
+
+def test_seeds_differing_above_32_bits_give_other_points():
+    """The seed's high words take part in the scramble: seeds 5 and 5 + 2^32 (and 5 + 2^64) give
+    unrelated points, while one seed always gives the same."""
+    pix, smp = np.arange(64) % 8, np.arange(64)
+    a = sobol_owen_2d(pix, smp, 0, seed=5)
+    for other in (5 + (1 << 32), 5 + (1 << 64)):
+        b = sobol_owen_2d(pix, smp, 0, seed=other)
+        assert np.mean(a[0] == b[0]) < 0.1
+    np.testing.assert_array_equal(a[0], sobol_owen_2d(pix, smp, 0, seed=5)[0])

@@ -107,7 +107,13 @@ def _sobol_y(index: np.ndarray) -> np.ndarray:
 
 def _key(seed: int, pixel: np.ndarray, pair: np.ndarray) -> np.ndarray:
     with np.errstate(over="ignore"):
-        k = _hash(np.asarray(pixel, np.uint64).astype(_U32) ^ _hash(np.full(1, seed & 0xFFFFFFFF, _U32)))
+        # every 32-bit word of the seed (a render seed can exceed 2^32), each hashed in turn
+        s = _hash(np.full(1, seed & 0xFFFFFFFF, _U32))
+        rest = (int(seed) % (1 << 128)) >> 32  # non-negative: the loop ends
+        while rest:
+            s = _hash(s ^ np.full(1, rest & 0xFFFFFFFF, _U32))
+            rest >>= 32
+        k = _hash(np.asarray(pixel, np.uint64).astype(_U32) ^ s)
         return _hash(k ^ _hash(np.asarray(pair, np.int64).astype(_U32) * _U32(0x9E3779B9)))
 
 
