@@ -1,0 +1,136 @@
+"""The preparation's faster code paths give the results of the ones they replace.
+
+- geometry.compact_indices equals np.unique(..., return_inverse=True) (the sort it replaces in
+  caster_objects and the Embree build);
+- the direct Embree fill (core/accel/embree_direct.py: Embree's C API through ctypes) builds a
+  scene that answers every ray exactly as embreex's own TriangleMesh does (t, prim, u, v and
+  occlusion bit for bit, rays through vertices and edges included), in one piece and in several;
+- MeshLights.build, which no longer forms a (T, n) array of spectra, selects the emitters an
+  independent per-triangle check selects;
+- caster_objects' groups equal those of a brute-force union-find over the shared vertices.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from opal_diffraction.core import primitives
+from opal_diffraction.core.geometry import compact_indices
+from opal_diffraction.core.light_pass import caster_objects
+from opal_diffraction.core.mesh_lights import MeshLights
+
+embree_direct = pytest.importorskip("opal_diffraction.core.accel.embree_direct")
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_compact_indices_equals_np_unique(seed):
+    rng = np.random.default_rng(seed)
+    lo = int(rng.integers(0, 1000))
+    ids = rng.integers(lo, lo + int(rng.integers(1, 5000)), size=(int(rng.integers(1, 3000)), 3))
+    used, local = compact_indices(ids)
+    u_ref, inv_ref = np.unique(ids, return_inverse=True)
+    assert np.array_equal(used, u_ref)
+    assert np.array_equal(local, inv_ref.reshape(ids.shape))
+    assert np.array_equal(used[local], ids)
+
+
+def _rays(v, n, rng):
+    """Random rays at the mesh, and rays aimed exactly at vertices and edge midpoints (ties
+    between the triangles sharing them)."""
+    o = rng.normal(size=(n, 3)) * 3
+    d = rng.normal(size=(n, 3)) * 0.3 - o
+    tgt = v[rng.integers(0, len(v), n // 2)]
+    mid = 0.5 * (v[rng.integers(0, len(v), n // 2)] + v[rng.integers(0, len(v), n // 2)])
+    o2 = np.full((n, 3), 2.5) + rng.normal(size=(n, 3)) * 0.01
+    d2 = np.concatenate([tgt, mid]) - o2
+    o = np.concatenate([o, o2]).astype(np.float32)
+    d = np.concatenate([d, d2])
+    return o, (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+
+
+@pytest.mark.parametrize("chunk", [None, 5000])
+def test_direct_embree_fill_answers_as_embreex(monkeypatch, chunk):
+    pytest.importorskip("embreex")
+    from opal_diffraction.core.accel import embree_backend
+
+    assert embree_direct.available(), "the ctypes path to embreex's Embree should work with this embreex"
+    if chunk is not None:  # several geometries (the large-mesh path), each with compacted vertices
+        monkeypatch.setattr(embree_backend, "_GEOMETRY_CHUNK", chunk)
+    v, t = primitives.icosphere((0.1, -0.2, 0.3), 1.0, 4)
+    v2, t2 = primitives.box((0, 0, -1.2), (3, 3, 0.2))
+    v = np.concatenate([v, v2]).astype(np.float32)
+    t = np.concatenate([t, t2 + len(v) - len(v2)]).astype(np.int32)
+    rng = np.random.default_rng(3)
+    o, d = _rays(v, 20000, rng)
+    tmax = rng.uniform(0.5, 6.0, len(o)).astype(np.float32)
+    out = {}
+    for direct in (True, False):
+        monkeypatch.setitem(embree_direct._state, "ok", direct)
+        acc = embree_backend.EmbreeAccelerator(v, t, threads=1)
+        assert (len(acc._geom_start) > 1) == (chunk is not None)
+        out[direct] = (acc.intersect(o, d), acc.occluded(o, d, tmax))
+    (h1, o1), (h2, o2) = out[True], out[False]
+    assert h1.hit.mean() > 0.5 and 0 < o1.mean() < 1
+    for k in ("t", "prim", "u", "v"):
+        assert np.array_equal(getattr(h1, k), getattr(h2, k)), k
+    assert np.array_equal(o1, o2)
+
+
+def test_mesh_lights_select_the_emitting_triangles():
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(300, 3))
+    t = rng.integers(0, 300, size=(500, 3))
+    t[:5, 1] = t[:5, 0]  # zero area: never emitters
+    n = 7
+    em = np.zeros((4, n))
+    em[1, 2] = 3.0   # emits in one bin
+    em[3] = 0.5      # emits everywhere
+    em[2, 4] = -1.0  # negative luminance: not an emitter
+    tm = rng.integers(0, 4, 500)
+    nrm = np.zeros((500, 3))
+    ml = MeshLights.build(v, t, tm, em, nrm)
+    p = v[t]
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    expect = [i for i in range(500) if em[tm[i]].mean() > 0 and (em[tm[i]] > 0).any() and area[i] > 0]
+    assert np.array_equal(ml.tri, expect)
+    assert ml.weight == pytest.approx(area[expect] * em[tm[expect]].mean(axis=1))
+
+
+def test_caster_objects_match_union_find():
+    # 12 small separate spheres (<= MAX_OBJECTS: one group each), half of them casters
+    rng = np.random.default_rng(1)
+    vs, ts, off = [], [], 0
+    for k in range(12):
+        c = rng.uniform(-5, 5, 3)
+        v, t = primitives.icosphere(c, rng.uniform(0.2, 0.6), 1)
+        vs.append(v)
+        ts.append(t + off)
+        off += len(v)
+    v, t = np.concatenate(vs), np.concatenate(ts)
+    mask = np.repeat(np.arange(12) % 2 == 0, len(ts[0]))
+    obj = caster_objects(v, t, mask)
+    # independent: union-find over the vertices the caster triangles share
+    parent = list(range(len(v)))
+
+    def find(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+    for tri in t[mask]:
+        for a, b in ((tri[0], tri[1]), (tri[1], tri[2])):
+            parent[find(a)] = find(b)
+    groups = {}
+    for i in np.unique(t[mask]):
+        groups.setdefault(find(i), []).append(i)
+    expect = []
+    for ids in groups.values():
+        p = v[ids]
+        c = 0.5 * (p.min(0) + p.max(0))
+        expect.append((tuple(c), np.sqrt(((p - c) ** 2).sum(1).max())))
+    assert len(obj) == len(expect) == 6
+    got = sorted(zip(map(tuple, obj.centre), obj.radius))
+    for (cg, rg), (ce, re) in zip(got, sorted(expect)):
+        assert np.allclose(cg, ce, rtol=0, atol=1e-12)
+        assert rg == pytest.approx(re, rel=2e-6)
