@@ -134,3 +134,68 @@ def test_caster_objects_match_union_find():
     for (cg, rg), (ce, re) in zip(got, sorted(expect)):
         assert np.allclose(cg, ce, rtol=0, atol=1e-12)
         assert rg == pytest.approx(re, rel=2e-6)
+
+
+def _old_triangle_cross(v, t):
+    p = np.asarray(v, np.float64)[np.asarray(t, np.int64)]
+    return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_triangle_cross_is_np_cross_bit_for_bit(dtype):
+    from opal_diffraction.core.geometry import triangle_cross
+
+    rng = np.random.default_rng(2)
+    v = (rng.normal(size=(400, 3)) * 10 ** rng.uniform(-6, 6, (400, 1))).astype(dtype)
+    t = rng.integers(0, 400, size=(3000, 3)).astype(np.int32)
+    assert np.array_equal(triangle_cross(v, t), _old_triangle_cross(v, t))
+    assert np.array_equal(triangle_cross(v, t.astype(np.float64)), _old_triangle_cross(v, t))
+
+
+def test_triangle_offsets_are_the_per_triangle_maxima():
+    from opal_diffraction.core.prepare import triangle_offsets
+
+    rng = np.random.default_rng(4)
+    v = (rng.normal(size=(500, 3)) * 100).astype(np.float32)
+    t = rng.integers(0, 500, size=(2000, 3)).astype(np.int32)
+    ref = (1e-5 + 4e-7 * np.abs(v[t]).max(axis=(1, 2))).astype(np.float32)  # the formula it replaces
+    assert np.array_equal(triangle_offsets(v, t, 1e-5), ref)
+
+
+def test_chunked_corner_normals_equal_the_whole_array_formula(monkeypatch):
+    from opal_diffraction.core import scene as scene_mod
+    from opal_diffraction.core.geometry import triangle_normals
+
+    rng = np.random.default_rng(5)
+    v = rng.normal(size=(300, 3)).astype(np.float32)
+    t = rng.integers(0, 300, size=(1000, 3)).astype(np.int32)
+    cn = rng.normal(size=(1000, 3, 3)).astype(np.float32)
+    cn[::7, 1] = 0  # zero normals: the face normal is used
+    # the formula over the whole array (what the chunked loop replaced)
+    c64 = cn.astype(np.float64)
+    length = np.linalg.norm(c64, axis=2, keepdims=True)
+    zero = ~(length > 1e-30)
+    face = triangle_normals(v, t)
+    ref = (np.where(zero, face[:, None, :], c64) / np.where(zero, 1.0, length)).astype(np.float32)
+    monkeypatch.setattr(scene_mod, "_ROWS_PER_CHUNK", 97)
+    warns = []
+    got = scene_mod._validate_corner_normals(cn, v, t, warns)
+    assert np.array_equal(got, ref)
+    # degenerate triangles (a repeated vertex) have no face normal and are not counted
+    n_zero = sum(1 for i in range(0, 1000, 7) if len(set(t[i])) == 3)
+    assert warns == [f"{n_zero} zero shading normal(s): their triangles' face normals are used there"]
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf, 1e39, -5e20, -1e-3])
+def test_fast_range_check_agrees_with_the_full_one(bad):
+    from opal_diffraction.core.scene import FLOAT32_MAX, _within
+
+    rng = np.random.default_rng(6)
+    a = rng.normal(size=(1000, 3))
+    assert _within(a) and _within(a.astype(np.float32))
+    a[617, 2] = bad
+    full = bool(np.isfinite(a).all() and np.abs(a).max() <= FLOAT32_MAX)
+    assert _within(a) == full
+    assert _within(a, limit=1e20) == (full and np.abs(a).max() <= 1e20)
+    assert _within(a, nonneg=True) is False  # normal samples are negative somewhere
+    assert _within(np.abs(a), nonneg=True) == (np.isfinite(a).all() and np.abs(a).max() <= FLOAT32_MAX)

@@ -29,11 +29,25 @@ def compact_indices(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def triangle_cross(vertices, triangles) -> np.ndarray:
     """(T, 3) float64 ``(v1 - v0) x (v2 - v0)`` per triangle: its normal times twice its area."""
-    t = np.asarray(triangles, np.int64).reshape(-1, 3)
+    t = np.asarray(triangles).reshape(-1, 3)
     if len(t) == 0:
         return np.zeros((0, 3))
-    p = np.asarray(vertices, np.float64)[t]
-    return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    if t.dtype.kind not in "iu":
+        t = t.astype(np.int64)
+    # the vertices in float64 once (V rows, not 3 T), the edges gathered from them, and the
+    # cross product written out as np.cross computes it (a1 b2 - a2 b1, ...): the same values
+    v = np.asarray(vertices, np.float64)
+    p0 = v[t[:, 0]]
+    a = v[t[:, 1]]
+    a -= p0
+    b = v[t[:, 2]]
+    b -= p0
+    del p0
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
 
 
 def triangle_areas(vertices, triangles) -> np.ndarray:

@@ -97,9 +97,8 @@ def caster_objects(vertices, triangles, mask) -> CasterObjects:
     t = np.asarray(triangles)[np.asarray(mask, bool)]
     if len(t) == 0:
         return CasterObjects(np.zeros((0, 3)), np.zeros(0))
-    v = np.asarray(vertices, np.float64)
     used, node = compact_indices(t)  # compact the vertex ids of the casters (np.unique's result)
-    pts = v[used]
+    pts = np.asarray(vertices)[used].astype(np.float64)  # the casters' vertices only, in float64
     extent = float(np.ptp(pts, axis=0).max()) or max(float(np.abs(pts).max()), 1e-30)
     n_nodes = len(used)
     rows = np.concatenate([node[:, 0], node[:, 1]])

@@ -140,7 +140,9 @@ def triangle_offsets(v: np.ndarray, t: np.ndarray, base: float) -> np.ndarray:
     largest |coordinate| (looked up per hit, so no per-hit reduction)."""
     if len(t) == 0:
         return np.zeros(0, np.float32)
-    return (base + 4e-7 * np.abs(v[t]).max(axis=(1, 2))).astype(np.float32)
+    # the largest |coordinate| per vertex, then per triangle (the same maxima, no (T, 3, 3) gather)
+    per_vertex = np.abs(v).max(axis=1)
+    return (base + 4e-7 * per_vertex[t].max(axis=1)).astype(np.float32)
 
 
 def _equal(a, b) -> bool:
