@@ -112,20 +112,21 @@ PHASES = [
 ]
 
 
-def instrument(times: dict):
+def instrument(times: dict, cpu: dict):
     depth = defaultdict(int)
 
     def wrap(name, fn):
         @functools.wraps(fn)
         def timed(*a, **k):
             depth[name] += 1
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             try:
                 return fn(*a, **k)
             finally:
                 depth[name] -= 1
                 if depth[name] == 0:  # recursion (_read_only) counted once
                     times[name] += time.perf_counter() - t0
+                    cpu[name] += time.process_time() - c0
         return timed
 
     for name, owner, attr in PHASES:
@@ -144,8 +145,8 @@ def run_one(triangles: int, profile: bool) -> dict:
     import colour  # noqa: F401  once per process (the first prepare_materials pays it): timed apart
     import_s = time.perf_counter() - t0
     rss_scene = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    times = defaultdict(float)
-    instrument(times)
+    times, cpus = defaultdict(float), defaultdict(float)
+    instrument(times, cpus)
     prof = None
     if profile:
         from pyinstrument import Profiler
@@ -158,11 +159,12 @@ def run_one(triangles: int, profile: bool) -> dict:
     if prof is not None:
         prof.stop()
         out_prof = prof.output_text(unicode=False, color=False, show_all=False)
-    times["light targets: rest"] -= times["light targets: caster objects"]
-    times["other"] = total - sum(times.values())
+    for d, whole in ((times, total), (cpus, cpu)):
+        d["light targets: rest"] -= d["light targets: caster objects"]
+        d["other"] = whole - sum(d.values())
     return {"triangles": len(scene.triangles), "build_s": build_s, "total_s": total, "cpu_s": cpu,
             "import_colour_s": import_s,
-            "prepare_s": prepared.prepare_s, "phases": dict(times), "rss_scene_mb": rss_scene,
+            "prepare_s": prepared.prepare_s, "phases": dict(times), "cpu_phases": dict(cpus), "rss_scene_mb": rss_scene,
             "rss_peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
             "objects": len(prepared.light_targets.objects), "warnings": list(prepared.warnings),
             "profile": out_prof}
@@ -172,6 +174,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=float, nargs="+", default=[0.1, 1, 3, 10], help="millions of triangles")
     ap.add_argument("--profile", type=float, default=None, help="pyinstrument profile of this size (millions)")
+    ap.add_argument("--json", default=None, help="also write the rows to this file")
     ap.add_argument("--one", type=int, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--with-profile", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -185,19 +188,25 @@ def main(argv=None) -> int:
             cmd.append("--with-profile")
         r = json.loads(subprocess.run(cmd, check=True, stdout=subprocess.PIPE, text=True).stdout.strip().splitlines()[-1])
         rows.append(r)
+        if args.json:
+            with open(args.json, "w") as f:
+                json.dump(rows, f)
         print(f"{r['triangles'] / 1e6:.2f} M triangles: prepare {r['total_s']:.2f} s (CPU {r['cpu_s']:.2f} s; colour-science import {r['import_colour_s']:.1f} s before), peak RSS {r['rss_peak_mb']:.0f} MB "
               f"(scene alone {r['rss_scene_mb']:.0f} MB), {r['objects']} caster groups", flush=True)
         if r["profile"]:
             print("\n".join(r["profile"].splitlines()[:60]))
     names = list(dict.fromkeys([p[0] for p in PHASES] + ["other"]))
-    head = "| phase | " + " | ".join(f"{r['triangles'] / 1e6:.2f} M" for r in rows) + " | ns/triangle at each size |"
+    for label, key, whole in (("wall-clock", "phases", "total_s"), ("CPU (process_time)", "cpu_phases", "cpu_s")):
+        if not all(key in r for r in rows):
+            continue
+        print(f"\n{label} seconds per phase, and ns per triangle")
+        print("| phase | " + " | ".join(f"{r['triangles'] / 1e6:.2f} M" for r in rows) + " | ns/triangle at each size |")
+        print("|---" * (len(rows) + 2) + "|")
+        for n in names + ["total"]:
+            secs = [r[whole] if n == "total" else r[key].get(n, 0.0) for r in rows]
+            ns = [1e9 * s / r["triangles"] for s, r in zip(secs, rows)]
+            print(f"| {n} | " + " | ".join(f"{s:.3f}" for s in secs) + " | " + " / ".join(f"{x:.0f}" for x in ns) + " |")
     print()
-    print(head)
-    print("|---" * (len(rows) + 2) + "|")
-    for n in names + ["total"]:
-        secs = [r["total_s"] if n == "total" else r["phases"].get(n, 0.0) for r in rows]
-        ns = [1e9 * s / r["triangles"] for s, r in zip(secs, rows)]
-        print(f"| {n} | " + " | ".join(f"{s:.3f}" for s in secs) + " | " + " / ".join(f"{x:.0f}" for x in ns) + " |")
     print("| peak RSS (MB) | " + " | ".join(f"{r['rss_peak_mb']:.0f}" for r in rows) + " | |")
     print("| RSS with the scene alone (MB) | " + " | ".join(f"{r['rss_scene_mb']:.0f}" for r in rows) + " | |")
     return 0

@@ -199,3 +199,73 @@ def test_fast_range_check_agrees_with_the_full_one(bad):
     assert _within(a, limit=1e20) == (full and np.abs(a).max() <= 1e20)
     assert _within(a, nonneg=True) is False  # normal samples are negative somewhere
     assert _within(np.abs(a), nonneg=True) == (np.isfinite(a).all() and np.abs(a).max() <= FLOAT32_MAX)
+
+
+def _old_triangle_tangents(tri_normal, tri_tangent):
+    """gratings.triangle_tangents as it was: every candidate over all rows."""
+    n = np.asarray(tri_normal, np.float64)
+    given = np.asarray(tri_tangent, np.float64).reshape(-1, 3)
+    if len(given) != len(n):
+        given = np.zeros((len(n), 3))
+    out = np.zeros((len(n), 3))
+    todo = np.ones(len(n), bool)
+    for cand in (given, np.array([[1.0, 0, 0]]), np.array([[0.0, 1, 0]])):
+        c = np.broadcast_to(cand, (len(n), 3))
+        proj = c - np.sum(c * n, axis=1, keepdims=True) * n
+        norm = np.linalg.norm(proj, axis=1)
+        ok = todo & (norm > 1e-6)
+        out[ok] = proj[ok] / norm[ok, None]
+        todo &= ~ok
+    return out.astype(np.float32)
+
+
+def test_triangle_tangents_equal_the_all_rows_version():
+    from opal_diffraction.core.gratings import triangle_tangents
+
+    rng = np.random.default_rng(7)
+    n = rng.normal(size=(3000, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    n[:200] = (1, 0, 0)        # normal along X: X projects to zero, Y is used
+    n[200:300] = (0, 0, 1)
+    given = rng.normal(size=(3000, 3)).astype(np.float32)
+    given[::3] = 0             # no tangent given
+    given[1::7] = n[1::7]      # given along the normal: falls back to X (then Y)
+    for g in (given, np.zeros((0, 3), np.float32)):
+        got = triangle_tangents(n, g)
+        assert got.dtype == np.float32
+        assert np.array_equal(got, _old_triangle_tangents(n, g))
+
+
+def test_smooth_corner_tangents_equal_the_float64_version():
+    from opal_diffraction.core import grating_directions as gd
+    from opal_diffraction.core.geometry import triangle_normals
+    from opal_diffraction.core.gratings import triangle_tangents
+
+    v, t = primitives.icosphere((0, 0, 0), 1.0, 3)
+    n = triangle_normals(v, t)
+    tt = triangle_tangents(n, np.tile([[1.0, 0.2, 0]], (len(t), 1)))
+    mat = (np.arange(len(t)) % 3).astype(np.int32)
+    grating = mat != 0
+    got = gd.smooth_corner_tangents(v, t, n, tt, mat, grating)
+    # independently: the corner-angle-weighted, sign-aligned mean over the same-material
+    # grating corners at each vertex within the tangent and normal angles (one loop per corner)
+    ang = gd._corner_angles(np.asarray(v, np.float64), np.asarray(t, np.int64))
+    tt64 = tt.astype(np.float64)
+    ref = np.repeat(tt64[:, None, :], 3, axis=1)
+    cos_t, cos_n = np.cos(np.radians(gd.MAX_TANGENT_ANGLE)), np.cos(np.radians(gd.MAX_NORMAL_ANGLE))
+    at_vertex = {}
+    for i in np.flatnonzero(grating):
+        for c in range(3):
+            at_vertex.setdefault(int(t[i, c]), []).append((i, c))
+    for i in np.flatnonzero(grating):
+        for c in range(3):
+            acc = np.zeros(3)
+            for j, cj in at_vertex[int(t[i, c])]:
+                d = tt64[i] @ tt64[j]
+                if abs(d) >= cos_t and mat[i] == mat[j] and n[i] @ n[j] >= cos_n:
+                    acc += ang[j, cj] * np.sign(d) * tt64[j]
+            ln = np.linalg.norm(acc)
+            ref[i, c] = acc / ln if ln > 1e-12 else tt64[i]
+    assert got.dtype == np.float32
+    assert np.allclose(got, ref.astype(np.float32), rtol=0, atol=1e-6)
+    assert np.array_equal(got[~grating], np.repeat(tt[~grating, None, :], 3, axis=1))
