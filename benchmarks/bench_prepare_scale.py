@@ -37,8 +37,10 @@ from opal_diffraction.core.settings import RenderSettings
 SETTINGS = RenderSettings(samples=16, light_paths=1_000_000, threads=2)
 
 
-def scene_of(triangles: int) -> Scene:
-    """About ``triangles`` triangles: icospheres of 20 480 (subdivision 5) in a square grid."""
+def scene_of(triangles: int, grating_every: int = 8) -> Scene:
+    """About ``triangles`` triangles: icospheres of 20 480 (subdivision 5) in a square grid;
+    sphere k is glass (k % 8 in 0, 4), a mirror (1, 5), diffuse, and one in ``grating_every``
+    a diffuse grating instead (default 8: k % 8 == 2)."""
     sub = 5 if triangles >= 200_000 else 3
     tv, tt = primitives.icosphere((0, 0, 0), 1.0, sub)
     k = max(1, round(triangles / len(tt)))
@@ -49,7 +51,8 @@ def scene_of(triangles: int) -> Scene:
     tris = (tt[None].astype(np.int64) + (np.arange(k) * len(tv))[:, None, None]).reshape(-1, 3)
     which = np.repeat(np.arange(k), len(tt))
     # material per sphere: 1 glass, 2 mirror, 3 grating, 0 diffuse
-    sphere_mat = np.array([1, 2, 3, 0, 1, 2, 0, 0])[np.arange(k) % 8]
+    sphere_mat = np.array([1, 2, 0, 0, 1, 2, 0, 0])[np.arange(k) % 8]
+    sphere_mat[np.arange(k) % grating_every == 2] = 3
     tri_mat = sphere_mat[which]
     half = side * 1.25 + 1
     fv = np.array([[-half, -half, 0], [half, -half, 0], [half, half, 0], [-half, half, 0]], np.float64)
@@ -137,9 +140,9 @@ def instrument(times: dict, cpu: dict):
             setattr(owner, attr, wrap(name, raw))
 
 
-def run_one(triangles: int, profile: bool) -> dict:
+def run_one(triangles: int, profile: bool, grating_every: int = 8) -> dict:
     t0 = time.perf_counter()
-    scene = scene_of(triangles)
+    scene = scene_of(triangles, grating_every)
     build_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     import colour  # noqa: F401  once per process (the first prepare_materials pays it): timed apart
@@ -166,7 +169,8 @@ def run_one(triangles: int, profile: bool) -> dict:
             "import_colour_s": import_s,
             "prepare_s": prepared.prepare_s, "phases": dict(times), "cpu_phases": dict(cpus), "rss_scene_mb": rss_scene,
             "rss_peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-            "objects": len(prepared.light_targets.objects), "warnings": list(prepared.warnings),
+            "objects": len(prepared.light_targets.objects),
+            "grating_triangles": int(np.sum(prepared.gratings.enabled[prepared.tri_material])), "warnings": list(prepared.warnings),
             "profile": out_prof}
 
 
@@ -174,16 +178,17 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=float, nargs="+", default=[0.1, 1, 3, 10], help="millions of triangles")
     ap.add_argument("--profile", type=float, default=None, help="pyinstrument profile of this size (millions)")
+    ap.add_argument("--grating-every", type=int, default=8, help="one sphere in this many is a grating")
     ap.add_argument("--json", default=None, help="also write the rows to this file")
     ap.add_argument("--one", type=int, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--with-profile", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.one is not None:
-        print(json.dumps(run_one(args.one, args.with_profile)))
+        print(json.dumps(run_one(args.one, args.with_profile, args.grating_every)))
         return 0
     rows = []
     for m in args.sizes:
-        cmd = [sys.executable, __file__, "--one", str(int(m * 1e6))]
+        cmd = [sys.executable, __file__, "--one", str(int(m * 1e6)), "--grating-every", str(args.grating_every)]
         if args.profile is not None and m == args.profile:
             cmd.append("--with-profile")
         r = json.loads(subprocess.run(cmd, check=True, stdout=subprocess.PIPE, text=True).stdout.strip().splitlines()[-1])
@@ -192,7 +197,7 @@ def main(argv=None) -> int:
             with open(args.json, "w") as f:
                 json.dump(rows, f)
         print(f"{r['triangles'] / 1e6:.2f} M triangles: prepare {r['total_s']:.2f} s (CPU {r['cpu_s']:.2f} s; colour-science import {r['import_colour_s']:.1f} s before), peak RSS {r['rss_peak_mb']:.0f} MB "
-              f"(scene alone {r['rss_scene_mb']:.0f} MB), {r['objects']} caster groups", flush=True)
+              f"(scene alone {r['rss_scene_mb']:.0f} MB), {r['objects']} caster groups, {r['grating_triangles']} grating triangles", flush=True)
         if r["profile"]:
             print("\n".join(r["profile"].splitlines()[:60]))
     names = list(dict.fromkeys([p[0] for p in PHASES] + ["other"]))

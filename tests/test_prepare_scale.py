@@ -269,3 +269,24 @@ def test_smooth_corner_tangents_equal_the_float64_version():
     assert got.dtype == np.float32
     assert np.allclose(got, ref.astype(np.float32), rtol=0, atol=1e-6)
     assert np.array_equal(got[~grating], np.repeat(tt[~grating, None, :], 3, axis=1))
+
+
+def test_prepare_uses_validations_cross_products_for_its_normals():
+    from opal_diffraction.core.geometry import triangle_normals
+    from opal_diffraction.core.prepare import prepare
+    from opal_diffraction.core.scene import TRIANGLE_CROSS_ATTR, Camera, Lights, Materials, Scene
+    from opal_diffraction.core.settings import RenderSettings
+
+    v, t = primitives.icosphere((0, 0, 1), 1.0, 2)
+    v = np.concatenate([v, [[5, 5, 5]]])
+    t = np.concatenate([t, [[0, 1, 1], [len(v) - 1, 2, 2]]])  # two degenerate triangles, dropped
+    sc = Scene(vertices=v.astype(np.float32), triangles=t.astype(np.int32), tri_material=np.zeros(len(t), np.int32),
+               materials=Materials.from_list([{"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)}]))
+    sc.lights = Lights.from_list([{"kind": "POINT", "position": (0, 0, 4), "power": 10.0}])
+    sc.camera = Camera.look_at((0, -5, 2), (0, 0, 1), width=8, height=8)
+    clean, _ = sc.validated()
+    assert clean.__dict__[TRIANGLE_CROSS_ATTR].shape == (len(t) - 2, 3)
+    p = prepare(sc, RenderSettings(samples=1, light_paths=0))
+    assert TRIANGLE_CROSS_ATTR not in p.scene.__dict__  # not kept with the prepared scene
+    assert np.array_equal(p.tri_normal, triangle_normals(p.scene.vertices, p.scene.triangles).astype(np.float32))
+    assert len(p.tri_normal) == len(t) - 2

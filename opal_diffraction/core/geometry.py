@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["compact_indices", "triangle_cross", "triangle_areas", "triangle_normals", "orthonormal_basis", "interpolate_corners"]
+__all__ = ["compact_indices", "triangle_cross", "triangle_areas", "triangle_normals", "normals_from_cross", "orthonormal_basis", "interpolate_corners"]
 
 
 def compact_indices(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -57,7 +57,11 @@ def triangle_areas(vertices, triangles) -> np.ndarray:
 
 def triangle_normals(vertices, triangles) -> np.ndarray:
     """(T, 3) float64 unit geometric normals (right-handed winding); zero for degenerate triangles."""
-    n = triangle_cross(vertices, triangles)
+    return normals_from_cross(triangle_cross(vertices, triangles))
+
+
+def normals_from_cross(n: np.ndarray) -> np.ndarray:
+    """(T, 3) float64 unit normals from :func:`triangle_cross`'s products; zero where they are."""
     return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
 
 

@@ -47,6 +47,12 @@ CONDUCTOR_FRESNELS = codes(ConductorFresnel)
 LIGHT_KINDS = codes(LightKind)
 
 
+#: The clean scene of ``Scene.validated`` carries its (T, 3) float64 triangle cross products
+#: (geometry.triangle_cross of its vertices and triangles) under this attribute, so that
+#: prepare does not compute them a second time; not a field (never saved, dropped by replace).
+TRIANGLE_CROSS_ATTR = "_validated_triangle_cross"
+
+
 class SceneError(ValueError):
     """A scene that cannot be rendered; the message (always one line) names the problem for the user."""
 
@@ -698,8 +704,10 @@ class Scene:
         dom = _validate_domains(self, len(t))
         t = t.astype(np.int32)
         cn = _validate_corner_normals(self.corner_normals, v, t, warns)
+        cross = None
         if len(t):
-            area2 = np.linalg.norm(triangle_cross(v, t), axis=1)
+            cross = triangle_cross(v, t)
+            area2 = np.linalg.norm(cross, axis=1)
             degenerate = area2 <= 0.0
             tiny = ~degenerate & (area2 < 2 * MIN_TRIANGLE_AREA)
             if degenerate.any():
@@ -709,7 +717,7 @@ class Scene:
                              f"(area below {MIN_TRIANGLE_AREA:g} m^2)")
             if degenerate.any() or tiny.any():
                 keep = ~(degenerate | tiny)
-                t, tm = t[keep], tm[keep]
+                t, tm, cross = t[keep], tm[keep], cross[keep]
                 tt = tt[keep] if len(tt) else tt
                 tp = tp[keep] if len(tp) else tp
                 cn = cn[keep] if len(cn) else cn
@@ -727,6 +735,8 @@ class Scene:
         clean = replace(self, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
                         materials=materials, lights=lights, camera=camera, world_color=wc, corner_normals=cn,
                         world_image=world_image, world_rotation=world_rotation, **tex, **dom)
+        if cross is not None:  # prepare's normals are these products normalised (it pops them)
+            clean.__dict__[TRIANGLE_CROSS_ATTR] = cross
         return clean, warns
 
     # ------------------------------------------------------------------ .npz
