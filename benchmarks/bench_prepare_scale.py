@@ -1,6 +1,6 @@
 """Preparation time per phase against the scene's triangle count (the [caustics] issue's Scale item).
 
-    .venv/bin/python benchmarks/bench_prepare_scale.py [--sizes 0.1 1 3 10] [--profile 1]
+    .venv/bin/python benchmarks/bench_prepare_scale.py [--sizes 0.1 1 3 10] [--profile 10] [--grating-every 8]
 
 The scene: a grid of icospheres (core/primitives.py, 20 x 4^s triangles each, copies of one
 template laid out in a square) on a diffuse floor: a quarter glass, a quarter mirror, an eighth
@@ -9,9 +9,11 @@ half the spheres (the other half and the floor flat), per-corner UVs; a point li
 sun, an emissive quad (a mesh light) and a world colour. Each size runs in its own subprocess
 (so its peak RSS, ``resource.getrusage(RUSAGE_SELF).ru_maxrss``, is the preparation's alone);
 the phases are timed by wrapping the functions core/prepare.py calls (the names it imported),
-so the code measured is the code that runs. Prints the table (seconds per phase x size, and
-nanoseconds per triangle), the RSS, and with ``--profile M`` pyinstrument's top lines for the
-M-million-triangle scene.
+so the code measured is the code that runs. Prints two tables, wall-clock and CPU seconds
+(``time.process_time``: every thread of the process, Embree's build threads included; on a
+shared machine the number to compare) per phase x size with nanoseconds per triangle, the RSS,
+and with ``--profile M`` pyinstrument's top lines for the M-million-triangle scene. Results in
+docs/benchmarks.md ("Preparation at 10 M triangles").
 """
 
 from __future__ import annotations
