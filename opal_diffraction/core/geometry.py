@@ -9,16 +9,45 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["triangle_cross", "triangle_areas", "triangle_normals", "orthonormal_basis", "interpolate_corners"]
+__all__ = ["compact_indices", "triangle_cross", "triangle_areas", "triangle_normals", "normals_from_cross", "orthonormal_basis", "interpolate_corners"]
+
+
+def compact_indices(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct non-negative integers in ``ids`` (sorted) and ``ids`` renumbered into them:
+    ``np.unique(ids, return_inverse=True)`` (same values, ``ids``' shape) in O(n + range) with
+    a mark array instead of an O(n log n) sort (vertex ids of triangles: a small range)."""
+    ids = np.asarray(ids)
+    if ids.size == 0:
+        return np.zeros(0, np.int64), np.zeros(ids.shape, np.int64)
+    lo, hi = int(ids.min()), int(ids.max())
+    shifted = ids - lo if lo else ids
+    mark = np.zeros(hi - lo + 1, bool)
+    mark[shifted.ravel()] = True
+    rank = np.cumsum(mark, dtype=np.int64) - 1  # the new id of each id present
+    return np.flatnonzero(mark) + lo, rank[shifted]
 
 
 def triangle_cross(vertices, triangles) -> np.ndarray:
     """(T, 3) float64 ``(v1 - v0) x (v2 - v0)`` per triangle: its normal times twice its area."""
-    t = np.asarray(triangles, np.int64).reshape(-1, 3)
+    t = np.asarray(triangles).reshape(-1, 3)
     if len(t) == 0:
         return np.zeros((0, 3))
-    p = np.asarray(vertices, np.float64)[t]
-    return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    if t.dtype.kind not in "iu":
+        t = t.astype(np.int64)
+    # the vertices in float64 once (V rows, not 3 T), the edges gathered from them, and the
+    # cross product written out as np.cross computes it (a1 b2 - a2 b1, ...): the same values
+    v = np.asarray(vertices, np.float64)
+    p0 = v[t[:, 0]]
+    a = v[t[:, 1]]
+    a -= p0
+    b = v[t[:, 2]]
+    b -= p0
+    del p0
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
 
 
 def triangle_areas(vertices, triangles) -> np.ndarray:
@@ -28,7 +57,11 @@ def triangle_areas(vertices, triangles) -> np.ndarray:
 
 def triangle_normals(vertices, triangles) -> np.ndarray:
     """(T, 3) float64 unit geometric normals (right-handed winding); zero for degenerate triangles."""
-    n = triangle_cross(vertices, triangles)
+    return normals_from_cross(triangle_cross(vertices, triangles))
+
+
+def normals_from_cross(n: np.ndarray) -> np.ndarray:
+    """(T, 3) float64 unit normals from :func:`triangle_cross`'s products; zero where they are."""
     return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
 
 

@@ -51,15 +51,16 @@ def smooth_corner_tangents(vertices, triangles, tri_normal, tri_tangent, tri_mat
 
     Cost: the pairs of corners sharing a vertex, about 6 per corner on a regular mesh."""
     grating_tri = np.asarray(grating_tri, bool)
-    tt = np.asarray(tri_tangent, np.float64)
-    if not grating_tri.any() or len(tt) != len(grating_tri):
+    if not grating_tri.any() or len(tri_tangent) != len(grating_tri):
         return None
-    out = np.repeat(tt[:, None, :], 3, axis=1)
+    # float32 from the start (the float64 rows were cast at the end: the same values), and the
+    # float64 work on the grating rows only
+    out = np.repeat(np.asarray(tri_tangent)[:, None, :], 3, axis=1).astype(np.float32, copy=False)
     g = np.flatnonzero(grating_tri)
     tris = np.asarray(triangles, np.int64)[g]
     v = np.asarray(vertices, np.float64)
     nrm = np.asarray(tri_normal, np.float64)[g]
-    tg = tt[g]
+    tg = np.asarray(tri_tangent)[g].astype(np.float64)
     mat = np.asarray(tri_material)[g]
     weight = _corner_angles(v, tris).ravel()
     vid = tris.ravel()
@@ -88,7 +89,7 @@ def smooth_corner_tangents(vertices, triangles, tri_normal, tri_tangent, tri_mat
     corner = np.empty((len(vid), 3))
     corner[order] = acc
     out[g] = corner.reshape(-1, 3, 3)
-    return out.astype(np.float32)
+    return out
 
 
 def tangents_at(corner_tangents: np.ndarray | None, tri_tangent: np.ndarray, prim, bu, bv, normal) -> np.ndarray:

@@ -113,16 +113,30 @@ def triangle_tangents(tri_normal: np.ndarray, tri_tangent: np.ndarray) -> np.nda
     given = np.asarray(tri_tangent, np.float64).reshape(-1, 3)
     if len(given) != t_count:
         given = np.zeros((t_count, 3))
-    out = np.zeros((t_count, 3))
-    todo = np.ones(t_count, bool)
-    for cand in (given, np.array([[1.0, 0, 0]]), np.array([[0.0, 1, 0]])):
-        c = np.broadcast_to(cand, (t_count, 3))
-        proj = c - np.sum(c * n, axis=1, keepdims=True) * n
+    out = np.zeros((t_count, 3), np.float32)
+
+    def project(c, nn):  # the candidate in the plane, normalised, where it is long enough
+        proj = c - np.sum(c * nn, axis=1, keepdims=True) * nn
         norm = np.linalg.norm(proj, axis=1)
-        ok = todo & (norm > 1e-6)
-        out[ok] = proj[ok] / norm[ok, None]
-        todo &= ~ok
-    return out.astype(np.float32)
+        ok = norm > 1e-6
+        return ok, proj[ok] / norm[ok, None]
+
+    # each candidate only on the rows still without a tangent, with the same per-row arithmetic
+    # as over all rows (a zero given tangent projects to zero: those rows go straight to X)
+    left = np.ones(t_count, bool)
+    rows = np.flatnonzero(np.any(given != 0, axis=1))
+    if len(rows):
+        ok, unit = project(given[rows], n[rows])
+        out[rows[ok]] = unit
+        left[rows[ok]] = False
+    todo = np.flatnonzero(left)
+    for cand in (np.array([[1.0, 0, 0]]), np.array([[0.0, 1, 0]])):
+        if len(todo) == 0:
+            break
+        ok, unit = project(np.broadcast_to(cand, (len(todo), 3)), n[todo])
+        out[todo[ok]] = unit
+        todo = todo[~ok]
+    return out
 
 
 def grating_frame(tangent: np.ndarray, normal: np.ndarray, cos_rot, sin_rot):

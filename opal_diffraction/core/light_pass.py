@@ -55,7 +55,7 @@ import numpy as np
 
 from .elements import ElementLayout, IlluminationMap
 from .grating_records import PILOT_STREAM, GratingRecords, record_layout
-from .geometry import orthonormal_basis, triangle_areas
+from .geometry import compact_indices, orthonormal_basis, triangle_areas
 from .grating_sampling import diffracting, scatter_at_gratings, scattering_materials
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIELECTRIC, DIFFUSE, MIRROR
@@ -97,10 +97,8 @@ def caster_objects(vertices, triangles, mask) -> CasterObjects:
     t = np.asarray(triangles)[np.asarray(mask, bool)]
     if len(t) == 0:
         return CasterObjects(np.zeros((0, 3)), np.zeros(0))
-    v = np.asarray(vertices, np.float64)
-    used, node = np.unique(t.ravel(), return_inverse=True)  # compact the vertex ids of the casters
-    node = node.reshape(-1, 3)
-    pts = v[used]
+    used, node = compact_indices(t)  # compact the vertex ids of the casters (np.unique's result)
+    pts = np.asarray(vertices)[used].astype(np.float64)  # the casters' vertices only, in float64
     extent = float(np.ptp(pts, axis=0).max()) or max(float(np.abs(pts).max()), 1e-30)
     n_nodes = len(used)
     rows = np.concatenate([node[:, 0], node[:, 1]])
@@ -110,7 +108,7 @@ def caster_objects(vertices, triangles, mask) -> CasterObjects:
     if n_comp > MAX_OBJECTS:  # many separate pieces: group them by a spatial grid instead
         cells = np.floor((pts - pts.min(axis=0)) / (extent / 4 + 1e-12 * extent)).astype(np.int64)
         key = (cells[:, 0] * 5 + cells[:, 1]) * 5 + cells[:, 2]  # cells are 0..4 per axis
-        _, label = np.unique(key, return_inverse=True)
+        _, label = compact_indices(key)
         n_comp = int(label.max()) + 1
     # per-group bounding box centre and radius, over the group's vertices (O(V) per pass)
     lo = np.full((n_comp, 3), np.inf)

@@ -51,19 +51,20 @@ class MeshLights:
         ``luminance_weights`` (n,): the Y observer's bin weights (spectrum @ weights = luminance;
         default: the mean over the bins), which weigh the choice of triangle.
         """
-        t = np.asarray(triangles, np.int64).reshape(-1, 3)
-        tm = np.asarray(tri_material, np.int64).reshape(-1)
+        t = np.asarray(triangles).reshape(-1, 3)
+        tm = np.asarray(tri_material).reshape(-1)
         em = np.asarray(emission_spectra, np.float64)
         if len(t) == 0 or em.size == 0:
             return None
         w = (np.full(em.shape[1], 1.0 / em.shape[1]) if luminance_weights is None
              else np.asarray(luminance_weights, np.float64))
         lum = np.maximum(em @ w, 0.0)
-        emits = (lum[tm] > 0) & np.any(em[tm] > 0, axis=1)
+        # per material, then looked up per triangle (never a (T, n) array of spectra)
+        emits = ((lum > 0) & np.any(em > 0, axis=1))[tm]
         if not emits.any():
             return None
         tri = np.flatnonzero(emits)
-        p = np.asarray(vertices, np.float64)[t[tri]]
+        p = np.asarray(vertices, np.float64)[np.asarray(t[tri], np.int64)]
         e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
         cr = np.cross(e1, e2)
         area = 0.5 * np.linalg.norm(cr, axis=1)

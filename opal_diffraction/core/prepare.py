@@ -29,7 +29,7 @@ import numpy as np
 from .accel import build_accelerator, default_threads
 from .cancel import check, run_cancellable
 from .environment import EnvironmentMap
-from .geometry import triangle_normals
+from .geometry import normals_from_cross, triangle_normals
 from .gratings import PreparedGratings, prepare_gratings, triangle_tangents
 from .grating_layering import attach_layering
 from .grating_directions import smooth_corner_tangents
@@ -39,7 +39,7 @@ from .materials import PreparedMaterials, prepare_materials
 from .bsdf import microfacet_materials
 from .mesh_lights import MeshLights
 from .opal.volume import VolumeDomains
-from .scene import Camera, Scene
+from .scene import TRIANGLE_CROSS_ATTR, Camera, Scene
 from .settings import AUTO_LIGHT_PATHS_RANGE, EYE_ONLY_SETTINGS, RenderSettings, auto_light_paths
 from .spectrum import SpectralConverter, WavelengthGrid
 from .textures import PreparedTextures, prepare_textures
@@ -140,7 +140,9 @@ def triangle_offsets(v: np.ndarray, t: np.ndarray, base: float) -> np.ndarray:
     largest |coordinate| (looked up per hit, so no per-hit reduction)."""
     if len(t) == 0:
         return np.zeros(0, np.float32)
-    return (base + 4e-7 * np.abs(v[t]).max(axis=(1, 2))).astype(np.float32)
+    # the largest |coordinate| per vertex, then per triangle (the same maxima, no (T, 3, 3) gather)
+    per_vertex = np.abs(v).max(axis=1)
+    return (base + 4e-7 * per_vertex[t].max(axis=1)).astype(np.float32)
 
 
 def _equal(a, b) -> bool:
@@ -207,6 +209,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
     settings = settings or RenderSettings()
     settings.validate()
     scene, warnings = scene.validated()
+    cross = scene.__dict__.pop(TRIANGLE_CROSS_ATTR, None)  # validation's products (not kept with the scene)
     if settings.light_paths is None:  # automatic: sized to the image (settings.auto_light_paths)
         cam = scene.camera
         settings = replace(settings, light_paths=auto_light_paths(cam.width, cam.height, settings.samples) if cam is not None
@@ -227,10 +230,12 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
     same_geometry = (reuse is not None and reuse.settings.backend == settings.backend
                      and _same_geometry(reuse.scene, scene))
     if same_geometry:
+        cross = None
         accel, nrm64, tri_normal = reuse.accel, None, reuse.tri_normal
         tri_offset, base, extent = reuse.tri_offset, reuse.offset_base, reuse.extent
     else:
-        nrm64 = triangle_normals(v, t)
+        nrm64 = triangle_normals(v, t) if cross is None or len(cross) != len(t) else normals_from_cross(cross)
+        cross = None
         tri_normal = nrm64.astype(np.float32)
         extent = scene_extent(v)
         base = OFFSET_RELATIVE * extent

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from .geometry import triangle_normals
+from .geometry import triangle_cross, triangle_normals
 from .enums import (ConductorFresnel, GratingDirection, GratingType, Lattice, LightKind, MaterialKind,
                     TextureEncoding, TextureExtension, TextureInterpolation, codes)
 from .optics import DISPERSION_MODELS, ior_spectrum
@@ -45,6 +45,12 @@ FORMAT_VERSION = 1
 MATERIAL_KINDS = codes(MaterialKind)
 CONDUCTOR_FRESNELS = codes(ConductorFresnel)
 LIGHT_KINDS = codes(LightKind)
+
+
+#: The clean scene of ``Scene.validated`` carries its (T, 3) float64 triangle cross products
+#: (geometry.triangle_cross of its vertices and triangles) under this attribute, so that
+#: prepare does not compute them a second time; not a field (never saved, dropped by replace).
+TRIANGLE_CROSS_ATTR = "_validated_triangle_cross"
 
 
 class SceneError(ValueError):
@@ -652,13 +658,14 @@ class Scene:
         camera = _validate_camera(self.camera)
         v = _column(self.vertices, "vertices", (3,), allow_empty=True)
         t = _column(self.triangles, "triangles", (3,), kind="int", allow_empty=True)
-        v64 = v.astype(np.float64, copy=False)
-        bad = ~np.isfinite(v64).all(axis=1)
-        if bad.any():
-            raise SceneError(
-                f"{int(bad.sum())} vertex coordinate(s) are NaN or infinite (first: vertex {int(np.argmax(bad))})"
-            )
-        _check_range(v64, lambda i: f"vertex {i}", "coordinate", " m", limit=COORD_LIMIT)
+        if not _within(v, COORD_LIMIT):  # the full checks only when something is wrong
+            v64 = v.astype(np.float64, copy=False)
+            bad = ~np.isfinite(v64).all(axis=1)
+            if bad.any():
+                raise SceneError(
+                    f"{int(bad.sum())} vertex coordinate(s) are NaN or infinite (first: vertex {int(np.argmax(bad))})"
+                )
+            _check_range(v64, lambda i: f"vertex {i}", "coordinate", " m", limit=COORD_LIMIT)
         v = v if v.dtype == np.float32 else v.astype(np.float32)
         if len(t):
             if t.min() < 0 or t.max() >= len(v):
@@ -689,17 +696,18 @@ class Scene:
             raise SceneError(f"tri_tangent / tri_period must have one entry per triangle ({len(t)}) or none")
         if not np.isfinite(tt).all() or not np.isfinite(tp).all() or (tp < 0).any():
             raise SceneError("a per-triangle grating direction or period is NaN, infinite or negative")
-        _check_range(tt.astype(np.float64), lambda i: f"triangle {i}", "grating direction", "")
-        _check_range(tp.astype(np.float64), lambda i: f"triangle {i}", "grating period", " nm", limit=PERIOD_MAX)
+        _check_range(tt, lambda i: f"triangle {i}", "grating direction", "")
+        _check_range(tp, lambda i: f"triangle {i}", "grating period", " nm", limit=PERIOD_MAX)
         tt = tt if tt.dtype == np.float32 else tt.astype(np.float32)
         tp = tp if tp.dtype == np.float32 else tp.astype(np.float32)
         tex = _validate_textures(self, len(t), materials, tm, warns)
         dom = _validate_domains(self, len(t))
         t = t.astype(np.int32)
         cn = _validate_corner_normals(self.corner_normals, v, t, warns)
+        cross = None
         if len(t):
-            p = v.astype(np.float64)[t]
-            area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+            cross = triangle_cross(v, t)
+            area2 = np.linalg.norm(cross, axis=1)
             degenerate = area2 <= 0.0
             tiny = ~degenerate & (area2 < 2 * MIN_TRIANGLE_AREA)
             if degenerate.any():
@@ -709,7 +717,7 @@ class Scene:
                              f"(area below {MIN_TRIANGLE_AREA:g} m^2)")
             if degenerate.any() or tiny.any():
                 keep = ~(degenerate | tiny)
-                t, tm = t[keep], tm[keep]
+                t, tm, cross = t[keep], tm[keep], cross[keep]
                 tt = tt[keep] if len(tt) else tt
                 tp = tp[keep] if len(tp) else tp
                 cn = cn[keep] if len(cn) else cn
@@ -720,13 +728,15 @@ class Scene:
         if len(t) == 0:
             warns.append("the scene has no geometry: the image shows only the background")
         # a coloured or mapped world lights the scene, and so does a mesh whose material emits
-        emitting = len(t) > 0 and bool(np.any(np.asarray(materials.emission)[np.unique(tm)] > 0))
+        emitting = len(t) > 0 and bool(np.any(np.asarray(materials.emission)[np.bincount(tm, minlength=nm) > 0] > 0))
         world_lit = bool(np.any(np.asarray(wc) > 0)) and (world_image.size == 0 or bool(np.any(world_image > 0)))
         if len(lights) == 0 and not world_lit and not emitting:
             warns.append("the scene has no lights: only the background is lit")
         clean = replace(self, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
                         materials=materials, lights=lights, camera=camera, world_color=wc, corner_normals=cn,
                         world_image=world_image, world_rotation=world_rotation, **tex, **dom)
+        if cross is not None:  # prepare's normals are these products normalised (it pops them)
+            clean.__dict__[TRIANGLE_CROSS_ATTR] = cross
         return clean, warns
 
     # ------------------------------------------------------------------ .npz
@@ -985,11 +995,24 @@ def _first_row(mask: np.ndarray) -> int:
     return int(np.argmax(m))
 
 
+def _within(a, limit: float | None = None, nonneg: bool = False) -> bool:
+    """True when every value of ``a`` (any real dtype) is finite, within float32 and ``limit``
+    (and >= 0 with ``nonneg``): two reductions and no float64 copy (a NaN propagates through
+    min and max). False: the caller's full check finds and names the first bad row."""
+    a = np.asarray(a)
+    if a.size == 0:
+        return True
+    lo, hi = float(np.min(a)), float(np.max(a))
+    mag = max(-lo, hi)
+    return bool(np.isfinite(lo) and np.isfinite(hi) and mag <= FLOAT32_MAX and (limit is None or mag <= limit)
+                and (not nonneg or lo >= 0))
+
+
 def _check_range(a64: np.ndarray, label, name: str, unit: str, limit: float | None = None,
                  finite_text: str | None = None, nonneg: bool = False) -> None:
     """Finite, within float32, |x| <= limit (and >= 0 with ``nonneg``), per row; ``label(i)``
     names row i ("light 2"). Empty arrays pass."""
-    if a64.size == 0:
+    if a64.size == 0 or _within(a64, limit, nonneg):
         return
     a64 = np.asarray(a64, np.float64)
     bad = ~np.isfinite(a64)
@@ -1185,6 +1208,9 @@ def _check_row_counts(table, what: str, n: int) -> None:
                              f"expected {n}")
 
 
+_ROWS_PER_CHUNK = 1 << 18  # rows of per-corner data normalised at a time
+
+
 def _validate_corner_normals(value, v: np.ndarray, t: np.ndarray, warns: list) -> np.ndarray:
     """Scene.corner_normals: (T, 3, 3) finite, or empty (flat). Returned unit length in float32;
     a zero normal falls back to its triangle's face normal (one warning for all of them)."""
@@ -1193,19 +1219,25 @@ def _validate_corner_normals(value, v: np.ndarray, t: np.ndarray, warns: list) -
         return np.zeros((0, 3, 3), np.float32)
     if len(cn) != len(t):
         raise SceneError(f"corner_normals must have one (3, 3) entry per triangle ({len(t)}) or none, got {len(cn)}")
-    c64 = cn.astype(np.float64)
-    _check_range(c64.reshape(len(c64), 9), lambda i: f"triangle {i}", "shading normal", "")
-    length = np.linalg.norm(c64, axis=2, keepdims=True)
-    zero = ~(length > 1e-30)
-    if zero.any():
-        face = triangle_normals(v, t)
-        # degenerate triangles (zero face normal) are dropped later: no warning for them
-        n_zero = int((zero[:, :, 0] & (np.abs(face).max(axis=1) > 0)[:, None]).sum())
-        if n_zero:
-            warns.append(f"{n_zero} zero shading normal(s): their triangles' face normals are used there")
-        c64 = np.where(zero, face[:, None, :], c64)
-        length = np.where(zero, 1.0, length)
-    return (c64 / length).astype(np.float32)
+    _check_range(cn.reshape(len(cn), 9), lambda i: f"triangle {i}", "shading normal", "")
+    # normalised in float64 in chunks of rows (the same values as over the whole array at once,
+    # without (T, 3, 3) float64 temporaries)
+    out = np.empty(cn.shape, np.float32)
+    n_zero = 0
+    for s in range(0, len(cn), _ROWS_PER_CHUNK):
+        c64 = cn[s:s + _ROWS_PER_CHUNK].astype(np.float64)
+        length = np.linalg.norm(c64, axis=2, keepdims=True)
+        zero = ~(length > 1e-30)
+        if zero.any():
+            face = triangle_normals(v, t[s:s + _ROWS_PER_CHUNK])
+            # degenerate triangles (zero face normal) are dropped later: no warning for them
+            n_zero += int((zero[:, :, 0] & (np.abs(face).max(axis=1) > 0)[:, None]).sum())
+            c64 = np.where(zero, face[:, None, :], c64)
+            length = np.where(zero, 1.0, length)
+        out[s:s + _ROWS_PER_CHUNK] = c64 / length
+    if n_zero:
+        warns.append(f"{n_zero} zero shading normal(s): their triangles' face normals are used there")
+    return out
 
 
 def _validate_materials(m: Materials) -> Materials:
@@ -1402,7 +1434,7 @@ def _validate_textures(scene: "Scene", n_tri: int, materials: Materials, tri_mat
         a = _column(getattr(scene, name), name, (3, width), allow_empty=True)
         if len(a) not in (0, n_tri):
             raise SceneError(f"{name} must have one row of 3 corners per triangle ({n_tri}) or none, got {len(a)}")
-        if a.size:
+        if a.size and not _within(a):
             bad = ~np.isfinite(a.astype(np.float64))
             if bad.any():
                 raise SceneError(f"{name}: triangle {_first_row(bad)} has a NaN or infinite value")
@@ -1410,8 +1442,8 @@ def _validate_textures(scene: "Scene", n_tri: int, materials: Materials, tri_mat
         out[name] = a if a.dtype == np.float32 else a.astype(np.float32)
     label = _material_label(materials.name)
     used = np.zeros(len(materials), bool)
-    if len(tri_material):
-        used[np.unique(tri_material)] = True
+    if len(tri_material):  # validated: 0 <= tri_material < len(materials)
+        used |= np.bincount(tri_material, minlength=len(materials))[:len(materials)] > 0
     for col in TEXTURE_COLUMNS:
         idx = np.asarray(getattr(materials, col)).astype(np.int64)
         bad = idx >= k

@@ -91,15 +91,16 @@ def _check_mesh(vertices, triangles):
     if not np.issubdtype(t.dtype, np.integer):
         if not np.all(np.equal(np.mod(t, 1), 0)):
             raise ValueError("triangles must hold integer vertex indices")
-    t = t.astype(np.int64)
-    if t.min() < 0 or t.max() >= len(v):
-        raise ValueError(f"triangle vertex indices must lie in [0, {len(v)}); got [{t.min()}, {t.max()}]")
+        t = t.astype(np.int64)
+    lo, hi = int(t.min()), int(t.max())  # in the given integer type: no int64 copy of the mesh
+    if lo < 0 or hi >= len(v):
+        raise ValueError(f"triangle vertex indices must lie in [0, {len(v)}); got [{lo}, {hi}]")
     v = np.asarray(v, np.float32)
-    if not np.all(np.isfinite(v)):
+    if not np.isfinite(np.min(v)) or not np.isfinite(np.max(v)):  # a NaN or inf propagates
         raise ValueError("vertices must be finite")
     if len(t) >= 2**31 - 1:
         raise ValueError("too many triangles")
-    return v, t.astype(np.int32)
+    return v, t.astype(np.int32, copy=False)
 
 
 def build_accelerator(vertices, triangles, backend: str = "auto", threads: int | None = None, stopped=None):

@@ -18,7 +18,9 @@ Facts about embreex 4.4.0.post1 this wrapper relies on (checked on this version)
 - OCCLUDED accepts ``t <= tfar``; we pass ``(tmax - nudge) * (1 - 2**-21)`` to get ``t < tmax``.
 - Output ``u``/``v`` follow the Embree convention used by the interface; ``Ng`` is ignored.
 - The mesh is copied into Embree's own buffers (float32 vertices, uint32 indices); primIDs
-  are indices into the triangles array in input order.
+  are indices into the triangles array in input order. The copy and the commit go through
+  Embree's C API directly when ``embree_direct.available()`` (embreex's copy loop costs
+  ~1.5 us per triangle with the GIL held); the buffers and the BVH are the same.
 """
 from __future__ import annotations
 
@@ -27,7 +29,8 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from ..cancel import check
-from . import Hits, _as_rays, _as_tmax, _empty_hits, default_threads
+from ..geometry import compact_indices
+from . import Hits, _as_rays, _as_tmax, _empty_hits, default_threads, embree_direct
 
 _CHUNK = 1 << 16       # rays per embree call
 _GEOMETRY_CHUNK = 1 << 18  # triangles per Embree geometry when a mesh is split
@@ -56,24 +59,29 @@ class EmbreeAccelerator:
         # first triangle of each Embree geometry (geomID), to map (geomID, primID) to our index
         self._geom_start = np.zeros(1, np.int64)
         if self.n_triangles:
-            self._scene = rtcs.EmbreeScene()
+            direct = embree_direct.available()
+            self._scene = embree_direct.new_scene() if direct else rtcs.EmbreeScene()
             v = np.ascontiguousarray(vertices, np.float32)
             t = np.ascontiguousarray(triangles, np.int32)
+            add = embree_direct.add_triangles if direct else TriangleMesh
             if len(t) <= _GEOMETRY_CHUNK:
-                TriangleMesh(self._scene, v, t)
+                add(self._scene, v, t)
             else:
-                # embreex copies a mesh in a loop that holds the GIL (~1.5 us per triangle): add
-                # the mesh as several geometries of one scene (one BVH over all of them), so a
-                # cancel poll can run between the pieces
+                # the mesh goes in as several geometries of one scene (one BVH over all of
+                # them), each with its own compacted vertices, so a cancel poll can run between
+                # the pieces (embreex's own copy holds the GIL ~1.5 us per triangle)
                 starts = np.arange(0, len(t), _GEOMETRY_CHUNK)
                 for s in starts:
                     check(stopped)
-                    piece = t[s:s + _GEOMETRY_CHUNK]
-                    used, local = np.unique(piece, return_inverse=True)
-                    TriangleMesh(self._scene, v[used], local.reshape(-1, 3).astype(np.int32))
+                    used, local = compact_indices(t[s:s + _GEOMETRY_CHUNK])
+                    local = local.astype(np.int32)
+                    add(self._scene, v[used], local)
                 self._geom_start = starts.astype(np.int64)
-            # Commit now, single-threaded (embreex commits lazily without a lock).
-            self._scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))
+            check(stopped)
+            if direct:  # Embree builds the BVH with the GIL released
+                embree_direct.commit(self._scene)
+            else:  # commit now, single-threaded (embreex commits lazily without a lock)
+                self._scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))
 
     def _prim_index(self, r) -> np.ndarray:
         """Our triangle index of Embree's hits (-1 for misses)."""
