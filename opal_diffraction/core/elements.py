@@ -109,21 +109,56 @@ class IlluminationMap:
                    np.zeros((layout.total, 3), np.float32) if with_direction else None)
 
     def deposit(self, elements: np.ndarray, flux: np.ndarray, lam: np.ndarray | None = None,
-                towards_source: np.ndarray | None = None) -> None:
+                towards_source: np.ndarray | None = None, basis: np.ndarray | None = None) -> None:
         """Add flux (B, n) white or (B,) at wavelengths ``lam`` to the elements (B,); with
-        ``towards_source`` (B, 3), also the flux-weighted incoming direction."""
+        ``basis`` (k, n), ``flux`` is (B, k) coefficients over it (white flux = flux @ basis: a
+        light's spectrum times a scalar, k = 1), summed per element and expanded once per
+        element; with ``towards_source`` (B, 3), also the flux-weighted incoming direction."""
         if len(elements) == 0:
+            return
+        elements = np.asarray(elements, np.int64)
+        if basis is not None:
+            self._deposit_coefficients(elements, flux, basis, towards_source)
             return
         if self.direction is not None and towards_source is not None:
             weight = flux if lam is not None else flux.sum(axis=1)
-            np.add.at(self.direction, elements, towards_source * weight[:, None])
+            self._add_directions(elements, towards_source * weight[:, None])
         if lam is not None:
-            np.add.at(self.flux, (elements, lam), flux)
+            # per (element, wavelength) sums in float64 by bincount (np.add.at is ~10x slower)
+            n = self.flux.shape[1]
+            keys, inv = np.unique(elements * n + np.asarray(lam, np.int64), return_inverse=True)
+            sums = np.bincount(inv.reshape(-1), weights=np.asarray(flux, np.float64).reshape(-1), minlength=len(keys))
+            flat = self.flux.reshape(-1)
+            flat[keys] += sums.astype(np.float32)
             return
         order = np.argsort(elements, kind="stable")
         e, f = elements[order], flux[order]
         starts = np.flatnonzero(np.concatenate([[True], e[1:] != e[:-1]]))
         self.flux[e[starts]] += np.add.reduceat(f, starts, axis=0)
+
+    def _deposit_coefficients(self, elements, coeff, basis, towards_source) -> None:
+        basis = np.asarray(basis, np.float64)
+        k = len(basis)
+        coeff = np.asarray(coeff, np.float64).reshape(len(elements), k)
+        cells, inv = np.unique(elements, return_inverse=True)
+        inv = inv.reshape(-1)
+        # per element and coefficient sums (one bincount over element * k + c), in float64
+        sums = np.bincount((inv[:, None] * k + np.arange(k)).reshape(-1), weights=coeff.reshape(-1),
+                           minlength=len(cells) * k).reshape(len(cells), k)
+        self.flux[cells] += (sums @ basis).astype(np.float32)
+        if self.direction is not None and towards_source is not None:
+            self._add_directions(elements, np.asarray(towards_source, np.float64) * (coeff @ basis.sum(axis=1))[:, None],
+                                 cells, inv)
+
+    def _add_directions(self, elements, weighted_dirs, cells=None, inv=None) -> None:
+        """direction[elements] += weighted_dirs (B, 3), by bincount per element (float64 sums)."""
+        if cells is None:
+            cells, inv = np.unique(elements, return_inverse=True)
+            inv = inv.reshape(-1)
+        m = len(cells)
+        wd = np.asarray(weighted_dirs, np.float64)
+        sums = np.stack([np.bincount(inv, weights=wd[:, c], minlength=m) for c in range(3)], axis=1)  # 3 axes
+        self.direction[cells] += sums.astype(np.float32)
 
     def irradiance(self, prim, bu, bv, front, rng=None) -> np.ndarray:
         """Spectral irradiance (B, n) at hits: the element's flux over its area (0 off the map).

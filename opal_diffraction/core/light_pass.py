@@ -174,7 +174,7 @@ class _LightTrace(SpecularWalker):
                 if valid.any():
                     src, at = -r.d[valid], h.p[valid]
                     if r.lam is None:
-                        self.records.deposit(idx[valid], r.dense_w(self.n)[valid], towards_source=src, at=at)
+                        self.records.deposit(idx[valid], r.take(valid).dense_w(self.n), towards_source=src, at=at)
                     else:
                         self.records.deposit(idx[valid], r.w[valid], r.lam[valid], towards_source=src, at=at)
         land = (kind == DIFFUSE) & (rays.depth >= 1)
@@ -186,7 +186,7 @@ class _LightTrace(SpecularWalker):
             return
         self.deposited += int(valid.sum())
         if r.lam is None:
-            self.illum.deposit(idx[valid], r.dense_w(self.n)[valid])
+            self.illum.deposit(idx[valid], r.dense_w(self.n)[valid] if r.basis is None else r.w[valid], basis=r.basis)
         else:
             self.illum.deposit(idx[valid], r.w[valid], r.lam[valid])
 
@@ -200,6 +200,8 @@ class _LightTrace(SpecularWalker):
     def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
         """The orders of the gratings' paths (mono rays; section 3.10): diffracted paths are
         specular ones, so they deposit caustics where they land on diffuse surfaces."""
+        if rays.basis is not None and (self.bragg is not None or self.prepared.gratings.any):
+            rays = rays.dense()  # the opal lobes and the gratings' orders weigh spectra
         opal = None if self.bragg is None else self.bragg.scatter_light(rays, hit, can_bounce, rng)  # FCC opal lobes
         sel = (kind == GRATING) & can_bounce
         if not sel.any():
@@ -432,18 +434,23 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
     seed = int(prepared.settings.seed)
     b = job.paths
     rng = np.random.default_rng(np.random.SeedSequence([seed, stream, job.light, job.batch]))
-    if job.light >= len(prepared.lights):  # the emissive meshes or the world: a spectrum per path
-        emit = _emit_mesh if job.light == len(prepared.lights) else _emit_world
-        o, d, wspec = emit(prepared, b, rng)
-        live = wspec.max(axis=1) > 0
-        w = (wspec[live] / float(job.light_paths)).astype(np.float32)
-    else:
+    n = prepared.grid.n
+    if job.light == len(prepared.lights):  # the emissive meshes: a spectrum per path
+        o, d, coeff = _emit_mesh(prepared, b, rng)
+        basis = None
+    elif job.light > len(prepared.lights):  # the world: coefficients over its basis spectra
+        o, d, coeff, basis = _emit_world(prepared, b, rng)
+    else:  # a light: a scalar per path times the light's spectrum
         o, d, weight = _emit(prepared, job.light, b, rng)
-        live = weight > 0
-        w = (weight[live, None] / float(job.light_paths)).astype(np.float32) * prepared.lights.spectrum[job.light][None, :]
+        coeff, basis = weight[:, None], prepared.lights.spectrum[job.light][None, :]
+    live = coeff.max(axis=1) > 0
+    w = (coeff[live] / float(job.light_paths)).astype(np.float32)
+    if basis is not None and len(basis) >= n:  # no fewer coefficients than samples: plain spectra
+        w, basis = (w @ basis).astype(np.float32), None
     m = int(live.sum())
     rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(m, np.int64),
-                w, None, np.zeros(m, np.int32), rng.random(m))
+                w, None, np.zeros(m, np.int32), rng.random(m),
+                basis=None if basis is None else np.ascontiguousarray(basis, np.float32))
     tr = _LightTrace(prepared, rng, illum, records)
     tr.walk(rays, tr.empty_mono())
     return {"paths": b, "deposits": tr.deposited, "rays": tr._rays}
@@ -455,11 +462,11 @@ class DepositLog:
 
     def __init__(self, layout: ElementLayout | None):
         self.layout = layout
-        self.calls: list[tuple] = []  # (elements, flux, lam, towards_source, at), in call order
+        self.calls: list[tuple] = []  # (elements, flux, lam, towards_source, at, basis), in call order
 
-    def deposit(self, elements, flux, lam=None, towards_source=None, at=None) -> None:
+    def deposit(self, elements, flux, lam=None, towards_source=None, at=None, basis=None) -> None:
         if len(elements):
-            self.calls.append((elements, flux, lam, towards_source, at))
+            self.calls.append((elements, flux, lam, towards_source, at, basis))
 
     def replay(self, target: IlluminationMap) -> None:
         self.replay_calls(self.calls, target)
@@ -467,8 +474,10 @@ class DepositLog:
     @staticmethod
     def replay_calls(calls, target: IlluminationMap) -> None:
         """Add recorded ``calls`` (a DepositLog's ``calls``, e.g. sent back by a worker) to ``target``."""
-        for elements, flux, lam, towards_source, at in calls:
-            if at is None:  # caustic maps take no points
+        for elements, flux, lam, towards_source, at, basis in calls:
+            if basis is not None:  # coefficients over basis spectra (caustic maps)
+                target.deposit(elements, flux, lam, towards_source, basis=basis)
+            elif at is None:  # caustic maps take no points
                 target.deposit(elements, flux, lam, towards_source)
             else:
                 target.deposit(elements, flux, lam, towards_source, at=at)
@@ -706,8 +715,12 @@ def _emit_world(prepared, b: int, rng):
     from the map's distribution (uniform over the sphere for a uniform world), then a point on
     the disk one caster object's bounding sphere casts across w (the object chosen by disk
     area, as for a SUN), the path starting far out along w and travelling along -w. Returns
-    origins, directions and spectral weights (B, n) = L(w) / pdf(w) / pdf_A(point): the flux
-    of the world's radiance through the disks, unbiased (no clamping, no cut-off)."""
+    origins, directions, and the spectral weights L(w) / pdf(w) / pdf_A(point) (the flux of the
+    world's radiance through the disks, unbiased: no clamping, no cut-off) as coefficients
+    (B, k) over basis spectra (k, n): a uniform world's spectrum (k = 1), or for a map the
+    spectra of pure red, green and blue (k = 3), since the RGB-to-illuminant upsampling
+    (spectrum.SpectralConverter.illuminant_from_rgb: max(rgb) times a basis combination of
+    rgb / max(rgb)) is linear in non-negative RGB."""
     obj = prepared.light_targets.objects
     env = prepared.environment
     if env is None:  # uniform world: directions uniform on the sphere
@@ -715,12 +728,14 @@ def _emit_world(prepared, b: int, rng):
         phi = 2 * np.pi * rng.random(b)
         s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
         towards_sky = np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
-        spectral = np.broadcast_to(prepared.world_spectrum.astype(np.float64) * (4 * np.pi), (b, prepared.grid.n))
+        coeff = np.full((b, 1), 4 * np.pi)
+        basis = prepared.world_spectrum.astype(np.float64)[None, :]
     else:
         towards_sky, pdf, rgb = env.sample(rng.random(b), rng.random(b))
         inv = np.where(pdf > 0, 1.0 / np.where(pdf > 0, pdf, 1.0), 0.0)
-        spectral = prepared.conv.illuminant_from_rgb(rgb) * inv[:, None]
+        coeff = np.maximum(rgb.astype(np.float64), 0.0) * inv[:, None]
+        basis = prepared.conv.illuminant_from_rgb(np.eye(3))  # (3, n): pure R, G, B
     pts, pdf_a = _caster_disk_points(obj, towards_sky, rng)
     o = pts + _far_distance(prepared) * towards_sky
     weight = np.where(pdf_a > 0, 1.0 / np.maximum(pdf_a, 1e-300), 0.0)
-    return o, -towards_sky, spectral * weight[:, None]
+    return o, -towards_sky, coeff * weight[:, None], basis

@@ -3,7 +3,13 @@ bounce of mirror reflection, Fresnel-sampled refraction and dispersion.
 
 A wavefront tracer: all rays of a batch advance one interaction at a time, in NumPy arrays, with
 no Python loop per ray. Rays live in two populations:
-- *white* rays carry the whole spectrum, a weight array (B, n) (``None``: all ones);
+- *white* rays carry the whole spectrum, a weight array (B, n) (``None``: all ones), or, for
+  light-pass rays whose spectra are combinations of a few spectra the population shares (a
+  light's spectrum; the world map's three RGB basis spectra), coefficients (B, k) over that
+  ``basis`` (k, n): spectral weight = w @ basis. Colourless glass and mirrors and grey tints
+  (reflectance constant over wavelength) scale the k coefficients instead of n samples; a
+  coloured tint, a dispersive split and code that needs spectra expand them (``dense``), and
+  the light pass's deposits take the coefficients (elements.IlluminationMap.deposit);
 - *mono* rays carry one wavelength sample, a scalar weight (B,) and its index (B,).
 A white ray stays white until it meets a dispersive dielectric; there it becomes mono rays:
 ``SPLIT`` makes one child per wavelength sample with the parent's weight at that wavelength (the
@@ -65,6 +71,9 @@ class Rays:
     # per-ray arrays a subclass carries along (the eye pass's path state: bounce counts, the last
     # BSDF pdf for MIS, ...); taken, concatenated and inherited with the rays. None: nothing.
     extra: dict | None = None
+    # (k, n) float32 spectra shared by the population (k < n): w is (B, k) coefficients over
+    # them (white light rays only); None: w is as above
+    basis: np.ndarray | None = None
 
     def __len__(self):
         return len(self.pix)
@@ -74,22 +83,45 @@ class Rays:
             return self
         return Rays(self.o[mask], self.d[mask], self.pix[mask], None if self.w is None else self.w[mask],
                      None if self.lam is None else self.lam[mask], self.depth[mask], self.u_lam[mask],
-                     None if self.extra is None else {k: v[mask] for k, v in self.extra.items()})
+                     None if self.extra is None else {k: v[mask] for k, v in self.extra.items()}, self.basis)
 
     def moved(self, o, d, w, depth=None) -> "Rays":
-        """The same paths (pixels, wavelengths, extra state) continuing from o along d with weight w."""
+        """The same paths (pixels, wavelengths, extra state) continuing from o along d with weight w
+        (coefficients over the same basis if w has the basis's k columns, else spectral)."""
+        basis = self.basis if self.basis is not None and w is not None and w.ndim == 2 and \
+            w.shape[1] == len(self.basis) else None
         return Rays(o, d, self.pix, w, self.lam, self.depth + 1 if depth is None else depth, self.u_lam,
-                     None if self.extra is None else dict(self.extra))
+                     None if self.extra is None else dict(self.extra), basis)
 
     def weighted(self, x):
         """The ray weight times x (x itself for unit-weight camera rays)."""
-        return x if self.w is None else self.w * x
+        if self.w is None:
+            return x
+        return (self.dense_w(np.shape(x)[-1]) if self.basis is not None else self.w) * x
 
     def dense_w(self, n: int) -> np.ndarray:
-        return np.ones((len(self), n), np.float32) if self.w is None else self.w
+        """The spectral weight (B, n) (white rays)."""
+        if self.w is None:
+            return np.ones((len(self), n), np.float32)
+        if self.basis is not None:
+            return (self.w @ self.basis).astype(np.float32, copy=False)
+        return self.w
+
+    def dense(self) -> "Rays":
+        """These rays with spectral weights (B, n) instead of coefficients over a basis."""
+        return self if self.basis is None else replace(self, w=self.dense_w(self.basis.shape[1]), basis=None)
 
     @staticmethod
     def concat(a: "Rays", b: "Rays") -> "Rays":
+        if a.basis is not None or b.basis is not None:
+            if a.basis is not b.basis and not (a.basis is not None and b.basis is not None
+                                               and a.basis.shape == b.basis.shape
+                                               and np.array_equal(a.basis, b.basis)):
+                a, b = a.dense(), b.dense()  # different bases: join as spectra
+            elif a.basis is not None:
+                basis = a.basis
+                joined = Rays.concat(replace(a, basis=None), replace(b, basis=None))
+                return replace(joined, basis=basis)
         if (a.w is None) != (b.w is None):  # one side has implicit unit weights: make them explicit
             n = (a.w if a.w is not None else b.w).shape[1]
             a, b = replace(a, w=a.dense_w(n)), replace(b, w=b.dense_w(n))
@@ -188,6 +220,10 @@ class SpecularWalker:
         self.microfacet = prepared.microfacet  # (M,) bool, once per prepared scene
         self.any_microfacet = bool(self.microfacet.any())
         self._spawned: list[Rays] = []
+        refl = prepared.materials.reflectance
+        # (M,) reflectance constant over wavelength (clear glass and mirrors, grey tints): it
+        # scales coefficient weights without expanding them to spectra
+        self.grey = np.all(refl == refl[:, :1], axis=1) if refl.size else np.zeros(len(refl), bool)
 
     # hooks ----------------------------------------------------------------------------------
     def on_segment(self, rays: Rays, t: np.ndarray) -> None:
@@ -281,7 +317,7 @@ class SpecularWalker:
             if rays.lam is None:
                 disp = white_split & prepared.materials.dispersive[hit.mat]
                 if disp.any():
-                    children, child_hits = self._split(rays.take(disp), hit.take(disp), rng)
+                    children, child_hits = self._split(rays.take(disp).dense(), hit.take(disp), rng)
                 diel = diel & ~disp
             if diel.any():
                 r, transmitted = self._dielectric(rays.take(diel), hit.take(diel), rng)
@@ -328,6 +364,8 @@ class SpecularWalker:
         m = self.prepared.materials
         if m.clear[hit.mat].all():
             return rays.w
+        if rays.basis is not None and self.grey[hit.mat].all():  # coefficients times a grey tint
+            return rays.w * m.reflectance[hit.mat, :1]
         return rays.weighted(self._per_ray(m.reflectance, hit.mat, rays.lam))
 
     def _specular_normal(self, rays: Rays, hit: Hit) -> np.ndarray:
