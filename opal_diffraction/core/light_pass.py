@@ -136,22 +136,51 @@ def _cones(origin: np.ndarray, objects: CasterObjects):
     return axis, cos_max, omega
 
 
-def _sample_cones(origin, weights, axis, cos_max, omega, rng):
+def _sample_cones(origin, weights, axis, cos_max, omega, rng, u=None):
     """Directions from ``origin`` (B, 3): choose object c with probability weights (B, C)
-    (normalised per row), then uniformly in its cone. Returns (dirs, pdf) with the mixture pdf."""
+    (normalised per row), then uniformly in its cone. Returns (dirs, pdf) with the mixture pdf.
+    ``u``: the uniform numbers ((B, 1), (B,), (B,)) to use instead of drawing them from rng."""
     b, c = weights.shape
+    uni = (rng.random((b, 1)), rng.random(b), rng.random(b)) if u is None else u
     prob = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-300)
     cdf = np.cumsum(prob, axis=1)
-    pick = np.minimum((rng.random((b, 1)) > cdf).sum(axis=1), c - 1)
-    rows = np.arange(b)
-    ax, cm = axis[rows, pick], cos_max[rows, pick]
-    cos_t = 1 - rng.random(b) * (1 - cm)
+    pick = np.minimum((uni[0] > cdf).sum(axis=1), c - 1)
+    shared = axis.strides[0] == 0 and cos_max.strides[0] == 0  # one origin for every path (a point light)
+    if shared:  # the cones' frames once per object, not once per path
+        ax, cm = axis[0][pick], cos_max[0][pick]
+        u0, v0 = orthonormal_basis(axis[0])
+        u, v = u0[pick], v0[pick]
+    else:
+        rows = np.arange(b)
+        ax, cm = axis[rows, pick], cos_max[rows, pick]
+    cos_t = 1 - uni[1] * (1 - cm)
     sin_t = np.sqrt(np.maximum(0, 1 - cos_t * cos_t))
-    phi = 2 * np.pi * rng.random(b)
-    u, v = orthonormal_basis(ax)
+    phi = 2 * np.pi * uni[2]
+    if not shared:
+        u, v = orthonormal_basis(ax)
     d = cos_t[:, None] * ax + (sin_t * np.cos(phi))[:, None] * u + (sin_t * np.sin(phi))[:, None] * v
     inside = np.einsum("bcj,bj->bc", axis, d) >= cos_max - 1e-12
     pdf = np.sum(np.where(inside, prob / np.maximum(omega, 1e-300), 0.0), axis=1)
+    return d, pdf
+
+
+#: Paths per chunk where every path has its own origin (area lights, sized lights, emissive
+#: meshes): the (paths, objects, 3) cone arrays stay near 6 MB even with MAX_OBJECTS objects.
+CONE_CHUNK = 4096
+
+
+def _sample_towards_casters(origin, obj: CasterObjects, rng):
+    """``_sample_cones`` from per-path origins (B, 3), each path choosing an object by its cone's
+    solid angle: in chunks of CONE_CHUNK paths (bounded temporaries), with the random numbers
+    drawn for the whole batch first (the same numbers as one unchunked call)."""
+    b = len(origin)
+    u = (rng.random((b, 1)), rng.random(b), rng.random(b))
+    d = np.empty((b, 3))
+    pdf = np.empty(b)
+    for s in range(0, b, CONE_CHUNK):  # loop over chunks of a batch, not over paths
+        sl = slice(s, min(b, s + CONE_CHUNK))
+        axis, cos_max, omega = _cones(origin[sl], obj)
+        d[sl], pdf[sl] = _sample_cones(origin[sl], omega, axis, cos_max, omega, None, tuple(x[sl] for x in u))
     return d, pdf
 
 
@@ -602,8 +631,7 @@ def _emit(prepared, li: int, b: int, rng):
         rad, phi = np.sqrt(r1), 2 * np.pi * r2
         a, c = 0.5 * lights.size_u[li] * rad * np.cos(phi), 0.5 * lights.size_v[li] * rad * np.sin(phi)
     origin = lights.position[li] + a[:, None] * lights.axis_u[li] + c[:, None] * lights.axis_v[li]
-    axis, cos_max, omega = _cones(origin, obj)
-    d, pdf = _sample_cones(origin, omega, axis, cos_max, omega, rng)
+    d, pdf = _sample_towards_casters(origin, obj, rng)
     cos_l = d @ lights.direction[li]
     # radiance (in the spectrum) * cos * area / pdf(direction)   (pdf of the point: 1 / area)
     weight = np.where(cos_l > 0, cos_l * lights.area[li] / np.maximum(pdf, 1e-300), 0.0)
@@ -667,8 +695,7 @@ def _emit_sized_point(prepared, li: int, b: int, rng):
     r = float(lights.radius[li])
     nrm = _sample_cone(np.array([0.0, 0.0, 1.0]), 2.0, rng, b)  # uniform on the sphere
     q = lights.position[li] + r * nrm
-    axis, cos_max, omega = _cones(q, obj)
-    d, pdf = _sample_cones(q, omega, axis, cos_max, omega, rng)
+    d, pdf = _sample_towards_casters(q, obj, rng)
     cos_l = np.einsum("ij,ij->i", d, nrm)
     weight = np.where((cos_l > 0) & (pdf > 0), 4.0 * cos_l / np.maximum(pdf, 1e-300), 0.0)
     if int(lights.kind[li]) == SPOT:
@@ -683,8 +710,7 @@ def _emit_mesh(prepared, b: int, rng):
     (B, n) = L_e |cos_l| / (p_A pdf_dir) (docs/physics.md section 7.7)."""
     ml, obj = prepared.mesh_lights, prepared.light_targets.objects
     q, j, pa = ml.sample_points(rng, b)
-    axis, cos_max, omega = _cones(q, obj)
-    d, pdf = _sample_cones(q, omega, axis, cos_max, omega, rng)
+    d, pdf = _sample_towards_casters(q, obj, rng)
     n = ml.normal[j]
     cos_s = np.einsum("ij,ij->i", d, n)
     scalar = np.where((pdf > 0) & (cos_s != 0), np.abs(cos_s) / np.maximum(pa * pdf, 1e-300), 0.0)

@@ -59,6 +59,21 @@ MICROFACET = 99
 GRATING = 98
 
 
+def _indices(mask):
+    """Row indices of a bool mask (None: every row, nothing to copy) or an index array as is.
+    Gathering rows by index (np.take) is several times faster than boolean indexing."""
+    mask = np.asarray(mask)
+    if mask.dtype != bool:
+        return mask
+    if len(mask) and mask.all():
+        return None
+    return np.flatnonzero(mask)
+
+
+def _rows(a, idx):
+    return np.take(a, idx, axis=0)
+
+
 @dataclass
 class Rays:
     o: np.ndarray      # (B, 3) float32 origins
@@ -79,11 +94,14 @@ class Rays:
         return len(self.pix)
 
     def take(self, mask) -> "Rays":
-        if mask.dtype == bool and len(mask) and mask.all():
+        """The rays where ``mask`` (B,) bool is set, or at indices ``mask``."""
+        idx = _indices(mask)
+        if idx is None:
             return self
-        return Rays(self.o[mask], self.d[mask], self.pix[mask], None if self.w is None else self.w[mask],
-                     None if self.lam is None else self.lam[mask], self.depth[mask], self.u_lam[mask],
-                     None if self.extra is None else {k: v[mask] for k, v in self.extra.items()}, self.basis)
+        return Rays(_rows(self.o, idx), _rows(self.d, idx), _rows(self.pix, idx),
+                     None if self.w is None else _rows(self.w, idx), None if self.lam is None else _rows(self.lam, idx),
+                     _rows(self.depth, idx), _rows(self.u_lam, idx),
+                     None if self.extra is None else {k: _rows(v, idx) for k, v in self.extra.items()}, self.basis)
 
     def moved(self, o, d, w, depth=None) -> "Rays":
         """The same paths (pixels, wavelengths, extra state) continuing from o along d with weight w
@@ -151,9 +169,13 @@ class Hit:
     _FIELDS = ("p", "ng", "ns", "cos_i", "front", "mat", "eps", "prim", "bu", "bv")
 
     def take(self, mask) -> "Hit":
-        if mask.dtype == bool and len(mask) and mask.all():
+        """The hits where ``mask`` (B,) bool is set, or at indices ``mask``."""
+        idx = _indices(mask)
+        if idx is None:
             return self
-        return Hit(*(getattr(self, f)[mask] for f in self._FIELDS))
+        out = {f: _rows(getattr(self, f), idx) for f in self._FIELDS if f != "ns"}
+        out["ns"] = out["ng"] if self.ns is self.ng else _rows(self.ns, idx)  # flat: one array for both
+        return Hit(**out)
 
     @staticmethod
     def concat(a: "Hit", b: "Hit") -> "Hit":
@@ -207,6 +229,11 @@ def valid_specular_normal(wo: np.ndarray, ng: np.ndarray, ns: np.ndarray) -> np.
     out = ns.copy()
     out[bad] = fixed
     return out
+
+
+def out_is_plain(rays: Rays) -> bool:
+    """No ray differentials to carry (core/footprint.py): the fused specular bounce applies."""
+    return rays.extra is None or footprint.KEY not in rays.extra
 
 
 class SpecularWalker:
@@ -387,13 +414,26 @@ class SpecularWalker:
     def _dielectric(self, rays: Rays, hit: Hit, rng) -> tuple[Rays, np.ndarray]:
         """Fresnel-sampled reflection or refraction: (the rays going on, refracted (B,) bool)."""
         prepared = self.prepared
-        lam0 = np.zeros(len(rays), np.int64) if rays.lam is None else rays.lam
-        n = prepared.materials.ior[hit.mat, lam0]  # constant over the grid for white rays
+        ior = prepared.materials.ior
+        # constant over the grid for white rays
+        n = np.take(ior[:, 0], hit.mat) if rays.lam is None else ior[hit.mat, rays.lam]
         eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
         ns = self._specular_normal(rays, hit)
         cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
         fr = fresnel_dielectric(cos_s, eta)
         refl = rng.random(len(rays)) < fr
+        if ns is hit.ng and out_is_plain(rays):
+            # flat: both directions are a d + b n with per-ray a, b (Snell's law and the mirror;
+            # under total internal reflection fr = 1, so refl is set): one pass over (B, 3)
+            cos = cos_s.astype(np.float32, copy=False)
+            cos_t = np.sqrt(np.maximum(np.float32(0), 1 - eta * eta * np.maximum(np.float32(0), 1 - cos * cos)))
+            a = np.where(refl, np.float32(1), eta)
+            b = np.where(refl, 2 * cos, eta * cos - cos_t)
+            d = a[:, None] * rays.d + b[:, None] * hit.ng
+            side = np.where(np.einsum("ij,ij->i", d, hit.ng) > 0, np.float32(1), np.float32(-1))
+            o = hit.p + (hit.eps * side)[:, None] * hit.ng
+            out = rays.moved(o.astype(np.float32, copy=False), d.astype(np.float32, copy=False), self._tinted(rays, hit))
+            return out, side < 0
         t_dir, _ = refract(rays.d, ns, eta)
         if ns is not hit.ng:
             # a refraction about ns that stays on the incident side is refracted about ng instead
