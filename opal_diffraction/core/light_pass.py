@@ -142,22 +142,33 @@ def _sample_cones(origin, weights, axis, cos_max, omega, rng, u=None):
     ``u``: the uniform numbers ((B, 1), (B,), (B,)) to use instead of drawing them from rng."""
     b, c = weights.shape
     uni = (rng.random((b, 1)), rng.random(b), rng.random(b)) if u is None else u
-    prob = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-300)
-    cdf = np.cumsum(prob, axis=1)
-    pick = np.minimum((uni[0] > cdf).sum(axis=1), c - 1)
-    shared = axis.strides[0] == 0 and cos_max.strides[0] == 0  # one origin for every path (a point light)
-    if shared:  # the cones' frames once per object, not once per path
+    # one origin for every path (a point light): the mixture, the cones' frames and the pdf's
+    # cone tests once per object, not once per path
+    shared = all(x.strides[0] == 0 for x in (weights, axis, cos_max, omega))
+    if shared:
+        w0 = weights[0]
+        prob0 = w0 / max(float(w0.sum()), 1e-300)
+        pick = np.minimum(np.searchsorted(np.cumsum(prob0), uni[0][:, 0], side="left"), c - 1)  # = (u > cdf).sum()
         ax, cm = axis[0][pick], cos_max[0][pick]
         u0, v0 = orthonormal_basis(axis[0])
         u, v = u0[pick], v0[pick]
-    else:
-        rows = np.arange(b)
-        ax, cm = axis[rows, pick], cos_max[rows, pick]
+        cos_t = 1 - uni[1] * (1 - cm)
+        sin_t = np.sqrt(np.maximum(0, 1 - cos_t * cos_t))
+        phi = 2 * np.pi * uni[2]
+        d = cos_t[:, None] * ax + (sin_t * np.cos(phi))[:, None] * u + (sin_t * np.sin(phi))[:, None] * v
+        if c == 1:  # the one cone holds every direction drawn in it
+            return d, np.full(b, prob0[0] / max(float(omega[0, 0]), 1e-300))
+        inside = d @ axis[0].T >= cos_max[0] - 1e-12
+        return d, inside @ (prob0 / np.maximum(omega[0], 1e-300))
+    prob = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-300)
+    cdf = np.cumsum(prob, axis=1)
+    pick = np.minimum((uni[0] > cdf).sum(axis=1), c - 1)
+    rows = np.arange(b)
+    ax, cm = axis[rows, pick], cos_max[rows, pick]
     cos_t = 1 - uni[1] * (1 - cm)
     sin_t = np.sqrt(np.maximum(0, 1 - cos_t * cos_t))
     phi = 2 * np.pi * uni[2]
-    if not shared:
-        u, v = orthonormal_basis(ax)
+    u, v = orthonormal_basis(ax)
     d = cos_t[:, None] * ax + (sin_t * np.cos(phi))[:, None] * u + (sin_t * np.sin(phi))[:, None] * v
     inside = np.einsum("bcj,bj->bc", axis, d) >= cos_max - 1e-12
     pdf = np.sum(np.where(inside, prob / np.maximum(omega, 1e-300), 0.0), axis=1)

@@ -369,7 +369,7 @@ class SpecularWalker:
     def _hit_info(self, rays: Rays, t, prim, bu, bv) -> Hit:
         prepared = self.prepared
         p = rays.o + t[:, None] * rays.d
-        ng0 = prepared.tri_normal[prim]
+        ng0 = np.take(prepared.tri_normal, prim, axis=0)  # row gathers: np.take is several times faster
         cos = -np.einsum("ij,ij->i", rays.d, ng0)
         front = cos > 0
         ng = np.where(front[:, None], ng0, -ng0)
@@ -378,8 +378,8 @@ class SpecularWalker:
         else:  # on the triangle's side first, then flipped with ng: both face the incoming ray's side
             ns = shading_normals(prepared.corner_normals, prim, bu, bv, ng0)
             ns = np.where(front[:, None], ns, -ns)
-        return Hit(p.astype(np.float32, copy=False), ng, ns, np.abs(cos), front, prepared.tri_material[prim],
-                   prepared.tri_offset[prim], prim, bu, bv)
+        return Hit(p.astype(np.float32, copy=False), ng, ns, np.abs(cos), front, np.take(prepared.tri_material, prim),
+                   np.take(prepared.tri_offset, prim), prim, bu, bv)
 
     @staticmethod
     def _per_ray(table, rows, lam):
