@@ -670,6 +670,8 @@ def _caster_disk_points(obj: CasterObjects, d: np.ndarray, rng) -> tuple[np.ndar
     c = obj.centre[pick]
     c_plane = c - np.einsum("ij,ij->i", c, d)[:, None] * d
     pts = c_plane + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
+    if len(obj) == 1:  # one object: every point drawn lies on its disk
+        return pts, np.full(b, 1.0 / area[0])
     # |pts - proj(centre)|^2 = |pts - centre|^2 - ((pts - centre) . d)^2 (pts . d = 0), every object at once
     cd = d @ obj.centre.T  # (B, C)
     dist2 = (np.sum(pts**2, axis=1)[:, None] - 2 * pts @ obj.centre.T + np.sum(obj.centre**2, axis=1)[None, :]
