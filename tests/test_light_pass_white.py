@@ -131,9 +131,11 @@ def test_dispersive_glass_caustic_equals_the_dense_spectrum_map():
     assert_same_map(new, ref)
 
 
-def test_world_map_caustic_equals_the_dense_spectrum_map():
-    """A world map's paths carry 3 coefficients over the spectra of pure red, green and blue."""
-    s = caustic_scene(tinted=False)
+@pytest.mark.parametrize("dispersion", ["NONE", "ABBE"])
+def test_world_map_caustic_equals_the_dense_spectrum_map(dispersion):
+    """A world map's paths carry 3 coefficients over the spectra of pure red, green and blue
+    (through a dispersive ball they are sampled to single wavelengths from w @ cumsum(basis))."""
+    s = caustic_scene(dispersion, tinted=False)
     s.lights = Lights.from_list([])
     img = np.full((16, 32, 3), 0.05, np.float32)
     img[2:5, 10:14] = (40.0, 25.0, 8.0)  # a warm bright patch high in the sky

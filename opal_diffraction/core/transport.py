@@ -251,6 +251,9 @@ class SpecularWalker:
         # (M,) reflectance constant over wavelength (clear glass and mirrors, grey tints): it
         # scales coefficient weights without expanding them to spectra
         self.grey = np.all(refl == refl[:, :1], axis=1) if refl.size else np.zeros(len(refl), bool)
+        # hooks a subclass leaves as they are (the light pass's misses and segments) cost nothing
+        self._hooks_segment = type(self).on_segment is not SpecularWalker.on_segment
+        self._hooks_miss = type(self).on_miss is not SpecularWalker.on_miss
 
     # hooks ----------------------------------------------------------------------------------
     def on_segment(self, rays: Rays, t: np.ndarray) -> None:
@@ -309,8 +312,9 @@ class SpecularWalker:
             h = prepared.accel.intersect(rays.o, rays.d)
             self._rays += len(rays)
             missed = h.prim < 0
-            self.on_segment(rays, np.where(missed, np.float32(np.inf), h.t))
-            if missed.any():
+            if self._hooks_segment:
+                self.on_segment(rays, np.where(missed, np.float32(np.inf), h.t))
+            if self._hooks_miss and missed.any():
                 self.on_miss(rays.take(missed))
             keep = ~missed
             rays = rays.take(keep)
@@ -344,7 +348,10 @@ class SpecularWalker:
             if rays.lam is None:
                 disp = white_split & prepared.materials.dispersive[hit.mat]
                 if disp.any():
-                    children, child_hits = self._split(rays.take(disp).dense(), hit.take(disp), rng)
+                    if rays.basis is not None and prepared.settings.dispersion_sampling != "SPLIT":
+                        children, child_hits = self._sample_coefficients(rays.take(disp), hit.take(disp))
+                    else:
+                        children, child_hits = self._split(rays.take(disp).dense(), hit.take(disp), rng)
                 diel = diel & ~disp
             if diel.any():
                 r, transmitted = self._dielectric(rays.take(diel), hit.take(diel), rng)
@@ -449,6 +456,31 @@ class SpecularWalker:
             out.extra[footprint.KEY] = footprint.refract_differentials(rays.extra[footprint.KEY], rays.o, rays.d,
                                                                        hit.p, ns, d, eta)
         return out, side < 0
+
+    def _sample_coefficients(self, rays: Rays, hit: Hit):
+        """``_split``'s SAMPLE for coefficient weights (B, k) over ``rays.basis`` (k, n): the
+        same estimator (wavelength j with p_j = W_j / sum W, weight sum W, from the stratified
+        u_lam) with the cumulative spectra W's CDF = w @ cumsum(basis) as one (B, k) x (k, n)
+        product, and for k = 1 a binary search in the basis's own CDF."""
+        n = self.n
+        cum = np.cumsum(rays.basis.astype(np.float64), axis=1)  # (k, n)
+        w = rays.w.astype(np.float64)
+        if len(cum) == 1:
+            total = w[:, 0] * cum[0, -1]
+            live = total > 0
+            lam = np.searchsorted(cum[0], rays.u_lam[live] * cum[0, -1], side="left")  # = #{CDF < u total}
+        else:
+            cdf = w @ cum
+            total = cdf[:, -1]
+            live = total > 0
+            lam = (cdf[live] < (rays.u_lam[live] * total[live])[:, None]).sum(axis=1)
+        parent = np.flatnonzero(live)
+        lam = np.minimum(lam, n - 1)
+        children = Rays(_rows(rays.o, parent), _rows(rays.d, parent), _rows(rays.pix, parent),
+                        total[live].astype(np.float32), lam.astype(np.int64), _rows(rays.depth, parent),
+                        _rows(rays.u_lam, parent),
+                        None if rays.extra is None else {k: _rows(v, parent) for k, v in rays.extra.items()})
+        return children, hit.take(parent)
 
     def _split(self, rays: Rays, hit: Hit, rng):
         """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit."""
