@@ -71,7 +71,7 @@ def _indices(mask):
 
 
 def _rows(a, idx):
-    return np.take(a, idx, axis=0)
+    return a.take(idx, axis=0)
 
 
 @dataclass
@@ -460,8 +460,9 @@ class SpecularWalker:
     def _sample_coefficients(self, rays: Rays, hit: Hit):
         """``_split``'s SAMPLE for coefficient weights (B, k) over ``rays.basis`` (k, n): the
         same estimator (wavelength j with p_j = W_j / sum W, weight sum W, from the stratified
-        u_lam) with the cumulative spectra W's CDF = w @ cumsum(basis) as one (B, k) x (k, n)
-        product, and for k = 1 a binary search in the basis's own CDF."""
+        u_lam), W's CDF being w @ cumsum(basis): for k = 1 a binary search in the basis's own
+        CDF, for k > 1 a vectorised binary search that evaluates the CDF only at the ~log2 n
+        probed wavelengths, (B, k) per step instead of (B, n)."""
         n = self.n
         cum = np.cumsum(rays.basis.astype(np.float64), axis=1)  # (k, n)
         w = rays.w.astype(np.float64)
@@ -470,10 +471,22 @@ class SpecularWalker:
             live = total > 0
             lam = np.searchsorted(cum[0], rays.u_lam[live] * cum[0, -1], side="left")  # = #{CDF < u total}
         else:
-            cdf = w @ cum
-            total = cdf[:, -1]
+            total = w @ cum[:, -1]
             live = total > 0
-            lam = (cdf[live] < (rays.u_lam[live] * total[live])[:, None]).sum(axis=1)
+            wl, target = w[live], rays.u_lam[live] * total[live]
+            cum_t = np.ascontiguousarray(cum.T)  # (n, k)
+            lo = np.zeros(len(wl), np.int64)  # the answer #{j: CDF_j < target} lies in [lo, hi]
+            hi = np.full(len(wl), n, np.int64)
+            for _ in range(int(np.ceil(np.log2(n + 1)))):  # binary search steps, not rays
+                mid = np.minimum((lo + hi) // 2, n - 1)
+                at = np.take(cum_t, mid, axis=0)
+                val = wl[:, 0] * at[:, 0]
+                for c in range(1, len(cum)):  # loop over the k basis spectra
+                    val += wl[:, c] * at[:, c]
+                less = (val < target) & (lo < hi)
+                lo = np.where(less, mid + 1, lo)
+                hi = np.where(less | (lo >= hi), hi, mid)
+            lam = lo
         parent = np.flatnonzero(live)
         lam = np.minimum(lam, n - 1)
         children = Rays(_rows(rays.o, parent), _rows(rays.d, parent), _rows(rays.pix, parent),
