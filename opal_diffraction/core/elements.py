@@ -79,18 +79,18 @@ class ElementLayout:
 
     def index(self, prim, bu, bv, front) -> tuple[np.ndarray, np.ndarray]:
         """(element index, valid) for hits on triangles ``prim`` at barycentrics (bu, bv)."""
-        prim = np.asarray(prim, np.int64)
-        k = self.k[prim]
+        prim = np.asarray(prim)
+        k = self.k.take(prim)
         valid = k > 0
         kf = k.astype(np.float64)
         x = np.clip(np.asarray(bu, np.float64), 0, 1) * kf
         y = np.clip(np.asarray(bv, np.float64), 0, 1) * kf
-        i = np.clip(np.floor(x).astype(np.int64), 0, np.maximum(k - 1, 0))
-        j = np.clip(np.floor(y).astype(np.int64), 0, np.maximum(k - 1 - i, 0))
-        upper = ((x - i) + (y - j) > 1.0) & (j < k - 1 - i)
-        local = 2 * k * i - i * i + 2 * j + upper
-        side = np.where(np.asarray(front, bool), 0, 1)
-        return self.offset[prim] + 2 * local + side, valid
+        km1 = np.maximum(k - 1, 0)
+        i = np.minimum(x.astype(np.int64), km1)  # x >= 0: the cast is the floor
+        j = np.minimum(y.astype(np.int64), np.maximum(km1 - i, 0))
+        upper = ((x - i) + (y - j) > 1.0) & (j < km1 - i)
+        local = (2 * k - i) * i + 2 * j + upper
+        return self.offset.take(prim) + 2 * local + ~np.asarray(front, bool), valid
 
 
 @dataclass

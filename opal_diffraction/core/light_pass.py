@@ -149,9 +149,11 @@ def _sample_cones(origin, weights, axis, cos_max, omega, rng, u=None):
         w0 = weights[0]
         prob0 = w0 / max(float(w0.sum()), 1e-300)
         pick = np.minimum(np.searchsorted(np.cumsum(prob0), uni[0][:, 0], side="left"), c - 1)  # = (u > cdf).sum()
-        ax, cm = axis[0][pick], cos_max[0][pick]
         u0, v0 = orthonormal_basis(axis[0])
-        u, v = u0[pick], v0[pick]
+        if c == 1:  # one cone: its axis and frame broadcast over the paths
+            ax, cm, u, v = axis[0, 0], cos_max[0, 0], u0[0], v0[0]
+        else:
+            ax, cm, u, v = axis[0][pick], cos_max[0][pick], u0[pick], v0[pick]
         cos_t = 1 - uni[1] * (1 - cm)
         sin_t = np.sqrt(np.maximum(0, 1 - cos_t * cos_t))
         phi = 2 * np.pi * uni[2]

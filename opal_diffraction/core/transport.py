@@ -379,7 +379,7 @@ class SpecularWalker:
         ng0 = np.take(prepared.tri_normal, prim, axis=0)  # row gathers: np.take is several times faster
         cos = -np.einsum("ij,ij->i", rays.d, ng0)
         front = cos > 0
-        ng = np.where(front[:, None], ng0, -ng0)
+        ng = ng0 * np.where(front, np.float32(1), np.float32(-1))[:, None]
         if prepared.corner_normals is None:
             ns = ng
         else:  # on the triangle's side first, then flipped with ng: both face the incoming ray's side
