@@ -27,7 +27,10 @@ in their cone (a sun with an angle), and emissive triangles (mesh_lights.MeshLig
 chosen by area x luminance, each aimed the same way (docs/physics.md section 7.7; the emissive
 meshes are one more entry, index L, of the budget). Paths start with weight (emitted radiometric quantity /
 pdf / paths of that light), so the map holds flux in W per wavelength sample; lights share the
-path budget in proportion to the power they send towards casters.
+path budget in proportion to the power they send towards casters. A lamp's or the world's white paths carry
+their weight as coefficients over shared spectra (the lamp's spectrum; the map's R, G, B
+spectra) until a tint or dispersion needs spectra (transport.Rays.basis, docs/physics.md
+section 4.7).
 
 The world (a uniform colour or an environment map, core/environment.py) is one more emitter,
 light-pass index L + 1 (after the L lights and the emissive meshes): directions from its distribution, points on the casters'
