@@ -27,7 +27,10 @@ in their cone (a sun with an angle), and emissive triangles (mesh_lights.MeshLig
 chosen by area x luminance, each aimed the same way (docs/physics.md section 7.7; the emissive
 meshes are one more entry, index L, of the budget). Paths start with weight (emitted radiometric quantity /
 pdf / paths of that light), so the map holds flux in W per wavelength sample; lights share the
-path budget in proportion to the power they send towards casters.
+path budget in proportion to the power they send towards casters. A lamp's or the world's white paths carry
+their weight as coefficients over shared spectra (the lamp's spectrum; the map's R, G, B
+spectra) until a tint or dispersion needs spectra (transport.Rays.basis, docs/physics.md
+section 4.7).
 
 The world (a uniform colour or an environment map, core/environment.py) is one more emitter,
 light-pass index L + 1 (after the L lights and the emissive meshes): directions from its distribution, points on the casters'
@@ -134,22 +137,64 @@ def _cones(origin: np.ndarray, objects: CasterObjects):
     return axis, cos_max, omega
 
 
-def _sample_cones(origin, weights, axis, cos_max, omega, rng):
+def _sample_cones(origin, weights, axis, cos_max, omega, rng, u=None):
     """Directions from ``origin`` (B, 3): choose object c with probability weights (B, C)
-    (normalised per row), then uniformly in its cone. Returns (dirs, pdf) with the mixture pdf."""
+    (normalised per row), then uniformly in its cone. Returns (dirs, pdf) with the mixture pdf.
+    ``u``: the uniform numbers ((B, 1), (B,), (B,)) to use instead of drawing them from rng."""
     b, c = weights.shape
+    uni = (rng.random((b, 1)), rng.random(b), rng.random(b)) if u is None else u
+    # one origin for every path (a point light): the mixture, the cones' frames and the pdf's
+    # cone tests once per object, not once per path
+    shared = all(x.strides[0] == 0 for x in (weights, axis, cos_max, omega))
+    if shared:
+        w0 = weights[0]
+        prob0 = w0 / max(float(w0.sum()), 1e-300)
+        pick = np.minimum(np.searchsorted(np.cumsum(prob0), uni[0][:, 0], side="left"), c - 1)  # = (u > cdf).sum()
+        u0, v0 = orthonormal_basis(axis[0])
+        if c == 1:  # one cone: its axis and frame broadcast over the paths
+            ax, cm, u, v = axis[0, 0], cos_max[0, 0], u0[0], v0[0]
+        else:
+            ax, cm, u, v = axis[0][pick], cos_max[0][pick], u0[pick], v0[pick]
+        cos_t = 1 - uni[1] * (1 - cm)
+        sin_t = np.sqrt(np.maximum(0, 1 - cos_t * cos_t))
+        phi = 2 * np.pi * uni[2]
+        d = cos_t[:, None] * ax + (sin_t * np.cos(phi))[:, None] * u + (sin_t * np.sin(phi))[:, None] * v
+        if c == 1:  # the one cone holds every direction drawn in it
+            return d, np.full(b, prob0[0] / max(float(omega[0, 0]), 1e-300))
+        inside = d @ axis[0].T >= cos_max[0] - 1e-12
+        return d, inside @ (prob0 / np.maximum(omega[0], 1e-300))
     prob = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-300)
     cdf = np.cumsum(prob, axis=1)
-    pick = np.minimum((rng.random((b, 1)) > cdf).sum(axis=1), c - 1)
+    pick = np.minimum((uni[0] > cdf).sum(axis=1), c - 1)
     rows = np.arange(b)
     ax, cm = axis[rows, pick], cos_max[rows, pick]
-    cos_t = 1 - rng.random(b) * (1 - cm)
+    cos_t = 1 - uni[1] * (1 - cm)
     sin_t = np.sqrt(np.maximum(0, 1 - cos_t * cos_t))
-    phi = 2 * np.pi * rng.random(b)
+    phi = 2 * np.pi * uni[2]
     u, v = orthonormal_basis(ax)
     d = cos_t[:, None] * ax + (sin_t * np.cos(phi))[:, None] * u + (sin_t * np.sin(phi))[:, None] * v
     inside = np.einsum("bcj,bj->bc", axis, d) >= cos_max - 1e-12
     pdf = np.sum(np.where(inside, prob / np.maximum(omega, 1e-300), 0.0), axis=1)
+    return d, pdf
+
+
+#: Paths per chunk where every path has its own origin (area lights, sized lights, emissive
+#: meshes): the (paths, objects, 3) cone arrays stay near 6 MB even with MAX_OBJECTS objects.
+CONE_CHUNK = 4096
+
+
+def _sample_towards_casters(origin, obj: CasterObjects, rng):
+    """``_sample_cones`` from per-path origins (B, 3), each path choosing an object by its cone's
+    solid angle: in chunks of CONE_CHUNK paths (bounded temporaries), with the random numbers
+    drawn for the whole batch first (the same numbers as one unchunked call)."""
+    b = len(origin)
+    u = (rng.random((b, 1)), rng.random(b), rng.random(b))
+    d = np.empty((b, 3))
+    pdf = np.empty(b)
+    for s in range(0, b, CONE_CHUNK):  # loop over chunks of a batch, not over paths
+        sl = slice(s, min(b, s + CONE_CHUNK))
+        axis, cos_max, omega = _cones(origin[sl], obj)
+        d[sl], pdf[sl] = _sample_cones(origin[sl], omega, axis, cos_max, omega, None, tuple(x[sl] for x in u))
     return d, pdf
 
 
@@ -172,7 +217,7 @@ class _LightTrace(SpecularWalker):
                 if valid.any():
                     src, at = -r.d[valid], h.p[valid]
                     if r.lam is None:
-                        self.records.deposit(idx[valid], r.dense_w(self.n)[valid], towards_source=src, at=at)
+                        self.records.deposit(idx[valid], r.take(valid).dense_w(self.n), towards_source=src, at=at)
                     else:
                         self.records.deposit(idx[valid], r.w[valid], r.lam[valid], towards_source=src, at=at)
         land = (kind == DIFFUSE) & (rays.depth >= 1)
@@ -184,7 +229,7 @@ class _LightTrace(SpecularWalker):
             return
         self.deposited += int(valid.sum())
         if r.lam is None:
-            self.illum.deposit(idx[valid], r.dense_w(self.n)[valid])
+            self.illum.deposit(idx[valid], r.dense_w(self.n)[valid] if r.basis is None else r.w[valid], basis=r.basis)
         else:
             self.illum.deposit(idx[valid], r.w[valid], r.lam[valid])
 
@@ -198,6 +243,8 @@ class _LightTrace(SpecularWalker):
     def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
         """The orders of the gratings' paths (mono rays; section 3.10): diffracted paths are
         specular ones, so they deposit caustics where they land on diffuse surfaces."""
+        if rays.basis is not None and (self.bragg is not None or self.prepared.gratings.any):
+            rays = rays.dense()  # the opal lobes and the gratings' orders weigh spectra
         opal = None if self.bragg is None else self.bragg.scatter_light(rays, hit, can_bounce, rng)  # FCC opal lobes
         sel = (kind == GRATING) & can_bounce
         if not sel.any():
@@ -430,18 +477,23 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
     seed = int(prepared.settings.seed)
     b = job.paths
     rng = np.random.default_rng(np.random.SeedSequence([seed, stream, job.light, job.batch]))
-    if job.light >= len(prepared.lights):  # the emissive meshes or the world: a spectrum per path
-        emit = _emit_mesh if job.light == len(prepared.lights) else _emit_world
-        o, d, wspec = emit(prepared, b, rng)
-        live = wspec.max(axis=1) > 0
-        w = (wspec[live] / float(job.light_paths)).astype(np.float32)
-    else:
+    n = prepared.grid.n
+    if job.light == len(prepared.lights):  # the emissive meshes: a spectrum per path
+        o, d, coeff = _emit_mesh(prepared, b, rng)
+        basis = None
+    elif job.light > len(prepared.lights):  # the world: coefficients over its basis spectra
+        o, d, coeff, basis = _emit_world(prepared, b, rng)
+    else:  # a light: a scalar per path times the light's spectrum
         o, d, weight = _emit(prepared, job.light, b, rng)
-        live = weight > 0
-        w = (weight[live, None] / float(job.light_paths)).astype(np.float32) * prepared.lights.spectrum[job.light][None, :]
+        coeff, basis = weight[:, None], prepared.lights.spectrum[job.light][None, :]
+    live = coeff.max(axis=1) > 0
+    w = (coeff[live] / float(job.light_paths)).astype(np.float32)
+    if basis is not None and len(basis) >= n:  # no fewer coefficients than samples: plain spectra
+        w, basis = (w @ basis).astype(np.float32), None
     m = int(live.sum())
     rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(m, np.int64),
-                w, None, np.zeros(m, np.int32), rng.random(m))
+                w, None, np.zeros(m, np.int32), rng.random(m),
+                basis=None if basis is None else np.ascontiguousarray(basis, np.float32))
     tr = _LightTrace(prepared, rng, illum, records)
     tr.walk(rays, tr.empty_mono())
     return {"paths": b, "deposits": tr.deposited, "rays": tr._rays}
@@ -453,11 +505,11 @@ class DepositLog:
 
     def __init__(self, layout: ElementLayout | None):
         self.layout = layout
-        self.calls: list[tuple] = []  # (elements, flux, lam, towards_source, at), in call order
+        self.calls: list[tuple] = []  # (elements, flux, lam, towards_source, at, basis), in call order
 
-    def deposit(self, elements, flux, lam=None, towards_source=None, at=None) -> None:
+    def deposit(self, elements, flux, lam=None, towards_source=None, at=None, basis=None) -> None:
         if len(elements):
-            self.calls.append((elements, flux, lam, towards_source, at))
+            self.calls.append((elements, flux, lam, towards_source, at, basis))
 
     def replay(self, target: IlluminationMap) -> None:
         self.replay_calls(self.calls, target)
@@ -465,8 +517,10 @@ class DepositLog:
     @staticmethod
     def replay_calls(calls, target: IlluminationMap) -> None:
         """Add recorded ``calls`` (a DepositLog's ``calls``, e.g. sent back by a worker) to ``target``."""
-        for elements, flux, lam, towards_source, at in calls:
-            if at is None:  # caustic maps take no points
+        for elements, flux, lam, towards_source, at, basis in calls:
+            if basis is not None:  # coefficients over basis spectra (caustic maps)
+                target.deposit(elements, flux, lam, towards_source, basis=basis)
+            elif at is None:  # caustic maps take no points
                 target.deposit(elements, flux, lam, towards_source)
             else:
                 target.deposit(elements, flux, lam, towards_source, at=at)
@@ -591,8 +645,7 @@ def _emit(prepared, li: int, b: int, rng):
         rad, phi = np.sqrt(r1), 2 * np.pi * r2
         a, c = 0.5 * lights.size_u[li] * rad * np.cos(phi), 0.5 * lights.size_v[li] * rad * np.sin(phi)
     origin = lights.position[li] + a[:, None] * lights.axis_u[li] + c[:, None] * lights.axis_v[li]
-    axis, cos_max, omega = _cones(origin, obj)
-    d, pdf = _sample_cones(origin, omega, axis, cos_max, omega, rng)
+    d, pdf = _sample_towards_casters(origin, obj, rng)
     cos_l = d @ lights.direction[li]
     # radiance (in the spectrum) * cos * area / pdf(direction)   (pdf of the point: 1 / area)
     weight = np.where(cos_l > 0, cos_l * lights.area[li] / np.maximum(pdf, 1e-300), 0.0)
@@ -620,6 +673,8 @@ def _caster_disk_points(obj: CasterObjects, d: np.ndarray, rng) -> tuple[np.ndar
     c = obj.centre[pick]
     c_plane = c - np.einsum("ij,ij->i", c, d)[:, None] * d
     pts = c_plane + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
+    if len(obj) == 1:  # one object: every point drawn lies on its disk
+        return pts, np.full(b, 1.0 / area[0])
     # |pts - proj(centre)|^2 = |pts - centre|^2 - ((pts - centre) . d)^2 (pts . d = 0), every object at once
     cd = d @ obj.centre.T  # (B, C)
     dist2 = (np.sum(pts**2, axis=1)[:, None] - 2 * pts @ obj.centre.T + np.sum(obj.centre**2, axis=1)[None, :]
@@ -656,8 +711,7 @@ def _emit_sized_point(prepared, li: int, b: int, rng):
     r = float(lights.radius[li])
     nrm = _sample_cone(np.array([0.0, 0.0, 1.0]), 2.0, rng, b)  # uniform on the sphere
     q = lights.position[li] + r * nrm
-    axis, cos_max, omega = _cones(q, obj)
-    d, pdf = _sample_cones(q, omega, axis, cos_max, omega, rng)
+    d, pdf = _sample_towards_casters(q, obj, rng)
     cos_l = np.einsum("ij,ij->i", d, nrm)
     weight = np.where((cos_l > 0) & (pdf > 0), 4.0 * cos_l / np.maximum(pdf, 1e-300), 0.0)
     if int(lights.kind[li]) == SPOT:
@@ -672,8 +726,7 @@ def _emit_mesh(prepared, b: int, rng):
     (B, n) = L_e |cos_l| / (p_A pdf_dir) (docs/physics.md section 7.7)."""
     ml, obj = prepared.mesh_lights, prepared.light_targets.objects
     q, j, pa = ml.sample_points(rng, b)
-    axis, cos_max, omega = _cones(q, obj)
-    d, pdf = _sample_cones(q, omega, axis, cos_max, omega, rng)
+    d, pdf = _sample_towards_casters(q, obj, rng)
     n = ml.normal[j]
     cos_s = np.einsum("ij,ij->i", d, n)
     scalar = np.where((pdf > 0) & (cos_s != 0), np.abs(cos_s) / np.maximum(pa * pdf, 1e-300), 0.0)
@@ -704,8 +757,12 @@ def _emit_world(prepared, b: int, rng):
     from the map's distribution (uniform over the sphere for a uniform world), then a point on
     the disk one caster object's bounding sphere casts across w (the object chosen by disk
     area, as for a SUN), the path starting far out along w and travelling along -w. Returns
-    origins, directions and spectral weights (B, n) = L(w) / pdf(w) / pdf_A(point): the flux
-    of the world's radiance through the disks, unbiased (no clamping, no cut-off)."""
+    origins, directions, and the spectral weights L(w) / pdf(w) / pdf_A(point) (the flux of the
+    world's radiance through the disks, unbiased: no clamping, no cut-off) as coefficients
+    (B, k) over basis spectra (k, n): a uniform world's spectrum (k = 1), or for a map the
+    spectra of pure red, green and blue (k = 3), since the RGB-to-illuminant upsampling
+    (spectrum.SpectralConverter.illuminant_from_rgb: max(rgb) times a basis combination of
+    rgb / max(rgb)) is linear in non-negative RGB."""
     obj = prepared.light_targets.objects
     env = prepared.environment
     if env is None:  # uniform world: directions uniform on the sphere
@@ -713,12 +770,14 @@ def _emit_world(prepared, b: int, rng):
         phi = 2 * np.pi * rng.random(b)
         s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
         towards_sky = np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
-        spectral = np.broadcast_to(prepared.world_spectrum.astype(np.float64) * (4 * np.pi), (b, prepared.grid.n))
+        coeff = np.full((b, 1), 4 * np.pi)
+        basis = prepared.world_spectrum.astype(np.float64)[None, :]
     else:
         towards_sky, pdf, rgb = env.sample(rng.random(b), rng.random(b))
         inv = np.where(pdf > 0, 1.0 / np.where(pdf > 0, pdf, 1.0), 0.0)
-        spectral = prepared.conv.illuminant_from_rgb(rgb) * inv[:, None]
+        coeff = np.maximum(rgb.astype(np.float64), 0.0) * inv[:, None]
+        basis = prepared.conv.illuminant_from_rgb(np.eye(3))  # (3, n): pure R, G, B
     pts, pdf_a = _caster_disk_points(obj, towards_sky, rng)
     o = pts + _far_distance(prepared) * towards_sky
     weight = np.where(pdf_a > 0, 1.0 / np.maximum(pdf_a, 1e-300), 0.0)
-    return o, -towards_sky, spectral * weight[:, None]
+    return o, -towards_sky, coeff * weight[:, None], basis

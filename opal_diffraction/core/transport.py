@@ -3,7 +3,13 @@ bounce of mirror reflection, Fresnel-sampled refraction and dispersion.
 
 A wavefront tracer: all rays of a batch advance one interaction at a time, in NumPy arrays, with
 no Python loop per ray. Rays live in two populations:
-- *white* rays carry the whole spectrum, a weight array (B, n) (``None``: all ones);
+- *white* rays carry the whole spectrum, a weight array (B, n) (``None``: all ones), or, for
+  light-pass rays whose spectra are combinations of a few spectra the population shares (a
+  light's spectrum; the world map's three RGB basis spectra), coefficients (B, k) over that
+  ``basis`` (k, n): spectral weight = w @ basis. Colourless glass and mirrors and grey tints
+  (reflectance constant over wavelength) scale the k coefficients instead of n samples; a
+  coloured tint, a dispersive split and code that needs spectra expand them (``dense``), and
+  the light pass's deposits take the coefficients (elements.IlluminationMap.deposit);
 - *mono* rays carry one wavelength sample, a scalar weight (B,) and its index (B,).
 A white ray stays white until it meets a dispersive dielectric; there it becomes mono rays:
 ``SPLIT`` makes one child per wavelength sample with the parent's weight at that wavelength (the
@@ -53,6 +59,21 @@ MICROFACET = 99
 GRATING = 98
 
 
+def _indices(mask):
+    """Row indices of a bool mask (None: every row, nothing to copy) or an index array as is.
+    Gathering rows by index (np.take) is several times faster than boolean indexing."""
+    mask = np.asarray(mask)
+    if mask.dtype != bool:
+        return mask
+    if len(mask) and mask.all():
+        return None
+    return np.flatnonzero(mask)
+
+
+def _rows(a, idx):
+    return a.take(idx, axis=0)
+
+
 @dataclass
 class Rays:
     o: np.ndarray      # (B, 3) float32 origins
@@ -65,31 +86,60 @@ class Rays:
     # per-ray arrays a subclass carries along (the eye pass's path state: bounce counts, the last
     # BSDF pdf for MIS, ...); taken, concatenated and inherited with the rays. None: nothing.
     extra: dict | None = None
+    # (k, n) float32 spectra shared by the population (k < n): w is (B, k) coefficients over
+    # them (white light rays only); None: w is as above
+    basis: np.ndarray | None = None
 
     def __len__(self):
         return len(self.pix)
 
     def take(self, mask) -> "Rays":
-        if mask.dtype == bool and len(mask) and mask.all():
+        """The rays where ``mask`` (B,) bool is set, or at indices ``mask``."""
+        idx = _indices(mask)
+        if idx is None:
             return self
-        return Rays(self.o[mask], self.d[mask], self.pix[mask], None if self.w is None else self.w[mask],
-                     None if self.lam is None else self.lam[mask], self.depth[mask], self.u_lam[mask],
-                     None if self.extra is None else {k: v[mask] for k, v in self.extra.items()})
+        return Rays(_rows(self.o, idx), _rows(self.d, idx), _rows(self.pix, idx),
+                     None if self.w is None else _rows(self.w, idx), None if self.lam is None else _rows(self.lam, idx),
+                     _rows(self.depth, idx), _rows(self.u_lam, idx),
+                     None if self.extra is None else {k: _rows(v, idx) for k, v in self.extra.items()}, self.basis)
 
     def moved(self, o, d, w, depth=None) -> "Rays":
-        """The same paths (pixels, wavelengths, extra state) continuing from o along d with weight w."""
+        """The same paths (pixels, wavelengths, extra state) continuing from o along d with weight w
+        (coefficients over the same basis if w has the basis's k columns, else spectral)."""
+        basis = self.basis if self.basis is not None and w is not None and w.ndim == 2 and \
+            w.shape[1] == len(self.basis) else None
         return Rays(o, d, self.pix, w, self.lam, self.depth + 1 if depth is None else depth, self.u_lam,
-                     None if self.extra is None else dict(self.extra))
+                     None if self.extra is None else dict(self.extra), basis)
 
     def weighted(self, x):
         """The ray weight times x (x itself for unit-weight camera rays)."""
-        return x if self.w is None else self.w * x
+        if self.w is None:
+            return x
+        return (self.dense_w(np.shape(x)[-1]) if self.basis is not None else self.w) * x
 
     def dense_w(self, n: int) -> np.ndarray:
-        return np.ones((len(self), n), np.float32) if self.w is None else self.w
+        """The spectral weight (B, n) (white rays)."""
+        if self.w is None:
+            return np.ones((len(self), n), np.float32)
+        if self.basis is not None:
+            return (self.w @ self.basis).astype(np.float32, copy=False)
+        return self.w
+
+    def dense(self) -> "Rays":
+        """These rays with spectral weights (B, n) instead of coefficients over a basis."""
+        return self if self.basis is None else replace(self, w=self.dense_w(self.basis.shape[1]), basis=None)
 
     @staticmethod
     def concat(a: "Rays", b: "Rays") -> "Rays":
+        if a.basis is not None or b.basis is not None:
+            if a.basis is not b.basis and not (a.basis is not None and b.basis is not None
+                                               and a.basis.shape == b.basis.shape
+                                               and np.array_equal(a.basis, b.basis)):
+                a, b = a.dense(), b.dense()  # different bases: join as spectra
+            elif a.basis is not None:
+                basis = a.basis
+                joined = Rays.concat(replace(a, basis=None), replace(b, basis=None))
+                return replace(joined, basis=basis)
         if (a.w is None) != (b.w is None):  # one side has implicit unit weights: make them explicit
             n = (a.w if a.w is not None else b.w).shape[1]
             a, b = replace(a, w=a.dense_w(n)), replace(b, w=b.dense_w(n))
@@ -119,9 +169,13 @@ class Hit:
     _FIELDS = ("p", "ng", "ns", "cos_i", "front", "mat", "eps", "prim", "bu", "bv")
 
     def take(self, mask) -> "Hit":
-        if mask.dtype == bool and len(mask) and mask.all():
+        """The hits where ``mask`` (B,) bool is set, or at indices ``mask``."""
+        idx = _indices(mask)
+        if idx is None:
             return self
-        return Hit(*(getattr(self, f)[mask] for f in self._FIELDS))
+        out = {f: _rows(getattr(self, f), idx) for f in self._FIELDS if f != "ns"}
+        out["ns"] = out["ng"] if self.ns is self.ng else _rows(self.ns, idx)  # flat: one array for both
+        return Hit(**out)
 
     @staticmethod
     def concat(a: "Hit", b: "Hit") -> "Hit":
@@ -177,6 +231,11 @@ def valid_specular_normal(wo: np.ndarray, ng: np.ndarray, ns: np.ndarray) -> np.
     return out
 
 
+def out_is_plain(rays: Rays) -> bool:
+    """No ray differentials to carry (core/footprint.py): the fused specular bounce applies."""
+    return rays.extra is None or footprint.KEY not in rays.extra
+
+
 class SpecularWalker:
     """Advances ray populations through specular interactions; subclasses add the shading."""
 
@@ -188,6 +247,13 @@ class SpecularWalker:
         self.microfacet = prepared.microfacet  # (M,) bool, once per prepared scene
         self.any_microfacet = bool(self.microfacet.any())
         self._spawned: list[Rays] = []
+        refl = prepared.materials.reflectance
+        # (M,) reflectance constant over wavelength (clear glass and mirrors, grey tints): it
+        # scales coefficient weights without expanding them to spectra
+        self.grey = np.all(refl == refl[:, :1], axis=1) if refl.size else np.zeros(len(refl), bool)
+        # hooks a subclass leaves as they are (the light pass's misses and segments) cost nothing
+        self._hooks_segment = type(self).on_segment is not SpecularWalker.on_segment
+        self._hooks_miss = type(self).on_miss is not SpecularWalker.on_miss
 
     # hooks ----------------------------------------------------------------------------------
     def on_segment(self, rays: Rays, t: np.ndarray) -> None:
@@ -246,8 +312,9 @@ class SpecularWalker:
             h = prepared.accel.intersect(rays.o, rays.d)
             self._rays += len(rays)
             missed = h.prim < 0
-            self.on_segment(rays, np.where(missed, np.float32(np.inf), h.t))
-            if missed.any():
+            if self._hooks_segment:
+                self.on_segment(rays, np.where(missed, np.float32(np.inf), h.t))
+            if self._hooks_miss and missed.any():
                 self.on_miss(rays.take(missed))
             keep = ~missed
             rays = rays.take(keep)
@@ -281,7 +348,10 @@ class SpecularWalker:
             if rays.lam is None:
                 disp = white_split & prepared.materials.dispersive[hit.mat]
                 if disp.any():
-                    children, child_hits = self._split(rays.take(disp), hit.take(disp), rng)
+                    if rays.basis is not None and prepared.settings.dispersion_sampling != "SPLIT":
+                        children, child_hits = self._sample_coefficients(rays.take(disp), hit.take(disp))
+                    else:
+                        children, child_hits = self._split(rays.take(disp).dense(), hit.take(disp), rng)
                 diel = diel & ~disp
             if diel.any():
                 r, transmitted = self._dielectric(rays.take(diel), hit.take(diel), rng)
@@ -306,17 +376,17 @@ class SpecularWalker:
     def _hit_info(self, rays: Rays, t, prim, bu, bv) -> Hit:
         prepared = self.prepared
         p = rays.o + t[:, None] * rays.d
-        ng0 = prepared.tri_normal[prim]
+        ng0 = np.take(prepared.tri_normal, prim, axis=0)  # row gathers: np.take is several times faster
         cos = -np.einsum("ij,ij->i", rays.d, ng0)
         front = cos > 0
-        ng = np.where(front[:, None], ng0, -ng0)
+        ng = ng0 * np.where(front, np.float32(1), np.float32(-1))[:, None]
         if prepared.corner_normals is None:
             ns = ng
         else:  # on the triangle's side first, then flipped with ng: both face the incoming ray's side
             ns = shading_normals(prepared.corner_normals, prim, bu, bv, ng0)
             ns = np.where(front[:, None], ns, -ns)
-        return Hit(p.astype(np.float32, copy=False), ng, ns, np.abs(cos), front, prepared.tri_material[prim],
-                   prepared.tri_offset[prim], prim, bu, bv)
+        return Hit(p.astype(np.float32, copy=False), ng, ns, np.abs(cos), front, np.take(prepared.tri_material, prim),
+                   np.take(prepared.tri_offset, prim), prim, bu, bv)
 
     @staticmethod
     def _per_ray(table, rows, lam):
@@ -328,6 +398,8 @@ class SpecularWalker:
         m = self.prepared.materials
         if m.clear[hit.mat].all():
             return rays.w
+        if rays.basis is not None and self.grey[hit.mat].all():  # coefficients times a grey tint
+            return rays.w * m.reflectance[hit.mat, :1]
         return rays.weighted(self._per_ray(m.reflectance, hit.mat, rays.lam))
 
     def _specular_normal(self, rays: Rays, hit: Hit) -> np.ndarray:
@@ -349,13 +421,26 @@ class SpecularWalker:
     def _dielectric(self, rays: Rays, hit: Hit, rng) -> tuple[Rays, np.ndarray]:
         """Fresnel-sampled reflection or refraction: (the rays going on, refracted (B,) bool)."""
         prepared = self.prepared
-        lam0 = np.zeros(len(rays), np.int64) if rays.lam is None else rays.lam
-        n = prepared.materials.ior[hit.mat, lam0]  # constant over the grid for white rays
+        ior = prepared.materials.ior
+        # constant over the grid for white rays
+        n = np.take(ior[:, 0], hit.mat) if rays.lam is None else ior[hit.mat, rays.lam]
         eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
         ns = self._specular_normal(rays, hit)
         cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
         fr = fresnel_dielectric(cos_s, eta)
         refl = rng.random(len(rays)) < fr
+        if ns is hit.ng and out_is_plain(rays):
+            # flat: both directions are a d + b n with per-ray a, b (Snell's law and the mirror;
+            # under total internal reflection fr = 1, so refl is set): one pass over (B, 3)
+            cos = cos_s.astype(np.float32, copy=False)
+            cos_t = np.sqrt(np.maximum(np.float32(0), 1 - eta * eta * np.maximum(np.float32(0), 1 - cos * cos)))
+            a = np.where(refl, np.float32(1), eta)
+            b = np.where(refl, 2 * cos, eta * cos - cos_t)
+            d = a[:, None] * rays.d + b[:, None] * hit.ng
+            side = np.where(np.einsum("ij,ij->i", d, hit.ng) > 0, np.float32(1), np.float32(-1))
+            o = hit.p + (hit.eps * side)[:, None] * hit.ng
+            out = rays.moved(o.astype(np.float32, copy=False), d.astype(np.float32, copy=False), self._tinted(rays, hit))
+            return out, side < 0
         t_dir, _ = refract(rays.d, ns, eta)
         if ns is not hit.ng:
             # a refraction about ns that stays on the incident side is refracted about ng instead
@@ -371,6 +456,44 @@ class SpecularWalker:
             out.extra[footprint.KEY] = footprint.refract_differentials(rays.extra[footprint.KEY], rays.o, rays.d,
                                                                        hit.p, ns, d, eta)
         return out, side < 0
+
+    def _sample_coefficients(self, rays: Rays, hit: Hit):
+        """``_split``'s SAMPLE for coefficient weights (B, k) over ``rays.basis`` (k, n): the
+        same estimator (wavelength j with p_j = W_j / sum W, weight sum W, from the stratified
+        u_lam), W's CDF being w @ cumsum(basis): for k = 1 a binary search in the basis's own
+        CDF, for k > 1 a vectorised binary search that evaluates the CDF only at the ~log2 n
+        probed wavelengths, (B, k) per step instead of (B, n)."""
+        n = self.n
+        cum = np.cumsum(rays.basis.astype(np.float64), axis=1)  # (k, n)
+        w = rays.w.astype(np.float64)
+        if len(cum) == 1:
+            total = w[:, 0] * cum[0, -1]
+            live = total > 0
+            lam = np.searchsorted(cum[0], rays.u_lam[live] * cum[0, -1], side="left")  # = #{CDF < u total}
+        else:
+            total = w @ cum[:, -1]
+            live = total > 0
+            wl, target = w[live], rays.u_lam[live] * total[live]
+            cum_t = np.ascontiguousarray(cum.T)  # (n, k)
+            lo = np.zeros(len(wl), np.int64)  # the answer #{j: CDF_j < target} lies in [lo, hi]
+            hi = np.full(len(wl), n, np.int64)
+            for _ in range(int(np.ceil(np.log2(n + 1)))):  # binary search steps, not rays
+                mid = np.minimum((lo + hi) // 2, n - 1)
+                at = np.take(cum_t, mid, axis=0)
+                val = wl[:, 0] * at[:, 0]
+                for c in range(1, len(cum)):  # loop over the k basis spectra
+                    val += wl[:, c] * at[:, c]
+                less = (val < target) & (lo < hi)
+                lo = np.where(less, mid + 1, lo)
+                hi = np.where(less | (lo >= hi), hi, mid)
+            lam = lo
+        parent = np.flatnonzero(live)
+        lam = np.minimum(lam, n - 1)
+        children = Rays(_rows(rays.o, parent), _rows(rays.d, parent), _rows(rays.pix, parent),
+                        total[live].astype(np.float32), lam.astype(np.int64), _rows(rays.depth, parent),
+                        _rows(rays.u_lam, parent),
+                        None if rays.extra is None else {k: _rows(v, parent) for k, v in rays.extra.items()})
+        return children, hit.take(parent)
 
     def _split(self, rays: Rays, hit: Hit, rng):
         """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit."""
