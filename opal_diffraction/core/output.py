@@ -85,8 +85,19 @@ def write_rgb_exr(path, rgb: np.ndarray) -> None:
     _exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
 
 
-def write_spectral_exr(path, spectral: np.ndarray, wavelengths_nm: np.ndarray, rgb: np.ndarray) -> None:
-    """(H, W, n) spectral radiance plus its RGB, in the JCGT 2021 spectral layout."""
+def write_spectral_exr(path, spectral: np.ndarray | None, wavelengths_nm: np.ndarray, rgb: np.ndarray) -> None:
+    """(H, W, n) spectral radiance plus its RGB, in the JCGT 2021 spectral layout.
+
+    ``spectral`` None (a RenderResult whose render kept no spectral film, core/film.py): a
+    SceneError saying how to keep it, before anything is written."""
+    if spectral is None:
+        from .film import NO_SPECTRAL
+        from .scene import SceneError
+
+        raise SceneError(f"cannot write the spectral EXR {os.fspath(path)}: {NO_SPECTRAL}")
+    spectral = np.asarray(spectral)
+    if spectral.ndim != 3 or spectral.shape[-1] != len(wavelengths_nm):
+        raise ValueError(f"spectral image of shape {spectral.shape} does not match {len(wavelengths_nm)} wavelengths")
     chans = {spectral_channel_name(wl): spectral[..., i] for i, wl in enumerate(wavelengths_nm)}
     chans.update({"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
     _exr(path, chans, {"spectralLayoutVersion": "1.0", "emissiveUnits": "W.m^-2.sr^-1"})

@@ -81,12 +81,14 @@ def _wavelength_count(lo: float, hi: float, step: float) -> float:
     return math.floor((hi - lo) / step + 1e-9) + 1 if (hi - lo) / step < 1e15 else math.inf
 
 
-def film_bytes(width: int, height: int, wavelengths: int) -> int:
-    """Memory (bytes) of a render's film: the (H, W, n) float32 spectral sums, the RGB parts,
+def film_bytes(width: int, height: int, wavelengths: int, spectral: bool = False) -> int:
+    """Memory (bytes) of a render's film: the RGB sums of the image and of its non-Direct parts,
     the denoising features, adaptive sampling's half buffer and the counts, plus the finished
-    image's spectral and RGB copies."""
+    image's RGB and passes; with ``spectral`` (a spectral EXR is written: core/film.py) also the
+    (H, W, n) float32 spectral sums, the finished image's spectral copy and the EXR's
+    per-channel copy."""
     px = int(width) * int(height)
-    return px * (2 * 4 * int(wavelengths) + 4 * 3 * 11 + 4 * 3)
+    return px * ((3 * 4 * int(wavelengths) if spectral else 0) + 4 * 3 * 12 + 4 * 3)
 
 
 @dataclass(frozen=True)
