@@ -82,13 +82,15 @@ def _wavelength_count(lo: float, hi: float, step: float) -> float:
 
 
 def film_bytes(width: int, height: int, wavelengths: int, spectral: bool = False) -> int:
-    """Memory (bytes) of a render's film: the RGB sums of the image and of its non-Direct parts,
-    the denoising features, adaptive sampling's half buffer and the counts, plus the finished
-    image's RGB and passes; with ``spectral`` (a spectral EXR is written: core/film.py) also the
-    (H, W, n) float32 spectral sums, the finished image's spectral copy and the EXR's
-    per-channel copy."""
+    """Memory (bytes) of a render's film (core/film.py), per pixel: the RGB sums of the image,
+    of its four non-Direct parts and of the two denoising features, adaptive sampling's half
+    buffer (8 float32 triples), the finished image's RGB and six passes (7 triples), 3 triples of
+    temporaries while it is made, and the counts (4 floats). With ``spectral`` (a spectral EXR is
+    written) also two (H, W, n) float32 arrays: the spectral sums, plus either a partial
+    result's copy (previews) or the EXR's contiguous channels (the final result divides the sums
+    in place)."""
     px = int(width) * int(height)
-    return px * ((3 * 4 * int(wavelengths) if spectral else 0) + 4 * 3 * 12 + 4 * 3)
+    return px * ((2 * 4 * int(wavelengths) if spectral else 0) + 4 * 3 * (8 + 7 + 3) + 4 * 4)
 
 
 @dataclass(frozen=True)
