@@ -138,7 +138,15 @@ def test_the_spectral_exr_is_written_from_the_spectral_film(tmp_path):
     path = str(tmp_path / "spectral.exr")
     settings = RenderSettings(**{**SETTINGS.__dict__, "spectral_exr": path})
     res = render(prism_scene(), settings)
-    write_spectral_exr(path, res.spectral, res.wavelengths, res.rgb)
+    write_spectral_exr(path, res.spectral, res.wavelengths, res.rgb)  # OpenEXR's import first
+    tracemalloc.start()
+    try:
+        write_spectral_exr(path, res.spectral, res.wavelengths, res.rgb)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    # the film's (n, H, W) planes are the EXR's channels: no copy of the spectral image
+    assert peak < 0.5 * res.spectral.nbytes, (peak, res.spectral.nbytes)
     ch = read_exr(path)
     assert len(res.wavelengths) == settings.grid().n
     for i, wl in enumerate(res.wavelengths):

@@ -12,7 +12,11 @@ passes, adaptive sampling's error estimate), so nothing is converted twice. The 
 spectral sums (61 float32 per pixel: 506 MB at 1920x1080) are kept only when a spectral image is
 asked for (``spectral=True``: a spectral EXR is written, or a caller wants
 ``RenderResult.spectral``); otherwise ``RenderResult.spectral`` is None. The RGB image is summed
-the same way in both cases, so it does not depend on whether the spectral film is kept.
+the same way in both cases, so it does not depend on whether the spectral film is kept. The
+spectral sums are stored wavelength-major, (n, H, W), and ``RenderResult.spectral`` is the
+(H, W, n) view of them (``np.moveaxis``), so each wavelength's image is already the contiguous
+(H, W) plane a spectral EXR's channel needs (core/output.py copies nothing), and the final
+result divides the sums in place: a spectral render holds one (n, H, W) array, not three.
 
 Passes (AOVs for the compositor, (H, W, 3) linear Rec.709): Direct (light reaching diffuse
 surfaces by shadow rays, also seen through mirrors and glass), Caustics (the light pass),
@@ -67,8 +71,8 @@ def tile_parts_rgb(conv: SpectralConverter, tile) -> dict:
 
 @dataclass
 class RenderResult:
-    spectral: np.ndarray | None   # (H, W, n) float32 mean spectral radiance, row 0 at the top; None
-    #                               unless the render kept its spectral film (Film(spectral=True))
+    spectral: np.ndarray | None   # (H, W, n) float32 mean spectral radiance, row 0 at the top (a view
+    #                               of (n, H, W) planes); None unless the render kept its spectral film
     rgb: np.ndarray               # (H, W, 3) float32 linear Rec.709
     wavelengths: np.ndarray       # (n,) nm
     samples: int                  # samples per pixel actually taken (the minimum over pixels)
@@ -101,7 +105,8 @@ class Film:
                  spectral: bool = False):
         self.conv = conv
         self.rgb = np.zeros((height, width, 3), np.float32)  # linear Rec.709 sums of everything
-        self.spectral = np.zeros((height, width, conv.grid.n), np.float32) if spectral else None
+        # wavelength-major (n, H, W): each wavelength's plane is one contiguous EXR channel
+        self.spectral = np.zeros((conv.grid.n, height, width), np.float32) if spectral else None
         # RGB sums of the parts of the spectral sum that are not Direct light
         self.parts = {name: np.zeros((height, width, 3), np.float32) for name in PARTS}
         self.counts = np.zeros((height, width), np.float32)  # samples per pixel so far
@@ -152,7 +157,7 @@ class Film:
             shape = (len(pixels),)
         self.rgb[where] += rgb.reshape(*shape, 3)
         if self.spectral is not None:
-            self.spectral[where] += spectral.reshape(*shape, -1)
+            self.spectral[(slice(None),) + where] += np.moveaxis(spectral.reshape(*shape, -1), -1, 0)
         for name, arr in self.parts.items():
             part = parts_rgb.get(name)
             if part is not None:
@@ -201,9 +206,10 @@ class Film:
         if self.spectral is not None:
             if final:
                 spectral, self.spectral = self.spectral, None
-                spectral *= scale
+                spectral *= scale[..., 0]
             else:
-                spectral = self.spectral * scale
+                spectral = self.spectral * scale[..., 0]
+            spectral = np.moveaxis(spectral, 0, -1)  # (H, W, n) view of the (n, H, W) planes
         rgb = self.rgb * scale
         caustics = self.parts["caustics"] * scale
         diffraction = self.parts["diffraction"] * scale

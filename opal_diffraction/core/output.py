@@ -89,7 +89,9 @@ def write_spectral_exr(path, spectral: np.ndarray | None, wavelengths_nm: np.nda
     """(H, W, n) spectral radiance plus its RGB, in the JCGT 2021 spectral layout.
 
     ``spectral`` None (a RenderResult whose render kept no spectral film, core/film.py): a
-    SceneError saying how to keep it, before anything is written."""
+    SceneError saying how to keep it, before anything is written. A film's spectral image is a
+    view of (n, H, W) planes, so its channels are passed without a copy (another layout is
+    copied one channel at a time into the contiguous arrays OpenEXR needs)."""
     if spectral is None:
         from .film import NO_SPECTRAL
         from .scene import SceneError
