@@ -63,7 +63,8 @@ def test_no_spectral_film_unless_a_spectral_image_is_asked():
 
 
 def test_rgb_is_the_conversion_of_the_spectral_image_within_float32_rounding():
-    """rgb = sum over tiles of to_rgb(tile) / N against to_rgb(sum of spectra / N) in float64:
+    """docs/physics.md section 10.1: rgb = sum over tiles of to_rgb(tile) / N against the float64
+    to_rgb(sum of spectra / N):
     equal up to float32 rounding of the (4 adds + 61-term dot product) per pixel, bounded by
     (adds + n) * eps32 * (|s| @ |W|) (the standard bound for a recursive sum)."""
     res = render(prism_scene(), SETTINGS, spectral_film=True)
