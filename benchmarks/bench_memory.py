@@ -14,7 +14,8 @@ samples per pixel, one tile at a time per thread, so a render of 64 spp holds wh
 holds and loops eight times longer. ``--spp 8 16`` shows it (one round and two). ``--tree``
 also runs every configuration with another checkout's ``opal_diffraction`` first on the path
 (``git worktree add /tmp/base 5d742db`` for the state before the RGB films), in turns.
-``--tracemalloc`` prints, for each configuration, the ten biggest allocation sites alive at the
+``--parallel N`` runs N configurations at once (each is its own process, so its peak RSS is its
+own; only the time changes). ``--tracemalloc`` prints, for each configuration, the ten biggest allocation sites alive at the
 peak of the traced Python allocations (NumPy reports its buffers to tracemalloc).
 
 The scene is examples/prism.py (dense flint, dispersion, 1 M automatic light paths at full HD)
@@ -123,6 +124,8 @@ def main(argv=None) -> int:
     ap.add_argument("--tree", default="", help="another checkout to measure too (e.g. a worktree of main)")
     ap.add_argument("--only", choices=["rgb", "spectral"], default=None, help="one of the two outputs only")
     ap.add_argument("--tracemalloc", action="store_true")
+    ap.add_argument("--parallel", type=int, default=1, help="configurations run at once (peak RSS is per process, "
+                                                               "so this changes only the time)")
     args = ap.parse_args(argv)
 
     sys.path.insert(0, REPO)
@@ -136,15 +139,25 @@ def main(argv=None) -> int:
         scene_path = os.path.join(tmp, "scene.npz")
         scene.save(scene_path)
         outputs = [False, True] if args.only is None else [args.only == "spectral"]
-        for spp in args.spp:
-            for spectral in outputs:
-                for label, tree in trees:  # in turns
-                    res = run_one(tree, scene_path, spp, spectral, tmp, args.tracemalloc)
-                    rows.append((label, spp, spectral, res))
-                    print(f"{label} ({res['package']}): {spp} spp, spectral EXR {spectral}: peak RSS "
-                          f"{res['maxrss_kb'] / 2**20:.2f} GiB", flush=True)
-                    for t in res.get("top", []):
-                        print(f"    {t['mb']:8.1f} MB  {' <- '.join(reversed(t['where']))}")
+        configs = [(label, tree, spp, spectral) for spp in args.spp for spectral in outputs
+                   for label, tree in trees]  # in turns
+
+        def one(i):
+            label, tree, spp, spectral = configs[i]
+            work = os.path.join(tmp, f"run{i}")  # each its own output files
+            os.makedirs(work)
+            res = run_one(tree, scene_path, spp, spectral, work, args.tracemalloc)
+            print(f"{label} ({res['package']}): {spp} spp, spectral EXR {spectral}: peak RSS "
+                  f"{res['maxrss_kb'] / 2**20:.2f} GiB", flush=True)
+            for t in res.get("top", []):
+                print(f"    {t['mb']:8.1f} MB  {' <- '.join(reversed(t['where']))}", flush=True)
+            return res
+
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=max(1, args.parallel)) as pool:
+            results = list(pool.map(one, range(len(configs))))
+        rows = [(label, spp, spectral, res) for (label, _, spp, spectral), res in zip(configs, results)]
     n = 61
     print(f"\n{args.scene} example, {args.width}x{args.height}, {n} wavelengths; film estimate "
           f"(settings.film_bytes) {film_bytes(args.width, args.height, n, False) / 2**30:.2f} GiB without, "

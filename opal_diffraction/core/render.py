@@ -24,6 +24,7 @@ image is still the same for any thread count or cluster. The film sums RGB; it k
 from __future__ import annotations
 
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
@@ -173,7 +174,12 @@ def render_prepared(
                 pending = [pool.submit(run_tile, r_index, ti, px) for ti, px in jobs]
             else:  # in the calling thread: simpler to profile and debug
                 pending = [_Inline(run_tile, r_index, ti, px) for ti, px in jobs]
-            for fut in pending:
+            # each future is dropped once its tile is in the film: a round's futures would
+            # otherwise hold every tile's (P, n) spectral sums until the round ends (1920x1080:
+            # 510 tiles, over 1 GB)
+            pending = deque(pending)
+            while pending:
+                fut = pending.popleft()
                 if stop:
                     fut.cancel()
                     continue
