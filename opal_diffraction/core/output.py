@@ -119,9 +119,19 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
+#: values (rows x width x 3) encoded at once by write_png (bounds its float64 temporaries)
+PNG_CHUNK_VALUES = 1 << 20
+
+
 def write_png(path, rgb: np.ndarray, exposure: float = 0.0) -> None:
     """An 8-bit sRGB preview of linear RGB (clipped; ``exposure`` in stops)."""
     from PIL import Image
 
-    img = (srgb_encode(np.asarray(rgb, np.float64) * 2.0**exposure) * 255 + 0.5).astype(np.uint8)
+    rgb = np.asarray(rgb)
+    img = np.empty(rgb.shape, np.uint8)
+    # in bands of rows: the float64 temporaries of a whole full-HD image were 240 MB (same bytes)
+    rows = max(1, PNG_CHUNK_VALUES // max(1, rgb[:1].size))
+    for y in range(0, rgb.shape[0], rows):
+        band = np.asarray(rgb[y:y + rows], np.float64) * 2.0**exposure
+        img[y:y + rows] = (srgb_encode(band) * 255 + 0.5).astype(np.uint8)
     _atomic_write(path, lambda tmp: Image.fromarray(img, "RGB").save(tmp, format="PNG"))
