@@ -62,7 +62,8 @@ def timed_local(scene, settings):
 
 
 def _diff(r, reference) -> float:
-    return max(float(np.max(np.abs(r.spectral.astype(np.float64) - reference.spectral))),
+    # RGB films (no spectral EXR): the RGB image and every pass
+    return max(float(np.max(np.abs(r.rgb.astype(np.float64) - reference.rgb))),
                *(float(np.max(np.abs(r.passes[k] - reference.passes[k]))) for k in r.passes))
 
 
@@ -128,7 +129,7 @@ def wire_sizes(scene, settings):
         tile_bytes.append(_size(out))
         t = time.perf_counter()
         x0, y0, x1, y1, _ = eye.tiles[ti]
-        film.add_converted(x0, y0, x1, y1, out["film"], out["parts"], eye.rounds[0])
+        film.add_converted(x0, y0, x1, y1, out["rgb"], out["parts"], eye.rounds[0], spectral=out["spectral"])
         add_s.append(time.perf_counter() - t)
     return dict(sizes=sizes, prepare_s=prepare_s, n_batches=len(work.batches), batch_bytes=batch_bytes,
                 batch_s=batch_s, replay_s=replay_s, rounds=len(eye.rounds), n_tiles=len(eye.tiles),

@@ -239,12 +239,16 @@ def _check_memory(prepared) -> None:
     from .core.settings import film_bytes
 
     cam = prepared.scene.camera
-    need = film_bytes(cam.width, cam.height, prepared.grid.n)
+    spectral = bool(prepared.settings.spectral_exr)  # the film keeps (H, W, n) sums only for a spectral EXR
+    need = film_bytes(cam.width, cam.height, prepared.grid.n, spectral)
     have = _physical_memory()
     if have and need > 0.75 * have:
-        raise CliError(f"the image needs {need / 2**30:.1f} GiB for its film ({cam.width}x{cam.height} pixels x "
-                       f"{prepared.grid.n} wavelengths), more than this machine's {have / 2**30:.1f} GiB allow: "
-                       f"lower the resolution or use a coarser wavelength step")
+        what = (f"{cam.width}x{cam.height} pixels x {prepared.grid.n} wavelengths for the spectral EXR" if spectral
+                else f"{cam.width}x{cam.height} pixels")
+        hint = ("lower the resolution, use a coarser wavelength step or write no spectral EXR" if spectral
+                else "lower the resolution")
+        raise CliError(f"the image needs {need / 2**30:.1f} GiB for its film ({what}), more than this machine's "
+                       f"{have / 2**30:.1f} GiB allow: {hint}")
 
 
 # ------------------------------------------------------------------------------ signals

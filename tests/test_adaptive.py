@@ -147,8 +147,8 @@ def test_off_and_never_converging_are_the_plain_sum_of_every_tile():
     when every one of them traces its whole tile (summed here without the film)."""
     scene = wall_scene(16)
     s = RenderSettings(samples=6, round_samples=2, tile_size=8, diffuse_bounces=1, wavelength_step=20.0, seed=5)
-    off = render(scene, s)
-    never = render(scene, replace(s, adaptive_threshold=1e-9))
+    off = render(scene, s, spectral_film=True)
+    never = render(scene, replace(s, adaptive_threshold=1e-9), spectral_film=True)
     prepared = prepare(scene, s)
     work, eye, filt = EyeWork.of(prepared), EyePass(prepared), FilterSampler(s.filter_width)
     total = np.zeros((16, 16, prepared.grid.n), np.float32)
@@ -221,9 +221,9 @@ def test_adaptive_renders_are_deterministic_for_any_thread_count():
     scene = wall_scene(16)
     s = dict(samples=48, round_samples=4, tile_size=4, diffuse_bounces=1, wavelength_step=20.0, seed=9,
              adaptive_threshold=0.05, adaptive_min_samples=8)
-    one = render(scene, RenderSettings(threads=1, **s))
-    two = render(scene, RenderSettings(threads=2, **s))
-    again = render(scene, RenderSettings(threads=2, **s))
+    one = render(scene, RenderSettings(threads=1, **s), spectral_film=True)
+    two = render(scene, RenderSettings(threads=2, **s), spectral_film=True)
+    again = render(scene, RenderSettings(threads=2, **s), spectral_film=True)
     assert one.sample_counts.min() < one.sample_counts.max()  # it did adapt
     for r in (two, again):
         np.testing.assert_array_equal(one.spectral, r.spectral)
@@ -240,10 +240,10 @@ def test_a_dask_cluster_renders_the_adaptive_image_bit_for_bit():
     scene = wall_scene(16)
     s = RenderSettings(samples=48, round_samples=4, tile_size=4, diffuse_bounces=1, wavelength_step=20.0, seed=9,
                        adaptive_threshold=0.05, adaptive_min_samples=8, threads=1)
-    local = render(scene, s)
+    local = render(scene, s, spectral_film=True)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
             Client(cluster) as client:
-        dist = render(scene, s, client=client)
+        dist = render(scene, s, client=client, spectral_film=True)
     assert local.sample_counts.min() < local.sample_counts.max()
     np.testing.assert_array_equal(local.spectral, dist.spectral)
     np.testing.assert_array_equal(local.sample_counts, dist.sample_counts)

@@ -370,7 +370,7 @@ def check_case(s: Scene, rs: RenderSettings, notes) -> str:
     t0 = time.perf_counter()
     try:
         try:
-            res = render(s, rs)
+            res = render(s, rs, spectral_film=True)
         except SceneError as e:
             msg = str(e)
             assert msg and "\n" not in msg and "Traceback" not in msg, f"unclean SceneError message {msg!r}"

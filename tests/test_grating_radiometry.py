@@ -290,7 +290,7 @@ def test_white_furnace_grating_on_white_lambertian():
     (1 - a/D) + sum_m e_m K(w_src,m), computed here order by order."""
     s = furnace_scene({"kind": "DIFFUSE", "color": (1, 1, 1)}, pixels=8)
     st = RenderSettings(samples=64, threads=1, filter_width=0.0)
-    res = render(s, st)
+    res = render(s, st, spectral_film=True)
     ctx = prepare(s, st)
     ratio = (res.spectral / ctx.world_spectrum[None, None, :]).reshape(-1, ctx.grid.n)
     o, d = pixel_centre_rays(s.camera)
@@ -308,7 +308,7 @@ def test_white_furnace_grating_on_white_mirror():
     Diffraction pass holds the rest); the sum matches the order-by-order reference in the mean."""
     s = furnace_scene({"kind": "MIRROR", "color": (1, 1, 1)}, pixels=8)
     st = RenderSettings(samples=64, threads=1, filter_width=0.0)
-    res = render(s, st)
+    res = render(s, st, spectral_film=True)
     ctx = prepare(s, st)
     ratio = (res.spectral / ctx.world_spectrum[None, None, :]).reshape(-1, ctx.grid.n)
     o, d = pixel_centre_rays(s.camera)
@@ -335,7 +335,7 @@ def test_white_furnace_transmission_grating_on_glass_is_unbiased():
     s = furnace_scene({"kind": "DIELECTRIC", "color": (1, 1, 1), "ior": 1.5}, grating_type="TRANSMISSION", pixels=10)
     spp = 64
     st = RenderSettings(samples=spp, threads=1, filter_width=0.0)
-    res = render(s, st)
+    res = render(s, st, spectral_film=True)
     ctx = prepare(s, st)
     ratio = (res.spectral / ctx.world_spectrum[None, None, :]).reshape(-1, ctx.grid.n)
     o, d = pixel_centre_rays(s.camera)
@@ -406,8 +406,8 @@ def test_mirror_base_sees_a_sized_light_once_in_the_zeroth_order():
         return s
 
     st = RenderSettings(samples=1, threads=1, filter_width=0.0, light_paths=0)
-    plain = render(scene(False), st).spectral.reshape(-1, prepare(scene(False), st).grid.n)
-    res = render(scene(True), st)
+    plain = render(scene(False), st, spectral_film=True).spectral.reshape(-1, prepare(scene(False), st).grid.n)
+    res = render(scene(True), st, spectral_film=True)
     layered = res.spectral.reshape(plain.shape)
     seen = plain.max(axis=1) > 0
     assert 10 < seen.sum() < len(seen)  # the light's reflection covers part of the view

@@ -175,11 +175,11 @@ def _compare_with_virtual_lights(mirror_scene, virtual_scene, element_size):
     prepared = prepare(mirror_scene(PIXELS), base)
     refl = prepared.materials.reflectance[1]
     assert prepared.materials.clear[1] and np.all(refl == 1.0)
-    ref = render(virtual_scene(PIXELS), RenderSettings(samples=1, filter_width=0.0, light_paths=0, threads=1))
+    ref = render(virtual_scene(PIXELS), RenderSettings(samples=1, filter_width=0.0, light_paths=0, threads=1), spectral_film=True)
     ref_b = _blocks(ref.spectral, BANDS)
     runs = []
     for seed in range(SEEDS):
-        res = render(mirror_scene(PIXELS), RenderSettings(**{**base.__dict__, "seed": seed}))
+        res = render(mirror_scene(PIXELS), RenderSettings(**{**base.__dict__, "seed": seed}), spectral_film=True)
         assert res.plan.light_pass
         runs.append(_blocks(res.spectral, BANDS))
     runs = np.array(runs)

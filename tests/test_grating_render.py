@@ -55,7 +55,7 @@ def rendered():
     s = fig5_scene()
     # point samples at the pixel centres (the footprint integral is tested in test_grating_footprint.py)
     st = RenderSettings(samples=1, filter_width=0.0, threads=1, grating_footprint=False)
-    res = render(s, st)
+    res = render(s, st, spectral_film=True)
     ctx = prepare(s, st)
     return res, ctx
 
@@ -154,5 +154,5 @@ def test_no_grating_no_grating_work():
 
 def test_hexagonal_lattice_renders_finite_and_energy_bounded():
     s = fig5_scene(lattice="HEXAGONAL")
-    res = render(s, RenderSettings(samples=4, threads=1))
+    res = render(s, RenderSettings(samples=4, threads=1), spectral_film=True)
     assert np.isfinite(res.spectral).all() and res.spectral.min() >= 0 and res.spectral.max() > 0

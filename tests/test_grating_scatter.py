@@ -574,7 +574,7 @@ def test_rendered_spectrum_on_the_screen():
     m = np.eye(4)
     m[:3, 3] = (cx, 0.0, -0.5)
     s.camera = Camera(matrix=m, kind="ORTHO", ortho_scale=scale, width=width, height=height)
-    res = render(s, RenderSettings(samples=4, light_paths=2_000_000, element_size=ELEMENT, diffuse_bounces=0))
+    res = render(s, RenderSettings(samples=4, light_paths=2_000_000, element_size=ELEMENT, diffuse_bounces=0), spectral_film=True)
     assert res.plan.light_pass
     row = res.spectral.sum(axis=0).astype(np.float64)  # (W, n)
     x_pix = cx + ((np.arange(width) + 0.5) * 2 / width - 1) * scale / 2  # pixel centres on the screen

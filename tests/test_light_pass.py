@@ -284,7 +284,7 @@ def test_more_receiving_triangles_than_the_map_can_hold_is_a_warning_not_a_hang(
     floor.add_mesh(v, t, material=0)
     floor.add_mesh(*primitives.box((0, 0, 1.0), (1.0, 1.0, 0.2)), material=1)
     floor.lights, floor.camera = s.lights, s.camera
-    res = render(floor, RenderSettings(samples=1, light_paths=20_000, wavelength_step=1.0))
+    res = render(floor, RenderSettings(samples=1, light_paths=20_000, wavelength_step=1.0), spectral_film=True)
     assert any("receiving triangles are too many for the caustic map" in w for w in res.warnings)
     assert np.isfinite(res.spectral).all() and res.rgb.mean() > 0
 

@@ -365,7 +365,7 @@ def sun_scene(theta_deg, n_void=1.0, layers=40):
 @pytest.fixture(scope="module")
 def renders():
     st = RenderSettings(samples=2, threads=1, wavelength_step=2.0, filter_width=0.0)
-    return {theta: render(sun_scene(theta), st) for theta in (30.0, 45.0)}
+    return {theta: render(sun_scene(theta), st, spectral_film=True) for theta in (30.0, 45.0)}
 
 
 def test_render_shows_the_band_and_its_blue_shift(renders):
@@ -422,7 +422,7 @@ def test_world_light_through_the_lobe_is_its_albedo(world_map):
     if world_map:
         s.world_image = np.ones((16, 32, 3), np.float32)
     st = RenderSettings(samples=32, threads=1, filter_width=0.0, light_paths=0)
-    res = render(s, st)
+    res = render(s, st, spectral_film=True)
     prep = prepare(s, st)
     edges = prep.grid.bin_edges
     wo = np.array([-np.sin(th), 0, np.cos(th)])

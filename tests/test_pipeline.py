@@ -37,12 +37,12 @@ SETTINGS = RenderSettings(samples=2, round_samples=1, light_paths=20_000, seed=5
 
 
 def test_render_equals_the_pipeline_run_step_by_step():
-    full = render(glass_scene(), SETTINGS)
+    full = render(glass_scene(), SETTINGS, spectral_film=True)
     prepared = prepare(glass_scene(), SETTINGS)
     plan = plan_render(prepared)
     assert plan.light_pass and plan.dispersion
     light = run_light_pass(prepared)
-    staged = render_prepared(prepared, light)
+    staged = render_prepared(prepared, light, spectral_film=True)
     np.testing.assert_array_equal(full.spectral, staged.spectral)
     for k in full.passes:
         np.testing.assert_array_equal(full.passes[k], staged.passes[k])
@@ -57,8 +57,8 @@ def test_a_camera_move_reuses_the_light_pass_exactly():
     moved = prepared.with_view(moved_cam, samples=3)
     assert moved.key == prepared.key and moved.accel is prepared.accel
     fresh_scene = replace(glass_scene(), camera=moved_cam)
-    fresh = render(fresh_scene, replace(SETTINGS, samples=3))
-    reused = render_prepared(moved, light)
+    fresh = render(fresh_scene, replace(SETTINGS, samples=3), spectral_film=True)
+    reused = render_prepared(moved, light, spectral_film=True)
     np.testing.assert_array_equal(fresh.spectral, reused.spectral)
     with pytest.raises(ValueError, match="eye-pass settings"):
         prepared.with_view(light_paths=5)

@@ -33,10 +33,10 @@ def prism_and_stripes(pixels=32):
 
 def test_same_seed_same_image_whatever_the_threads():
     s = prism_and_stripes()
-    a = render(s, RenderSettings(light_paths=0, samples=4, seed=7, threads=1, tile_size=8)).spectral
-    b = render(s, RenderSettings(light_paths=0, samples=4, seed=7, threads=2, tile_size=8)).spectral
+    a = render(s, RenderSettings(light_paths=0, samples=4, seed=7, threads=1, tile_size=8), spectral_film=True).spectral
+    b = render(s, RenderSettings(light_paths=0, samples=4, seed=7, threads=2, tile_size=8), spectral_film=True).spectral
     np.testing.assert_array_equal(a, b)
-    c = render(s, RenderSettings(light_paths=0, samples=4, seed=8, threads=2, tile_size=8)).spectral
+    c = render(s, RenderSettings(light_paths=0, samples=4, seed=8, threads=2, tile_size=8), spectral_film=True).spectral
     assert not np.array_equal(a, c)
 
 
@@ -178,7 +178,7 @@ def test_time_limit_is_honoured_inside_the_light_pass_and_inside_a_round():
     s.lights = Lights.from_list([{"kind": "POINT", "position": (0, 0, 4), "power": 500.0}])
     s.camera = Camera.look_at((0, -5, 3), (0, 0, 0), width=64, height=64)
     res = render(s, RenderSettings(samples=4096, round_samples=4096, light_paths=20_000_000, time_limit=1.0,
-                                   threads=2))
+                                   threads=2), spectral_film=True)
     assert res.stats["light_paths"] < 20_000_000
     assert any("time limit reached during the light pass" in w for w in res.warnings)
     assert any("time limit reached after" in w for w in res.warnings)

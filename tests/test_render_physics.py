@@ -26,14 +26,14 @@ def luminance(result):
 def test_inverse_square_law_point_light():
     """albedo 0.5, I = 1 W/sr at 2 m: Y = rho / pi * I / r^2 = 0.039789 below the light."""
     scene = plane_under_light({"kind": "POINT", "position": (0, 0, 2), "power": 4 * np.pi}, size_m=0.16, pixels=16)
-    res = render(scene, RenderSettings(samples=4, threads=1))
+    res = render(scene, RenderSettings(samples=4, threads=1), spectral_film=True)
     y = luminance(res)
     assert y[7:9, 7:9].mean() == pytest.approx(0.039789, rel=2e-4)
 
 
 def test_point_light_falloff_cos_cubed_over_the_plane():
     scene = plane_under_light({"kind": "POINT", "position": (0, 0, 2), "power": 4 * np.pi}, size_m=6.0, pixels=48)
-    y = luminance(render(scene, RenderSettings(samples=16, threads=1)))
+    y = luminance(render(scene, RenderSettings(samples=16, threads=1), spectral_film=True))
     x, yy = pixel_centres_world(scene.camera)
     r2 = x**2 + yy**2 + 4.0
     expected = 0.5 / np.pi * 2.0 / r2**1.5  # I cos(theta) / r^2 with cos = h / r
@@ -46,7 +46,7 @@ def test_sun_irradiance_on_a_tilted_incidence():
     """Sun strength 1 at 20 deg from the normal: Y = rho / pi * cos(20 deg)."""
     d = np.array([np.sin(np.radians(20)), 0, -np.cos(np.radians(20))])
     scene = plane_under_light({"kind": "SUN", "direction": d, "power": 1.0}, size_m=2.0, pixels=8)
-    y = luminance(render(scene, RenderSettings(samples=1, threads=1)))
+    y = luminance(render(scene, RenderSettings(samples=1, threads=1), spectral_film=True))
     np.testing.assert_allclose(y, 0.5 / np.pi * np.cos(np.radians(20)), rtol=1e-5)
 
 
@@ -55,7 +55,7 @@ def test_spot_light_is_a_point_light_masked_by_its_cone():
     spot = {"kind": "SPOT", "position": (0, 0, 2), "direction": (0, 0, -1), "power": power,
             "spot_size": np.radians(60), "spot_blend": 0.0}
     scene = plane_under_light(spot, size_m=6.0, pixels=60)
-    y = luminance(render(scene, RenderSettings(samples=16, threads=1)))
+    y = luminance(render(scene, RenderSettings(samples=16, threads=1), spectral_film=True))
     x, yy = pixel_centres_world(scene.camera)
     r = np.hypot(x, yy)
     angle = np.degrees(np.arctan2(r, 2.0))
@@ -80,7 +80,7 @@ def test_area_light_irradiance_on_axis(kind):
     light = {"kind": kind, "position": (0, 0, h), "direction": (0, 0, -1), "axis_u": (1, 0, 0),
              "power": power, "size_u": a, "size_v": b if kind == "AREA_RECT" else a}
     scene = plane_under_light(light, size_m=0.08, pixels=8)
-    res = render(scene, RenderSettings(samples=256, threads=1))
+    res = render(scene, RenderSettings(samples=256, threads=1), spectral_film=True)
     y = luminance(res)
     if kind == "AREA_RECT":
         e = _rect_irradiance_on_axis(power / (np.pi * a * b), a, b, h)
@@ -94,7 +94,7 @@ def test_area_light_irradiance_on_axis(kind):
 
 def test_area_light_is_one_sided():
     light = {"kind": "AREA_RECT", "position": (0, 0, 1.0), "direction": (0, 0, 1), "power": 50.0, "size_u": 1.0}
-    y = luminance(render(plane_under_light(light, size_m=1.0, pixels=8), RenderSettings(samples=4, threads=1)))
+    y = luminance(render(plane_under_light(light, size_m=1.0, pixels=8), RenderSettings(samples=4, threads=1), spectral_film=True))
     assert np.all(y == 0)
 
 
@@ -161,9 +161,9 @@ def test_a_uniform_world_lights_diffuse_surfaces():
     cam = np.eye(4)  # looking straight down at the floor just in front of the wall
     cam[:3, 3] = (0.0, 0.0, 0.3)
     s.camera = Camera(matrix=cam, kind="ORTHO", ortho_scale=0.1, width=16, height=16)
-    res = render(s, RenderSettings(samples=64, light_paths=0, seed=3, threads=2))
+    res = render(s, RenderSettings(samples=64, light_paths=0, seed=3, threads=2), spectral_film=True)
     conv_white = render(Scene(materials=mats, world_color=s.world_color, camera=s.camera),
-                        RenderSettings(samples=1, light_paths=0)).spectral.mean(axis=(0, 1))  # L(lambda) seen directly
+                        RenderSettings(samples=1, light_paths=0), spectral_film=True).spectral.mean(axis=(0, 1))  # L(lambda) seen directly
     expected = 0.5 * rho * conv_white
     blocks = res.spectral.reshape(4, 4, 4, 4, -1).mean(axis=(1, 3)).reshape(16, -1)
     mean = blocks.mean(axis=0)

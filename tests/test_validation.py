@@ -266,5 +266,5 @@ def test_blackbody_on_odd_grids():
     s = scene()
     s.lights.temperature = np.array([3000.0, 100.0, 1e9])
     res = render(s, RenderSettings(samples=1, light_paths=0, wavelength_min=475.55, wavelength_max=731.72,
-                                   wavelength_step=25.617, threads=1))
+                                   wavelength_step=25.617, threads=1), spectral_film=True)
     assert np.isfinite(res.spectral).all() and res.spectral.shape[-1] == 11

@@ -12,6 +12,7 @@ anything moved.
 
 from __future__ import annotations
 
+import inspect
 import os
 import sys
 
@@ -62,11 +63,13 @@ def render_all(out: str) -> None:
     if tree != os.path.realpath(ROOT):  # e.g. another checkout's venv (its editable install) or PYTHONPATH
         print(f"note: rendering opal_diffraction and examples/ of {tree}, not of {ROOT}", file=sys.stderr)
 
+    # the spectral films are compared (a checkout from before the RGB films keeps them always)
+    keep = {"spectral_film": True} if "spectral_film" in inspect.signature(render).parameters else {}
     films = {}
     for scenes in (_core_scenes, _blender_scenes):
         for name, scene in scenes():
             settings = RenderSettings(samples=4, light_paths=100_000, seed=3, threads=2)
-            r = render(scene, settings)
+            r = render(scene, settings, **keep)
             films[name] = r.spectral
             for k, v in r.passes.items():
                 films[f"{name}:{k}"] = v

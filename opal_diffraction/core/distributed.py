@@ -16,9 +16,10 @@ render does, and then runs its units of work on the cluster's workers:
    in lane order (light_pass.finish_light_pass). The finished maps are scattered once to every
    worker (only their rows that hold flux: ``pack_map``) and unpacked once per worker.
 3. Eye pass: one task per (round, tile) (tiles.EyeWork, each with its own stream), reading the
-   scattered job and light maps; a task returns its tile's spectral sums and its non-Direct
-   parts already in RGB, added to the Film here in the local render's order (round by round),
-   at most ``window`` tasks ahead of the one the film needs.
+   scattered job and light maps; a task returns its tile's sums and its non-Direct parts
+   already in RGB (and its (P, n) spectral sums only when the job keeps a spectral film: a
+   spectral EXR is written), added to the Film here in the local render's order (round by
+   round), at most ``window`` tasks ahead of the one the film needs.
 
 Progress is reported as tasks finish; ``should_cancel`` is polled every POLL_S and cancels the
 pending tasks. A worker that dies takes its running tasks and the results it held with it; the
@@ -58,7 +59,7 @@ from .camera import FilterSampler
 from .elements import ElementLayout, IlluminationMap
 from .eye_pass import EyePass
 from .grating_records import GratingRecords
-from .film import Film, RenderResult, tile_parts_rgb
+from .film import Film, RenderResult, keeps_spectral, tile_parts_rgb
 from .light_pass import LANES, DepositLog, LightPassResult, LightWork, finish_light_pass, trace_batch
 from .plan import plan_render
 from .prepare import prepare
@@ -207,13 +208,14 @@ def code_digest() -> str:
     return _digest_cache[0]
 
 
-def make_job(scene: Scene, settings: RenderSettings, region, backend: str) -> dict:
-    """What every worker receives once for a frame (plain data; see to_wire)."""
+def make_job(scene: Scene, settings: RenderSettings, region, backend: str, spectral: bool = False) -> dict:
+    """What every worker receives once for a frame (plain data; see to_wire). ``spectral``: the
+    tile tasks return their spectral sums too (the client's film keeps a spectral image)."""
     scene_w, settings_w = to_wire(scene), to_wire(settings)
     token = hashlib.blake2b(pickle.dumps((scene_w, settings_w, tuple(region)), protocol=5),
                             digest_size=16).hexdigest()
     return {"token": token, "code": code_digest(), "backend": backend, "region": list(region),
-            "scene": scene_w, "settings": settings_w}
+            "scene": scene_w, "settings": settings_w, "spectral": bool(spectral)}
 
 
 # --------------------------------------------------------------------------- on a worker
@@ -308,13 +310,17 @@ def light_batch_task(job: dict, index: int) -> dict:
 
 def tile_task(job: dict, light: dict | None, r_index: int, t_index: int, pixels=None) -> dict:
     """Trace tile ``t_index`` of round ``r_index`` (only its flat pixel indices ``pixels``, for
-    adaptive sampling; None: all), reading the scattered light-pass maps; its spectral sums,
-    its non-Direct parts already in RGB and its denoising features (Film.add_converted)."""
+    adaptive sampling; None: all), reading the scattered light-pass maps; its sums in RGB, its
+    non-Direct parts in RGB, its denoising features (Film.add_converted) and, only when the job
+    keeps a spectral film, its (P, n) spectral sums (else None: 12 bytes a pixel cross the wire
+    instead of 4 n)."""
     frame = _frame(job)
     eye = EyePass(frame.prepared, frame.light(light))
     tile = trace_tile(eye, frame.filt, frame.eye_work, r_index, t_index, pixels)
-    return {"film": tile.film, "parts": tile_parts_rgb(frame.prepared.conv, tile), "rays": int(tile.rays),
-            "albedo": tile.albedo, "normal": tile.normal}
+    conv = frame.prepared.conv
+    return {"rgb": conv.to_rgb(tile.film), "spectral": tile.film if job.get("spectral") else None,
+            "parts": tile_parts_rgb(conv, tile), "rays": int(tile.rays), "albedo": tile.albedo,
+            "normal": tile.normal}
 
 
 class _ModuleRef:
@@ -453,31 +459,33 @@ class _Finished:
 
 
 def render_on_cluster(client, scene: Scene, settings: RenderSettings, prepared, progress=None, should_cancel=None,
-                      on_round=None, region=None, started_at: float | None = None) -> RenderResult:
-    """``render(scene, settings, ..., client=client)`` (see render.render for the callbacks):
-    ``prepared`` is this process's preparation of ``scene`` and ``settings``."""
+                      on_round=None, region=None, started_at: float | None = None,
+                      spectral_film: bool | None = None) -> RenderResult:
+    """``render(scene, settings, ..., client=client)`` (see render.render for the callbacks and
+    ``spectral_film``): ``prepared`` is this process's preparation of ``scene`` and ``settings``."""
     t_start = time.perf_counter() if started_at is None else started_at
     settings = prepared.settings
     plan = plan_render(prepared)
     warnings = list(prepared.warnings) + list(plan.warnings)
+    spectral = keeps_spectral(settings, spectral_film)
     (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv,
-                                                 adaptive_of(settings) is not None)
+                                                 adaptive_of(settings) is not None, spectral)
     stats = {"rays": 0, "prepare_s": prepared.prepare_s, "backend": prepared.accel.name,
              "triangles": len(prepared.scene.triangles), "scheduler": str(client.scheduler.address)}
     deadline = t_start + settings.time_limit if settings.time_limit else None
     uid = uuid.uuid4().hex[:12]
     scattered = _Replicas(client)  # the job and the light-pass maps, released at the end
 
-    def finish(cancelled):
-        return film.result(plan, cancelled, warnings, stats)
+    def finish(cancelled, final=False):
+        return film.result(plan, cancelled, warnings, stats, final=final)
 
     try:
         threads = _worker_threads(client, should_cancel)
         if threads == 0:  # cancelled while waiting for workers
-            return finish(True)
+            return finish(True, final=True)
         stats["workers"] = len(client.nthreads())
         stats["worker_threads"] = threads
-        job = make_job(scene, settings, (rx0, ry0, rx1, ry1), prepared.accel.name)
+        job = make_job(scene, settings, (rx0, ry0, rx1, ry1), prepared.accel.name, spectral)
         stats["sent_job_bytes"] = _nbytes(job)
         (job_f,) = client.scatter([job], broadcast=True, hash=False)
         scattered.add(job_f)
@@ -491,7 +499,7 @@ def render_on_cluster(client, scene: Scene, settings: RenderSettings, prepared, 
             stats.update(light.stats)
             stats["rays"] += light.stats.get("light_rays", 0)
         if light is not None and light.cancelled:
-            return finish(True)
+            return finish(True, final=True)
         light_f = None
         if light is not None:
             light_w = {"token": uid, "caustics": pack_map(light.caustics),
@@ -510,7 +518,7 @@ def render_on_cluster(client, scene: Scene, settings: RenderSettings, prepared, 
     stats["render_s"] = time.perf_counter() - t_start
     stats["mrays_per_s"] = stats["rays"] / max(time.perf_counter() - t_eye + stats.get("light_pass_s", 0.0),
                                                1e-9) / 1e6
-    return finish(stop == "cancel")
+    return finish(stop == "cancel", final=True)
 
 
 def _cancel(client, pending: dict) -> None:
@@ -619,8 +627,8 @@ def _eye_pass(client, job_f, light_f, prepared, film, plan, stats, region, progr
                 px = pixels_of.pop(cursor)
                 x0, y0, x1, y1, _ = work.tiles[t_index]
                 if res is not None:
-                    film.add_converted(x0, y0, x1, y1, res["film"], res["parts"], work.rounds[r_index],
-                                       res["albedo"], res["normal"], px, is_half_a(r_index))
+                    film.add_converted(x0, y0, x1, y1, res["rgb"], res["parts"], work.rounds[r_index],
+                                       res["albedo"], res["normal"], px, is_half_a(r_index), res["spectral"])
                     if adaptive is not None:
                         film.update_active(x0, y0, x1, y1, *adaptive)
                     stats["rays"] += res["rays"]

@@ -85,8 +85,21 @@ def write_rgb_exr(path, rgb: np.ndarray) -> None:
     _exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
 
 
-def write_spectral_exr(path, spectral: np.ndarray, wavelengths_nm: np.ndarray, rgb: np.ndarray) -> None:
-    """(H, W, n) spectral radiance plus its RGB, in the JCGT 2021 spectral layout."""
+def write_spectral_exr(path, spectral: np.ndarray | None, wavelengths_nm: np.ndarray, rgb: np.ndarray) -> None:
+    """(H, W, n) spectral radiance plus its RGB, in the JCGT 2021 spectral layout.
+
+    ``spectral`` None (a RenderResult whose render kept no spectral film, core/film.py): a
+    SceneError saying how to keep it, before anything is written. A film's spectral image is a
+    view of (n, H, W) planes, so its channels are passed without a copy (another layout is
+    copied one channel at a time into the contiguous arrays OpenEXR needs)."""
+    if spectral is None:
+        from .film import NO_SPECTRAL
+        from .scene import SceneError
+
+        raise SceneError(f"cannot write the spectral EXR {os.fspath(path)}: {NO_SPECTRAL}")
+    spectral = np.asarray(spectral)
+    if spectral.ndim != 3 or spectral.shape[-1] != len(wavelengths_nm):
+        raise ValueError(f"spectral image of shape {spectral.shape} does not match {len(wavelengths_nm)} wavelengths")
     chans = {spectral_channel_name(wl): spectral[..., i] for i, wl in enumerate(wavelengths_nm)}
     chans.update({"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
     _exr(path, chans, {"spectralLayoutVersion": "1.0", "emissiveUnits": "W.m^-2.sr^-1"})
@@ -106,9 +119,19 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
+#: values (rows x width x 3) encoded at once by write_png (bounds its float64 temporaries)
+PNG_CHUNK_VALUES = 1 << 20
+
+
 def write_png(path, rgb: np.ndarray, exposure: float = 0.0) -> None:
     """An 8-bit sRGB preview of linear RGB (clipped; ``exposure`` in stops)."""
     from PIL import Image
 
-    img = (srgb_encode(np.asarray(rgb, np.float64) * 2.0**exposure) * 255 + 0.5).astype(np.uint8)
+    rgb = np.asarray(rgb)
+    img = np.empty(rgb.shape, np.uint8)
+    # in bands of rows: the float64 temporaries of a whole full-HD image were 240 MB (same bytes)
+    rows = max(1, PNG_CHUNK_VALUES // max(1, rgb[:1].size))
+    for y in range(0, rgb.shape[0], rows):
+        band = np.asarray(rgb[y:y + rows], np.float64) * 2.0**exposure
+        img[y:y + rows] = (srgb_encode(band) * 255 + 0.5).astype(np.uint8)
     _atomic_write(path, lambda tmp: Image.fromarray(img, "RGB").save(tmp, format="PNG"))

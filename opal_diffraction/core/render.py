@@ -15,19 +15,23 @@ cluster (distributed.py, imported only then); rounds make time limits, cancellat
 previews cheap. With adaptive sampling (``settings.adaptive_threshold``, core/adaptive.py) a
 tile's round traces only the pixels that have not converged, and a tile whose pixels all have
 takes no more rounds; which pixels follows from the film after the tile's earlier rounds, so the
-image is still the same for any thread count or cluster.
+image is still the same for any thread count or cluster. The film sums RGB; it keeps the
+(H, W, n) spectral image only when it is asked for (``spectral_film``; by default when
+``settings.spectral_exr`` names a spectral EXR), so ``RenderResult.spectral`` is None otherwise
+(film.py).
 """
 
 from __future__ import annotations
 
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 from .camera import FilterSampler
 from .eye_pass import EyePass
 from .cancel import RenderCancelled
-from .film import Film, RenderResult
+from .film import Film, RenderResult, keeps_spectral
 from .light_pass import LightPassResult, run_light_pass
 from .plan import RenderPlan, plan_render
 from .prepare import PreparedScene, prepare
@@ -61,6 +65,7 @@ def render(
     on_round: Callable[[RenderResult], None] | None = None,
     region: tuple[int, int, int, int] | None = None,
     client=None,
+    spectral_film: bool | None = None,
 ) -> RenderResult:
     """Render ``scene``; raises SceneError (a readable message) for unrenderable input.
 
@@ -73,25 +78,29 @@ def render(
     ``client``: a ``dask.distributed.Client``; the light pass's batches and the eye pass's
     tiles x rounds then run on its workers and the image is the one this machine renders alone,
     bit for bit (core/distributed.py, docs/distributed.md). None: this process's threads.
+
+    ``spectral_film``: keep the spectral image (``RenderResult.spectral``, (H, W, n)); None: only
+    when ``settings.spectral_exr`` is set. Otherwise the film is RGB only and ``spectral`` is None.
     """
     t_start = time.perf_counter()
     try:
         prepared = prepare(scene, settings, should_cancel=should_cancel)
     except RenderCancelled:
-        return _cancelled_before_start(scene, settings or RenderSettings(), region)
+        return _cancelled_before_start(scene, settings or RenderSettings(), region, spectral_film)
     if client is not None:
         from .distributed import render_on_cluster  # dask only when asked for
 
         return render_on_cluster(client, scene, settings or RenderSettings(), prepared, progress, should_cancel,
-                                 on_round, region, started_at=t_start)
-    return render_prepared(prepared, None, progress, should_cancel, on_round, region, started_at=t_start)
+                                 on_round, region, started_at=t_start, spectral_film=spectral_film)
+    return render_prepared(prepared, None, progress, should_cancel, on_round, region, started_at=t_start,
+                           spectral_film=spectral_film)
 
 
-def _cancelled_before_start(scene: Scene, settings: RenderSettings, region) -> RenderResult:
+def _cancelled_before_start(scene: Scene, settings: RenderSettings, region, spectral_film=None) -> RenderResult:
     """The (black, zero-sample) result of a render cancelled while it was being prepared."""
     cam = scene.camera
     x0, y0, x1, y1 = region if region is not None else (0, 0, int(cam.width), int(cam.height))
-    film = Film(x1 - x0, y1 - y0, SpectralConverter(settings.grid()))
+    film = Film(x1 - x0, y1 - y0, SpectralConverter(settings.grid()), spectral=keeps_spectral(settings, spectral_film))
     plan = RenderPlan(eye_pass=False, notes=("cancelled while preparing the scene",))
     return film.result(plan, True, ["cancelled while preparing the scene"], {"rays": 0})
 
@@ -104,8 +113,9 @@ def render_prepared(
     on_round: Callable[[RenderResult], None] | None = None,
     region: tuple[int, int, int, int] | None = None,
     started_at: float | None = None,
+    spectral_film: bool | None = None,
 ) -> RenderResult:
-    """Render a prepared scene (see ``render`` for the callbacks and ``region``).
+    """Render a prepared scene (see ``render`` for the callbacks, ``region`` and ``spectral_film``).
 
     ``light``: a finished light pass of the same prepared scene (``prepared.with_view`` keeps it
     valid) to reuse; None runs the light pass when the plan asks for it. ``started_at``: the
@@ -116,7 +126,8 @@ def render_prepared(
     plan = plan_render(prepared)
     warnings = list(prepared.warnings) + list(plan.warnings)
     adaptive = adaptive_of(settings)
-    (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv, adaptive is not None)
+    (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv, adaptive is not None,
+                                                 keeps_spectral(settings, spectral_film))
     stats = {"rays": 0, "prepare_s": prepared.prepare_s, "backend": prepared.accel.name,
              "triangles": len(prepared.scene.triangles)}
 
@@ -144,8 +155,8 @@ def render_prepared(
     def run_tile(r_index, t_index, pixels):
         return t_index, pixels, trace_tile(eye, filt, work, r_index, t_index, pixels)
 
-    def finish():
-        return film.result(plan, cancelled, warnings, stats)
+    def finish(final=False):
+        return film.result(plan, cancelled, warnings, stats, final=final)
 
     work_done = 0
     stop = "cancel" if cancelled else ""  # why the rounds ended early: "cancel" or "time"
@@ -163,7 +174,12 @@ def render_prepared(
                 pending = [pool.submit(run_tile, r_index, ti, px) for ti, px in jobs]
             else:  # in the calling thread: simpler to profile and debug
                 pending = [_Inline(run_tile, r_index, ti, px) for ti, px in jobs]
-            for fut in pending:
+            # each future is dropped once its tile is in the film: a round's futures would
+            # otherwise hold every tile's (P, n) spectral sums until the round ends (1920x1080:
+            # 510 tiles, over 1 GB)
+            pending = deque(pending)
+            while pending:
+                fut = pending.popleft()
                 if stop:
                     fut.cancel()
                     continue
@@ -196,4 +212,4 @@ def render_prepared(
         warnings.append(f"time limit reached after {int(film.counts.min())} of {spp} samples per pixel")
     stats["render_s"] = time.perf_counter() - t_start
     stats["mrays_per_s"] = stats["rays"] / max(time.perf_counter() - t_eye + stats.get("light_pass_s", 0.0), 1e-9) / 1e6
-    return finish()
+    return finish(final=True)

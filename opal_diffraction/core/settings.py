@@ -81,12 +81,16 @@ def _wavelength_count(lo: float, hi: float, step: float) -> float:
     return math.floor((hi - lo) / step + 1e-9) + 1 if (hi - lo) / step < 1e15 else math.inf
 
 
-def film_bytes(width: int, height: int, wavelengths: int) -> int:
-    """Memory (bytes) of a render's film: the (H, W, n) float32 spectral sums, the RGB parts,
-    the denoising features, adaptive sampling's half buffer and the counts, plus the finished
-    image's spectral and RGB copies."""
+def film_bytes(width: int, height: int, wavelengths: int, spectral: bool = False) -> int:
+    """Memory (bytes) of a render's film (core/film.py), per pixel: the RGB sums of the image,
+    of its four non-Direct parts and of the two denoising features, adaptive sampling's half
+    buffer (8 float32 triples), the finished image's RGB and six passes (7 triples), 3 triples of
+    temporaries while it is made, and the counts (4 floats). With ``spectral`` (a spectral EXR is
+    written) also two (H, W, n) float32 arrays: the spectral sums, plus either a partial
+    result's copy (previews) or the EXR's contiguous channels (the final result divides the sums
+    in place)."""
     px = int(width) * int(height)
-    return px * (2 * 4 * int(wavelengths) + 4 * 3 * 11 + 4 * 3)
+    return px * ((2 * 4 * int(wavelengths) if spectral else 0) + 4 * 3 * (8 + 7 + 3) + 4 * 4)
 
 
 @dataclass(frozen=True)
