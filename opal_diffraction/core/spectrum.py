@@ -151,7 +151,13 @@ class SpectralConverter:
         # Outside 380-780 nm the basis is held constant (it is flat there anyway).
         cols = [np.interp(self.grid.wavelengths, wl, basis.values[:, k]) for k in range(3)]
         b = np.stack(cols, axis=1)
-        return b / b.sum(axis=1, keepdims=True)  # exactly 1 for white after interpolation
+        b = b / b.sum(axis=1, keepdims=True)  # exactly 1 for white after interpolation
+        # Point-sampled on our bins the basis no longer round-trips exactly (up to 0.9 % in R on
+        # the 10 nm grid: docs/physics.md section 1.4). M[k, c] = RGB channel c of basis k under
+        # the white illuminant; B M^-T round-trips every colour exactly. White's row of M is
+        # (1, 1, 1) (rgb_weights' white balance), so the rows still sum to 1.
+        m = (b * self.white_illuminant[:, None]).T @ self.rgb_weights
+        return b @ np.linalg.inv(m).T
 
     # --- conversions ---------------------------------------------------------------------
     def to_xyz(self, spectra: np.ndarray) -> np.ndarray:
