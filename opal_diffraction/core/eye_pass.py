@@ -358,6 +358,11 @@ class _TileTrace(SpecularWalker):
             # the base colour once per hit: next events and the bounce (scatter) share it
             albedo = surface_reflectance(prepared, h, r.lam)
             self._albedo_of = (full_hit, np.flatnonzero(full_live)[diffuse], albedo)
+            lit = (albedo.max(axis=1) if albedo.ndim == 2 else albedo) > 0
+            if not lit.all():  # black (emission-only) surfaces reflect nothing: no next events
+                r, h, r_full, albedo, first = r.take(lit), h.take(lit), r_full.take(lit), albedo[lit], first[lit]
+                if len(r) == 0:
+                    return
             if first.all():
                 self._next_events(r, h, self._film, albedo)
             else:
@@ -436,6 +441,12 @@ class _TileTrace(SpecularWalker):
         albedo = self._cached_albedo(hit, sel, up if self.bent and not up.all() else None)
         if albedo is None:
             albedo = surface_reflectance(self.prepared, h, r.lam)
+        lit = (albedo.max(axis=1) if albedo.ndim == 2 else albedo) > 0
+        if not lit.all():  # a zero-weight path (a black surface) ends here
+            r, h, wi, cos, albedo = r.take(lit), h.take(lit), wi[lit], cos[lit], albedo[lit]
+            b = len(r)
+            if b == 0:
+                return micro_out
         o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
         bump = self._bump(h, wi)
         if np.ndim(bump):
