@@ -18,7 +18,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import footprint
-from .geometry import orthonormal_basis
 from .grating_directions import tangents_at
 from .gratings import diffracted_radiance, grating_frame
 from .sampler import SLOT_BOUNCE, SLOT_LIGHT, SLOT_PARAMS, SLOT_WIDTH, PixelSampler, vertex_pair
@@ -428,25 +427,22 @@ class _TileTrace(SpecularWalker):
         # roulette applies to the bounce; a path that loses it takes no segment at all
         sel &= can_bounce | (rays.depth >= self.limits[0])
         r, h = rays.take(sel), hit.take(sel)
-        b = len(r)
-        if b == 0:
+        if len(r) == 0:
             return micro_out
-        wi, cos = _cosine_hemisphere(h.ns, self._numbers(r, SLOT_BOUNCE))
-        up = None
-        if self.bent:  # about ns; a direction below the geometric surface ends the path
-            up = np.einsum("ij,ij->i", wi, h.ng) > 0
-            if not up.all():
-                r, h, wi, cos = r.take(up), h.take(up), wi[up], cos[up]
-                b = len(r)
-        albedo = self._cached_albedo(hit, sel, up if self.bent and not up.all() else None)
+        albedo = self._cached_albedo(hit, sel)
         if albedo is None:
             albedo = surface_reflectance(self.prepared, h, r.lam)
         lit = (albedo.max(axis=1) if albedo.ndim == 2 else albedo) > 0
         if not lit.all():  # a zero-weight path (a black surface) ends here
-            r, h, wi, cos, albedo = r.take(lit), h.take(lit), wi[lit], cos[lit], albedo[lit]
-            b = len(r)
-            if b == 0:
+            r, h, albedo = r.take(lit), h.take(lit), albedo[lit]
+            if len(r) == 0:
                 return micro_out
+        wi, cos = _cosine_hemisphere(h.ns, self._numbers(r, SLOT_BOUNCE))
+        if self.bent:  # about ns; a direction below the geometric surface ends the path
+            up = np.einsum("ij,ij->i", wi, h.ng) > 0
+            if not up.all():
+                r, h, wi, cos, albedo = r.take(up), h.take(up), wi[up], cos[up], albedo[up]
+        b = len(r)
         o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
         bump = self._bump(h, wi)
         if np.ndim(bump):
@@ -462,9 +458,9 @@ class _TileTrace(SpecularWalker):
         s["final"] = (s["diffuse"] > self.limits[1]) | (out.depth > self.limits[0])
         return out if micro_out is None or not len(micro_out) else Rays.concat(out, micro_out)
 
-    def _cached_albedo(self, hit: Hit, sel: np.ndarray, up):
-        """The base colours on_hit computed for the hits ``sel`` of ``hit`` (then ``up`` of
-        those), or None when on_hit did not shade exactly these hits."""
+    def _cached_albedo(self, hit: Hit, sel: np.ndarray):
+        """The base colours on_hit computed for the hits ``sel`` of ``hit``, or None when on_hit
+        did not shade these hits as diffuse."""
         cached, self._albedo_of = self._albedo_of, None
         if cached is None or cached[0] is not hit:
             return None
@@ -473,8 +469,7 @@ class _TileTrace(SpecularWalker):
         pos = np.searchsorted(rows, want)
         if pos.size and (pos.max() >= len(rows) or not np.array_equal(rows[pos], want)):
             return None  # a hit on_hit did not shade as diffuse
-        out = albedo[pos]
-        return out if up is None else out[up]
+        return albedo[pos]
 
     def _mirror(self, rays: Rays, hit: Hit) -> Rays:
         out = super()._mirror(rays, hit)  # a grating's zeroth order, or the base's share (section 3.3)
@@ -911,7 +906,7 @@ def _cosine_hemisphere(n: np.ndarray, rng: np.random.Generator):
     b = len(n)
     u1, u2 = rng.random(b, np.float32), rng.random(b, np.float32)
     r, phi = np.sqrt(u1), np.float32(2 * np.pi) * u2
-    tu, tv = orthonormal_basis(n)
+    tu, tv = bsdf.tangent_frame(n)
     cos = np.sqrt(np.maximum(np.float32(1) - u1, 0))
     wi = (r * np.cos(phi))[:, None] * tu + (r * np.sin(phi))[:, None] * tv + cos[:, None] * n
     return wi.astype(np.float32), cos.astype(np.float32)
