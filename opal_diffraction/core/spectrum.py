@@ -156,8 +156,13 @@ class SpectralConverter:
         # the 10 nm grid: docs/physics.md section 1.4). M[k, c] = RGB channel c of basis k under
         # the white illuminant; B M^-T round-trips every colour exactly. White's row of M is
         # (1, 1, 1) (rgb_weights' white balance), so the rows still sum to 1.
+        # A grid that misses most of the visible (a fuzzed 360-365 nm) leaves M far from the
+        # identity or singular: there the basis stays uncalibrated, as it stays bounded in [0, 1].
         m = (b * self.white_illuminant[:, None]).T @ self.rgb_weights
-        return b @ np.linalg.inv(m).T
+        if not np.all(np.isfinite(m)) or np.abs(m - np.eye(3)).max() > 0.05:
+            return b
+        cal = b @ np.linalg.inv(m).T
+        return cal if cal.min() >= 0 and cal.max() <= 1 else b
 
     # --- conversions ---------------------------------------------------------------------
     def to_xyz(self, spectra: np.ndarray) -> np.ndarray:
