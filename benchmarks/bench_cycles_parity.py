@@ -14,7 +14,9 @@ block-mean difference over the reference's mean). Times are wall-clock seconds o
 ``bpy.ops.render.render`` for one render, both engines with 2 threads; ours includes the export
 from Blender, preparation and any light pass (one warm-up render of each engine comes first,
 so no timed render pays for imports). The time to reach E_64 is interpolated in log-log
-between the two sample counts around it.
+between the two sample counts around it. The same ratio on CPU seconds (``time.process_time``
+of the process around each render: both engines' threads run in it) is printed beside it: on a
+machine shared with other work it is the steadier of the two.
 
     python benchmarks/bench_cycles_parity.py [--ref-spp 4096] [SCENE ...]
 """
@@ -26,6 +28,7 @@ import math
 import os
 import sys
 import tempfile
+import time
 
 from opal_diffraction._scripts import load_script
 
@@ -48,24 +51,34 @@ def time_to_error(points, target):
     return None
 
 
+def _render(engine, spp, seed, path):
+    """cp.render_once plus the process's CPU seconds for it: (image, wall s, CPU s)."""
+    c0 = time.process_time()
+    img, t = cp.render_once(engine, spp, seed, path)
+    return img, t, time.process_time() - c0
+
+
 def bench_scene(name: str, ref_spp: int, max_spp: int, work: str) -> dict:
     cp.build(name, work)
     ref = cp.cycles_reference(name, ref_spp, work)
-    c64, t_c = cp.render_once("CYCLES", CYCLES_SPP, CYCLES_SEED, os.path.join(work, "cycles64.exr"))
+    c64, t_c, cpu_c = _render("CYCLES", CYCLES_SPP, CYCLES_SEED, os.path.join(work, "cycles64.exr"))
     target = cp.filtered_rel_rmse(c64, ref.image)
-    points, spp = [], 2
+    points, cpu_points, spp = [], [], 2
     while spp <= max_spp:
-        img, t = cp.render_once(cp.ENGINE, spp, OUR_SEED, os.path.join(work, "ours.exr"))
+        img, t, cpu = _render(cp.ENGINE, spp, OUR_SEED, os.path.join(work, "ours.exr"))
         e = cp.filtered_rel_rmse(img, ref.image)
         points.append((spp, t, e))
+        cpu_points.append((spp, cpu, e))
         if e <= target:
             break
         if len(points) >= 3 and e > 0.85 * points[-2][2] and points[-2][2] > 0.85 * points[-3][2]:
             break  # no longer falling as 1/sqrt(spp): a bias
         spp *= 2
     t_ours = time_to_error(points, target)
+    cpu_ours = time_to_error(cpu_points, target)
     return dict(scene=name, ref_spp=ref_spp, target=target, cycles_s=t_c, points=points, ours_s=t_ours,
-                ratio=None if t_ours is None else t_ours / t_c)
+                ratio=None if t_ours is None else t_ours / t_c, cycles_cpu=cpu_c, cpu_points=cpu_points,
+                cpu_ratio=None if cpu_ours is None else cpu_ours / max(cpu_c, 1e-9))
 
 
 def row(r: dict) -> str:
@@ -76,11 +89,13 @@ def row(r: dict) -> str:
     else:
         ours = f"{r['ours_s']:.2f} ({last_spp} spp)"
         ratio = f"{r['ratio']:.2f}"
-    return f"| {r['scene']} | {r['target']:.3f} | {r['cycles_s']:.2f} | {ours} | {ratio} |"
+    cpu = "-" if r["cpu_ratio"] is None else f"{r['cpu_ratio']:.2f}"
+    return (f"| {r['scene']} | {r['target']:.3f} | {r['cycles_s']:.2f} | {ours} | {ratio} | "
+            f"{r['cycles_cpu']:.2f} | {cpu} |")
 
 
-HEAD = ("| scene | Cycles 64 spp error | Cycles 64 spp s | ours: s to that error | ratio |\n"
-        "|---|---|---|---|---|")
+HEAD = ("| scene | Cycles 64 spp error | Cycles 64 spp s | ours: s to that error | ratio | Cycles 64 spp CPU s "
+        "| CPU ratio |\n|---|---|---|---|---|---|---|")
 
 
 def main(argv=None) -> int:
@@ -103,8 +118,9 @@ def main(argv=None) -> int:
             with tempfile.TemporaryDirectory(prefix="bench_parity_") as work:
                 r = bench_scene(name, args.ref_spp, args.max_spp, work)
             print(row(r), flush=True)
-            print("    ours (spp, s, error): " + ", ".join(f"({s}, {t:.2f}, {e:.3f})" for s, t, e in r["points"]),
-                  file=sys.stderr, flush=True)
+            print("    ours (spp, s, CPU s, error): " + ", ".join(
+                f"({s}, {t:.2f}, {c:.2f}, {e:.3f})" for (s, t, e), (_, c, _) in zip(r["points"], r["cpu_points"])),
+                file=sys.stderr, flush=True)
     finally:
         opal_diffraction.unregister()
     return 0

@@ -433,3 +433,20 @@ def test_params_from_materials():
     frac = [(r.lobe == c).mean() for c in (B.GLOSSY, B.DIELECTRIC, B.PLASTIC)]
     np.testing.assert_allclose(frac, [0.3, 0.35, 0.35], atol=4 * math.sqrt(0.25 / k))
     np.testing.assert_allclose(r.spec_f0[r.lobe == B.PLASTIC], ((0.45 / 2.45) ** 2) * 0.5, rtol=1e-5)
+
+
+def test_tangent_frame_is_orthonormal_and_right_handed():
+    """docs/physics.md section 4.8: Duff et al. 2017's basis, checked on random normals and the
+    poles (n_z = +-1, 0)."""
+    from opal_diffraction.core.bsdf import tangent_frame
+
+    n = np.random.default_rng(5).normal(size=(2000, 3))
+    n = np.concatenate([n, [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0, 1, 0], [0.6, 0.8, 0.0]]])
+    n = (n / np.linalg.norm(n, axis=1, keepdims=True)).astype(np.float32)
+    u, v = tangent_frame(n)
+    dot = lambda a, b: np.einsum("ij,ij->i", a, b)  # noqa: E731
+    for a, b in ((u, v), (u, n), (v, n)):
+        assert np.abs(dot(a, b)).max() < 1e-5
+    for a in (u, v):
+        assert np.abs(np.linalg.norm(a, axis=1) - 1).max() < 1e-5
+    assert np.abs(np.cross(u, v) - n).max() < 1e-5

@@ -43,7 +43,6 @@ from functools import lru_cache
 
 import numpy as np
 
-from .geometry import orthonormal_basis
 
 __all__ = [
     "LAMBERT", "CONDUCTOR", "DIELECTRIC", "PLASTIC", "GLOSSY",
@@ -386,9 +385,24 @@ def _lobe_factor(p, mu, code):
 
 
 # ---------------------------------------------------------------------------------- frames
+def tangent_frame(n):
+    """Unit tangents (u, v) (B, 3) float32 with (u, v, n) orthonormal and right-handed (u x v =
+    n), for unit normals n (B, 3): Duff, Burgess, Christensen, Hery, Kensler, Liani & Villemin
+    2017, "Building an Orthonormal Basis, Revisited" (JCGT 6(1)), branchless, no cross product
+    or square root (docs/physics.md section 4.8); discontinuous only across z = 0, which no
+    isotropic lobe sees."""
+    n = np.asarray(n, _F32)
+    x, y, z = n[:, 0], n[:, 1], n[:, 2]
+    sg = np.where(z >= 0, _F32(1), _F32(-1))
+    a = _F32(-1) / (sg + z)
+    b = x * y * a
+    u = np.stack([_F32(1) + sg * x * x * a, sg * b, -sg * x], axis=1)
+    v = np.stack([b, sg + y * y * a, -y], axis=1)
+    return u, v
+
+
 def _frame(ns):
-    u, v = orthonormal_basis(ns)
-    return u.astype(_F32), v.astype(_F32)
+    return tangent_frame(ns)
 
 
 def _to_local(w, u, v, n):

@@ -18,7 +18,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import footprint
-from .geometry import orthonormal_basis
 from .grating_directions import tangents_at
 from .gratings import diffracted_radiance, grating_frame
 from .sampler import SLOT_BOUNCE, SLOT_LIGHT, SLOT_PARAMS, SLOT_WIDTH, PixelSampler, vertex_pair
@@ -139,6 +138,7 @@ class _TileTrace(SpecularWalker):
         self.mesh_lights = eye.prepared.mesh_lights
         self.normal_maps = eye.prepared.textures.uses("normal")
         self._micro = None  # (hit, mask, SurfaceParams) of the microfacet hits on_hit shaded
+        self._albedo_of = None  # (hit, rows, base colours) of the diffuse hits on_hit shaded
         self.bragg = BraggShading.for_prepared(eye.prepared)  # FCC opal lobes (None: no BRAGG material)
         # shading normals differ from the geometric ones: directions need both side tests
         self.bent = eye.prepared.corner_normals is not None or self.normal_maps
@@ -327,6 +327,7 @@ class _TileTrace(SpecularWalker):
         if self.bragg is not None:  # the opal lobe, before its body is shaded (core/opal/bragg_shading.py)
             self.bragg.shade(self, rays, hit, live, rng)
         self._micro = None
+        self._albedo_of = None  # (hit, rows, base colours) of the diffuse hits shaded here, for scatter
         if self.any_microfacet:  # rough and layered surfaces: core/bsdf.py, one lobe drawn per hit
             micro = live & self.microfacet[hit.mat]
             if rays.lam is None:  # white rays at a dispersive glass split first; their children shade
@@ -339,6 +340,7 @@ class _TileTrace(SpecularWalker):
                 self._micro = (hit, micro, params)  # for scatter(): the same lobe for light and bounce
                 self._shade_microfacet(rm, hm, params, rng)
             kind = np.where(micro, -1, kind)  # shaded: not Lambertian below
+        full_hit, full_live = hit, live
         if not live.all():
             rays, hit, kind = rays.take(live), hit.take(live), kind[live]
             st = rays.extra
@@ -357,12 +359,20 @@ class _TileTrace(SpecularWalker):
             first = r.extra["nd"] == 0
             if first.any():
                 self._denoising_features(r.take(first), h.take(first))
+            # the base colour once per hit: next events and the bounce (scatter) share it
+            albedo = surface_reflectance(prepared, h, r.lam)
+            self._albedo_of = (full_hit, np.flatnonzero(full_live)[diffuse], albedo)
+            lit = (albedo.max(axis=1) if albedo.ndim == 2 else albedo) > 0
+            if not lit.all():  # black (emission-only) surfaces reflect nothing: no next events
+                r, h, r_full, albedo, first = r.take(lit), h.take(lit), r_full.take(lit), albedo[lit], first[lit]
+                if len(r) == 0:
+                    return
             if first.all():
-                self._next_events(r, h, self._film)
+                self._next_events(r, h, self._film, albedo)
             else:
                 if first.any():
-                    self._next_events(r.take(first), h.take(first), self._film)
-                self._next_events(r.take(~first), h.take(~first), self._part("indirect"))
+                    self._next_events(r.take(first), h.take(first), self._film, albedo[first])
+                self._next_events(r.take(~first), h.take(~first), self._part("indirect"), albedo[~first])
             if self.caustic_map is not None:
                 if self.scattering is not None and self.scattering[h.mat].any():
                     own = self.scattering[h.mat]  # the map holds the base's share there already
@@ -422,16 +432,22 @@ class _TileTrace(SpecularWalker):
         # roulette applies to the bounce; a path that loses it takes no segment at all
         sel &= can_bounce | (rays.depth >= self.limits[0])
         r, h = rays.take(sel), hit.take(sel)
-        b = len(r)
-        if b == 0:
+        if len(r) == 0:
             return micro_out
+        albedo = self._cached_albedo(hit, sel)
+        if albedo is None:
+            albedo = surface_reflectance(self.prepared, h, r.lam)
+        lit = (albedo.max(axis=1) if albedo.ndim == 2 else albedo) > 0
+        if not lit.all():  # a zero-weight path (a black surface) ends here
+            r, h, albedo = r.take(lit), h.take(lit), albedo[lit]
+            if len(r) == 0:
+                return micro_out
         wi, cos = _cosine_hemisphere(h.ns, self._numbers(r, SLOT_BOUNCE))
         if self.bent:  # about ns; a direction below the geometric surface ends the path
             up = np.einsum("ij,ij->i", wi, h.ng) > 0
             if not up.all():
-                r, h, wi, cos = r.take(up), h.take(up), wi[up], cos[up]
-                b = len(r)
-        albedo = surface_reflectance(self.prepared, h, r.lam)
+                r, h, wi, cos, albedo = r.take(up), h.take(up), wi[up], cos[up], albedo[up]
+        b = len(r)
         o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
         bump = self._bump(h, wi)
         if np.ndim(bump):
@@ -446,6 +462,19 @@ class _TileTrace(SpecularWalker):
         s["caustic"] = np.full(b, 1 if self.caustic_map is not None else 0, np.int8)
         s["final"] = (s["diffuse"] > self.limits[1]) | (out.depth > self.limits[0])
         return out if micro_out is None or not len(micro_out) else Rays.concat(out, micro_out)
+
+    def _cached_albedo(self, hit: Hit, sel: np.ndarray):
+        """The base colours on_hit computed for the hits ``sel`` of ``hit``, or None when on_hit
+        did not shade these hits as diffuse."""
+        cached, self._albedo_of = self._albedo_of, None
+        if cached is None or cached[0] is not hit:
+            return None
+        rows, albedo = cached[1], cached[2]
+        want = np.flatnonzero(sel)
+        pos = np.searchsorted(rows, want)
+        if pos.size and (pos.max() >= len(rows) or not np.array_equal(rows[pos], want)):
+            return None  # a hit on_hit did not shade as diffuse
+        return albedo[pos]
 
     def _mirror(self, rays: Rays, hit: Hit) -> Rays:
         out = super()._mirror(rays, hit)  # a grating's zeroth order, or the base's share (section 3.3)
@@ -704,17 +733,55 @@ class _TileTrace(SpecularWalker):
             prepared.corner_normals, hit.prim, hit.bu, hit.bv, hit.ng)  # the normal before the map bent it
         return np.where(bent, bump_shadowing(ni, hit.ns, wi), np.float32(1.0))
 
-    def _next_events(self, rays: Rays, hit: Hit, film):
+    def _next_events(self, rays: Rays, hit: Hit, film, albedo=None):
         """Next-event estimation at Lambertian vertices: every light (with the factored fast path
-        of ``_direct_light``), then the emissive meshes and the world map as at any other
-        surface (``_nee_microfacet`` with the Lambertian lobe)."""
+        of ``_direct_light``), then the emissive meshes and the world map (``_nee_lambert``).
+        ``albedo``: the hits' base colours (surface_reflectance), computed here if None."""
         rng = self._numbers(rays, SLOT_LIGHT)
-        self._direct_light(rays, hit, rng, film)
+        self._direct_light(rays, hit, rng, film, albedo)
         if self.mesh_lights is not None or self.prepared.environment is not None:
-            params = self._surface_params(rays, hit, self._numbers(rays, SLOT_PARAMS))
-            self._nee_microfacet(rays, hit, params, rng, film, analytic=False)
+            if albedo is None:
+                albedo = surface_reflectance(self.prepared, hit, rays.lam)
+            self._nee_lambert(rays, hit, albedo, rng, film)
 
-    def _direct_light(self, rays: Rays, hit: Hit, rng, film):
+    def _nee_lambert(self, rays: Rays, hit: Hit, albedo, rng, film):
+        """``_nee_microfacet``'s emissive-mesh and world-map samples at Lambertian vertices,
+        with the lobe written out: f cos = albedo / pi * cos(wi, ns) and pdf = cos / pi where wo
+        and wi are above ns and wi above ng (bsdf.evaluate's LAMBERT, without its frames and
+        parameter tables), times Cycles' bump-terminator term on normal-mapped hits."""
+        prepared = self.prepared
+        wo_up = np.einsum("ij,ij->i", rays.d, hit.ns) < 0
+        dark = (albedo.max(axis=1) if albedo.ndim == 2 else albedo) <= 0
+        for wi, dist, g, spectrum, p_light, pad in self.light_samples(hit, rng, analytic=False):
+            cos_s = np.einsum("ij,ij->i", wi, hit.ns)
+            ok = wo_up & ~dark & (cos_s > 0) & (np.einsum("ij,ij->i", wi, hit.ng) > 0)
+            p_bsdf = np.where(ok, cos_s * np.float32(1 / np.pi), np.float32(0.0)).astype(np.float32)
+            scale = np.asarray(g, np.float32) * p_bsdf  # g cos / pi
+            if self.normal_maps:
+                scale = scale * self._bump(hit, wi)
+            scale = scale * _power_heuristic(p_light, p_bsdf, light_first=True)
+            live = np.flatnonzero(scale > 0)
+            if live.size == 0:
+                continue
+            eps = hit.eps[live]
+            o = (hit.p[live] + eps[:, None] * hit.ng[live]).astype(np.float32)
+            d = np.asarray(dist, np.float32)[live]
+            tmax = np.where(np.isinf(d), np.inf, d - 2 * eps - np.asarray(pad if np.ndim(pad) == 0 else pad[live]))
+            occ = prepared.accel.occluded(o, wi[live], tmax.astype(np.float32))
+            self._rays += len(occ)
+            live = live[~occ]
+            if live.size == 0:
+                continue
+            r = rays.take(live)
+            spec = spectrum if np.ndim(spectrum) == 1 else spectrum[live]
+            if r.lam is None:
+                contrib = r.weighted(albedo[live] * scale[live, None] * spec)
+            else:
+                lam_spec = spec[r.lam] if np.ndim(spec) == 1 else spec[np.arange(len(r)), r.lam]
+                contrib = r.w * albedo[live] * scale[live] * lam_spec
+            self._accumulate(r, contrib, film)
+
+    def _direct_light(self, rays: Rays, hit: Hit, rng, film, albedo=None):
         prepared = self.prepared
         lights = prepared.lights
         nl, b = len(lights), len(rays)
@@ -752,7 +819,7 @@ class _TileTrace(SpecularWalker):
         if (rays.lam is None and rays.w is None and not prepared.textures.uses("color")
                 and self._accumulate_factored(rays.pix, hit.mat, factors, film)):
             return
-        brdf = surface_reflectance(prepared, hit, rays.lam) * np.float32(1 / np.pi)
+        brdf = (surface_reflectance(prepared, hit, rays.lam) if albedo is None else albedo) * np.float32(1 / np.pi)
         if rays.lam is None:
             irradiance = factors @ lights.spectrum          # (B, L) @ (L, n)
         else:
@@ -855,7 +922,7 @@ def _cosine_hemisphere(n: np.ndarray, rng: np.random.Generator):
     b = len(n)
     u1, u2 = rng.random(b, np.float32), rng.random(b, np.float32)
     r, phi = np.sqrt(u1), np.float32(2 * np.pi) * u2
-    tu, tv = orthonormal_basis(n)
+    tu, tv = bsdf.tangent_frame(n)
     cos = np.sqrt(np.maximum(np.float32(1) - u1, 0))
     wi = (r * np.cos(phi))[:, None] * tu + (r * np.sin(phi))[:, None] * tv + cos[:, None] * n
     return wi.astype(np.float32), cos.astype(np.float32)

@@ -319,7 +319,11 @@ def find_light_targets(vertices, triangles, tri_material, materials, gratings, l
     objects = caster_objects(vertices, triangles, aimed)
     # the world's power through the casters' disks: integral of L over the sphere x sum pi r^2
     world_budget = 4 * np.pi * world_lum * float(np.sum(np.pi * objects.radius**2)) if len(objects) else 0.0
-    return LightTargets(caster, mk == DIFFUSE, grating, objects, _light_budget(lights, objects, conv),
+    # a black diffuse surface (an Emission-only material) reflects no caustic: not a receiver
+    receiver = mk == DIFFUSE
+    if len(tri_material):
+        receiver &= (np.asarray(materials.reflectance).max(axis=1) > 0)[tri_material]
+    return LightTargets(caster, receiver, grating, objects, _light_budget(lights, objects, conv),
                         _mesh_light_budget(mesh_lights, objects), world_budget)
 
 

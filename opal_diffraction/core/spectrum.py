@@ -151,7 +151,18 @@ class SpectralConverter:
         # Outside 380-780 nm the basis is held constant (it is flat there anyway).
         cols = [np.interp(self.grid.wavelengths, wl, basis.values[:, k]) for k in range(3)]
         b = np.stack(cols, axis=1)
-        return b / b.sum(axis=1, keepdims=True)  # exactly 1 for white after interpolation
+        b = b / b.sum(axis=1, keepdims=True)  # exactly 1 for white after interpolation
+        # Point-sampled on our bins the basis no longer round-trips exactly (up to 0.9 % in R on
+        # the 10 nm grid: docs/physics.md section 1.4). M[k, c] = RGB channel c of basis k under
+        # the white illuminant; B M^-T round-trips every colour exactly. White's row of M is
+        # (1, 1, 1) (rgb_weights' white balance), so the rows still sum to 1.
+        # A grid that misses most of the visible (a fuzzed 360-365 nm) leaves M far from the
+        # identity or singular: there the basis stays uncalibrated, as it stays bounded in [0, 1].
+        m = (b * self.white_illuminant[:, None]).T @ self.rgb_weights
+        if not np.all(np.isfinite(m)) or np.abs(m - np.eye(3)).max() > 0.05:
+            return b
+        cal = b @ np.linalg.inv(m).T
+        return cal if cal.min() >= 0 and cal.max() <= 1 else b
 
     # --- conversions ---------------------------------------------------------------------
     def to_xyz(self, spectra: np.ndarray) -> np.ndarray:
