@@ -38,7 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import footprint
+from . import footprint, wavelengths
 from .geometry import interpolate_corners
 from .materials import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
 from .optics import fresnel_dielectric, reflect, refract
@@ -280,8 +280,10 @@ class SpecularWalker:
         if white_split.any():
             if rays.lam is None:
                 disp = white_split & prepared.materials.dispersive[hit.mat]
-                if disp.any():
-                    children, child_hits = self._split(rays.take(disp), hit.take(disp), rng)
+                if disp.any():  # core/wavelengths.py: smooth glass reflects white, refracts mono
+                    children, child_hits, white = wavelengths.split_at_glass(self, rays.take(disp), hit.take(disp), rng)
+                    if white is not None and len(white):
+                        out.append(white)
                 diel = diel & ~disp
             if diel.any():
                 r, transmitted = self._dielectric(rays.take(diel), hit.take(diel), rng)
@@ -373,28 +375,20 @@ class SpecularWalker:
         return out, side < 0
 
     def _split(self, rays: Rays, hit: Hit, rng):
-        """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit."""
+        """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit.
+
+        SAMPLE draws ``wavelengths.BRANCHES`` wavelengths per ray from the ray's stratified number,
+        importance-sampled by the image's sensitivity (core/wavelengths.py, docs/physics.md
+        section 2.6); SPLIT makes one child per wavelength with the parent's weight there."""
         n, b = self.n, len(rays)
-        split = self.prepared.settings.dispersion_sampling == "SPLIT"
-        if rays.w is None:  # unit weights: every wavelength alike
-            if split:
-                parent, lam = np.repeat(np.arange(b), n), np.tile(np.arange(n), b)
-                w = np.ones(b * n, np.float32)
-            else:
-                parent = np.arange(b)
-                lam = np.minimum((rays.u_lam * n).astype(np.int64), n - 1)
-                w = np.full(b, n, np.float32)
-        elif split:
+        if self.prepared.settings.dispersion_sampling != "SPLIT":
+            parent, lam, w = wavelengths.draw(self.prepared.grid, rays.w, rays.u_lam)
+        elif rays.w is None:  # unit weights: every wavelength alike
+            parent, lam = np.repeat(np.arange(b), n), np.tile(np.arange(n), b)
+            w = np.ones(b * n, np.float32)
+        else:
             parent, lam = np.nonzero(rays.w > 0)
             w = rays.w[parent, lam]
-        else:
-            total = rays.w.sum(axis=1, dtype=np.float64)
-            live = total > 0
-            cdf = np.cumsum(rays.w[live], axis=1, dtype=np.float64)
-            u = rays.u_lam[live] * total[live]  # stratified per pixel
-            lam = np.minimum((cdf < u[:, None]).sum(axis=1), n - 1)
-            parent = np.flatnonzero(live)
-            w = total[live].astype(np.float32)  # w_k / p_k with p_k = w_k / total
         children = Rays(rays.o[parent], rays.d[parent], rays.pix[parent], w.astype(np.float32),
                          lam.astype(np.int64), rays.depth[parent], rays.u_lam[parent],
                          None if rays.extra is None else {k: v[parent] for k, v in rays.extra.items()})
