@@ -9,7 +9,8 @@ switches in turn (alternating, in one process, ``--repeats`` times; the best tim
 - ``importance``: the wavelength drawn by the image's sensitivity;
 - ``white-refl``: smooth glass reflects the white ray (the choice made once, on the white ray);
 - ``both``: importance + white reflection (the default);
-- ``hero4``: both, with 4 rotated hero wavelengths per refracted ray (pbrt-v4's count).
+- ``hero4``, ``hero8``, ``hero16``: both, with K = 4 (pbrt-v4's count), 8 or 16 rotated hero
+  wavelengths per refracted ray, each its own mono ray of weight 1/K.
 
 Each is compared with the converged reference of benchmarks/bench_examples_error.py (the cached
 ``ref_gem_160x120_<spp>.npz``; its commit is printed) by the 8 x 8-box-filtered relative RMSE,
@@ -46,6 +47,8 @@ VARIANTS = {  # name: (IMPORTANCE, WHITE_REFLECTION, BRANCHES)
     "white-refl": (False, True, 1),
     "both": (True, True, 1),
     "hero4": (True, True, 4),
+    "hero8": (True, True, 8),
+    "hero16": (True, True, 16),
 }
 
 
@@ -75,10 +78,10 @@ def split_probe(mode: str, chunk: int, spp: int) -> None:
     wavelengths.SPLIT_CHUNK_RAYS = chunk
     settings = replace(base, samples=spp, seed=3, threads=2, dispersion_sampling=mode)
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     r = render(scene, settings)
-    t = time.perf_counter() - t0
-    print(json.dumps({"mode": mode, "chunk": chunk, "spp": spp, "seconds": t,
+    t, c = time.perf_counter() - t0, time.process_time() - c0
+    print(json.dumps({"mode": mode, "chunk": chunk, "spp": spp, "seconds": t, "cpu_seconds": c,
                       "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                       "rss_before_mb": rss0 / 1024, "rays": int(r.stats.get("rays", 0))}))
 
@@ -156,7 +159,7 @@ def main(argv=None) -> int:
 
     if not args.no_split:
         print(f"\nSPLIT memory and time (gem 160x120, {args.split_spp} spp, fresh process each):")
-        print("| mode | chunk (mono rays) | s | peak RSS MB |\n|---|---|---|---|")
+        print("| mode | chunk (mono rays) | wall s | cpu s | peak RSS MB |\n|---|---|---|---|---|")
         from opal_diffraction.core import wavelengths
 
         probes = [("SPLIT", 1 << 40), ("SPLIT", wavelengths.SPLIT_CHUNK_RAYS), ("SAMPLE", wavelengths.SPLIT_CHUNK_RAYS)]
@@ -171,7 +174,8 @@ def main(argv=None) -> int:
                 continue
             p = json.loads(line[-1])
             results["split"].append(p)
-            print(f"| {mode} | {'all' if chunk >= 1 << 40 else chunk} | {p['seconds']:.1f} | {p['peak_rss_mb']:.0f} |",
+            print(f"| {mode} | {'all' if chunk >= 1 << 40 else chunk} | {p['seconds']:.1f} | {p['cpu_seconds']:.1f} | "
+                  f"{p['peak_rss_mb']:.0f} |",
                   flush=True)
     with open(args.json, "w") as f:
         json.dump(results, f, indent=1, default=float)
