@@ -37,9 +37,10 @@ import numpy as np
 __all__ = ["BRANCHES", "IMPORTANCE", "WHITE_REFLECTION", "DEFENSIVE", "sensitivity", "importance",
            "sample_indices", "rotated", "draw"]
 
-#: Mono rays per white ray at a dispersive refraction (SAMPLE): 1 measured best on the gem
-#: (benchmarks/bench_dispersion.py, docs/benchmarks.md); 4 is pbrt-v4's count of hero wavelengths.
-BRANCHES = 1
+#: Mono rays per white ray at a dispersive refraction (SAMPLE), pbrt-v4's count of hero
+#: wavelengths: on the gem 4 halves the display error of 1 at 16 spp for 1.4x the time, and 8 or
+#: 16 gain little more (benchmarks/bench_dispersion.py, docs/benchmarks.md).
+BRANCHES = 4
 #: Importance-sample wavelengths by the image's sensitivity (False: uniform over the grid).
 IMPORTANCE = True
 #: Make the reflect / refract choice on the white ray at a smooth dispersive glass.
