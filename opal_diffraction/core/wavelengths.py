@@ -13,11 +13,11 @@ one-wavelength pick:
   p_k ~ w_k sqrt(sum_c rgb_weights[k, c]^2) (the L2 norm of the Rec.709 matching functions);
   camera rays (unit weights) use the white illuminant's spectrum for w (what most lights emit).
   A uniform share ``DEFENSIVE`` is mixed in so every wavelength stays reachable (the spectral
-  EXR is a film too) and no weight exceeds n / DEFENSIVE times the uniform one;
+  EXR is a film too) and no weight exceeds 1 / DEFENSIVE times a uniform pick's;
 - **stratification**: the K numbers of a ray are its pixel's low-discrepancy number u (the
   Sobol-Burley dimension of core/camera.pixel_samples) rotated by j / K (pbrt-v4's hero
   wavelength rotation, Wilkie et al. 2014), inverted through the pdf's CDF;
-- **reflection stays white** (``white_reflection``): a smooth dispersive surface reflects every
+- **reflection stays white** (``WHITE_REFLECTION``): a smooth dispersive surface reflects every
   wavelength the same way, so the reflect / refract choice is made once for the white ray, with
   probability P = sum_k p_k F_k (F_k the Fresnel reflectance at wavelength k, p the importance
   above); a reflected ray goes on white with weight w_k F_k / P, a refracted one becomes mono rays
@@ -79,13 +79,13 @@ def importance(grid, w: np.ndarray | None, b: int) -> np.ndarray:
     return np.asarray(w, np.float64) * sensitivity(grid)[None, :]
 
 
-def _defended(q: np.ndarray) -> np.ndarray:
-    """Rows of q (B, n) >= 0 normalised to pdfs, mixed with DEFENSIVE x uniform where q has
-    support everywhere the uniform one would add it (zero-weight wavelengths stay at zero)."""
+def _defended(q: np.ndarray, support: np.ndarray | None = None) -> np.ndarray:
+    """Rows of q (B, n) >= 0 normalised to pdfs, mixed with DEFENSIVE x uniform over ``support``
+    (B, n) bool (default q > 0: where the estimated spectrum can be non-zero)."""
     total = q.sum(axis=1, keepdims=True)
     p = q / np.where(total > 0, total, 1.0)
     if IMPORTANCE and DEFENSIVE > 0:
-        support = q > 0
+        support = q > 0 if support is None else support
         cnt = support.sum(axis=1, keepdims=True)
         p = (1.0 - DEFENSIVE) * p + DEFENSIVE * support / np.maximum(cnt, 1)
     return p
@@ -101,7 +101,7 @@ def sample_indices(p: np.ndarray, u: np.ndarray) -> np.ndarray:
     cdf = np.cumsum(p, axis=1)
     total = cdf[:, -1:]
     lam = np.empty(u.shape, np.int64)
-    for j in range(u.shape[1]):  # K <= 4 columns
+    for j in range(u.shape[1]):  # K columns (a handful)
         lam[:, j] = (cdf < u[:, j:j + 1] * total).sum(axis=1)
     return np.minimum(lam, p.shape[1] - 1)
 
@@ -123,7 +123,7 @@ def draw(grid, w: np.ndarray | None, u: np.ndarray, q_extra: np.ndarray | None =
     if q_extra is not None:
         q = q * q_extra
     live = q.sum(axis=1) > 0
-    p = _defended(q[live])
+    p = _defended(q[live], target[live] > 0)
     lam = sample_indices(p, rotated(np.asarray(u)[live], k))
     parent = np.repeat(np.flatnonzero(live), k)
     lam = lam.ravel()
