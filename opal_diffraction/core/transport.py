@@ -9,7 +9,8 @@ A white ray stays white until it meets a dispersive dielectric; there it becomes
 ``SPLIT`` makes one child per wavelength sample with the parent's weight at that wavelength (the
 children's weights sum to the parent's: energy is conserved exactly), ``SAMPLE`` makes one child
 with wavelength k drawn with probability p_k proportional to the parent's weight and weight
-w_k / p_k (an unbiased one-sample estimator of the SPLIT sum, pbrt-v4's TerminateSecondary idea).
+w_k / p_k (an unbiased one-sample estimator of the SPLIT sum, pbrt-v4's TerminateSecondary idea;
+core/wavelengths.py refines it: 4 hero wavelengths, a sensitivity pdf, white reflection).
 Children inherit the parent's hit, so the split costs no extra ray cast.
 
 At a dielectric the reflect / refract choice is sampled with probability equal to the Fresnel
