@@ -21,7 +21,7 @@ one-wavelength pick:
   wavelength the same way, so the reflect / refract choice is made once for the white ray, with
   probability P = sum_k p_k F_k (F_k the Fresnel reflectance at wavelength k, p the importance
   above); a reflected ray goes on white with weight w_k F_k / P, a refracted one becomes mono rays
-  drawn from p_k (1 - F_k) with weights w_k (1 - F_k) / ((1 - P) K p'_k): the facets' white
+  drawn from p with weights w_k (1 - F_k) / ((1 - P) K p_k): the facets' white
   reflections of the lights keep their colour exact, only light that enters the glass is split.
 
 ``BRANCHES``, ``IMPORTANCE`` and ``WHITE_REFLECTION`` are module settings so that
@@ -185,8 +185,13 @@ def split_at_glass(walker, rays, hit, rng):
     tr = ~refl
     if tr.any():
         r, h = rays.take(tr), hit.take(tr)
-        parent, lam, w = draw(grid, None if wt is None else wt[tr], r.u_lam, q_extra=1.0 - fr[tr])
-        w = w / (1.0 - p_refl[tr][parent])
+        # the wavelengths from the ray's number and weight alone (not from the Fresnel factor, which
+        # moves with the hit point's rounding: the image stays the same on every ray-casting backend)
+        parent, lam, w = draw(grid, None if wt is None else wt[tr], r.u_lam)
+        w = w * (1.0 - fr[tr][parent, lam]) / (1.0 - p_refl[tr][parent])
+        keep = w > 0  # a wavelength that cannot refract (total internal reflection) has no child
+        if not keep.all():
+            parent, lam, w = parent[keep], lam[keep], w[keep]
         nr = ns[tr][parent]
         d = r.d[parent]
         e = eta[tr][parent, lam].astype(np.float32)
