@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import footprint
+from . import footprint, wavelengths
 from .grating_directions import tangents_at
 from .gratings import diffracted_radiance, grating_frame
 from .sampler import SLOT_BOUNCE, SLOT_LIGHT, SLOT_PARAMS, SLOT_WIDTH, PixelSampler, vertex_pair
@@ -83,6 +83,12 @@ class EyePass:
         """
         if u_lambda is None:
             u_lambda = rng.random(len(pix))
+        chunks = wavelengths.split_chunks(self.prepared, len(pix))
+        if chunks is not None:  # SPLIT: bounded memory, the batch in pieces (core/wavelengths.py)
+            return wavelengths.merge_tiles([self.trace(
+                origins[c], directions[c], pix[c], n_pixels, rng, u_lambda[c],
+                None if sampler_ids is None else (sampler_ids[0][c], sampler_ids[1][c], sampler_ids[2]),
+                None if differentials is None else differentials[c]) for c in chunks])
         tr = _TileTrace(self, n_pixels, rng)
         if sampler_ids is None:
             return tr.run(origins, directions, pix, u_lambda, differentials=differentials)

@@ -15,7 +15,8 @@ A white ray stays white until it meets a dispersive dielectric; there it becomes
 ``SPLIT`` makes one child per wavelength sample with the parent's weight at that wavelength (the
 children's weights sum to the parent's: energy is conserved exactly), ``SAMPLE`` makes one child
 with wavelength k drawn with probability p_k proportional to the parent's weight and weight
-w_k / p_k (an unbiased one-sample estimator of the SPLIT sum, pbrt-v4's TerminateSecondary idea).
+w_k / p_k (an unbiased one-sample estimator of the SPLIT sum, pbrt-v4's TerminateSecondary idea;
+core/wavelengths.py refines it: 4 hero wavelengths, a sensitivity pdf, white reflection).
 Children inherit the parent's hit, so the split costs no extra ray cast.
 
 At a dielectric the reflect / refract choice is sampled with probability equal to the Fresnel
@@ -44,7 +45,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import footprint
+from . import footprint, wavelengths
 from .geometry import interpolate_corners
 from .materials import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
 from .optics import fresnel_dielectric, reflect, refract
@@ -347,11 +348,10 @@ class SpecularWalker:
         if white_split.any():
             if rays.lam is None:
                 disp = white_split & prepared.materials.dispersive[hit.mat]
-                if disp.any():
-                    if rays.basis is not None and prepared.settings.dispersion_sampling != "SPLIT":
-                        children, child_hits = self._sample_coefficients(rays.take(disp), hit.take(disp))
-                    else:
-                        children, child_hits = self._split(rays.take(disp).dense(), hit.take(disp), rng)
+                if disp.any():  # core/wavelengths.py: smooth glass reflects white, refracts mono
+                    children, child_hits, white = wavelengths.split_at_glass(self, rays.take(disp).dense(), hit.take(disp), rng)
+                    if white is not None and len(white):
+                        out.append(white)
                 diel = diel & ~disp
             if diel.any():
                 r, transmitted = self._dielectric(rays.take(diel), hit.take(diel), rng)
@@ -457,67 +457,21 @@ class SpecularWalker:
                                                                        hit.p, ns, d, eta)
         return out, side < 0
 
-    def _sample_coefficients(self, rays: Rays, hit: Hit):
-        """``_split``'s SAMPLE for coefficient weights (B, k) over ``rays.basis`` (k, n): the
-        same estimator (wavelength j with p_j = W_j / sum W, weight sum W, from the stratified
-        u_lam), W's CDF being w @ cumsum(basis): for k = 1 a binary search in the basis's own
-        CDF, for k > 1 a vectorised binary search that evaluates the CDF only at the ~log2 n
-        probed wavelengths, (B, k) per step instead of (B, n)."""
-        n = self.n
-        cum = np.cumsum(rays.basis.astype(np.float64), axis=1)  # (k, n)
-        w = rays.w.astype(np.float64)
-        if len(cum) == 1:
-            total = w[:, 0] * cum[0, -1]
-            live = total > 0
-            lam = np.searchsorted(cum[0], rays.u_lam[live] * cum[0, -1], side="left")  # = #{CDF < u total}
-        else:
-            total = w @ cum[:, -1]
-            live = total > 0
-            wl, target = w[live], rays.u_lam[live] * total[live]
-            cum_t = np.ascontiguousarray(cum.T)  # (n, k)
-            lo = np.zeros(len(wl), np.int64)  # the answer #{j: CDF_j < target} lies in [lo, hi]
-            hi = np.full(len(wl), n, np.int64)
-            for _ in range(int(np.ceil(np.log2(n + 1)))):  # binary search steps, not rays
-                mid = np.minimum((lo + hi) // 2, n - 1)
-                at = np.take(cum_t, mid, axis=0)
-                val = wl[:, 0] * at[:, 0]
-                for c in range(1, len(cum)):  # loop over the k basis spectra
-                    val += wl[:, c] * at[:, c]
-                less = (val < target) & (lo < hi)
-                lo = np.where(less, mid + 1, lo)
-                hi = np.where(less | (lo >= hi), hi, mid)
-            lam = lo
-        parent = np.flatnonzero(live)
-        lam = np.minimum(lam, n - 1)
-        children = Rays(_rows(rays.o, parent), _rows(rays.d, parent), _rows(rays.pix, parent),
-                        total[live].astype(np.float32), lam.astype(np.int64), _rows(rays.depth, parent),
-                        _rows(rays.u_lam, parent),
-                        None if rays.extra is None else {k: _rows(v, parent) for k, v in rays.extra.items()})
-        return children, hit.take(parent)
-
     def _split(self, rays: Rays, hit: Hit, rng):
-        """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit."""
+        """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit.
+
+        SAMPLE draws ``wavelengths.BRANCHES`` wavelengths per ray from the ray's stratified number,
+        importance-sampled by the image's sensitivity (core/wavelengths.py, docs/physics.md
+        section 2.6); SPLIT makes one child per wavelength with the parent's weight there."""
         n, b = self.n, len(rays)
-        split = self.prepared.settings.dispersion_sampling == "SPLIT"
-        if rays.w is None:  # unit weights: every wavelength alike
-            if split:
-                parent, lam = np.repeat(np.arange(b), n), np.tile(np.arange(n), b)
-                w = np.ones(b * n, np.float32)
-            else:
-                parent = np.arange(b)
-                lam = np.minimum((rays.u_lam * n).astype(np.int64), n - 1)
-                w = np.full(b, n, np.float32)
-        elif split:
+        if self.prepared.settings.dispersion_sampling != "SPLIT":
+            parent, lam, w = wavelengths.draw(self.prepared.grid, rays.w, rays.u_lam)
+        elif rays.w is None:  # unit weights: every wavelength alike
+            parent, lam = np.repeat(np.arange(b), n), np.tile(np.arange(n), b)
+            w = np.ones(b * n, np.float32)
+        else:
             parent, lam = np.nonzero(rays.w > 0)
             w = rays.w[parent, lam]
-        else:
-            total = rays.w.sum(axis=1, dtype=np.float64)
-            live = total > 0
-            cdf = np.cumsum(rays.w[live], axis=1, dtype=np.float64)
-            u = rays.u_lam[live] * total[live]  # stratified per pixel
-            lam = np.minimum((cdf < u[:, None]).sum(axis=1), n - 1)
-            parent = np.flatnonzero(live)
-            w = total[live].astype(np.float32)  # w_k / p_k with p_k = w_k / total
         children = Rays(rays.o[parent], rays.d[parent], rays.pix[parent], w.astype(np.float32),
                          lam.astype(np.int64), rays.depth[parent], rays.u_lam[parent],
                          None if rays.extra is None else {k: v[parent] for k, v in rays.extra.items()})
