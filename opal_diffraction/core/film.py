@@ -160,12 +160,20 @@ class Film:
             return {"samples_min": 0, "samples_mean": 0.0, "samples_max": 0}
         return {"samples_min": int(c.min()), "samples_mean": float(c.mean()), "samples_max": int(c.max())}
 
-    def result(self, plan: RenderPlan, cancelled: bool, warnings, stats) -> RenderResult:
-        """The mean image so far, with its passes."""
+    def result(self, plan: RenderPlan, cancelled: bool, warnings, stats, splat=None) -> RenderResult:
+        """The mean image so far, with its passes. ``splat``: the light pass's camera splat over
+        this film's pixels, (RGB (H, W, 3), spectrum (H, W, n) or None) (core/camera_splat.py),
+        added once to Combined and Caustics: it is not an eye-pass sample."""
         scale = (1.0 / np.maximum(self.counts, 1.0))[..., None]
         spectral = self.spectral * scale
+        if splat is not None and splat[1] is not None:
+            spectral = spectral + splat[1]
         rgb = self.conv.to_rgb(spectral)
         caustics = self.parts["caustics"] * scale
+        if splat is not None:
+            caustics = caustics + splat[0]
+            if splat[1] is None:
+                rgb = rgb + splat[0]
         diffraction = self.parts["diffraction"] * scale
         indirect = self.parts["indirect"] * scale
         passes = {"Direct": rgb - self.parts["background"] * scale - indirect - diffraction - caustics,
