@@ -591,6 +591,7 @@ def main(argv=None) -> int:
     ap.add_argument("--replot", action="store_true", help="redo the plot and tables from the last run's results")
     ap.add_argument("--ref-spp", type=int, default=512, help="--splat: the ptracer reference's spp per half at 4x "
                     "(the path reference's: half that)")
+    ap.add_argument("--shading", choices=("flat", "smooth", "both"), default="both", help="--splat: which spheres")
     ap.add_argument("--splat", action="store_true",
                     help="the camera splat (caustic_splat) on flat and smooth spheres against Mitsuba ptracer only")
     args = ap.parse_args(argv)
@@ -700,7 +701,7 @@ def splat_benchmark(args, log) -> int:
 
     rows = []
     var = "llvm_ad_rgb" if not args.no_llvm and mitsuba_llvm_ok() else "scalar_rgb"
-    for smooth in (False, True):
+    for smooth in {"flat": (False,), "smooth": (True,), "both": (False, True)}[args.shading]:
         spec = Spec(smooth=smooth)
         shade = "smooth" if smooth else "flat"
         lab = masks(spec)
@@ -740,7 +741,8 @@ def splat_benchmark(args, log) -> int:
         for name, img in shown.items():
             fn = os.path.join(args.cache, f"splat_{shade}_{name.replace(' ', '_')}.png")
             write_png(fn, np.nan_to_num(img).astype(np.float32))
-    with open(os.path.join(args.docs, "caustics_splat_table.md"), "w") as f:
+    with open(os.path.join(args.docs, f"caustics_splat_table{'' if args.shading == 'both' else '_' + args.shading}.md"),
+              "w") as f:
         f.write(f"Camera splat benchmark, {datetime.date.today()}, `benchmarks/caustic_sphere.py --splat"
                 f"{' --quick' if args.quick else ''}` (best of {args.repeats}; Mitsuba {var}).\n\n")
         f.write("| shading | renderer | configuration | time (s) | floor RMSE | sphere RMSE vs path | "
@@ -748,7 +750,7 @@ def splat_benchmark(args, log) -> int:
         for r in rows:
             f.write(f"| {r['shading']} | {r['renderer']} | {r['config']} | {r['seconds']:.2f} | {r['floor_rmse']:.4f} | "
                     f"{r['sphere_rmse']:.4f} | {r.get('sphere_rmse_without_caustics', '')} |\n")
-    with open(os.path.join(args.cache, "splat_results.json"), "w") as f:
+    with open(os.path.join(args.cache, f"splat_results_{args.shading}.json"), "w") as f:
         json.dump(rows, f, indent=1)
     return 0
 
