@@ -229,11 +229,12 @@ class CameraConnection:
             return None, shadow_rays
         r, h = r.take(keep), h.take(keep)
         g = cos_y[keep] * factor[keep] / np.pi  # rho / pi and the camera's importance
-        rho = surface_reflectance(prepared, h, r.lam).astype(np.float64)
+        rho = surface_reflectance(prepared, h, r.lam)
         if r.lam is None:
-            c = r.dense_w(n).astype(np.float64) * rho * g[:, None]  # (K, n)
-            if self.rgb_weights is not None:
-                c = c @ self.rgb_weights
+            c = r.dense_w(n) * rho  # (K, n) float32
+            if self.rgb_weights is not None:  # to RGB before the per-pixel work: 3 channels, not n
+                c = c @ self.rgb_weights.astype(np.float32)
+            c = c.astype(np.float64) * g[:, None]
         else:
             v = r.w.astype(np.float64) * rho * g  # (K,) at wavelength r.lam
             if self.rgb_weights is not None:
@@ -270,6 +271,11 @@ class SplatBatch:
             return np.zeros(0, np.int64), np.zeros((0, c), np.float32)
         idx = np.concatenate(self._idx)
         val = np.concatenate(self._val)
+        pixels = self.connection.width * self.connection.height
+        if c <= 4 and len(idx) * 4 >= pixels:  # RGB: a dense bincount per channel beats sorting
+            dense = np.stack([np.bincount(idx, weights=val[:, k], minlength=pixels) for k in range(c)], axis=1)
+            nz = np.flatnonzero(np.any(dense != 0, axis=1))
+            return nz, dense[nz].astype(np.float32)
         order = np.argsort(idx, kind="stable")
         idx, val = idx[order], val[order]
         starts = np.flatnonzero(np.concatenate([[True], idx[1:] != idx[:-1]]))

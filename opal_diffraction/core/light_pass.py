@@ -13,7 +13,10 @@ Line gratings are casters as well: a path that meets one is diffracted (kind GRA
 ``classify``, the order sampled by core/grating_sampling.py in ``scatter``) and goes on as a
 specular path, so the orders land on diffuse surfaces as caustics (docs/physics.md section
 3.10). Direct light stays the eye pass's job, so a path that reaches a
-diffuse surface or grating first deposits nothing: no double counting. On smooth-shaded casters
+diffuse surface or grating first deposits nothing: no double counting. The same landings on plain
+diffuse surfaces are also joined to the camera and splatted into a film for that view
+(core/camera_splat.py, docs/physics.md section 4.7; ``LightPassResult.splat``), which the eye
+pass uses instead of the map where the camera sees such a surface directly. On smooth-shaded casters
 the paths bend about the shading normals (transport.py, docs/physics.md section 4.6); deposits
 and records stay indexed by the geometric hit (triangle, barycentrics, side).
 
