@@ -31,8 +31,10 @@ falls back to the map everywhere.
 Accumulation is deterministic: a batch's splats are summed per pixel (sort + reduceat, float64)
 into a sparse (pixels, values) pair, and a lane's film adds the batches' pairs in lane order, on
 this machine or replayed from Dask workers alike (core/distributed.py), so both give the same
-film bit for bit. The film holds linear Rec.709 RGB (spectrum -> RGB at splat time), or the
-spectrum when a spectral EXR is asked.
+film bit for bit. The film holds the spectrum when a spectral EXR is asked or when W x H x n
+floats fit the caustic map's per-lane cap (SPECTRAL_CAP: 32 M, e.g. 512 x 512 at 61
+wavelengths), else linear Rec.709 RGB (spectrum -> RGB at splat time; RenderResult.spectral
+then lacks the splat, its RGB, passes and EXR have it).
 """
 
 from __future__ import annotations
@@ -48,6 +50,7 @@ __all__ = ["CameraConnection", "CameraSplat", "SplatBatch", "SplatLog", "view_ke
            "blackman_harris_density", "filter_density", "usable_splat"]
 
 _BH = (0.35875, 0.48829, 0.14128, 0.01168)
+SPECTRAL_CAP = 32_000_000  # floats per lane: a spectral splat film up to this size (the caustic map's cap)
 
 
 def blackman_harris_density(t: np.ndarray, width: float) -> np.ndarray:
@@ -148,8 +151,10 @@ class CameraConnection:
         shift = _shift_extent(cam)
         m = np.asarray(cam.matrix, np.float64)
         rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
-        spectral = bool(s.spectral_exr)
         n = prepared.grid.n
+        # the spectrum when a spectral EXR is asked or when it fits the map's per-lane cap, so
+        # RenderResult.spectral holds the splat too; else RGB (3 floats per pixel)
+        spectral = bool(s.spectral_exr) or int(cam.width) * int(cam.height) * n <= SPECTRAL_CAP
         return cls(m[:3, 3].copy(), rot, cam.kind == "ORTHO", float(hx), float(hy), float(cam.shift_x * shift),
                    float(cam.shift_y * shift), int(cam.width), int(cam.height), float(s.filter_width),
                    FilterSampler(s.filter_width), view_key(cam, s.filter_width), mats,
