@@ -28,7 +28,7 @@ diffuse or glossy bounces. The split holds only for the camera the splat was mad
 (``view_key``: the camera and the filter width); another view (``PreparedScene.with_view``)
 falls back to the map everywhere.
 
-Accumulation is deterministic: a batch's splats are summed per pixel (sort + reduceat, float64)
+Accumulation is deterministic: a batch's splats are summed per pixel (a bincount per channel, float64)
 into a sparse (pixels, values) pair, and a lane's film adds the batches' pairs in lane order, on
 this machine or replayed from Dask workers alike (core/distributed.py), so both give the same
 film bit for bit. The film holds the spectrum when a spectral EXR is asked or when W x H x n
@@ -211,7 +211,9 @@ class CameraConnection:
         """The splats of light-path landings (``rays``, ``hit``: transport.Rays / Hit at diffuse
         hits after a specular bounce): shadow rays to the camera, the contribution of
         docs/physics.md section 4.7, the filter footprint. Returns (flat pixel indices (M,),
-        values (M, channels) float64) and the number of shadow rays cast."""
+        values (M, channels) float64) and the number of shadow rays cast. Returns ((pixels (K, F),
+        filter weights (K, F), contributions (K, channels) float64) or None, shadow rays cast):
+        landing k adds weight[k, f] * contribution[k] to pixel pixels[k, f]."""
         sel = self.materials[hit.mat]
         if not sel.any():
             return None, 0
@@ -248,9 +250,7 @@ class CameraConnection:
                 c = np.zeros((len(v), n))
                 c[np.arange(len(v)), r.lam] = v
         idx, w = self.footprint(x[keep], y[keep])
-        nz = w > 0
-        rows = np.nonzero(nz)[0]
-        return (idx[nz], c[rows] * w[nz][:, None]), shadow_rays
+        return (idx, w, c), shadow_rays
 
 
 class SplatBatch:
@@ -258,33 +258,34 @@ class SplatBatch:
 
     def __init__(self, connection: CameraConnection):
         self.connection = connection
-        self._idx: list[np.ndarray] = []
-        self._val: list[np.ndarray] = []
+        self._calls: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (pixels, weights, contributions)
         self.shadow_rays = 0
 
     def connect(self, prepared, rays, hit, n: int) -> None:
         out, cast = self.connection.connect(prepared, rays, hit, n)
         self.shadow_rays += cast
         if out is not None and len(out[0]):
-            self._idx.append(out[0])
-            self._val.append(out[1])
+            self._calls.append(out)
 
     def finish(self) -> tuple[np.ndarray, np.ndarray]:
         """(distinct flat pixel indices (U,) int64, their summed values (U, channels) float32)."""
         c = self.connection.channels
-        if not self._idx:
+        if not self._calls:
             return np.zeros(0, np.int64), np.zeros((0, c), np.float32)
-        idx = np.concatenate(self._idx)
-        val = np.concatenate(self._val)
-        pixels = self.connection.width * self.connection.height
-        if c <= 4 and len(idx) * 4 >= pixels:  # RGB: a dense bincount per channel beats sorting
-            dense = np.stack([np.bincount(idx, weights=val[:, k], minlength=pixels) for k in range(c)], axis=1)
-            nz = np.flatnonzero(np.any(dense != 0, axis=1))
-            return nz, dense[nz].astype(np.float32)
-        order = np.argsort(idx, kind="stable")
-        idx, val = idx[order], val[order]
-        starts = np.flatnonzero(np.concatenate([[True], idx[1:] != idx[:-1]]))
-        return idx[starts], np.add.reduceat(val, starts, axis=0).astype(np.float32)
+        idx = np.concatenate([p.ravel() for p, _, _ in self._calls])
+        w = np.concatenate([q.ravel() for _, q, _ in self._calls])
+        contrib = np.concatenate([v for _, _, v in self._calls])
+        rows = np.repeat(np.arange(len(contrib)), self._calls[0][0].shape[1])
+        keep = w > 0
+        idx, w, rows = idx[keep], w[keep], rows[keep]
+        # the touched pixels (a sort of integers), then one bincount per channel over them: no
+        # (entries x channels) array, so a spectral film costs little more than an RGB one
+        pixels, inv = np.unique(idx, return_inverse=True)
+        out = np.empty((len(pixels), c), np.float32)
+        per_channel = np.ascontiguousarray(contrib.T)  # (channels, K): contiguous gathers below
+        for k in range(c):  # loop over channels (3, or the wavelengths)
+            out[:, k] = np.bincount(inv, weights=w * per_channel[k][rows], minlength=len(pixels))
+        return pixels, out
 
 
 class SplatLog:
