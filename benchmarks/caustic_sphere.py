@@ -74,6 +74,7 @@ class Spec:
     target: tuple = (0.0, -0.4, 0.5)
     lens: float = 50.0                       # mm, sensor width 36 mm, fit AUTO (square image)
     res: int = 256
+    smooth: bool = False                     # the sphere shaded smooth: exact radial vertex normals
 
     @property
     def intensity(self) -> float:
@@ -84,7 +85,18 @@ class Spec:
         return float(np.degrees(2 * np.arctan(18.0 / self.lens)))
 
     def key(self) -> str:
-        return hashlib.sha1(json.dumps(asdict(self), sort_keys=True).encode()).hexdigest()[:10]
+        d = asdict(self)
+        if not d["smooth"]:
+            d.pop("smooth")  # the flat scene keeps the key its cached references were made under
+        return hashlib.sha1(json.dumps(d, sort_keys=True).encode()).hexdigest()[:10]
+
+
+def vertex_normals(spec: Spec, name: str, v) -> np.ndarray | None:
+    """The shading normals per vertex (the sphere's radial ones when shaded smooth), or None: flat."""
+    if name != "sphere" or not spec.smooth:
+        return None
+    n = np.asarray(v, np.float64) - np.array([0.0, 0.0, 1.0])
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
 def meshes(spec: Spec, plane_only=False):
@@ -105,18 +117,18 @@ def our_scene(spec: Spec, plane_only=False) -> Scene:
     mats = Materials.from_list([{"kind": "DIFFUSE", "color": (spec.albedo,) * 3},
                                 {"kind": "DIELECTRIC", "ior": spec.ior, "color": (1, 1, 1)}])
     s = Scene(materials=mats)
-    for _, v, t, m in meshes(spec, plane_only):
-        s.add_mesh(v, t, material=m)
+    for name, v, t, m in meshes(spec, plane_only):
+        s.add_mesh(v, t, material=m, normals=vertex_normals(spec, name, v))
     s.lights = Lights.from_list([{"kind": "POINT", "position": spec.light, "power": spec.power}])
     s.camera = camera(spec)
     return s
 
 
 def run_ours(spec: Spec, light_paths: int, samples: int, threads=2, plane_only=False, element_size=0.0, seed=0,
-             wavelength_step=5.0):
+             wavelength_step=5.0, caustic_splat=True):
     scene = our_scene(spec, plane_only)
     st = RenderSettings(samples=samples, light_paths=light_paths, threads=threads, element_size=element_size, seed=seed,
-                        wavelength_step=wavelength_step)
+                        wavelength_step=wavelength_step, caustic_splat=caustic_splat)
     t0 = time.perf_counter()
     res = render(scene, st)
     dt = time.perf_counter() - t0
@@ -173,12 +185,16 @@ def rmse(img, ref, mask) -> float:
 
 
 # ---------------------------------------------------------------------------------------- Mitsuba
-def write_ply(path, v, t):
+def write_ply(path, v, t, normals=None):
     v = np.ascontiguousarray(v, np.float32)
+    props = "property float x\nproperty float y\nproperty float z\n"
+    if normals is not None:  # per-vertex shading normals (Mitsuba interpolates them when face_normals is off)
+        v = np.ascontiguousarray(np.concatenate([v, np.asarray(normals, np.float32)], axis=1))
+        props += "property float nx\nproperty float ny\nproperty float nz\n"
     rec = np.zeros(len(t), dtype=[("n", "u1"), ("i", "<i4", 3)])
     rec["n"], rec["i"] = 3, t
-    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\nproperty float x\nproperty float y\n"
-            f"property float z\nelement face {len(t)}\nproperty list uchar int vertex_indices\nend_header\n")
+    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\n{props}"
+            f"element face {len(t)}\nproperty list uchar int vertex_indices\nend_header\n")
     with open(path, "wb") as f:
         f.write(head.encode() + v.tobytes() + rec.tobytes())
 
@@ -194,11 +210,12 @@ def mitsuba_scene(spec: Spec, variant: str, integrator: str, cache: str, plane_o
     shapes = {}
     for name, v, t, m in meshes(spec, plane_only):
         path = os.path.join(cache, f"{name}_{spec.key()}.ply")
+        normals = vertex_normals(spec, name, v)
         if not os.path.exists(path):
-            write_ply(path, v, t)
+            write_ply(path, v, t, normals)
         bsdf = ({"type": "diffuse", "reflectance": {"type": "rgb", "value": [spec.albedo] * 3}} if m == FLOOR else
                 {"type": "dielectric", "int_ior": spec.ior, "ext_ior": 1.0})
-        shapes[name] = {"type": "ply", "filename": path, "face_normals": True, "bsdf": bsdf}
+        shapes[name] = {"type": "ply", "filename": path, "face_normals": normals is None, "bsdf": bsdf}
     n = spec.res * SS
     film = {"type": "hdrfilm", "width": n, "height": n, "rfilter": {"type": "box"}, "pixel_format": "rgb",
             "component_format": "float32"}
@@ -400,11 +417,12 @@ def unit_check(spec, cache, log, with_cycles):
 
 
 # ---------------------------------------------------------------------------------------- references
-def references(spec, cache, lab, quick, fresh, log):
+def references(spec, cache, lab, quick, fresh, log, glass=True, spp=(512, 256)):
     """Floor: Mitsuba ptracer, sphere: Mitsuba path (each as two halves with different seeds, so
-    their own noise can be measured). Cached in ``cache`` by the scene's key and sample counts."""
+    their own noise can be measured). Cached in ``cache`` by the scene's key and sample counts.
+    ``glass``: also the estimate of the caustic seen through the glass (flat facets only)."""
     variant = "llvm_ad_rgb" if mitsuba_llvm_ok() else "scalar_rgb"
-    spp_pt, spp_path = 512, 256  # per half, at 4x supersampling: 16 x that many light paths per pixel
+    spp_pt, spp_path = spp  # per half, at 4x supersampling: 16 x that many light paths per pixel
     if quick and not all(os.path.exists(os.path.join(cache, f"ref_{n}_{spec.key()}_{s}.npz"))
                          for n, s in (("pt", spp_pt), ("path", spp_path))):
         spp_pt, spp_path = 64, 64  # a quick run without the cached full references: noisier ones
@@ -437,6 +455,8 @@ def references(spec, cache, lab, quick, fresh, log):
                name + "_spp": np.array(2 * spp), "variant": np.array(variant)}
         np.savez_compressed(path, **one)
         out.update(one)
+    if not glass:
+        return out
     path = os.path.join(cache, f"ref_glass_{spec.key()}_{int(out['pt_spp'])}.npz")
     if os.path.exists(path) and not fresh:
         z = np.load(path)
@@ -569,6 +589,11 @@ def main(argv=None) -> int:
     ap.add_argument("--docs", default=os.path.join(ROOT, "docs"))
     ap.add_argument("--profile", action="store_true", help="pyinstrument profile of our light pass only")
     ap.add_argument("--replot", action="store_true", help="redo the plot and tables from the last run's results")
+    ap.add_argument("--ref-spp", type=int, default=512, help="--splat: the ptracer reference's spp per half at 4x "
+                    "(the path reference's: half that)")
+    ap.add_argument("--shading", choices=("flat", "smooth", "both"), default="both", help="--splat: which spheres")
+    ap.add_argument("--splat", action="store_true",
+                    help="the camera splat (caustic_splat) on flat and smooth spheres against Mitsuba ptracer only")
     args = ap.parse_args(argv)
     os.makedirs(args.cache, exist_ok=True)
     spec = Spec()
@@ -582,6 +607,8 @@ def main(argv=None) -> int:
 
     if args.profile:
         return profile_light_pass(spec, 1_000_000)
+    if args.splat:
+        return splat_benchmark(args, log)
     results = os.path.join(args.cache, f"results{'_quick' if args.quick else ''}.json")
     if args.replot:
         with open(results) as f:
@@ -661,6 +688,70 @@ def main(argv=None) -> int:
                    "ref": {k: ref[k].tolist() for k in ("pt_spp", "path_spp", "variant", "glass_unseen")}}, f, indent=1)
     write_outputs(args, spec, rows, check, ref, noise_floor, noise_sphere, log_lines, total)
     log(f"done in {time.perf_counter() - t_all:.0f} s")
+    return 0
+
+
+def splat_benchmark(args, log) -> int:
+    """Flat facets and the smooth-shaded sphere: ours with the camera splat (caustic_splat, the
+    default) and without, against Mitsuba 3 ptracer (LLVM if available) in the same run, best of
+    ``--repeats``. Floor RMSE against the ptracer reference, sphere RMSE against the path
+    reference (also without our Caustics pass: the part the path reference cannot have).
+    Writes docs/caustics_splat_table.md and PNGs under out/caustic_sphere/."""
+    from opal_diffraction.core.output import write_png
+
+    rows = []
+    var = "llvm_ad_rgb" if not args.no_llvm and mitsuba_llvm_ok() else "scalar_rgb"
+    for smooth in {"flat": (False,), "smooth": (True,), "both": (False, True)}[args.shading]:
+        spec = Spec(smooth=smooth)
+        shade = "smooth" if smooth else "flat"
+        lab = masks(spec)
+        floor, sphere = lab == FLOOR, lab == SPHERE
+        log(f"{shade}: references ({args.ref_spp} spp per half)")
+        ref = references(spec, args.cache, lab, False, args.fresh_reference, log, glass=False,
+                         spp=(args.ref_spp, args.ref_spp // 2))
+        noise_floor = float(np.sqrt(np.mean(ref["pt_halfdiff"][floor] ** 2)) / 2)
+        noise_sphere = float(np.sqrt(np.nanmean(ref["path_halfdiff"][sphere] ** 2)) / 2)
+        log(f"{shade}: reference noise floor {noise_floor:.4f}, sphere {noise_sphere:.4f} ({ref['variant']})")
+        shown = {"mitsuba ptracer reference": ref["pt"]}
+
+        def record(renderer, config, img, secs, caus=None, extra=None):
+            r = {"shading": shade, "renderer": renderer, "config": config, "seconds": round(secs, 2),
+                 "floor_rmse": round(rmse(img, ref["pt"], floor), 4),
+                 "sphere_rmse": round(rmse(img, ref["path"], sphere), 4)}
+            if caus is not None:
+                r["sphere_rmse_without_caustics"] = round(rmse(img - caus, ref["path"], sphere), 4)
+            r.update(extra or {})
+            rows.append(r)
+            log(f"{shade:6s} {renderer:26s} {config:24s} {secs:7.2f} s  floor {r['floor_rmse']:.4f}  sphere "
+                f"{r['sphere_rmse']:.4f}  {r.get('sphere_rmse_without_caustics', '')}")
+
+        cfgs = [(250_000, 8), (500_000, 16), (1_000_000, 32)] if args.quick else \
+            [(250_000, 8), (500_000, 16), (1_000_000, 16), (1_000_000, 32), (2_000_000, 64)]
+        for splat in (True, False):
+            for lp, spp in (cfgs if splat else cfgs[-1:]):
+                img, dt, res = best_of(args.repeats, lambda: run_ours(spec, lp, spp, args.threads, caustic_splat=splat))
+                caus = res.passes["Caustics"].astype(np.float64)
+                record(f"ours, splat {'on' if splat else 'off'}", f"{lp / 1e6:g} M paths, {spp} spp", img, dt, caus,
+                       {"light_pass_s": round(res.stats.get("light_pass_s", 0.0), 2)})
+                shown[f"ours splat {'on' if splat else 'off'} {lp / 1e6:g}M {spp}spp"] = img
+        for spp in ([4, 16] if args.quick else [4, 16, 64]):
+            img, dt = best_of(args.repeats, lambda: run_mitsuba(spec, var, "ptracer", spp, args.cache, seed=spp))
+            record(f"mitsuba ptracer {var}", f"{spp} spp at {SS}x", img, dt)
+            shown[f"mitsuba ptracer {spp}spp"] = img
+        for name, img in shown.items():
+            fn = os.path.join(args.cache, f"splat_{shade}_{name.replace(' ', '_')}.png")
+            write_png(fn, np.nan_to_num(img).astype(np.float32))
+    with open(os.path.join(args.docs, f"caustics_splat_table{'' if args.shading == 'both' else '_' + args.shading}.md"),
+              "w") as f:
+        f.write(f"Camera splat benchmark, {datetime.date.today()}, `benchmarks/caustic_sphere.py --splat"
+                f"{' --quick' if args.quick else ''}` (best of {args.repeats}; Mitsuba {var}).\n\n")
+        f.write("| shading | renderer | configuration | time (s) | floor RMSE | sphere RMSE vs path | "
+                "sphere, ours minus its Caustics pass |\n|---|---|---|---:|---:|---:|---:|\n")
+        for r in rows:
+            f.write(f"| {r['shading']} | {r['renderer']} | {r['config']} | {r['seconds']:.2f} | {r['floor_rmse']:.4f} | "
+                    f"{r['sphere_rmse']:.4f} | {r.get('sphere_rmse_without_caustics', '')} |\n")
+    with open(os.path.join(args.cache, f"splat_results_{args.shading}.json"), "w") as f:
+        json.dump(rows, f, indent=1)
     return 0
 
 

@@ -133,6 +133,8 @@ def _parser() -> argparse.ArgumentParser:
                    "requirements-denoise.txt: pyoidn); the noisy image is written as OUT.noisy.exr")
     r.add_argument("--no-grating-footprint", action="store_true", help="point-sample grating patterns instead of "
                    "integrating them over each pixel's footprint (docs/physics.md section 3.7)")
+    r.add_argument("--no-caustic-splat", action="store_true", help="look caustics seen directly up in the "
+                   "caustic map instead of splatting the light paths into the image (docs/physics.md section 4.9)")
     r.add_argument("--threads", type=int, default=0, help="0: all cores")
     r.add_argument("--backend", choices=["auto", "embree", "numpy"], default="auto")
     r.add_argument("--scheduler", default="", help="render on a Dask cluster, the same image: tcp://HOST:PORT of "
@@ -371,6 +373,7 @@ def _render(args, sig: _Signals, created: list) -> int:
             spectral_exr=args.spectral_exr, time_limit=args.time_limit, threads=args.threads,
             backend=args.backend, adaptive_threshold=args.adaptive_threshold,
             adaptive_min_samples=args.adaptive_min_samples, grating_footprint=not args.no_grating_footprint,
+            caustic_splat=not args.no_caustic_splat,
         )
         settings.validate()
         sig.phase = "prepare"

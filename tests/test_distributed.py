@@ -93,6 +93,7 @@ def test_the_scene_exercises_every_pass():
     assert plan.light_pass and plan.gratings and plan.dispersion
     light = run_light_pass(prepared)
     assert light.caustics.flux.sum() > 0 and light.grating_records.flux.sum() > 0
+    assert light.splat is not None and light.splat.image.sum() > 0  # caustics the camera sees directly, splatted
     assert len(LightWork.of(prepared).batches) >= 4  # several light tasks, both lanes used
 
 

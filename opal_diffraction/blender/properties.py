@@ -235,6 +235,12 @@ class OpalRenderSettings(PropertyGroup):
         "footprint (ray differentials), so narrow orders and long tracks render without speckle; off: "
         "point samples, which converge only with many samples", default=True,
     )
+    caustic_splat: BoolProperty(
+        name="Camera Caustics", description="Caustics the camera sees directly (on diffuse surfaces, not "
+        "through mirrors or glass): light paths joined to the camera and splatted into the image, sharp "
+        "as a light tracer renders them; off: looked up in the caustic map, blurred by its elements",
+        default=True,
+    )
     time_limit: FloatProperty(
         name="Time Limit", description="Stop after this many seconds (at the end of a progressive round); "
         "0: no limit", default=0.0, min=0.0, step=100.0, unit="TIME_ABSOLUTE",

@@ -113,6 +113,7 @@ class OPAL_RENDER_PT_light_paths(OpalButtonsPanel, Panel):
         sub = col.column()
         sub.active = not opal.light_paths_auto
         sub.prop(opal, "light_paths")
+        layout.prop(opal, "caustic_splat")
 
 
 class OPAL_RENDER_PT_film(OpalButtonsPanel, Panel):

@@ -60,6 +60,7 @@ from .elements import ElementLayout, IlluminationMap
 from .eye_pass import EyePass
 from .grating_records import GratingRecords
 from .film import Film, RenderResult, keeps_spectral, tile_parts_rgb
+from .camera_splat import CameraConnection, CameraSplat, SplatLog, usable_splat, view_key
 from .light_pass import LANES, DepositLog, LightPassResult, LightWork, finish_light_pass, trace_batch
 from .plan import plan_render
 from .prepare import prepare
@@ -269,8 +270,11 @@ class _Frame:
             return None
         token, result = self._light
         if token != light["token"]:
+            # the client's camera splat holds for this job's view: the worker needs only its key
+            splat = (CameraSplat(view_key(self.prepared.scene.camera, self.prepared.settings.filter_width), None,
+                                 bool(light["splat_spectral"])) if light.get("splat") else None)
             result = LightPassResult(unpack_map(light["caustics"]), unpack_map(light["grating_records"]),
-                                     MappingProxyType({}), (), False, self.prepared.key)
+                                     MappingProxyType({}), (), False, self.prepared.key, splat)
             self._light = (light["token"], result)
         return result
 
@@ -303,9 +307,10 @@ def light_batch_task(job: dict, index: int) -> dict:
     work = frame.light_work
     illum = DepositLog(work.layout)
     records = DepositLog(work.record_layout) if work.record_layout is not None else None
-    counts = trace_batch(frame.prepared, work.batches[index], illum, records)
+    splat = SplatLog() if CameraConnection.of(frame.prepared) is not None else None
+    counts = trace_batch(frame.prepared, work.batches[index], illum, records, splat=splat)
     return {"illum": illum.calls, "records": None if records is None else records.calls, "counts": counts,
-            "elements": work.layout.total}
+            "elements": work.layout.total, "splat": None if splat is None else splat.calls}
 
 
 def tile_task(job: dict, light: dict | None, r_index: int, t_index: int, pixels=None) -> dict:
@@ -476,8 +481,10 @@ def render_on_cluster(client, scene: Scene, settings: RenderSettings, prepared, 
     uid = uuid.uuid4().hex[:12]
     scattered = _Replicas(client)  # the job and the light-pass maps, released at the end
 
+    splat_images = [None]  # the light pass's camera splat over the region, once it ran (core/camera_splat.py)
+
     def finish(cancelled, final=False):
-        return film.result(plan, cancelled, warnings, stats, final=final)
+        return film.result(plan, cancelled, warnings, stats, final=final, splat=splat_images[0])
 
     try:
         threads = _worker_threads(client, should_cancel)
@@ -500,10 +507,15 @@ def render_on_cluster(client, scene: Scene, settings: RenderSettings, prepared, 
             stats["rays"] += light.stats.get("light_rays", 0)
         if light is not None and light.cancelled:
             return finish(True, final=True)
+        splat = usable_splat(prepared, light)
+        if splat is not None:
+            splat_images[0] = splat.images(prepared.conv, (rx0, ry0, rx1, ry1))
         light_f = None
         if light is not None:
             light_w = {"token": uid, "caustics": pack_map(light.caustics),
-                       "grating_records": pack_map(light.grating_records)}
+                       "grating_records": pack_map(light.grating_records),
+                       "splat": light.splat is not None,
+                       "splat_spectral": light.splat is not None and light.splat.spectral}
             stats["sent_light_bytes"] = _nbytes(light_w)
             (light_f,) = client.scatter([light_w], broadcast=True, hash=False)
             scattered.add(light_f)
@@ -540,6 +552,8 @@ def _light_pass(client, job_f, prepared, progress, should_cancel, deadline, uid,
     work = LightWork.of(prepared)
     maps = [work.empty_maps(prepared.grid.n) for _ in range(LANES)]
     counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
+    connection = CameraConnection.of(prepared)  # the camera splat, added batch by batch in lane order
+    splats = [connection.empty() for _ in range(LANES)] if connection is not None else None
     lanes = [work.lane(k) for k in range(LANES)]
     position = [0] * LANES  # how many of its batches each lane has added
     finished = _Finished()
@@ -559,6 +573,9 @@ def _light_pass(client, job_f, prepared, progress, should_cancel, deadline, uid,
                     DepositLog.replay_calls(out["illum"], illum)
                     if records is not None:
                         DepositLog.replay_calls(out["records"], records)
+                    if splats is not None:
+                        for pixels, values in out["splat"] or ():
+                            splats[k].add(pixels, values)
                     for name, value in out["counts"].items():
                         counts[k][name] += value
                     position[k] += 1
@@ -582,7 +599,7 @@ def _light_pass(client, job_f, prepared, progress, should_cancel, deadline, uid,
                                                       f"{work.total / 1e6:.2f} M paths on {threads} worker thread(s)")
     finally:
         _cancel(client, pending)
-    result = finish_light_pass(prepared, work, maps, counts, t0, timed_out, cancelled)
+    result = finish_light_pass(prepared, work, maps, counts, t0, timed_out, cancelled, splats)
     stats = dict(result.stats, light_tasks=len(work.batches), received_light_bytes=received)
     return replace(result, stats=MappingProxyType(stats))
 

@@ -31,6 +31,7 @@ from .surface import shading_normal, surface_emission, surface_reflectance, surf
 from .transport import MICROFACET, Hit, Rays, SpecularWalker, shading_normals
 from . import bsdf
 from .opal.bragg_shading import BraggShading
+from .camera_splat import direct_materials, usable_splat
 
 __all__ = ["EyePass", "TileResult"]
 
@@ -66,6 +67,10 @@ class EyePass:
         # the triangles the caustic map holds flux on: the lookup runs only for hits there
         self.caustic_lit = None if self.caustic_map is None else self.caustic_map.lit_triangles()
         self.record_map = None if light is None else light.grating_records
+        # (M,) bool: materials whose directly seen caustics the light pass splatted for this
+        # camera (core/camera_splat.py, docs/physics.md section 4.9); None: the map everywhere
+        self.direct_splat = (None if self.caustic_map is None or usable_splat(prepared, light) is None
+                             else direct_materials(prepared))
         # camera rays carry ray differentials (core/footprint.py) only to integrate gratings
         self.wants_differentials = bool(prepared.gratings.any and getattr(prepared.settings, "grating_footprint", True))
 
@@ -129,6 +134,7 @@ class _TileTrace(SpecularWalker):
         self.caustic_map, self.record_map = eye.caustic_map, eye.record_map
         self.caustic_lit = eye.caustic_lit
         self.world_gratings = diffracts_world(eye.prepared)
+        self.direct_splat = eye.direct_splat
         self.sampler_seed = None  # set by EyePass.trace when the tile numbers its samples
         s = eye.prepared.settings
         self.limits = (s.max_bounces, s.diffuse_bounces, s.glossy_bounces, s.transmission_bounces)
@@ -384,6 +390,10 @@ class _TileTrace(SpecularWalker):
                     own = self.scattering[h.mat]  # the map holds the base's share there already
                     self._caustic_light(r_full.take(own), h.take(own), rng)
                     r, h = r.take(~own), h.take(~own)
+                if self.direct_splat is not None:  # camera -> diffuse: the light pass's splat has it (section 4.9)
+                    seen = (r.depth == 0) & self.direct_splat[h.mat]
+                    if seen.any():
+                        r, h = r.take(~seen), h.take(~seen)
                 self._caustic_light(r, h, rng)
 
     def survives(self, rays: Rays, rng) -> np.ndarray:

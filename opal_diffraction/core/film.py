@@ -197,10 +197,13 @@ class Film:
             return {"samples_min": 0, "samples_mean": 0.0, "samples_max": 0}
         return {"samples_min": int(c.min()), "samples_mean": float(c.mean()), "samples_max": int(c.max())}
 
-    def result(self, plan: RenderPlan, cancelled: bool, warnings, stats, final: bool = False) -> RenderResult:
+    def result(self, plan: RenderPlan, cancelled: bool, warnings, stats, final: bool = False,
+               splat=None) -> RenderResult:
         """The mean image so far, with its passes. ``final``: nothing is added after this, so
         the spectral mean is divided in place in the film's own buffer (no second (H, W, n)
-        copy; the film keeps no spectral sums afterwards)."""
+        copy; the film keeps no spectral sums afterwards). ``splat``: the light pass's camera
+        splat over this film's pixels, (RGB (H, W, 3), spectrum (H, W, n) or None)
+        (core/camera_splat.py), added once to Combined and Caustics: it is not an eye-pass sample."""
         scale = (1.0 / np.maximum(self.counts, 1.0))[..., None]
         spectral = None
         if self.spectral is not None:
@@ -210,8 +213,13 @@ class Film:
             else:
                 spectral = self.spectral * scale[..., 0]
             spectral = np.moveaxis(spectral, 0, -1)  # (H, W, n) view of the (n, H, W) planes
+            if splat is not None and splat[1] is not None:
+                spectral += splat[1]
         rgb = self.rgb * scale
         caustics = self.parts["caustics"] * scale
+        if splat is not None:  # the RGB film sums RGB either way: the splat's RGB goes to it
+            caustics = caustics + splat[0]
+            rgb = rgb + splat[0]
         diffraction = self.parts["diffraction"] * scale
         indirect = self.parts["indirect"] * scale
         passes = {"Direct": rgb - self.parts["background"] * scale - indirect - diffraction - caustics,

@@ -13,7 +13,10 @@ Line gratings are casters as well: a path that meets one is diffracted (kind GRA
 ``classify``, the order sampled by core/grating_sampling.py in ``scatter``) and goes on as a
 specular path, so the orders land on diffuse surfaces as caustics (docs/physics.md section
 3.10). Direct light stays the eye pass's job, so a path that reaches a
-diffuse surface or grating first deposits nothing: no double counting. On smooth-shaded casters
+diffuse surface or grating first deposits nothing: no double counting. The same landings on plain
+diffuse surfaces are also joined to the camera and splatted into a film for that view
+(core/camera_splat.py, docs/physics.md section 4.9; ``LightPassResult.splat``), which the eye
+pass uses instead of the map where the camera sees such a surface directly. On smooth-shaded casters
 the paths bend about the shading normals (transport.py, docs/physics.md section 4.6); deposits
 and records stay indexed by the geometric hit (triangle, barycentrics, side).
 
@@ -56,6 +59,7 @@ from types import MappingProxyType
 
 import numpy as np
 
+from .camera_splat import CameraConnection, CameraSplat, SplatBatch
 from .elements import ElementLayout, IlluminationMap
 from .grating_records import PILOT_STREAM, GratingRecords, record_layout
 from .geometry import compact_indices, orthonormal_basis, triangle_areas
@@ -201,10 +205,12 @@ def _sample_towards_casters(origin, obj: CasterObjects, rng):
 class _LightTrace(SpecularWalker):
     """Light paths: deposit at diffuse surfaces after a specular bounce, Russian roulette."""
 
-    def __init__(self, prepared, rng, illum: IlluminationMap, records: GratingRecords | None):
+    def __init__(self, prepared, rng, illum: IlluminationMap, records: GratingRecords | None,
+                 splat: SplatBatch | None = None):
         super().__init__(prepared, rng)
         self.illum = illum
         self.records = records
+        self.splat = splat  # the camera connection of the landings (core/camera_splat.py), or None
         self.deposited = 0
         self.bragg = BraggShading.for_prepared(prepared)  # FCC opal lobes scatter light paths on
 
@@ -224,6 +230,8 @@ class _LightTrace(SpecularWalker):
         if not land.any():
             return
         r, h = rays.take(land), hit.take(land)
+        if self.splat is not None:  # the same landings, seen by the camera (docs/physics.md section 4.9)
+            self.splat.connect(self.prepared, r, h, self.n)
         idx, valid = self.illum.layout.index(h.prim, h.bu, h.bv, h.front)
         if not valid.any():
             return
@@ -364,6 +372,7 @@ class LightPassResult:
     warnings: tuple[str, ...]
     cancelled: bool
     key: int
+    splat: CameraSplat | None = None  # the paths' camera connection (core/camera_splat.py), or None: off
 
     @classmethod
     def skipped(cls, prepared) -> "LightPassResult":
@@ -473,10 +482,12 @@ class LightWork:
                 GratingRecords.empty(self.record_layout, n) if self.record_layout else None)
 
 
-def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_PASS_STREAM) -> dict:
+def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_PASS_STREAM, splat=None) -> dict:
     """Trace one batch of light paths, depositing into ``illum`` and ``records`` (objects with a
     ``layout`` and IlluminationMap's ``deposit``: maps, or DepositLogs; ``records`` None
     without gratings). ``stream``: the random stream id (the records' pilot pass has its own).
+    ``splat``: where the batch's camera splats go (an object with CameraSplat's ``add``: a
+    lane's film or a camera_splat.SplatLog), or None: no camera connection.
     Returns its counts: paths, deposits, rays."""
     seed = int(prepared.settings.seed)
     b = job.paths
@@ -498,9 +509,15 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
     rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(m, np.int64),
                 w, None, np.zeros(m, np.int32), rng.random(m),
                 basis=None if basis is None else np.ascontiguousarray(basis, np.float32))
-    tr = _LightTrace(prepared, rng, illum, records)
+    connection = CameraConnection.of(prepared) if splat is not None else None
+    batch = SplatBatch(connection) if connection is not None else None
+    tr = _LightTrace(prepared, rng, illum, records, batch)
     tr.walk(rays, tr.empty_mono())
-    return {"paths": b, "deposits": tr.deposited, "rays": tr._rays}
+    shadow = 0
+    if batch is not None:
+        splat.add(*batch.finish())
+        shadow = batch.shadow_rays
+    return {"paths": b, "deposits": tr.deposited, "rays": tr._rays + shadow}
 
 
 class DepositLog:
@@ -531,14 +548,20 @@ class DepositLog:
 
 
 def finish_light_pass(prepared, work: LightWork, maps, counts, t0: float, timed_out: bool = False,
-                      cancelled: bool = False) -> LightPassResult:
-    """The LightPassResult of lanes' ``maps`` [(illum, records)] and ``counts`` [dict]: the lanes
-    summed in lane order, rescaled by planned / traced paths after a time limit."""
+                      cancelled: bool = False, splats=None) -> LightPassResult:
+    """The LightPassResult of lanes' ``maps`` [(illum, records)], ``counts`` [dict] and camera
+    ``splats`` [CameraSplat] (None: off): the lanes summed in lane order, rescaled by planned /
+    traced paths after a time limit."""
     illum, records = maps[0]
     for extra_illum, extra_records in maps[1:]:
         illum += extra_illum
         if records is not None:
             records += extra_records
+    splat = None
+    if splats:
+        splat = splats[0]
+        for extra in splats[1:]:
+            splat += extra
     total = work.total
     traced = sum(c["paths"] for c in counts)
     warnings = [work.warning] if work.warning else []
@@ -548,6 +571,8 @@ def finish_light_pass(prepared, work: LightWork, maps, counts, t0: float, timed_
             illum.flux *= scale
             if records is not None:
                 records.scale(scale)
+            if splat is not None:
+                splat.image *= scale
         warnings.append(f"time limit reached during the light pass: caustics from {traced / 1e6:.2f} M of "
                         f"{total / 1e6:.2f} M light paths")
     stats = {"light_paths": traced, "light_deposits": sum(c["deposits"] for c in counts),
@@ -558,7 +583,7 @@ def finish_light_pass(prepared, work: LightWork, maps, counts, t0: float, timed_
         stats.update(work.record_info)
     if cancelled:
         stats["cancelled"] = True
-    return LightPassResult(illum, records, MappingProxyType(stats), tuple(warnings), cancelled, prepared.key)
+    return LightPassResult(illum, records, MappingProxyType(stats), tuple(warnings), cancelled, prepared.key, splat)
 
 
 def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_cancel=None,
@@ -578,6 +603,8 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
     total = work.total
     maps = [work.empty_maps(prepared.grid.n) for _ in range(LANES)]
     counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
+    connection = CameraConnection.of(prepared)  # the camera splat (core/camera_splat.py), or None: off
+    splats = [connection.empty() for _ in range(LANES)] if connection is not None else None
     stop = threading.Event()
     cancelled = False
 
@@ -586,7 +613,8 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
         for j in work.lane(k):  # bounded memory: fixed batches
             if stop.is_set():
                 return
-            done = trace_batch(prepared, work.batches[j], illum, records)
+            done = trace_batch(prepared, work.batches[j], illum, records,
+                               splat=None if splats is None else splats[k])
             for name, value in done.items():
                 counts[k][name] += value
 
@@ -609,7 +637,7 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
                 timed_out = True
         for f in futures:
             f.result()  # re-raise a worker's exception here
-    return finish_light_pass(prepared, work, maps, counts, t0, timed_out, cancelled)
+    return finish_light_pass(prepared, work, maps, counts, t0, timed_out, cancelled, splats)
 
 
 def _emit(prepared, li: int, b: int, rng):

@@ -29,6 +29,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 from .camera import FilterSampler
+from .camera_splat import usable_splat
 from .eye_pass import EyePass
 from .cancel import RenderCancelled
 from .film import Film, RenderResult, keeps_spectral
@@ -155,8 +156,11 @@ def render_prepared(
     def run_tile(r_index, t_index, pixels):
         return t_index, pixels, trace_tile(eye, filt, work, r_index, t_index, pixels)
 
+    splat = usable_splat(prepared, light)  # the camera splat, if made for this view (else the map)
+    splat_images = None if splat is None else splat.images(prepared.conv, (rx0, ry0, rx1, ry1))
+
     def finish(final=False):
-        return film.result(plan, cancelled, warnings, stats, final=final)
+        return film.result(plan, cancelled, warnings, stats, final=final, splat=splat_images)
 
     work_done = 0
     stop = "cancel" if cancelled else ""  # why the rounds ended early: "cancel" or "time"

@@ -124,6 +124,10 @@ class RenderSettings:
     # gratings: average the pattern over each sample's pixel footprint (ray differentials,
     # docs/physics.md section 3.7); False: point-sample it at the sample's (u, v)
     grating_footprint: bool = True
+    # caustics seen directly by the camera: light paths joined to the camera and splatted into
+    # the image (core/camera_splat.py, docs/physics.md section 4.9); False: looked up in the
+    # caustic map like every other caustic
+    caustic_splat: bool = True
 
     def __post_init__(self):
         # normalise number types only (never raise here: validate() names what is wrong)
@@ -219,6 +223,8 @@ class RenderSettings:
             raise SceneError(f"spectral EXR must be a path (a string), got {type(self.spectral_exr).__name__}")
         if not isinstance(self.grating_footprint, (bool, np.bool_)):
             raise SceneError(f"grating footprint must be True or False, got {self.grating_footprint!r}")
+        if not isinstance(self.caustic_splat, (bool, np.bool_)):
+            raise SceneError(f"caustic splat must be True or False, got {self.caustic_splat!r}")
         _validate_backend(self.backend)
         self._validate_grid()
 
