@@ -28,7 +28,7 @@ from .lights import intersect_lights, is_delta, light_pdf, sample_light, sun_rad
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIFFUSE
 from .surface import shading_normal, surface_emission, surface_reflectance, surface_roughness
-from .transport import MICROFACET, Hit, Rays, SpecularWalker, shading_normals
+from .transport import MICROFACET, Hit, Rays, SpecularWalker, light_spectrum_of, shading_normals
 from . import bsdf
 from .opal.bragg_shading import BraggShading
 from .camera_splat import direct_materials, usable_splat
@@ -536,7 +536,6 @@ class _TileTrace(SpecularWalker):
         power-proportional points) and of the world map (its luminance distribution), each by
         shadow ray and weighted against BSDF sampling by the power heuristic; the BSDF is
         core/bsdf.py's (``params``), with Cycles' bump-terminator term on Lambertian lobes."""
-        prepared = self.prepared
         wo = -rays.d
         samples = self.light_samples(hit, rng, analytic)
         lambert = params.lobe == bsdf.LAMBERT
@@ -551,24 +550,27 @@ class _TileTrace(SpecularWalker):
             if live.size == 0:
                 continue
             side = np.where(np.einsum("ij,ij->i", wi[live], hit.ng[live]) > 0, 1.0, -1.0).astype(np.float32)
-            eps = hit.eps[live]
-            o = (hit.p[live] + (side * eps)[:, None] * hit.ng[live]).astype(np.float32)
-            d = np.asarray(dist, np.float32)[live]
-            tmax = np.where(np.isinf(d), np.inf, d - 2 * eps - np.asarray(pad if np.ndim(pad) == 0 else pad[live]))
-            occ = prepared.accel.occluded(o, wi[live], tmax.astype(np.float32))
-            self._rays += len(occ)
-            live = live[~occ]
+            live = self.visible(hit, wi, dist, pad, live, side)
             if live.size == 0:
                 continue
             r = rays.take(live)
-            spec = spectrum if np.ndim(spectrum) == 1 else spectrum[live]
+            spec = light_spectrum_of(spectrum, live, r)
             val = f_cos[live] * scale[live, None]
-            if r.lam is None:
-                contrib = r.weighted(val * spec)
-            else:
-                lam_spec = spec[r.lam] if np.ndim(spec) == 1 else spec[np.arange(len(r)), r.lam]
-                contrib = r.w * val[:, 0] * lam_spec
+            contrib = r.weighted(val * spec) if r.lam is None else r.w * val[:, 0] * spec
             self._accumulate(r, contrib, film)
+
+    def visible(self, hit: Hit, wi, dist, pad, live, side=None) -> np.ndarray:
+        """The entries of ``live`` whose shadow ray from the hit along ``wi`` reaches its light
+        sample (``dist`` less twice the offset and ``pad``), offset along ng (times ``side``,
+        -1 for samples below the surface); counts the rays."""
+        eps = hit.eps[live]
+        off = eps if side is None else side * eps
+        o = (hit.p[live] + off[:, None] * hit.ng[live]).astype(np.float32)
+        d = np.asarray(dist, np.float32)[live]
+        tmax = np.where(np.isinf(d), np.inf, d - 2 * eps - np.asarray(pad if np.ndim(pad) == 0 else pad[live]))
+        occ = self.prepared.accel.occluded(o, np.ascontiguousarray(wi[live], np.float32), tmax.astype(np.float32))
+        self._rays += len(occ)
+        return live[~occ]
 
     def light_samples(self, hit: Hit, rng, analytic: bool = True) -> list:
         """One next-event sample per emitter at the hits: every light (``analytic``), the emissive
@@ -765,7 +767,6 @@ class _TileTrace(SpecularWalker):
         with the lobe written out: f cos = albedo / pi * cos(wi, ns) and pdf = cos / pi where wo
         and wi are above ns and wi above ng (bsdf.evaluate's LAMBERT, without its frames and
         parameter tables), times Cycles' bump-terminator term on normal-mapped hits."""
-        prepared = self.prepared
         wo_up = np.einsum("ij,ij->i", rays.d, hit.ns) < 0
         dark = (albedo.max(axis=1) if albedo.ndim == 2 else albedo) <= 0
         for wi, dist, g, spectrum, p_light, pad in self.light_samples(hit, rng, analytic=False):
@@ -779,22 +780,15 @@ class _TileTrace(SpecularWalker):
             live = np.flatnonzero(scale > 0)
             if live.size == 0:
                 continue
-            eps = hit.eps[live]
-            o = (hit.p[live] + eps[:, None] * hit.ng[live]).astype(np.float32)
-            d = np.asarray(dist, np.float32)[live]
-            tmax = np.where(np.isinf(d), np.inf, d - 2 * eps - np.asarray(pad if np.ndim(pad) == 0 else pad[live]))
-            occ = prepared.accel.occluded(o, wi[live], tmax.astype(np.float32))
-            self._rays += len(occ)
-            live = live[~occ]
+            live = self.visible(hit, wi, dist, pad, live)
             if live.size == 0:
                 continue
             r = rays.take(live)
-            spec = spectrum if np.ndim(spectrum) == 1 else spectrum[live]
+            spec = light_spectrum_of(spectrum, live, r)
             if r.lam is None:
                 contrib = r.weighted(albedo[live] * scale[live, None] * spec)
             else:
-                lam_spec = spec[r.lam] if np.ndim(spec) == 1 else spec[np.arange(len(r)), r.lam]
-                contrib = r.w * albedo[live] * scale[live] * lam_spec
+                contrib = r.w * albedo[live] * scale[live] * spec
             self._accumulate(r, contrib, film)
 
     def _direct_light(self, rays: Rays, hit: Hit, rng, film, albedo=None):

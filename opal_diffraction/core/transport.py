@@ -50,7 +50,7 @@ from .geometry import interpolate_corners
 from .materials import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
 from .optics import fresnel_dielectric, reflect, refract
 
-__all__ = ["Rays", "Hit", "SpecularWalker", "shading_normals", "valid_specular_normal", "MICROFACET", "GRATING"]
+__all__ = ["Rays", "Hit", "SpecularWalker", "shading_normals", "light_spectrum_of", "valid_specular_normal", "MICROFACET", "GRATING"]
 
 #: The kind a hit on a rough (or layered) mirror or glass gets in the walk: not a delta bounce;
 #: the eye pass shades it with core/bsdf.py, the light pass ends its path there.
@@ -181,6 +181,15 @@ class Hit:
     @staticmethod
     def concat(a: "Hit", b: "Hit") -> "Hit":
         return Hit(*(np.concatenate([getattr(a, f), getattr(b, f)]) for f in Hit._FIELDS))
+
+
+def light_spectrum_of(spectrum, live, rays: Rays):
+    """A light sample's spectrum ((n,) or (B, n)) for ``rays`` = the rays at entries ``live``:
+    (K, n) or (n,) for white rays, (K,) at their wavelengths for mono rays."""
+    spec = spectrum if np.ndim(spectrum) == 1 else spectrum[live]
+    if rays.lam is None:
+        return spec
+    return spec[rays.lam] if np.ndim(spec) == 1 else spec[np.arange(len(rays)), rays.lam]
 
 
 def shading_normals(corner_normals: np.ndarray, prim, bu, bv, ng: np.ndarray) -> np.ndarray:

@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..enums import Lattice
-from ..transport import Rays
+from ..transport import Rays, light_spectrum_of
 from .bragg import effective_index
 from .bragg_bsdf import BraggLobe, kappa_from_spread
 from .multilayer import band_table
@@ -206,7 +206,6 @@ class BraggShading:
         """One sample of every light, of the emissive meshes and of the world map, each by shadow
         ray, the lobe evaluated there (power heuristic against the lobe's sampling where the light
         can also be found by it); into the film part of the path's vertex count + 1."""
-        prepared = self.prepared
         wo = -np.asarray(rays.d, np.float64)
         ns = np.asarray(hit.ns, np.float64)
         samples = trace.light_samples(hit, rng)  # the eye pass's one sample per emitter
@@ -220,22 +219,15 @@ class BraggShading:
             live = np.flatnonzero((scale > 0) & (peak > 0))
             if live.size == 0:
                 continue
-            eps = hit.eps[live]
-            o = (hit.p[live] + eps[:, None] * hit.ng[live]).astype(np.float32)
-            d = np.asarray(dist, np.float32)[live]
-            tmax = np.where(np.isinf(d), np.inf, d - 2 * eps - np.asarray(pad if np.ndim(pad) == 0 else pad[live]))
-            occ = prepared.accel.occluded(o, np.ascontiguousarray(wi[live], np.float32), tmax.astype(np.float32))
-            trace._rays += len(occ)
-            live = live[~occ]
+            live = trace.visible(hit, wi, dist, pad, live)
             if live.size == 0:
                 continue
             r = rays.take(live)
-            spec = spectrum if np.ndim(spectrum) == 1 else spectrum[live]
+            spec = light_spectrum_of(spectrum, live, r)
             if r.lam is None:
                 contrib = r.weighted(f_cos[live] * scale[live, None] * spec)
             else:
-                lam_spec = spec[r.lam] if np.ndim(spec) == 1 else spec[np.arange(len(r)), r.lam]
-                contrib = r.w * f_cos[live] * scale[live] * lam_spec
+                contrib = r.w * f_cos[live] * scale[live] * spec
             k_nd = nd[live]
             for k in np.unique(k_nd):  # the path's vertex counts (0, 1, 2+)
                 part = k_nd == k
