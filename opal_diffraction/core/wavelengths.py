@@ -145,7 +145,6 @@ def split_at_glass(walker, rays, hit, rng):
     from .materials import DIELECTRIC
     from .optics import fresnel_dielectric, reflect, refract
     from . import footprint
-    from .transport import Rays
 
     prepared = walker.prepared
     if prepared.settings.dispersion_sampling == "SPLIT" or not WHITE_REFLECTION:
@@ -204,7 +203,8 @@ def split_at_glass(walker, rays, hit, rng):
         side = np.where(np.einsum("ij,ij->i", t_dir, hp.ng) > 0, 1.0, -1.0).astype(np.float32)
         o = hp.p + (hp.eps * side)[:, None] * hp.ng
         extra = None if r.extra is None else {k: v[parent] for k, v in r.extra.items()}
-        mono = Rays(o.astype(np.float32), t_dir.astype(np.float32), r.pix[parent], w.astype(np.float32),
+        # type(r): transport.Rays, without importing the module that imports this one
+        mono = type(r)(o.astype(np.float32), t_dir.astype(np.float32), r.pix[parent], w.astype(np.float32),
                     lam.astype(np.int64), r.depth[parent] + 1, r.u_lam[parent], extra)
         if extra is not None and footprint.KEY in extra:
             mono.extra[footprint.KEY] = footprint.refract_differentials(extra[footprint.KEY], r.o[parent], d, hp.p, nr,
