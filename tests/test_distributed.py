@@ -140,7 +140,7 @@ def test_a_worker_killed_mid_render_changes_nothing(client, local, phase):
         if message.startswith(phase) and not killed:
             _kill_a_busy_worker(client, killed)
 
-    dist = render(every_pass_scene(), SETTINGS, client=client, progress=progress)
+    dist = render(every_pass_scene(), SETTINGS, client=client, progress=progress, spectral_film=True)
     assert len(killed) == 1
     assert_identical(local, dist)
     t0 = time.perf_counter()  # it really died, and its nanny replaced it
