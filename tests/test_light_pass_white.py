@@ -28,7 +28,7 @@ class DenseReference:
         self.flux = np.zeros((layout.total, n))
         self.calls = 0
 
-    def deposit(self, elements, flux, lam=None, towards_source=None, basis=None):
+    def deposit(self, elements, flux, lam=None, basis=None):
         assert basis is None, "the reference path carries spectra only"
         self.calls += 1
         if lam is None:
@@ -42,10 +42,10 @@ class Counting(IlluminationMap):
 
     coefficient_calls = 0
 
-    def deposit(self, elements, flux, lam=None, towards_source=None, basis=None):
+    def deposit(self, elements, flux, lam=None, basis=None):
         if basis is not None:
             self.coefficient_calls += 1
-        super().deposit(elements, flux, lam, towards_source, basis=basis)
+        super().deposit(elements, flux, lam, basis=basis)
 
 
 def reference_batch(ctx, job, sink):

@@ -152,13 +152,9 @@ def pack_map(m: IlluminationMap | GratingRecords | None) -> dict | None:
         return None
     if isinstance(m, GratingRecords):  # sparse already: its occupied lobes, as they are
         return {"layout": to_wire(m.layout), "records": m.arrays()}
-    bits = np.any(m.flux.view(np.uint32) != 0, axis=1)
-    if m.direction is not None:
-        bits |= np.any(m.direction.view(np.uint32) != 0, axis=1)
-    rows = np.flatnonzero(bits).astype(np.int64)
+    rows = np.flatnonzero(np.any(m.flux.view(np.uint32) != 0, axis=1)).astype(np.int64)
     return {"layout": to_wire(m.layout), "shape": list(m.flux.shape), "rows": rows,
-            "flux": np.ascontiguousarray(m.flux[rows]),
-            "direction": None if m.direction is None else np.ascontiguousarray(m.direction[rows])}
+            "flux": np.ascontiguousarray(m.flux[rows])}
 
 
 def unpack_map(d: dict | None) -> IlluminationMap | GratingRecords | None:
@@ -169,11 +165,7 @@ def unpack_map(d: dict | None) -> IlluminationMap | GratingRecords | None:
         return GratingRecords.from_arrays(from_wire(d["layout"]), d["records"])
     flux = np.zeros(tuple(d["shape"]), np.float32)
     flux[d["rows"]] = d["flux"]
-    direction = None
-    if d["direction"] is not None:
-        direction = np.zeros((d["shape"][0], 3), np.float32)
-        direction[d["rows"]] = d["direction"]
-    return IlluminationMap(from_wire(d["layout"]), flux, direction)
+    return IlluminationMap(from_wire(d["layout"]), flux)
 
 
 def _nbytes(x) -> int:

@@ -99,30 +99,23 @@ class IlluminationMap:
 
     layout: ElementLayout
     flux: np.ndarray  # (E, n) float32
-    # grating records also keep where the light came from: the flux-weighted sum of the unit
-    # directions towards the source (E, 3); None for caustic maps
-    direction: np.ndarray | None = None
 
     @classmethod
-    def empty(cls, layout: ElementLayout, n: int, with_direction: bool = False) -> "IlluminationMap":
-        return cls(layout, np.zeros((layout.total, n), np.float32),
-                   np.zeros((layout.total, 3), np.float32) if with_direction else None)
+    def empty(cls, layout: ElementLayout, n: int) -> "IlluminationMap":
+        return cls(layout, np.zeros((layout.total, n), np.float32))
 
     def deposit(self, elements: np.ndarray, flux: np.ndarray, lam: np.ndarray | None = None,
-                towards_source: np.ndarray | None = None, basis: np.ndarray | None = None) -> None:
+                basis: np.ndarray | None = None) -> None:
         """Add flux (B, n) white or (B,) at wavelengths ``lam`` to the elements (B,); with
         ``basis`` (k, n), ``flux`` is (B, k) coefficients over it (white flux = flux @ basis: a
         light's spectrum times a scalar, k = 1), summed per element and expanded once per
-        element; with ``towards_source`` (B, 3), also the flux-weighted incoming direction."""
+        element."""
         if len(elements) == 0:
             return
         elements = np.asarray(elements, np.int64)
         if basis is not None:
-            self._deposit_coefficients(elements, flux, basis, towards_source)
+            self._deposit_coefficients(elements, flux, basis)
             return
-        if self.direction is not None and towards_source is not None:
-            weight = flux if lam is not None else flux.sum(axis=1)
-            self._add_directions(elements, towards_source * weight[:, None])
         if lam is not None:
             # per (element, wavelength) sums in float64 by bincount (np.add.at is ~10x slower)
             n = self.flux.shape[1]
@@ -148,7 +141,7 @@ class IlluminationMap:
             lit[held] = counts > 0
         return lit
 
-    def _deposit_coefficients(self, elements, coeff, basis, towards_source) -> None:
+    def _deposit_coefficients(self, elements, coeff, basis) -> None:
         basis = np.asarray(basis, np.float64)
         k = len(basis)
         coeff = np.asarray(coeff, np.float64).reshape(len(elements), k)
@@ -158,19 +151,6 @@ class IlluminationMap:
         sums = np.bincount((inv[:, None] * k + np.arange(k)).reshape(-1), weights=coeff.reshape(-1),
                            minlength=len(cells) * k).reshape(len(cells), k)
         self.flux[cells] += (sums @ basis).astype(np.float32)
-        if self.direction is not None and towards_source is not None:
-            self._add_directions(elements, np.asarray(towards_source, np.float64) * (coeff @ basis.sum(axis=1))[:, None],
-                                 cells, inv)
-
-    def _add_directions(self, elements, weighted_dirs, cells=None, inv=None) -> None:
-        """direction[elements] += weighted_dirs (B, 3), by bincount per element (float64 sums)."""
-        if cells is None:
-            cells, inv = np.unique(elements, return_inverse=True)
-            inv = inv.reshape(-1)
-        m = len(cells)
-        wd = np.asarray(weighted_dirs, np.float64)
-        sums = np.stack([np.bincount(inv, weights=wd[:, c], minlength=m) for c in range(3)], axis=1)  # 3 axes
-        self.direction[cells] += sums.astype(np.float32)
 
     def irradiance(self, prim, bu, bv, front, rng=None) -> np.ndarray:
         """Spectral irradiance (B, n) at hits: the element's flux over its area (0 off the map).
@@ -193,20 +173,6 @@ class IlluminationMap:
             out[valid] = self.flux[idx[valid]] / area[:, None].astype(np.float32)
         return out
 
-    def incoming(self, prim, bu, bv, front) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Grating records at hits: (spectral irradiance (B, n), unit direction towards the
-        source (B, 3), has-record mask (B,))."""
-        idx, valid = self.layout.index(prim, bu, bv, front)
-        irr = self.irradiance(prim, bu, bv, front)
-        d = np.zeros((len(idx), 3), np.float32)
-        d[valid] = self.direction[idx[valid]]
-        norm = np.linalg.norm(d, axis=1)
-        ok = valid & (norm > 0) & (irr.sum(axis=1) > 0)
-        d[ok] /= norm[ok, None]
-        return irr, d, ok
-
     def __iadd__(self, other: "IlluminationMap") -> "IlluminationMap":
         self.flux += other.flux
-        if self.direction is not None and other.direction is not None:
-            self.direction += other.direction
         return self

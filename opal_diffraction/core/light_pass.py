@@ -539,11 +539,9 @@ class DepositLog:
     def replay_calls(calls, target: IlluminationMap) -> None:
         """Add recorded ``calls`` (a DepositLog's ``calls``, e.g. sent back by a worker) to ``target``."""
         for elements, flux, lam, towards_source, at, basis in calls:
-            if basis is not None:  # coefficients over basis spectra (caustic maps)
-                target.deposit(elements, flux, lam, towards_source, basis=basis)
-            elif at is None:  # caustic maps take no points
-                target.deposit(elements, flux, lam, towards_source)
-            else:
+            if at is None:  # caustic maps: no points, no directions; perhaps coefficients over basis spectra
+                target.deposit(elements, flux, lam, basis=basis)
+            else:  # grating records
                 target.deposit(elements, flux, lam, towards_source, at=at)
 
 
