@@ -497,7 +497,9 @@ class _TileTrace(SpecularWalker):
         return grating_layering.continue_specular(self.prepared, out, hit, None) if self.layers else out
 
     def _dielectric(self, rays: Rays, hit: Hit, rng):
-        out, transmitted = super()._dielectric(rays, hit, rng)
+        # the reflect / refract choice from the vertex's bounce numbers (stratified over the
+        # pixel's samples, as Cycles draws its glass closure's choice), not the tile's stream
+        out, transmitted = super()._dielectric(rays, hit, self._numbers(rays, SLOT_BOUNCE))
         if self.layers:
             out = grating_layering.continue_specular(self.prepared, out, hit, transmitted)
         return out, transmitted
