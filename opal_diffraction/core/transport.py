@@ -46,11 +46,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import footprint, wavelengths
-from .geometry import interpolate_corners
 from .materials import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
 from .optics import fresnel_dielectric, reflect, refract
 
-__all__ = ["Rays", "Hit", "SpecularWalker", "shading_normals", "light_spectrum_of", "valid_specular_normal", "MICROFACET", "GRATING"]
+__all__ = ["Rays", "Hit", "SpecularWalker", "shading_normals", "hit_shading_normals", "smooth_triangles", "light_spectrum_of", "valid_specular_normal", "MICROFACET", "GRATING"]
 
 #: The kind a hit on a rough (or layered) mirror or glass gets in the walk: not a delta bounce;
 #: the eye pass shades it with core/bsdf.py, the light pass ends its path there.
@@ -197,11 +196,64 @@ def shading_normals(corner_normals: np.ndarray, prim, bu, bv, ng: np.ndarray) ->
     with the hit's barycentrics and normalised, on the side of ``ng`` (the triangle's winding
     normal, (B, 3)): a normal pointing into the other half-space (a bad custom normal) is
     negated, one that interpolates to zero (opposite corners) is ``ng``."""
-    n = interpolate_corners(corner_normals, prim, bu, bv)
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    n = n / np.maximum(length, np.float32(1e-30))
-    n = np.where(np.einsum("ij,ij->i", n, ng)[:, None] < 0, -n, n)
-    return np.where(length > 1e-6, n, ng).astype(np.float32, copy=False)
+    c = np.take(corner_normals, prim, axis=0)  # (B, 3, 3): a row gather, faster than c[prim]
+    u = np.asarray(bu, c.dtype)
+    v = np.asarray(bv, c.dtype)
+    # geometry.interpolate_corners's (1 - u - v) c0 + u c1 + v c2 in one pass
+    n = np.einsum("bk,bkj->bj", np.stack([1 - u - v, u, v], axis=1), c)
+    l2 = np.einsum("ij,ij->i", n, n)
+    # normalise and put on ng's side with one scale per row
+    s = np.where(np.einsum("ij,ij->i", n, ng) < 0, np.float32(-1), np.float32(1)) / np.sqrt(
+        np.maximum(l2, np.float32(1e-30)))
+    n *= s.astype(n.dtype, copy=False)[:, None]
+    flat = l2 <= np.float32(1e-12)  # interpolated to zero: ng
+    if flat.any():
+        n[flat] = ng[flat]
+    return n.astype(np.float32, copy=False)
+
+
+_SMOOTH_CACHE: dict = {}
+
+
+def smooth_triangles(corner_normals: np.ndarray) -> np.ndarray:
+    """(T,) bool: the triangles whose three corner normals differ (smooth shading); on the others
+    the shading normal is the (one) corner normal, with no interpolation. Computed once per
+    corner-normal array (prepared scenes share it between renders) and cached while it lives."""
+    key = id(corner_normals)
+    hit = _SMOOTH_CACHE.get(key)
+    if hit is not None and hit[0]() is corner_normals:
+        return hit[1]
+    import weakref
+
+    c = corner_normals
+    smooth = ~((c[:, 0] == c[:, 1]).all(axis=1) & (c[:, 0] == c[:, 2]).all(axis=1))
+    try:
+        ref = weakref.ref(c, lambda _r, k=key: _SMOOTH_CACHE.pop(k, None))
+    except TypeError:  # not weak-referenceable: no cache
+        return smooth
+    _SMOOTH_CACHE[key] = (ref, smooth)
+    return smooth
+
+
+def hit_shading_normals(corner_normals: np.ndarray, prim, bu, bv, ng: np.ndarray) -> np.ndarray:
+    """``shading_normals`` at hits, interpolating only on smooth triangles (``smooth_triangles``):
+    a flat-shaded triangle's normal is its corner normal, put on ng's side (a zero one: ng)."""
+    smooth = smooth_triangles(corner_normals)
+    sm = np.take(smooth, prim)
+    if sm.all():
+        return shading_normals(corner_normals, prim, bu, bv, ng)
+    n = np.take(corner_normals[:, 0], prim, axis=0)  # corner 0 = every corner there
+    l2 = np.einsum("ij,ij->i", n, n)
+    s = np.where(np.einsum("ij,ij->i", n, ng) < 0, np.float32(-1), np.float32(1)) / np.sqrt(
+        np.maximum(l2, np.float32(1e-30)))
+    n *= s.astype(n.dtype, copy=False)[:, None]
+    zero = l2 <= np.float32(1e-12)
+    if zero.any():
+        n[zero] = ng[zero]
+    if sm.any():
+        idx = np.flatnonzero(sm)
+        n[idx] = shading_normals(corner_normals, prim[idx], np.asarray(bu)[idx], np.asarray(bv)[idx], ng[idx])
+    return n.astype(np.float32, copy=False)
 
 
 #: The mirror direction about a shading normal leaves at least this cosine above the geometric
@@ -291,6 +343,11 @@ class SpecularWalker:
         white population (a grating's orders) join the mono population."""
         return None
 
+    def choice_numbers(self, rays: Rays, rng) -> np.ndarray:
+        """The numbers (B,) in [0, 1) of the reflect / refract choice of ``rays`` at smooth glass
+        (default: ``rng``'s); the eye pass takes them from its pixel sampler."""
+        return rng.random(len(rays))
+
     def classify(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> np.ndarray:
         """The kind per hit the walk uses (default: the material's, rough ones MICROFACET); the
         light pass marks the paths a grating diffracts GRATING."""
@@ -358,12 +415,15 @@ class SpecularWalker:
             if rays.lam is None:
                 disp = white_split & prepared.materials.dispersive[hit.mat]
                 if disp.any():  # core/wavelengths.py: smooth glass reflects white, refracts mono
-                    children, child_hits, white = wavelengths.split_at_glass(self, rays.take(disp).dense(), hit.take(disp), rng)
+                    rd = rays.take(disp).dense()
+                    children, child_hits, white = wavelengths.split_at_glass(self, rd, hit.take(disp), rng,
+                                                                             self.choice_numbers(rd, rng))
                     if white is not None and len(white):
                         out.append(white)
                 diel = diel & ~disp
             if diel.any():
-                r, transmitted = self._dielectric(rays.take(diel), hit.take(diel), rng)
+                r = rays.take(diel)
+                r, transmitted = self._dielectric(r, hit.take(diel), rng, self.choice_numbers(r, rng))
                 out.append(self.after_delta(r, transmitted))
         scattered = self.scatter(rays, hit, kind, can_bounce, rng)
         if scattered is not None and len(scattered):
@@ -392,8 +452,8 @@ class SpecularWalker:
         if prepared.corner_normals is None:
             ns = ng
         else:  # on the triangle's side first, then flipped with ng: both face the incoming ray's side
-            ns = shading_normals(prepared.corner_normals, prim, bu, bv, ng0)
-            ns = np.where(front[:, None], ns, -ns)
+            ns = hit_shading_normals(prepared.corner_normals, prim, bu, bv, ng0)
+            ns *= np.where(front, np.float32(1), np.float32(-1))[:, None]
         return Hit(p.astype(np.float32, copy=False), ng, ns, np.abs(cos), front, np.take(prepared.tri_material, prim),
                    np.take(prepared.tri_offset, prim), prim, bu, bv)
 
@@ -427,8 +487,13 @@ class SpecularWalker:
                                                                        hit.p, ns)
         return out
 
-    def _dielectric(self, rays: Rays, hit: Hit, rng) -> tuple[Rays, np.ndarray]:
-        """Fresnel-sampled reflection or refraction: (the rays going on, refracted (B,) bool)."""
+    def _dielectric(self, rays: Rays, hit: Hit, rng, u=None) -> tuple[Rays, np.ndarray]:
+        """Fresnel-sampled reflection or refraction: (the rays going on, refracted (B,) bool);
+        ``u`` (B,): the choice's numbers (reflect where u < F), None: drawn from ``rng``.
+
+        Both directions are a d + b n about the specular normal n (the mirror: a = 1, b = 2 cos;
+        Snell's law: a = eta, b = eta cos - cos_t; under total internal reflection fr = 1, so the
+        mirror is chosen): one pass over (B, 3) for both branches."""
         prepared = self.prepared
         ior = prepared.materials.ior
         # constant over the grid for white rays
@@ -436,31 +501,24 @@ class SpecularWalker:
         eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
         ns = self._specular_normal(rays, hit)
         cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
-        fr = fresnel_dielectric(cos_s, eta)
-        refl = rng.random(len(rays)) < fr
-        if ns is hit.ng and out_is_plain(rays):
-            # flat: both directions are a d + b n with per-ray a, b (Snell's law and the mirror;
-            # under total internal reflection fr = 1, so refl is set): one pass over (B, 3)
-            cos = cos_s.astype(np.float32, copy=False)
-            cos_t = np.sqrt(np.maximum(np.float32(0), 1 - eta * eta * np.maximum(np.float32(0), 1 - cos * cos)))
-            a = np.where(refl, np.float32(1), eta)
-            b = np.where(refl, 2 * cos, eta * cos - cos_t)
-            d = a[:, None] * rays.d + b[:, None] * hit.ng
-            side = np.where(np.einsum("ij,ij->i", d, hit.ng) > 0, np.float32(1), np.float32(-1))
-            o = hit.p + (hit.eps * side)[:, None] * hit.ng
-            out = rays.moved(o.astype(np.float32, copy=False), d.astype(np.float32, copy=False), self._tinted(rays, hit))
-            return out, side < 0
-        t_dir, _ = refract(rays.d, ns, eta)
+        cos = np.asarray(cos_s, np.float32)
+        fr = fresnel_dielectric(cos, eta)
+        refl = (rng.random(len(rays)) if u is None else u) < fr
+        cos_t = np.sqrt(np.maximum(np.float32(0), 1 - eta * eta * np.maximum(np.float32(0), 1 - cos * cos)))
+        a = np.where(refl, np.float32(1), eta)
+        b = np.where(refl, 2 * cos, eta * cos - cos_t)
+        d = a[:, None] * rays.d + b[:, None] * ns
+        dn = np.einsum("ij,ij->i", d, hit.ng)
         if ns is not hit.ng:
             # a refraction about ns that stays on the incident side is refracted about ng instead
-            stay = ~refl & (np.einsum("ij,ij->i", t_dir, hit.ng) >= 0)
+            stay = ~refl & (dn >= 0)
             if stay.any():
-                t_dir[stay] = refract(rays.d[stay], hit.ng[stay], eta[stay])[0]
-        d = np.where(refl[:, None], reflect(rays.d, ns), t_dir)
+                d[stay] = refract(rays.d[stay], hit.ng[stay], eta[stay])[0]
+                dn[stay] = np.einsum("ij,ij->i", d[stay], hit.ng[stay])
         # offset to the side the new direction leaves on (a refraction about ng can be a TIR)
-        side = np.where(np.einsum("ij,ij->i", d, hit.ng) > 0, 1.0, -1.0).astype(np.float32)
+        side = np.where(dn > 0, np.float32(1), np.float32(-1))
         o = hit.p + (hit.eps * side)[:, None] * hit.ng
-        out = rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit))
+        out = rays.moved(o.astype(np.float32, copy=False), d.astype(np.float32, copy=False), self._tinted(rays, hit))
         if out.extra is not None and footprint.KEY in out.extra:  # ray differentials (core/footprint.py)
             out.extra[footprint.KEY] = footprint.refract_differentials(rays.extra[footprint.KEY], rays.o, rays.d,
                                                                        hit.p, ns, d, eta)

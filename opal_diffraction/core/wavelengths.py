@@ -132,7 +132,7 @@ def draw(grid, w: np.ndarray | None, u: np.ndarray, q_extra: np.ndarray | None =
     return parent, lam, weight
 
 
-def split_at_glass(walker, rays, hit, rng):
+def split_at_glass(walker, rays, hit, rng, u=None):
     """White ``rays`` at dispersive hits ``hit`` (smooth or rough glass) -> (mono children at the
     hit or None, their hits, white rays reflected by smooth glass or None).
 
@@ -140,7 +140,8 @@ def split_at_glass(walker, rays, hit, rng):
     own Fresnel choice). Otherwise smooth glass chooses reflect / refract for the white ray (module
     docstring): reflected rays go on white (returned, bounce counted), refracted ones become mono
     rays already refracted at their wavelengths, handed to ``walker._spawned`` (the walk traces
-    them with the mono population); rough glass still splits at the hit.
+    them with the mono population); rough glass still splits at the hit. ``u`` (B,): the
+    numbers of the reflect / refract choice (None: drawn from ``rng``).
     """
     from .materials import DIELECTRIC
     from .optics import fresnel_dielectric, reflect, refract
@@ -151,10 +152,12 @@ def split_at_glass(walker, rays, hit, rng):
         return (*walker._split(rays, hit, rng), None)
     smooth = prepared.materials.kind[hit.mat] == DIELECTRIC
     children = child_hits = None
+    if u is None:  # the reflect / refract choice's numbers, one per ray (the eye pass: its sampler's)
+        u = rng.random(len(rays))
     if not smooth.all():
         rough = ~smooth
         children, child_hits = walker._split(rays.take(rough), hit.take(rough), rng)
-        rays, hit = rays.take(smooth), hit.take(smooth)
+        rays, hit, u = rays.take(smooth), hit.take(smooth), u[smooth]
     if not len(rays):
         return children, child_hits, None
     grid = prepared.grid
@@ -168,7 +171,7 @@ def split_at_glass(walker, rays, hit, rng):
     q = importance(grid, wt, b)
     qs = q.sum(axis=1)
     p_refl = np.where(qs > 0, (q * fr).sum(axis=1) / np.where(qs > 0, qs, 1.0), 1.0)
-    refl = rng.random(b) < p_refl
+    refl = u < p_refl
     white = None
     if refl.any():
         r, h = rays.take(refl), hit.take(refl)
