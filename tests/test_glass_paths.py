@@ -131,7 +131,7 @@ def test_hit_shading_normals_interpolate_smooth_triangles_and_take_the_corner_on
     cn[flat] = cn[flat, :1]  # one normal for all three corners
     cn[3] = cn[3, 0]  # (flat too)
     flat[3] = True
-    cn /= np.linalg.norm(cn, axis=2, keepdims=True)
+    cn /= np.linalg.norm(cn, axis=2, keepdims=True)  # unit, as the scene's validation leaves them
     ng_tri = rng.normal(size=(t, 3)).astype(np.float32)
     ng_tri /= np.linalg.norm(ng_tri, axis=1, keepdims=True)
     np.testing.assert_array_equal(smooth_triangles(cn), ~flat)

@@ -237,19 +237,15 @@ def smooth_triangles(corner_normals: np.ndarray) -> np.ndarray:
 
 def hit_shading_normals(corner_normals: np.ndarray, prim, bu, bv, ng: np.ndarray) -> np.ndarray:
     """``shading_normals`` at hits, interpolating only on smooth triangles (``smooth_triangles``):
-    a flat-shaded triangle's normal is its corner normal, put on ng's side (a zero one: ng)."""
+    a flat-shaded triangle's normal is its corner normal (unit: prepared corner normals are
+    validated), put on ng's side."""
     smooth = smooth_triangles(corner_normals)
     sm = np.take(smooth, prim)
     if sm.all():
         return shading_normals(corner_normals, prim, bu, bv, ng)
-    n = np.take(corner_normals[:, 0], prim, axis=0)  # corner 0 = every corner there
-    l2 = np.einsum("ij,ij->i", n, n)
-    s = np.where(np.einsum("ij,ij->i", n, ng) < 0, np.float32(-1), np.float32(1)) / np.sqrt(
-        np.maximum(l2, np.float32(1e-30)))
-    n *= s.astype(n.dtype, copy=False)[:, None]
-    zero = l2 <= np.float32(1e-12)
-    if zero.any():
-        n[zero] = ng[zero]
+    # corner 0 = every corner there; unit already (scene validation normalises corner normals)
+    n = np.take(corner_normals[:, 0], prim, axis=0)
+    n *= np.where(np.einsum("ij,ij->i", n, ng) < 0, np.float32(-1), np.float32(1))[:, None]
     if sm.any():
         idx = np.flatnonzero(sm)
         n[idx] = shading_normals(corner_normals, prim[idx], np.asarray(bu)[idx], np.asarray(bv)[idx], ng[idx])
