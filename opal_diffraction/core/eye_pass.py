@@ -212,11 +212,13 @@ class _TileTrace(SpecularWalker):
         receives the light pass's caustics, 2 = and specular bounces followed it (a caustic path,
         counted by the light pass); final: the bounce limit was reached - this segment only
         gathers emitted light (for MIS), nothing more; seen: the last diffuse vertex was seen
-        straight from the camera on a core/splat_bounce.py receiver; pid, sid: the pixel and sample numbers
+        straight from the camera on a core/splat_bounce.py receiver; split: the Fresnel weight a
+        split gave the path (core/fresnel_split.py; 1: none), which Russian roulette divides out; pid, sid: the pixel and sample numbers
         of core/sampler.py's points (``_numbers``)."""
         return {"nd": np.zeros(b, np.int8), "diffuse": np.zeros(b, np.int16), "glossy": np.zeros(b, np.int16),
                 "transmission": np.zeros(b, np.int16), "pdf": np.zeros(b, np.float32),
                 "caustic": np.zeros(b, np.int8), "final": np.zeros(b, bool), "seen": np.zeros(b, bool),
+                "split": np.ones(b, np.float32),
                 "pid": np.zeros(b, np.uint32), "sid": np.zeros(b, np.uint32)}
 
     def empty_mono(self) -> Rays:
@@ -413,7 +415,8 @@ class _TileTrace(SpecularWalker):
         if rays.lam is None and rays.w is not None:
             deep = ok & (rays.depth >= 3)
             if deep.any():
-                q = np.minimum(rays.w.max(axis=1), np.float32(1.0))
+                # a Fresnel-split child (core/fresnel_split.py) is rouletted as its unsplit path
+                q = np.minimum(rays.w.max(axis=1) / rays.extra["split"], np.float32(1.0))
                 roulette = deep & (q < 1)
                 if roulette.any():
                     alive = rng.random(len(rays), np.float32) < q

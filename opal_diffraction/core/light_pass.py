@@ -235,7 +235,7 @@ class _LightTrace(SpecularWalker):
         if self.splat is not None:  # the same landings, seen by the camera (docs/physics.md section 4.9)
             self.splat.connect(self.prepared, r, h, self.n)
             if self.bounces is not None:  # and one diffuse bounce on, to the camera (section 4.10)
-                self.bounces.add(self.prepared, r, h, rng)
+                self.bounces.add(self.prepared, r, h)
         idx, valid = self.illum.layout.index(h.prim, h.bu, h.bv, h.front)
         if not valid.any():
             return

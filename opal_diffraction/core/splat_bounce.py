@@ -102,30 +102,36 @@ def _cosine(n: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 class BounceLog:
     """The landings of one light batch to continue (``add`` from the light pass's on_hit), traced
-    after the batch's walk by ``trace_bounces``."""
+    after the batch's walk by ``trace_bounces``: their directions are drawn then, so the walk's
+    random numbers, its map and its direct splats are those of a light pass without them."""
 
     def __init__(self, prepared):
         self.mask = receivers(prepared)
-        self.white: list[Rays] = []
-        self.mono: list[Rays] = []
+        self.landings: list[tuple[Rays, Hit]] = []
 
-    def add(self, prepared, rays: Rays, hit: Hit, rng: np.random.Generator) -> None:
-        """Continue the landings (``rays`` at ``hit``, diffuse hits after a specular bounce) on
-        receiving hits: a cosine-sampled direction about the normal on the side the light arrived
-        from, weight times rho(X), depth 0 (so a later landing after glass has depth >= 1)."""
+    def add(self, prepared, rays: Rays, hit: Hit, rng=None) -> None:
+        """Keep the landings (``rays`` at ``hit``, diffuse hits after a specular bounce) on
+        receiving hits."""
         sel = receives(self.mask, hit)
-        if not sel.any():
-            return
-        r, h = rays.take(sel), hit.take(sel)
-        rho = surface_reflectance(prepared, h, r.lam)
-        wi = _cosine(h.ng, rng)  # ng faces the side the light came from; ns = ng here
-        o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
-        if r.lam is None:
-            w = r.dense_w(prepared.grid.n) * rho
-            out = Rays(o, wi, r.pix, w.astype(np.float32), None, np.zeros(len(r), np.int32), r.u_lam)
-        else:
-            out = Rays(o, wi, r.pix, (r.w * rho).astype(np.float32), r.lam, np.zeros(len(r), np.int32), r.u_lam)
-        (self.white if out.lam is None else self.mono).append(out)
+        if sel.any():
+            self.landings.append((rays.take(sel), hit.take(sel)))
+
+    def rays(self, prepared, rng: np.random.Generator) -> tuple[list[Rays], list[Rays]]:
+        """(white, mono) continued rays: a cosine-sampled direction about the normal on the side
+        the light arrived from, weight times rho(X), depth 0 (a later landing after glass has
+        depth >= 1)."""
+        white, mono = [], []
+        for r, h in self.landings:
+            rho = surface_reflectance(prepared, h, r.lam)
+            wi = _cosine(h.ng, rng)  # ng faces the side the light came from; ns = ng here
+            o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
+            zero = np.zeros(len(r), np.int32)
+            if r.lam is None:
+                w = (r.dense_w(prepared.grid.n) * rho).astype(np.float32)
+                white.append(Rays(o, wi, r.pix, w, None, zero, r.u_lam))
+            else:
+                mono.append(Rays(o, wi, r.pix, (r.w * rho).astype(np.float32), r.lam, zero, r.u_lam))
+        return white, mono
 
 
 class _Continuation(SpecularWalker):
@@ -145,11 +151,12 @@ class _Continuation(SpecularWalker):
 def trace_bounces(prepared, log: BounceLog, batch, rng: np.random.Generator) -> int:
     """Trace a batch's continuations (``log``) and splat their landings into ``batch``
     (camera_splat.SplatBatch); returns the rays cast (shadow rays are the batch's)."""
-    if not log.white and not log.mono:
+    if not log.landings:
         return 0
+    ws, ms = log.rays(prepared, rng)
     cat = lambda rs: rs[0] if len(rs) == 1 else _concat(rs)  # noqa: E731
-    white = cat(log.white) if log.white else None
-    mono = cat(log.mono) if log.mono else SpecularWalker.empty_mono()
+    white = cat(ws) if ws else None
+    mono = cat(ms) if ms else SpecularWalker.empty_mono()
     tr = _Continuation(prepared, rng, batch)
     if white is None:
         white = SpecularWalker.empty_mono().take(np.zeros(0, bool))
