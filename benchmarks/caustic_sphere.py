@@ -43,7 +43,10 @@ import numpy as np
 from opal_diffraction.core import primitives
 from opal_diffraction.core.accel import build_accelerator
 from opal_diffraction.core.camera import generate_rays
-from opal_diffraction.core.render import render
+from opal_diffraction.core.light_pass import run_light_pass
+from opal_diffraction.core.plan import plan_render
+from opal_diffraction.core.prepare import prepare
+from opal_diffraction.core.render import render, render_prepared
 from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
 from opal_diffraction.core.settings import RenderSettings
 
@@ -125,13 +128,22 @@ def our_scene(spec: Spec, plane_only=False) -> Scene:
 
 
 def run_ours(spec: Spec, light_paths: int, samples: int, threads=2, plane_only=False, element_size=0.0, seed=0,
-             wavelength_step=5.0, caustic_splat=True):
+             wavelength_step=5.0, caustic_splat=True, **extra):
+    """Our render: (RGB, wall seconds, RenderResult). ``res.stats`` gains ``cpu_s`` (process CPU
+    time of the whole render, both threads), ``cpu_prepare_s``, ``cpu_light_s`` and ``cpu_eye_s``
+    (the machine is shared: CPU time is what the render itself used). ``extra``: more
+    RenderSettings (adaptive_threshold, adaptive_min_samples, ...)."""
     scene = our_scene(spec, plane_only)
     st = RenderSettings(samples=samples, light_paths=light_paths, threads=threads, element_size=element_size, seed=seed,
-                        wavelength_step=wavelength_step, caustic_splat=caustic_splat)
-    t0 = time.perf_counter()
-    res = render(scene, st)
-    dt = time.perf_counter() - t0
+                        wavelength_step=wavelength_step, caustic_splat=caustic_splat, **extra)
+    t0, c0 = time.perf_counter(), time.process_time()
+    prepared = prepare(scene, st)
+    c1 = time.process_time()
+    light = run_light_pass(prepared) if plan_render(prepared).light_pass else None
+    c2 = time.process_time()
+    res = render_prepared(prepared, light, started_at=t0)
+    dt, c3 = time.perf_counter() - t0, time.process_time()
+    res.stats.update({"cpu_s": c3 - c0, "cpu_prepare_s": c1 - c0, "cpu_light_s": c2 - c1, "cpu_eye_s": c3 - c2})
     return res.rgb.astype(np.float64), dt, res
 
 
@@ -722,21 +734,37 @@ def splat_benchmark(args, log) -> int:
                 r["sphere_rmse_without_caustics"] = round(rmse(img - caus, ref["path"], sphere), 4)
             r.update(extra or {})
             rows.append(r)
-            log(f"{shade:6s} {renderer:26s} {config:24s} {secs:7.2f} s  floor {r['floor_rmse']:.4f}  sphere "
-                f"{r['sphere_rmse']:.4f}  {r.get('sphere_rmse_without_caustics', '')}")
+            log(f"{shade:6s} {renderer:26s} {config:24s} {secs:7.2f} s (CPU {r.get('cpu_s', 0):6.2f} s)  floor "
+                f"{r['floor_rmse']:.4f}  sphere {r['sphere_rmse']:.4f}  {r.get('sphere_rmse_without_caustics', '')}")
 
-        cfgs = [(250_000, 8), (500_000, 16), (1_000_000, 32)] if args.quick else \
-            [(250_000, 8), (500_000, 16), (1_000_000, 16), (1_000_000, 32), (2_000_000, 64)]
-        for splat in (True, False):
-            for lp, spp in (cfgs if splat else cfgs[-1:]):
-                img, dt, res = best_of(args.repeats, lambda: run_ours(spec, lp, spp, args.threads, caustic_splat=splat))
-                caus = res.passes["Caustics"].astype(np.float64)
-                record(f"ours, splat {'on' if splat else 'off'}", f"{lp / 1e6:g} M paths, {spp} spp", img, dt, caus,
-                       {"light_pass_s": round(res.stats.get("light_pass_s", 0.0), 2)})
-                shown[f"ours splat {'on' if splat else 'off'} {lp / 1e6:g}M {spp}spp"] = img
+        def cpu_timed(fn):  # (result..., CPU seconds of this process: every thread, not the other jobs')
+            def run():
+                c0 = time.process_time()
+                out = fn()
+                return (*out, time.process_time() - c0)
+            return run
+
+        from opal_diffraction.core import fresnel_split
+        # (light paths, spp, splat, Fresnel split at the first glass hit)
+        cfgs = [(100_000, 16, True, True), (100_000, 24, True, True), (250_000, 8, True, True),
+                (250_000, 32, True, True), (100_000, 24, True, False), (250_000, 32, False, True)]
+        if not args.quick:
+            cfgs += [(1_000_000, 64, True, True)]
+        for lp, spp, splat, split in cfgs:
+            fresnel_split.ENABLED = split
+            img, dt, res = best_of(args.repeats, lambda: run_ours(spec, lp, spp, args.threads, caustic_splat=splat))
+            fresnel_split.ENABLED = True
+            caus = res.passes["Caustics"].astype(np.float64)
+            st = res.stats
+            label = f"ours, splat {'on' if splat else 'off'}" + ("" if split else ", no Fresnel split")
+            record(label, f"{lp / 1e6:g} M paths, {spp} spp", img, dt, caus,
+                   {"light_pass_s": round(st.get("light_pass_s", 0.0), 2), "cpu_s": round(st["cpu_s"], 2),
+                    "cpu_light_s": round(st["cpu_light_s"], 2), "cpu_eye_s": round(st["cpu_eye_s"], 2)})
+            shown[f"ours splat {'on' if splat else 'off'}{'' if split else ' nosplit'} {lp / 1e6:g}M {spp}spp"] = img
         for spp in ([4, 16] if args.quick else [4, 16, 64]):
-            img, dt = best_of(args.repeats, lambda: run_mitsuba(spec, var, "ptracer", spp, args.cache, seed=spp))
-            record(f"mitsuba ptracer {var}", f"{spp} spp at {SS}x", img, dt)
+            img, dt, cpu = best_of(args.repeats, cpu_timed(lambda: run_mitsuba(spec, var, "ptracer", spp, args.cache,
+                                                                               seed=spp)))
+            record(f"mitsuba ptracer {var}", f"{spp} spp at {SS}x", img, dt, extra={"cpu_s": round(cpu, 2)})
             shown[f"mitsuba ptracer {spp}spp"] = img
         for name, img in shown.items():
             fn = os.path.join(args.cache, f"splat_{shade}_{name.replace(' ', '_')}.png")
@@ -745,11 +773,14 @@ def splat_benchmark(args, log) -> int:
               "w") as f:
         f.write(f"Camera splat benchmark, {datetime.date.today()}, `benchmarks/caustic_sphere.py --splat"
                 f"{' --quick' if args.quick else ''}` (best of {args.repeats}; Mitsuba {var}).\n\n")
-        f.write("| shading | renderer | configuration | time (s) | floor RMSE | sphere RMSE vs path | "
-                "sphere, ours minus its Caustics pass |\n|---|---|---|---:|---:|---:|---:|\n")
+        f.write("| shading | renderer | configuration | wall (s) | CPU (s) | CPU light / eye (s) | floor RMSE | "
+                "sphere RMSE vs path | sphere, ours minus its Caustics pass |\n"
+                "|---|---|---|---:|---:|---:|---:|---:|---:|\n")
         for r in rows:
-            f.write(f"| {r['shading']} | {r['renderer']} | {r['config']} | {r['seconds']:.2f} | {r['floor_rmse']:.4f} | "
-                    f"{r['sphere_rmse']:.4f} | {r.get('sphere_rmse_without_caustics', '')} |\n")
+            split = f"{r['cpu_light_s']:.2f} / {r['cpu_eye_s']:.2f}" if "cpu_eye_s" in r else ""
+            f.write(f"| {r['shading']} | {r['renderer']} | {r['config']} | {r['seconds']:.2f} | {r.get('cpu_s', 0):.2f} | "
+                    f"{split} | {r['floor_rmse']:.4f} | {r['sphere_rmse']:.4f} | "
+                    f"{r.get('sphere_rmse_without_caustics', '')} |\n")
     with open(os.path.join(args.cache, f"splat_results_{args.shading}.json"), "w") as f:
         json.dump(rows, f, indent=1)
     return 0

@@ -34,6 +34,7 @@ from .opal.bragg_shading import BraggShading
 from .camera_splat import direct_materials, usable_splat
 from .factored_film import add_scaled_spectra
 from .specular_numbers import bounce_choice
+from . import fresnel_split, splat_bounce
 
 __all__ = ["EyePass", "TileResult"]
 
@@ -73,6 +74,10 @@ class EyePass:
         # camera (core/camera_splat.py, docs/physics.md section 4.9); None: the map everywhere
         self.direct_splat = (None if self.caustic_map is None or usable_splat(prepared, light) is None
                              else direct_materials(prepared))
+        # (M,) bool: where the light pass's paths also took a diffuse bounce to the camera
+        # (core/splat_bounce.py, docs/physics.md section 4.11); None: no such paths
+        self.splat_bounce = (splat_bounce.receivers(prepared) if self.direct_splat is not None
+                             and splat_bounce.enabled(prepared) else None)
         # camera rays carry ray differentials (core/footprint.py) only to integrate gratings
         self.wants_differentials = bool(prepared.gratings.any and getattr(prepared.settings, "grating_footprint", True))
 
@@ -137,6 +142,7 @@ class _TileTrace(SpecularWalker):
         self.caustic_lit = eye.caustic_lit
         self.world_gratings = diffracts_world(eye.prepared)
         self.direct_splat = eye.direct_splat
+        self.splat_bounce = eye.splat_bounce
         self.sampler_seed = None  # set by EyePass.trace when the tile numbers its samples
         s = eye.prepared.settings
         self.limits = (s.max_bounces, s.diffuse_bounces, s.glossy_bounces, s.transmission_bounces)
@@ -216,11 +222,14 @@ class _TileTrace(SpecularWalker):
         camera ray or a specular bounce - no MIS partner); caustic: 0, 1 = the last diffuse vertex
         receives the light pass's caustics, 2 = and specular bounces followed it (a caustic path,
         counted by the light pass); final: the bounce limit was reached - this segment only
-        gathers emitted light (for MIS), nothing more; pid, sid: the pixel and sample numbers
+        gathers emitted light (for MIS), nothing more; seen: the last diffuse vertex was seen
+        straight from the camera on a core/splat_bounce.py receiver; split: the Fresnel weight a
+        split gave the path (core/fresnel_split.py; 1: none), which Russian roulette divides out; pid, sid: the pixel and sample numbers
         of core/sampler.py's points (``_numbers``)."""
         return {"nd": np.zeros(b, np.int8), "diffuse": np.zeros(b, np.int16), "glossy": np.zeros(b, np.int16),
                 "transmission": np.zeros(b, np.int16), "pdf": np.zeros(b, np.float32),
-                "caustic": np.zeros(b, np.int8), "final": np.zeros(b, bool),
+                "caustic": np.zeros(b, np.int8), "final": np.zeros(b, bool), "seen": np.zeros(b, bool),
+                "split": np.ones(b, np.float32),
                 "pid": np.zeros(b, np.uint32), "sid": np.zeros(b, np.uint32)}
 
     def empty_mono(self) -> Rays:
@@ -410,6 +419,8 @@ class _TileTrace(SpecularWalker):
                     r, h = r.take(~own), h.take(~own)
                 if self.direct_splat is not None:  # camera -> diffuse: the light pass's splat has it (section 4.9)
                     seen = (r.depth == 0) & self.direct_splat[h.mat]
+                    if self.splat_bounce is not None:  # ... and one diffuse bounce on (section 4.11)
+                        seen |= splat_bounce.covered(self.splat_bounce, r, h)
                     if seen.any():
                         r, h = r.take(~seen), h.take(~seen)
                 self._caustic_light(r, h, rng)
@@ -422,7 +433,8 @@ class _TileTrace(SpecularWalker):
         if rays.lam is None and rays.w is not None:
             deep = ok & (rays.depth >= 3)
             if deep.any():
-                q = np.minimum(rays.w.max(axis=1), np.float32(1.0))
+                # a Fresnel-split child (core/fresnel_split.py) is rouletted as its unsplit path
+                q = np.minimum(rays.w.max(axis=1) / rays.extra["split"], np.float32(1.0))
                 roulette = deep & (q < 1)
                 if roulette.any():
                     alive = rng.random(len(rays), np.float32) < q
@@ -496,6 +508,7 @@ class _TileTrace(SpecularWalker):
         s["diffuse"] = s["diffuse"] + 1
         s["pdf"] = (cos * np.float32(1 / np.pi)).astype(np.float32)
         s["caustic"] = np.full(b, 1 if self.caustic_map is not None else 0, np.int8)
+        s["seen"] = splat_bounce.mark_bounce(self.splat_bounce, r, h)
         s["final"] = (s["diffuse"] > self.limits[1]) | (out.depth > self.limits[0])
         return out if micro_out is None or not len(micro_out) else Rays.concat(out, micro_out)
 
@@ -523,6 +536,9 @@ class _TileTrace(SpecularWalker):
         return bounce_choice(rays.extra, rays.depth, self.sampler_seed, self.rng)
 
     def _dielectric(self, rays: Rays, hit: Hit, rng, u=None):
+        if fresnel_split.ENABLED and not self.layers and self.escapes is None:
+            # camera rays take both branches (core/fresnel_split.py, docs/physics.md section 4.12)
+            return fresnel_split.split_first_dielectric(self, rays, hit, rng, u, super()._dielectric)
         out, transmitted = super()._dielectric(rays, hit, rng, u)
         if self.layers:
             out = grating_layering.continue_specular(self.prepared, out, hit, transmitted)

@@ -60,6 +60,7 @@ from types import MappingProxyType
 import numpy as np
 
 from .camera_splat import CameraConnection, CameraSplat, SplatBatch
+from . import splat_bounce
 from .elements import ElementLayout, IlluminationMap
 from .grating_records import PILOT_STREAM, GratingRecords, record_layout
 from .geometry import compact_indices, orthonormal_basis, triangle_areas
@@ -211,6 +212,7 @@ class _LightTrace(SpecularWalker):
         self.illum = illum
         self.records = records
         self.splat = splat  # the camera connection of the landings (core/camera_splat.py), or None
+        self.bounces = None  # core/splat_bounce.BounceLog: the landings continued by a diffuse bounce, or None
         self.deposited = 0
         self.bragg = BraggShading.for_prepared(prepared)  # FCC opal lobes scatter light paths on
 
@@ -232,6 +234,8 @@ class _LightTrace(SpecularWalker):
         r, h = rays.take(land), hit.take(land)
         if self.splat is not None:  # the same landings, seen by the camera (docs/physics.md section 4.9)
             self.splat.connect(self.prepared, r, h, self.n)
+            if self.bounces is not None:  # and one diffuse bounce on, to the camera (section 4.11)
+                self.bounces.add(self.prepared, r, h)
         idx, valid = self.illum.layout.index(h.prim, h.bu, h.bv, h.front)
         if not valid.any():
             return
@@ -512,8 +516,12 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
     connection = CameraConnection.of(prepared) if splat is not None else None
     batch = SplatBatch(connection) if connection is not None else None
     tr = _LightTrace(prepared, rng, illum, records, batch)
+    if batch is not None and splat_bounce.enabled(prepared):
+        tr.bounces = splat_bounce.BounceLog(prepared)
     tr.walk(rays, tr.empty_mono())
     shadow = 0
+    if tr.bounces is not None:  # after the walk: the batch's random stream stays one sequence
+        tr._rays += splat_bounce.trace_bounces(prepared, tr.bounces, batch, rng)
     if batch is not None:
         splat.add(*batch.finish())
         shadow = batch.shadow_rays
