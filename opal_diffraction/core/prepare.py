@@ -84,7 +84,8 @@ class PreparedScene:
     tri_normal: np.ndarray             # (T, 3) float32 unit geometric normals
     tri_offset: np.ndarray             # (T,) float32 self-intersection offset per triangle
     tri_material: np.ndarray           # (T,) int32
-    tri_grating_tangent: np.ndarray    # (T, 3) float32 unit grating vectors; (0, 3) without gratings
+    tri_grating_tangent: np.ndarray    # (T, 3) float32 unit grating vectors of grating triangles (other rows
+    #                                    zero); (0, 3) without gratings
     tri_period: np.ndarray             # (T,) float32 nm per-triangle period override (0: the material's), or (0,)
     world_spectrum: np.ndarray         # (n,) float32 radiance of a uniform world; with a map, the map's
     #                                    mean over the sphere (what does not sample the map yet uses)
@@ -104,7 +105,8 @@ class PreparedScene:
     microfacet: np.ndarray | None = None
     # opal volume domains (core/opal/volume.py: lookup(points, prim)); None: the scene has none
     opal_domains: VolumeDomains | None = None
-    # (T, 3, 3) float32 smooth grating tangents per corner (core/grating_directions.py), or None
+    # (T, 3, 3) float32 smooth grating tangents per corner of grating triangles (core/grating_directions.py;
+    # other rows zero), or None
     corner_grating_tangent: np.ndarray | None = None
 
     @property
@@ -253,9 +255,10 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         check(stopped)
     if gratings.any:  # only a scene with gratings pays for their frames
         nrm64 = triangle_normals(v, t) if nrm64 is None else nrm64
-        tri_grating_tangent = triangle_tangents(nrm64, scene.tri_tangent)
-        corner_grating_tangent = smooth_corner_tangents(v, t, nrm64, tri_grating_tangent, tri_material,
-                                                        gratings.enabled[tri_material])
+        grating_tri = gratings.enabled[tri_material]
+        # the frames of grating triangles only (only grating hits read them; other rows zero)
+        tri_grating_tangent = triangle_tangents(nrm64, scene.tri_tangent, rows=grating_tri)
+        corner_grating_tangent = smooth_corner_tangents(v, t, nrm64, tri_grating_tangent, tri_material, grating_tri)
     else:
         tri_grating_tangent = np.zeros((0, 3), np.float32)
         corner_grating_tangent = None
