@@ -60,9 +60,15 @@ def triangle_normals(vertices, triangles) -> np.ndarray:
     return normals_from_cross(triangle_cross(vertices, triangles))
 
 
-def normals_from_cross(n: np.ndarray) -> np.ndarray:
-    """(T, 3) float64 unit normals from :func:`triangle_cross`'s products; zero where they are."""
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+def normals_from_cross(n: np.ndarray, length: np.ndarray | None = None, in_place: bool = False) -> np.ndarray:
+    """(T, 3) float64 unit normals from :func:`triangle_cross`'s products; zero where they are.
+
+    ``length``: (T,) their norms when the caller has them (``np.linalg.norm(n, axis=1)``: the
+    same values). ``in_place``: divide ``n`` itself (the caller's products are not kept)."""
+    if length is None:
+        length = np.linalg.norm(n, axis=1)
+    d = np.maximum(length, 1e-30)[:, None]
+    return np.divide(n, d, out=n) if in_place else n / d
 
 
 def orthonormal_basis(axis):
