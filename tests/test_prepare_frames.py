@@ -134,3 +134,21 @@ def test_prepare_frames_of_the_grating_rows_equal_the_all_rows_frames():
     assert np.array_equal(p.tri_grating_tangent[grating], full[grating])
     assert np.array_equal(p.corner_grating_tangent[grating], corner[grating])
     assert not p.tri_grating_tangent[~grating].any() and not p.corner_grating_tangent[~grating].any()
+
+
+@pytest.mark.parametrize("n_groups", [1, 7, 300, 40000])
+def test_group_extrema_equal_ufunc_at(n_groups):
+    from opal_diffraction.core.geometry import group_extrema
+
+    rng = np.random.default_rng(n_groups)
+    label = rng.integers(0, n_groups, 5000)
+    values = rng.normal(size=(5000, 3)) * 10 ** rng.uniform(-3, 3, (5000, 1))
+    lo, hi = group_extrema(label, n_groups, values)
+    ref_lo, ref_hi = np.full((n_groups, 3), np.inf), np.full((n_groups, 3), -np.inf)
+    np.minimum.at(ref_lo, label, values)
+    np.maximum.at(ref_hi, label, values)
+    assert np.array_equal(lo, ref_lo) and np.array_equal(hi, ref_hi)  # empty groups too (+-inf)
+    (m,) = group_extrema(label, n_groups, values[:, 0], ops=(np.maximum,))
+    for g in rng.choice(n_groups, min(n_groups, 20), replace=False):  # by hand, group by group
+        rows = values[label == g, 0]
+        assert m[g] == (rows.max() if len(rows) else -np.inf)

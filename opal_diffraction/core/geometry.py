@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["compact_indices", "triangle_cross", "triangle_areas", "triangle_normals", "normals_from_cross", "orthonormal_basis", "interpolate_corners"]
+__all__ = ["compact_indices", "group_extrema", "triangle_cross", "triangle_areas", "triangle_normals", "normals_from_cross", "orthonormal_basis", "interpolate_corners"]
 
 
 def compact_indices(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -25,6 +25,31 @@ def compact_indices(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     mark[shifted.ravel()] = True
     rank = np.cumsum(mark, dtype=np.int64) - 1  # the new id of each id present
     return np.flatnonzero(mark) + lo, rank[shifted]
+
+
+def group_extrema(label: np.ndarray, n_groups: int, values: np.ndarray, ops=(np.minimum, np.maximum)) -> list:
+    """Per group, ``op``'s reduction of the rows of ``values`` (N, ...) with that ``label`` (N,)
+    in [0, n_groups), for each ufunc in ``ops``: ``np.minimum.at`` / ``np.maximum.at`` on arrays
+    filled with +inf / -inf, the same values (min and max are exact in any order), by one
+    stable sort of the labels (a radix sort for 16-bit ones) and ``reduceat`` over each group's
+    run instead of ufunc.at's per-row scatter. Groups without rows get +inf / -inf."""
+    label = np.asarray(label)
+    values = np.asarray(values)
+    counts = np.bincount(label, minlength=n_groups)
+    fill = {np.minimum: np.inf, np.maximum: -np.inf}
+    if len(label) == 0 or (counts == 0).any():  # empty groups: reduceat cannot express them
+        out = []
+        for op in ops:
+            acc = np.full((n_groups,) + values.shape[1:], fill[op], np.result_type(values, np.float64))
+            op.at(acc, label, values)
+            out.append(acc)
+        return out
+    key = label.astype(np.int16) if n_groups <= np.iinfo(np.int16).max else label
+    order = np.argsort(key, kind="stable")
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    sorted_values = values[order]
+    return [op.reduceat(sorted_values, starts, axis=0).astype(np.result_type(values, np.float64), copy=False)
+            for op in ops]
 
 
 def triangle_cross(vertices, triangles) -> np.ndarray:

@@ -62,7 +62,7 @@ import numpy as np
 from .camera_splat import CameraConnection, CameraSplat, SplatBatch
 from .elements import ElementLayout, IlluminationMap
 from .grating_records import PILOT_STREAM, GratingRecords, record_layout
-from .geometry import compact_indices, orthonormal_basis, triangle_areas
+from .geometry import compact_indices, group_extrema, orthonormal_basis, triangle_areas
 from .grating_sampling import diffracting, scatter_at_gratings, scattering_materials
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIELECTRIC, DIFFUSE, MIRROR
@@ -118,13 +118,9 @@ def caster_objects(vertices, triangles, mask) -> CasterObjects:
         _, label = compact_indices(key)
         n_comp = int(label.max()) + 1
     # per-group bounding box centre and radius, over the group's vertices (O(V) per pass)
-    lo = np.full((n_comp, 3), np.inf)
-    hi = np.full((n_comp, 3), -np.inf)
-    np.minimum.at(lo, label, pts)
-    np.maximum.at(hi, label, pts)
+    lo, hi = group_extrema(label, n_comp, pts)  # np.minimum.at / np.maximum.at without the scatter
     centre = 0.5 * (lo + hi)
-    d2 = np.zeros(n_comp)
-    np.maximum.at(d2, label, np.sum((pts - centre[label]) ** 2, axis=1))
+    d2 = np.maximum(group_extrema(label, n_comp, np.sum((pts - centre[label]) ** 2, axis=1), ops=(np.maximum,))[0], 0.0)
     radius = np.sqrt(d2) * (1 + 1e-6) + 1e-9 * extent
     return CasterObjects(centre, radius)
 
