@@ -708,8 +708,7 @@ class Scene:
         cn = _validate_corner_normals(self.corner_normals, v, t, warns)
         cross = None
         if len(t):
-            cross = triangle_cross(v, t)
-            area2 = np.linalg.norm(cross, axis=1)
+            cross, area2 = triangle_cross(v, t, with_norm=True)  # area2: np.linalg.norm(cross, axis=1)
             degenerate = area2 <= 0.0
             tiny = ~degenerate & (area2 < 2 * MIN_TRIANGLE_AREA)
             if degenerate.any():
