@@ -98,7 +98,7 @@ def caster_objects(vertices, triangles, mask) -> CasterObjects:
     not share vertices simply makes more, tighter groups. More than MAX_OBJECTS groups are merged
     on a coarse spatial grid so the mixture stays cheap.
     """
-    from scipy.sparse import coo_matrix
+    from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 
     t = np.asarray(triangles)[np.asarray(mask, bool)]
@@ -108,9 +108,10 @@ def caster_objects(vertices, triangles, mask) -> CasterObjects:
     pts = np.asarray(vertices)[used].astype(np.float64)  # the casters' vertices only, in float64
     extent = float(np.ptp(pts, axis=0).max()) or max(float(np.abs(pts).max()), 1e-30)
     n_nodes = len(used)
-    rows = np.concatenate([node[:, 0], node[:, 1]])
-    cols = np.concatenate([node[:, 1], node[:, 2]])
-    graph = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(n_nodes, n_nodes))
+    # int32 indices and float64 weights, in CSR: what connected_components converts to otherwise
+    rows = np.concatenate([node[:, 0], node[:, 1]]).astype(np.int32)
+    cols = np.concatenate([node[:, 1], node[:, 2]]).astype(np.int32)
+    graph = csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_nodes, n_nodes))
     n_comp, label = connected_components(graph, directed=False)
     if n_comp > MAX_OBJECTS:  # many separate pieces: group them by a spatial grid instead
         cells = np.floor((pts - pts.min(axis=0)) / (extent / 4 + 1e-12 * extent)).astype(np.int64)
