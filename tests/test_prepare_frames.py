@@ -5,7 +5,7 @@ for grating triangles and with the vertex-sum shortcut give the values of the fu
   the others are zero;
 - ``smooth_corner_tangents``' vertex sums (a smooth vertex: one bincount) equal the enumeration
   of every pair of corners at the vertex bit for bit, and both equal an independent per-corner
-  loop over the definition (docs/physics.md section 3.1);
+  loop over the definition (docs/physics.md section 3.1; the shortcut: docs/physics.md section 3.12);
 - prepare's frames on the grating rows equal the frames computed over all triangles.
 """
 

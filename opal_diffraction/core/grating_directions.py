@@ -88,8 +88,8 @@ def smooth_corner_tangents(vertices, triangles, tri_normal, tri_tangent, tri_mat
     likewise, with one material (a smooth surface: nearly every vertex), every pair of corners
     counts and sign(t_a . t_b) = s_a s_b with s = sign(t . t_ref), so corner a's sum is
     s_a sum_b s_b w_b t_b: one bincount over the vertices, added in the same order as the pairs
-    (the same values bit for bit: a sign flip is exact). The other vertices enumerate their
-    pairs of corners (about 6 per corner on a regular mesh)."""
+    (the same values bit for bit: a sign flip is exact; docs/physics.md section 3.12). The other
+    vertices enumerate their pairs of corners (about 6 per corner on a regular mesh)."""
     grating_tri = np.asarray(grating_tri, bool)
     if not grating_tri.any() or len(tri_tangent) != len(grating_tri):
         return None
