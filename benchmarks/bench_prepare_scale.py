@@ -13,7 +13,7 @@ so the code measured is the code that runs. Prints two tables, wall-clock and CP
 (``time.process_time``: every thread of the process, Embree's build threads included; on a
 shared machine the number to compare) per phase x size with nanoseconds per triangle, the RSS,
 and with ``--profile M`` pyinstrument's top lines for the M-million-triangle scene. Results in
-docs/benchmarks.md ("Preparation at 10 M triangles").
+docs/benchmarks.md ("Preparation at 10 M triangles", and the dated section after it).
 """
 
 from __future__ import annotations

@@ -147,9 +147,12 @@ def test_triangle_cross_is_np_cross_bit_for_bit(dtype):
 
     rng = np.random.default_rng(2)
     v = (rng.normal(size=(400, 3)) * 10 ** rng.uniform(-6, 6, (400, 1))).astype(dtype)
-    t = rng.integers(0, 400, size=(3000, 3)).astype(np.int32)
+    t = rng.integers(0, 400, size=(40000, 3)).astype(np.int32)  # several chunks
     assert np.array_equal(triangle_cross(v, t), _old_triangle_cross(v, t))
     assert np.array_equal(triangle_cross(v, t.astype(np.float64)), _old_triangle_cross(v, t))
+    cross, norm = triangle_cross(v, t, with_norm=True)
+    assert np.array_equal(cross, _old_triangle_cross(v, t))
+    assert np.array_equal(norm, np.linalg.norm(_old_triangle_cross(v, t), axis=1))
 
 
 def test_triangle_offsets_are_the_per_triangle_maxima():

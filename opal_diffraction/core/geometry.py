@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["compact_indices", "triangle_cross", "triangle_areas", "triangle_normals", "normals_from_cross", "orthonormal_basis", "interpolate_corners"]
+__all__ = ["compact_indices", "group_extrema", "triangle_cross", "triangle_areas", "triangle_normals", "normals_from_cross", "orthonormal_basis", "interpolate_corners"]
 
 
 def compact_indices(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -27,27 +27,65 @@ def compact_indices(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.flatnonzero(mark) + lo, rank[shifted]
 
 
-def triangle_cross(vertices, triangles) -> np.ndarray:
-    """(T, 3) float64 ``(v1 - v0) x (v2 - v0)`` per triangle: its normal times twice its area."""
+def group_extrema(label: np.ndarray, n_groups: int, values: np.ndarray, ops=(np.minimum, np.maximum)) -> list:
+    """Per group, ``op``'s reduction of the rows of ``values`` (N, ...) with that ``label`` (N,)
+    in [0, n_groups), for each ufunc in ``ops``: ``np.minimum.at`` / ``np.maximum.at`` on arrays
+    filled with +inf / -inf, the same values (min and max are exact in any order), by one
+    stable sort of the labels (a radix sort for 16-bit ones) and ``reduceat`` over each group's
+    run instead of ufunc.at's per-row scatter. Groups without rows get +inf / -inf."""
+    label = np.asarray(label)
+    values = np.asarray(values)
+    counts = np.bincount(label, minlength=n_groups)
+    fill = {np.minimum: np.inf, np.maximum: -np.inf}
+    if len(label) == 0 or (counts == 0).any():  # empty groups: reduceat cannot express them
+        out = []
+        for op in ops:
+            acc = np.full((n_groups,) + values.shape[1:], fill[op], np.result_type(values, np.float64))
+            op.at(acc, label, values)
+            out.append(acc)
+        return out
+    key = label.astype(np.int16) if n_groups <= np.iinfo(np.int16).max else label
+    order = np.argsort(key, kind="stable")
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    sorted_values = values[order]
+    return [op.reduceat(sorted_values, starts, axis=0).astype(np.result_type(values, np.float64), copy=False)
+            for op in ops]
+
+
+_CROSS_ROWS = 1 << 14  # triangles per chunk of triangle_cross: its temporaries stay in cache
+
+
+def triangle_cross(vertices, triangles, with_norm: bool = False):
+    """(T, 3) float64 ``(v1 - v0) x (v2 - v0)`` per triangle: its normal times twice its area.
+    ``with_norm``: also their norms (T,), the values of ``np.linalg.norm(cross, axis=1)``."""
     t = np.asarray(triangles).reshape(-1, 3)
     if len(t) == 0:
-        return np.zeros((0, 3))
+        return (np.zeros((0, 3)), np.zeros(0)) if with_norm else np.zeros((0, 3))
     if t.dtype.kind not in "iu":
         t = t.astype(np.int64)
-    # the vertices in float64 once (V rows, not 3 T), the edges gathered from them, and the
-    # cross product written out as np.cross computes it (a1 b2 - a2 b1, ...): the same values
+    # the vertices in float64 once (V rows, not 3 T), the edges gathered from them in chunks of
+    # triangles, and the cross product written out as np.cross computes it (a1 b2 - a2 b1,
+    # ...): the same values; the norm as sqrt((x^2 + y^2) + z^2), np.linalg.norm's order
     v = np.asarray(vertices, np.float64)
-    p0 = v[t[:, 0]]
-    a = v[t[:, 1]]
-    a -= p0
-    b = v[t[:, 2]]
-    b -= p0
-    del p0
-    out = np.empty_like(a)
-    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
-    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
-    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    return out
+    out = np.empty((len(t), 3))
+    norm = np.empty(len(t)) if with_norm else None
+    for s in range(0, len(t), _CROSS_ROWS):
+        tc = t[s:s + _CROSS_ROWS]
+        p0 = v[tc[:, 0]]
+        a = v[tc[:, 1]]
+        a -= p0
+        b = v[tc[:, 2]]
+        b -= p0
+        o = out[s:s + _CROSS_ROWS]
+        o[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+        o[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+        o[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+        if with_norm:
+            sq = np.multiply(o, o, out=a)
+            length = sq[:, 0] + sq[:, 1]
+            length += sq[:, 2]
+            norm[s:s + _CROSS_ROWS] = np.sqrt(length, out=length)
+    return (out, norm) if with_norm else out
 
 
 def triangle_areas(vertices, triangles) -> np.ndarray:
@@ -60,9 +98,15 @@ def triangle_normals(vertices, triangles) -> np.ndarray:
     return normals_from_cross(triangle_cross(vertices, triangles))
 
 
-def normals_from_cross(n: np.ndarray) -> np.ndarray:
-    """(T, 3) float64 unit normals from :func:`triangle_cross`'s products; zero where they are."""
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+def normals_from_cross(n: np.ndarray, length: np.ndarray | None = None, in_place: bool = False) -> np.ndarray:
+    """(T, 3) float64 unit normals from :func:`triangle_cross`'s products; zero where they are.
+
+    ``length``: (T,) their norms when the caller has them (``np.linalg.norm(n, axis=1)``: the
+    same values). ``in_place``: divide ``n`` itself (the caller's products are not kept)."""
+    if length is None:
+        length = np.linalg.norm(n, axis=1)
+    d = np.maximum(length, 1e-30)[:, None]
+    return np.divide(n, d, out=n) if in_place else n / d
 
 
 def orthonormal_basis(axis):

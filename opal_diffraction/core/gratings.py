@@ -101,13 +101,25 @@ def prepare_gratings(m) -> PreparedGratings:
     )
 
 
-def triangle_tangents(tri_normal: np.ndarray, tri_tangent: np.ndarray) -> np.ndarray:
+def triangle_tangents(tri_normal: np.ndarray, tri_tangent: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
     """Unit grating vectors in each triangle's plane (T, 3) float32.
 
     The given tangent (the exporter's UV U direction, object axis or per-face attribute) is
     projected onto the plane; where none is given (zero) or it is parallel to the normal, the
     world X axis is projected instead (then Y), so neighbouring coplanar triangles agree.
+
+    ``rows``: (T,) bool, only these triangles (the gratings': nothing reads the others' rows);
+    the other rows are zero. The rows computed hold the same values as without ``rows``.
     """
+    if rows is not None:
+        rows = np.asarray(rows, bool)
+        out = np.zeros((len(rows), 3), np.float32)  # calloc'd: untouched pages cost nothing
+        idx = np.flatnonzero(rows)
+        if len(idx):
+            given = np.asarray(tri_tangent).reshape(-1, 3)
+            out[idx] = triangle_tangents(np.asarray(tri_normal)[idx], given[idx] if len(given) == len(rows)
+                                         else np.zeros((0, 3), np.float32))
+        return out
     n = np.asarray(tri_normal, np.float64)
     t_count = len(n)
     given = np.asarray(tri_tangent, np.float64).reshape(-1, 3)

@@ -63,7 +63,7 @@ from .camera_splat import CameraConnection, CameraSplat, SplatBatch
 from . import splat_bounce
 from .elements import ElementLayout, IlluminationMap
 from .grating_records import PILOT_STREAM, GratingRecords, record_layout
-from .geometry import compact_indices, orthonormal_basis, triangle_areas
+from .geometry import compact_indices, group_extrema, orthonormal_basis, triangle_areas
 from .grating_sampling import diffracting, scatter_at_gratings, scattering_materials
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIELECTRIC, DIFFUSE, MIRROR
@@ -99,7 +99,7 @@ def caster_objects(vertices, triangles, mask) -> CasterObjects:
     not share vertices simply makes more, tighter groups. More than MAX_OBJECTS groups are merged
     on a coarse spatial grid so the mixture stays cheap.
     """
-    from scipy.sparse import coo_matrix
+    from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 
     t = np.asarray(triangles)[np.asarray(mask, bool)]
@@ -109,9 +109,10 @@ def caster_objects(vertices, triangles, mask) -> CasterObjects:
     pts = np.asarray(vertices)[used].astype(np.float64)  # the casters' vertices only, in float64
     extent = float(np.ptp(pts, axis=0).max()) or max(float(np.abs(pts).max()), 1e-30)
     n_nodes = len(used)
-    rows = np.concatenate([node[:, 0], node[:, 1]])
-    cols = np.concatenate([node[:, 1], node[:, 2]])
-    graph = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(n_nodes, n_nodes))
+    # int32 indices and float64 weights, in CSR: what connected_components converts to otherwise
+    rows = np.concatenate([node[:, 0], node[:, 1]]).astype(np.int32)
+    cols = np.concatenate([node[:, 1], node[:, 2]]).astype(np.int32)
+    graph = csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_nodes, n_nodes))
     n_comp, label = connected_components(graph, directed=False)
     if n_comp > MAX_OBJECTS:  # many separate pieces: group them by a spatial grid instead
         cells = np.floor((pts - pts.min(axis=0)) / (extent / 4 + 1e-12 * extent)).astype(np.int64)
@@ -119,13 +120,9 @@ def caster_objects(vertices, triangles, mask) -> CasterObjects:
         _, label = compact_indices(key)
         n_comp = int(label.max()) + 1
     # per-group bounding box centre and radius, over the group's vertices (O(V) per pass)
-    lo = np.full((n_comp, 3), np.inf)
-    hi = np.full((n_comp, 3), -np.inf)
-    np.minimum.at(lo, label, pts)
-    np.maximum.at(hi, label, pts)
+    lo, hi = group_extrema(label, n_comp, pts)  # np.minimum.at / np.maximum.at without the scatter
     centre = 0.5 * (lo + hi)
-    d2 = np.zeros(n_comp)
-    np.maximum.at(d2, label, np.sum((pts - centre[label]) ** 2, axis=1))
+    d2 = np.maximum(group_extrema(label, n_comp, np.sum((pts - centre[label]) ** 2, axis=1), ops=(np.maximum,))[0], 0.0)
     radius = np.sqrt(d2) * (1 + 1e-6) + 1e-9 * extent
     return CasterObjects(centre, radius)
 

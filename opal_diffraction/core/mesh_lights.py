@@ -64,7 +64,7 @@ class MeshLights:
         if not emits.any():
             return None
         tri = np.flatnonzero(emits)
-        p = np.asarray(vertices, np.float64)[np.asarray(t[tri], np.int64)]
+        p = np.asarray(vertices)[np.asarray(t[tri], np.int64)].astype(np.float64)  # the emitters' corners only
         e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
         cr = np.cross(e1, e2)
         area = 0.5 * np.linalg.norm(cr, axis=1)

@@ -39,7 +39,7 @@ from .materials import PreparedMaterials, prepare_materials
 from .bsdf import microfacet_materials
 from .mesh_lights import MeshLights
 from .opal.volume import VolumeDomains
-from .scene import TRIANGLE_CROSS_ATTR, Camera, Scene
+from .scene import TRIANGLE_CROSS_ATTR, TRIANGLE_CROSS_NORM_ATTR, Camera, Scene
 from .settings import AUTO_LIGHT_PATHS_RANGE, EYE_ONLY_SETTINGS, RenderSettings, auto_light_paths
 from .spectrum import SpectralConverter, WavelengthGrid
 from .textures import PreparedTextures, prepare_textures
@@ -84,7 +84,8 @@ class PreparedScene:
     tri_normal: np.ndarray             # (T, 3) float32 unit geometric normals
     tri_offset: np.ndarray             # (T,) float32 self-intersection offset per triangle
     tri_material: np.ndarray           # (T,) int32
-    tri_grating_tangent: np.ndarray    # (T, 3) float32 unit grating vectors; (0, 3) without gratings
+    tri_grating_tangent: np.ndarray    # (T, 3) float32 unit grating vectors of grating triangles (other rows
+    #                                    zero); (0, 3) without gratings
     tri_period: np.ndarray             # (T,) float32 nm per-triangle period override (0: the material's), or (0,)
     world_spectrum: np.ndarray         # (n,) float32 radiance of a uniform world; with a map, the map's
     #                                    mean over the sphere (what does not sample the map yet uses)
@@ -104,7 +105,8 @@ class PreparedScene:
     microfacet: np.ndarray | None = None
     # opal volume domains (core/opal/volume.py: lookup(points, prim)); None: the scene has none
     opal_domains: VolumeDomains | None = None
-    # (T, 3, 3) float32 smooth grating tangents per corner (core/grating_directions.py), or None
+    # (T, 3, 3) float32 smooth grating tangents per corner of grating triangles (core/grating_directions.py;
+    # other rows zero), or None
     corner_grating_tangent: np.ndarray | None = None
 
     @property
@@ -140,9 +142,15 @@ def triangle_offsets(v: np.ndarray, t: np.ndarray, base: float) -> np.ndarray:
     largest |coordinate| (looked up per hit, so no per-hit reduction)."""
     if len(t) == 0:
         return np.zeros(0, np.float32)
-    # the largest |coordinate| per vertex, then per triangle (the same maxima, no (T, 3, 3) gather)
-    per_vertex = np.abs(v).max(axis=1)
-    return (base + 4e-7 * per_vertex[t].max(axis=1)).astype(np.float32)
+    # the largest |coordinate| per vertex, then per triangle (the same maxima, no (T, 3, 3) gather),
+    # column by column: a reduction over a short last axis is several times slower
+    a = np.abs(v)
+    per_vertex = np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2])
+    del a
+    m = per_vertex[t[:, 0]]
+    np.maximum(m, per_vertex[t[:, 1]], out=m)
+    np.maximum(m, per_vertex[t[:, 2]], out=m)
+    return (base + 4e-7 * m).astype(np.float32)
 
 
 def _equal(a, b) -> bool:
@@ -210,6 +218,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
     settings.validate()
     scene, warnings = scene.validated()
     cross = scene.__dict__.pop(TRIANGLE_CROSS_ATTR, None)  # validation's products (not kept with the scene)
+    cross_norm = scene.__dict__.pop(TRIANGLE_CROSS_NORM_ATTR, None)
     if settings.light_paths is None:  # automatic: sized to the image (settings.auto_light_paths)
         cam = scene.camera
         settings = replace(settings, light_paths=auto_light_paths(cam.width, cam.height, settings.samples) if cam is not None
@@ -234,8 +243,11 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         accel, nrm64, tri_normal = reuse.accel, None, reuse.tri_normal
         tri_offset, base, extent = reuse.tri_offset, reuse.offset_base, reuse.extent
     else:
-        nrm64 = triangle_normals(v, t) if cross is None or len(cross) != len(t) else normals_from_cross(cross)
-        cross = None
+        if cross is None or len(cross) != len(t):
+            nrm64 = triangle_normals(v, t)
+        else:  # validation's products divided in place by their norms (it took them for the areas)
+            nrm64 = normals_from_cross(cross, cross_norm, in_place=True)
+        cross = cross_norm = None
         tri_normal = nrm64.astype(np.float32)
         extent = scene_extent(v)
         base = OFFSET_RELATIVE * extent
@@ -253,9 +265,10 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         check(stopped)
     if gratings.any:  # only a scene with gratings pays for their frames
         nrm64 = triangle_normals(v, t) if nrm64 is None else nrm64
-        tri_grating_tangent = triangle_tangents(nrm64, scene.tri_tangent)
-        corner_grating_tangent = smooth_corner_tangents(v, t, nrm64, tri_grating_tangent, tri_material,
-                                                        gratings.enabled[tri_material])
+        grating_tri = gratings.enabled[tri_material]
+        # the frames of grating triangles only (only grating hits read them; other rows zero)
+        tri_grating_tangent = triangle_tangents(nrm64, scene.tri_tangent, rows=grating_tri)
+        corner_grating_tangent = smooth_corner_tangents(v, t, nrm64, tri_grating_tangent, tri_material, grating_tri)
     else:
         tri_grating_tangent = np.zeros((0, 3), np.float32)
         corner_grating_tangent = None

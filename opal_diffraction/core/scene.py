@@ -51,6 +51,8 @@ LIGHT_KINDS = codes(LightKind)
 #: (geometry.triangle_cross of its vertices and triangles) under this attribute, so that
 #: prepare does not compute them a second time; not a field (never saved, dropped by replace).
 TRIANGLE_CROSS_ATTR = "_validated_triangle_cross"
+#: ... and their norms (twice the areas), (T,) float64
+TRIANGLE_CROSS_NORM_ATTR = "_validated_triangle_cross_norm"
 
 
 class SceneError(ValueError):
@@ -706,8 +708,7 @@ class Scene:
         cn = _validate_corner_normals(self.corner_normals, v, t, warns)
         cross = None
         if len(t):
-            cross = triangle_cross(v, t)
-            area2 = np.linalg.norm(cross, axis=1)
+            cross, area2 = triangle_cross(v, t, with_norm=True)  # area2: np.linalg.norm(cross, axis=1)
             degenerate = area2 <= 0.0
             tiny = ~degenerate & (area2 < 2 * MIN_TRIANGLE_AREA)
             if degenerate.any():
@@ -717,7 +718,7 @@ class Scene:
                              f"(area below {MIN_TRIANGLE_AREA:g} m^2)")
             if degenerate.any() or tiny.any():
                 keep = ~(degenerate | tiny)
-                t, tm, cross = t[keep], tm[keep], cross[keep]
+                t, tm, cross, area2 = t[keep], tm[keep], cross[keep], area2[keep]
                 tt = tt[keep] if len(tt) else tt
                 tp = tp[keep] if len(tp) else tp
                 cn = cn[keep] if len(cn) else cn
@@ -737,6 +738,7 @@ class Scene:
                         world_image=world_image, world_rotation=world_rotation, **tex, **dom)
         if cross is not None:  # prepare's normals are these products normalised (it pops them)
             clean.__dict__[TRIANGLE_CROSS_ATTR] = cross
+            clean.__dict__[TRIANGLE_CROSS_NORM_ATTR] = area2
         return clean, warns
 
     # ------------------------------------------------------------------ .npz
@@ -1208,7 +1210,7 @@ def _check_row_counts(table, what: str, n: int) -> None:
                              f"expected {n}")
 
 
-_ROWS_PER_CHUNK = 1 << 18  # rows of per-corner data normalised at a time
+_ROWS_PER_CHUNK = 1 << 14  # rows of per-corner data normalised at a time (a few MB: in cache)
 
 
 def _validate_corner_normals(value, v: np.ndarray, t: np.ndarray, warns: list) -> np.ndarray:
@@ -1221,20 +1223,27 @@ def _validate_corner_normals(value, v: np.ndarray, t: np.ndarray, warns: list) -
         raise SceneError(f"corner_normals must have one (3, 3) entry per triangle ({len(t)}) or none, got {len(cn)}")
     _check_range(cn.reshape(len(cn), 9), lambda i: f"triangle {i}", "shading normal", "")
     # normalised in float64 in chunks of rows (the same values as over the whole array at once,
-    # without (T, 3, 3) float64 temporaries)
+    # without (T, 3, 3) float64 temporaries), chunks small enough to stay in cache; the length is sqrt((x^2 + y^2) + z^2), the order
+    # np.linalg.norm's reduction adds in (the same values, tests/test_prepare_scale.py)
     out = np.empty(cn.shape, np.float32)
     n_zero = 0
     for s in range(0, len(cn), _ROWS_PER_CHUNK):
         c64 = cn[s:s + _ROWS_PER_CHUNK].astype(np.float64)
-        length = np.linalg.norm(c64, axis=2, keepdims=True)
+        sq = c64 * c64
+        length = sq[..., 0] + sq[..., 1]
+        length += sq[..., 2]
+        del sq
+        length = np.sqrt(length, out=length)[..., None]
         zero = ~(length > 1e-30)
         if zero.any():
-            face = triangle_normals(v, t[s:s + _ROWS_PER_CHUNK])
+            tc = t[s:s + _ROWS_PER_CHUNK]  # the chunk's corners only (not all V vertices in float64)
+            face = triangle_normals(v[tc.reshape(-1)], np.arange(tc.size).reshape(-1, 3))
             # degenerate triangles (zero face normal) are dropped later: no warning for them
             n_zero += int((zero[:, :, 0] & (np.abs(face).max(axis=1) > 0)[:, None]).sum())
             c64 = np.where(zero, face[:, None, :], c64)
             length = np.where(zero, 1.0, length)
-        out[s:s + _ROWS_PER_CHUNK] = c64 / length
+        np.divide(c64, length, out=c64)
+        out[s:s + _ROWS_PER_CHUNK] = c64
     if n_zero:
         warns.append(f"{n_zero} zero shading normal(s): their triangles' face normals are used there")
     return out
