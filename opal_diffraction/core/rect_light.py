@@ -19,6 +19,8 @@ sqrt(d^2 + y1^2), hv = h0 + v (h1 - h0), yv = hv d / sqrt(1 - hv^2), d = sqrt(xu
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 __all__ = ["RectFrame", "solid_angle", "sample"]
@@ -48,25 +50,21 @@ def _setup(rect: RectFrame, o: np.ndarray):
     zs = np.where(z0 > 0, -1.0, 1.0)  # z turned away from o: z0 <= 0
     z0 = z0 * zs
     x1, y1 = x0 + rect.lx, y0 + rect.ly
-
-    def nrm(a, b, c):
-        inv = 1.0 / np.sqrt(a * a + b * b + c * c)
-        return a * inv, b * inv, c * inv
+    # The edge planes' unit normals n0 = (0, z0, -y0) / ry0, n1 = (-z0, 0, x1) / rx1,
+    # n2 = (0, -z0, y1) / ry1, n3 = (z0, 0, -x0) / rx0 (cross products of neighbouring corner
+    # vectors), so their dot products and z components reduce to these four lengths.
+    zz = z0 * z0
+    rx0, rx1, ry0, ry1 = np.sqrt(zz + x0 * x0), np.sqrt(zz + x1 * x1), np.sqrt(zz + y0 * y0), np.sqrt(zz + y1 * y1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        # the edge planes' normals (cross products of neighbouring corner vectors)
-        n0 = nrm(0.0 * x0, z0, -y0)
-        n1 = nrm(-z0, 0.0 * x0, x1)
-        n2 = nrm(0.0 * x0, -z0, y1)
-        n3 = nrm(z0, 0.0 * x0, -x0)
-        dot = lambda a, b: a[0] * b[0] + a[1] * b[1] + a[2] * b[2]  # noqa: E731
-        g0 = np.arccos(np.clip(-dot(n0, n1), -1.0, 1.0))
-        g1 = np.arccos(np.clip(-dot(n1, n2), -1.0, 1.0))
-        g2 = np.arccos(np.clip(-dot(n2, n3), -1.0, 1.0))
-        g3 = np.arccos(np.clip(-dot(n3, n0), -1.0, 1.0))
+        g0 = np.arccos(np.clip(y0 * x1 / (ry0 * rx1), -1.0, 1.0))    # acos(-n0 . n1)
+        g1 = np.arccos(np.clip(-x1 * y1 / (rx1 * ry1), -1.0, 1.0))   # acos(-n1 . n2)
+        g2 = np.arccos(np.clip(x0 * y1 / (ry1 * rx0), -1.0, 1.0))    # acos(-n2 . n3)
+        g3 = np.arccos(np.clip(-x0 * y0 / (rx0 * ry0), -1.0, 1.0))   # acos(-n3 . n0)
+        b0, b1 = -y0 / ry0, y1 / ry1                                 # n0.z, n2.z
     k = 2 * np.pi - g2 - g3
     s = g0 + g1 - k
     s = np.where(np.isfinite(s) & (z0 < 0), np.maximum(s, 0.0), 0.0)  # o in the light's plane: nothing seen
-    return x0, x1, y0, y1, z0, zs, n0[2], n2[2], k, s
+    return x0, x1, y0, y1, z0, zs, b0, b1, k, s
 
 
 def solid_angle(rect: RectFrame, o: np.ndarray) -> np.ndarray:
@@ -99,6 +97,10 @@ def sample(rect: RectFrame, o: np.ndarray, u: np.ndarray, v: np.ndarray):
     return pts, s
 
 
+#: Per thread: (lights, index, points, solid angles) of the last sample_light_rect call.
+_last = threading.local()
+
+
 def _frame_of(pl, index: int) -> RectFrame:
     return RectFrame(pl.position[index], pl.axis_u[index], pl.axis_v[index], pl.size_u[index], pl.size_v[index])
 
@@ -112,6 +114,7 @@ def sample_light_rect(pl, index: int, p: np.ndarray, r1: np.ndarray, r2: np.ndar
     rect = _frame_of(pl, index)
     p64 = np.asarray(p, np.float64)
     target, s = sample(rect, p64, r1, r2)
+    _last.entry = (pl, index, p64, s)  # the next events ask light_pdf for the same points next
     tiny = s < MIN_SOLID_ANGLE
     if tiny.any():
         a, c = (np.asarray(r1, np.float64) - 0.5) * rect.lx, (np.asarray(r2, np.float64) - 0.5) * rect.ly
@@ -129,7 +132,12 @@ def sample_light_rect(pl, index: int, p: np.ndarray, r1: np.ndarray, r2: np.ndar
 def pdf_light_rect(pl, index: int, p: np.ndarray, hit: np.ndarray, t: np.ndarray, cos_l: np.ndarray) -> np.ndarray:
     """(B,) float64 solid-angle pdf of ``sample_light_rect`` for directions that reach the light's
     front at distance ``t`` with cosine ``cos_l`` (``hit``), 0 elsewhere."""
-    s = solid_angle(_frame_of(pl, index), p)
+    e = getattr(_last, "entry", None)
+    p = np.asarray(p, np.float64)
+    if e is not None and e[0] is pl and e[1] == index and e[2].shape == p.shape and np.array_equal(e[2], p):
+        s = e[3]  # the solid angles the sampler just computed at these points
+    else:
+        s = solid_angle(_frame_of(pl, index), p)
     tiny = s < MIN_SOLID_ANGLE
     with np.errstate(divide="ignore", invalid="ignore"):
         pdf = np.where(tiny, t * t / (float(pl.area[index]) * cos_l), 1.0 / s)
