@@ -97,7 +97,8 @@ def sample(rect: RectFrame, o: np.ndarray, u: np.ndarray, v: np.ndarray):
     return pts, s
 
 
-#: Per thread: (lights, index, points, solid angles) of the last sample_light_rect call.
+#: Per thread: (lights, index, points, solid angles, directions, pdfs) of the last
+#: sample_light_rect call.
 _last = threading.local()
 
 
@@ -114,7 +115,7 @@ def sample_light_rect(pl, index: int, p: np.ndarray, r1: np.ndarray, r2: np.ndar
     rect = _frame_of(pl, index)
     p64 = np.asarray(p, np.float64)
     target, s = sample(rect, p64, r1, r2)
-    _last.entry = (pl, index, p64, s)  # the next events ask light_pdf for the same points next
+    _last.entry = (pl, index, p64, s)
     tiny = s < MIN_SOLID_ANGLE
     if tiny.any():
         a, c = (np.asarray(r1, np.float64) - 0.5) * rect.lx, (np.asarray(r2, np.float64) - 0.5) * rect.ly
@@ -126,7 +127,24 @@ def sample_light_rect(pl, index: int, p: np.ndarray, r1: np.ndarray, r2: np.ndar
     wi = to_light / dist[:, None]
     cos_l = -(wi @ np.asarray(pl.direction[index], np.float64))
     g = np.where(cos_l > 0, np.where(tiny, cos_l * float(pl.area[index]) / d2, s), 0.0)
-    return wi.astype(f32), dist.astype(f32), g.astype(f32)
+    wi32 = wi.astype(f32)
+    with np.errstate(divide="ignore"):
+        pdf = np.where(cos_l > 0, np.where(tiny, d2 / (float(pl.area[index]) * cos_l), 1.0 / s), 0.0)
+    # the next events ask light_pdf for these points and directions next
+    _last.entry = (pl, index, p64, s, wi32, pdf.astype(f32))
+    return wi32, dist.astype(f32), g.astype(f32)
+
+
+def cached_pdf(pl, index: int, p: np.ndarray, wi: np.ndarray):
+    """light_pdf of the directions the last ``sample_light_rect`` call (this thread) drew, when
+    ``p`` and ``wi`` are those points and directions: the pdf of a sampled direction is 1 / S
+    (it reaches the light's front where cos_l > 0) without a ray-rectangle test; else None."""
+    e = getattr(_last, "entry", None)
+    if e is None or e[0] is not pl or e[1] != index or len(e) < 6:
+        return None
+    if e[4].shape != np.shape(wi) or not np.array_equal(e[4], wi) or not np.array_equal(e[2], p):
+        return None
+    return e[5]
 
 
 def pdf_light_rect(pl, index: int, p: np.ndarray, hit: np.ndarray, t: np.ndarray, cos_l: np.ndarray) -> np.ndarray:

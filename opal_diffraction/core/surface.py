@@ -52,14 +52,18 @@ def surface_reflectance(prepared, hit, lam=None) -> np.ndarray:
     wavelength index ``lam`` (B,) for mono rays. Untextured materials:
     ``prepared.materials.reflectance[hit.mat]``; a colour texture: its RGB through
     ``reflectance_from_rgb``'s linear basis."""
-    out = _per_hit(prepared.materials.reflectance, hit.mat, lam)
     tx = prepared.textures
     if tx.uses("color"):
         rows, rgba = tx.lookup("color", hit.mat, hit.prim, hit.bu, hit.bv)
         if rows.size:
             rgb = np.clip(rgba[:, :3], np.float32(0), np.float32(1))
-            out[rows] = _spectrum(rgb, tx.reflectance_basis, lam, rows)
-    return out
+            spectra = _spectrum(rgb, tx.reflectance_basis, lam, rows)
+            if rows.size == len(hit.mat):  # every hit textured: nothing of the table to keep
+                return spectra
+            out = _per_hit(prepared.materials.reflectance, hit.mat, lam)
+            out[rows] = spectra
+            return out
+    return _per_hit(prepared.materials.reflectance, hit.mat, lam)
 
 
 def _scalar(prepared, hit, column: str, slot: str) -> np.ndarray:
