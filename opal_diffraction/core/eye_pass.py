@@ -391,7 +391,8 @@ class _TileTrace(SpecularWalker):
                 self._next_events(r, h, self._film, albedo)
             else:
                 if first.any():
-                    self._next_events(r.take(first), h.take(first), self._film, None if albedo is None else albedo[first])
+                    self._next_events(r.take(first), h.take(first), self._film,
+                                      None if albedo is None else albedo[first])
                 self._next_events(r.take(~first), h.take(~first), self._part("indirect"),
                                   None if albedo is None else albedo[~first])
             if self.caustic_map is not None:
