@@ -76,3 +76,26 @@ def test_seeds_differing_above_32_bits_give_other_points():
         b = sobol_owen_2d(pix, smp, 0, seed=other)
         assert np.mean(a[0] == b[0]) < 0.1
     np.testing.assert_array_equal(a[0], sobol_owen_2d(pix, smp, 0, seed=5)[0])
+
+
+def test_bit_reversal_and_sobols_second_dimension_match_their_definitions():
+    """The shift-and-mask bit reversal equals reversing the binary digits, and Sobol's second
+    dimension from superset parities equals the xor of its direction numbers v_0 = 2^31,
+    v_i = v_(i-1) xor (v_(i-1) >> 1) over the index's set bits (Joe & Kuo's polynomial x + 1)."""
+    from opal_diffraction.core.sampler import _reverse_bits, _sobol_y
+
+    rng = np.random.default_rng(9)
+    x = np.concatenate([rng.integers(0, 1 << 32, 3000, dtype=np.uint64), [0, 1, 0xFFFFFFFF, 1 << 31]]).astype(np.uint32)
+    want = np.array([int(f"{int(v):032b}"[::-1], 2) for v in x], np.uint64)
+    assert np.array_equal(_reverse_bits(x).astype(np.uint64), want)
+    v = [1 << 31]
+    for _ in range(31):
+        v.append(v[-1] ^ (v[-1] >> 1))
+    y = []
+    for i in x:
+        acc = 0
+        for bit in range(32):
+            if int(i) >> bit & 1:
+                acc ^= v[bit]
+        y.append(acc)
+    assert np.array_equal(_sobol_y(x).astype(np.uint64), np.array(y, np.uint64))

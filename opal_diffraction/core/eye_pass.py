@@ -24,6 +24,7 @@ from .sampler import SLOT_BOUNCE, SLOT_LIGHT, SLOT_PARAMS, SLOT_WIDTH, PixelSamp
 from . import grating_layering
 from .grating_sampling import scattering_materials
 from .grating_world import diffracts_world, world_through_grating
+from .grey_paths import GreyPaths
 from .lights import intersect_lights, is_delta, light_pdf, sample_light, sun_radiance
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIFFUSE
@@ -187,6 +188,9 @@ class _TileTrace(SpecularWalker):
         pm = eye.prepared
         self.scattering = (scattering_materials(pm.gratings, pm.materials.kind, pm.microfacet)
                            if self.caustic_map is not None and pm.gratings.any else None)
+        # grey path weights (core/grey_paths.py), in the plain path tracer only: gratings, their
+        # layers and the opal's lobes read spectral weights
+        self.greys = GreyPaths(pm, enabled=not (pm.gratings.any or self.layers or self.bragg is not None))
 
     def _new_film(self) -> np.ndarray:
         return np.zeros(self._n_pixels * self.n, np.float32)
@@ -398,20 +402,26 @@ class _TileTrace(SpecularWalker):
             first = r.extra["nd"] == 0
             if first.any():
                 self._denoising_features(r.take(first), h.take(first))
-            # the base colour once per hit: next events and the bounce (scatter) share it
-            albedo = surface_reflectance(prepared, h, r.lam)
+            # the base colour once per hit: next events and the bounce (scatter) share it;
+            # grey ones as one number per hit (core/grey_paths.py; next events expand it)
+            grey = self.greys.albedo(r, h.mat)
+            albedo = surface_reflectance(prepared, h, r.lam) if grey is None else grey
             self._albedo_of = (full_hit, np.flatnonzero(full_live)[diffuse], albedo)
             lit = (albedo.max(axis=1) if albedo.ndim == 2 else albedo) > 0
             if not lit.all():  # black (emission-only) surfaces reflect nothing: no next events
                 r, h, r_full, albedo, first = r.take(lit), h.take(lit), r_full.take(lit), albedo[lit], first[lit]
                 if len(r) == 0:
                     return
+            if grey is not None:
+                albedo = None  # the next events take the spectra where they need them
             if first.all():
                 self._next_events(r, h, self._film, albedo)
             else:
                 if first.any():
-                    self._next_events(r.take(first), h.take(first), self._film, albedo[first])
-                self._next_events(r.take(~first), h.take(~first), self._part("indirect"), albedo[~first])
+                    self._next_events(r.take(first), h.take(first), self._film,
+                                      None if albedo is None else albedo[first])
+                self._next_events(r.take(~first), h.take(~first), self._part("indirect"),
+                                  None if albedo is None else albedo[~first])
             if self.caustic_map is not None:
                 if self.scattering is not None and self.scattering[h.mat].any():
                     own = self.scattering[h.mat]  # the map holds the base's share there already
@@ -484,7 +494,13 @@ class _TileTrace(SpecularWalker):
             return micro_out
         albedo = self._cached_albedo(hit, sel)
         if albedo is None:
+            albedo = self.greys.albedo(r, h.mat)
+        if albedo is None:
             albedo = surface_reflectance(self.prepared, h, r.lam)
+        # (B,) for white rays: grey base colours, the weight stays one number (core/grey_paths.py)
+        grey = albedo.ndim == 1 and r.lam is None
+        if grey and not self.greys.is_grey(r):  # spectral weights: the grey colour as a spectrum
+            albedo, grey = albedo[:, None] * self.greys.basis, False
         lit = (albedo.max(axis=1) if albedo.ndim == 2 else albedo) > 0
         if not lit.all():  # a zero-weight path (a black surface) ends here
             r, h, albedo = r.take(lit), h.take(lit), albedo[lit]
@@ -499,8 +515,11 @@ class _TileTrace(SpecularWalker):
         o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
         bump = self._bump(h, wi)
         if np.ndim(bump):
-            albedo = albedo * (bump[:, None] if r.lam is None else bump)
-        out = r.moved(o, wi, r.weighted(albedo))
+            albedo = albedo * (bump[:, None] if albedo.ndim == 2 else bump)
+        if grey:
+            out = self.greys.scaled(r, albedo, r.moved(o, wi, None))
+        else:
+            out = r.moved(o, wi, r.weighted(albedo))
         if self.layers:
             out = grating_layering.scale_base(self.prepared, out, h)
         s = out.extra
@@ -520,6 +539,8 @@ class _TileTrace(SpecularWalker):
             return None
         rows, albedo = cached[1], cached[2]
         want = np.flatnonzero(sel)
+        if len(want) == len(rows) and np.array_equal(rows, want):  # the usual case: the same hits
+            return albedo
         pos = np.searchsorted(rows, want)
         if pos.size and (pos.max() >= len(rows) or not np.array_equal(rows[pos], want)):
             return None  # a hit on_hit did not shade as diffuse
@@ -754,6 +775,8 @@ class _TileTrace(SpecularWalker):
             return
         bg = self.prepared.world_spectrum
         if not bg.any() or len(rays) == 0:
+            return
+        if self.greys.add_constant(film, rays, bg, self._n_pixels):  # grey weights: sums per pixel
             return
         if rays.lam is None and rays.w is None:  # unit weights: count rays per pixel
             counts = np.bincount(rays.pix, minlength=self._n_pixels).astype(np.float32)

@@ -22,9 +22,11 @@ Sampling (pbrt-v4 section 12.2 SphereLight / Cycles' point.h and distant.h): a s
 outside is sampled uniformly in the cone it subtends (sin theta_max = r / d), from inside
 uniformly over the sphere of directions (Cycles' choice for transmissive surfaces; its
 cosine-hemisphere choice needs the normal, which this interface does not take); a soft-falloff
-disk by a uniform point on it; a sun with an angle uniformly in its cone; an area light by a
-uniform point on it. ``light_pdf`` is the solid-angle density of those samplers, ``intersect_lights``
-and ``sun_radiance`` what a ray sees of the sized lights (mirrors, glass, the camera, MIS).
+disk by a uniform point on it; a sun with an angle uniformly in its cone; a rectangle light
+uniformly in the solid angle it subtends (Urena et al. 2013, core/rect_light.py, as Cycles'
+area.h), a disk light by a uniform point on it. ``light_pdf`` is the solid-angle density of
+those samplers, ``intersect_lights`` and ``sun_radiance`` what a ray sees of the sized lights
+(mirrors, glass, the camera, MIS).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .enums import LightKind
+from . import rect_light
 from .geometry import orthonormal_basis
 from .scene import Lights
 from .spectrum import SpectralConverter
@@ -246,11 +249,11 @@ def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.G
         target = pl.position[index].astype(f32)
     else:
         r1, r2 = rng.random(b, f32), rng.random(b, f32)
-        if k == AREA_RECT:
-            a, c = (r1 - 0.5) * pl.size_u[index], (r2 - 0.5) * pl.size_v[index]
-        else:  # uniform on an ellipse: concentric-free polar mapping is fine for uniform density
-            rad, phi = np.sqrt(r1), 2 * np.pi * r2
-            a, c = 0.5 * pl.size_u[index] * rad * np.cos(phi), 0.5 * pl.size_v[index] * rad * np.sin(phi)
+        if k == AREA_RECT:  # by solid angle, as Cycles (core/rect_light.py)
+            return rect_light.sample_light_rect(pl, index, p, r1, r2)
+        # a disk: uniform on the ellipse (a polar mapping is fine for a uniform density)
+        rad, phi = np.sqrt(r1), 2 * np.pi * r2
+        a, c = 0.5 * pl.size_u[index] * rad * np.cos(phi), 0.5 * pl.size_v[index] * rad * np.sin(phi)
         target = (pl.position[index] + a[:, None] * pl.axis_u[index] + c[:, None] * pl.axis_v[index]).astype(f32)
     to_light = target - p
     d2 = np.maximum(np.einsum("ij,ij->i", to_light, to_light), f32(1e-30))
@@ -337,7 +340,11 @@ def light_pdf(pl: PreparedLights, index: int, p: np.ndarray, wi: np.ndarray) -> 
         with np.errstate(divide="ignore", invalid="ignore"):
             pdf = t * t / (np.pi * r * r * cos_l)
         return np.where(ok & (cos_l > 0), pdf, 0.0).astype(np.float32)
+    if k == AREA_RECT and (cached := rect_light.cached_pdf(pl, index, p, wi)) is not None:
+        return cached  # the directions sample_light just drew (core/rect_light.py)
     t, ok, cos_l = _area_hit(pl, index, p, wi, np.full(b, np.inf))
+    if k == AREA_RECT:
+        return rect_light.pdf_light_rect(pl, index, p, ok, t, cos_l).astype(np.float32)
     with np.errstate(divide="ignore", invalid="ignore"):
         pdf = t * t / (pl.area[index] * cos_l)
     return np.where(ok, pdf, 0.0).astype(np.float32)

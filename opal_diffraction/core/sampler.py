@@ -39,36 +39,27 @@ SLOT_WIDTH = {SLOT_LIGHT: 8, SLOT_PARAMS: 2, SLOT_BOUNCE: 6}
 _U32 = np.uint32
 
 
-def _sobol_dim1_tables() -> np.ndarray:
-    """Sobol's second dimension as four 256-entry XOR tables (one per byte of the index): the
-    direction numbers are v_0 = 2^31, v_i = v_{i-1} xor (v_{i-1} >> 1) (polynomial x + 1)."""
-    v = np.zeros(32, np.uint64)
-    v[0] = 1 << 31
-    for i in range(1, 32):
-        v[i] = v[i - 1] ^ (v[i - 1] >> np.uint64(1))
-    tables = np.zeros((4, 256), np.uint64)
-    for byte in range(4):
-        for value in range(256):
-            acc = 0
-            for bit in range(8):
-                if value >> bit & 1:
-                    acc ^= int(v[byte * 8 + bit])
-            tables[byte, value] = acc
-    return tables.astype(_U32)
-
-
-_DIM1 = _sobol_dim1_tables()
-
-
-_REVERSED_BYTE = np.array([int(f"{b:08b}"[::-1], 2) for b in range(256)], np.uint32)
-
-
 def _reverse_bits(x: np.ndarray) -> np.ndarray:
-    """The 32 bits of x in reverse order (four byte lookups)."""
+    """The 32 bits of x in reverse order: neighbouring bits, pairs and nibbles swapped by masks,
+    then the four bytes (a few whole-array operations, no table lookups)."""
     x = x.astype(_U32, copy=False)
-    t = _REVERSED_BYTE
-    return ((t[x & _U32(0xFF)] << _U32(24)) | (t[(x >> _U32(8)) & _U32(0xFF)] << _U32(16))
-            | (t[(x >> _U32(16)) & _U32(0xFF)] << _U32(8)) | t[x >> _U32(24)])
+    x = ((x >> _U32(1)) & _U32(0x55555555)) | ((x & _U32(0x55555555)) << _U32(1))
+    x = ((x >> _U32(2)) & _U32(0x33333333)) | ((x & _U32(0x33333333)) << _U32(2))
+    x = ((x >> _U32(4)) & _U32(0x0F0F0F0F)) | ((x & _U32(0x0F0F0F0F)) << _U32(4))
+    return x.byteswap()
+
+
+def _superset_parity(index: np.ndarray) -> np.ndarray:
+    """Bit j of the result = the parity of the index's set bits i that contain j (i & j == j).
+
+    Sobol's second dimension has direction numbers v_i = v_{i-1} xor (v_{i-1} >> 1), v_0 = 2^31:
+    bit 31 - j of v_i is binomial(i, j) mod 2, which is 1 exactly when j's bits are a subset of
+    i's (Lucas' theorem). So y(index) = xor of v_i over the index's bits is this word reversed.
+    The subset sums over GF(2) take one masked shift-xor per bit of the bit position (5)."""
+    w = index.astype(_U32, copy=True)
+    for shift, mask in ((1, 0x55555555), (2, 0x33333333), (4, 0x0F0F0F0F), (8, 0x00FF00FF), (16, 0x0000FFFF)):
+        w ^= (w >> _U32(shift)) & _U32(mask)
+    return w
 
 
 def _hash(x: np.ndarray) -> np.ndarray:
@@ -99,10 +90,8 @@ def _owen(x: np.ndarray, seed: np.ndarray) -> np.ndarray:
 
 
 def _sobol_y(index: np.ndarray) -> np.ndarray:
-    """Sobol's second dimension of ``index`` (uint32), from the byte tables."""
-    i = index
-    return (_DIM1[0][i & _U32(0xFF)] ^ _DIM1[1][(i >> _U32(8)) & _U32(0xFF)]
-            ^ _DIM1[2][(i >> _U32(16)) & _U32(0xFF)] ^ _DIM1[3][i >> _U32(24)])
+    """Sobol's second dimension of ``index`` (uint32): the reversed superset parities."""
+    return _reverse_bits(_superset_parity(index))
 
 
 def _key(seed: int, pixel: np.ndarray, pair: np.ndarray) -> np.ndarray:
@@ -129,7 +118,9 @@ def sobol_owen_2d(pixel, sample, pair, seed: int = 0) -> tuple[np.ndarray, np.nd
         # Sobol's x is the reversed index, so its Owen scramble reverse(LK(reverse(x))) needs
         # only the final reversal
         x = _reverse_bits(_laine_karras(index, _hash(key ^ _U32(0x68BC21EB))))
-        y = _owen(_sobol_y(index), _hash(key ^ _U32(0x02E5BE93)))
+        # Sobol's y is reverse(superset parities of the index) (_sobol_y), so its Owen scramble
+        # reverse(LK(reverse(y))) is reverse(LK(those parities)): two reversals fewer
+        y = _reverse_bits(_laine_karras(_superset_parity(index), _hash(key ^ _U32(0x02E5BE93))))
     scale = 1.0 / (1 << 24)
     return (x >> _U32(8)).astype(np.float64) * scale, (y >> _U32(8)).astype(np.float64) * scale
 

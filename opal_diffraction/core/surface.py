@@ -52,14 +52,18 @@ def surface_reflectance(prepared, hit, lam=None) -> np.ndarray:
     wavelength index ``lam`` (B,) for mono rays. Untextured materials:
     ``prepared.materials.reflectance[hit.mat]``; a colour texture: its RGB through
     ``reflectance_from_rgb``'s linear basis."""
-    out = _per_hit(prepared.materials.reflectance, hit.mat, lam)
     tx = prepared.textures
     if tx.uses("color"):
         rows, rgba = tx.lookup("color", hit.mat, hit.prim, hit.bu, hit.bv)
         if rows.size:
             rgb = np.clip(rgba[:, :3], np.float32(0), np.float32(1))
-            out[rows] = _spectrum(rgb, tx.reflectance_basis, lam, rows)
-    return out
+            spectra = _spectrum(rgb, tx.reflectance_basis, lam, rows)
+            if rows.size == len(hit.mat):  # every hit textured: nothing of the table to keep
+                return spectra
+            out = _per_hit(prepared.materials.reflectance, hit.mat, lam)
+            out[rows] = spectra
+            return out
+    return _per_hit(prepared.materials.reflectance, hit.mat, lam)
 
 
 def _scalar(prepared, hit, column: str, slot: str) -> np.ndarray:
@@ -123,15 +127,16 @@ def shading_normal(prepared, hit) -> np.ndarray:
     rows, rgba = tx.lookup("normal", hit.mat, hit.prim, hit.bu, hit.bv)
     if rows.size == 0:
         return n
-    out = n.copy()
-    ns = n[rows]
-    ng = np.asarray(hit.ng, np.float32)[rows]
+    every = rows.size == len(n)  # every hit mapped: no gathers of the batch
+    pick = (lambda a: np.asarray(a)) if every else (lambda a: np.asarray(a)[rows])  # noqa: E731
+    ns = pick(n)
+    ng = pick(np.asarray(hit.ng, np.float32))
     # the map is applied on the triangle's own (outward) side, then turned to face the ray
-    side = np.where(np.asarray(hit.front)[rows], np.float32(1), np.float32(-1))[:, None]
-    frame = interpolate_corners(tx.corner_tangents, hit.prim[rows], hit.bu[rows], hit.bv[rows])
+    side = np.where(pick(hit.front), np.float32(1), np.float32(-1))[:, None]
+    frame = interpolate_corners(tx.corner_tangents, pick(hit.prim), pick(hit.bu), pick(hit.bv))
     t, sign = frame[:, :3], frame[:, 3:4]
     n_out = ns * side
-    b = sign * np.cross(n_out, t)
+    b = sign * _cross(n_out, t)
     c = np.float32(2) * (rgba[:, :3] - np.float32(0.5))
     mapped, ok = _normalize(c[:, 0:1] * t + c[:, 1:2] * b + c[:, 2:3] * n_out)
     mapped = mapped * side
@@ -148,5 +153,15 @@ def shading_normal(prepared, hit) -> np.ndarray:
     if low.any():
         lifted, _ = _normalize(mapped[low] + (np.float32(NORMAL_MIN_COS) - d[low])[:, None] * ng[low])
         mapped[low] = lifted
+    if every:
+        return mapped
+    out = n.copy()
     out[rows] = mapped
     return out
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise a x b of (B, 3) arrays (np.cross's arithmetic without its generic set-up)."""
+    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)

@@ -211,11 +211,16 @@ class PreparedTextures:
         rows = np.flatnonzero(tid >= 0)
         if rows.size == 0:
             return rows, np.zeros((0, 4), np.float32)
-        tid = tid[rows]
+        every = rows.size == len(tid)  # every hit textured: no gathers of the batch
+        tid = tid if every else tid[rows]
         if len(self.corner_uvs):
-            uv = interpolate_corners(self.corner_uvs, prim[rows], bu[rows], bv[rows])
+            uv = (interpolate_corners(self.corner_uvs, prim, bu, bv) if every
+                  else interpolate_corners(self.corner_uvs, prim[rows], bu[rows], bv[rows]))
         else:  # no UV map: (0, 0), as Cycles reads a missing UV attribute
             uv = np.zeros((rows.size, 2), np.float32)
+        if tid.min() == tid.max():  # one texture (the usual case)
+            k = int(tid[0])
+            return rows, sample_texture(self.images[k], uv, self.interpolation[k], self.extension[k], self.encoding[k])
         out = np.empty((rows.size, 4), np.float32)
         for k in np.unique(tid):  # loop over the textures present (a handful)
             sel = tid == k
