@@ -176,3 +176,33 @@ def test_irradiance_near_and_far_is_lamberts_formula():
         z = (x.mean() - expected) / (x.std() / math.sqrt(n))
         print(f"p {p}: MC {x.mean():.6f} analytic {expected:.6f} Z {z:.2f}")
         assert abs(z) < Z_MAX, (p, z)
+
+
+def test_sample_light_pdf_is_light_pdf_of_its_directions():
+    """lights.sample_light_pdf's pdf (from the sample's g) against light_pdf (a second, float64
+    intersection with the light) for every kind of sized light, and None for delta lights."""
+    from opal_diffraction.core.lights import SPOT, light_pdf, sample_light_pdf
+    from test_lights_sized import prepared
+    pl = prepared({"kind": "AREA_RECT", "position": (0, 0, 2), "direction": (0.2, 0, -1), "size_u": 1.0,
+                   "size_v": 0.6},
+                  {"kind": "AREA_DISK", "position": (0.5, 0, 1.5), "direction": (0, 0, -1), "size_u": 0.8,
+                   "size_v": 0.8},
+                  {"kind": "POINT", "position": (1, 1, 1), "radius": 0.3},
+                  {"kind": "POINT", "position": (0.1, 0.1, 0.2), "radius": 0.4, "soft_falloff": 1},
+                  {"kind": "POINT", "position": (0.1, 0.0, 0.1), "radius": 0.5},  # some points inside
+                  {"kind": "SPOT", "position": (0, 1, 2), "direction": (0, -0.3, -1), "radius": 0.2,
+                   "spot_size": 1.0},
+                  {"kind": "SUN", "direction": (0.3, 0.2, -1), "angle": 0.2},
+                  {"kind": "POINT", "position": (0, 0, 1)})
+    p = np.random.default_rng(7).uniform(-1, 1, (2000, 3)).astype(np.float32) * np.float32(0.5)
+    for li in range(len(pl)):
+        wi, dist, g, pdf = sample_light_pdf(pl, li, p, np.random.default_rng(li))
+        if li == len(pl) - 1:
+            assert pdf is None
+            continue
+        ref = light_pdf(pl, li, p, wi)
+        live = (g > 0) & (ref > 0)
+        assert live.mean() > 0.3, li
+        np.testing.assert_allclose(pdf[live], ref[live], rtol=2e-3, err_msg=f"light {li}")
+        if int(pl.kind[li]) != SPOT:  # a spot's g holds its cone mask; its pdf is the sampler's density
+            assert (pdf[g <= 0] == 0).all()

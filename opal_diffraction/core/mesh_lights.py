@@ -43,46 +43,70 @@ __all__ = ["MeshLights"]
 MIN_SOLID_ANGLE = 1e-5
 
 
-def _unit(v):
-    return v / np.maximum(np.linalg.norm(v, axis=1), 1e-300)[:, None]
-
-
 def _dot(a, b):
+    """Row-wise dot products of (K, 3) arrays, or of (3, K) arrays along axis 0 (``axis=0``)."""
     return np.einsum("ij,ij->i", a, b)
 
 
-def _angle(a, b):
-    """Angles between unit vectors a, b (K, 3), accurate near 0 and pi: 2 atan2(|a - b|, |a + b|)."""
-    return 2.0 * np.arctan2(np.linalg.norm(a - b, axis=1), np.linalg.norm(a + b, axis=1))
+def _d0(a, b):
+    """Dot products of (3, K) arrays (one vector per column)."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cross0(a, b):
+    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _unit0(v):
+    return v / np.sqrt(np.maximum(_d0(v, v), 1e-300))
+
+
+def _spherical_setup(a, b, c):
+    """For unit corners a, b, c (3, K): (cos of the arc ab, the triple product |a . (b x c)|,
+    the solid angle Omega (Van Oosterom & Strackee 1983: tan(Omega / 2) = |a . (b x c)| /
+    (1 + a.b + b.c + c.a)), cos and sin of the angle at a)."""
+    cos_a, cos_b, cos_c = _d0(b, c), _d0(a, c), _d0(a, b)  # the arcs opposite a, b, c
+    triple = np.abs(_d0(a, _cross0(b, c)))
+    omega = 2.0 * np.arctan2(triple, 1.0 + cos_a + cos_b + cos_c)
+    # the angle at a: cos = (cos_a - cos_b cos_c) / (sin_b sin_c), sin = triple / (sin_b sin_c);
+    # normalised together, so no sin_b sin_c and no inverse trigonometry
+    num = cos_a - cos_b * cos_c
+    r = np.sqrt(np.maximum(num * num + triple * triple, 1e-300))
+    return cos_c, omega, num / r, triple / r
+
+
+def _arvo(a, b, c, u0, u1, setup):
+    """sample_spherical_triangle on (3, K) corners with their ``_spherical_setup``: (3, K)."""
+    cos_ab, omega, cos_al, sin_al = setup
+    sub = u0 * omega  # the sub-triangle's area
+    sin_s, cos_s = np.sin(sub), np.cos(sub)
+    s = sin_s * cos_al - cos_s * sin_al  # sin(sub - alpha)
+    t = cos_s * cos_al + sin_s * sin_al  # cos(sub - alpha)
+    uu = t - cos_al
+    vv = s + sin_al * cos_ab
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = ((vv * t - uu * s) * cos_al - vv) / ((vv * s + uu * t) * sin_al)  # cos of the arc a c'
+    q = np.clip(np.nan_to_num(q, nan=1.0), -1.0, 1.0)
+    c2 = q * a + np.sqrt(np.maximum(1.0 - q * q, 0.0)) * _unit0(c - _d0(c, a) * a)
+    z = 1.0 - u1 * (1.0 - _d0(c2, b))
+    return z * b + np.sqrt(np.maximum(1.0 - z * z, 0.0)) * _unit0(c2 - _d0(c2, b) * b)
 
 
 def solid_angle(a, b, c):
     """(K,) solid angles of the spherical triangles with unit corners a, b, c (K, 3): Van
     Oosterom & Strackee 1983, tan(Omega / 2) = |a . (b x c)| / (1 + a.b + b.c + c.a)."""
-    num = np.abs(_dot(a, np.cross(b, c)))
-    return 2.0 * np.arctan2(num, 1.0 + _dot(a, b) + _dot(b, c) + _dot(c, a))
+    return _spherical_setup(np.asarray(a, np.float64).T, np.asarray(b, np.float64).T,
+                            np.asarray(c, np.float64).T)[1]
 
 
 def sample_spherical_triangle(a, b, c, u0, u1):
     """Directions uniform in the spherical triangles with unit corners a, b, c (K, 3) from two
-    uniform numbers (K,) each (Arvo 1995, "Stratified Sampling of Spherical Triangles"; pbrt-v4
-    section 6.5.4): u0 chooses the sub-triangle (a, b, c') of area u0 Omega, u1 a point on the
-    arc from b to c' with the density that keeps the whole uniform. Returns unit (K, 3)."""
-    n_ab, n_bc, n_ca = _unit(np.cross(a, b)), _unit(np.cross(b, c)), _unit(np.cross(c, a))
-    alpha = _angle(n_ab, -n_ca)  # the spherical triangle's angles at a, b, c
-    beta = _angle(n_bc, -n_ab)
-    gamma = _angle(n_ca, -n_bc)
-    sub = u0 * (alpha + beta + gamma - np.pi)  # the sub-triangle's area
-    s, t = np.sin(sub - alpha), np.cos(sub - alpha)
-    sin_a, cos_a = np.sin(alpha), np.cos(alpha)
-    uu = t - cos_a
-    vv = s + sin_a * _dot(a, b)  # sin(alpha) cos(arc ab)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        q = ((vv * t - uu * s) * cos_a - vv) / ((vv * s + uu * t) * sin_a)  # cos of the arc a c'
-    q = np.clip(np.nan_to_num(q, nan=1.0), -1.0, 1.0)
-    c2 = q[:, None] * a + np.sqrt(np.maximum(1.0 - q * q, 0.0))[:, None] * _unit(c - _dot(c, a)[:, None] * a)
-    z = 1.0 - u1 * (1.0 - _dot(c2, b))
-    return z[:, None] * b + np.sqrt(np.maximum(1.0 - z * z, 0.0))[:, None] * _unit(c2 - _dot(c2, b)[:, None] * b)
+    uniform numbers (K,) each (Arvo 1995, "Stratified Sampling of Spherical Triangles"): u0
+    chooses the sub-triangle (a, b, c') of area u0 Omega (the arc a c' from Arvo's closed form,
+    with the angle at a from its cosine and sine), u1 a point on the arc from b to c' with the
+    density that keeps the whole uniform. Returns unit (K, 3)."""
+    a, b, c = (np.asarray(x, np.float64).T for x in (a, b, c))
+    return _arvo(a, b, c, np.asarray(u0, np.float64), np.asarray(u1, np.float64), _spherical_setup(a, b, c)).T
 
 
 def heitz_triangle(u0, u1):
@@ -110,11 +134,15 @@ class MeshLights:
         self.prob = weight / self.total   # (E,) P(j)
         e3 = e2 - e1
         self.longest2 = np.maximum(np.maximum(_dot(e1, e1), _dot(e2, e2)), _dot(e3, e3))  # (E,) m^2
+        self._plane = _dot(normal, v0)    # (E,) n . v0: the plane's offset
+        # (3, E) copies, one vector per column: the per-sample geometry runs on (3, B) rows
+        self._v0t, self._v1t, self._v2t = (np.ascontiguousarray(x.T) for x in (v0, v0 + e1, v0 + e2))
+        self._e1t, self._e2t, self._nt = (np.ascontiguousarray(x.T) for x in (e1, e2, normal))
         # (T,) emitter index of each scene triangle, -1 where it does not emit
         self._emitter_of = np.full(int(n_triangles), -1, np.int32 if len(tri) < 2 ** 31 else np.int64)
         self._emitter_of[tri] = np.arange(len(tri))
         for a in (tri, v0, e1, e2, normal, area, weight, self._cdf, self._cdf_lo, self.prob, self.longest2,
-                  self._emitter_of):
+                  self._plane, self._v0t, self._v1t, self._v2t, self._e1t, self._e2t, self._nt, self._emitter_of):
             a.flags.writeable = False  # part of a frozen PreparedScene, read from many threads
 
     @classmethod
@@ -180,21 +208,28 @@ class MeshLights:
         q = self.v0[j] + b1[:, None] * self.e1[j] + b2[:, None] * self.e2[j]
         return q, j, self.prob[j] / self.area[j]
 
-    def _by_solid_angle(self, p, j):
-        """Which (p, emitter j) pairs sample by solid angle (Cycles' heuristic: the longest edge
-        longer than the distance to the triangle's plane), and the corners' unit directions and
-        solid angles there: (near (b,) bool, a, b, c (K, 3), omega (K,)) for the K near pairs."""
-        plane = _dot(p - self.v0[j], self.normal[j])
+    def _near(self, pt, j):
+        """Which (point, emitter) pairs sample by solid angle, by Cycles' heuristic (the longest
+        edge longer than the distance to the triangle's plane), and for those the corners' unit
+        directions (3, K each) and their ``_spherical_setup``: (near (b,) bool, a, b, c, setup).
+        ``pt`` (3, b) float64 points, ``j`` (b,) emitters. Pairs whose solid angle is below
+        MIN_SOLID_ANGLE stay with area sampling."""
+        plane = _d0(pt, np.take(self._nt, j, axis=1)) - self._plane[j]
         near = self.longest2[j] > plane * plane
         idx = np.flatnonzero(near)
-        pn, jn = p[idx], j[idx]
-        a = _unit(self.v0[jn] - pn)
-        bb = _unit(self.v0[jn] + self.e1[jn] - pn)
-        c = _unit(self.v0[jn] + self.e2[jn] - pn)
-        omega = solid_angle(a, bb, c)
-        ok = omega > MIN_SOLID_ANGLE
-        near[idx[~ok]] = False
-        return near, a[ok], bb[ok], c[ok], omega[ok]
+        if idx.size == 0:
+            return near, None, None, None, None
+        pn, jn = np.take(pt, idx, axis=1), j[idx]
+        a = _unit0(np.take(self._v0t, jn, axis=1) - pn)
+        b = _unit0(np.take(self._v1t, jn, axis=1) - pn)
+        c = _unit0(np.take(self._v2t, jn, axis=1) - pn)
+        setup = _spherical_setup(a, b, c)
+        ok = setup[1] > MIN_SOLID_ANGLE
+        if not ok.all():
+            near[idx[~ok]] = False
+            a, b, c = a[:, ok], b[:, ok], c[:, ok]
+            setup = tuple(x[ok] for x in setup)
+        return near, a, b, c, setup
 
     def sample(self, p, rng: np.random.Generator):
         """One emitter sample per shading point p (B, 3), from one pair of numbers.
@@ -203,36 +238,43 @@ class MeshLights:
         float32, prim (B,) int64 scene triangle, pdf (B,) float32 solid-angle pdf); g and pdf are
         0 where the sample is seen edge-on or coincides with p.
         """
-        p = np.asarray(p, np.float64)
-        b = len(p)
+        pt = np.ascontiguousarray(np.asarray(p, np.float64).T)  # (3, B)
+        b = pt.shape[1]
         u = rng.random((b, 2))
         j, u0 = self.pick(u[:, 0])
         u1 = u[:, 1]
-        # by area: a point on the triangle (Heitz's map), its solid-angle pdf P(j) t^2 / (A_j cos_l)
-        b1, b2 = heitz_triangle(u0, u1)
-        to_q = self.v0[j] + b1[:, None] * self.e1[j] + b2[:, None] * self.e2[j] - p
-        d2 = _dot(to_q, to_q)
-        dist = np.sqrt(d2)
-        wi = to_q / np.maximum(dist, 1e-300)[:, None]
-        cos_l = np.abs(_dot(wi, self.normal[j]))
-        ok = (cos_l > 0) & (d2 > 0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            pdf = np.where(ok, self.prob[j] / self.area[j] * d2 / cos_l, 0.0)
-        near, a, bb, c, omega = self._by_solid_angle(p, j)
-        if near.any():  # by solid angle: a direction in the spherical triangle, then its point
-            w = sample_spherical_triangle(a, bb, c, u0[near], u1[near])
-            jn = j[near]
-            nrm = self.normal[jn]
-            den = _dot(w, nrm)
+        wi = np.empty((3, b))
+        dist = np.empty(b)
+        pdf = np.empty(b)
+        near, a, bb, c, setup = self._near(pt, j)
+        far = np.flatnonzero(~near)
+        if far.size:  # by area: a point on the triangle (Heitz's map), pdf P(j) t^2 / (A_j cos_l)
+            jf = j[far]
+            b1, b2 = heitz_triangle(u0[far], u1[far])
+            to_q = (np.take(self._v0t, jf, axis=1) + b1 * np.take(self._e1t, jf, axis=1)
+                    + b2 * np.take(self._e2t, jf, axis=1) - np.take(pt, far, axis=1))
+            d2 = _d0(to_q, to_q)
+            t = np.sqrt(d2)
+            w = to_q / np.maximum(t, 1e-300)
+            cos_l = np.abs(_d0(w, np.take(self._nt, jf, axis=1)))
             with np.errstate(divide="ignore", invalid="ignore"):
-                t = _dot(self.v0[jn] - p[near], nrm) / den
-            good = np.isfinite(t) & (t > 0) & (den != 0)
-            wi[near] = w
-            dist[near] = np.where(good, t, 0.0)
-            pdf[near] = np.where(good, self.prob[jn] / omega, 0.0)
+                pdf[far] = np.where((cos_l > 0) & (d2 > 0), self.prob[jf] / self.area[jf] * d2 / cos_l, 0.0)
+            wi[:, far], dist[far] = w, t
+        if a is not None:  # by solid angle: a direction in the spherical triangle, then its point
+            idx = np.flatnonzero(near)
+            jn = j[idx]
+            w = _arvo(a, bb, c, u0[idx], u1[idx], setup)
+            nrm = np.take(self._nt, jn, axis=1)
+            den = _d0(w, nrm)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (self._plane[jn] - _d0(np.take(pt, idx, axis=1), nrm)) / den
+            good = np.isfinite(t) & (t > 0)
+            wi[:, idx] = w
+            dist[idx] = np.where(good, t, 0.0)
+            pdf[idx] = np.where(good, self.prob[jn] / setup[1], 0.0)
         with np.errstate(divide="ignore"):
             g = np.where(pdf > 0, 1.0 / pdf, 0.0)
-        return (wi.astype(np.float32), dist.astype(np.float32), g.astype(np.float32), self.tri[j],
+        return (np.ascontiguousarray(wi.T, np.float32), dist.astype(np.float32), g.astype(np.float32), self.tri[j],
                 pdf.astype(np.float32))
 
     def pdf(self, prim, p_from, p_on) -> np.ndarray:
@@ -244,13 +286,14 @@ class MeshLights:
         if em.size == 0:
             return out.astype(np.float32)
         j = j[em]
-        p = np.asarray(p_from, np.float64)[em]
-        to_q = np.asarray(p_on, np.float64)[em] - p
-        d2 = _dot(to_q, to_q)
-        cos_l = np.abs(_dot(to_q, self.normal[j])) / np.sqrt(np.maximum(d2, 1e-300))
+        pt = np.ascontiguousarray(np.asarray(p_from, np.float64)[em].T)
+        to_q = np.asarray(p_on, np.float64)[em].T - pt
+        d2 = _d0(to_q, to_q)
+        cos_l = np.abs(_d0(to_q, np.take(self._nt, j, axis=1))) / np.sqrt(np.maximum(d2, 1e-300))
         with np.errstate(divide="ignore", invalid="ignore"):
             val = np.where(cos_l > 0, self.prob[j] / self.area[j] * d2 / cos_l, 0.0)
-        near, _, _, _, omega = self._by_solid_angle(p, j)
-        val[near] = self.prob[j[near]] / omega
+        near, _, _, _, setup = self._near(pt, j)
+        if setup is not None:
+            val[near] = self.prob[j[near]] / setup[1]
         out[em] = val
         return out.astype(np.float32)
