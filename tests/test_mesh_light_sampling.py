@@ -18,7 +18,7 @@ from test_lights_sized import Z_MAX, polygon_irradiance
 from test_mesh_lights import ray_triangles
 
 #: chi-square tests in this file (Bonferroni)
-CHI2_TESTS = 6
+CHI2_TESTS = 5
 ALPHA = 0.01 / CHI2_TESTS
 
 # a large panel (two triangles), a small far triangle and a tilted one with another emission

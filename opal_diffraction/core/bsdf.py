@@ -170,9 +170,10 @@ def _sample_vndf(wo, alpha, u1, u2):
     lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
     big = lensq > 1e-7
     inv = np.where(big, 1.0 / np.sqrt(np.where(big, lensq, 1.0)), 0.0)
-    t1 = np.stack([np.where(big, -vh[:, 1] * inv, 1.0), np.where(big, vh[:, 0] * inv, 0.0),
-                   np.zeros_like(lensq)], axis=1)
-    t2 = np.cross(vh, t1)
+    t1x, t1y = np.where(big, -vh[:, 1] * inv, 1.0), np.where(big, vh[:, 0] * inv, 0.0)
+    t1 = np.stack([t1x, t1y, np.zeros_like(lensq)], axis=1)
+    # vh x t1 written out (t1 has no z): np.cross's general path costs several times more
+    t2 = np.stack([-vh[:, 2] * t1y, vh[:, 2] * t1x, vh[:, 0] * t1y - vh[:, 1] * t1x], axis=1)
     r = np.sqrt(u1)
     phi = 2.0 * np.pi * u2
     p1 = r * np.cos(phi)
@@ -624,10 +625,16 @@ def sample(params: SurfaceParams, wo, ns, ng, u):
     flags = np.zeros(B, np.int32)
     valid = wl[:, 2] > 0
     for code in (LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY):  # a loop over the 5 lobes
-        idx = np.flatnonzero((params.lobe == code) & valid)
-        if len(idx) == B:
-            wi_l, weight, pdf, flags = _sample_lobe(params, code, wl, u)
-        elif len(idx):
+        mine = params.lobe == code
+        idx = np.flatnonzero(mine & valid)
+        if len(idx) and mine.all():  # one lobe everywhere: all rows, the invalid ones zeroed (no take)
+            with np.errstate(all="ignore"):
+                wi_l, weight, pdf, flags = _sample_lobe(params, code, wl, u)
+            if len(idx) < B:
+                bad = ~valid
+                wi_l[bad], weight[bad], pdf[bad], flags[bad] = (0.0, 0.0, 1.0), 0.0, 0.0, 0
+            break
+        if len(idx):
             wi_l[idx], weight[idx], pdf[idx], flags[idx] = _sample_lobe(params.take(idx), code, wl[idx], u[idx])
     wi = _to_world(wi_l, fu, fv, ns)
     wi /= np.maximum(np.linalg.norm(wi, axis=1, keepdims=True), 1e-30)
@@ -655,10 +662,15 @@ def evaluate(params: SurfaceParams, wo, wi, ns, ng):
     consistent = np.where(il[:, 2] > 0, side > 0, (side < 0) & (il[:, 2] < 0))
     valid = (wl[:, 2] > 0) & consistent
     for code in (LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY):
-        idx = np.flatnonzero((params.lobe == code) & valid)
-        if len(idx) == B:
-            fcos, pdf = _eval_lobe(params, code, wl, il)
-        elif len(idx):
+        mine = params.lobe == code
+        idx = np.flatnonzero(mine & valid)
+        if len(idx) and mine.all():  # one lobe everywhere: all rows, the invalid ones zeroed (no take)
+            with np.errstate(all="ignore"):
+                fcos, pdf = _eval_lobe(params, code, wl, il)
+            if len(idx) < B:
+                fcos[~valid], pdf[~valid] = 0.0, 0.0
+            break
+        if len(idx):
             fcos[idx], pdf[idx] = _eval_lobe(params.take(idx), code, wl[idx], il[idx])
     return fcos, pdf
 
