@@ -119,9 +119,10 @@ def f82_b(f0, tint):
 def fresnel_f82(cos, f0, b):
     """Conductor Fresnel: Schlick minus b cos (1 - cos)^6, clamped to [0, 1] (Cycles fresnel_f82).
     cos (B,), f0 and b (B, k)."""
-    s = np.clip(1.0 - cos, 0.0, 1.0)[:, None]
+    s = np.clip(1.0 - cos, 0.0, 1.0)
     s5 = s ** 5
-    return np.clip(f0 + (1.0 - f0) * s5 - b * np.asarray(cos)[:, None] * s5 * s, 0.0, 1.0)
+    # f0 (1 - s5) + s5 - b cos s5 s: the per-hit factors first, three (B, k) operations then
+    return np.clip(f0 * (1.0 - s5)[:, None] + s5[:, None] - b * (np.asarray(cos) * s5 * s)[:, None], 0.0, 1.0)
 
 
 def _f82_fss(f0, b):
@@ -170,9 +171,10 @@ def _sample_vndf(wo, alpha, u1, u2):
     lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
     big = lensq > 1e-7
     inv = np.where(big, 1.0 / np.sqrt(np.where(big, lensq, 1.0)), 0.0)
-    t1 = np.stack([np.where(big, -vh[:, 1] * inv, 1.0), np.where(big, vh[:, 0] * inv, 0.0),
-                   np.zeros_like(lensq)], axis=1)
-    t2 = np.cross(vh, t1)
+    t1x, t1y = np.where(big, -vh[:, 1] * inv, 1.0), np.where(big, vh[:, 0] * inv, 0.0)
+    t1 = np.stack([t1x, t1y, np.zeros_like(lensq)], axis=1)
+    # vh x t1 written out (t1 has no z): np.cross's general path costs several times more
+    t2 = np.stack([-vh[:, 2] * t1y, vh[:, 2] * t1x, vh[:, 0] * t1y - vh[:, 1] * t1x], axis=1)
     r = np.sqrt(u1)
     phi = 2.0 * np.pi * u2
     p1 = r * np.cos(phi)
@@ -374,9 +376,11 @@ def energy_compensation(params: SurfaceParams, cos_o) -> np.ndarray:
     return out
 
 
-def _lobe_factor(p, mu, code):
+def _lobe_factor(p, mu, code, b=None):
+    """The lobe's multiscatter factor (B, k); ``b``: CONDUCTOR's f82_b(p.base, p.edge) when the
+    caller has it already."""
     if code == CONDUCTOR:
-        return _ms_factor(p.alpha, mu, _f82_fss(p.base, f82_b(p.base, p.edge)))
+        return _ms_factor(p.alpha, mu, _f82_fss(p.base, f82_b(p.base, p.edge) if b is None else b))
     if code == GLOSSY:
         return _ms_factor(p.alpha, mu, np.clip(p.base, 0.0, 1.0))
     if code == DIELECTRIC:
@@ -456,8 +460,9 @@ def _eval_lobe(p, code, wo, wi, terms=None):
         if len(m):
             q = _sub(p, m)
             fc, pd, coh = _eval_reflection_common(q.alpha, wo[m], wi[m])
-            f = fresnel_f82(coh, q.base, f82_b(q.base, q.edge)) if code == CONDUCTOR else q.base
-            fcos[m] = f * (fc[:, None] * _lobe_factor(q, mu_o[m], code))
+            b = f82_b(q.base, q.edge) if code == CONDUCTOR else None
+            f = fresnel_f82(coh, q.base, b) if code == CONDUCTOR else q.base
+            fcos[m] = f * (fc[:, None] * _lobe_factor(q, mu_o[m], code, b))
             pdf[m] = pd
         return fcos, pdf
     if code == DIELECTRIC:
@@ -541,11 +546,15 @@ def _sample_lobe(p, code, wo, u):
     if code in (CONDUCTOR, GLOSSY):
         wi = _reflect_local(wo, h, cos_oh)
         ok = (wi[:, 2] > 0) & (cos_oh > 0)
-        f = fresnel_f82(cos_oh, p.base, f82_b(p.base, p.edge)) if code == CONDUCTOR else p.base
+        b = f82_b(p.base, p.edge) if code == CONDUCTOR else None
+        f = fresnel_f82(cos_oh, p.base, b) if code == CONDUCTOR else p.base
         g = np.where(rough, (1.0 + lo) / (1.0 + lo + _lambda(a2, wi)), 1.0)
-        fac = np.ones((B, k), _F32)
-        if len(r):
-            fac[r] = _lobe_factor(_sub(p, r), mu_o[r], code)
+        if len(r) == B:
+            fac = _lobe_factor(p, mu_o, code, b)
+        else:
+            fac = np.ones((B, k), _F32)
+            if len(r):
+                fac[r] = _lobe_factor(_sub(p, r), mu_o[r], code, None if b is None else b[r])
         weight = np.where(ok[:, None], f * fac * g[:, None], 0.0).astype(_F32)
         pdf = np.where(ok, np.where(rough, _ggx_d(a2, h) / ((1.0 + lo) * 4.0 * mu_o), np.inf), 0.0).astype(_F32)
         flags = np.where(ok, GLOSSY_REFLECTION | np.where(rough, 0, SINGULAR), 0).astype(np.int32)
@@ -624,10 +633,16 @@ def sample(params: SurfaceParams, wo, ns, ng, u):
     flags = np.zeros(B, np.int32)
     valid = wl[:, 2] > 0
     for code in (LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY):  # a loop over the 5 lobes
-        idx = np.flatnonzero((params.lobe == code) & valid)
-        if len(idx) == B:
-            wi_l, weight, pdf, flags = _sample_lobe(params, code, wl, u)
-        elif len(idx):
+        mine = params.lobe == code
+        idx = np.flatnonzero(mine & valid)
+        if len(idx) and mine.all():  # one lobe everywhere: all rows, the invalid ones zeroed (no take)
+            with np.errstate(all="ignore"):
+                wi_l, weight, pdf, flags = _sample_lobe(params, code, wl, u)
+            if len(idx) < B:
+                bad = ~valid
+                wi_l[bad], weight[bad], pdf[bad], flags[bad] = (0.0, 0.0, 1.0), 0.0, 0.0, 0
+            break
+        if len(idx):
             wi_l[idx], weight[idx], pdf[idx], flags[idx] = _sample_lobe(params.take(idx), code, wl[idx], u[idx])
     wi = _to_world(wi_l, fu, fv, ns)
     wi /= np.maximum(np.linalg.norm(wi, axis=1, keepdims=True), 1e-30)
@@ -655,10 +670,15 @@ def evaluate(params: SurfaceParams, wo, wi, ns, ng):
     consistent = np.where(il[:, 2] > 0, side > 0, (side < 0) & (il[:, 2] < 0))
     valid = (wl[:, 2] > 0) & consistent
     for code in (LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY):
-        idx = np.flatnonzero((params.lobe == code) & valid)
-        if len(idx) == B:
-            fcos, pdf = _eval_lobe(params, code, wl, il)
-        elif len(idx):
+        mine = params.lobe == code
+        idx = np.flatnonzero(mine & valid)
+        if len(idx) and mine.all():  # one lobe everywhere: all rows, the invalid ones zeroed (no take)
+            with np.errstate(all="ignore"):
+                fcos, pdf = _eval_lobe(params, code, wl, il)
+            if len(idx) < B:
+                fcos[~valid], pdf[~valid] = 0.0, 0.0
+            break
+        if len(idx):
             fcos[idx], pdf[idx] = _eval_lobe(params.take(idx), code, wl[idx], il[idx])
     return fcos, pdf
 

@@ -25,7 +25,7 @@ from . import grating_layering
 from .grating_sampling import scattering_materials
 from .grating_world import diffracts_world, world_through_grating
 from .grey_paths import GreyPaths
-from .lights import intersect_lights, is_delta, light_pdf, sample_light, sun_radiance
+from .lights import intersect_lights, is_delta, light_pdf, sample_light, sample_light_pdf, sun_radiance
 from .lights import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from .materials import DIFFUSE
 from .surface import shading_normal, surface_emission, surface_reflectance, surface_roughness
@@ -645,13 +645,12 @@ class _TileTrace(SpecularWalker):
         b = len(hit.p)
         samples = []
         for li in range(len(lights) if analytic else 0):  # the lights (a handful)
-            wi, dist, g = sample_light(lights, li, hit.p, rng)
-            pl = None if self.delta[li] else light_pdf(lights, li, hit.p, wi)
+            wi, dist, g, pl = sample_light_pdf(lights, li, hit.p, rng)
             samples.append((np.asarray(wi, np.float32), dist, g, lights.spectrum[li], pl, 0.0))
         if self.mesh_lights is not None:
             wi, dist, g, prim, pdf = self.mesh_lights.sample(hit.p, rng)
-            em = prepared.materials.emission[prepared.tri_material[prim]]
-            samples.append((wi.astype(np.float32), dist, g, em, pdf.astype(np.float32), 2 * prepared.tri_offset[prim]))
+            em = _RowsOf(prepared.materials.emission, prepared.tri_material[prim])  # gathered for the lit rows only
+            samples.append((wi, dist, g, em, pdf, 2 * prepared.tri_offset[prim]))
         if prepared.environment is not None:
             wi, pdf, rgb = prepared.environment.sample(rng.random(b), rng.random(b))
             with np.errstate(divide="ignore"):
@@ -853,11 +852,10 @@ class _TileTrace(SpecularWalker):
         with the lobe written out: f cos = albedo / pi * cos(wi, ns) and pdf = cos / pi where wo
         and wi are above ns and wi above ng (bsdf.evaluate's LAMBERT, without its frames and
         parameter tables), times Cycles' bump-terminator term on normal-mapped hits."""
-        wo_up = np.einsum("ij,ij->i", rays.d, hit.ns) < 0
-        dark = (albedo.max(axis=1) if albedo.ndim == 2 else albedo) <= 0
+        wo_up = np.einsum("ij,ij->i", rays.d, hit.ns) < 0  # (on_hit passes lit surfaces only: albedo > 0)
         for wi, dist, g, spectrum, p_light, pad in self.light_samples(hit, rng, analytic=False):
             cos_s = np.einsum("ij,ij->i", wi, hit.ns)
-            ok = wo_up & ~dark & (cos_s > 0) & (np.einsum("ij,ij->i", wi, hit.ng) > 0)
+            ok = wo_up & (cos_s > 0) & (np.einsum("ij,ij->i", wi, hit.ng) > 0)
             p_bsdf = np.where(ok, cos_s * np.float32(1 / np.pi), np.float32(0.0)).astype(np.float32)
             scale = np.asarray(g, np.float32) * p_bsdf  # g cos / pi
             if self.normal_maps:
@@ -888,14 +886,13 @@ class _TileTrace(SpecularWalker):
         factors = np.zeros((b, nl), np.float32)
         origins, dirs, tmax, idx = [], [], [], []
         for li in range(nl):  # loop over lights (a handful), not rays
-            wi, dist, g = sample_light(lights, li, hit.p, rng)
+            wi, dist, g, p_light = sample_light_pdf(lights, li, hit.p, rng)
             # shaded with ns; light from below the geometric surface does not reach it (no leaks)
             cos_s = np.einsum("ij,ij->i", wi, hit.ns)
             above = True if flat else np.einsum("ij,ij->i", wi, hit.ng) > 0
             f = np.where((cos_s > 0) & above, g * cos_s * self._bump(hit, wi), np.float32(0.0))
-            if not self.delta[li]:  # a light BSDF sampling can also find: the power heuristic
-                f = f * _power_heuristic(light_pdf(lights, li, hit.p, wi), np.maximum(cos_s, 0) * np.float32(1 / np.pi),
-                                         light_first=True)
+            if p_light is not None:  # a light BSDF sampling can also find: the power heuristic
+                f = f * _power_heuristic(p_light, np.maximum(cos_s, 0) * np.float32(1 / np.pi), light_first=True)
             live = np.flatnonzero(f > 0)
             if live.size == 0:
                 continue
@@ -999,6 +996,23 @@ class _TileTrace(SpecularWalker):
                     sub = r.take(j)
                     contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(j)), sub.lam]
                     self._accumulate(sub, contrib, self._diffraction)
+
+
+class _RowsOf:
+    """``table[rows]`` (B, n) without forming it: indexing with the entries a next event keeps
+    (``light_spectrum_of``) gathers those rows only."""
+
+    ndim = 2
+
+    def __init__(self, table, rows):
+        self.table, self.rows = table, rows
+
+    def __getitem__(self, idx):
+        return self.table[self.rows[idx]]
+
+    def __array__(self, dtype=None, copy=None):
+        out = self.table[self.rows]
+        return out if dtype is None else out.astype(dtype)
 
 
 def _footprint(rays: Rays, hit: Hit, idx, t, s, wi, dist, aligned: bool = False):

@@ -41,8 +41,8 @@ from .geometry import orthonormal_basis
 from .scene import Lights
 from .spectrum import SpectralConverter
 
-__all__ = ["PreparedLights", "prepare_lights", "sample_light", "light_pdf", "is_delta", "intersect_lights",
-           "sun_radiance"]
+__all__ = ["PreparedLights", "prepare_lights", "sample_light", "sample_light_pdf", "light_pdf", "is_delta",
+           "intersect_lights", "sun_radiance"]
 
 POINT, SPOT, SUN, AREA_RECT, AREA_DISK = (int(k) for k in LightKind)
 
@@ -307,6 +307,31 @@ def _sample_sized_point(pl, index, p, rng):
     if int(pl.kind[index]) == SPOT:
         g = g * _spot_mask(pl, index, -wi)
     return wi, t, g.astype(f32)
+
+
+def sample_light_pdf(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.Generator):
+    """``sample_light`` and the solid-angle pdf of each direction it drew (B,) float32 (None for
+    a delta light), what ``light_pdf`` gives for it, from the sample's own g instead of a second
+    intersection with the light: the sized lights' radiance is c times the spectrum with c = 1
+    (area), 1 / (pi r^2) (spheres, facing disks) and 1 / (pi sin^2 h) (sun cones), and g = c /
+    pdf (module docstring). A spot's cone mask is in its g, so its pdf is ``light_pdf``'s."""
+    wi, dist, g = sample_light(pl, index, p, rng)
+    if is_delta(pl, index):
+        return wi, dist, g, None
+    k = int(pl.kind[index])
+    if k == SPOT:
+        return wi, dist, g, light_pdf(pl, index, p, wi)
+    if k == SUN:
+        omc = float(pl.sun_omc[index])
+        c = 1.0 / (np.pi * omc * (2.0 - omc))
+    elif k == POINT:
+        c = 1.0 / (np.pi * float(pl.radius[index]) ** 2)
+    else:
+        c = 1.0
+    g = np.asarray(g, np.float32)
+    with np.errstate(divide="ignore"):
+        pdf = np.where(g > 0, np.float32(c) / g, np.float32(0.0)).astype(np.float32)
+    return wi, dist, g, pdf
 
 
 def light_pdf(pl: PreparedLights, index: int, p: np.ndarray, wi: np.ndarray) -> np.ndarray:
