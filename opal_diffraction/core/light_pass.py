@@ -59,6 +59,7 @@ from types import MappingProxyType
 
 import numpy as np
 
+from . import wavelengths
 from .camera_splat import CameraConnection, CameraSplat, SplatBatch
 from .elements import ElementLayout, IlluminationMap
 from .grating_records import PILOT_STREAM, GratingRecords, record_layout
@@ -512,7 +513,12 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
     connection = CameraConnection.of(prepared) if splat is not None else None
     batch = SplatBatch(connection) if connection is not None else None
     tr = _LightTrace(prepared, rng, illum, records, batch)
-    tr.walk(rays, tr.empty_mono())
+    chunks = wavelengths.split_chunks(prepared, m)
+    if chunks is None:
+        tr.walk(rays, tr.empty_mono())
+    else:  # SPLIT: the batch's white paths in pieces, so their mono children stay bounded
+        for c in chunks:  # (a loop over a batch's few chunks; the same stream, drawn piece by piece)
+            tr.walk(rays.take(np.arange(c.start, c.stop)), tr.empty_mono())
     shadow = 0
     if batch is not None:
         splat.add(*batch.finish())
