@@ -513,16 +513,17 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
     connection = CameraConnection.of(prepared) if splat is not None else None
     batch = SplatBatch(connection) if connection is not None else None
     tr = _LightTrace(prepared, rng, illum, records, batch)
+    # SPLIT: the batch's white paths in pieces (core/wavelengths.split_chunks), so the mono paths
+    # they become stay bounded, and each piece's camera splats are summed per pixel before the
+    # next piece (a loop over a batch's few pieces, drawing the batch's stream one after another)
     chunks = wavelengths.split_chunks(prepared, m)
-    if chunks is None:
-        tr.walk(rays, tr.empty_mono())
-    else:  # SPLIT: the batch's white paths in pieces, so their mono children stay bounded
-        for c in chunks:  # (a loop over a batch's few chunks; the same stream, drawn piece by piece)
-            tr.walk(rays.take(np.arange(c.start, c.stop)), tr.empty_mono())
     shadow = 0
-    if batch is not None:
-        splat.add(*batch.finish())
-        shadow = batch.shadow_rays
+    for c in [slice(0, m)] if chunks is None else chunks:
+        tr.walk(rays if chunks is None else rays.take(np.arange(c.start, c.stop)), tr.empty_mono())
+        if tr.splat is not None:
+            splat.add(*tr.splat.finish())
+            shadow += tr.splat.shadow_rays
+            tr.splat = SplatBatch(connection)
     return {"paths": b, "deposits": tr.deposited, "rays": tr._rays + shadow}
 
 
