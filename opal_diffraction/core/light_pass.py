@@ -45,7 +45,9 @@ batch), and batches add into the map, so the map does not depend on how the work
 ``LightWork`` is that split: the batches in order and the LANES fixed lanes they are dealt to;
 ``trace_batch`` traces one batch into any pair of sinks with a ``deposit`` method (the lane's
 maps here; a ``DepositLog`` on a Dask worker, replayed into the lane's maps on the client in the
-same order, so a distributed map equals this one bit for bit: core/distributed.py).
+same order, so a distributed map equals this one bit for bit: core/distributed.py). With SPLIT
+dispersion a batch is walked in pieces of ``wavelengths.SPLIT_CHUNK_RAYS / n`` white paths, so
+the n mono paths each becomes at a dispersive glass stay bounded (docs/physics.md section 2.6).
 """
 
 from __future__ import annotations
