@@ -2,7 +2,11 @@
 render, the bytes each task sends, and a model of the same frame on 64 machines.
 
     .venv/bin/python benchmarks/bench_distributed.py [--width 640 --height 400 --spp 16]
-        [--workers 1 2] [--machines 64 --cores 8 --bandwidth 117]
+        [--workers 1 2] [--machines 64 --cores 8 --bandwidth 117] [--spectral] [--sizes-only]
+
+``--spectral``: the frame writes a spectral EXR, so tiles send their spectral sums too (the
+default sends RGB; the bytes table shows both either way). ``--sizes-only``: no cluster and no
+frame timings, only the bytes and the per-task times in this process.
 
 The scene is the prism example (examples/prism.py: dense flint, 1 M light paths, caustics).
 Renders it in this process with 1 thread and with all threads (the reference image), and on a
