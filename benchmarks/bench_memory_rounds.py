@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     end = (time.perf_counter() - t0, time.process_time(), 1.0, "done",
            resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10, rss_mb())
     rows.append(end)
-    print(f"samples taken {int(res.counts.min()) if hasattr(res, 'counts') else ''}; {len(rows)} progress reports\n")
+    print(f"samples taken {res.samples}; {len(rows)} progress reports\n")
     print("| report | wall s | CPU s | progress | message | peak RSS MB | RSS MB |\n|---|---|---|---|---|---|---|")
     shown = set()
     for i, (w, c, f, m, peak, cur) in enumerate(rows):
