@@ -12,8 +12,7 @@ from opal_diffraction.core.output import read_exr, spectral_channel_name
 from opal_diffraction.core.render import render
 from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
 from opal_diffraction.core.settings import RenderSettings
-
-import stripe_scenes  # noqa: E402  (tests/stripe_scenes.py)
+import stripe_scenes  # tests/stripe_scenes.py
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
 
