@@ -1,7 +1,7 @@
 """Peak memory (RSS) of a full-HD render, with and without a spectral EXR.
 
     .venv/bin/python benchmarks/bench_memory.py [--scene prism|gem] [--width 1920 --height 1080]
-        [--spp 8 16] [--tree /path/to/another/checkout] [--tracemalloc]
+        [--spp 8 16] [--tree /path/to/another/checkout] [--tracemalloc] [--timeline 10] [--keep DIR]
 
 Each configuration runs in a fresh subprocess that renders the scene through the command line
 (``opal_diffraction.cli render``: prepare, light pass, eye pass, the RGB EXR and PNG, and with
@@ -17,6 +17,10 @@ also runs every configuration with another checkout's ``opal_diffraction`` first
 ``--parallel N`` runs N configurations at once (each is its own process, so its peak RSS is its
 own; only the time changes). ``--tracemalloc`` prints, for each configuration, the ten biggest allocation sites alive at the
 peak of the traced Python allocations (NumPy reports its buffers to tracemalloc).
+
+``--timeline S`` samples each child's peak RSS every S seconds (wall, CPU, ru_maxrss) into
+``run<i>/stderr.txt`` as it runs (readable before a long render ends) and summarises it;
+``--keep DIR`` keeps the runs' folders there instead of a temporary one.
 
 The scene is examples/prism.py (dense flint, dispersion, 1 M automatic light paths at full HD)
 or examples/gem.py (a diamond under an environment map). Prints a Markdown table.
