@@ -2,7 +2,11 @@
 render, the bytes each task sends, and a model of the same frame on 64 machines.
 
     .venv/bin/python benchmarks/bench_distributed.py [--width 640 --height 400 --spp 16]
-        [--workers 1 2] [--machines 64 --cores 8 --bandwidth 117]
+        [--workers 1 2] [--machines 64 --cores 8 --bandwidth 117] [--spectral] [--sizes-only]
+
+``--spectral``: the frame writes a spectral EXR, so tiles send their spectral sums too (the
+default sends RGB; the bytes table shows both either way). ``--sizes-only``: no cluster and no
+frame timings, only the bytes and the per-task times in this process.
 
 The scene is the prism example (examples/prism.py: dense flint, 1 M light paths, caustics).
 Renders it in this process with 1 thread and with all threads (the reference image), and on a
@@ -86,13 +90,19 @@ def timed_cluster(client, scene, settings, n_workers, reference):
     return s, r, _diff(r, reference), durations, busy
 
 
-def wire_sizes(scene, settings):
-    """Pickled sizes and client-side costs, measured by running the tasks in this process."""
+def wire_sizes(scene, settings, spectral: bool = False):
+    """Pickled sizes and client-side costs, measured by running the tasks in this process.
+    ``spectral``: the tiles send their spectral sums too (a spectral EXR is asked); either way
+    ``tile_bytes_rgb`` and ``tile_bytes_spectral`` hold both sizes of every tile (the RGB result
+    is the spectral one without its spectral sums: tile_task's only difference, checked on the
+    first tile against an RGB job's own result)."""
     prepared = prepare(scene, settings)
     t = time.perf_counter()
     prepare(scene, settings)
     prepare_s = time.perf_counter() - t
-    job = dist.make_job(scene, settings, (0, 0, scene.camera.width, scene.camera.height), prepared.accel.name)
+    region = (0, 0, scene.camera.width, scene.camera.height)
+    job = dist.make_job(scene, settings, region, prepared.accel.name, spectral=True)
+    job_rgb = dist.make_job(scene, settings, region, prepared.accel.name, spectral=False)
     work = LightWork.of(prepared)
     eye = EyeWork.of(prepared)
     key = "opal-light-0123456789ab-17"
@@ -115,25 +125,33 @@ def wire_sizes(scene, settings):
         replay_s.append(time.perf_counter() - t)
     light = run_light_pass(prepared)
     light_w = {"token": "0" * 12, "caustics": dist.pack_map(light.caustics),
-               "grating_records": dist.pack_map(light.grating_records)}
+               "grating_records": dist.pack_map(light.grating_records),
+               "splat": light.splat is not None, "splat_spectral": light.splat is not None and light.splat.spectral}
     sizes["light maps"] = _size(light_w)
     sizes["light maps, dense"] = light.caustics.flux.nbytes + (0 if light.grating_records is None else
                                                               light.grating_records.flux.nbytes)
     # tiles: every tile of the first round (a tile's result size does not depend on the round)
-    film = Film(scene.camera.width, scene.camera.height, prepared.conv)
-    tile_bytes, tile_s, add_s = [], [], []
+    film = Film(scene.camera.width, scene.camera.height, prepared.conv, spectral=spectral)
+    tile_rgb, tile_spec, tile_s, add_s = [], [], [], []
     for ti in range(len(eye.tiles)):
         t = time.perf_counter()
         out = dist.tile_task(job, light_w, 0, ti)
         tile_s.append(time.perf_counter() - t)
-        tile_bytes.append(_size(out))
+        tile_spec.append(_size(out))
+        rgb_out = dict(out, spectral=None)
+        tile_rgb.append(_size(rgb_out))
+        if ti == 0:  # the RGB job's own result: the same bytes
+            own = _size(dist.tile_task(job_rgb, light_w, 0, ti))
+            assert own == tile_rgb[0], (own, tile_rgb[0])
         t = time.perf_counter()
         x0, y0, x1, y1, _ = eye.tiles[ti]
-        film.add_converted(x0, y0, x1, y1, out["rgb"], out["parts"], eye.rounds[0], spectral=out["spectral"])
+        o = out if spectral else rgb_out
+        film.add_converted(x0, y0, x1, y1, o["rgb"], o["parts"], eye.rounds[0], spectral=o["spectral"])
         add_s.append(time.perf_counter() - t)
     return dict(sizes=sizes, prepare_s=prepare_s, n_batches=len(work.batches), batch_bytes=batch_bytes,
                 batch_s=batch_s, replay_s=replay_s, rounds=len(eye.rounds), n_tiles=len(eye.tiles),
-                tile_bytes=tile_bytes, tile_s=tile_s, add_s=add_s)
+                tile_bytes=tile_spec if spectral else tile_rgb, tile_bytes_rgb=tile_rgb,
+                tile_bytes_spectral=tile_spec, tile_s=tile_s, add_s=add_s)
 
 
 def model(w, machines: int, cores: int, bandwidth_mb: float, local_1thread_s: float):
@@ -187,16 +205,24 @@ def main(argv=None) -> int:
     ap.add_argument("--machines", type=int, default=64)
     ap.add_argument("--cores", type=int, default=8, help="cores per machine in the model")
     ap.add_argument("--bandwidth", type=float, default=117.0, help="MB/s per machine in the model (1 Gbit/s)")
+    ap.add_argument("--spectral", action="store_true",
+                    help="the frame writes a spectral EXR: tiles send their spectral sums too (the model uses those)")
+    ap.add_argument("--sizes-only", action="store_true",
+                    help="only the bytes and per-task times (no cluster, no frame timings); the model's "
+                         "one-machine time is then the sum of the per-task times measured here")
     args = ap.parse_args(argv)
 
     scene = load_example("prism").build_scene(args.width, args.height)
-    settings = RenderSettings(samples=args.spp, light_paths=args.light_paths, seed=0)
+    settings = RenderSettings(samples=args.spp, light_paths=args.light_paths, seed=0,
+                              spectral_exr="spectral.exr" if args.spectral else "")  # a name only: render() writes no file
     print(f"prism example {args.width}x{args.height}, {args.spp} spp, {args.light_paths / 1e6:g} M light paths; "
           f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at the start\n")
 
+    render(load_example("prism").build_scene(32, 20), replace(settings, spectral_exr=""))  # warm caches
+    if args.sizes_only:
+        return report_sizes(args, scene, settings, None, {})
     from dask.distributed import Client, LocalCluster
 
-    render(load_example("prism").build_scene(32, 20), settings)  # warm caches (imports, colour tables)
     with ExitStack() as stack:
         clients = {}
         for n in args.workers:
@@ -245,8 +271,16 @@ def main(argv=None) -> int:
         lp_s = "" if lp is None else f"{lp:.2f}"
         d = "" if diff is None else f"{diff:g}"
         print(f"| {name} | {s:.2f} | {lp_s} | {t1 / s:.2f} | {tn / s:.2f} | {d} | {note} |")
+    return report_sizes(args, scene, settings, t1, stats)
 
-    w = wire_sizes(scene, settings)
+
+def report_sizes(args, scene, settings, t1, stats) -> int:
+    """The bytes table, the per-task times and the 64-machine model (``t1``: the measured 1-thread
+    frame, or None: the sum of the per-task times measured here)."""
+    w = wire_sizes(scene, settings, args.spectral)
+    if t1 is None:
+        t1 = w["prepare_s"] + sum(w["batch_s"]) + w["rounds"] * sum(w["tile_s"])
+        print(f"(--sizes-only: 1-thread frame taken as the sum of the per-task times here, {t1:.2f} s)")
     sz = w["sizes"]
     n_units = w["rounds"] * w["n_tiles"]
     print(f"\nbytes on the wire (pickled), {w['n_batches']} light tasks, {n_units} eye tasks "
@@ -261,8 +295,11 @@ def main(argv=None) -> int:
     bb, tb = np.array(w["batch_bytes"]), np.array(w["tile_bytes"])
     print(f"| a light batch's deposits | per light task, to the client | mean {_mb(bb.mean())}, max {_mb(bb.max())}, "
           f"total {_mb(bb.sum())} |")
-    print(f"| a tile's result | per eye task, to the client | mean {_mb(tb.mean())}, max {_mb(tb.max())}, "
-          f"total {_mb(tb.mean() * n_units)} |")
+    for label, key in (("RGB only (no spectral EXR)", "tile_bytes_rgb"), ("with a spectral EXR", "tile_bytes_spectral")):
+        tb = np.array(w[key])
+        print(f"| a tile's result, {label} | per eye task, to the client | mean {_mb(tb.mean())}, max {_mb(tb.max())}, "
+              f"total {_mb(tb.mean() * n_units)} |")
+    tb = np.array(w["tile_bytes"])
     for n, st in stats.items():
         print(f"| (measured, {n} worker(s)) | stats of a next frame | job {_mb(st['sent_job_bytes'])}, light maps "
               f"{_mb(st.get('sent_light_bytes', 0))}, deposits {_mb(st.get('received_light_bytes', 0))}, tiles "
@@ -274,6 +311,7 @@ def main(argv=None) -> int:
           f"prepare {w['prepare_s']:.2f} s")
 
     # the client's link: a machine's cores return tile results at bytes / unit time each
+    print(f"(the model below uses the tiles {'with' if args.spectral else 'without'} their spectral sums)")
     per_machine = args.cores * float(np.mean(w["tile_bytes"])) / float(np.mean(w["tile_s"])) / 1e6
     print(f"\none machine of {args.cores} cores returns {per_machine:.0f} MB/s of tile results (at "
           f"{settings.round_samples} samples per round): a {args.bandwidth:g} MB/s client link saturates at "

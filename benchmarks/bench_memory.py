@@ -1,7 +1,7 @@
 """Peak memory (RSS) of a full-HD render, with and without a spectral EXR.
 
     .venv/bin/python benchmarks/bench_memory.py [--scene prism|gem] [--width 1920 --height 1080]
-        [--spp 8 16] [--tree /path/to/another/checkout] [--tracemalloc]
+        [--spp 8 16] [--tree /path/to/another/checkout] [--tracemalloc] [--timeline 10] [--keep DIR]
 
 Each configuration runs in a fresh subprocess that renders the scene through the command line
 (``opal_diffraction.cli render``: prepare, light pass, eye pass, the RGB EXR and PNG, and with
@@ -17,6 +17,10 @@ also runs every configuration with another checkout's ``opal_diffraction`` first
 ``--parallel N`` runs N configurations at once (each is its own process, so its peak RSS is its
 own; only the time changes). ``--tracemalloc`` prints, for each configuration, the ten biggest allocation sites alive at the
 peak of the traced Python allocations (NumPy reports its buffers to tracemalloc).
+
+``--timeline S`` samples each child's peak RSS every S seconds (wall, CPU, ru_maxrss) into
+``run<i>/stderr.txt`` as it runs (readable before a long render ends) and summarises it;
+``--keep DIR`` keeps the runs' folders there instead of a temporary one.
 
 The scene is examples/prism.py (dense flint, dispersion, 1 M automatic light paths at full HD)
 or examples/gem.py (a diamond under an environment map). Prints a Markdown table.
@@ -41,10 +45,22 @@ if trace:
     tracemalloc.start(8)
 from opal_diffraction.cli import main
 import opal_diffraction
+timeline = []
+if os.environ.get("BENCH_TIMELINE"):  # (wall s, CPU s, peak RSS kB) every few seconds, to stderr
+    import threading, time
+    t0 = time.perf_counter()
+    def sample():
+        while True:
+            row = (round(time.perf_counter() - t0, 1), round(time.process_time(), 1),
+                   resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+            timeline.append(row)
+            print("BENCH_TIMELINE " + json.dumps(row), file=sys.stderr, flush=True)
+            time.sleep(float(os.environ["BENCH_TIMELINE"]))
+    threading.Thread(target=sample, daemon=True).start()
 args = json.loads(sys.argv[1])
 code = main(args)
 out = {"code": code, "maxrss_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
-       "package": os.path.dirname(opal_diffraction.__file__)}
+       "package": os.path.dirname(opal_diffraction.__file__), "timeline": timeline}
 if trace:
     cur, peak = tracemalloc.get_traced_memory()
     out["traced_peak_mb"] = peak / 2**20
@@ -103,8 +119,12 @@ def run_one(tree: str, scene_path: str, spp: int, spectral: bool, workdir: str, 
     if spectral:
         args += ["--spectral-exr", os.path.join(workdir, "spectral.exr")]
     env = dict(os.environ, PYTHONPATH=tree)
-    proc = subprocess.run([sys.executable, "-c", CHILD_TRACE if trace else CHILD, json.dumps(args)],
-                          env=env, capture_output=True, text=True, cwd=workdir)
+    # the child's stderr (its --timeline samples) goes to a file beside its outputs, readable while it runs
+    with open(os.path.join(workdir, "stderr.txt"), "w") as err:
+        proc = subprocess.run([sys.executable, "-c", CHILD_TRACE if trace else CHILD, json.dumps(args)],
+                              env=env, stdout=subprocess.PIPE, stderr=err, text=True, cwd=workdir)
+    with open(os.path.join(workdir, "stderr.txt")) as err:
+        proc.stderr = err.read()
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("BENCH_RESULT ")]
     if proc.returncode != 0 or not lines:
         raise RuntimeError(f"child failed ({proc.returncode}):\n{proc.stdout[-2000:]}\n{proc.stderr[-4000:]}")
@@ -113,6 +133,20 @@ def run_one(tree: str, scene_path: str, spp: int, spectral: bool, workdir: str, 
         raise RuntimeError(f"render failed: {proc.stderr[-2000:]}")
     res["spectral_bytes"] = os.path.getsize(os.path.join(workdir, "spectral.exr")) if spectral else 0
     return res
+
+
+class _Keep:
+    """A folder that stays (``--keep``), used like TemporaryDirectory."""
+
+    def __init__(self, path):
+        self.path = os.path.abspath(path)
+
+    def __enter__(self):
+        os.makedirs(self.path, exist_ok=True)
+        return self.path
+
+    def __exit__(self, *exc):
+        return False
 
 
 def main(argv=None) -> int:
@@ -126,7 +160,12 @@ def main(argv=None) -> int:
     ap.add_argument("--tracemalloc", action="store_true")
     ap.add_argument("--parallel", type=int, default=1, help="configurations run at once (peak RSS is per process, "
                                                                "so this changes only the time)")
+    ap.add_argument("--timeline", type=float, default=0.0,
+                    help="seconds between peak-RSS samples in each child (printed as it runs, and summarised)")
+    ap.add_argument("--keep", default="", help="a folder for the runs' outputs and logs (default: a temporary one)")
     args = ap.parse_args(argv)
+    if args.timeline > 0:
+        os.environ["BENCH_TIMELINE"] = str(args.timeline)
 
     sys.path.insert(0, REPO)
     from opal_diffraction._scripts import load_example
@@ -134,7 +173,7 @@ def main(argv=None) -> int:
 
     trees = [("this tree", REPO)] + ([("--tree", os.path.abspath(args.tree))] if args.tree else [])
     rows = []
-    with tempfile.TemporaryDirectory() as tmp:
+    with (tempfile.TemporaryDirectory() if not args.keep else _Keep(args.keep)) as tmp:
         scene = load_example(args.scene).build_scene(args.width, args.height)
         scene_path = os.path.join(tmp, "scene.npz")
         scene.save(scene_path)
@@ -149,6 +188,10 @@ def main(argv=None) -> int:
             res = run_one(tree, scene_path, spp, spectral, work, args.tracemalloc)
             print(f"{label} ({res['package']}): {spp} spp, spectral EXR {spectral}: peak RSS "
                   f"{res['maxrss_kb'] / 2**20:.2f} GiB", flush=True)
+            tl = res.get("timeline") or []
+            if tl:
+                print(f"    timeline: {len(tl)} samples over {tl[-1][0]:.0f} s wall, {tl[-1][1]:.0f} s CPU; peak RSS "
+                      f"{', '.join(f'{r[2] / 2**20:.2f}' for r in tl[::max(1, len(tl) // 12)])} GiB", flush=True)
             for t in res.get("top", []):
                 print(f"    {t['mb']:8.1f} MB  {' <- '.join(reversed(t['where']))}", flush=True)
             return res

@@ -15,22 +15,13 @@ from opal_diffraction.core.render import render
 from opal_diffraction.core.scene import Camera, Lights, Materials, Scene, SceneError
 from opal_diffraction.core.settings import RenderSettings, film_bytes
 from opal_diffraction.core.spectrum import SpectralConverter
+from stripe_scenes import prism_and_stripes
 
 
 def prism_scene(width=32, height=24):
     """Stripes under a sun seen through a dispersive prism: colours the RGB image mixes from
     very different spectra (a grey scene would hide a wrong conversion)."""
-    mats = Materials.from_list([
-        {"kind": "DIFFUSE", "color": (0.9, 0.6, 0.2)}, {"kind": "DIFFUSE", "color": (0.05, 0.2, 0.6)},
-        {"kind": "DIELECTRIC", "ior": 1.72, "dispersion": "ABBE", "abbe": 29.0},
-    ])
-    s = Scene(materials=mats)
-    for i in range(8):
-        s.add_mesh(*primitives.quad((0, 3.0, i + 0.5), (10, 0, 0), (0, 0, 1.0)), material=i % 2)
-    s.add_mesh(*primitives.prism((0, 0, 0.75), side=1.2, length=2.4, axis="X", rotation_deg=180), material=2)
-    s.lights = Lights.from_list([{"kind": "SUN", "direction": (0, 1, -0.3), "power": 3.0}])
-    s.camera = Camera.look_at((0, -5.5, 3.6), (0, 0.2, 0.8), lens=120, width=width, height=height)
-    return s
+    return prism_and_stripes(width, height, colors=((0.9, 0.6, 0.2), (0.05, 0.2, 0.6)))
 
 
 def plane_scene(width, height):

@@ -12,23 +12,14 @@ from opal_diffraction.core.output import read_exr, spectral_channel_name
 from opal_diffraction.core.render import render
 from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
 from opal_diffraction.core.settings import RenderSettings
+import stripe_scenes  # tests/stripe_scenes.py
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
 
 
 def prism_and_stripes(pixels=32):
-    """Horizontal stripes seen through a dispersive prism (the prism bends the view up)."""
-    mats = Materials.from_list([
-        {"kind": "DIFFUSE", "color": (0.9, 0.9, 0.9)}, {"kind": "DIFFUSE", "color": (0.05, 0.05, 0.05)},
-        {"kind": "DIELECTRIC", "ior": 1.72, "dispersion": "ABBE", "abbe": 29.0},
-    ])
-    s = Scene(materials=mats)
-    for i in range(8):
-        s.add_mesh(*primitives.quad((0, 3.0, i + 0.5), (10, 0, 0), (0, 0, 1.0)), material=i % 2)
-    s.add_mesh(*primitives.prism((0, 0, 0.75), side=1.2, length=2.4, axis="X", rotation_deg=180), material=2)
-    s.lights = Lights.from_list([{"kind": "SUN", "direction": (0, 1, -0.3), "power": 3.0}])
-    s.camera = Camera.look_at((0, -5.5, 3.6), (0, 0.2, 0.8), lens=120, width=pixels, height=pixels)
-    return s
+    """Horizontal stripes seen through a dispersive prism (the prism bends the view up), grey."""
+    return stripe_scenes.prism_and_stripes(pixels)
 
 
 def test_same_seed_same_image_whatever_the_threads():

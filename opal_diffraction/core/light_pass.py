@@ -45,7 +45,9 @@ batch), and batches add into the map, so the map does not depend on how the work
 ``LightWork`` is that split: the batches in order and the LANES fixed lanes they are dealt to;
 ``trace_batch`` traces one batch into any pair of sinks with a ``deposit`` method (the lane's
 maps here; a ``DepositLog`` on a Dask worker, replayed into the lane's maps on the client in the
-same order, so a distributed map equals this one bit for bit: core/distributed.py).
+same order, so a distributed map equals this one bit for bit: core/distributed.py). With SPLIT
+dispersion a batch is walked in pieces of ``wavelengths.SPLIT_CHUNK_RAYS / n`` white paths, so
+the n mono paths each becomes at a dispersive glass stay bounded (docs/physics.md section 2.6).
 """
 
 from __future__ import annotations
@@ -59,6 +61,7 @@ from types import MappingProxyType
 
 import numpy as np
 
+from . import wavelengths
 from .camera_splat import CameraConnection, CameraSplat, SplatBatch
 from . import splat_bounce
 from .elements import ElementLayout, IlluminationMap
@@ -513,15 +516,26 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
     connection = CameraConnection.of(prepared) if splat is not None else None
     batch = SplatBatch(connection) if connection is not None else None
     tr = _LightTrace(prepared, rng, illum, records, batch)
+    bounce_rng = None
     if batch is not None and splat_bounce.enabled(prepared):
         tr.bounces = splat_bounce.BounceLog(prepared)
-    tr.walk(rays, tr.empty_mono())
+        # the continued landings (core/splat_bounce.py) draw from a stream of their own, so the
+        # map and the direct splats are those of the same seed without them
+        bounce_rng = np.random.default_rng(np.random.SeedSequence([seed, stream, job.light, job.batch, 1]))
+    # SPLIT: the batch's white paths in pieces (core/wavelengths.split_chunks), so the mono paths
+    # they become stay bounded, and each piece's camera splats are summed per pixel before the
+    # next piece (a loop over a batch's few pieces, drawing the batch's stream one after another)
+    chunks = wavelengths.split_chunks(prepared, m)
     shadow = 0
-    if tr.bounces is not None:  # after the walk: the batch's random stream stays one sequence
-        tr._rays += splat_bounce.trace_bounces(prepared, tr.bounces, batch, rng)
-    if batch is not None:
-        splat.add(*batch.finish())
-        shadow = batch.shadow_rays
+    for c in [slice(0, m)] if chunks is None else chunks:
+        tr.walk(rays if chunks is None else rays.take(np.arange(c.start, c.stop)), tr.empty_mono())
+        if tr.bounces is not None:  # the piece's landings, one diffuse bounce on
+            tr._rays += splat_bounce.trace_bounces(prepared, tr.bounces, tr.splat, bounce_rng)
+            tr.bounces = splat_bounce.BounceLog(prepared)
+        if tr.splat is not None:
+            splat.add(*tr.splat.finish())
+            shadow += tr.splat.shadow_rays
+            tr.splat = SplatBatch(connection)
     return {"paths": b, "deposits": tr.deposited, "rays": tr._rays + shadow}
 
 

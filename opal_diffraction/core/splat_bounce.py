@@ -101,9 +101,10 @@ def _cosine(n: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 
 class BounceLog:
-    """The landings of one light batch to continue (``add`` from the light pass's on_hit), traced
-    after the batch's walk by ``trace_bounces``: their directions are drawn then, so the walk's
-    random numbers, its map and its direct splats are those of a light pass without them."""
+    """The landings of one light batch (or SPLIT piece) to continue (``add`` from the light
+    pass's on_hit), traced after its walk by ``trace_bounces`` with a random stream of their own
+    (light_pass.trace_batch), so the walk's random numbers, its map and its direct splats are
+    those of a light pass without them."""
 
     def __init__(self, prepared):
         self.mask = receivers(prepared)
