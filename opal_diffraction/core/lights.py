@@ -365,8 +365,6 @@ def light_pdf(pl: PreparedLights, index: int, p: np.ndarray, wi: np.ndarray) -> 
         with np.errstate(divide="ignore", invalid="ignore"):
             pdf = t * t / (np.pi * r * r * cos_l)
         return np.where(ok & (cos_l > 0), pdf, 0.0).astype(np.float32)
-    if k == AREA_RECT and (cached := rect_light.cached_pdf(pl, index, p, wi)) is not None:
-        return cached  # the directions sample_light just drew (core/rect_light.py)
     t, ok, cos_l = _area_hit(pl, index, p, wi, np.full(b, np.inf))
     if k == AREA_RECT:
         return rect_light.pdf_light_rect(pl, index, p, ok, t, cos_l).astype(np.float32)

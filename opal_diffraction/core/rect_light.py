@@ -19,7 +19,6 @@ sqrt(d^2 + y1^2), hv = h0 + v (h1 - h0), yv = hv d / sqrt(1 - hv^2), d = sqrt(xu
 
 from __future__ import annotations
 
-import threading
 
 import numpy as np
 
@@ -97,11 +96,6 @@ def sample(rect: RectFrame, o: np.ndarray, u: np.ndarray, v: np.ndarray):
     return pts, s
 
 
-#: Per thread: (lights, index, points, solid angles, directions, pdfs) of the last
-#: sample_light_rect call.
-_last = threading.local()
-
-
 def _frame_of(pl, index: int) -> RectFrame:
     return RectFrame(pl.position[index], pl.axis_u[index], pl.axis_v[index], pl.size_u[index], pl.size_v[index])
 
@@ -115,7 +109,6 @@ def sample_light_rect(pl, index: int, p: np.ndarray, r1: np.ndarray, r2: np.ndar
     rect = _frame_of(pl, index)
     p64 = np.asarray(p, np.float64)
     target, s = sample(rect, p64, r1, r2)
-    _last.entry = (pl, index, p64, s)
     tiny = s < MIN_SOLID_ANGLE
     if tiny.any():
         a, c = (np.asarray(r1, np.float64) - 0.5) * rect.lx, (np.asarray(r2, np.float64) - 0.5) * rect.ly
@@ -128,34 +121,13 @@ def sample_light_rect(pl, index: int, p: np.ndarray, r1: np.ndarray, r2: np.ndar
     cos_l = -(wi @ np.asarray(pl.direction[index], np.float64))
     g = np.where(cos_l > 0, np.where(tiny, cos_l * float(pl.area[index]) / d2, s), 0.0)
     wi32 = wi.astype(f32)
-    with np.errstate(divide="ignore"):
-        pdf = np.where(cos_l > 0, np.where(tiny, d2 / (float(pl.area[index]) * cos_l), 1.0 / s), 0.0)
-    # the next events ask light_pdf for these points and directions next
-    _last.entry = (pl, index, p64, s, wi32, pdf.astype(f32))
     return wi32, dist.astype(f32), g.astype(f32)
-
-
-def cached_pdf(pl, index: int, p: np.ndarray, wi: np.ndarray):
-    """light_pdf of the directions the last ``sample_light_rect`` call (this thread) drew, when
-    ``p`` and ``wi`` are those points and directions: the pdf of a sampled direction is 1 / S
-    (it reaches the light's front where cos_l > 0) without a ray-rectangle test; else None."""
-    e = getattr(_last, "entry", None)
-    if e is None or e[0] is not pl or e[1] != index or len(e) < 6:
-        return None
-    if e[4].shape != np.shape(wi) or not np.array_equal(e[4], wi) or not np.array_equal(e[2], p):
-        return None
-    return e[5]
 
 
 def pdf_light_rect(pl, index: int, p: np.ndarray, hit: np.ndarray, t: np.ndarray, cos_l: np.ndarray) -> np.ndarray:
     """(B,) float64 solid-angle pdf of ``sample_light_rect`` for directions that reach the light's
     front at distance ``t`` with cosine ``cos_l`` (``hit``), 0 elsewhere."""
-    e = getattr(_last, "entry", None)
-    p = np.asarray(p, np.float64)
-    if e is not None and e[0] is pl and e[1] == index and e[2].shape == p.shape and np.array_equal(e[2], p):
-        s = e[3]  # the solid angles the sampler just computed at these points
-    else:
-        s = solid_angle(_frame_of(pl, index), p)
+    s = solid_angle(_frame_of(pl, index), np.asarray(p, np.float64))
     tiny = s < MIN_SOLID_ANGLE
     with np.errstate(divide="ignore", invalid="ignore"):
         pdf = np.where(tiny, t * t / (float(pl.area[index]) * cos_l), 1.0 / s)
