@@ -783,8 +783,6 @@ class Scene:
         """Read a scene written by :meth:`save`; a clear one-line SceneError if it is not one
         (missing, a directory, empty, not a .npz archive, a corrupted or missing member).
         The arrays are checked by :meth:`validated` (every render does that)."""
-        import zipfile
-
         shown = os.fspath(path) if isinstance(path, (str, bytes, os.PathLike)) else path
         if isinstance(shown, (str, bytes)):
             if not os.path.exists(shown):

@@ -224,8 +224,9 @@ SPLIT_CHUNK_RAYS = 1 << 18
 
 
 def split_chunks(prepared, b: int) -> list[slice] | None:
-    """Slices of a batch of ``b`` camera rays such that SPLIT makes at most SPLIT_CHUNK_RAYS mono
-    rays from each (None: one piece will do, or the scene does not split)."""
+    """Slices of a batch of ``b`` white rays (the eye pass's camera rays, the light pass's paths)
+    such that SPLIT makes at most SPLIT_CHUNK_RAYS mono rays from each (None: one piece will do,
+    or the scene does not split)."""
     if prepared.settings.dispersion_sampling != "SPLIT" or not bool(prepared.materials.dispersive.any()):
         return None
     per = max(1, SPLIT_CHUNK_RAYS // prepared.grid.n)
