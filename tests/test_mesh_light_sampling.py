@@ -15,7 +15,7 @@ from chi2 import chi2_directions
 from opal_diffraction.core.geometry import triangle_normals
 from opal_diffraction.core.mesh_lights import MeshLights, heitz_triangle, sample_spherical_triangle, solid_angle
 from test_lights_sized import Z_MAX, polygon_irradiance
-from test_mesh_lights import ray_triangles
+from test_mesh_lights import light_density, ray_triangles
 
 #: chi-square tests in this file (Bonferroni)
 CHI2_TESTS = 5
@@ -79,23 +79,6 @@ def test_heitz_map_is_uniform_on_the_triangle():
     assert pval > ALPHA, info
 
 
-def _density(ml, p):
-    """The solid-angle density of ml.sample at p in directions d: MeshLights.pdf of every emitter
-    d crosses (an independent ray-triangle test), summed."""
-    verts = V[T[ml.tri]]
-
-    def density(d):
-        t = ray_triangles(np.broadcast_to(p, d.shape), d, verts)
-        out = np.zeros(len(d))
-        for k in range(len(ml.tri)):
-            hit = np.isfinite(t[k])
-            if hit.any():
-                q = p + t[k, hit, None] * d[hit]
-                out[hit] += ml.pdf(np.full(hit.sum(), ml.tri[k]), np.broadcast_to(p, q.shape), q)
-        return out
-    return density
-
-
 def test_spherical_triangle_directions_are_uniform_in_its_solid_angle():
     """Arvo's sampler alone, for a wide triangle seen from close by: chi-square against 1 / Omega
     inside the triangle (found by ray casting), and the mean of the directions against the
@@ -140,7 +123,7 @@ def test_sampler_matches_its_pdf_near_and_far_chi2():
     q = p + wi.astype(np.float64) * dist[:, None]
     np.testing.assert_allclose(pdf, ml.pdf(prim, np.broadcast_to(p, (n, 3)), q), rtol=2e-3)
     np.testing.assert_allclose(g * pdf, 1, rtol=1e-5)
-    pval, info, total = chi2_directions(wi, _density(ml, p), np.array([0.0, 0.0, 1.0]), theta_max=np.pi / 2,
+    pval, info, total = chi2_directions(wi, light_density(ml, V[T[ml.tri]], p), np.array([0.0, 0.0, 1.0]), theta_max=np.pi / 2,
                                         n_theta=20, n_phi=32, sub=40)
     print(info)
     assert pval > ALPHA, info
@@ -153,7 +136,7 @@ def test_sampler_matches_its_pdf_from_below_the_tilted_triangle_chi2():
     p = np.array([-1.0, 0.4, 0.4])
     n = 300_000
     wi, dist, g, prim, pdf = ml.sample(np.broadcast_to(p, (n, 3)), np.random.default_rng(5))
-    pval, info, total = chi2_directions(wi, _density(ml, p), np.array([-0.3, 0.0, 1.0]), theta_max=2.2,
+    pval, info, total = chi2_directions(wi, light_density(ml, V[T[ml.tri]], p), np.array([-0.3, 0.0, 1.0]), theta_max=2.2,
                                         n_theta=20, n_phi=32, sub=40)
     print(info)
     assert pval > ALPHA, info

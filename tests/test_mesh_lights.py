@@ -54,6 +54,23 @@ def ray_triangles(o, d, verts):
     return out
 
 
+def light_density(ml, verts, p):
+    """The solid-angle density of ``ml.sample`` at p in directions d: MeshLights.pdf of every
+    emitter (corners ``verts`` (K, 3, 3), ml.tri's order) d crosses, by an independent
+    ray-triangle test, summed."""
+
+    def density(d):
+        t = ray_triangles(np.broadcast_to(p, d.shape), d, verts)
+        out = np.zeros(len(d))
+        for k in range(len(ml.tri)):  # the emitters (a handful)
+            hit = np.isfinite(t[k])
+            if hit.any():
+                q = p + t[k, hit, None] * d[hit]
+                out[hit] += ml.pdf(np.full(hit.sum(), ml.tri[k]), np.broadcast_to(p, q.shape), q)
+        return out
+    return density
+
+
 def test_build_selects_the_emitters_with_power_proportional_weights():
     ml = build()
     assert ml is not None and sorted(ml.tri.tolist()) == [0, 1, 3]
@@ -74,17 +91,7 @@ def test_triangle_sampler_matches_its_pdf_chi2():
     # the pdf the sampler reports is MeshLights.pdf of the point it drew
     np.testing.assert_allclose(pdf, ml.pdf(prim, np.broadcast_to(p, (n, 3)), p + wi * dist[:, None].astype(np.float64)),
                                rtol=2e-3)
-    verts = V[T[ml.tri]]
-
-    def density(d):
-        t = ray_triangles(np.broadcast_to(p, d.shape), d, verts)
-        out = np.zeros(len(d))
-        for k in range(len(ml.tri)):
-            hit = np.isfinite(t[k])
-            if hit.any():
-                q = p + t[k, hit, None] * d[hit]
-                out[hit] += ml.pdf(np.full(hit.sum(), ml.tri[k]), np.broadcast_to(p, q.shape), q)
-        return out
+    density = light_density(ml, V[T[ml.tri]], p)
 
     axis = V[T[ml.tri]].mean(axis=(0, 1)) - p
     pval, info, total = chi2_directions(wi, density, axis, theta_max=1.4, n_theta=16, n_phi=32, sub=40)

@@ -80,17 +80,11 @@ def test_vertex_sums_equal_the_pair_enumeration_bit_for_bit(monkeypatch):
     assert np.array_equal(fast[~grating], np.repeat(tt[~grating, None, :], 3, axis=1))
 
 
-def test_smooth_corner_tangents_match_a_per_corner_loop():
-    v, t, n, tt, mat, grating = _mesh(2)
-    got = gd.smooth_corner_tangents(v, t, n, tt, mat, grating)
-    # the definition, corner by corner: the corner-angle-weighted, sign-aligned sum over the
-    # grating corners at the vertex with the same material, tangent within 20 and normal within
-    # 30 degrees, normalised (its own tangent when it vanishes)
-    p = v.astype(np.float64)[t]
-    ang = np.zeros(t.shape)
-    for c in range(3):
-        a, b = p[:, (c + 1) % 3] - p[:, c], p[:, (c + 2) % 3] - p[:, c]
-        ang[:, c] = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.sum(a * b, axis=1))
+def corner_tangents_by_loop(t, n, tt, mat, grating, ang):
+    """The smoothed grating tangents (T, 3, 3) by their definition, one loop per corner: the
+    corner-angle-weighted (``ang`` (T, 3)), sign-aligned sum over the grating corners at the vertex
+    with the same material, tangent within MAX_TANGENT_ANGLE and normal within MAX_NORMAL_ANGLE,
+    normalised (its own tangent when it vanishes); non-grating rows keep their tangent."""
     tt64 = tt.astype(np.float64)
     cos_t, cos_n = np.cos(np.radians(gd.MAX_TANGENT_ANGLE)), np.cos(np.radians(gd.MAX_NORMAL_ANGLE))
     at_vertex = {}
@@ -107,6 +101,21 @@ def test_smooth_corner_tangents_match_a_per_corner_loop():
                     acc += ang[j, cj] * np.sign(d) * tt64[j]
             ln = np.linalg.norm(acc)
             ref[i, c] = acc / ln if ln > 1e-12 else tt64[i]
+    return ref
+
+
+def test_smooth_corner_tangents_match_a_per_corner_loop():
+    v, t, n, tt, mat, grating = _mesh(2)
+    got = gd.smooth_corner_tangents(v, t, n, tt, mat, grating)
+    # the definition, corner by corner: the corner-angle-weighted, sign-aligned sum over the
+    # grating corners at the vertex with the same material, tangent within 20 and normal within
+    # 30 degrees, normalised (its own tangent when it vanishes)
+    p = v.astype(np.float64)[t]
+    ang = np.zeros(t.shape)
+    for c in range(3):
+        a, b = p[:, (c + 1) % 3] - p[:, c], p[:, (c + 2) % 3] - p[:, c]
+        ang[:, c] = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.sum(a * b, axis=1))
+    ref = corner_tangents_by_loop(t, n, tt, mat, grating, ang)
     assert np.allclose(got, ref.astype(np.float32), rtol=0, atol=2e-6)
 
 

@@ -243,6 +243,7 @@ def test_smooth_corner_tangents_equal_the_float64_version():
     from opal_diffraction.core import grating_directions as gd
     from opal_diffraction.core.geometry import triangle_normals
     from opal_diffraction.core.gratings import triangle_tangents
+    from test_prepare_frames import corner_tangents_by_loop
 
     v, t = primitives.icosphere((0, 0, 0), 1.0, 3)
     n = triangle_normals(v, t)
@@ -253,22 +254,7 @@ def test_smooth_corner_tangents_equal_the_float64_version():
     # independently: the corner-angle-weighted, sign-aligned mean over the same-material
     # grating corners at each vertex within the tangent and normal angles (one loop per corner)
     ang = gd._corner_angles(np.asarray(v, np.float64), np.asarray(t, np.int64))
-    tt64 = tt.astype(np.float64)
-    ref = np.repeat(tt64[:, None, :], 3, axis=1)
-    cos_t, cos_n = np.cos(np.radians(gd.MAX_TANGENT_ANGLE)), np.cos(np.radians(gd.MAX_NORMAL_ANGLE))
-    at_vertex = {}
-    for i in np.flatnonzero(grating):
-        for c in range(3):
-            at_vertex.setdefault(int(t[i, c]), []).append((i, c))
-    for i in np.flatnonzero(grating):
-        for c in range(3):
-            acc = np.zeros(3)
-            for j, cj in at_vertex[int(t[i, c])]:
-                d = tt64[i] @ tt64[j]
-                if abs(d) >= cos_t and mat[i] == mat[j] and n[i] @ n[j] >= cos_n:
-                    acc += ang[j, cj] * np.sign(d) * tt64[j]
-            ln = np.linalg.norm(acc)
-            ref[i, c] = acc / ln if ln > 1e-12 else tt64[i]
+    ref = corner_tangents_by_loop(t, n, tt, mat, grating, ang)
     assert got.dtype == np.float32
     assert np.allclose(got, ref.astype(np.float32), rtol=0, atol=1e-6)
     assert np.array_equal(got[~grating], np.repeat(tt[~grating, None, :], 3, axis=1))
