@@ -11,8 +11,8 @@ Steps:
    cached in ``build/wheels/<platform>/``) and list them in the staged manifest with its
    ``platforms``. Blender ships numpy; it does not ship colour-science (spectra, CIE observer,
    blackbody) or the scipy and typing-extensions it imports, OpenEXR's Python binding (spectral
-   EXR output) or embreex (Embree ray casting, x86-64 only; without it the core falls back to its
-   NumPy BVH). Their versions are the ``==`` pins of ``requirements.txt``: the zip ships exactly
+   EXR output), embreex (Embree ray casting, x86-64 only; without it the core falls back to its
+   NumPy BVH) or threadpoolctl (one BLAS thread while a render runs: core/blas_threads.py). Their versions are the ``==`` pins of ``requirements.txt``: the zip ships exactly
    what the test venv runs.
 3. ``blender_ext.py build`` (the extension CLI inside the bpy wheel), ``--split-platforms`` when
    wheels are bundled (one zip per platform), then ``blender_ext.py validate`` on every zip.
@@ -49,6 +49,7 @@ BUNDLED = [
     ("scipy", False),
     ("OpenEXR", False),
     ("embreex", True),
+    ("threadpoolctl", False),
 ]
 #: numpy bundled with Blender releases (the oldest is blender_version_min's): every bundled wheel
 #: that depends on numpy must accept each (tests/test_packaging_meta.py, tests/blender/test_packaging.py).

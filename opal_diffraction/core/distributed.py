@@ -55,6 +55,7 @@ from types import MappingProxyType
 
 import numpy as np
 
+from .blas_threads import one_blas_thread
 from .camera import FilterSampler
 from .elements import ElementLayout, IlluminationMap
 from .eye_pass import EyePass
@@ -293,6 +294,7 @@ def _frame(job: dict) -> _Frame:
         return frame
 
 
+@one_blas_thread()  # the worker's threads are the parallelism (core/blas_threads.py)
 def light_batch_task(job: dict, index: int) -> dict:
     """Trace batch ``index`` of the job's light pass; its deposits in order, and its counts."""
     frame = _frame(job)
@@ -305,6 +307,7 @@ def light_batch_task(job: dict, index: int) -> dict:
             "elements": work.layout.total, "splat": None if splat is None else splat.calls}
 
 
+@one_blas_thread()
 def tile_task(job: dict, light: dict | None, r_index: int, t_index: int, pixels=None) -> dict:
     """Trace tile ``t_index`` of round ``r_index`` (only its flat pixel indices ``pixels``, for
     adaptive sampling; None: all), reading the scattered light-pass maps; its sums in RGB, its

@@ -62,6 +62,7 @@ from types import MappingProxyType
 import numpy as np
 
 from . import wavelengths
+from .blas_threads import one_blas_thread
 from .camera_splat import CameraConnection, CameraSplat, SplatBatch
 from . import splat_bounce
 from .elements import ElementLayout, IlluminationMap
@@ -603,6 +604,7 @@ def finish_light_pass(prepared, work: LightWork, maps, counts, t0: float, timed_
     return LightPassResult(illum, records, MappingProxyType(stats), tuple(warnings), cancelled, prepared.key, splat)
 
 
+@one_blas_thread()  # the lanes are the parallelism (core/blas_threads.py)
 def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_cancel=None,
                    deadline: float | None = None) -> LightPassResult:
     """Run the light pass over ``prepared`` (``n_paths``: default the settings' light paths).

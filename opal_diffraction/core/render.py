@@ -28,6 +28,7 @@ from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
+from .blas_threads import one_blas_thread
 from .camera import FilterSampler
 from .camera_splat import usable_splat
 from .eye_pass import EyePass
@@ -106,6 +107,7 @@ def _cancelled_before_start(scene: Scene, settings: RenderSettings, region, spec
     return film.result(plan, True, ["cancelled while preparing the scene"], {"rays": 0})
 
 
+@one_blas_thread()  # the tile threads are the parallelism (core/blas_threads.py)
 def render_prepared(
     prepared: PreparedScene,
     light: LightPassResult | None = None,
