@@ -118,7 +118,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--glossy-bounces", type=int, default=4)
     r.add_argument("--transmission-bounces", type=int, default=12)
     r.add_argument("--light-paths", type=_light_paths, default=None, metavar="N|auto",
-                   help="light-pass paths for caustics (0: off; default auto: 4 per camera sample, 65 536 to 1 000 000)")
+                   help="light-pass paths for caustics (0: off; default auto: 1 per camera sample, 65 536 to 1 000 000)")
     r.add_argument("--dispersion-sampling", choices=["SPLIT", "SAMPLE"], default="SAMPLE")
     r.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"), help="override the camera's resolution")
     r.add_argument("--spectral-exr", default="", help="also write a spectral EXR (JCGT 2021 layout) here")

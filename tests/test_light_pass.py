@@ -290,17 +290,17 @@ def test_more_receiving_triangles_than_the_map_can_hold_is_a_warning_not_a_hang(
 
 
 def test_automatic_light_paths_follow_the_image_size():
-    """light_paths=None (the default) sizes the light pass to the image: 4 paths per camera
+    """light_paths=None (the default) sizes the light pass to the image: 1 path per camera
     sample within 65 536 - 1 000 000 (settings.auto_light_paths); an explicit count is kept."""
     from dataclasses import replace as _replace
 
     from opal_diffraction.core.settings import auto_light_paths
 
     assert RenderSettings().light_paths is None
-    assert auto_light_paths(64, 64, 4) == 65_536 and auto_light_paths(64, 64, 32) == 524_288
-    assert auto_light_paths(640, 400, 1) == 1_000_000
+    assert auto_light_paths(64, 64, 4) == 65_536 and auto_light_paths(64, 64, 32) == 131_072
+    assert auto_light_paths(640, 400, 4) == 1_000_000 and auto_light_paths(640, 400, 1) == 256_000
     scene = slab_scene()
-    for (w, h, spp), expected in (((64, 64, 1), 65_536), ((100, 50, 16), 320_000), ((800, 600, 16), 1_000_000)):
+    for (w, h, spp), expected in (((64, 64, 1), 65_536), ((100, 50, 16), 80_000), ((800, 600, 16), 1_000_000)):
         s = _replace(scene, camera=_replace(scene.camera, width=w, height=h))
         assert prepare(s, RenderSettings(samples=spp)).settings.light_paths == expected
         assert prepare(s, RenderSettings(samples=spp, light_paths=1234)).settings.light_paths == 1234

@@ -148,7 +148,7 @@ class OpalRenderSettings(PropertyGroup):
         max=1 << 24, soft_max=4096,
     )
     light_paths_auto: BoolProperty(
-        name="Automatic Light Paths", description="Size the light pass to the image: 4 light paths per camera sample (pixels x samples), "
+        name="Automatic Light Paths", description="Size the light pass to the image: 1 light path per camera sample (pixels x samples), "
         "between 65 536 and 1 000 000 (off: the number below)",
         default=True,
     )

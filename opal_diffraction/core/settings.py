@@ -61,12 +61,13 @@ FILTER_WIDTH_MAX = 100.0  # pixels
 
 #: light_paths=None (automatic): this many light paths per camera sample (pixels x samples),
 #: within the range. A caustic's noise in a pixel goes with the light paths landing in it, and
-#: the eye pass's with the samples, so the two stay in proportion: a 64 x 64 preview at 4
-#: samples takes 65 536 paths (about a tenth of a second), 64 x 64 at 64 samples and any
-#: full-size render the 1 M cap. Measured on the Cycles parity scenes: at 1 path per sample
-#: the mirror sphere's glossy caustic doubled the image's noise at 32 samples; at 4 it adds
-#: about a tenth.
-AUTO_LIGHT_PATHS_PER_SAMPLE = 4
+#: the eye pass's with the samples, so the two stay in proportion: a 64 x 64 preview at up to
+#: 16 samples takes 65 536 paths (about a tenth of a second), any full-size render the 1 M cap.
+#: Measured on the Cycles parity mirror sphere (64 x 64, 32 samples, 4 seeds; docs/benchmarks.md
+#: "Light paths per sample"): the floor's error with its glossy caustic 0.00417 / 0.00278 /
+#: 0.00243 at 0.25 / 1 / 4 paths per sample (Cycles' at 64 samples: 0.012), for 0.44 / 0.59 /
+#: 1.38 CPU s: past one path per sample the eye pass's noise dominates and the paths only cost.
+AUTO_LIGHT_PATHS_PER_SAMPLE = 1
 AUTO_LIGHT_PATHS_RANGE = (65_536, 1_000_000)
 
 
