@@ -260,7 +260,7 @@ class OpalRenderSettings(PropertyGroup):
     )
     round_samples: IntProperty(
         name="Samples per Round", description="Samples per pixel added by each progressive round: the image "
-        "updates after every round", default=8, min=1, max=4096,
+        "updates after every round", default=16, min=1, max=4096,
     )
     filter_width: FloatProperty(
         name="Filter Width", description="Width of the Blackman-Harris pixel filter, as in Cycles",

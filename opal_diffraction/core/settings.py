@@ -115,7 +115,7 @@ class RenderSettings:
     threads: int = 0                  # 0: all cores
     backend: str = "auto"             # ray casting: 'auto' | 'embree' | 'numpy' | 'brute' (tests)
     tile_size: int = 64               # pixels per tile side
-    round_samples: int = 8            # samples per pixel per progressive round
+    round_samples: int = 16           # samples per pixel per progressive round (docs/physics.md section 9.1)
     filter_width: float = 1.5         # Blackman-Harris reconstruction filter width (pixels)
     # adaptive sampling (Cycles' Noise Threshold, core/adaptive.py): pixels stop sampling once
     # their error estimate is below the threshold; 0: off (every pixel takes every sample).
