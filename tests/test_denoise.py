@@ -152,15 +152,15 @@ def test_cli_denoise_without_pyoidn_is_a_one_line_error_before_rendering(tmp_pat
 def test_cli_adaptive_flags_reach_the_render(tmp_path):
     path = tmp_path / "scene.npz"
     noisy_scene(16).save(path)
-    base = ["render", str(path), "--spp", "32", "--wavelength-step", "20", "--diffuse-bounces", "1",
+    base = ["render", str(path), "--spp", "64", "--wavelength-step", "20", "--diffuse-bounces", "1",
             "--light-paths", "0", "--no-preview"]
     code, err = run_main(base + ["-o", str(tmp_path / "a.exr"), "--adaptive-threshold", "0.05",
                                  "--adaptive-min-samples", "8"])
     assert code == 0, err
     line = [ln for ln in err.splitlines() if ln.startswith("adaptive sampling:")]
-    # rounds of 8 samples: the first check needs both halves (two rounds), so at least 16
-    assert line and line[0].startswith("adaptive sampling: 16 to "), err
-    assert int(line[0].split()[4]) <= 32
+    # rounds of 16 samples (the default): the first check needs both halves (two rounds), so at least 32
+    assert line and line[0].startswith("adaptive sampling: 32 to "), err
+    assert int(line[0].split()[4]) <= 64
     code, err = run_main(base + ["-o", str(tmp_path / "b.exr"), "--adaptive-threshold", "2"])
     assert code == 2 and err.startswith("error: adaptive threshold") and "between 0 (off) and 1" in err, err
 

@@ -38,7 +38,7 @@ evaluate to zero (no light leaks). Everything is float32.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from functools import lru_cache
 
 import numpy as np
@@ -48,7 +48,7 @@ __all__ = [
     "LAMBERT", "CONDUCTOR", "DIELECTRIC", "PLASTIC", "GLOSSY",
     "DIFFUSE_REFLECTION", "GLOSSY_REFLECTION", "TRANSMISSION", "SINGULAR",
     "MIN_ROUGHNESS", "SurfaceParams", "params_from_materials", "sample", "evaluate", "microfacet_materials",
-    "energy_compensation", "fresnel_f82", "f82_b", "fresnel_dielectric_exact",
+    "energy_compensation", "fresnel_f82", "f82_b", "fresnel_dielectric_exact", "with_outgoing",
 ]
 
 #: Lobe codes per hit. GLOSSY is Blender's Glossy BSDF: GGX with a constant Fresnel (its colour).
@@ -81,12 +81,19 @@ class SurfaceParams:
     eta: np.ndarray        # (B,) DIELECTRIC: n on the far side / n on wo's side; 1 otherwise
     spec_f0: np.ndarray    # (B,) PLASTIC: F0 of the specular layer (((ior-1)/(ior+1))^2 * 2 * IOR level); 0: none
     spec_tint: np.ndarray  # (B, k) PLASTIC: specular tint
+    # What depends on wo only, filled by with_outgoing() for the hits' wo and shading normal
+    # (one next event and the bounce at a hit share them); None: computed in each call.
+    frame_u: np.ndarray | None = None   # (B, 3) the shading frame's tangents (tangent_frame(ns))
+    frame_v: np.ndarray | None = None
+    wo_local: np.ndarray | None = None  # (B, 3) wo in that frame
+    f82: np.ndarray | None = None       # (B, k) CONDUCTOR's F82 factor b (f82_b), every row a conductor
+    ms: np.ndarray | None = None        # (B, k) the multiscatter factor, every row one CONDUCTOR or GLOSSY lobe
 
     def __len__(self):
         return len(self.lobe)
 
     def take(self, idx) -> "SurfaceParams":
-        return SurfaceParams(*(getattr(self, f.name)[idx] for f in fields(self)))
+        return SurfaceParams(*(None if v is None else v[idx] for v in (getattr(self, f.name) for f in fields(self))))
 
 
 def _sub(p: SurfaceParams, idx: np.ndarray) -> SurfaceParams:
@@ -455,6 +462,12 @@ def _eval_lobe(p, code, wo, wi, terms=None):
         c = np.where(up, wi[:, 2], 0.0) * _INV_PI
         return (p.base * c[:, None]).astype(_F32), c.astype(_F32)
     rough = p.alpha >= _MIN_ALPHA
+    if code in (CONDUCTOR, GLOSSY) and p.ms is not None:  # wo's factors known: all rows, the rest zeroed
+        ok = up & rough
+        fc, pd, coh = _eval_reflection_common(p.alpha, wo, wi)
+        f = fresnel_f82(coh, p.base, p.f82) if code == CONDUCTOR else p.base
+        return (np.where(ok[:, None], f * (fc[:, None] * p.ms), _F32(0.0)).astype(_F32, copy=False),
+                np.where(ok, pd, _F32(0.0)).astype(_F32, copy=False))
     if code in (CONDUCTOR, GLOSSY):
         m = np.flatnonzero(up & rough)
         if len(m):
@@ -546,10 +559,12 @@ def _sample_lobe(p, code, wo, u):
     if code in (CONDUCTOR, GLOSSY):
         wi = _reflect_local(wo, h, cos_oh)
         ok = (wi[:, 2] > 0) & (cos_oh > 0)
-        b = f82_b(p.base, p.edge) if code == CONDUCTOR else None
+        b = p.f82 if p.ms is not None else f82_b(p.base, p.edge) if code == CONDUCTOR else None
         f = fresnel_f82(cos_oh, p.base, b) if code == CONDUCTOR else p.base
         g = np.where(rough, (1.0 + lo) / (1.0 + lo + _lambda(a2, wi)), 1.0)
-        if len(r) == B:
+        if p.ms is not None:
+            fac = p.ms
+        elif len(r) == B:
             fac = _lobe_factor(p, mu_o, code, b)
         else:
             fac = np.ones((B, k), _F32)
@@ -612,13 +627,34 @@ def _sample_lobe(p, code, wo, u):
 def _prepare(params, wo, ns):
     wo = np.asarray(wo, _F32)
     ns = np.asarray(ns, _F32)
+    if params.wo_local is not None:
+        return wo, ns, params.frame_u, params.frame_v, params.wo_local
     u, v = _frame(ns)
     return wo, ns, u, v, _to_local(wo, u, v, ns)
 
 
+def with_outgoing(params: SurfaceParams, wo, ns) -> SurfaceParams:
+    """``params`` with what depends on wo only computed once for these hits: the shading frame,
+    wo in it and, where every hit has one CONDUCTOR or GLOSSY lobe, F82's b and the multiscatter
+    factor. ``evaluate`` and ``sample`` then skip them; they must be called with the same wo and
+    ns (rows taken together with ``take``). The values are the ones they compute themselves."""
+    wo, ns, fu, fv, wl = _prepare(params, wo, ns)
+    out = replace(params, frame_u=fu, frame_v=fv, wo_local=wl)
+    lobe = params.lobe
+    if len(lobe) and lobe[0] in (CONDUCTOR, GLOSSY) and (lobe == lobe[0]).all():
+        code = int(lobe[0])
+        b = f82_b(params.base, params.edge).astype(_F32) if code == CONDUCTOR else None
+        rough = params.alpha >= _MIN_ALPHA
+        with np.errstate(all="ignore"):  # rows with wo below ns: evaluate and sample zero them
+            fac = _lobe_factor(params, wl[:, 2], code, b)
+        out.f82, out.ms = b, np.where(rough[:, None], fac, _F32(1.0)).astype(_F32)
+    return out
+
+
 def sample(params: SurfaceParams, wo, ns, ng, u):
     """Sample wi for each hit. wo (B, 3) unit towards the previous vertex; ns (B, 3) unit shading
-    normal and ng (B, 3) geometric normal, both on wo's side; u (B, 3) uniforms in [0, 1).
+    normal and ng (B, 3) geometric normal, both on wo's side; u (B, 3) uniforms in [0, 1)
+    (u[:, 2], the reflect / transmit or coat / base choice, is read by DIELECTRIC and PLASTIC only).
 
     Returns wi (B, 3) unit, weight (B, k) = f |cos(wi, ns)| / pdf, pdf (B,) solid-angle density
     (inf for SINGULAR events), flags (B,) (0: absorbed; weight and pdf are 0 then)."""

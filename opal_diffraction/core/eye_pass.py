@@ -191,6 +191,21 @@ class _TileTrace(SpecularWalker):
         # grey path weights (core/grey_paths.py), in the plain path tracer only: gratings, their
         # layers and the opal's lobes read spectral weights
         self.greys = GreyPaths(pm, enabled=not (pm.gratings.any or self.layers or self.bragg is not None))
+        # (M,) Principled mixes whose layer is drawn per hit (metallic or transmission strictly
+        # between 0 and 1); elsewhere the layer is fixed and no number is drawn for it
+        mt, tr = np.asarray(pm.materials.metallic), np.asarray(pm.materials.transmission)
+        self.mixed_layers = ((mt > 0) & (mt < 1)) | ((tr > 0) & (tr < 1))
+        self._probe = _probe_wavelength(pm)
+
+    def _reflects(self, albedo: np.ndarray) -> np.ndarray:
+        """(B,) bool: base colours (B, n) spectra or (B,) values that are not zero everywhere.
+        One column decides where ``_probe_wavelength`` found one (a (B, n) maximum costs about a
+        tenth of a textured floor's eye pass)."""
+        if albedo.ndim == 1:
+            return albedo > 0
+        if self._probe is not None and albedo.shape[1] == self.prepared.grid.n:
+            return albedo[:, self._probe] > 0
+        return albedo.max(axis=1) > 0
 
     def _new_film(self) -> np.ndarray:
         return np.zeros(self._n_pixels * self.n, np.float32)
@@ -407,7 +422,7 @@ class _TileTrace(SpecularWalker):
             grey = self.greys.albedo(r, h.mat)
             albedo = surface_reflectance(prepared, h, r.lam) if grey is None else grey
             self._albedo_of = (full_hit, np.flatnonzero(full_live)[diffuse], albedo)
-            lit = (albedo.max(axis=1) if albedo.ndim == 2 else albedo) > 0
+            lit = self._reflects(albedo)
             if not lit.all():  # black (emission-only) surfaces reflect nothing: no next events
                 r, h, r_full, albedo, first = r.take(lit), h.take(lit), r_full.take(lit), albedo[lit], first[lit]
                 if len(r) == 0:
@@ -501,7 +516,7 @@ class _TileTrace(SpecularWalker):
         grey = albedo.ndim == 1 and r.lam is None
         if grey and not self.greys.is_grey(r):  # spectral weights: the grey colour as a spectrum
             albedo, grey = albedo[:, None] * self.greys.basis, False
-        lit = (albedo.max(axis=1) if albedo.ndim == 2 else albedo) > 0
+        lit = self._reflects(albedo)
         if not lit.all():  # a zero-weight path (a black surface) ends here
             r, h, albedo = r.take(lit), h.take(lit), albedo[lit]
             if len(r) == 0:
@@ -568,13 +583,16 @@ class _TileTrace(SpecularWalker):
     # ----------------------------------------------------------------- microfacet surfaces
     def _surface_params(self, rays: Rays, hit: Hit, rng) -> "bsdf.SurfaceParams":
         """core/bsdf.py's parameters of these hits: base colour and roughness per hit (textures),
-        the side (entering or leaving glass), one Principled layer drawn per hit."""
+        the side (entering or leaving glass), one Principled layer drawn per hit where the
+        material mixes layers (a pure metal, glass or base takes its one layer: no number)."""
         prepared = self.prepared
         base = surface_reflectance(prepared, hit, rays.lam)
         if rays.lam is not None:
             base = base[:, None]
-        return bsdf.params_from_materials(prepared.materials, hit.mat, hit.front, rays.lam, base=base,
-                                          roughness=surface_roughness(prepared, hit), u_layer=rng.random(len(rays)))
+        u_layer = rng.random(len(rays)) if self.mixed_layers[hit.mat].any() else None
+        params = bsdf.params_from_materials(prepared.materials, hit.mat, hit.front, rays.lam, base=base,
+                                            roughness=surface_roughness(prepared, hit), u_layer=u_layer)
+        return bsdf.with_outgoing(params, -rays.d, hit.ns)  # the next events and the bounce share wo
 
     def _shade_microfacet(self, rays: Rays, hit: Hit, params, rng):
         """Next-event estimation at rough and layered surfaces: every light, the emissive meshes
@@ -670,8 +688,13 @@ class _TileTrace(SpecularWalker):
         if idx.size == 0:
             return None
         r, h = rays.take(idx), hit.take(idx)
-        wi, weight, pdf, flags = bsdf.sample(params, -r.d, h.ns, h.ng,
-                                             self._numbers(r, SLOT_BOUNCE).random((len(r), 3), np.float32))
+        # the third number (reflect or transmit, coat or base) only where a lobe chooses: one
+        # Sobol pair fewer for metals and glossy surfaces
+        chooses = np.isin(params.lobe, (bsdf.DIELECTRIC, bsdf.PLASTIC)).any()
+        u = self._numbers(r, SLOT_BOUNCE).random((len(r), 3 if chooses else 2), np.float32)
+        if not chooses:
+            u = np.concatenate([u, np.zeros((len(r), 1), np.float32)], axis=1)
+        wi, weight, pdf, flags = bsdf.sample(params, -r.d, h.ns, h.ng, u)
         ok = flags != 0
         if not ok.all():
             r, h, wi, weight, pdf, flags = r.take(ok), h.take(ok), wi[ok], weight[ok], pdf[ok], flags[ok]
@@ -996,6 +1019,23 @@ class _TileTrace(SpecularWalker):
                     sub = r.take(j)
                     contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(j)), sub.lam]
                     self._accumulate(sub, contrib, self._diffraction)
+
+
+def _probe_wavelength(prepared) -> int | None:
+    """A wavelength index j at which every base colour the scene can produce is positive unless
+    it is zero at every wavelength, or None. Textures' colours are rgb @ basis with rgb in
+    [0, 1] (core/surface.py), so j must have every basis row positive there; every material's
+    own reflectance must be positive at j exactly when it is anywhere."""
+    refl = np.asarray(prepared.materials.reflectance)
+    if refl.ndim != 2 or refl.shape[1] == 0:
+        return None
+    tx = prepared.textures
+    ok = np.ones(refl.shape[1], bool)
+    if tx.uses("color"):
+        ok &= (np.asarray(tx.reflectance_basis) > 0).all(axis=0)
+    ok &= ((refl > 0) == (refl > 0).any(axis=1, keepdims=True)).all(axis=0)
+    cols = np.flatnonzero(ok)
+    return int(cols[len(cols) // 2]) if len(cols) else None
 
 
 class _RowsOf:
