@@ -71,8 +71,11 @@ def _measure(engine, spp, seed0, seeds, ref, path):
     return t, cpu, math.sqrt(e2)
 
 
-def bench_scene(name: str, ref_spp: int, max_spp: int, work: str, seeds: int = 1) -> dict:
+def bench_scene(name: str, ref_spp: int, max_spp: int, work: str, seeds: int = 1, blue_noise: bool = True) -> dict:
+    import bpy
+
     cp.build(name, work)
+    bpy.context.scene.opal.blue_noise = blue_noise
     ref = cp.cycles_reference(name, ref_spp, work)
     t_c, cpu_c, target = _measure("CYCLES", CYCLES_SPP, CYCLES_SEED, seeds, ref, os.path.join(work, "cycles64.exr"))
     points, cpu_points, spp = [], [], 2
@@ -114,6 +117,8 @@ def main(argv=None) -> int:
     ap.add_argument("scenes", nargs="*")
     ap.add_argument("--ref-spp", type=int, default=4096)
     ap.add_argument("--max-spp", type=int, default=1024, help="our largest sample count tried")
+    ap.add_argument("--no-blue-noise", action="store_true", help="ours with each pixel's own sequence "
+                    "(RenderSettings.blue_noise off)")
     ap.add_argument("--seeds", type=int, default=1,
                     help="renders per sample count, both engines (seeds 7, 8, ... and 3, 4, ...): the error is "
                          "their RMS, the seconds their mean (a steadier target than one Cycles render)")
@@ -130,7 +135,7 @@ def main(argv=None) -> int:
         print(HEAD)
         for name in names:
             with tempfile.TemporaryDirectory(prefix="bench_parity_") as work:
-                r = bench_scene(name, args.ref_spp, args.max_spp, work, args.seeds)
+                r = bench_scene(name, args.ref_spp, args.max_spp, work, args.seeds, not args.no_blue_noise)
             print(row(r), flush=True)
             print("    ours (spp, s, CPU s, error): " + ", ".join(
                 f"({s}, {t:.2f}, {c:.2f}, {e:.4f})" for (s, t, e), (_, c, _) in zip(r["points"], r["cpu_points"])),

@@ -131,6 +131,8 @@ def _parser() -> argparse.ArgumentParser:
                         "(64 at T = 0.01)")
     r.add_argument("--denoise", action="store_true", help="denoise the RGB image with Open Image Denoise (needs "
                    "requirements-denoise.txt: pyoidn); the noisy image is written as OUT.noisy.exr")
+    r.add_argument("--no-blue-noise", action="store_true", help="each pixel samples its own low-discrepancy "
+                   "sequence instead of a block of one shared, blue-noise ordered sequence (docs/physics.md section 6.6)")
     r.add_argument("--no-grating-footprint", action="store_true", help="point-sample grating patterns instead of "
                    "integrating them over each pixel's footprint (docs/physics.md section 3.7)")
     r.add_argument("--no-caustic-splat", action="store_true", help="look caustics seen directly up in the "
@@ -373,6 +375,7 @@ def _render(args, sig: _Signals, created: list) -> int:
             spectral_exr=args.spectral_exr, time_limit=args.time_limit, threads=args.threads,
             backend=args.backend, adaptive_threshold=args.adaptive_threshold,
             adaptive_min_samples=args.adaptive_min_samples, grating_footprint=not args.no_grating_footprint,
+            blue_noise=not args.no_blue_noise,
             caustic_splat=not args.no_caustic_splat,
         )
         settings.validate()

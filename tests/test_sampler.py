@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from opal_diffraction.core.sampler import PixelSampler, sobol_owen_2d, vertex_pair
+from opal_diffraction.core.sampler import PixelSampler, blue_noise_numbers, blue_noise_rank, sobol_owen_2d, vertex_pair
 
 
 @pytest.mark.parametrize("k", [2, 5, 8])
@@ -99,3 +99,69 @@ def test_bit_reversal_and_sobols_second_dimension_match_their_definitions():
                 acc ^= v[bit]
         y.append(acc)
     assert np.array_equal(_sobol_y(x).astype(np.uint64), np.array(y, np.uint64))
+
+
+def _is_net(x, y, k):
+    """Every elementary interval 2^-i x 2^-(k-i) holds exactly one of the 2^k points."""
+    n = 1 << k
+    for i in range(k + 1):
+        cells = (np.floor(x * (1 << i)).astype(np.int64) << (k - i)) + np.floor(y * (1 << (k - i))).astype(np.int64)
+        if len(np.unique(cells)) != n:
+            return False
+    return True
+
+
+@pytest.mark.parametrize("seed", [0, 9, 2**40 + 3])
+def test_blue_noise_rank_is_a_hierarchical_bijection(seed):
+    """The ranks of a 32 x 32 image are a permutation of 0 .. 1023, and every aligned 2^k x 2^k
+    square of pixels holds one aligned block of 4^k consecutive ranks (the ordering is a
+    scrambled quadtree: what makes neighbouring pixels' sample blocks one net)."""
+    ys, xs = np.mgrid[0:32, 0:32]
+    r = blue_noise_rank(xs.ravel(), ys.ravel(), seed, 5).reshape(32, 32).astype(np.int64)
+    assert sorted(r.ravel()) == list(range(1024))
+    for k in range(1, 5):
+        s = 1 << k
+        for by in range(0, 32, s):
+            for bx in range(0, 32, s):
+                block = r[by:by + s, bx:bx + s]
+                assert block.max() - block.min() == s * s - 1 and block.min() % (s * s) == 0
+    other = blue_noise_rank(xs.ravel(), ys.ravel(), seed + 1, 5)
+    assert (other != r.ravel()).mean() > 0.9  # another seed, another order
+
+
+@pytest.mark.parametrize("spp", [4, 16, 32])
+def test_blue_noise_squares_of_pixels_share_one_net(spp):
+    """With blue noise the pixels number their samples in blocks of one shared sequence: each
+    pixel's spp points are a net, and so are the 4 spp points of every aligned 2 x 2 square and
+    the 16 spp of every aligned 4 x 4 square, in every dimension pair (the pixel position, the
+    light numbers, the bounce). Per-pixel sequences (the classic pattern) give no such squares."""
+    ys, xs = np.mgrid[0:8, 0:8]
+    xs, ys = xs.ravel(), ys.ravel()
+    starts = blue_noise_numbers(xs, ys, 8, 8, spp, seed=5).astype(np.int64)
+    k = spp.bit_length() - 1
+    for pair in (0, 2, 13):
+        num = (starts[:, None] + np.arange(spp)[None, :]).ravel()
+        x, y = sobol_owen_2d(np.zeros(len(num), np.uint32), num, pair, seed=5)
+        x, y = x.reshape(8, 8, spp), y.reshape(8, 8, spp)
+        ind_x, ind_y = sobol_owen_2d(np.repeat(ys * 8 + xs, spp), np.tile(np.arange(spp), 64), pair, seed=5)
+        ind_x, ind_y = ind_x.reshape(8, 8, spp), ind_y.reshape(8, 8, spp)
+        assert all(_is_net(x[j, i], y[j, i], k) for j in range(8) for i in range(8))
+        for s, kk in ((2, k + 2), (4, k + 4)):
+            squares = [(x[j:j + s, i:i + s].ravel(), y[j:j + s, i:i + s].ravel())
+                       for j in range(0, 8, s) for i in range(0, 8, s)]
+            assert all(_is_net(a, b, kk) for a, b in squares)
+            classic = [(ind_x[j:j + s, i:i + s].ravel(), ind_y[j:j + s, i:i + s].ravel())
+                       for j in range(0, 8, s) for i in range(0, 8, s)]
+            assert not all(_is_net(a, b, kk) for a, b in classic)
+
+
+def test_blue_noise_numbers_are_uniform_over_pixels_and_fall_back_when_too_long():
+    """The first sample's 2-D point over a 256 x 256 image is uniform (chi-square); blocks that
+    would not fit in 32-bit indices (4096 x 4096 pixels at 512 samples) are not used."""
+    ys, xs = np.mgrid[0:256, 0:256]
+    starts = blue_noise_numbers(xs.ravel(), ys.ravel(), 256, 256, 64, seed=1)
+    x, y = sobol_owen_2d(np.zeros(len(starts), np.uint32), starts, 3, seed=1)
+    h, _, _ = np.histogram2d(x, y, bins=16, range=[[0, 1], [0, 1]])
+    assert stats.chisquare(h.ravel()).pvalue > 0.01
+    assert blue_noise_numbers(np.zeros(1), np.zeros(1), 4096, 4096, 512, seed=1) is None
+    assert blue_noise_numbers(np.zeros(1), np.zeros(1), 4096, 4096, 256, seed=1) is not None

@@ -230,6 +230,11 @@ class OpalRenderSettings(PropertyGroup):
         "the pyoidn package in Blender's Python (otherwise a warning says so: the passes are still written "
         "for the compositor's Denoise node). Off by default (Cycles has it on)", default=False,
     )
+    blue_noise: BoolProperty(
+        name="Blue-Noise Sampling", description="Pixels share one low-discrepancy sequence in a blue-noise "
+        "order (as Cycles' Automatic pattern), so neighbouring pixels' noise cancels at a distance; off: "
+        "each pixel samples its own sequence", default=True,
+    )
     grating_footprint: BoolProperty(
         name="Grating Footprint", description="Integrate diffraction gratings' patterns over each pixel's "
         "footprint (ray differentials), so narrow orders and long tracks render without speckle; off: "

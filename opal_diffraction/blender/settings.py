@@ -33,5 +33,6 @@ def render_settings(opal, scene, spectral_path: str = "") -> RenderSettings:
         backend=opal.backend.lower(), tile_size=int(opal.tile_size), round_samples=int(opal.round_samples),
         filter_width=float(opal.filter_width), adaptive_threshold=adaptive_threshold(opal),
         adaptive_min_samples=int(opal.adaptive_min_samples), grating_footprint=bool(opal.grating_footprint),
+        blue_noise=bool(opal.blue_noise),
         caustic_splat=bool(opal.caustic_splat),
     )

@@ -61,6 +61,7 @@ class OPAL_RENDER_PT_sampling(OpalButtonsPanel, Panel):
         sub.active = opal.use_adaptive_sampling
         sub.prop(opal, "adaptive_min_samples", text="Min Samples")
         col.prop(opal, "round_samples")
+        col.prop(opal, "blue_noise")
         col = layout.column(align=True)
         col.prop(opal, "time_limit")
         col = layout.column(align=True, heading="Denoise")

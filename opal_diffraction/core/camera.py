@@ -83,15 +83,15 @@ def pixel_samples(
     choosing a wavelength (so a pixel's samples cover the spectrum evenly), and pixel_index the
     position in the input pixel arrays.
 
-    ``qmc`` = (pixel ids (P,), first sample number, seed): the positions and u_lambda are the
-    pixels' Sobol-Burley points (core/sampler.py, pairs 0 and 1) numbered from the first sample
-    number on; None: N-rooks with ``rng``.
+    ``qmc`` = (pixel ids (P,), first sample numbers (P,) (or one for all), seed): the positions
+    and u_lambda are the pixels' Sobol-Burley points (core/sampler.py, pairs 0 and 1) numbered
+    from each pixel's first sample number on; None: N-rooks with ``rng``.
     """
     p = len(pixel_x)
     if qmc is not None:
         ids, first, seed = qmc
         pix = np.repeat(np.asarray(ids), spp)
-        num = np.tile(np.arange(first, first + spp), p)
+        num = (np.broadcast_to(np.asarray(first, np.int64), (p,))[:, None] + np.arange(spp)[None, :]).ravel()
         ux, uy = sobol_owen_2d(pix, num, 0, seed)
         ul, _ = sobol_owen_2d(pix, num, 1, seed)
         x = np.repeat(pixel_x, spp) + 0.5 + filt.offsets(ux)

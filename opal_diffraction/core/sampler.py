@@ -14,6 +14,18 @@ The Owen scramble is Laine & Karras's hash permutation applied to the bit-revers
 Burley's constants): a bit changes only with the bits above it, as nested uniform scrambling
 requires (docs/physics.md section 6.5).
 
+Blue-noise dithering (the default, ``blue_noise_numbers``): as Cycles' "Automatic" pattern for
+final renders (BLUE_NOISE_PURE, intern/cycles/kernel/sample/pattern.h), every pixel takes a
+block of one shared sequence instead of its own: pixel (x, y) numbers its samples from
+rank(x, y) L on, with L the render's samples rounded up to a power of two and the same scramble
+keys for all pixels (pixel id 0). rank is the pixel's Morton code under a base-4 nested uniform
+scramble (Ahmed & Wonka 2020, "Screen-space blue-noise diffusion of Monte Carlo sampling error
+via hierarchical ordering of pixels", SIGGRAPH Asia; Vegdahl 2022, Owen-scrambling based
+dithered blue noise): each aligned 2^k x 2^k square of pixels gets an aligned block of 4^k L
+consecutive sequence indices, which the index shuffle keeps an aligned block, so the square's
+samples together are one stratified net and its pixels' errors cancel against each other
+(docs/physics.md section 6.6).
+
 ``PixelSampler`` offers the one method of ``numpy.random.Generator`` the sampling routines use,
 ``random(size, dtype)``: each call for the sampler's batch size takes the next dimension (two
 consecutive calls form one 2-D pair), any other call falls through to the pseudo-random
@@ -25,7 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["sobol_owen_2d", "PixelSampler", "CAMERA_PAIRS", "PAIRS_PER_VERTEX", "SLOT_LIGHT", "SLOT_PARAMS",
-           "SLOT_BOUNCE", "SLOT_WIDTH", "vertex_pair"]
+           "SLOT_BOUNCE", "SLOT_WIDTH", "vertex_pair", "morton2d", "blue_noise_rank", "blue_noise_numbers"]
 
 #: Pairs the camera uses: 0 the pixel position (x, y), 1 the wavelength number (its x).
 CAMERA_PAIRS = 2
@@ -123,6 +135,50 @@ def sobol_owen_2d(pixel, sample, pair, seed: int = 0) -> tuple[np.ndarray, np.nd
         y = _reverse_bits(_laine_karras(_superset_parity(index), _hash(key ^ _U32(0x02E5BE93))))
     scale = 1.0 / (1 << 24)
     return (x >> _U32(8)).astype(np.float64) * scale, (y >> _U32(8)).astype(np.float64) * scale
+
+
+def morton2d(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(B,) uint32 Morton codes of 16-bit x, y: x's bits at the even positions, y's at the odd."""
+    def spread(v):
+        v = np.asarray(v).astype(_U32) & _U32(0xFFFF)
+        for shift, mask in ((8, 0x00FF00FF), (4, 0x0F0F0F0F), (2, 0x33333333), (1, 0x55555555)):
+            v = (v | (v << _U32(shift))) & _U32(mask)
+        return v
+    return spread(x) | (spread(y) << _U32(1))
+
+
+#: The 24 permutations of a base-4 digit (rows), for the base-4 scramble.
+_PERMS4 = np.array([p for p in __import__("itertools").permutations(range(4))], _U32)
+
+
+def blue_noise_rank(x: np.ndarray, y: np.ndarray, seed: int, digits: int) -> np.ndarray:
+    """(B,) uint32 ranks < 4^digits of pixels (x, y) < 2^digits: their Morton codes under a
+    base-4 nested uniform (Owen) scramble. Each base-4 digit, from the top, is permuted by one of
+    the 24 permutations, chosen by a hash of the seed, the level and the digits above it (the
+    original ones): a bijection of [0, 4^digits) that maps every aligned block of 4^k codes (an
+    aligned 2^k x 2^k square of pixels) onto an aligned block of 4^k ranks."""
+    code = morton2d(x, y)
+    out = np.zeros(code.shape, _U32)
+    with np.errstate(over="ignore"):
+        s = _hash(np.full(1, int(seed) & 0xFFFFFFFF, _U32) ^ _U32(0xB10E5E)) ^ _U32((int(seed) >> 32) & 0xFFFFFFFF)
+        for level in range(digits - 1, -1, -1):  # a loop over the (at most 16) digits
+            shift = _U32(2 * level)
+            above = code >> shift >> _U32(2)  # the digits above this one
+            perm = _hash(_hash(above ^ s) ^ _U32(level * 0x9E3779B9 & 0xFFFFFFFF)) % _U32(24)
+            out |= _PERMS4[perm, (code >> shift) & _U32(3)] << shift
+    return out
+
+
+def blue_noise_numbers(x: np.ndarray, y: np.ndarray, width: int, height: int, samples: int, seed: int):
+    """The first sample number of each pixel (x, y) of a ``width`` x ``height`` image in the
+    shared blue-noise sequence, rank(x, y) L with L = ``samples`` rounded up to a power of two
+    (uint32), or None where the blocks would not fit in 2^32 indices (then each pixel keeps its
+    own sequence)."""
+    digits = max(1, int(max(int(width), int(height)) - 1).bit_length())
+    length = 1 << max(0, int(samples) - 1).bit_length()
+    if (1 << (2 * digits)) * length > 1 << 32:
+        return None
+    return blue_noise_rank(x, y, seed, digits) * _U32(length)
 
 
 def vertex_pair(depth: np.ndarray, slot: int) -> np.ndarray:

@@ -28,7 +28,7 @@ BACKENDS = ("auto", "embree", "numpy", "brute")
 #: Settings only the eye pass reads: changing them keeps a prepared scene and its light pass.
 EYE_ONLY_SETTINGS = frozenset({"samples", "round_samples", "tile_size", "filter_width", "time_limit", "spectral_exr",
                                "diffuse_bounces", "glossy_bounces", "transmission_bounces", "adaptive_threshold",
-                               "adaptive_min_samples", "grating_footprint"})
+                               "adaptive_min_samples", "grating_footprint", "blue_noise"})
 
 #: The wavelength grid holds 2 to 4001 samples (360-830 nm at 0.1175 nm at most); below 16 the
 #: colours are coarse (a warning, not an error).
@@ -129,6 +129,9 @@ class RenderSettings:
     # the image (core/camera_splat.py, docs/physics.md section 4.9); False: looked up in the
     # caustic map like every other caustic
     caustic_splat: bool = True
+    # pixels share one low-discrepancy sequence in a blue-noise order, as Cycles' default
+    # pattern (core/sampler.py, docs/physics.md section 6.6); False: each pixel its own sequence
+    blue_noise: bool = True
 
     def __post_init__(self):
         # normalise number types only (never raise here: validate() names what is wrong)
@@ -226,6 +229,8 @@ class RenderSettings:
             raise SceneError(f"grating footprint must be True or False, got {self.grating_footprint!r}")
         if not isinstance(self.caustic_splat, (bool, np.bool_)):
             raise SceneError(f"caustic splat must be True or False, got {self.caustic_splat!r}")
+        if not isinstance(self.blue_noise, (bool, np.bool_)):
+            raise SceneError(f"blue noise must be True or False, got {self.blue_noise!r}")
         _validate_backend(self.backend)
         self._validate_grid()
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from .camera import FilterSampler, generate_rays, pixel_samples
 from .footprint import camera_differentials, filter_box_width
+from .sampler import blue_noise_numbers
 from .settings import RenderSettings
 
 __all__ = ["EYE_PASS_STREAM", "LIGHT_PASS_SHARE", "MAX_TILE_RAYS", "round_size", "tiles_of", "EyeWork",
@@ -82,12 +83,14 @@ def tiles_of(width: int, height: int, size: int, region):
 @dataclass(frozen=True)
 class EyeWork:
     """The eye pass of one render: samples per round, tiles (x0, y0, x1, y1, stream) in region
-    coordinates, the region (x0, y0, x1, y1) of the camera's image, the seed."""
+    coordinates, the region (x0, y0, x1, y1) of the camera's image, the seed, and whether pixels
+    share one blue-noise ordered sequence (settings.blue_noise)."""
 
     rounds: tuple[int, ...]
     tiles: tuple[tuple[int, int, int, int, int], ...]
     region: tuple[int, int, int, int]
     seed: int
+    blue_noise: bool = False
 
     @classmethod
     def of(cls, prepared, region=None) -> "EyeWork":
@@ -100,7 +103,7 @@ class EyeWork:
         else:
             rounds = adaptive_rounds(spp, per_round, adaptive[1], MAX_TILE_RAYS // int(settings.tile_size) ** 2)
         tiles = tuple(tiles_of(int(cam.width), int(cam.height), int(settings.tile_size), region))
-        return cls(rounds, tiles, region, int(settings.seed))
+        return cls(rounds, tiles, region, int(settings.seed), bool(getattr(settings, "blue_noise", True)))
 
     @property
     def units(self) -> int:
@@ -124,12 +127,17 @@ def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: i
     ids = (ys.astype(np.int64) * int(cam.width) + xs).astype(np.uint32)
     first = int(sum(work.rounds[:r_index]))
     spp = work.rounds[r_index]
+    starts = np.full(len(xs), first, np.uint32)
+    if work.blue_noise:  # one shared sequence, a block per pixel in blue-noise order (core/sampler.py)
+        blocks = blue_noise_numbers(xs, ys, cam.width, cam.height, sum(work.rounds), work.seed)
+        if blocks is not None:
+            ids, starts = np.zeros(len(xs), np.uint32), blocks + np.uint32(first)
     sx, sy, sl, pidx = pixel_samples(xs.astype(np.float64), ys.astype(np.float64), spp, rng, filt,
-                                     qmc=(ids, first, work.seed))
+                                     qmc=(ids, starts, work.seed))
     o, d = generate_rays(cam, sx, sy)
     rd = None
     if eye.wants_differentials:  # ray differentials for gratings (core/footprint.py)
         rd = camera_differentials(cam, d, (sx - xs[pidx] - 0.5, sy - ys[pidx] - 0.5), filter_box_width(filt.width))
     return eye.trace(o, d, pidx, len(xs), rng, u_lambda=sl,
-                     sampler_ids=(ids[pidx], np.tile(np.arange(first, first + spp), len(xs)), work.seed),
+                     sampler_ids=(ids[pidx], (starts[:, None] + np.arange(spp, dtype=np.uint32)).ravel(), work.seed),
                      differentials=rd)
