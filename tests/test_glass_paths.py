@@ -20,7 +20,8 @@ from opal_diffraction.core.prepare import prepare
 from opal_diffraction.core.sampler import SLOT_BOUNCE, PixelSampler, sobol_owen_2d, vertex_pair
 from opal_diffraction.core.scene import Camera, Materials, Scene
 from opal_diffraction.core.settings import RenderSettings
-from opal_diffraction.core.specular_numbers import bounce_choice, sobol_owen_x
+from opal_diffraction.core.sampler import sobol_owen_x
+from opal_diffraction.core.specular_numbers import bounce_choice
 from opal_diffraction.core.transport import Rays, SpecularWalker, hit_shading_normals, smooth_triangles
 
 

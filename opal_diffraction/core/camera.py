@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .scene import Camera
-from .sampler import sobol_owen_2d
+from .sampler import sobol_owen_2d, sobol_owen_x
 
 __all__ = ["FilterSampler", "camera_frame", "pixel_samples", "generate_rays"]
 
@@ -93,7 +93,7 @@ def pixel_samples(
         pix = np.repeat(np.asarray(ids), spp)
         num = (np.broadcast_to(np.asarray(first, np.int64), (p,))[:, None] + np.arange(spp)[None, :]).ravel()
         ux, uy = sobol_owen_2d(pix, num, 0, seed)
-        ul, _ = sobol_owen_2d(pix, num, 1, seed)
+        ul = sobol_owen_x(pix, num, 1, seed).astype(np.float64)  # the wavelength number: one coordinate
         x = np.repeat(pixel_x, spp) + 0.5 + filt.offsets(ux)
         y = np.repeat(pixel_y, spp) + 0.5 + filt.offsets(uy)
         return x, y, ul, np.repeat(np.arange(p), spp)

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["sobol_owen_2d", "PixelSampler", "CAMERA_PAIRS", "PAIRS_PER_VERTEX", "SLOT_LIGHT", "SLOT_PARAMS",
+__all__ = ["sobol_owen_2d", "sobol_owen_x", "PixelSampler", "CAMERA_PAIRS", "PAIRS_PER_VERTEX", "SLOT_LIGHT", "SLOT_PARAMS",
            "SLOT_BOUNCE", "SLOT_WIDTH", "vertex_pair", "morton2d", "blue_noise_rank", "blue_noise_numbers"]
 
 #: Pairs the camera uses: 0 the pixel position (x, y), 1 the wavelength number (its x).
@@ -118,18 +118,27 @@ def _key(seed: int, pixel: np.ndarray, pair: np.ndarray) -> np.ndarray:
         return _hash(k ^ _hash(np.asarray(pair, np.int64).astype(_U32) * _U32(0x9E3779B9)))
 
 
-def sobol_owen_2d(pixel, sample, pair, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """The 2-D point of ``sample`` (B,) in pixel ``pixel`` (B,) for dimension pair ``pair``
-    (scalar or (B,)): two float64 arrays in [0, 1), multiples of 2^-24."""
-    pixel = np.asarray(pixel)
+def _shuffled(pixel, sample, pair, seed: int):
+    """(key, shuffled index) uint32 of (pixel, sample, pair): the pair's own order of the points."""
     sample = np.asarray(sample, np.int64).astype(_U32)
     pair = np.broadcast_to(np.asarray(pair, np.int64), sample.shape)
     with np.errstate(over="ignore"):
-        key = _key(seed, pixel, pair)
-        index = _owen(sample, key)  # the shuffle: each pair visits the points in its own order
-        # Sobol's x is the reversed index, so its Owen scramble reverse(LK(reverse(x))) needs
-        # only the final reversal
-        x = _reverse_bits(_laine_karras(index, _hash(key ^ _U32(0x68BC21EB))))
+        key = _key(seed, np.asarray(pixel), pair)
+        return key, _owen(sample, key)
+
+
+def _scrambled_x(key, index):
+    """Sobol's x of the shuffled index, Owen-scrambled: x is the reversed index, so its scramble
+    reverse(LK(reverse(x))) needs only the final reversal."""
+    return _reverse_bits(_laine_karras(index, _hash(key ^ _U32(0x68BC21EB))))
+
+
+def sobol_owen_2d(pixel, sample, pair, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The 2-D point of ``sample`` (B,) in pixel ``pixel`` (B,) for dimension pair ``pair``
+    (scalar or (B,)): two float64 arrays in [0, 1), multiples of 2^-24."""
+    key, index = _shuffled(pixel, sample, pair, seed)
+    with np.errstate(over="ignore"):
+        x = _scrambled_x(key, index)
         # Sobol's y is reverse(superset parities of the index) (_sobol_y), so its Owen scramble
         # reverse(LK(reverse(y))) is reverse(LK(those parities)): two reversals fewer
         y = _reverse_bits(_laine_karras(_superset_parity(index), _hash(key ^ _U32(0x02E5BE93))))
@@ -179,6 +188,16 @@ def blue_noise_numbers(x: np.ndarray, y: np.ndarray, width: int, height: int, sa
     if (1 << (2 * digits)) * length > 1 << 32:
         return None
     return blue_noise_rank(x, y, seed, digits) * _U32(length)
+
+
+def sobol_owen_x(pixel, sample, pair, seed: int) -> np.ndarray:
+    """The x coordinate of ``sobol_owen_2d(pixel, sample, pair, seed)`` alone, as float32 in
+    [0, 1) (multiples of 2^-24, exact in float32): where a decision needs one number (the glass
+    choice, the wavelength), without the y coordinate's work."""
+    key, index = _shuffled(pixel, sample, pair, seed)
+    with np.errstate(over="ignore"):
+        x = _scrambled_x(key, index)
+    return (x >> _U32(8)).astype(np.float32) * np.float32(1.0 / (1 << 24))
 
 
 def vertex_pair(depth: np.ndarray, slot: int) -> np.ndarray:

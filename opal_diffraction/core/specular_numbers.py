@@ -6,7 +6,7 @@ coordinate of the Owen-scrambled, shuffled Sobol' point of (pixel, sample, pair)
 "Practical Hash-based Owen Scrambling", as Cycles' sobol_burley.h), so a pixel's samples split
 between reflection and refraction in proportion to the Fresnel factor with stratified, not
 independent, numbers - as Cycles draws its glass closure's choice from its sampler. A glass
-vertex makes no other decision, so only x is needed: ``sobol_owen_x`` computes
+vertex makes no other decision, so only x is needed: ``sampler.sobol_owen_x`` computes
 ``sampler.sobol_owen_2d``'s x alone (the same bits), without the y coordinate's work, which
 about halves the cost of the choice's numbers.
 """
@@ -15,25 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import sampler
-from .sampler import SLOT_BOUNCE, vertex_pair
+from .sampler import SLOT_BOUNCE, sobol_owen_x, vertex_pair
 
-__all__ = ["sobol_owen_x", "bounce_choice"]
-
-_U32 = np.uint32
-_reverse_bits = sampler._reverse_bits  # the sampler's bit reversal, the same bits
-
-
-def sobol_owen_x(pixel, sample, pair, seed: int) -> np.ndarray:
-    """The x coordinate of ``sampler.sobol_owen_2d(pixel, sample, pair, seed)`` as float32 in
-    [0, 1) (multiples of 2^-24, exact in float32)."""
-    sample = np.asarray(sample, np.int64).astype(_U32)
-    pair = np.broadcast_to(np.asarray(pair, np.int64), sample.shape)
-    with np.errstate(over="ignore"):
-        key = sampler._key(seed, np.asarray(pixel), pair)
-        index = _reverse_bits(sampler._laine_karras(_reverse_bits(sample), key))  # the shuffle
-        x = _reverse_bits(sampler._laine_karras(index, sampler._hash(key ^ _U32(0x68BC21EB))))
-    return (x >> _U32(8)).astype(np.float32) * np.float32(1.0 / (1 << 24))
+__all__ = ["bounce_choice"]
 
 
 def bounce_choice(extra: dict, depth: np.ndarray, seed: int | None, rng: np.random.Generator) -> np.ndarray:
