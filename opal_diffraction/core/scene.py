@@ -543,7 +543,8 @@ class Scene:
         without get (0, 0) once any mesh has UVs); ``uv_tangents``: also store per-corner tangent
         frames from those UVs (``textures.uv_tangents``) for normal maps.
         """
-        v = np.asarray(vertices, np.float32).reshape(-1, 3)
+        with np.errstate(over="ignore"):  # beyond float32: inf, which validated() names (no warning here)
+            v = np.asarray(vertices, np.float32).reshape(-1, 3)
         t = np.asarray(triangles, np.int64).reshape(-1, 3) + len(self.vertices)
         n_old = len(self.triangles)
         self.vertices = np.concatenate([self.vertices, v])
