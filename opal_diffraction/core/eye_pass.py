@@ -1085,8 +1085,8 @@ def _power_heuristic(p_this: np.ndarray, p_other: np.ndarray, light_first: bool 
     strategy means a specular or camera ray with no competitor: weight 1."""
     a = np.asarray(p_this, np.float32)
     b = np.asarray(p_other, np.float32)
-    a2, b2 = a * a, b * b
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # pdfs past 1e19: inf, mapped below
+        a2, b2 = a * a, b * b
         w = np.where(a2 + b2 > 0, a2 / (a2 + b2), np.float32(1.0))
     if not light_first:
         w = np.where(a > 0, w, np.float32(1.0))
