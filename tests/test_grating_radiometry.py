@@ -289,7 +289,7 @@ def test_white_furnace_grating_on_white_lambertian():
     diffract the world into every order, the zeroth included (section 3.11): per pixel and bin
     (1 - a/D) + sum_m e_m K(w_src,m), computed here order by order."""
     s = furnace_scene({"kind": "DIFFUSE", "color": (1, 1, 1)}, pixels=8)
-    st = RenderSettings(samples=64, threads=1, filter_width=0.0)
+    st = RenderSettings(samples=64, threads=1, filter_width=0.0, blue_noise=False)  # independent pixels (the Z-test)
     res = render(s, st, spectral_film=True)
     ctx = prepare(s, st)
     ratio = (res.spectral / ctx.world_spectrum[None, None, :]).reshape(-1, ctx.grid.n)
@@ -307,7 +307,7 @@ def test_white_furnace_grating_on_white_mirror():
     orders are sampled from the viewer (section 3.11). The continuation is exact per pixel (the
     Diffraction pass holds the rest); the sum matches the order-by-order reference in the mean."""
     s = furnace_scene({"kind": "MIRROR", "color": (1, 1, 1)}, pixels=8)
-    st = RenderSettings(samples=64, threads=1, filter_width=0.0)
+    st = RenderSettings(samples=64, threads=1, filter_width=0.0, blue_noise=False)  # independent pixels (the Z-test)
     res = render(s, st, spectral_film=True)
     ctx = prepare(s, st)
     ratio = (res.spectral / ctx.world_spectrum[None, None, :]).reshape(-1, ctx.grid.n)
@@ -334,7 +334,7 @@ def test_white_furnace_transmission_grating_on_glass_is_unbiased():
     wavelength bin passes a Z-test (Bonferroni over the bins), and nothing exceeds 1."""
     s = furnace_scene({"kind": "DIELECTRIC", "color": (1, 1, 1), "ior": 1.5}, grating_type="TRANSMISSION", pixels=10)
     spp = 64
-    st = RenderSettings(samples=spp, threads=1, filter_width=0.0)
+    st = RenderSettings(samples=spp, threads=1, filter_width=0.0, blue_noise=False)  # independent pixels (the Z-test)
     res = render(s, st, spectral_film=True)
     ctx = prepare(s, st)
     ratio = (res.spectral / ctx.world_spectrum[None, None, :]).reshape(-1, ctx.grid.n)

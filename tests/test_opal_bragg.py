@@ -421,7 +421,7 @@ def test_world_light_through_the_lobe_is_its_albedo(world_map):
     s.world_color = np.ones(3, np.float32)
     if world_map:
         s.world_image = np.ones((16, 32, 3), np.float32)
-    st = RenderSettings(samples=32, threads=1, filter_width=0.0, light_paths=0)
+    st = RenderSettings(samples=32, threads=1, filter_width=0.0, light_paths=0, blue_noise=False)  # independent pixels
     res = render(s, st, spectral_film=True)
     prep = prepare(s, st)
     edges = prep.grid.bin_edges

@@ -4,7 +4,9 @@ the light pass (docs/physics.md section 4.5), checked against analytic furnaces.
 A closed room whose walls all have albedo rho and emit radiance E: the radiance everywhere is
 E (1 + rho + rho^2 + ...) = E / (1 - rho), or the partial sum when bounces are limited. A
 lossless glass object inside changes nothing (the radiance field is uniform and glass preserves
-radiance). The tolerance of each check is a Z-test over pixels (pixels are independent samples).
+radiance). The tolerance of each check is a Z-test over pixels (pixels are independent samples:
+each pixel its own sequence, ``blue_noise=False``); the default blue-noise pattern, whose pixels
+share one sequence, is checked against the same furnace with independent renders (seeds).
 """
 
 from __future__ import annotations
@@ -55,7 +57,7 @@ def _assert_close(rgb, expected: float, what: str):
 
 
 def _settings(**kw) -> RenderSettings:
-    base = dict(samples=64, light_paths=0, threads=1, wavelength_step=20.0, seed=3)
+    base = dict(samples=64, light_paths=0, threads=1, wavelength_step=20.0, seed=3, blue_noise=False)
     base.update(kw)
     return RenderSettings(**base)
 
@@ -73,6 +75,20 @@ def test_furnace_converges_to_the_analytic_radiance():
     """Unlimited bounces (Russian roulette ends the paths, unbiased): E / (1 - rho)."""
     rgb = render(furnace(), _settings(diffuse_bounces=200, max_bounces=200, samples=128)).rgb
     _assert_close(rgb, E / (1 - RHO) * (1 - RHO**202), "unlimited")
+
+
+def test_blue_noise_sampling_converges_to_the_same_radiance():
+    """The default pattern (pixels take blocks of one shared sequence, docs/physics.md section
+    6.6) is unbiased: six renders' image means against E / (1 - rho) with three diffuse bounces'
+    partial sum, the tolerance from the renders' scatter (a t-test, 5 degrees of freedom)."""
+    expected = E * sum(RHO**i for i in range(5))
+    means = np.array([render(furnace(pixels=16),
+                             _settings(diffuse_bounces=3, max_bounces=64, samples=16, seed=seed,
+                                       blue_noise=True)).rgb.mean() for seed in range(6)])
+    err = means.std(ddof=1) / np.sqrt(len(means))
+    t = (means.mean() - expected) / max(err, 1e-5 * expected)
+    print(f"blue noise: {means.mean():.5f} +- {err:.5f} (expected {expected:.5f}, t {t:+.2f})")
+    assert abs(t) < 6.9 and abs(means.mean() - expected) < 0.01 * expected  # P(|t_5| > 6.9) < 0.001
 
 
 def test_glass_in_the_furnace_neither_adds_nor_loses_energy():

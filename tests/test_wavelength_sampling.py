@@ -119,9 +119,9 @@ def _prism_scene(world=True, wall=False, size=(32, 24)):
 
 
 def _settings(mode, seed, spp=16):
-    # high bounce limits: a furnace loses no energy to them
+    # high bounce limits: a furnace loses no energy to them; independent pixels (Z-tests over pixels)
     return RenderSettings(samples=spp, seed=seed, dispersion_sampling=mode, light_paths=0, max_bounces=64,
-                          glossy_bounces=64, transmission_bounces=64, threads=1)
+                          glossy_bounces=64, transmission_bounces=64, threads=1, blue_noise=False)
 
 
 def test_furnace_a_dispersive_prism_in_a_white_world_is_invisible():
