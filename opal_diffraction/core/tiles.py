@@ -28,13 +28,22 @@ __all__ = ["EYE_PASS_STREAM", "LIGHT_PASS_SHARE", "MAX_TILE_RAYS", "round_size",
 EYE_PASS_STREAM = 1  # stream ids keep the passes' random numbers independent
 LIGHT_PASS_SHARE = 0.25  # of the progress bar, when the light pass runs
 MAX_TILE_RAYS = 1 << 18  # camera rays of one tile in one round (bounds memory and time-limit latency)
+#: The cap with a spectral EXR, whose (H, W, n) films leave less room for the rounds' rays: a
+#: 64 x 64 tile at 8 samples. Full HD at 61 wavelengths: peak RSS 2.08 GiB with rounds of 16
+#: samples, 1.82 GiB with 8 (docs/benchmarks.md, "Memory with rounds of 16 samples").
+MAX_TILE_RAYS_SPECTRAL = 1 << 15
+
+
+def tile_ray_cap(settings: RenderSettings) -> int:
+    """The most camera rays one tile's round may cast under these settings."""
+    return MAX_TILE_RAYS_SPECTRAL if getattr(settings, "spectral_exr", "") else MAX_TILE_RAYS
 
 
 def round_size(settings: RenderSettings) -> int:
     """Samples per pixel per round: the setting, capped so one tile's round casts at most
-    MAX_TILE_RAYS camera rays (a round is the unit of memory and of time-limit checks)."""
+    tile_ray_cap camera rays (a round is the unit of memory and of time-limit checks)."""
     tile_pixels = int(settings.tile_size) ** 2
-    return max(1, min(int(settings.round_samples), MAX_TILE_RAYS // tile_pixels))
+    return max(1, min(int(settings.round_samples), tile_ray_cap(settings) // tile_pixels))
 
 
 def is_half_a(r_index: int) -> bool:
@@ -101,7 +110,7 @@ class EyeWork:
         if adaptive is None:
             rounds = tuple(min(per_round, spp - s) for s in range(0, spp, per_round))
         else:
-            rounds = adaptive_rounds(spp, per_round, adaptive[1], MAX_TILE_RAYS // int(settings.tile_size) ** 2)
+            rounds = adaptive_rounds(spp, per_round, adaptive[1], tile_ray_cap(settings) // int(settings.tile_size) ** 2)
         tiles = tuple(tiles_of(int(cam.width), int(cam.height), int(settings.tile_size), region))
         return cls(rounds, tiles, region, int(settings.seed), bool(getattr(settings, "blue_noise", True)))
 
