@@ -34,6 +34,8 @@ generator. Numbers are multiples of 2^-24, so they stay below 1 in float32 as we
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 __all__ = ["sobol_owen_2d", "sobol_owen_x", "PixelSampler", "CAMERA_PAIRS", "PAIRS_PER_VERTEX", "SLOT_LIGHT", "SLOT_PARAMS",
@@ -157,7 +159,7 @@ def morton2d(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 #: The 24 permutations of a base-4 digit (rows), for the base-4 scramble.
-_PERMS4 = np.array([p for p in __import__("itertools").permutations(range(4))], _U32)
+_PERMS4 = np.array(list(itertools.permutations(range(4))), _U32)
 
 
 def blue_noise_rank(x: np.ndarray, y: np.ndarray, seed: int, digits: int) -> np.ndarray:
