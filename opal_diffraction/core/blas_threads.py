@@ -6,8 +6,8 @@ and its worker threads then busy-wait for the next call. Between those calls the
 element-wise NumPy in one thread, so the spinning threads burn a second core for nothing:
 measured on the Cycles parity scenes (64 x 64, 64 samples, one render thread), the rough metal
 sphere took 2.03 CPU s for 1.03 wall s with OpenBLAS's default threads and 0.97 CPU s for
-0.96 wall s with one (docs/benchmarks.md, "BLAS threads"). With the render's tile threads each
-doing its own products, nothing is lost.
+0.96 wall s with one (docs/benchmarks.md, "Cycles parity on an idle machine"). With the
+render's tile threads each doing its own products, nothing is lost.
 
 How: ``threadpoolctl.threadpool_limits(1, user_api="blas")`` (the library that finds the BLAS
 NumPy is linked to, OpenBLAS, MKL or BLIS, and sets its thread count through its own API; it
@@ -16,8 +16,9 @@ without it the limit is skipped (a render is only slower on CPU time, never wron
 
 A trap, measured with NumPy 1.26's OpenBLAS 0.3.23: once the main thread has set a thread count,
 a count set from another thread is ignored (the main thread's stays). Blender's F12 render job
-and the viewport's worker set it from their own threads, and Blender itself sets none; a script
-that set one in the main thread keeps its own.
+and the viewport's worker set it from their own threads; if a script has set a count in the
+main thread first, that count stays (slower on CPU time only). tests/test_blas_threads.py
+checks the limit in the thread that renders.
 """
 
 from __future__ import annotations
