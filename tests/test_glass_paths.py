@@ -141,7 +141,7 @@ def test_hit_shading_normals_interpolate_smooth_triangles_and_take_the_corner_on
     bu = (rng.random(b) * 0.5).astype(np.float32)
     bv = (rng.random(b) * 0.5).astype(np.float32)
     ng = ng_tri[prim]
-    got = hit_shading_normals(cn, prim, bu, bv, ng)
+    got = hit_shading_normals(cn, smooth_triangles(cn), prim, bu, bv, ng)
     ref = interpolate_corners(cn.astype(np.float64), prim, bu, bv)
     ref /= np.linalg.norm(ref, axis=1, keepdims=True)
     ref = np.where(np.sum(ref * ng, axis=1, keepdims=True) < 0, -ref, ref)

@@ -43,6 +43,7 @@ from .scene import TRIANGLE_CROSS_ATTR, TRIANGLE_CROSS_NORM_ATTR, Camera, Scene
 from .settings import AUTO_LIGHT_PATHS_RANGE, EYE_ONLY_SETTINGS, RenderSettings, auto_light_paths
 from .spectrum import SpectralConverter, WavelengthGrid
 from .textures import PreparedTextures, prepare_textures
+from .transport import smooth_triangles
 
 __all__ = ["PreparedScene", "prepare", "scene_extent", "OFFSET_RELATIVE"]
 
@@ -101,6 +102,8 @@ class PreparedScene:
     prepare_s: float                   # seconds spent validating and preparing
     key: int                           # identity of the geometry, materials and lights
     corner_normals: np.ndarray | None = None  # (T, 3, 3) float32 unit shading normals per corner; None: flat
+    # (T,) bool: triangles whose corner normals differ (transport.smooth_triangles); None: flat
+    smooth_triangles: np.ndarray | None = None
     # (M,) bool: rough and layered materials, shaded with core/bsdf.py (bsdf.microfacet_materials)
     microfacet: np.ndarray | None = None
     # opal volume domains (core/opal/volume.py: lookup(points, prim)); None: the scene has none
@@ -273,11 +276,12 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         tri_grating_tangent = np.zeros((0, 3), np.float32)
         corner_grating_tangent = None
     if len(scene.corner_normals) == 0:
-        corner_normals = None
+        corner_normals = smooth = None
     elif same_geometry and reuse.corner_normals is not None and _same_shading(reuse.scene, scene):
-        corner_normals = reuse.corner_normals
+        corner_normals, smooth = reuse.corner_normals, reuse.smooth_triangles
     else:
         corner_normals = np.asarray(scene.corner_normals, np.float32)  # unit length (validated)
+        smooth = smooth_triangles(corner_normals)
     mesh_lights = MeshLights.build(v, t, tri_material, materials.emission, tri_normal,
                                    luminance_weights=conv.cmf_weights[:, 1])
     environment = world_environment(scene, reuse)
@@ -322,6 +326,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         prepare_s=0.0,
         key=key,
         corner_normals=corner_normals,
+        smooth_triangles=smooth,
         microfacet=microfacet,
         opal_domains=scene.volume_domains(),
         corner_grating_tangent=corner_grating_tangent,

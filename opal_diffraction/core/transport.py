@@ -212,34 +212,18 @@ def shading_normals(corner_normals: np.ndarray, prim, bu, bv, ng: np.ndarray) ->
     return n.astype(np.float32, copy=False)
 
 
-_SMOOTH_CACHE: dict = {}
-
-
 def smooth_triangles(corner_normals: np.ndarray) -> np.ndarray:
     """(T,) bool: the triangles whose three corner normals differ (smooth shading); on the others
-    the shading normal is the (one) corner normal, with no interpolation. Computed once per
-    corner-normal array (prepared scenes share it between renders) and cached while it lives."""
-    key = id(corner_normals)
-    hit = _SMOOTH_CACHE.get(key)
-    if hit is not None and hit[0]() is corner_normals:
-        return hit[1]
-    import weakref
-
+    the shading normal is the (one) corner normal, with no interpolation. prepare() computes it
+    once per scene (``PreparedScene.smooth_triangles``)."""
     c = corner_normals
-    smooth = ~((c[:, 0] == c[:, 1]).all(axis=1) & (c[:, 0] == c[:, 2]).all(axis=1))
-    try:
-        ref = weakref.ref(c, lambda _r, k=key: _SMOOTH_CACHE.pop(k, None))
-    except TypeError:  # not weak-referenceable: no cache
-        return smooth
-    _SMOOTH_CACHE[key] = (ref, smooth)
-    return smooth
+    return ~((c[:, 0] == c[:, 1]).all(axis=1) & (c[:, 0] == c[:, 2]).all(axis=1))
 
 
-def hit_shading_normals(corner_normals: np.ndarray, prim, bu, bv, ng: np.ndarray) -> np.ndarray:
-    """``shading_normals`` at hits, interpolating only on smooth triangles (``smooth_triangles``):
-    a flat-shaded triangle's normal is its corner normal (unit: prepared corner normals are
-    validated), put on ng's side."""
-    smooth = smooth_triangles(corner_normals)
+def hit_shading_normals(corner_normals: np.ndarray, smooth: np.ndarray, prim, bu, bv, ng: np.ndarray) -> np.ndarray:
+    """``shading_normals`` at hits, interpolating only on the ``smooth`` triangles (T,) bool
+    (``smooth_triangles``): a flat-shaded triangle's normal is its corner normal (unit: prepared
+    corner normals are validated), put on ng's side."""
     sm = np.take(smooth, prim)
     if sm.all():
         return shading_normals(corner_normals, prim, bu, bv, ng)
@@ -448,7 +432,7 @@ class SpecularWalker:
         if prepared.corner_normals is None:
             ns = ng
         else:  # on the triangle's side first, then flipped with ng: both face the incoming ray's side
-            ns = hit_shading_normals(prepared.corner_normals, prim, bu, bv, ng0)
+            ns = hit_shading_normals(prepared.corner_normals, prepared.smooth_triangles, prim, bu, bv, ng0)
             ns *= np.where(front, np.float32(1), np.float32(-1))[:, None]
         return Hit(p.astype(np.float32, copy=False), ng, ns, np.abs(cos), front, np.take(prepared.tri_material, prim),
                    np.take(prepared.tri_offset, prim), prim, bu, bv)
