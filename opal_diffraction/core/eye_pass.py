@@ -81,6 +81,11 @@ class EyePass:
                              and splat_bounce.enabled(prepared) else None)
         # camera rays carry ray differentials (core/footprint.py) only to integrate gratings
         self.wants_differentials = bool(prepared.gratings.any and getattr(prepared.settings, "grating_footprint", True))
+        # (M,) Principled mixes whose layer is drawn per hit (metallic or transmission strictly
+        # between 0 and 1); elsewhere the layer is fixed and no number is drawn for it
+        mt, tr = np.asarray(prepared.materials.metallic), np.asarray(prepared.materials.transmission)
+        self.mixed_layers = ((mt > 0) & (mt < 1)) | ((tr > 0) & (tr < 1))
+        self.probe = _probe_wavelength(prepared)  # the black-surface test's wavelength (_TileTrace._reflects)
 
     def trace(self, origins, directions, pix, n_pixels: int, rng: np.random.Generator,
               u_lambda: np.ndarray | None = None, sampler_ids=None,
@@ -191,11 +196,7 @@ class _TileTrace(SpecularWalker):
         # grey path weights (core/grey_paths.py), in the plain path tracer only: gratings, their
         # layers and the opal's lobes read spectral weights
         self.greys = GreyPaths(pm, enabled=not (pm.gratings.any or self.layers or self.bragg is not None))
-        # (M,) Principled mixes whose layer is drawn per hit (metallic or transmission strictly
-        # between 0 and 1); elsewhere the layer is fixed and no number is drawn for it
-        mt, tr = np.asarray(pm.materials.metallic), np.asarray(pm.materials.transmission)
-        self.mixed_layers = ((mt > 0) & (mt < 1)) | ((tr > 0) & (tr < 1))
-        self._probe = _probe_wavelength(pm)
+        self.mixed_layers, self._probe = eye.mixed_layers, eye.probe
 
     def _reflects(self, albedo: np.ndarray) -> np.ndarray:
         """(B,) bool: base colours (B, n) spectra or (B,) values that are not zero everywhere.
