@@ -162,14 +162,16 @@ ENABLED = splat_bounce.enabled
 
 
 def test_the_continued_light_paths_directions_are_cosine_distributed():
-    """splat_bounce's bounce directions against the cosine density cos(theta) / pi about the
-    normal (tests/chi2.py, Mitsuba 3's chi2 test; two normals, threshold 0.01 / 2)."""
+    """splat_bounce's bounce directions (bsdf.cosine_hemisphere, the eye pass's diffuse bounce
+    too) against the cosine density cos(theta) / pi about the normal (tests/chi2.py, Mitsuba 3's
+    chi2 test; two normals, threshold 0.01 / 2)."""
     from chi2 import chi2_directions
 
     rng = np.random.default_rng(7)
     for axis in ((0.0, 0.0, 1.0), (0.6, -0.48, 0.64)):
         a = np.asarray(axis, np.float64) / np.linalg.norm(axis)
-        wi = splat_bounce._cosine(np.tile(a.astype(np.float32), (200_000, 1)), rng).astype(np.float64)
+        wi, _ = splat_bounce.cosine_hemisphere(np.tile(a.astype(np.float32), (200_000, 1)), rng)
+        wi = wi.astype(np.float64)
         np.testing.assert_allclose(np.linalg.norm(wi, axis=1), 1.0, atol=1e-5)
         pval, info, total = chi2_directions(wi, lambda d: np.maximum(d @ a, 0.0) / np.pi, a, theta_max=np.pi / 2)
         assert abs(total - 1.0) < 1e-3

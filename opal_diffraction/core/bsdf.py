@@ -48,7 +48,7 @@ __all__ = [
     "LAMBERT", "CONDUCTOR", "DIELECTRIC", "PLASTIC", "GLOSSY",
     "DIFFUSE_REFLECTION", "GLOSSY_REFLECTION", "TRANSMISSION", "SINGULAR",
     "MIN_ROUGHNESS", "SurfaceParams", "params_from_materials", "sample", "evaluate", "microfacet_materials",
-    "energy_compensation", "fresnel_f82", "f82_b", "fresnel_dielectric_exact", "with_outgoing",
+    "energy_compensation", "fresnel_f82", "f82_b", "fresnel_dielectric_exact", "with_outgoing", "cosine_hemisphere",
 ]
 
 #: Lobe codes per hit. GLOSSY is Blender's Glossy BSDF: GGX with a constant Fresnel (its colour).
@@ -410,6 +410,19 @@ def tangent_frame(n):
     u = np.stack([_F32(1) + sg * x * x * a, sg * b, -sg * x], axis=1)
     v = np.stack([b, sg + y * y * a, -y], axis=1)
     return u, v
+
+
+def cosine_hemisphere(n, rng):
+    """Cosine-weighted unit directions about the unit normals n (B, 3) and their cosines (Malley's
+    method: a uniform disk point lifted to the hemisphere; pdf = cos / pi), from two numbers per
+    row of ``rng`` (a Generator or the eye pass's pixel sampler)."""
+    b = len(n)
+    u1, u2 = rng.random(b, _F32), rng.random(b, _F32)
+    r, phi = np.sqrt(u1), _F32(2 * np.pi) * u2
+    tu, tv = tangent_frame(n)
+    cos = np.sqrt(np.maximum(_F32(1) - u1, 0))
+    wi = (r * np.cos(phi))[:, None] * tu + (r * np.sin(phi))[:, None] * tv + cos[:, None] * n
+    return wi.astype(_F32), cos.astype(_F32)
 
 
 def _frame(ns):

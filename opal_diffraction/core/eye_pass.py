@@ -522,7 +522,7 @@ class _TileTrace(SpecularWalker):
             r, h, albedo = r.take(lit), h.take(lit), albedo[lit]
             if len(r) == 0:
                 return micro_out
-        wi, cos = _cosine_hemisphere(h.ns, self._numbers(r, SLOT_BOUNCE))
+        wi, cos = bsdf.cosine_hemisphere(h.ns, self._numbers(r, SLOT_BOUNCE))
         if self.bent:  # about ns; a direction below the geometric surface ends the path
             up = np.einsum("ij,ij->i", wi, h.ng) > 0
             if not up.all():
@@ -1065,18 +1065,6 @@ def _footprint(rays: Rays, hit: Hit, idx, t, s, wi, dist, aligned: bool = False)
         return None
     return footprint.grating_footprint(rd[idx], rays.o[idx], rays.d[idx], hit.p[idx], hit.ng[idx], t[idx], s[idx],
                                        wi if aligned else wi[idx], None if dist is None else dist[idx])
-
-
-def _cosine_hemisphere(n: np.ndarray, rng: np.random.Generator):
-    """Cosine-weighted unit directions about the unit normals n (B, 3) and their cosines (Malley's
-    method: a uniform disk point lifted to the hemisphere; pdf = cos / pi)."""
-    b = len(n)
-    u1, u2 = rng.random(b, np.float32), rng.random(b, np.float32)
-    r, phi = np.sqrt(u1), np.float32(2 * np.pi) * u2
-    tu, tv = bsdf.tangent_frame(n)
-    cos = np.sqrt(np.maximum(np.float32(1) - u1, 0))
-    wi = (r * np.cos(phi))[:, None] * tu + (r * np.sin(phi))[:, None] * tv + cos[:, None] * n
-    return wi.astype(np.float32), cos.astype(np.float32)
 
 
 def _power_heuristic(p_this: np.ndarray, p_other: np.ndarray, light_first: bool = False) -> np.ndarray:

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .bsdf import cosine_hemisphere
 from .materials import DIFFUSE
 from .surface import surface_reflectance
 from .transport import Hit, Rays, SpecularWalker
@@ -88,18 +89,6 @@ def mark_bounce(mask: np.ndarray | None, rays: Rays, hit: Hit) -> np.ndarray:
     return (rays.depth == 0) & receives(mask, hit)
 
 
-def _cosine(n: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Cosine-weighted unit directions about the unit normals n (Malley's method)."""
-    from .bsdf import tangent_frame
-
-    b = len(n)
-    u1, u2 = rng.random(b, np.float32), rng.random(b, np.float32)
-    r, phi = np.sqrt(u1), np.float32(2 * np.pi) * u2
-    tu, tv = tangent_frame(n)
-    cos = np.sqrt(np.maximum(np.float32(1) - u1, 0))
-    return ((r * np.cos(phi))[:, None] * tu + (r * np.sin(phi))[:, None] * tv + cos[:, None] * n).astype(np.float32)
-
-
 class BounceLog:
     """The landings of one light batch (or SPLIT piece) to continue (``add`` from the light
     pass's on_hit), traced after its walk by ``trace_bounces`` with a random stream of their own
@@ -124,7 +113,7 @@ class BounceLog:
         white, mono = [], []
         for r, h in self.landings:
             rho = surface_reflectance(prepared, h, r.lam)
-            wi = _cosine(h.ng, rng)  # ng faces the side the light came from; ns = ng here
+            wi, _ = cosine_hemisphere(h.ng, rng)  # ng faces the side the light came from; ns = ng here
             o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
             zero = np.zeros(len(r), np.int32)
             if r.lam is None:
