@@ -16,7 +16,6 @@ import time
 import numpy as np
 
 from opal_diffraction.core import primitives
-from opal_diffraction.core.geometry import triangle_normals
 from opal_diffraction.core.lights import intersect_lights, light_pdf, prepare_lights, sample_light
 from opal_diffraction.core.mesh_lights import MeshLights
 from opal_diffraction.core.scene import Lights
@@ -58,10 +57,10 @@ def main():
         x = rate(lambda: intersect_lights(pl, p, wi, np.full(n, np.inf, np.float32)), n)
         print(f"{name:<20} {s:>11.2f} {q:>9.2f} {x:>14.2f}")
     v, t = primitives.icosphere((0, 0, 3), 1.0, 6)  # 81920 emitting triangles
-    ml = MeshLights.build(v, t, np.zeros(len(t), np.int32), np.ones((1, conv.grid.n)), triangle_normals(v, t),
+    ml = MeshLights.build(v, t, np.zeros(len(t), np.int32), np.ones((1, conv.grid.n)),
                           luminance_weights=conv.cmf_weights[:, 1])
     t0 = time.perf_counter()
-    MeshLights.build(v, t, np.zeros(len(t), np.int32), np.ones((1, conv.grid.n)), triangle_normals(v, t))
+    MeshLights.build(v, t, np.zeros(len(t), np.int32), np.ones((1, conv.grid.n)))
     build_s = time.perf_counter() - t0
     print(f"MeshLights over {len(ml)} triangles: build {build_s * 1e3:.1f} ms, "
           f"sample {rate(lambda: ml.sample(p, rng), n):.2f} M/s")

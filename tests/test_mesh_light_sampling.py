@@ -12,7 +12,6 @@ import numpy as np
 from scipy import stats
 
 from chi2 import chi2_directions
-from opal_diffraction.core.geometry import triangle_normals
 from opal_diffraction.core.mesh_lights import MeshLights, heitz_triangle, sample_spherical_triangle, solid_angle
 from test_lights_sized import Z_MAX, polygon_irradiance
 from test_mesh_lights import light_density, ray_triangles
@@ -31,7 +30,7 @@ EMISSION = np.array([[1.0, 1.0], [5.0, 3.0], [0.5, 2.0]])
 
 
 def build():
-    return MeshLights.build(V, T, TM, EMISSION, triangle_normals(V, T))
+    return MeshLights.build(V, T, TM, EMISSION)
 
 
 def pearson(observed, expected, min_expected=5.0):

@@ -11,7 +11,6 @@ import numpy as np
 
 from chi2 import chi2_directions
 from opal_diffraction.core import primitives
-from opal_diffraction.core.geometry import triangle_normals
 from opal_diffraction.core.light_pass import run_light_pass
 from opal_diffraction.core.mesh_lights import MeshLights
 from opal_diffraction.core.optics import fresnel_dielectric
@@ -31,7 +30,7 @@ EMISSION = np.array([[1.0, 2.0, 1.0], [3.0, 3.0, 3.0], [0.0, 0.0, 0.0]])  # (M, 
 
 
 def build():
-    return MeshLights.build(V, T, TM, EMISSION, triangle_normals(V, T))
+    return MeshLights.build(V, T, TM, EMISSION)
 
 
 def ray_triangles(o, d, verts):
@@ -78,7 +77,7 @@ def test_build_selects_the_emitters_with_power_proportional_weights():
     lum = EMISSION.mean(axis=1)
     np.testing.assert_allclose(ml.weight, (area * lum[TM])[ml.tri])
     np.testing.assert_allclose(ml.power, 2 * np.pi * np.sum((area * lum[TM])[[0, 1, 3]]))
-    assert MeshLights.build(V, T, np.full(4, 2), EMISSION, triangle_normals(V, T)) is None
+    assert MeshLights.build(V, T, np.full(4, 2), EMISSION) is None
 
 
 def test_triangle_sampler_matches_its_pdf_chi2():

@@ -88,8 +88,7 @@ def test_mesh_lights_select_the_emitting_triangles():
     em[3] = 0.5      # emits everywhere
     em[2, 4] = -1.0  # negative luminance: not an emitter
     tm = rng.integers(0, 4, 500)
-    nrm = np.zeros((500, 3))
-    ml = MeshLights.build(v, t, tm, em, nrm)
+    ml = MeshLights.build(v, t, tm, em)
     p = v[t]
     area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
     expect = [i for i in range(500) if em[tm[i]].mean() > 0 and (em[tm[i]] > 0).any() and area[i] > 0]

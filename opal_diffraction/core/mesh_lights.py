@@ -44,7 +44,7 @@ MIN_SOLID_ANGLE = 1e-5
 
 
 def _dot(a, b):
-    """Row-wise dot products of (K, 3) arrays, or of (3, K) arrays along axis 0 (``axis=0``)."""
+    """Row-wise dot products of (K, 3) arrays (``_d0``: of (3, K) arrays)."""
     return np.einsum("ij,ij->i", a, b)
 
 
@@ -146,15 +146,14 @@ class MeshLights:
             a.flags.writeable = False  # part of a frozen PreparedScene, read from many threads
 
     @classmethod
-    def build(cls, vertices, triangles, tri_material, emission_spectra, tri_normal=None,
+    def build(cls, vertices, triangles, tri_material, emission_spectra,
               luminance_weights=None) -> "MeshLights | None":
         """The emitters among the scene's triangles, or None when no material emits.
 
         ``emission_spectra`` (M, n): each material's emitted radiance on the grid;
         ``luminance_weights`` (n,): the Y observer's bin weights (spectrum @ weights = luminance;
-        default: the mean over the bins), which weigh the choice of triangle. ``tri_normal`` is
-        not read (the emitters' normals come from their corners, exactly the ones sampled with);
-        it stays in the signature for the callers that pass it.
+        default: the mean over the bins), which weigh the choice of triangle. The emitters'
+        normals come from their corners, exactly the ones sampled with.
         """
         t = np.asarray(triangles).reshape(-1, 3)
         tm = np.asarray(tri_material).reshape(-1)

@@ -282,8 +282,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
     else:
         corner_normals = np.asarray(scene.corner_normals, np.float32)  # unit length (validated)
         smooth = smooth_triangles(corner_normals)
-    mesh_lights = MeshLights.build(v, t, tri_material, materials.emission, tri_normal,
-                                   luminance_weights=conv.cmf_weights[:, 1])
+    mesh_lights = MeshLights.build(v, t, tri_material, materials.emission, luminance_weights=conv.cmf_weights[:, 1])
     environment = world_environment(scene, reuse)
     if environment is None:
         world_spectrum = conv.illuminant_from_rgb(np.asarray(scene.world_color, np.float64)).astype(np.float32)

@@ -190,7 +190,7 @@ def test_emissive_panel_lights_the_plane_as_in_cycles(tmp_path):
     bs.mesh_object("panel", verts, [(0, 1, 2, 3)], bs.material("glow", "EMISSION", (1, 1, 1), Strength=strength))
     cyc, _ = _renders(tmp_path, ours=False)
     v = np.array(verts)
-    ml = MeshLights.build(v, [[0, 1, 2], [0, 2, 3]], [0, 0], [[strength]], np.tile([0, 0, 1.0], (2, 1)))
+    ml = MeshLights.build(v, [[0, 1, 2], [0, 2, 3]], [0, 0], [[strength]])
     pts = _pixel_points()
     rng = np.random.default_rng(4)
     e = np.zeros((N, N))
