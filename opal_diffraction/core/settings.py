@@ -64,7 +64,7 @@ FILTER_WIDTH_MAX = 100.0  # pixels
 #: the eye pass's with the samples, so the two stay in proportion: a 64 x 64 preview at up to
 #: 16 samples takes 65 536 paths (about a tenth of a second), any full-size render the 1 M cap.
 #: Measured on the Cycles parity mirror sphere (64 x 64, 32 samples, 4 seeds; docs/benchmarks.md
-#: "Light paths per sample"): the floor's error with its glossy caustic 0.00417 / 0.00278 /
+#: "Cycles parity on an idle machine", item 2): the floor's error with its glossy caustic 0.00417 / 0.00278 /
 #: 0.00243 at 0.25 / 1 / 4 paths per sample (Cycles' at 64 samples: 0.012), for 0.44 / 0.59 /
 #: 1.38 CPU s: past one path per sample the eye pass's noise dominates and the paths only cost.
 AUTO_LIGHT_PATHS_PER_SAMPLE = 1
