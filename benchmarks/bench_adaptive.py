@@ -27,8 +27,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def wall_scene(pixels: int):
-    from opal_diffraction.core import primitives
-    from opal_diffraction.core.scene import Camera, Materials, Scene
+    from opal_diffraction.core.scene import primitives
+    from opal_diffraction.core.scene.model import Camera, Materials, Scene
 
     s = Scene(materials=Materials.from_list([{"kind": "DIFFUSE", "color": (0.8, 0.8, 0.8)}]),
               world_color=np.array([0.5, 0.5, 0.5], np.float32))
@@ -49,8 +49,8 @@ def main(argv=None) -> int:
     p.add_argument("--threads", type=int, default=1, help="1: steadier timings on a shared machine")
     args = p.parse_args(argv)
 
-    from opal_diffraction.core.render import render
-    from opal_diffraction.core.settings import RenderSettings
+    from opal_diffraction.core.render.frame import render
+    from opal_diffraction.core.scene.settings import RenderSettings
 
     scene = wall_scene(args.pixels)
     base = dict(round_samples=8, tile_size=args.tile_size, diffuse_bounces=1, wavelength_step=20.0,

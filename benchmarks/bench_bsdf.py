@@ -1,4 +1,4 @@
-"""core/bsdf.py throughput: the one-off table build, then sample() and evaluate() per lobe.
+"""core/materials/bsdf.py throughput: the one-off table build, then sample() and evaluate() per lobe.
 
     .venv/bin/python benchmarks/bench_bsdf.py [--hits 200000] [--k 61]
 
@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from opal_diffraction.core import bsdf as B
+from opal_diffraction.core.materials import bsdf as B
 
 
 def main() -> None:

@@ -28,9 +28,9 @@ import time
 import numpy as np
 
 from opal_diffraction._scripts import load_example
-from opal_diffraction.core.output import srgb_encode
-from opal_diffraction.core.render import render
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.render.output import srgb_encode
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.settings import RenderSettings
 
 
 def main():

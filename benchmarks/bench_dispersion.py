@@ -1,11 +1,11 @@
 """Benchmark (not a test): dispersion noise and SPLIT's memory on the gem example (issue 14).
 
-**Wavelength sampling** (core/wavelengths.py): the gem of examples/gem.py at 160 x 120 (the
+**Wavelength sampling** (core/transport/wavelengths.py): the gem of examples/gem.py at 160 x 120 (the
 camera of the example), SAMPLE dispersion, rendered with each combination of the module's
 switches in turn (alternating, in one process, ``--repeats`` times; the best time is kept):
 
 - ``uniform``: one wavelength per ray, uniform over the grid, the reflect / refract choice per
-  mono ray: the code before core/wavelengths.py;
+  mono ray: the code before core/transport/wavelengths.py;
 - ``importance``: the wavelength drawn by the image's sensitivity;
 - ``white-refl``: smooth glass reflects the white ray (the choice made once, on the white ray);
 - ``both``: importance + white reflection (the default);
@@ -53,7 +53,7 @@ VARIANTS = {  # name: (IMPORTANCE, WHITE_REFLECTION, BRANCHES)
 
 
 def set_variant(name: str) -> None:
-    from opal_diffraction.core import wavelengths
+    from opal_diffraction.core.transport import wavelengths
 
     wavelengths.IMPORTANCE, wavelengths.WHITE_REFLECTION, wavelengths.BRANCHES = VARIANTS[name]
 
@@ -70,8 +70,8 @@ def split_probe(mode: str, chunk: int, spp: int) -> None:
     """One render in this (fresh) process; prints a JSON line with its time and peak RSS."""
     from dataclasses import replace
 
-    from opal_diffraction.core import wavelengths
-    from opal_diffraction.core.render import render
+    from opal_diffraction.core.transport import wavelengths
+    from opal_diffraction.core.render.frame import render
 
     bex = load_script("benchmarks/bench_examples_error.py")
     scene, base = bex.build("gem")
@@ -160,7 +160,7 @@ def main(argv=None) -> int:
     if not args.no_split:
         print(f"\nSPLIT memory and time (gem 160x120, {args.split_spp} spp, fresh process each):")
         print("| mode | chunk (mono rays) | wall s | cpu s | peak RSS MB |\n|---|---|---|---|---|")
-        from opal_diffraction.core import wavelengths
+        from opal_diffraction.core.transport import wavelengths
 
         probes = [("SPLIT", 1 << 40), ("SPLIT", wavelengths.SPLIT_CHUNK_RAYS), ("SAMPLE", wavelengths.SPLIT_CHUNK_RAYS)]
         results["split"] = []

@@ -42,13 +42,13 @@ from dataclasses import replace  # noqa: E402
 import numpy as np  # noqa: E402
 
 from opal_diffraction._scripts import load_example  # noqa: E402
-from opal_diffraction.core import distributed as dist  # noqa: E402
-from opal_diffraction.core.film import Film  # noqa: E402
-from opal_diffraction.core.light_pass import LANES, LightWork, run_light_pass  # noqa: E402
-from opal_diffraction.core.prepare import prepare  # noqa: E402
-from opal_diffraction.core.render import render  # noqa: E402
-from opal_diffraction.core.settings import RenderSettings  # noqa: E402
-from opal_diffraction.core.tiles import EyeWork  # noqa: E402
+from opal_diffraction.core.render import distributed as dist  # noqa: E402
+from opal_diffraction.core.render.film import Film  # noqa: E402
+from opal_diffraction.core.integrators.light.light_pass import LANES, LightWork, run_light_pass  # noqa: E402
+from opal_diffraction.core.render.prepare import prepare  # noqa: E402
+from opal_diffraction.core.render.frame import render  # noqa: E402
+from opal_diffraction.core.scene.settings import RenderSettings  # noqa: E402
+from opal_diffraction.core.render.tiles import EyeWork  # noqa: E402
 
 
 def _size(x) -> int:

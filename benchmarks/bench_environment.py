@@ -5,7 +5,7 @@
 Builds an EnvironmentMap of ``--width`` x ``--width / 2`` texels (a smooth sky with a small
 bright sun), times the construction (luminance, cell means, CDFs), 1 M lookups, 1 M samples
 and 1 M pdf evaluations, then a light pass of 1 M world paths through a glass sphere over a
-floor (core/light_pass.py ``_emit_world``). Prints the numbers (docs/physics.md section 7.6).
+floor (core/integrators/light/light_pass.py ``_emit_world``). Prints the numbers (docs/physics.md section 7.6).
 """
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ import time
 
 import numpy as np
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.environment import EnvironmentMap
-from opal_diffraction.core.light_pass import run_light_pass
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.scene import Camera, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.lights.environment import EnvironmentMap
+from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.scene.model import Camera, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 
 def sky(width: int) -> np.ndarray:
@@ -60,7 +60,7 @@ def main() -> None:
     print(f"light pass, 1 M world paths: {time.perf_counter() - t:.2f} s "
           f"({lp.stats['light_deposits']} deposits, {prepared.threads} threads)")
     # the same light pass from a SUN (the emission's own cost is the difference)
-    from opal_diffraction.core.scene import Lights
+    from opal_diffraction.core.scene.model import Lights
 
     s.world_image = np.zeros((0, 0, 3), np.float32)
     s.world_color = np.zeros(3, np.float32)

@@ -67,7 +67,7 @@ def commit_of_tree() -> str:
 
 def build(name: str):
     """(scene, settings) of the example ``name`` at its SIZES entry; settings are the example's."""
-    from opal_diffraction.core.settings import RenderSettings
+    from opal_diffraction.core.scene.settings import RenderSettings
 
     w, h = SIZES[name]
     if name == "prism":
@@ -96,7 +96,7 @@ def render_rgb(scene, base, spp: int, seed: int, **overrides):
     """(rgb (H, W, 3), wall s, cpu s, stats) of one render with ``base``'s settings at ``spp``."""
     from dataclasses import replace
 
-    from opal_diffraction.core.render import render
+    from opal_diffraction.core.render.frame import render
 
     settings = replace(base, samples=int(spp), seed=int(seed), threads=2, light_paths=None, adaptive_threshold=0.0,
                        time_limit=0.0, spectral_exr="", **overrides)

@@ -19,10 +19,10 @@ import time
 import numpy as np
 
 from opal_diffraction._scripts import load_example
-from opal_diffraction.core.grating_sampling import sample_orders
-from opal_diffraction.core.light_pass import run_light_pass
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.gratings.order_sampling import sample_orders
+from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.scene.settings import RenderSettings
 
 
 def sampler_rate(period_nm: float, n: int = 1_000_000) -> float:

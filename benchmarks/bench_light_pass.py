@@ -42,15 +42,15 @@ def build(name: str):
 
 
 def prepared(name: str, paths: int, threads: int):
-    from opal_diffraction.core.prepare import prepare
-    from opal_diffraction.core.settings import RenderSettings
+    from opal_diffraction.core.render.prepare import prepare
+    from opal_diffraction.core.scene.settings import RenderSettings
 
     return prepare(build(name), RenderSettings(samples=1, light_paths=paths, threads=threads))
 
 
 def time_once(name: str, paths: int, threads: int) -> dict:
     """One timed light pass: wall and CPU seconds (this process, all threads), paths, rays, deposits."""
-    from opal_diffraction.core.light_pass import run_light_pass
+    from opal_diffraction.core.integrators.light.light_pass import run_light_pass
 
     ctx = prepared(name, paths, threads)
     t0, c0 = time.perf_counter(), time.process_time()
@@ -64,7 +64,7 @@ def time_once(name: str, paths: int, threads: int) -> dict:
 def profile(name: str, paths: int, lines: int) -> None:
     from pyinstrument import Profiler
 
-    from opal_diffraction.core.light_pass import LightWork, trace_batch
+    from opal_diffraction.core.integrators.light.light_pass import LightWork, trace_batch
 
     ctx = prepared(name, paths, 1)
     prof = Profiler(interval=0.002)

@@ -15,12 +15,12 @@ import time
 
 import numpy as np
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.lights import intersect_lights, light_pdf, prepare_lights, sample_light
-from opal_diffraction.core.mesh_lights import MeshLights
-from opal_diffraction.core.scene import Lights
-from opal_diffraction.core.settings import RenderSettings
-from opal_diffraction.core.spectrum import SpectralConverter
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.lights.sources import intersect_lights, light_pdf, prepare_lights, sample_light
+from opal_diffraction.core.lights.mesh_lights import MeshLights
+from opal_diffraction.core.scene.model import Lights
+from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.spectral.spectrum import SpectralConverter
 
 ROWS = {
     "point (delta)": {"kind": "POINT", "position": (0, 0, 3)},

@@ -167,9 +167,8 @@ def main(argv=None) -> int:
     if args.timeline > 0:
         os.environ["BENCH_TIMELINE"] = str(args.timeline)
 
-    sys.path.insert(0, REPO)
     from opal_diffraction._scripts import load_example
-    from opal_diffraction.core.settings import film_bytes
+    from opal_diffraction.core.scene.settings import film_bytes
 
     trees = [("this tree", REPO)] + ([("--tree", os.path.abspath(args.tree))] if args.tree else [])
     rows = []

@@ -20,8 +20,6 @@ import resource
 import sys
 import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(HERE))
 
 
 def rss_mb() -> float:
@@ -39,8 +37,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from opal_diffraction._scripts import load_example
-    from opal_diffraction.core.render import render
-    from opal_diffraction.core.settings import RenderSettings
+    from opal_diffraction.core.render.frame import render
+    from opal_diffraction.core.scene.settings import RenderSettings
 
     scene = load_example(args.scene).build_scene(args.width, args.height)
     settings = RenderSettings(samples=args.spp)

@@ -28,7 +28,7 @@ N_EFF_BLACK = 1.4198  # the Black preset: silica spheres, water voids (docs/opal
 
 def spectral_image(path: str) -> tuple[np.ndarray, np.ndarray]:
     """(wavelengths (K,), spectra (H, W, K)) of a spectral EXR the engine wrote."""
-    from opal_diffraction.core.output import read_exr
+    from opal_diffraction.core.render.output import read_exr
 
     ch = read_exr(path)
     names = sorted((k for k in ch if k.startswith("S0.")), key=lambda k: float(k[3:-2].replace(",", ".")))

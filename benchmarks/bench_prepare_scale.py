@@ -2,13 +2,13 @@
 
     .venv/bin/python benchmarks/bench_prepare_scale.py [--sizes 0.1 1 3 10] [--profile 10] [--grating-every 8]
 
-The scene: a grid of icospheres (core/primitives.py, 20 x 4^s triangles each, copies of one
+The scene: a grid of icospheres (core/scene/primitives.py, 20 x 4^s triangles each, copies of one
 template laid out in a square) on a diffuse floor: a quarter glass, a quarter mirror, an eighth
 diffuse with a line grating (per-triangle tangents), the rest diffuse; smooth corner normals on
 half the spheres (the other half and the floor flat), per-corner UVs; a point light, a
 sun, an emissive quad (a mesh light) and a world colour. Each size runs in its own subprocess
 (so its peak RSS, ``resource.getrusage(RUSAGE_SELF).ru_maxrss``, is the preparation's alone);
-the phases are timed by wrapping the functions core/prepare.py calls (the names it imported),
+the phases are timed by wrapping the functions core/render/prepare.py calls (the names it imported),
 so the code measured is the code that runs. Prints two tables, wall-clock and CPU seconds
 (``time.process_time``: every thread of the process, Embree's build threads included; on a
 shared machine the number to compare) per phase x size with nanoseconds per triangle, the RSS,
@@ -29,12 +29,12 @@ from collections import defaultdict
 
 import numpy as np
 
-from opal_diffraction.core import light_pass as _lp
-from opal_diffraction.core import prepare as _prep
-from opal_diffraction.core import primitives
-from opal_diffraction.core.mesh_lights import MeshLights
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.integrators.light import light_pass as _lp
+from opal_diffraction.core.render import prepare as _prep
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.lights.mesh_lights import MeshLights
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 SETTINGS = RenderSettings(samples=16, light_paths=1_000_000, threads=2)
 
@@ -97,7 +97,7 @@ def scene_of(triangles: int, grating_every: int = 8) -> Scene:
     return s
 
 
-# the functions core/prepare.py calls, by phase (wrapped in the modules whose names it calls)
+# the functions core/render/prepare.py calls, by phase (wrapped in the modules whose names it calls)
 PHASES = [
     ("validation", Scene, "validated"),
     ("materials/lights/gratings", _prep, "prepare_materials"),

@@ -1,7 +1,7 @@
 """Benchmark (not a test): the light pass's SPLIT dispersion in chunks, memory and time (issue 14).
 
 With ``dispersion_sampling = 'SPLIT'`` a white light path becomes one mono path per wavelength
-sample (n = 61) at the first dispersive glass it meets (core/transport.py ``_split``): a batch
+sample (n = 61) at the first dispersive glass it meets (core/transport/walker.py ``_split``): a batch
 of 2^15 paths (light_pass.BATCH_PATHS) becomes up to 2 M mono rays, each with its hit and path
 state. ``light_pass.trace_batch`` now walks a batch's white paths in pieces of
 ``wavelengths.SPLIT_CHUNK_RAYS / n`` paths (the eye pass's bound, docs/physics.md section 2.6),
@@ -48,10 +48,10 @@ def probe(scene_name: str, mode: str, chunk: int, paths: int, threads: int, widt
 
         tracemalloc.start(1)
     from opal_diffraction._scripts import load_example
-    from opal_diffraction.core import wavelengths
-    from opal_diffraction.core.light_pass import run_light_pass
-    from opal_diffraction.core.prepare import prepare
-    from opal_diffraction.core.settings import RenderSettings
+    from opal_diffraction.core.transport import wavelengths
+    from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+    from opal_diffraction.core.render.prepare import prepare
+    from opal_diffraction.core.scene.settings import RenderSettings
 
     wavelengths.SPLIT_CHUNK_RAYS = chunk
     scene = load_example(scene_name).build_scene(width, height)
@@ -97,8 +97,7 @@ def main(argv=None) -> int:
         print(json.dumps(probe(*json.loads(args.probe))))
         return 0
 
-    sys.path.insert(0, REPO)
-    from opal_diffraction.core import wavelengths
+    from opal_diffraction.core.transport import wavelengths
 
     chunk = wavelengths.SPLIT_CHUNK_RAYS
     configs = [("SPLIT", HUGE), ("SPLIT", chunk)] + ([] if args.no_sample else [("SAMPLE", chunk)])

@@ -15,11 +15,11 @@ import time
 
 import numpy as np
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.scene import Camera, Materials, Scene
-from opal_diffraction.core.surface import shading_normal, surface_reflectance, surface_roughness
-from opal_diffraction.core.transport import Hit
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.scene.model import Camera, Materials, Scene
+from opal_diffraction.core.materials.surface import shading_normal, surface_reflectance, surface_roughness
+from opal_diffraction.core.transport.walker import Hit
 
 B = 1 << 18
 

@@ -20,10 +20,10 @@ import time
 import numpy as np
 
 from opal_diffraction._scripts import load_example
-from opal_diffraction.core import primitives
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 
 def colour_chart(pixels=192) -> Scene:

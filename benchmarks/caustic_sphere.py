@@ -40,15 +40,15 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from opal_diffraction.core import primitives
+from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.accel import build_accelerator
-from opal_diffraction.core.camera import generate_rays
-from opal_diffraction.core.light_pass import run_light_pass
-from opal_diffraction.core.plan import plan_render
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.render import render, render_prepared
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.sampling.camera import generate_rays
+from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+from opal_diffraction.core.render.plan import plan_render
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.render.frame import render, render_prepared
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 LLVM_CANDIDATES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1",
@@ -283,7 +283,7 @@ def run_cycles(spec: Spec, samples: int, shadow_caustics: bool, cache: str, plan
     smooth, at 16 spp), so that curve renders interpolated normals on the same mesh."""
     import bpy
 
-    from opal_diffraction.core.output import read_exr
+    from opal_diffraction.core.render.output import read_exr
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     sc = bpy.context.scene
@@ -709,7 +709,7 @@ def splat_benchmark(args, log) -> int:
     ``--repeats``. Floor RMSE against the ptracer reference, sphere RMSE against the path
     reference (also without our Caustics pass: the part the path reference cannot have).
     Writes docs/caustics_splat_table.md and PNGs under out/caustic_sphere/."""
-    from opal_diffraction.core.output import write_png
+    from opal_diffraction.core.render.output import write_png
 
     rows = []
     var = "llvm_ad_rgb" if not args.no_llvm and mitsuba_llvm_ok() else "scalar_rgb"
@@ -744,7 +744,7 @@ def splat_benchmark(args, log) -> int:
                 return (*out, time.process_time() - c0)
             return run
 
-        from opal_diffraction.core import fresnel_split
+        from opal_diffraction.core.integrators.eye import fresnel_split
         # (light paths, spp, splat, Fresnel split at the first glass hit)
         cfgs = [(100_000, 16, True, True), (100_000, 24, True, True), (250_000, 8, True, True),
                 (250_000, 32, True, True), (100_000, 24, True, False), (250_000, 32, False, True)]
@@ -789,8 +789,8 @@ def splat_benchmark(args, log) -> int:
 def profile_light_pass(spec: Spec, paths: int) -> int:
     from pyinstrument import Profiler
 
-    from opal_diffraction.core.light_pass import run_light_pass
-    from opal_diffraction.core.prepare import prepare
+    from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+    from opal_diffraction.core.render.prepare import prepare
 
     scene, _ = our_scene(spec).validated()
     st = RenderSettings(samples=1, light_paths=paths, threads=1)

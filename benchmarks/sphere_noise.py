@@ -27,9 +27,9 @@ import time
 import numpy as np
 
 from opal_diffraction import _scripts
-from opal_diffraction.core import eye_pass as ep
-from opal_diffraction.core.render import render
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.integrators.eye import eye_pass as ep
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.settings import RenderSettings
 
 cs = _scripts.load_script("benchmarks/caustic_sphere.py")
 

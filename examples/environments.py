@@ -1,7 +1,7 @@
 """Procedural equirectangular environment maps for the examples (no image files to ship).
 
 Each function returns an (H, W, 3) float32 linear Rec.709 radiance map in Cycles'
-equirectangular convention (row 0 at the bottom; core/environment.py), for ``Scene.world_image``
+equirectangular convention (row 0 at the bottom; core/lights/environment.py), for ``Scene.world_image``
 with ``Scene.world_color`` as its multiplier, or for an Environment Texture in Blender.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from opal_diffraction.core.environment import uv_to_direction
+from opal_diffraction.core.lights.environment import uv_to_direction
 
 __all__ = ["texel_directions", "sky", "studio", "blender_world"]
 

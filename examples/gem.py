@@ -19,8 +19,8 @@ import sys
 import numpy as np
 
 from opal_diffraction._scripts import load_example
-from opal_diffraction.core import primitives
-from opal_diffraction.core.scene import Camera, Materials, Scene
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.scene.model import Camera, Materials, Scene
 
 
 def build_scene(width: int = 480, height: int = 360) -> Scene:

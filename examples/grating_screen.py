@@ -24,8 +24,8 @@ import sys
 
 import numpy as np
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 
 PERIOD_NM = 1e6 / 600.0  # 600 lines/mm
 

@@ -22,8 +22,8 @@ import sys
 
 import numpy as np
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 
 
 def fig5_scene(width=480, height=240, slit_count=1000) -> Scene:

@@ -147,7 +147,7 @@ def viewport_first_image(width: int, height: int) -> float:
     from opal_diffraction.blender.settings import render_settings
     from opal_diffraction.blender.export import export_scene
     from opal_diffraction.blender.viewport import ProgressiveRenderer, preview_levels, viewport_camera
-    from opal_diffraction.core.prepare import prepare
+    from opal_diffraction.core.render.prepare import prepare
 
     sc = bpy.context.scene
     dg = bpy.context.evaluated_depsgraph_get()

@@ -18,8 +18,8 @@ import sys
 import numpy as np
 
 from opal_diffraction._scripts import load_example
-from opal_diffraction.core import primitives
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 
 
 #: The sky's strength (a multiplier of examples/environments.py's sky).

@@ -59,7 +59,7 @@ def build_scene(width: int = 640, height: int = 400, spp: int = 32, light_paths:
     import bpy
     from mathutils import Vector
 
-    from opal_diffraction.core import primitives
+    from opal_diffraction.core.scene import primitives
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene

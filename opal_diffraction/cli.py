@@ -4,8 +4,8 @@
 
 Writes a float RGB EXR, an 8-bit PNG preview next to it (or at ``--preview``), and optionally a
 spectral EXR. Same seed, same image. ``--adaptive-threshold T`` stops sampling pixels whose noise
-is below T (Cycles' Noise Threshold, core/adaptive.py); ``--denoise`` runs Open Image Denoise
-(the optional pyoidn wheel, core/denoise.py) on the RGB image, guided by the albedo and normal
+is below T (Cycles' Noise Threshold, core/render/adaptive.py); ``--denoise`` runs Open Image Denoise
+(the optional pyoidn wheel, core/render/denoise.py) on the RGB image, guided by the albedo and normal
 feature passes, and writes the noisy image beside it as OUT.noisy.exr.
 
 Everything the user gives is checked before the render starts: the arguments, the scene file
@@ -240,7 +240,7 @@ def _physical_memory() -> int | None:
 
 
 def _check_memory(prepared) -> None:
-    from .core.settings import film_bytes
+    from .core.scene.settings import film_bytes
 
     cam = prepared.scene.camera
     spectral = bool(prepared.settings.spectral_exr)  # the film keeps (H, W, n) sums only for a spectral EXR
@@ -344,18 +344,18 @@ def main(argv=None) -> int:
 
 
 def _render(args, sig: _Signals, created: list) -> int:
-    from .core.output import write_png, write_rgb_exr, write_spectral_exr
-    from .core.prepare import prepare
-    from .core.render import render_prepared
-    from .core.scene import Scene, SceneError
-    from .core.settings import RenderSettings
+    from .core.render.output import write_png, write_rgb_exr, write_spectral_exr
+    from .core.render.prepare import prepare
+    from .core.render.frame import render_prepared
+    from .core.scene.model import Scene, SceneError
+    from .core.scene.settings import RenderSettings
 
     t_start = time.perf_counter()
     if not math.isfinite(args.exposure) or abs(args.exposure) > 100:
         raise CliError(f"exposure must be a finite number of stops within +-100, got {args.exposure}")
     paths = _output_paths(args, created)
     if args.denoise:
-        from .core.denoise import available, INSTALL_HINT
+        from .core.render.denoise import available, INSTALL_HINT
 
         if not available():  # before the render, not after it
             raise CliError(f"--denoise needs Open Image Denoise's Python binding pyoidn, which is not installed: "
@@ -390,8 +390,8 @@ def _render(args, sig: _Signals, created: list) -> int:
     bar = None if args.quiet else _ProgressBar()
     sig.phase = "render"
     try:
-        if args.scheduler:  # the same image, rendered on a Dask cluster (core/distributed.py)
-            from .core.distributed import connect, render_on_cluster
+        if args.scheduler:  # the same image, rendered on a Dask cluster (core/render/distributed.py)
+            from .core.render.distributed import connect, render_on_cluster
 
             with connect(args.scheduler) as client:
                 result = render_on_cluster(client, scene, settings, prepared, progress=bar,
@@ -416,7 +416,7 @@ def _render(args, sig: _Signals, created: list) -> int:
         print(f"warning: {w}", file=sys.stderr)
 
     if args.denoise and result.samples > 0:
-        from .core.denoise import denoise_result
+        from .core.render.denoise import denoise_result
 
         sig.phase = "denoise"
         try:

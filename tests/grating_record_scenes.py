@@ -10,8 +10,8 @@ blocks the same rays in both scenes: none of the virtual lights' rays pass it).
 
 import numpy as np
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 
 D_NM, A_NM, N_SLITS, L_UM = 1600.0, 800.0, 10, 1.5
 POWER = 200.0

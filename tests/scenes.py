@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 
 
 def top_down_camera(size_m: float, pixels: int, height: float = 10.0, centre=(0.0, 0.0)) -> Camera:

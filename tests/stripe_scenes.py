@@ -1,7 +1,7 @@
 """A test scene shared by several test files: stripes seen through a dispersive prism."""
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 
 GREY_STRIPES = ((0.9, 0.9, 0.9), (0.05, 0.05, 0.05))
 

@@ -1,4 +1,4 @@
-"""Adaptive sampling (core/adaptive.py, Cycles' Noise Threshold; docs/physics.md section 10.5):
+"""Adaptive sampling (core/render/adaptive.py, Cycles' Noise Threshold; docs/physics.md section 10.5):
 the error estimate is an unbiased estimate of the mean's error for equal and unequal halves,
 Cycles' parameters, the 3 x 3 dilation, the settings' validation, and on a scene with a noise-free
 region (the world seen directly), a quiet one (a plane far from a wall) and a noisy one (the
@@ -15,15 +15,15 @@ import numpy as np
 import pytest
 from scipy import ndimage, stats
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.adaptive import THRESHOLD_SCALE, dilate, error_estimate, min_samples, next_active
-from opal_diffraction.core.camera import FilterSampler
-from opal_diffraction.core.eye_pass import EyePass
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Materials, Scene, SceneError
-from opal_diffraction.core.settings import EYE_ONLY_SETTINGS, RenderSettings
-from opal_diffraction.core.tiles import EyeWork, adaptive_rounds, trace_tile
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.render.adaptive import THRESHOLD_SCALE, dilate, error_estimate, min_samples, next_active
+from opal_diffraction.core.sampling.camera import FilterSampler
+from opal_diffraction.core.integrators.eye.eye_pass import EyePass
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Materials, Scene, SceneError
+from opal_diffraction.core.scene.settings import EYE_ONLY_SETTINGS, RenderSettings
+from opal_diffraction.core.render.tiles import EyeWork, adaptive_rounds, trace_tile
 
 from scenes import top_down_camera
 
@@ -178,7 +178,7 @@ def test_converged_pixels_stop_early_and_the_noisy_ones_go_on(renders):
         print(f"{name}: mean {counts[sl].mean():.1f} samples per pixel")
     assert (counts[REGIONS["world"]] == floor).all()  # no noise at all: the minimum, exactly
     assert counts[REGIONS["far plane"]].mean() < 1.2 * floor
-    # the penumbra goes on well past the minimum (with the stratified numbers of core/sampler.py
+    # the penumbra goes on well past the minimum (with the stratified numbers of core/sampling/sampler.py
     # it is less noisy than with random ones: 86 samples where it took over 96)
     assert counts[REGIONS["near the wall"]].mean() > 1.25 * floor
     assert all(r.stats["samples_max"] <= BASE["samples"] and r.stats["samples_min"] == floor for r in adaptive)

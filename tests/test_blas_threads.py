@@ -1,11 +1,11 @@
-"""A render runs with one BLAS thread and gives BLAS its threads back (core/blas_threads.py)."""
+"""A render runs with one BLAS thread and gives BLAS its threads back (core/util/blas_threads.py)."""
 
 import numpy as np
 import pytest
 
-from opal_diffraction.core.blas_threads import one_blas_thread
-from opal_diffraction.core.render import render
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.util.blas_threads import one_blas_thread
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.settings import RenderSettings
 
 from scenes import plane_under_light
 

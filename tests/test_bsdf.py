@@ -1,4 +1,4 @@
-"""core/bsdf.py: GGX microfacet BSDFs (docs/physics.md section 14).
+"""core/materials/bsdf.py: GGX microfacet BSDFs (docs/physics.md section 14).
 
 - sample() against evaluate()'s pdf: chi-square goodness of fit on a (theta, phi) grid of the
   whole sphere, the expected count of each cell by Gauss-Legendre integration of the pdf over it,
@@ -25,11 +25,11 @@ import pytest
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm
 
-from opal_diffraction.core import bsdf as B
-from opal_diffraction.core.geometry import orthonormal_basis
-from opal_diffraction.core.materials import prepare_materials
-from opal_diffraction.core.scene import Camera, Materials, Scene, SceneError
-from opal_diffraction.core.spectrum import SpectralConverter
+from opal_diffraction.core.materials import bsdf as B
+from opal_diffraction.core.util.geometry import orthonormal_basis
+from opal_diffraction.core.materials.spectra import prepare_materials
+from opal_diffraction.core.scene.model import Camera, Materials, Scene, SceneError
+from opal_diffraction.core.spectral.spectrum import SpectralConverter
 
 NS = np.array([0.3, -0.5, 0.81])
 NS = NS / np.linalg.norm(NS)  # a tilted shading frame, so the frame code is exercised
@@ -438,7 +438,7 @@ def test_params_from_materials():
 def test_tangent_frame_is_orthonormal_and_right_handed():
     """docs/physics.md section 4.8: Duff et al. 2017's basis, checked on random normals and the
     poles (n_z = +-1, 0)."""
-    from opal_diffraction.core.bsdf import tangent_frame
+    from opal_diffraction.core.materials.bsdf import tangent_frame
 
     n = np.random.default_rng(5).normal(size=(2000, 3))
     n = np.concatenate([n, [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0, 1, 0], [0.6, 0.8, 0.0]]])

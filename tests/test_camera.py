@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from opal_diffraction.core.camera import FilterSampler, generate_rays, pixel_samples
-from opal_diffraction.core.scene import Camera
+from opal_diffraction.core.sampling.camera import FilterSampler, generate_rays, pixel_samples
+from opal_diffraction.core.scene.model import Camera
 
 
 def angle_deg(d, axis):

@@ -12,14 +12,14 @@ included, and must match the caustic map's estimate where the map is unbiased (i
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.camera import FilterSampler
-from opal_diffraction.core.camera_splat import blackman_harris_density, filter_density
-from opal_diffraction.core.light_pass import run_light_pass
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.render import render, render_prepared
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.sampling.camera import FilterSampler
+from opal_diffraction.core.integrators.light.camera_splat import blackman_harris_density, filter_density
+from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.render.frame import render, render_prepared
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 SUN_UP = np.array([-1.5, 0.0, 1.0]) / np.hypot(1.5, 1.0)  # travelling up to the mirror at z = 1
 CAM = dict(eye=(-2.0, -3.0, 3.0), target=(0.5, 0.0, 0.0))
@@ -175,7 +175,7 @@ def test_a_region_is_the_crop_of_the_whole_image():
 def test_the_spectral_exr_gets_the_splat_in_its_spectrum(tmp_path, monkeypatch):
     """An RGB splat film (an image over the spectral cap, here the cap set to 0) and a spectral
     one (a spectral EXR asked) give the same RGB; the spectral image holds the splat."""
-    from opal_diffraction.core import camera_splat
+    from opal_diffraction.core.integrators.light import camera_splat
 
     st = dict(samples=2, light_paths=30_000, wavelength_step=20.0, diffuse_bounces=0)
     with monkeypatch.context() as m:
@@ -185,7 +185,7 @@ def test_the_spectral_exr_gets_the_splat_in_its_spectrum(tmp_path, monkeypatch):
     spectral = render(_scene(True, 16, 16), RenderSettings(spectral_exr=str(tmp_path / "s.exr"), **st))
     np.testing.assert_allclose(spectral.rgb, rgb_only.rgb, rtol=1e-4, atol=1e-6)
     conv_rgb = spectral.rgb
-    from opal_diffraction.core.spectrum import SpectralConverter
+    from opal_diffraction.core.spectral.spectrum import SpectralConverter
 
     conv = SpectralConverter(RenderSettings(**st).grid())
     np.testing.assert_allclose(conv.to_rgb(spectral.spectral), conv_rgb, rtol=1e-4, atol=1e-6)
@@ -196,7 +196,7 @@ def test_a_splat_lands_in_the_pixels_whose_eye_samples_would_see_it():
     0.25 px cells, against where that pixel's eye samples fall (FilterSampler offsets about its
     centre, 1 000 000 samples): chi-square, cells with expected < 5 pooled."""
     from scipy.stats import chi2 as chi2_dist
-    from opal_diffraction.core.camera_splat import CameraConnection
+    from opal_diffraction.core.integrators.light.camera_splat import CameraConnection
 
     prepared = prepare(_scene(True, 12, 12), RenderSettings(samples=1, light_paths=1000, wavelength_step=20.0))
     conn = CameraConnection.of(prepared)

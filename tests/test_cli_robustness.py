@@ -23,8 +23,8 @@ import numpy as np
 import pytest
 
 from opal_diffraction import cli
-from opal_diffraction.core import primitives
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
 FAST = ["--spp", "1", "--light-paths", "0", "--wavelength-step", "50", "-q"]
@@ -377,7 +377,7 @@ def test_signal_during_the_render(tmp_path, slow_scene, sig, code, partial):
     assert not tmp_files(tmp_path)
     assert out.exists() == partial, err
     if partial:
-        from opal_diffraction.core.output import read_exr
+        from opal_diffraction.core.render.output import read_exr
 
         assert read_exr(out)["R"].shape == (160, 160)
         assert "partial image" in err

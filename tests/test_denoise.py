@@ -1,6 +1,6 @@
 """Denoising: the feature passes (Cycles' Denoising Albedo and Denoising Normal: the albedo of
 a red plane, its normal in Cycles' camera space), Open Image Denoise through pyoidn
-(core/denoise.py) lowering the error of a low-sample render against a converged one, and the
+(core/render/denoise.py) lowering the error of a low-sample render against a converged one, and the
 command line's --denoise (OUT.exr denoised, OUT.noisy.exr the render itself), its readable
 error without pyoidn, and its adaptive-sampling flags."""
 
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from opal_diffraction import cli
-from opal_diffraction.core import primitives
-from opal_diffraction.core.output import read_exr
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.render.output import read_exr
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 from scenes import top_down_camera
 
@@ -104,7 +104,7 @@ def rmse(a, b) -> float:
 
 def test_denoising_lowers_the_error_of_a_low_sample_render(converged):
     pytest.importorskip("pyoidn")
-    from opal_diffraction.core.denoise import NOISY_PASS, denoise_result
+    from opal_diffraction.core.render.denoise import NOISY_PASS, denoise_result
 
     noisy = render(noisy_scene(), RenderSettings(samples=2, seed=1, **NOISY), spectral_film=True)
     clean = denoise_result(noisy)

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from opal_diffraction.core.diffraction import (
+from opal_diffraction.core.gratings.kernel import (
     fraunhofer_pattern, fraunhofer_pattern_binned, grating_radiance_factor, multislit, multislit_integral,
     multislit_mean, sinc2, sinc2_integral, sinc2_mean,
 )
@@ -158,7 +158,7 @@ def test_stress_no_nan_inf_negative_and_float32_agrees(n, ratio, d, u, v, length
 def test_grazing_exit_is_bounded():
     """No 1/cos(theta_o) (docs/physics.md section 3.2): an exit in the surface's plane is finite and
     no larger than the radiance factor times the Harvey-Shack bound 1 / (a / D)."""
-    from opal_diffraction.core.gratings import PreparedGratings, diffracted_radiance
+    from opal_diffraction.core.gratings.radiance import PreparedGratings, diffracted_radiance
 
     g = PreparedGratings(np.array([True]), np.array([False]), np.array([False]), np.array([2000.0]),
                          np.array([1000.0]), np.array([1000]), np.array([1e5]), np.ones(1), np.zeros(1))

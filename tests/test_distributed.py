@@ -1,4 +1,4 @@
-"""One frame on Dask (core/distributed.py): a LocalCluster of 2 worker processes renders the
+"""One frame on Dask (core/render/distributed.py): a LocalCluster of 2 worker processes renders the
 image, the spectral film (and its EXR) and the passes of a single-process render bit for bit,
 also when a worker is killed mid-render; cancel stops it; the core never imports dask unasked;
 the wire format names none of our modules."""
@@ -15,16 +15,16 @@ import time
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.distributed import (TILE_TASK, ClusterError, connect, from_wire, pack_map, to_wire,
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.render.distributed import (TILE_TASK, ClusterError, connect, from_wire, pack_map, to_wire,
                                                unpack_map)
-from opal_diffraction.core.light_pass import LightWork, run_light_pass
-from opal_diffraction.core.output import write_spectral_exr
-from opal_diffraction.core.plan import plan_render
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.integrators.light.light_pass import LightWork, run_light_pass
+from opal_diffraction.core.render.output import write_spectral_exr
+from opal_diffraction.core.render.plan import plan_render
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 SETTINGS = RenderSettings(samples=4, round_samples=2, light_paths=150_000, seed=11, threads=2, tile_size=8)
 
@@ -187,7 +187,7 @@ def test_the_wire_names_none_of_our_modules_and_round_trips():
     assert back_settings == SETTINGS and back_scene.camera == scene.camera
     np.testing.assert_array_equal(back_scene.vertices, scene.vertices)
     np.testing.assert_array_equal(back_scene.materials.period, scene.materials.period)
-    assert b"opal_diffraction.core.distributed" in pickle.dumps(TILE_TASK)
+    assert b"opal_diffraction.core.render.distributed" in pickle.dumps(TILE_TASK)
     assert pickle.loads(pickle.dumps(TILE_TASK)).__name__ == "tile_task"
     with pytest.raises(TypeError, match="cannot be sent"):
         to_wire(prepare(scene, SETTINGS))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from opal_diffraction.core.environment import EnvironmentMap, direction_to_uv, uv_to_direction
+from opal_diffraction.core.lights.environment import EnvironmentMap, direction_to_uv, uv_to_direction
 
 
 def rotation_xyz(ax, ay, az) -> np.ndarray:
@@ -232,12 +232,12 @@ def test_importance_sampled_irradiance_matches_quadrature():
 
 
 # ------------------------------------------------------------------------------ the light pass
-from opal_diffraction.core import primitives  # noqa: E402
-from opal_diffraction.core.elements import IlluminationMap  # noqa: E402
-from opal_diffraction.core.light_pass import BATCH_PATHS, LightWork, trace_batch  # noqa: E402
-from opal_diffraction.core.prepare import prepare  # noqa: E402
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene  # noqa: E402
-from opal_diffraction.core.settings import RenderSettings  # noqa: E402
+from opal_diffraction.core.scene import primitives  # noqa: E402
+from opal_diffraction.core.transport.elements import IlluminationMap  # noqa: E402
+from opal_diffraction.core.integrators.light.light_pass import BATCH_PATHS, LightWork, trace_batch  # noqa: E402
+from opal_diffraction.core.render.prepare import prepare  # noqa: E402
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene  # noqa: E402
+from opal_diffraction.core.scene.settings import RenderSettings  # noqa: E402
 
 IOR = 1.5
 SLAB_HALF, SLAB_BOTTOM, SLAB_T, RECEIVER_HALF = 1.0, 0.15, 0.02, 0.2
@@ -371,9 +371,9 @@ def test_a_bright_patch_throws_the_caustic_of_a_sun_of_its_irradiance():
 
 
 # ------------------------------------------------------------------------------ scene, prepare, eye pass
-from opal_diffraction.core.camera import generate_rays  # noqa: E402
-from opal_diffraction.core.render import render  # noqa: E402
-from opal_diffraction.core.scene import MAX_SIDE, SceneError  # noqa: E402
+from opal_diffraction.core.sampling.camera import generate_rays  # noqa: E402
+from opal_diffraction.core.render.frame import render  # noqa: E402
+from opal_diffraction.core.scene.model import MAX_SIDE, SceneError  # noqa: E402
 
 
 def _world_scene(**kw) -> Scene:
@@ -467,7 +467,7 @@ def test_the_map_through_dispersive_glass_matches_non_dispersive_glass(sampling)
     so the two images differ only by BK7's index spread (1.511-1.527 over the visible: < 0.3 %
     in the slab's transmittance) and the rays' noise: a t-test (p = 0.001) on the image means
     over four seeds of 64 samples per pixel each."""
-    from opal_diffraction.core.optics import ior_spectrum
+    from opal_diffraction.core.spectral.optics import ior_spectrum
 
     img = structured_map(32, 16)
     n_d = float(ior_spectrum(np.array([587.6]), "BK7")[0])

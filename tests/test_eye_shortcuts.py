@@ -1,6 +1,6 @@
 """The eye pass's shortcuts that must leave every estimate unchanged (docs/physics.md section
 4.7): the Lambertian next events written out (``_nee_lambert``) against the same samples
-through core/bsdf.py's LAMBERT lobe (``_nee_microfacet``), and black (emission-only) surfaces,
+through core/materials/bsdf.py's LAMBERT lobe (``_nee_microfacet``), and black (emission-only) surfaces,
 which receive no caustics, so a scene whose only diffuse surfaces are black needs no light pass."""
 
 from __future__ import annotations
@@ -8,14 +8,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.eye_pass import EyePass, _TileTrace
-from opal_diffraction.core.plan import plan_render
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
-from opal_diffraction.core.surface import surface_reflectance
-from opal_diffraction.core.transport import Rays
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.integrators.eye.eye_pass import EyePass, _TileTrace
+from opal_diffraction.core.render.plan import plan_render
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.materials.surface import surface_reflectance
+from opal_diffraction.core.transport.walker import Rays
 
 
 def _room():

@@ -1,4 +1,4 @@
-"""Films in RGB unless a spectral image is asked (core/film.py): no (H, W, n) spectral film
+"""Films in RGB unless a spectral image is asked (core/render/film.py): no (H, W, n) spectral film
 without a spectral EXR, the RGB image equal to the conversion of the spectral one within float32
 rounding, and the spectral EXR still written from the spectral film."""
 
@@ -8,13 +8,13 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.film import Film
-from opal_diffraction.core.output import read_exr, spectral_channel_name, write_spectral_exr
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene, SceneError
-from opal_diffraction.core.settings import RenderSettings, film_bytes
-from opal_diffraction.core.spectrum import SpectralConverter
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.render.film import Film
+from opal_diffraction.core.render.output import read_exr, spectral_channel_name, write_spectral_exr
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene, SceneError
+from opal_diffraction.core.scene.settings import RenderSettings, film_bytes
+from opal_diffraction.core.spectral.spectrum import SpectralConverter
 from stripe_scenes import prism_and_stripes
 
 
@@ -108,7 +108,7 @@ def test_film_bytes_bounds_what_the_film_allocates(spectral):
         background = indirect = diffraction = caustics = None
         albedo = normal = np.ones((w * h, 3), np.float32)
 
-    from opal_diffraction.core.plan import RenderPlan
+    from opal_diffraction.core.render.plan import RenderPlan
 
     tile = Tile()
     tracemalloc.start()

@@ -36,12 +36,12 @@ import pytest
 hypothesis = pytest.importorskip("hypothesis")
 from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
 
-from opal_diffraction.core import primitives  # noqa: E402
-from opal_diffraction.core.render import render  # noqa: E402
-from opal_diffraction.core.scene import (  # noqa: E402
+from opal_diffraction.core.scene import primitives  # noqa: E402
+from opal_diffraction.core.render.frame import render  # noqa: E402
+from opal_diffraction.core.scene.model import (  # noqa: E402
     Camera, Lights, Materials, Scene, SceneError,
 )
-from opal_diffraction.core.settings import RenderSettings  # noqa: E402
+from opal_diffraction.core.scene.settings import RenderSettings  # noqa: E402
 
 EXAMPLES = int(os.environ.get("OPAL_FUZZ_EXAMPLES", "0") or 0)
 CI = EXAMPLES <= 0

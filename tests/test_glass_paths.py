@@ -13,16 +13,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.factored_film import add_scaled_spectra
-from opal_diffraction.core.geometry import interpolate_corners
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.sampler import SLOT_BOUNCE, PixelSampler, sobol_owen_2d, vertex_pair
-from opal_diffraction.core.scene import Camera, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
-from opal_diffraction.core.sampler import sobol_owen_x
-from opal_diffraction.core.specular_numbers import bounce_choice
-from opal_diffraction.core.transport import Rays, SpecularWalker, hit_shading_normals, smooth_triangles
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.integrators.eye.factored_film import add_scaled_spectra
+from opal_diffraction.core.util.geometry import interpolate_corners
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.sampling.sampler import SLOT_BOUNCE, PixelSampler, sobol_owen_2d, vertex_pair
+from opal_diffraction.core.scene.model import Camera, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.sampling.sampler import sobol_owen_x
+from opal_diffraction.core.sampling.specular_numbers import bounce_choice
+from opal_diffraction.core.transport.walker import Rays, SpecularWalker, hit_shading_normals, smooth_triangles
 
 
 # ============================================================================ the choice's numbers
@@ -173,8 +173,8 @@ def test_add_scaled_spectra_is_the_per_ray_sum():
 def test_a_glass_ball_before_emitters_renders_the_same_with_and_without_the_factored_emission():
     """The regrouped film add is the same sum: one render with the factored emission and one
     with it switched off (the per-ray spectra), same seed, agree to float rounding."""
-    from opal_diffraction.core import eye_pass
-    from opal_diffraction.core.render import render
+    from opal_diffraction.core.integrators.eye import eye_pass
+    from opal_diffraction.core.render.frame import render
 
     s = Scene(materials=Materials.from_list([
         {"kind": "DIELECTRIC", "ior": 1.45},

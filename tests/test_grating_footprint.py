@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from opal_diffraction._scripts import load_example
-from opal_diffraction.core import footprint
-from opal_diffraction.core.diffraction import fraunhofer_pattern_footprint, multislit, sinc2
-from opal_diffraction.core.grating_directions import smooth_corner_tangents, tangents_at
-from opal_diffraction.core.gratings import triangle_tangents
-from opal_diffraction.core.scene import Camera
+from opal_diffraction.core.sampling import footprint
+from opal_diffraction.core.gratings.kernel import fraunhofer_pattern_footprint, multislit, sinc2
+from opal_diffraction.core.gratings.directions import smooth_corner_tangents, tangents_at
+from opal_diffraction.core.gratings.radiance import triangle_tangents
+from opal_diffraction.core.scene.model import Camera
 
 D, A = 1600.0, 800.0
 LAM0, LAM1 = 550.0, 555.0
@@ -94,7 +94,7 @@ def test_camera_footprint_on_a_parallel_plane_is_the_projected_pixel():
     """docs/physics.md section 3.7: a plane parallel to the image plane at distance Z sees every
     pixel as a Z * (sensor / lens) / width square: the position differentials are exactly that,
     at the centre and at the corners."""
-    from opal_diffraction.core.camera import generate_rays
+    from opal_diffraction.core.sampling.camera import generate_rays
     cam = _camera()
     xs = np.array([0.5, 32.0, 63.5, 10.25])
     ys = np.array([0.5, 24.0, 47.5, 40.0])
@@ -111,8 +111,8 @@ def test_camera_footprint_on_a_parallel_plane_is_the_projected_pixel():
 
 def test_camera_footprint_on_a_tilted_plane_matches_finite_differences():
     """The footprint on a plane at 60 degrees equals the difference of neighbouring rays' hits
-    (core/camera.py's projection of x + h and y + h, h = 1e-3 px) divided by h, within 1e-3."""
-    from opal_diffraction.core.camera import generate_rays
+    (core/sampling/camera.py's projection of x + h and y + h, h = 1e-3 px) divided by h, within 1e-3."""
+    from opal_diffraction.core.sampling.camera import generate_rays
     cam = _camera()
     rng = np.random.default_rng(3)
     xs, ys = rng.uniform(0, 64, 50), rng.uniform(0, 48, 50)
@@ -135,8 +135,8 @@ def test_flat_mirror_keeps_the_spread():
     """A flat mirror 1 m in front of the camera folds the path: the footprint on a plane 2 m
     back from the mirror (parallel to the image plane) is the pixel projected to 3 m, as if the
     mirror were not there (its x and y components unchanged)."""
-    from opal_diffraction.core.camera import generate_rays
-    from opal_diffraction.core.optics import reflect
+    from opal_diffraction.core.sampling.camera import generate_rays
+    from opal_diffraction.core.spectral.optics import reflect
     cam = _camera()
     xs, ys = np.array([0.5, 32.0, 63.5]), np.array([0.5, 24.0, 30.0])
     o, d = generate_rays(cam, xs, ys)
@@ -155,8 +155,8 @@ def test_flat_mirror_keeps_the_spread():
 def test_refraction_differentials_match_finite_differences():
     """Refraction into glass (eta = 1 / 1.5) at a tilted plane: the direction and position
     differentials equal finite differences of Snell's law applied to neighbouring camera rays."""
-    from opal_diffraction.core.camera import generate_rays
-    from opal_diffraction.core.optics import refract
+    from opal_diffraction.core.sampling.camera import generate_rays
+    from opal_diffraction.core.spectral.optics import refract
     cam = _camera()
     rng = np.random.default_rng(5)
     xs, ys = rng.uniform(0, 64, 40), rng.uniform(0, 48, 40)
@@ -186,7 +186,7 @@ def test_grating_footprint_matches_finite_differences_of_u_and_v():
     (w_i recomputed at each hit), within 1 %; and the shift to the footprint's centre is the
     change of (u, v) to the ray through the pixel centre (up to 1.5 px away) within 5 % of the
     largest change (first order)."""
-    from opal_diffraction.core.camera import generate_rays
+    from opal_diffraction.core.sampling.camera import generate_rays
     cam = Camera.look_at((0.0, -0.3, 0.4), (0.0, 0.0, 0.0), lens=50.0, width=64, height=48)
     rng = np.random.default_rng(7)
     xs, ys = rng.uniform(5, 59, 30), rng.uniform(5, 43, 30)
@@ -223,7 +223,7 @@ def test_grating_footprint_matches_finite_differences_of_u_and_v():
 
 # ------------------------------------------------------------------ smooth grating directions
 def _faceted_disc(segments=64, rings=24, r_in=0.0075, r_out=0.06):
-    from opal_diffraction.core.geometry import triangle_normals
+    from opal_diffraction.core.util.geometry import triangle_normals
     annulus = load_example("gratings").annulus
     v, t, tangent = annulus(r_in, r_out, segments=segments, rings=rings)
     nrm = triangle_normals(v.astype(np.float32), t)
@@ -304,8 +304,8 @@ MAIN_RMSE_L10 = 20.0
 
 def _cd_render(length_um, spp, seed, grating_footprint=True):
     cd_scene = load_example("gratings").cd_scene
-    from opal_diffraction.core.render import render
-    from opal_diffraction.core.settings import RenderSettings
+    from opal_diffraction.core.render.frame import render
+    from opal_diffraction.core.scene.settings import RenderSettings
     s = cd_scene(80, 60)
     s.materials.coherence_length[1] = length_um
     st = RenderSettings(samples=spp, seed=seed, light_paths=0, wavelength_step=20.0, threads=2,

@@ -14,15 +14,15 @@
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.camera import generate_rays
-from opal_diffraction.core.diffraction import harvey_shack_factor, propagating_power
-from opal_diffraction.core.gratings import PreparedGratings, diffracted_radiance
-from opal_diffraction.core.grating_layering import base_scale, strip_fraction
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.sampling.camera import generate_rays
+from opal_diffraction.core.gratings.kernel import harvey_shack_factor, propagating_power
+from opal_diffraction.core.gratings.radiance import PreparedGratings, diffracted_radiance
+from opal_diffraction.core.gratings.layering import base_scale, strip_fraction
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 LAM = 550.0
 EDGES = np.array([LAM - 0.5, LAM + 0.5])
@@ -363,7 +363,7 @@ def test_hexagonal_harvey_shack_factor_matches_an_order_loop():
     the rows construction's reciprocal lattice b1 = (1, -1/sqrt 3) / D, b2 = (0, 2/sqrt 3) / D."""
     from scipy.special import j1
 
-    from opal_diffraction.core.diffraction import hexagonal_harvey_shack_factor
+    from opal_diffraction.core.gratings.kernel import hexagonal_harvey_shack_factor
 
     rng = np.random.default_rng(5)
     for d, ratio in ((250.0, 0.5), (550.0, 0.9), (1200.0, 0.3)):
@@ -391,7 +391,7 @@ def test_mirror_base_sees_a_sized_light_once_in_the_zeroth_order():
     so the pixels that see the light's reflection equal the plain mirror's times (a/D)^2 K of
     the mirror direction; before the layering they got the mirror's full image plus the
     diffracted zeroth order on top (docs/physics.md section 3.3)."""
-    from opal_diffraction.core.scene import Lights
+    from opal_diffraction.core.scene.model import Lights
 
     def scene(grating):
         base = {"kind": "MIRROR", "color": (1, 1, 1)}
@@ -420,7 +420,7 @@ def test_exclude_zeroth_removes_only_the_zeroth_order_period():
     """fraunhofer_pattern_binned(..., exclude_zeroth=True): 0 where every wavelength of the bin has
     |u| < lambda / (2 D) (the zeroth order's period of the N-slit factor), the full pattern
     where none has, and in between no more than the full pattern."""
-    from opal_diffraction.core.diffraction import fraunhofer_pattern_binned
+    from opal_diffraction.core.gratings.kernel import fraunhofer_pattern_binned
 
     d, a, n, length = 1600.0, 800.0, 500, 2e4
     edges = np.array([540.0, 545.0, 550.0])

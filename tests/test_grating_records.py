@@ -16,13 +16,13 @@ from scipy import stats as sps
 
 from grating_record_scenes import (mirror_transmission_scene, two_mirror_scene, two_virtual_lights_scene,
                                    virtual_transmission_scene)
-from opal_diffraction.core.elements import ElementLayout
-from opal_diffraction.core.grating_records import (DIRECTION_GRID, RECORD_DEPOSITS, GratingRecords,
+from opal_diffraction.core.transport.elements import ElementLayout
+from opal_diffraction.core.gratings.records import (DIRECTION_GRID, RECORD_DEPOSITS, GratingRecords,
                                                    layout_from_hits, octahedral_bin)
-from opal_diffraction.core.light_pass import run_light_pass
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.render import render
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.settings import RenderSettings
 
 PIXELS = 40
 BLOCK = 4       # pixel blocks of BLOCK x BLOCK

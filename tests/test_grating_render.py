@@ -7,12 +7,12 @@ test_diffraction.py); docs/physics.md section 3.9."""
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.diffraction import fraunhofer_pattern
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.gratings.kernel import fraunhofer_pattern
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 D, A, N, L_UM = 1600.0, 480.0, 100, 20.0
 INCIDENCE = np.radians(10.0)

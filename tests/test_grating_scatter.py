@@ -1,4 +1,4 @@
-"""Gratings in the light pass (docs/physics.md section 3.10): core/grating_sampling.py.
+"""Gratings in the light pass (docs/physics.md section 3.10): core/gratings/order_sampling.py.
 
 - The order sampler against the efficiencies: a chi-square over the order histogram per
   incidence angle, wavelength, period, slit ratio and side (reflection / transmission / into
@@ -30,12 +30,12 @@ from scipy import integrate
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.grating_sampling import SPREAD_LOBES, sample_orders, sample_sinc2
-from opal_diffraction.core.light_pass import LightWork, trace_batch, DepositLog
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.gratings.order_sampling import SPREAD_LOBES, sample_orders, sample_sinc2
+from opal_diffraction.core.integrators.light.light_pass import LightWork, trace_batch, DepositLog
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 # (theta_i deg, lambda nm, D nm, a/D, side): side 'R' reflection, 'T' transmission, 'G' into glass n = 1.5
 CASES = [(th, lam, d, r, side) for th in (0.0, 30.0, 60.0) for lam in (450.0, 650.0)
@@ -546,7 +546,7 @@ def test_split_dispersion_sampling_at_gratings():
 def test_a_line_grating_alone_runs_the_light_pass():
     """Line gratings are light-pass casters (paths are aimed at them) and a scene whose only
     caster is a grating runs the light pass; a HEXAGONAL grating is not scattered, so not aimed at."""
-    from opal_diffraction.core.plan import plan_render
+    from opal_diffraction.core.render.plan import plan_render
 
     p = prepare(screen_scene(0.0), RenderSettings(light_paths=1000))
     grating_tris = p.tri_material == 0
@@ -565,7 +565,7 @@ def test_rendered_spectrum_on_the_screen():
     diffracted light); an orthographic camera looks straight at the screen's first order, 1 mm per
     pixel. The centroid of every wavelength bin of the rendered spectral image sits within one
     pixel of the bin's mean of tan(asin(lambda / D)) (1 m behind the grating)."""
-    from opal_diffraction.core.render import render
+    from opal_diffraction.core.render.frame import render
 
     s = screen_scene(0.0, screen_x=(0.1, 0.6))  # the first order only
     s.lights = Lights.from_list([{"kind": "SPOT", "position": (0, 0, 1.0), "direction": (0, 0, -1.0),

@@ -1,4 +1,4 @@
-"""Grey path weights (core/grey_paths.py, docs/physics.md section 4.13): carrying a grey path's
+"""Grey path weights (core/integrators/eye/grey_paths.py, docs/physics.md section 4.13): carrying a grey path's
 throughput as one coefficient over the constant spectrum changes how the estimate is computed,
 never what it is. The same render (same seed, so the same random numbers, paths and Russian
 roulette decisions) with the coefficients and with dense spectral weights (the n samples per
@@ -11,10 +11,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opal_diffraction.core import eye_pass, grey_paths, primitives
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.integrators.eye import eye_pass, grey_paths
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 
 def _scene(world_map: bool, coloured: bool, textured: bool) -> Scene:
@@ -65,7 +66,7 @@ def test_grey_coefficients_give_the_dense_spectral_estimate(monkeypatch, world_m
 
 
 def test_grey_materials_are_the_untextured_lambertian_ones_constant_over_wavelength():
-    from opal_diffraction.core.prepare import prepare
+    from opal_diffraction.core.render.prepare import prepare
 
     s = _scene(False, True, False)
     pm = prepare(s, RenderSettings(samples=1, light_paths=0, wavelength_step=20.0))

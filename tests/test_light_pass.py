@@ -4,14 +4,14 @@ import numpy as np
 import pytest
 
 from opal_diffraction._scripts import load_example
-from opal_diffraction.core import primitives
-from opal_diffraction.core.elements import ElementLayout, IlluminationMap
-from opal_diffraction.core.light_pass import run_light_pass
-from opal_diffraction.core.optics import ior_spectrum
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.transport.elements import ElementLayout, IlluminationMap
+from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+from opal_diffraction.core.spectral.optics import ior_spectrum
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 
 def light_map(scene, **kw):
@@ -294,7 +294,7 @@ def test_automatic_light_paths_follow_the_image_size():
     sample within 65 536 - 1 000 000 (settings.auto_light_paths); an explicit count is kept."""
     from dataclasses import replace as _replace
 
-    from opal_diffraction.core.settings import auto_light_paths
+    from opal_diffraction.core.scene.settings import auto_light_paths
 
     assert RenderSettings().light_paths is None
     assert auto_light_paths(64, 64, 4) == 65_536 and auto_light_paths(64, 64, 32) == 131_072

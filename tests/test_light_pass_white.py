@@ -1,4 +1,4 @@
-"""White light as coefficients over a few basis spectra (core/transport.py ``Rays.basis``,
+"""White light as coefficients over a few basis spectra (core/transport/walker.py ``Rays.basis``,
 docs/physics.md section 4.7): the caustic maps equal those of the dense-spectrum light pass.
 
 The reference is the earlier dense path, kept here: every light path carries its full (B, n)
@@ -11,13 +11,13 @@ on how the weight is stored), so the maps agree to float32 rounding.
 import numpy as np
 import pytest
 
-from opal_diffraction.core import light_pass as lp
-from opal_diffraction.core import primitives
-from opal_diffraction.core.elements import IlluminationMap
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
-from opal_diffraction.core.transport import Rays
+from opal_diffraction.core.integrators.light import light_pass as lp
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.transport.elements import IlluminationMap
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.transport.walker import Rays
 
 
 class DenseReference:
@@ -134,7 +134,7 @@ def test_dispersive_glass_caustic_equals_the_dense_spectrum_map():
 @pytest.mark.parametrize("dispersion", ["NONE", "ABBE"])
 def test_world_map_caustic_equals_the_dense_spectrum_map(dispersion):
     """A world map's paths carry 3 coefficients over the spectra of pure red, green and blue
-    (through a dispersive ball they are expanded and split into wavelengths, core/wavelengths.py)."""
+    (through a dispersive ball they are expanded and split into wavelengths, core/transport/wavelengths.py)."""
     s = caustic_scene(dispersion, tinted=False)
     s.lights = Lights.from_list([])
     img = np.full((16, 32, 3), 0.05, np.float32)

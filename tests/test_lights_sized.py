@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from chi2 import chi2_directions
-from opal_diffraction.core.lights import (intersect_lights, is_delta, light_pdf, prepare_lights, sample_light,
+from opal_diffraction.core.lights.sources import (intersect_lights, is_delta, light_pdf, prepare_lights, sample_light,
                                           sun_radiance)
-from opal_diffraction.core.scene import Lights, Scene, SceneError
-from opal_diffraction.core.settings import RenderSettings
-from opal_diffraction.core.spectrum import SpectralConverter
+from opal_diffraction.core.scene.model import Lights, Scene, SceneError
+from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.spectral.spectrum import SpectralConverter
 
 CONV = SpectralConverter(RenderSettings(wavelength_step=20.0).grid())
 #: chi-square tests in this file and tests/test_mesh_lights.py (Bonferroni)
@@ -255,7 +255,7 @@ def test_spot_with_radius_masks_along_the_ray():
 
 # ------------------------------------------------------------------------------ the table
 def test_radius_and_angle_round_trip_and_validate(tmp_path):
-    from opal_diffraction.core.scene import Camera
+    from opal_diffraction.core.scene.model import Camera
 
     s = Scene(camera=Camera.look_at((0, 0, 5), (0, 0, 0), width=4, height=4))
     s.lights = Lights.from_list([{"kind": "POINT", "radius": 0.25, "soft_falloff": 1},
@@ -284,8 +284,8 @@ def test_radius_and_angle_round_trip_and_validate(tmp_path):
 # ------------------------------------------------------------------------------ the light pass
 def _big_slab_scene(light: dict) -> Scene:
     """A 40 x 40 x 0.05 m clear glass slab (top at z = 0.3) on a 100 m floor, one light above."""
-    from opal_diffraction.core import primitives
-    from opal_diffraction.core.scene import Camera, Materials
+    from opal_diffraction.core.scene import primitives
+    from opal_diffraction.core.scene.model import Camera, Materials
 
     mats = Materials.from_list([{"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)},
                                 {"kind": "DIELECTRIC", "ior": 1.5, "color": (1, 1, 1)}])
@@ -300,7 +300,7 @@ def _big_slab_scene(light: dict) -> Scene:
 def _slab_transmission(cos_i):
     """(1 - R) / (1 + R): a clear slab's transmitted fraction with all internal reflections,
     R the unpolarised Fresnel reflectance entering from air (eta = 1 / 1.5)."""
-    from opal_diffraction.core.optics import fresnel_dielectric
+    from opal_diffraction.core.spectral.optics import fresnel_dielectric
 
     r = fresnel_dielectric(cos_i, np.full(np.shape(cos_i), 1 / 1.5))
     return (1 - r) / (1 + r)
@@ -324,8 +324,8 @@ def test_sized_lights_send_the_analytic_flux_through_a_glass_slab(case):
     - a sun of strength S and half angle h_s overhead: the cone's uniform radiance crossing the
       top of area A: Phi = A S int_0^h_s cos sin T / int_0^h_s cos sin.
     Six independent runs give the Monte Carlo error (Student t, 5 degrees of freedom)."""
-    from opal_diffraction.core.light_pass import run_light_pass
-    from opal_diffraction.core.prepare import prepare
+    from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+    from opal_diffraction.core.render.prepare import prepare
 
     row = LIGHT_PASS_CASES[case]
     s = _big_slab_scene(row)

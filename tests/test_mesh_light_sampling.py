@@ -12,7 +12,7 @@ import numpy as np
 from scipy import stats
 
 from chi2 import chi2_directions
-from opal_diffraction.core.mesh_lights import MeshLights, heitz_triangle, sample_spherical_triangle, solid_angle
+from opal_diffraction.core.lights.mesh_lights import MeshLights, heitz_triangle, sample_spherical_triangle, solid_angle
 from test_lights_sized import Z_MAX, polygon_irradiance
 from test_mesh_lights import light_density, ray_triangles
 
@@ -163,7 +163,7 @@ def test_irradiance_near_and_far_is_lamberts_formula():
 def test_sample_light_pdf_is_light_pdf_of_its_directions():
     """lights.sample_light_pdf's pdf (from the sample's g) against light_pdf (a second, float64
     intersection with the light) for every kind of sized light, and None for delta lights."""
-    from opal_diffraction.core.lights import SPOT, light_pdf, sample_light_pdf
+    from opal_diffraction.core.lights.sources import SPOT, light_pdf, sample_light_pdf
     from test_lights_sized import prepared
     pl = prepared({"kind": "AREA_RECT", "position": (0, 0, 2), "direction": (0.2, 0, -1), "size_u": 1.0,
                    "size_v": 0.6},

@@ -10,13 +10,13 @@ import math
 import numpy as np
 
 from chi2 import chi2_directions
-from opal_diffraction.core import primitives
-from opal_diffraction.core.light_pass import run_light_pass
-from opal_diffraction.core.mesh_lights import MeshLights
-from opal_diffraction.core.optics import fresnel_dielectric
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+from opal_diffraction.core.lights.mesh_lights import MeshLights
+from opal_diffraction.core.spectral.optics import fresnel_dielectric
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 from test_lights_sized import ALPHA, Z_MAX, polygon_irradiance
 
 # three emitting triangles of different sizes, orientations and brightness, one dark one

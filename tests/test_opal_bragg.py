@@ -22,12 +22,12 @@ import pytest
 from scipy.stats import norm
 
 from chi2 import chi2_directions
-from opal_diffraction.core import primitives
-from opal_diffraction.core.opal.bragg_bsdf import BraggLobe, kappa_from_spread
-from opal_diffraction.core.opal.multilayer import band_table, stack_reflectance
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene, SceneError
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.materials.bragg_bsdf import BraggLobe, kappa_from_spread
+from opal_diffraction.core.materials.bragg_multilayer import band_table, stack_reflectance
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene, SceneError
+from opal_diffraction.core.scene.settings import RenderSettings
 
 N_S = 1.45
 
@@ -373,7 +373,7 @@ def test_render_shows_the_band_and_its_blue_shift(renders):
     its chromaticity is the Rouard band's (times the sun's spectrum) within 0.01 in xy; orbiting
     the camera 15 degrees further from the normal (the sun with it, mirror-wise, so the flash
     stays in view) moves the centre to the Bragg law's 45-degree value (2 %): a blue shift of 8 %."""
-    from opal_diffraction.core.spectrum import SpectralConverter
+    from opal_diffraction.core.spectral.spectrum import SpectralConverter
     res0 = renders[30.0]
     lam = res0.wavelengths
     spec = res0.spectral.reshape(-1, len(lam))
@@ -384,7 +384,7 @@ def test_render_shows_the_band_and_its_blue_shift(renders):
     # chromaticity against the independent band
     st = RenderSettings(wavelength_step=2.0)
     conv = SpectralConverter(st.grid())
-    from opal_diffraction.core.prepare import prepare
+    from opal_diffraction.core.render.prepare import prepare
     prep = prepare(sun_scene(30.0), st)
     edges = prep.grid.bin_edges
     fine = np.linspace(edges[0], edges[-1], 40001)
@@ -410,7 +410,7 @@ def test_world_light_through_the_lobe_is_its_albedo(world_map):
     finds it; with a (constant) world map next-event estimation and the continuation share it by
     the power heuristic (docs/physics.md section 5.8): both sum to the same (Z-test over pixels
     of the band-integrated radiance, 4.5 sigma, plus 1 % for the quadrature)."""
-    from opal_diffraction.core.prepare import prepare
+    from opal_diffraction.core.render.prepare import prepare
     mats = Materials.from_list([{"kind": "DIFFUSE", "color": (0, 0, 0), "grating": 1, "lattice": "BRAGG",
                                  "sphere_diameter": 250.0, "mosaic_spread": 10.0}])
     s = Scene(materials=mats)
@@ -483,7 +483,7 @@ def test_light_pass_flash_matches_the_light_side_prediction():
     predicted_flash_rgb, within 5 % (about 4 x the render-to-render scatter, 1.6 % measured over
     four seeds at 300 000 paths). The eye pass leaves those paths out (no second count in Indirect beyond the flash's
     own second-order light, which the prediction does not hold)."""
-    from opal_diffraction.core.prepare import prepare
+    from opal_diffraction.core.render.prepare import prepare
     s = flash_scene()
     st = RenderSettings(samples=16, threads=1, light_paths=1_000_000, filter_width=0.0)
     lp = render(s, st)
@@ -532,7 +532,7 @@ def test_eye_pass_flash_matches_a_pixel_centre_quadrature():
     panel -> floor -> eye), filter width 0 (every sample at its pixel's centre): eight renders'
     mean within 4 standard errors (the renders' and the quadrature's) + 1 % of the pixel-centre
     quadrature. The light pass estimates the area integral instead (the test above)."""
-    from opal_diffraction.core.prepare import prepare
+    from opal_diffraction.core.render.prepare import prepare
     s = flash_scene()
     eye = [float(render(s, RenderSettings(samples=64, threads=1, light_paths=0, filter_width=0.0, seed=k,
                                           glossy_bounces=0)).passes["Indirect"].sum()) for k in range(8)]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2 as chi2_dist
 
-from opal_diffraction.core import primitives
+from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.opal import cabochon
 from opal_diffraction.core.opal.volume import (
     VolumeDomains,
@@ -18,7 +18,7 @@ from opal_diffraction.core.opal.volume import (
     inside_mesh,
     transform_domains,
 )
-from opal_diffraction.core.scene import Camera, Materials, Scene, SceneError
+from opal_diffraction.core.scene.model import Camera, Materials, Scene, SceneError
 
 #: Chi-square tests in this file; each must pass at p > 1e-3 / TESTS (Bonferroni).
 CHI2_TESTS = 4
@@ -284,8 +284,8 @@ def test_bragg_domains_take_the_cell_or_the_face_and_keep_the_normals_hemisphere
 
 
 def test_prepared_scene_carries_the_domains():
-    from opal_diffraction.core.prepare import prepare
-    from opal_diffraction.core.settings import RenderSettings
+    from opal_diffraction.core.render.prepare import prepare
+    from opal_diffraction.core.scene.settings import RenderSettings
 
     st = RenderSettings(samples=1, light_paths=0)
     sc = _scene()

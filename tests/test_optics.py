@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from opal_diffraction.core.optics import (
+from opal_diffraction.core.spectral.optics import (
     cauchy_from_abbe, fresnel_dielectric, ior_spectrum, reflect, refract, sellmeier_ior, LAMBDA_C, LAMBDA_D, LAMBDA_F,
 )
 

@@ -10,14 +10,14 @@ from dataclasses import FrozenInstanceError, replace
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.eye_pass import EyePass
-from opal_diffraction.core.light_pass import run_light_pass
-from opal_diffraction.core.plan import plan_render
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.render import render, render_prepared
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.integrators.eye.eye_pass import EyePass
+from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+from opal_diffraction.core.render.plan import plan_render
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.render.frame import render, render_prepared
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 PACKAGE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "opal_diffraction")
 

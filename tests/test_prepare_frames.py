@@ -1,4 +1,4 @@
-"""The grating frames of prepare (core/gratings.py, core/grating_directions.py) computed only
+"""The grating frames of prepare (core/gratings/radiance.py, core/gratings/directions.py) computed only
 for grating triangles and with the vertex-sum shortcut give the values of the full versions.
 
 - ``triangle_tangents(..., rows=)``: the rows asked for equal the all-rows version bit for bit,
@@ -14,10 +14,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opal_diffraction.core import grating_directions as gd
-from opal_diffraction.core import primitives
-from opal_diffraction.core.geometry import triangle_normals
-from opal_diffraction.core.gratings import triangle_tangents
+from opal_diffraction.core.gratings import directions as gd
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.util.geometry import triangle_normals
+from opal_diffraction.core.gratings.radiance import triangle_tangents
 
 
 def _mesh(seed=0):
@@ -120,9 +120,9 @@ def test_smooth_corner_tangents_match_a_per_corner_loop():
 
 
 def test_prepare_frames_of_the_grating_rows_equal_the_all_rows_frames():
-    from opal_diffraction.core.prepare import prepare
-    from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-    from opal_diffraction.core.settings import RenderSettings
+    from opal_diffraction.core.render.prepare import prepare
+    from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+    from opal_diffraction.core.scene.settings import RenderSettings
 
     v, t, n, _, mat, grating = _mesh(3)
     rng = np.random.default_rng(3)
@@ -147,7 +147,7 @@ def test_prepare_frames_of_the_grating_rows_equal_the_all_rows_frames():
 
 @pytest.mark.parametrize("n_groups", [1, 7, 300, 40000])
 def test_group_extrema_equal_ufunc_at(n_groups):
-    from opal_diffraction.core.geometry import group_extrema
+    from opal_diffraction.core.util.geometry import group_extrema
 
     rng = np.random.default_rng(n_groups)
     label = rng.integers(0, n_groups, 5000)

@@ -15,10 +15,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.geometry import compact_indices
-from opal_diffraction.core.light_pass import caster_objects
-from opal_diffraction.core.mesh_lights import MeshLights
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.util.geometry import compact_indices
+from opal_diffraction.core.integrators.light.light_pass import caster_objects
+from opal_diffraction.core.lights.mesh_lights import MeshLights
 
 embree_direct = pytest.importorskip("opal_diffraction.core.accel.embree_direct")
 
@@ -142,7 +142,7 @@ def _old_triangle_cross(v, t):
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_triangle_cross_is_np_cross_bit_for_bit(dtype):
-    from opal_diffraction.core.geometry import triangle_cross
+    from opal_diffraction.core.util.geometry import triangle_cross
 
     rng = np.random.default_rng(2)
     v = (rng.normal(size=(400, 3)) * 10 ** rng.uniform(-6, 6, (400, 1))).astype(dtype)
@@ -155,7 +155,7 @@ def test_triangle_cross_is_np_cross_bit_for_bit(dtype):
 
 
 def test_triangle_offsets_are_the_per_triangle_maxima():
-    from opal_diffraction.core.prepare import triangle_offsets
+    from opal_diffraction.core.render.prepare import triangle_offsets
 
     rng = np.random.default_rng(4)
     v = (rng.normal(size=(500, 3)) * 100).astype(np.float32)
@@ -165,8 +165,8 @@ def test_triangle_offsets_are_the_per_triangle_maxima():
 
 
 def test_chunked_corner_normals_equal_the_whole_array_formula(monkeypatch):
-    from opal_diffraction.core import scene as scene_mod
-    from opal_diffraction.core.geometry import triangle_normals
+    from opal_diffraction.core.scene import model as scene_mod
+    from opal_diffraction.core.util.geometry import triangle_normals
 
     rng = np.random.default_rng(5)
     v = rng.normal(size=(300, 3)).astype(np.float32)
@@ -190,7 +190,7 @@ def test_chunked_corner_normals_equal_the_whole_array_formula(monkeypatch):
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf, 1e39, -5e20, -1e-3])
 def test_fast_range_check_agrees_with_the_full_one(bad):
-    from opal_diffraction.core.scene import FLOAT32_MAX, _within
+    from opal_diffraction.core.scene.model import FLOAT32_MAX, _within
 
     rng = np.random.default_rng(6)
     a = rng.normal(size=(1000, 3))
@@ -222,7 +222,7 @@ def _old_triangle_tangents(tri_normal, tri_tangent):
 
 
 def test_triangle_tangents_equal_the_all_rows_version():
-    from opal_diffraction.core.gratings import triangle_tangents
+    from opal_diffraction.core.gratings.radiance import triangle_tangents
 
     rng = np.random.default_rng(7)
     n = rng.normal(size=(3000, 3))
@@ -239,9 +239,9 @@ def test_triangle_tangents_equal_the_all_rows_version():
 
 
 def test_smooth_corner_tangents_equal_the_float64_version():
-    from opal_diffraction.core import grating_directions as gd
-    from opal_diffraction.core.geometry import triangle_normals
-    from opal_diffraction.core.gratings import triangle_tangents
+    from opal_diffraction.core.gratings import directions as gd
+    from opal_diffraction.core.util.geometry import triangle_normals
+    from opal_diffraction.core.gratings.radiance import triangle_tangents
     from test_prepare_frames import corner_tangents_by_loop
 
     v, t = primitives.icosphere((0, 0, 0), 1.0, 3)
@@ -260,10 +260,10 @@ def test_smooth_corner_tangents_equal_the_float64_version():
 
 
 def test_prepare_uses_validations_cross_products_for_its_normals():
-    from opal_diffraction.core.geometry import triangle_normals
-    from opal_diffraction.core.prepare import prepare
-    from opal_diffraction.core.scene import TRIANGLE_CROSS_ATTR, Camera, Lights, Materials, Scene
-    from opal_diffraction.core.settings import RenderSettings
+    from opal_diffraction.core.util.geometry import triangle_normals
+    from opal_diffraction.core.render.prepare import prepare
+    from opal_diffraction.core.scene.model import TRIANGLE_CROSS_ATTR, Camera, Lights, Materials, Scene
+    from opal_diffraction.core.scene.settings import RenderSettings
 
     v, t = primitives.icosphere((0, 0, 1), 1.0, 2)
     v = np.concatenate([v, [[5, 5, 5]]])

@@ -1,10 +1,10 @@
-"""Meshes of core/primitives.py: closed, consistently wound outwards, with the stated proportions."""
+"""Meshes of core/scene/primitives.py: closed, consistently wound outwards, with the stated proportions."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from opal_diffraction.core.primitives import round_brilliant
+from opal_diffraction.core.scene.primitives import round_brilliant
 
 
 def test_round_brilliant_is_closed_outward_and_has_tolkowsky_proportions():

@@ -8,12 +8,12 @@ the acceleration structure), not by the formula alone.
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.eye_pass import EyePass
-from opal_diffraction.core.optics import ior_spectrum
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.scene import Camera, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.integrators.eye.eye_pass import EyePass
+from opal_diffraction.core.spectral.optics import ior_spectrum
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.scene.model import Camera, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 
 def prism_context(dispersion="BK7", dispersion_sampling="SAMPLE"):

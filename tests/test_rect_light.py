@@ -1,4 +1,4 @@
-"""core/rect_light.py: rectangle lights sampled by solid angle (Urena et al. 2013; docs/physics.md
+"""core/lights/rect_light.py: rectangle lights sampled by solid angle (Urena et al. 2013; docs/physics.md
 section 7.10). The solid angle against Van Oosterom & Strackee's formula for the rectangle's two
 triangles (an independent closed form), the sampled directions against a uniform density over
 the spherical rectangle (chi-square, Mitsuba's chi2.py scheme) and every sample on the
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from chi2 import chi2_directions
 
-from opal_diffraction.core import rect_light
+from opal_diffraction.core.lights import rect_light
 
 
 def _triangle_solid_angle(o, a, b, c):

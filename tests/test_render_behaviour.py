@@ -7,11 +7,11 @@ import sys
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.output import read_exr, spectral_channel_name
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.render.output import read_exr, spectral_channel_name
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 import stripe_scenes  # tests/stripe_scenes.py
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
@@ -86,7 +86,7 @@ def test_cli_renders_exr_png_and_spectral_exr(tmp_path):
     assert spectral_channel_name(550.0) == "S0.550,000000nm" and "S0.550,000000nm" in ch
     assert len([k for k in ch if k.startswith("S0.")]) == 31
     # the RGB stored with the spectra is the spectra's colour
-    from opal_diffraction.core.spectrum import SpectralConverter, WavelengthGrid
+    from opal_diffraction.core.spectral.spectrum import SpectralConverter, WavelengthGrid
     conv = SpectralConverter(WavelengthGrid(400, 700, 10))
     cube = np.stack([ch[spectral_channel_name(w)] for w in conv.grid.wavelengths], axis=-1)
     np.testing.assert_allclose(conv.to_rgb(cube)[..., 1], ch["G"], rtol=1e-4, atol=1e-6)
@@ -129,13 +129,13 @@ def test_region_renders_the_same_pixels_as_the_full_image():
     np.testing.assert_array_equal(part, full[16:32, 8:24])
     odd = render(s, RenderSettings(light_paths=0, samples=2, seed=4, tile_size=8), region=(5, 3, 20, 30)).rgb
     assert odd.shape == (27, 15, 3)
-    from opal_diffraction.core.scene import SceneError
+    from opal_diffraction.core.scene.model import SceneError
     with pytest.raises(SceneError, match="outside"):
         render(s, RenderSettings(light_paths=0, samples=1), region=(0, 0, 64, 8))
 
 
 def test_emissive_surface_is_seen_with_its_radiance():
-    from opal_diffraction.core import primitives as prim
+    from opal_diffraction.core.scene import primitives as prim
     from scenes import top_down_camera
     sc = Scene(materials=Materials.from_list([{"kind": "DIFFUSE", "color": (0, 0, 0), "emission": (2.0, 1.0, 0.5)}]))
     sc.add_mesh(*prim.quad((0, 0, 0), (10, 0, 0), (0, 10, 0)), material=0)

@@ -8,11 +8,11 @@ The diffuse BRDF is albedo / pi. Y is read from the spectral film through the CI
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
-from opal_diffraction.core.spectrum import SpectralConverter
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.spectral.spectrum import SpectralConverter
 
 from scenes import glass_in_uniform_world, pixel_centres_world, plane_under_light
 

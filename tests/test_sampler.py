@@ -1,4 +1,4 @@
-"""core/sampler.py: Owen-scrambled shuffled Sobol' points (docs/physics.md section 6.5).
+"""core/sampling/sampler.py: Owen-scrambled shuffled Sobol' points (docs/physics.md section 6.5).
 
 Checked against their definitions, not against our own output: every power-of-two prefix of a
 pixel's points is a (0, k, 2)-net (one point in each elementary interval), the numbers are
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from opal_diffraction.core.sampler import PixelSampler, blue_noise_numbers, blue_noise_rank, sobol_owen_2d, vertex_pair
+from opal_diffraction.core.sampling.sampler import PixelSampler, blue_noise_numbers, blue_noise_rank, sobol_owen_2d, vertex_pair
 
 
 @pytest.mark.parametrize("k", [2, 5, 8])
@@ -82,7 +82,7 @@ def test_bit_reversal_and_sobols_second_dimension_match_their_definitions():
     """The shift-and-mask bit reversal equals reversing the binary digits, and Sobol's second
     dimension from superset parities equals the xor of its direction numbers v_0 = 2^31,
     v_i = v_(i-1) xor (v_(i-1) >> 1) over the index's set bits (Joe & Kuo's polynomial x + 1)."""
-    from opal_diffraction.core.sampler import _reverse_bits, _sobol_y
+    from opal_diffraction.core.sampling.sampler import _reverse_bits, _sobol_y
 
     rng = np.random.default_rng(9)
     x = np.concatenate([rng.integers(0, 1 << 32, 3000, dtype=np.uint64), [0, 1, 0xFFFFFFFF, 1 << 31]]).astype(np.uint32)

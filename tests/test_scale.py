@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 W, H, BLOCK = 32, 24, 4
 

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene, SceneError
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene, SceneError
+from opal_diffraction.core.scene.settings import RenderSettings
 
 from scenes import plane_under_light
 
@@ -145,7 +145,7 @@ def test_grating_data_round_trips_and_follows_dropped_triangles(tmp_path):
 
 
 def test_grating_tangents_lie_in_the_plane_and_agree_across_shared_edges():
-    from opal_diffraction.core.gratings import triangle_tangents
+    from opal_diffraction.core.gratings.radiance import triangle_tangents
     v, t = primitives.icosphere((0, 0, 0), 1.0, 2)
     p = v[t]
     nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])

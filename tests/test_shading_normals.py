@@ -15,15 +15,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.geometry import triangle_normals
-from opal_diffraction.core.light_pass import run_light_pass
-from opal_diffraction.core.materials import DIELECTRIC
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene, SceneError
-from opal_diffraction.core.settings import RenderSettings
-from opal_diffraction.core.transport import Rays, SpecularWalker, valid_specular_normal
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.util.geometry import triangle_normals
+from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+from opal_diffraction.core.materials.spectra import DIELECTRIC
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene, SceneError
+from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.transport.walker import Rays, SpecularWalker, valid_specular_normal
 
 
 def smooth_sphere(center, radius, segments, rings):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from opal_diffraction.core.spectrum import SpectralConverter, WavelengthGrid
+from opal_diffraction.core.spectral.spectrum import SpectralConverter, WavelengthGrid
 
 
 @pytest.fixture(scope="module")

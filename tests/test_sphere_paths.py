@@ -1,20 +1,22 @@
 """The glass sphere's eye-pass noise fixes: both Fresnel branches at the first glass hit
-(core/fresnel_split.py, docs/physics.md section 4.12) and the light paths' diffuse bounce to the
-camera (core/splat_bounce.py, docs/physics.md section 4.11), against independent estimates."""
+(core/integrators/eye/fresnel_split.py, docs/physics.md section 4.12) and the light paths' diffuse bounce to the
+camera (core/integrators/light/splat_bounce.py, docs/physics.md section 4.11), against independent estimates."""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
-from opal_diffraction.core import fresnel_split, primitives, splat_bounce
-from opal_diffraction.core.eye_pass import EyePass, _TileTrace
-from opal_diffraction.core.light_pass import run_light_pass
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.render import render, render_prepared
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
-from opal_diffraction.core.transport import Rays
+from opal_diffraction.core.integrators.eye import fresnel_split
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.integrators.light import splat_bounce
+from opal_diffraction.core.integrators.eye.eye_pass import EyePass, _TileTrace
+from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.render.frame import render, render_prepared
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.transport.walker import Rays
 
 
 def _sphere_scene(res=48, subdivisions=3) -> Scene:
@@ -32,7 +34,7 @@ def _sphere_scene(res=48, subdivisions=3) -> Scene:
 
 def _labels(prepared, material: int, margin: int = 2) -> np.ndarray:
     """(H, W) bool: pixels whose centre ray and the rays `margin` px around it all hit `material`."""
-    from opal_diffraction.core.camera import generate_rays
+    from opal_diffraction.core.sampling.camera import generate_rays
 
     cam = prepared.scene.camera
     h, w = int(cam.height), int(cam.width)
@@ -120,7 +122,7 @@ def test_splitting_keeps_the_sphere_and_lowers_its_noise(monkeypatch):
 
 def test_the_light_paths_bounce_carries_what_the_eye_read_from_the_map(monkeypatch):
     """On the floor the camera sees, the caustic after one diffuse bounce through the glass
-    (E -> floor -> glass -> caustic): with the continuation (core/splat_bounce.py) the light
+    (E -> floor -> glass -> caustic): with the continuation (core/integrators/light/splat_bounce.py) the light
     paths splat it, without it the eye pass reads it from the map after its bounce. The light
     pass with the continuation draws the bounces after its walk, so its map and direct splats
     are those of the same seed without it, and each render's Caustics pass minus the direct

@@ -13,12 +13,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from opal_diffraction.core import primitives, wavelengths
-from opal_diffraction.core.elements import IlluminationMap
-from opal_diffraction.core.light_pass import LightBatch, LightWork, trace_batch
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.transport import wavelengths
+from opal_diffraction.core.transport.elements import IlluminationMap
+from opal_diffraction.core.integrators.light.light_pass import LightBatch, LightWork, trace_batch
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 PATHS = 2048  # per batch
 PIECE = 256   # white paths per piece: SPLIT_CHUNK_RAYS = PIECE x n

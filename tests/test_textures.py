@@ -9,16 +9,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opal_diffraction.core import primitives
-from opal_diffraction.core.enums import TextureEncoding, TextureExtension, TextureInterpolation
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import MAX_SIDE, Materials, Scene, SceneError
-from opal_diffraction.core.settings import RenderSettings
-from opal_diffraction.core.surface import (shading_normal, surface_emission, surface_metallic, surface_reflectance,
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.util.enums import TextureEncoding, TextureExtension, TextureInterpolation
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import MAX_SIDE, Materials, Scene, SceneError
+from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.materials.surface import (shading_normal, surface_emission, surface_metallic, surface_reflectance,
                                            surface_roughness)
-from opal_diffraction.core.textures import sample_texture, srgb_to_linear
-from opal_diffraction.core.transport import Hit
+from opal_diffraction.core.materials.textures import sample_texture, srgb_to_linear
+from opal_diffraction.core.transport.walker import Hit
 
 from scenes import pixel_centres_world, top_down_camera
 
@@ -381,7 +381,7 @@ def test_npz_round_trip_and_older_files(tmp_path):
 def test_preparation_reuse_and_the_wire_format_carry_textures():
     """The light pass's key survives a re-preparation with the same textures and changes with a
     texel; the Dask wire format carries the texture list unchanged."""
-    from opal_diffraction.core.distributed import from_wire, to_wire
+    from opal_diffraction.core.render.distributed import from_wire, to_wire
 
     s = scene_with_texture()
     p = prepare(s)

@@ -1,4 +1,4 @@
-"""Wavelength sampling at dispersive glass (core/wavelengths.py, docs/physics.md section 2.6).
+"""Wavelength sampling at dispersive glass (core/transport/wavelengths.py, docs/physics.md section 2.6).
 
 - chi-square tests of the wavelength sampler against its pdf (Mitsuba 3's chi2 test: cells
   with an expected count below 5 pooled, the p-value threshold divided by the number of tests);
@@ -13,11 +13,12 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from opal_diffraction.core import primitives, wavelengths
-from opal_diffraction.core.render import render
-from opal_diffraction.core.scene import Camera, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
-from opal_diffraction.core.spectrum import SpectralConverter, WavelengthGrid
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.transport import wavelengths
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.scene.model import Camera, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.spectral.spectrum import SpectralConverter, WavelengthGrid
 
 GRID = WavelengthGrid(400.0, 700.0, 5.0)
 N_TESTS = 8  # chi-square tests in this file (Bonferroni)
@@ -154,7 +155,7 @@ def test_sampled_dispersion_matches_split_on_the_prism():
     block equals SPLIT's exact sum over wavelengths (Z-test, the noise of both measured from
     independent renders)."""
     s = _prism_scene(world=False, wall=True, size=(32, 24))
-    from opal_diffraction.core.scene import Lights
+    from opal_diffraction.core.scene.model import Lights
 
     s.lights = Lights.from_list([{"kind": "POINT", "position": (2.0, -3.0, 5.0), "power": 1500.0}])
 

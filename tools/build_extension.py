@@ -12,7 +12,7 @@ Steps:
    ``platforms``. Blender ships numpy; it does not ship colour-science (spectra, CIE observer,
    blackbody) or the scipy and typing-extensions it imports, OpenEXR's Python binding (spectral
    EXR output), embreex (Embree ray casting, x86-64 only; without it the core falls back to its
-   NumPy BVH) or threadpoolctl (one BLAS thread while a render runs: core/blas_threads.py). Their versions are the ``==`` pins of ``requirements.txt``: the zip ships exactly
+   NumPy BVH) or threadpoolctl (one BLAS thread while a render runs: core/util/blas_threads.py). Their versions are the ``==`` pins of ``requirements.txt``: the zip ships exactly
    what the test venv runs.
 3. ``blender_ext.py build`` (the extension CLI inside the bpy wheel), ``--split-platforms`` when
    wheels are bundled (one zip per platform), then ``blender_ext.py validate`` on every zip.

@@ -138,7 +138,7 @@ def render_once(engine: str, samples: int, seed: int, path: str) -> tuple[np.nda
     it back: ((H, W, 3) linear RGB with row 0 at the top, wall seconds)."""
     import bpy
 
-    from opal_diffraction.core.output import read_exr
+    from opal_diffraction.core.render.output import read_exr
 
     sc = bpy.context.scene
     sc.render.engine = engine
@@ -232,7 +232,7 @@ def side_by_side_png(path: str, ref: np.ndarray, ours: np.ndarray, scale: int = 
     through the same exposure (the reference's 99th luminance percentile maps to 1) and the sRGB
     curve; the difference panel shows ours - Cycles in luminance, red where ours is brighter,
     blue where darker, at the same exposure."""
-    from opal_diffraction.core.output import write_png
+    from opal_diffraction.core.render.output import write_png
 
     scale_to = 1.0 / max(np.percentile(luminance(ref), 99), 1e-6)
     d = (luminance(ours) - luminance(ref)) * scale_to

@@ -56,8 +56,8 @@ def _blender_scenes():
 
 def render_all(out: str) -> None:
     import opal_diffraction
-    from opal_diffraction.core.render import render
-    from opal_diffraction.core.settings import RenderSettings
+    from opal_diffraction.core.render.frame import render
+    from opal_diffraction.core.scene.settings import RenderSettings
 
     tree = os.path.dirname(os.path.dirname(os.path.realpath(opal_diffraction.__file__)))
     if tree != os.path.realpath(ROOT):  # e.g. another checkout's venv (its editable install) or PYTHONPATH

@@ -8,7 +8,7 @@ space, so Blender's colour management (view transform, look, exposure) applies a
 Direct, Indirect, Caustics and Diffraction are registered as passes for the compositor, with
 Cycles' Denoising Albedo and Denoising Normal (same names, so a compositor Denoise node links to
 them), Noisy Image when the render is denoised (``scene.opal.use_denoising``: Open Image Denoise
-through pyoidn, core/denoise.py; without pyoidn a warning says so and the image stays noisy), and
+through pyoidn, core/render/denoise.py; without pyoidn a warning says so and the image stays noisy), and
 Debug Sample Count (samples per pixel) with adaptive sampling.
 
 Errors in the scene are reported once with ``report({'ERROR'}, message)`` (the status bar, the
@@ -37,12 +37,12 @@ from dataclasses import replace
 import bpy
 import numpy as np
 
-from ..core import denoise as _denoise
-from ..core.distributed import connect
-from ..core.enums import Lattice
-from ..core.output import write_spectral_exr
-from ..core.render import render as core_render
-from ..core.scene import SceneError
+from ..core.render import denoise as _denoise
+from ..core.render.distributed import connect
+from ..core.util.enums import Lattice
+from ..core.render.output import write_spectral_exr
+from ..core.render.frame import render as core_render
+from ..core.scene.model import SceneError
 from .export import ExportCancelled, export_scene, rec709_to_working_space, render_region
 from .settings import render_settings
 from . import viewport

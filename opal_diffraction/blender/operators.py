@@ -10,7 +10,7 @@ import bpy
 from bpy.props import EnumProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
-from ..core.scene import SceneError
+from ..core.scene.model import SceneError
 from .export import ExportCancelled, export_scene
 from .properties import DISPERSION_PRESETS
 

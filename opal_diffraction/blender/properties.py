@@ -5,7 +5,7 @@ and the README's "In Blender"): users' scripts and saved .blend files rely on th
 never change. Every EnumProperty item has
 an explicit, stable index, so a file saved today still loads after items are added (the values
 are stored as those numbers): the identifiers and indices are the members and codes of the
-core's enumerations (``core/enums.py``); only the names and tooltips are written here.
+core's enumerations (``core/util/enums.py``); only the names and tooltips are written here.
 
 Base colour, metallic, roughness, transmission and IOR are not duplicated here: they come from
 the material's shader nodes (Principled, Diffuse, Glossy, Glass BSDF, Emission), so existing
@@ -25,9 +25,8 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorPro
                        StringProperty)
 from bpy.types import PropertyGroup
 
-from ..core.enums import (Backend, DispersionModel, DispersionSampling, DomainOrientation, GratingDirection, GratingType,
-                          Lattice)
-from ..core.spectrum import WavelengthGrid
+from ..core.util.enums import (Backend, DispersionModel, DispersionSampling, DomainOrientation, GratingDirection, GratingType, Lattice)
+from ..core.spectral.spectrum import WavelengthGrid
 
 __all__ = [
     "OpalRenderSettings",

@@ -6,7 +6,7 @@ imports the other for it.
 
 from __future__ import annotations
 
-from ..core.settings import RenderSettings
+from ..core.scene.settings import RenderSettings
 
 __all__ = ["render_settings", "adaptive_threshold"]
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import bpy
 from bpy.types import Menu, Panel
 
-from ..core.optics import SELLMEIER_PRESETS
+from ..core.spectral.optics import SELLMEIER_PRESETS
 from .engine import ENGINE_ID
 from .export.nodes import missing_output, output_node
 from .opal_presets import OPAL_MT_glass_presets, OPAL_MT_opal_presets

@@ -34,11 +34,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..core.light_pass import LightPassResult, run_light_pass
-from ..core.plan import plan_render
-from ..core.prepare import PreparedScene, prepare
-from ..core.render import render_prepared
-from ..core.scene import Camera, SceneError
+from ..core.integrators.light.light_pass import LightPassResult, run_light_pass
+from ..core.render.plan import plan_render
+from ..core.render.prepare import PreparedScene, prepare
+from ..core.render.frame import render_prepared
+from ..core.scene.model import Camera, SceneError
 from .settings import render_settings
 
 __all__ = ["preview_levels", "viewport_camera", "prepare_pixels", "Frame", "ProgressiveRenderer", "ViewportSession",

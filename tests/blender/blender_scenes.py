@@ -121,7 +121,7 @@ def lit_plane_scene(light_kind: str, pixels: int = 32, engine: str = ENGINE, **l
 def render_to_array(path: str, engine: str | None = None, samples: int | None = None) -> np.ndarray:
     """Render the current scene with ``engine`` to a float EXR at ``path`` and read it back as
     (H, W, 3) linear RGB, row 0 at the top."""
-    from opal_diffraction.core.output import read_exr
+    from opal_diffraction.core.render.output import read_exr
 
     sc = bpy.context.scene
     if engine is not None:

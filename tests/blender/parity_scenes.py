@@ -125,7 +125,7 @@ def _save_image(name, rgb, path, colorspace):
     file a user would have. (Blender's own Image.save() writes a generated float image through
     its colour space, not as the values were set.)"""
     if path.endswith(".exr"):
-        from opal_diffraction.core.output import write_rgb_exr
+        from opal_diffraction.core.render.output import write_rgb_exr
 
         write_rgb_exr(path, np.ascontiguousarray(rgb, np.float32))
     else:

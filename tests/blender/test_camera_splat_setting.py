@@ -6,7 +6,7 @@ from __future__ import annotations
 import bpy
 
 from opal_diffraction.blender.settings import render_settings
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.scene.settings import RenderSettings
 
 
 def test_camera_caustics_reaches_the_core_settings():

@@ -149,7 +149,7 @@ def test_noise_threshold_settings_reach_the_core_as_cycles_reads_them(last_rende
     assert render_settings(o, sc).adaptive_threshold == pytest.approx(1 / 200)
     o.samples = 5000
     assert render_settings(o, sc).adaptive_threshold == pytest.approx(0.001)
-    # 0.01: with the stratified numbers (core/sampler.py) every pixel of this scene is below 0.05 at 16
+    # 0.01: with the stratified numbers (core/sampling/sampler.py) every pixel of this scene is below 0.05 at 16
     o.samples, o.adaptive_threshold, o.adaptive_min_samples, o.round_samples = 64, 0.01, 8, 8
     bpy.ops.render.render()
     assert last_render["status"] == "FINISHED"

@@ -12,8 +12,8 @@ import pytest
 
 import blender_scenes as bs
 from opal_diffraction.blender.export import ExportCancelled, export_scene
-from opal_diffraction.core.optics import DISPERSION_MODELS
-from opal_diffraction.core.scene import LIGHT_KINDS, MATERIAL_KINDS, SceneError
+from opal_diffraction.core.spectral.optics import DISPERSION_MODELS
+from opal_diffraction.core.scene.model import LIGHT_KINDS, MATERIAL_KINDS, SceneError
 
 
 def _export():
@@ -99,7 +99,7 @@ def test_vertex_instancing(tmp_path, last_render):
     sc.opal.scene_npz = str(tmp_path / "verts.npz")
     bpy.ops.render.render()
     assert last_render["export"]["triangles"] == 4 * 12
-    from opal_diffraction.core.scene import Scene
+    from opal_diffraction.core.scene.model import Scene
 
     s = Scene.load(tmp_path / "verts.npz")
     centres = s.vertices[s.triangles].reshape(4, -1, 3).mean(axis=1)
@@ -192,7 +192,7 @@ def test_principled_and_bsdf_nodes():
     np.testing.assert_allclose(_row(ex, "default")["color"], 0.8, rtol=1e-6)
     assert _row(ex, "metal")["kind"] == K["MIRROR"]
     np.testing.assert_allclose(_row(ex, "metal")["color"], (0.9, 0.6, 0.2), rtol=1e-6)
-    # a rough metal stays a metal, its roughness carried (core/bsdf.py renders it)
+    # a rough metal stays a metal, its roughness carried (core/materials/bsdf.py renders it)
     m = ex.scene.materials
     i = list(m.name).index("rough metal")
     assert _row(ex, "rough metal")["kind"] == K["MIRROR"] and m.roughness[i] == pytest.approx(0.8)
@@ -393,9 +393,9 @@ def test_world_colour():
 
 
 def test_export_operator_writes_a_renderable_scene(tmp_path):
-    from opal_diffraction.core.render import render
-    from opal_diffraction.core.scene import Scene
-    from opal_diffraction.core.settings import RenderSettings
+    from opal_diffraction.core.render.frame import render
+    from opal_diffraction.core.scene.model import Scene
+    from opal_diffraction.core.scene.settings import RenderSettings
 
     _basic_scene()
     bpy.ops.mesh.primitive_cube_add(size=1.0)

@@ -25,11 +25,11 @@ import pytest
 
 import blender_scenes as bs
 from opal_diffraction.blender.export import export_scene
-from opal_diffraction.core.lights import prepare_lights, sample_light
-from opal_diffraction.core.mesh_lights import MeshLights
-from opal_diffraction.core.scene import LIGHT_KINDS, Lights
-from opal_diffraction.core.settings import RenderSettings
-from opal_diffraction.core.spectrum import SpectralConverter
+from opal_diffraction.core.lights.sources import prepare_lights, sample_light
+from opal_diffraction.core.lights.mesh_lights import MeshLights
+from opal_diffraction.core.scene.model import LIGHT_KINDS, Lights
+from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.spectral.spectrum import SpectralConverter
 
 N = 64          # pixels per side
 FRAME = 4.0     # metres the orthographic camera frames

@@ -16,7 +16,7 @@ import pytest
 from blender_scenes import camera, empty_scene, link, material
 
 from opal_diffraction.blender.export import MeshCache, export_scene
-from opal_diffraction.core.geometry import triangle_normals
+from opal_diffraction.core.util.geometry import triangle_normals
 
 
 def _export(cache=None):

@@ -1,4 +1,4 @@
-"""Rough surfaces through the exporter, and core/bsdf.py against Cycles (docs/physics.md section 14).
+"""Rough surfaces through the exporter, and core/materials/bsdf.py against Cycles (docs/physics.md section 14).
 
 - The BSDF nodes' roughness, Principled's layer weights, IOR level and specular tint, and the
   metals' Fresnel reach the material columns; no smooth-surface approximation is warned about.
@@ -22,9 +22,9 @@ from mathutils import Vector
 
 import blender_scenes as bs
 from opal_diffraction.blender.export import export_scene
-from opal_diffraction.core import bsdf as B
-from opal_diffraction.core.materials import PreparedMaterials
-from opal_diffraction.core.scene import MATERIAL_KINDS
+from opal_diffraction.core.materials import bsdf as B
+from opal_diffraction.core.materials.spectra import PreparedMaterials
+from opal_diffraction.core.scene.model import MATERIAL_KINDS
 
 
 def _export():
@@ -160,7 +160,7 @@ def _cycles_radiance(tmp_path, name, th_i, th_o, phi):
 
 def _rgb_materials(m):
     """PreparedMaterials with the three RGB channels as the 'wavelengths' (the BSDF is linear
-    per channel), from the exported columns as core/materials.py builds them."""
+    per channel), from the exported columns as core/materials/spectra.py builds them."""
     n_d = m.ior.astype(np.float64)
     spec_f0 = ((n_d - 1) / (n_d + 1)) ** 2 * 2 * m.specular_ior_level
     f32 = np.float32

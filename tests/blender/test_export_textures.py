@@ -19,12 +19,12 @@ import pytest
 
 import blender_scenes as bs
 from opal_diffraction.blender.export import export_scene
-from opal_diffraction.core.enums import TextureEncoding, TextureExtension, TextureInterpolation
-from opal_diffraction.core.geometry import interpolate_corners
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.surface import shading_normal
-from opal_diffraction.core.textures import sample_texture
-from opal_diffraction.core.transport import Hit
+from opal_diffraction.core.util.enums import TextureEncoding, TextureExtension, TextureInterpolation
+from opal_diffraction.core.util.geometry import interpolate_corners
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.materials.surface import shading_normal
+from opal_diffraction.core.materials.textures import sample_texture
+from opal_diffraction.core.transport.walker import Hit
 
 N = 8        # texels per side
 PIXELS = 48  # render size: 6 pixels per texel

@@ -13,8 +13,8 @@ import pytest
 import blender_scenes as bs
 from opal_diffraction.blender.export import export_scene
 from opal_diffraction.blender.export.world import MISSING_IMAGE_RGB
-from opal_diffraction.core.camera import generate_rays
-from opal_diffraction.core.environment import EnvironmentMap
+from opal_diffraction.core.sampling.camera import generate_rays
+from opal_diffraction.core.lights.environment import EnvironmentMap
 
 W, H = 64, 32
 
@@ -66,7 +66,7 @@ SUB = 12  # sub-pixel grid per axis for our side of the comparison
 def _cycles_and_ours(tmp_path, views, width=48, height=32, samples=128):
     """Cycles' render of the world with its BOX pixel filter (measured: Cycles 5.0 averages a
     box filter over the whole pixel whatever its width) and our EnvironmentMap averaged over
-    the same pixel box (SUB x SUB rays through each pixel from core/camera.py), per view."""
+    the same pixel box (SUB x SUB rays through each pixel from core/sampling/camera.py), per view."""
     sc = bpy.context.scene
     sc.render.resolution_x, sc.render.resolution_y = width, height
     sc.cycles.pixel_filter_type = "BOX"
@@ -111,7 +111,7 @@ def _compare(pairs, what):
 def test_environment_texture_with_mapping_rotation_matches_cycles(tmp_path):
     """Five views (horizon, up to the zenith, down to the nadir) of a patterned map under a
     POINT Mapping rotation: Cycles' background per pixel = our lookup along our camera rays
-    (core/camera.py) of the exported image, strength and rotation - the u/v convention, the row
+    (core/sampling/camera.py) of the exported image, strength and rotation - the u/v convention, the row
     order, the Euler order and the Mapping all at once."""
     bs.empty_scene(48, 32, "CYCLES")
     img, px = pattern_image()
@@ -139,7 +139,7 @@ def test_mapping_types_match_cycles(tmp_path, vector_type, rotation, scale):
 def test_our_render_of_the_environment_matches_cycles(tmp_path):
     """The whole pipeline (export, prepare, the eye pass's background) against Cycles: the same
     view rendered by both engines with Cycles' default pixel filter (Blackman-Harris 1.5 px, which
-    core/camera.py reproduces), 256 samples each: 2 x 2 pixel boxes within 3 % at the 99th
+    core/sampling/camera.py reproduces), 256 samples each: 2 x 2 pixel boxes within 3 % at the 99th
     percentile (the filter jitter's noise at the pattern's sharp edges), the median within
     0.5 % and the image mean within 0.5 % (the RGB -> spectrum -> RGB round trip adds < 0.1 %
     for these colours)."""

@@ -24,12 +24,12 @@ from opal_diffraction.blender.export import export_scene
 from opal_diffraction.blender import opal_presets
 from opal_diffraction.blender.opal_domains import read_domains
 from opal_diffraction.blender.opal_presets import PRESET_ITEMS, preset_file, preset_files, read_preset
-from opal_diffraction.core import enums as core_enums
+from opal_diffraction.core.util import enums as core_enums
 from opal_diffraction.core import opal as core_opal
-from opal_diffraction.core.camera import generate_rays
-from opal_diffraction.core.prepare import prepare
-from opal_diffraction.core.scene import Camera, Lights, Materials, Scene
-from opal_diffraction.core.settings import RenderSettings
+from opal_diffraction.core.sampling.camera import generate_rays
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
 
 ATTRS = {"opal_grating_direction": ("FLOAT_VECTOR", "FACE"), "opal_grating_period": ("FLOAT", "FACE"),
          "opal_grating_domain": ("INT", "FACE"), "opal_preview": ("FLOAT_COLOR", "CORNER")}

@@ -52,7 +52,7 @@ def test_zip_builds_and_validates(built_zip):
     with zipfile.ZipFile(built_zip) as z:
         names = z.namelist()
         manifest = tomllib.loads(z.read("blender_manifest.toml").decode())
-    assert "__init__.py" in names and "blender/engine.py" in names and "core/render.py" in names
+    assert "__init__.py" in names and "blender/engine.py" in names and "core/render/frame.py" in names
     assert not any("__pycache__" in n or n.endswith(".pyc") for n in names)
     wheels = " ".join(manifest["wheels"])
     for dep in ("colour_science", "scipy", "openexr"):

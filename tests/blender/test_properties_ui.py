@@ -12,9 +12,9 @@ import pytest
 import blender_scenes as bs
 from opal_diffraction.blender import properties, ui
 from opal_diffraction.blender.engine import ENGINE_ID
-from opal_diffraction.core import enums
-from opal_diffraction.core.optics import DISPERSION_MODELS, SELLMEIER_PRESETS
-from opal_diffraction.core.spectrum import WavelengthGrid
+from opal_diffraction.core.util import enums
+from opal_diffraction.core.spectral.optics import DISPERSION_MODELS, SELLMEIER_PRESETS
+from opal_diffraction.core.spectral.spectrum import WavelengthGrid
 
 SCENE_CONTRACT = ["samples", "light_paths", "wavelength_min", "wavelength_max", "wavelength_step", "max_bounces",
                   "diffuse_bounces", "glossy_bounces", "transmission_bounces",

@@ -15,8 +15,8 @@ import pytest
 
 import blender_scenes as bs
 from opal_diffraction.blender.engine import OpalRenderEngine
-from opal_diffraction.core.output import read_exr
-from opal_diffraction.core.scene import Scene
+from opal_diffraction.core.render.output import read_exr
+from opal_diffraction.core.scene.model import Scene
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 

@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...core.scene import Lights, Scene
+from ...core.scene.model import Lights, Scene
 from ..mesh_io import GRATING_ATTRIBUTE, PERIOD_ATTRIBUTE
 from .camera import export_camera, render_region, render_size
 from .colour import rec709_to_working_space, working_space_to_rec709

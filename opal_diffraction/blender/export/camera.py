@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.scene import Camera, SceneError
+from ...core.scene.model import Camera, SceneError
 from .messages import Warnings
 
 __all__ = ["render_size", "render_region", "camera_from_object", "export_camera"]

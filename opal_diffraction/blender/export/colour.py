@@ -37,7 +37,7 @@ def _matrix_to_rec709(space: str) -> np.ndarray | None:
     name = _COLOUR_SPACE_NAMES.get(space)
     if name is None:
         return None
-    from ...core.spectrum import _colour
+    from ...core.spectral.spectrum import _colour
 
     colour = _colour()
     return np.asarray(colour.matrix_RGB_to_RGB(colour.RGB_COLOURSPACES[name], colour.RGB_COLOURSPACES["sRGB"],
@@ -73,7 +73,7 @@ BLACKBODY_MIN_K = 800.0
 def blackbody_rgb(temperature: float) -> np.ndarray:
     """Linear Rec.709 colour of a blackbody with luminance 1 (Blender's Blackbody node convention);
     below ``BLACKBODY_MIN_K`` that temperature's colour, NaN, infinite or not positive: 6500 K."""
-    from ...core.spectrum import SpectralConverter
+    from ...core.spectral.spectrum import SpectralConverter
 
     conv = blackbody_rgb.conv = getattr(blackbody_rgb, "conv", None) or SpectralConverter()
     t = float(temperature)

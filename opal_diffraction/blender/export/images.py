@@ -30,8 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.enums import TextureEncoding
-from ...core.textures import srgb_to_linear as _decode
+from ...core.util.enums import TextureEncoding
+from ...core.materials.textures import srgb_to_linear as _decode
 from .colour import working_space_to_rec709
 
 __all__ = ["read_image", "read_texture", "image_mean", "srgb_to_linear", "is_data", "MISSING_RGB", "TextureTable"]
@@ -201,7 +201,7 @@ class TextureTable:
 
     def scene_fields(self) -> dict:
         """The Scene fields: textures and their per-texture codes."""
-        from ...core.scene import TEXTURE_EXTENSIONS, TEXTURE_INTERPOLATIONS
+        from ...core.scene.model import TEXTURE_EXTENSIONS, TEXTURE_INTERPOLATIONS
 
         return {
             "textures": list(self.pixels),

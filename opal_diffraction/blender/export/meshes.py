@@ -29,8 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...core.geometry import triangle_normals
-from ...core.scene import SceneError
+from ...core.util.geometry import triangle_normals
+from ...core.scene.model import SceneError
 from ..mesh_io import GRATING_ATTRIBUTE, PERIOD_ATTRIBUTE, attribute_ok, foreach
 
 __all__ = [
@@ -550,7 +550,7 @@ def _corner_tangents(me, name: str, loops: np.ndarray, md: MeshData, out: dict, 
     try:
         me.calc_tangents(uvmap=layer.name)
     except RuntimeError as e:  # n-gons: Blender's MikkTSpace takes triangles and quads only
-        from ...core.textures import uv_tangents
+        from ...core.util.geometry import uv_tangents
 
         say(f"object '{md.name}': Blender cannot compute its tangents ({str(e).strip()}): using per-triangle UV "
             "tangents for its normal map")

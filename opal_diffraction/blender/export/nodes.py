@@ -2,7 +2,7 @@
 
 Follows a node tree from its output node through reroutes, mix and add shaders, and evaluates
 the BSDF it finds to one of the core's surfaces (diffuse, mirror, dielectric) with a colour, an
-IOR, an emission and the rough-surface columns (core/bsdf.py: roughness, Principled's metallic /
+IOR, an emission and the rough-surface columns (core/materials/bsdf.py: roughness, Principled's metallic /
 transmission weights, IOR level, specular tint, the metal's Fresnel). Image Texture nodes on a
 BSDF's colour, roughness, metallic or emission colour and, through a tangent-space Normal Map
 node, on its normal are bound as textures sampled per hit (:class:`TextureRef`,
@@ -29,7 +29,7 @@ import bpy
 import numpy as np
 from mathutils import Euler
 
-from ...core.scene import SceneError
+from ...core.scene.model import SceneError
 from .colour import blackbody_rgb, in_rec709, rgb
 from .images import image_mean
 from .messages import Warnings

@@ -28,8 +28,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..cancel import check
-from ..geometry import compact_indices
+from ..util.cancel import check
+from ..util.geometry import compact_indices
 from . import Hits, _as_rays, _as_tmax, _empty_hits, default_threads, embree_direct
 
 _CHUNK = 1 << 16       # rays per embree call

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import triangle_cross
+from ..util.geometry import triangle_cross
 
 __all__ = [
     "cabochon",

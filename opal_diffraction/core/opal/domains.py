@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import triangle_areas
+from ..util.geometry import triangle_areas
 from .bragg import N_SILICA, N_VOID, period_from_sphere_diameter
 from .surface import face_geometry, project_to_planes, tangent_basis, transport_tangents
 

@@ -7,7 +7,7 @@ Volume (BRAGG) domains (:func:`bragg_colors`): each domain's Bragg colour at nor
 its (111) planes, lambda = 2 d111 n_eff (Sanders 1964; docs/physics.md section 5.2), as a band of
 relative width (4/pi) |n_s - n_void| / (n_s + n_void) (the stop band of a quarter-wave stack:
 Macleod, *Thin-Film Optical Filters*, chapter 6 - an estimate, the transfer-matrix band is
-the renderer's) under D65, through the project's spectral converter (core/spectrum.py: CIE 1931
+the renderer's) under D65, through the project's spectral converter (core/spectral/spectrum.py: CIE 1931
 observer, linear Rec.709), out-of-gamut parts clipped and scaled to a brightest channel of 1."""
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ def bragg_band_width(n_sphere: float = N_SILICA, n_void: float = N_VOID) -> floa
 def bragg_colors(diameter, n_sphere: float = N_SILICA, n_void: float = N_VOID) -> np.ndarray:
     """RGBA (N, 4) float32 linear Rec.709: the Bragg colour at normal incidence of spheres of
     ``diameter`` (N,) nm (0 or less: grey)."""
-    from ..spectrum import SpectralConverter, WavelengthGrid
+    from ..spectral.spectrum import SpectralConverter, WavelengthGrid
 
     if not _CONVERTER:
         _CONVERTER.append(SpectralConverter(WavelengthGrid(380.0, 780.0, 5.0)))

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import triangle_cross
+from ..util.geometry import triangle_cross
 
 __all__ = [
     "FaceGeometry",

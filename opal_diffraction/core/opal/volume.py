@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..enums import DomainOrientation
+from ..util.enums import DomainOrientation
 
 __all__ = [
     "VolumeDomains",

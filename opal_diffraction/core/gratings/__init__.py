@@ -1,0 +1,1 @@
+"""Diffraction gratings as array functions over hits and tables: the Fraunhofer kernel, frames, orders, layering on a base, smooth directions and the light pass's records. Imports rooms up to transport/; never the integrators."""

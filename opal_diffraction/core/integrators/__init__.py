@@ -1,0 +1,1 @@
+"""The two passes of the bidirectional method (docs/physics.md section 1): light/ (paths from the lights, caustics, camera splats) and eye/ (the spectral path tracer); eye/ may import light/, never the reverse. Imports every room below render/."""

@@ -1,0 +1,335 @@
+"""Light paths connected to the camera (light tracing's t = 1 strategy), splatted into a film.
+
+Where a light path lands on a diffuse surface after one or more specular bounces (the landings
+``light_pass._LightTrace.on_hit`` deposits into the caustic map), it is also joined to the
+pinhole camera by a shadow ray and its contribution is splatted into the pixels whose
+reconstruction filter covers the point it projects to: Veach 1997, section 10.2 (light tracing),
+pbrt-v4 section 5.2.3 (``PerspectiveCamera::SampleWi``, the importance W_e of a pinhole) and
+Mitsuba 3's ``ptracer`` (``sample_direction`` plus ``ImageBlock::put``). The estimate of pixel j
+is (docs/physics.md section 4.9)
+
+    I_j += Phi(lambda) * rho(lambda) / pi * |cos theta_y| / (d^2 cos^3 theta_c a_pix) * h(x - c_j)
+
+(perspective; orthographic: |cos theta_y| / a_pix), with Phi the path's flux per wavelength
+sample (what the map would receive), rho / pi the Lambertian BRDF (core/materials/surface.py: textures
+too), theta_y the angle between the geometric normal and the direction to the camera, d the
+distance, theta_c the angle off the optical axis, a_pix one pixel's area on the image plane at
+distance 1 (metres for orthographic) and h the eye pass's reconstruction filter as a density
+(core/sampling/camera.py FilterSampler: separable Blackman-Harris over +-width px, unit integral; the density
+of its tabulated inverse CDF, ``filter_density``): the
+same pixel integral the eye pass's filter-importance samples estimate, so the splat converges
+to the caustic radiance the eye pass would otherwise look up in the map.
+
+The path-space split (docs/physics.md section 4.9): the splat covers caustic light seen
+*directly* (camera -> diffuse surface, no vertex between) on plain diffuse materials
+(``direct_materials``: not rough or layered, not a grating or an opal); the eye pass leaves the
+caustic map out exactly there and still looks it up behind mirrors and glass and after
+diffuse or glossy bounces. The split holds only for the camera the splat was made for
+(``view_key``: the camera and the filter width); another view (``PreparedScene.with_view``)
+falls back to the map everywhere.
+
+Accumulation is deterministic: a batch's splats are summed per pixel (a bincount per channel, float64)
+into a sparse (pixels, values) pair, and a lane's film adds the batches' pairs in lane order, on
+this machine or replayed from Dask workers alike (core/render/distributed.py), so both give the same
+film bit for bit. The film holds the spectrum when a spectral EXR is asked or when W x H x n
+floats fit the caustic map's per-lane cap (SPECTRAL_CAP: 32 M, e.g. 512 x 512 at 61
+wavelengths), else linear Rec.709 RGB (spectrum -> RGB at splat time; RenderResult.spectral
+then lacks the splat, its RGB, passes and EXR have it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...materials.spectra import DIFFUSE
+from ...materials.surface import surface_reflectance
+
+__all__ = ["CameraConnection", "CameraSplat", "SplatBatch", "SplatLog", "view_key", "direct_materials",
+           "blackman_harris_density", "filter_density", "usable_splat"]
+
+_BH = (0.35875, 0.48829, 0.14128, 0.01168)
+SPECTRAL_CAP = 32_000_000  # floats per lane: a spectral splat film up to this size (the caustic map's cap)
+
+
+def blackman_harris_density(t: np.ndarray, width: float) -> np.ndarray:
+    """The 1-D Blackman-Harris window over [-width, width] px as a density (unit integral):
+    the distribution FilterSampler draws its offsets from."""
+    t = np.asarray(t, np.float64)
+    a0, a1, a2, a3 = _BH
+    x = t / (2.0 * width) + 0.5
+    f = a0 - a1 * np.cos(2 * np.pi * x) + a2 * np.cos(4 * np.pi * x) - a3 * np.cos(6 * np.pi * x)
+    return np.where(np.abs(t) < width, f / (2.0 * width * a0), 0.0)
+
+
+def filter_density(t: np.ndarray, sampler) -> np.ndarray:
+    """The density of ``sampler``'s (camera.FilterSampler) offsets at t (pixels): its inverse CDF
+    is a table interpolated linearly, so the offsets are uniform between neighbouring entries,
+    density 1 / ((T - 1) (inv[i + 1] - inv[i])) there. This, not the ideal window
+    (``blackman_harris_density``; they differ in the last 0.3 % of the tails), is the filter
+    the eye pass integrates each pixel with."""
+    inv = sampler._inv
+    t = np.asarray(t, np.float64)
+    seg = np.diff(inv)
+    dens = np.where(seg > 0, 1.0 / ((len(inv) - 1) * np.where(seg > 0, seg, 1.0)), 0.0)
+    i = np.clip(np.searchsorted(inv, t, side="right") - 1, 0, len(seg) - 1)
+    return np.where((t >= inv[0]) & (t < inv[-1]), dens[i], 0.0)
+
+
+def view_key(camera, filter_width: float) -> tuple:
+    """What a splat depends on in the view: the camera (pose, projection, image size) and the
+    reconstruction filter. Two views with equal keys see the same splat."""
+    m = tuple(float(x) for x in np.asarray(camera.matrix, np.float64).ravel())
+    return (m, str(camera.kind), float(camera.lens), float(camera.sensor_width), float(camera.sensor_height),
+            str(camera.sensor_fit), float(camera.ortho_scale), float(camera.shift_x), float(camera.shift_y),
+            int(camera.width), int(camera.height), float(filter_width))
+
+
+def direct_materials(prepared) -> np.ndarray:
+    """(M,) bool: the materials whose directly seen caustics the splat carries: plain Lambertian
+    ones (kind DIFFUSE, not rough or layered, no grating, no opal), where the eye pass's caustic
+    lookup is exactly irradiance * rho / pi (eye_pass._caustic_light)."""
+    mats = prepared.materials
+    ok = np.asarray(mats.kind) == DIFFUSE
+    if prepared.microfacet is not None:
+        ok &= ~np.asarray(prepared.microfacet, bool)
+    g = prepared.gratings
+    ok &= ~np.asarray(g.enabled, bool)
+    if getattr(g, "bragg", None) is not None:
+        ok &= ~np.asarray(g.bragg, bool)
+    return ok
+
+
+def usable_splat(prepared, light) -> "CameraSplat | None":
+    """The light pass's camera splat if it was made for ``prepared``'s view (camera and filter
+    width) and holds the spectrum when a spectral EXR is asked; None: the eye pass looks up the
+    caustic map everywhere (another view of a kept light pass, or no splat)."""
+    splat = None if light is None else getattr(light, "splat", None)
+    if splat is None or not splat.matches(prepared.scene.camera, prepared.settings.filter_width):
+        return None
+    if prepared.settings.spectral_exr and not splat.spectral:
+        return None
+    return splat
+
+
+@dataclass(frozen=True)
+class CameraConnection:
+    """The camera as the light pass connects to it: pose, image-plane extent, filter."""
+
+    eye: np.ndarray       # (3,) camera position
+    rot: np.ndarray       # (3, 3) camera axes as columns (local -z: the view direction)
+    ortho: bool
+    hx: float             # image-plane half extents (at distance 1; metres for ortho)
+    hy: float
+    sx: float             # lens shift on the image plane
+    sy: float
+    width: int
+    height: int
+    filter_width: float
+    filt: object          # camera.FilterSampler: the eye pass's filter, whose density the splat weights are
+    key: tuple
+    materials: np.ndarray  # (M,) bool: direct_materials
+    rgb_weights: np.ndarray | None  # (n, 3) spectrum -> RGB; None: the film keeps the spectrum
+    channels: int
+
+    @classmethod
+    def of(cls, prepared) -> "CameraConnection | None":
+        """The connection for ``prepared``'s camera, or None when the splat is off (the setting,
+        a zero filter width: the eye pass then point-samples pixel centres, which a splat cannot
+        estimate, or no material it applies to)."""
+        from ...sampling.camera import FilterSampler, _shift_extent, camera_frame
+
+        s = prepared.settings
+        if not getattr(s, "caustic_splat", True) or float(s.filter_width) <= 0:
+            return None
+        mats = direct_materials(prepared)
+        if not mats.any():
+            return None
+        cam = prepared.scene.camera
+        hx, hy = camera_frame(cam)
+        shift = _shift_extent(cam)
+        m = np.asarray(cam.matrix, np.float64)
+        rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
+        n = prepared.grid.n
+        # the spectrum when a spectral EXR is asked or when it fits the map's per-lane cap, so
+        # RenderResult.spectral holds the splat too; else RGB (3 floats per pixel)
+        spectral = bool(s.spectral_exr) or int(cam.width) * int(cam.height) * n <= SPECTRAL_CAP
+        return cls(m[:3, 3].copy(), rot, cam.kind == "ORTHO", float(hx), float(hy), float(cam.shift_x * shift),
+                   float(cam.shift_y * shift), int(cam.width), int(cam.height), float(s.filter_width),
+                   FilterSampler(s.filter_width), view_key(cam, s.filter_width), mats,
+                   None if spectral else prepared.conv.rgb_weights.astype(np.float64), n if spectral else 3)
+
+    def empty(self) -> "CameraSplat":
+        return CameraSplat(self.key, np.zeros((self.height, self.width, self.channels), np.float32),
+                           self.rgb_weights is None)
+
+    def project(self, p: np.ndarray):
+        """Image positions of world points p (B, 3): (x, y) in pixels (0 at the left / top edge),
+        unit directions towards the camera (B, 3), the shadow-ray length, the factor
+        1 / (d^2 cos^3 theta_c a_pix) (ortho: 1 / a_pix), and whether the point is in front of
+        the camera and within a filter's reach of the image."""
+        v = np.asarray(p, np.float64) - self.eye
+        local = v @ self.rot  # camera coordinates
+        depth = -local[:, 2]
+        front = depth > 0
+        a_pix = (2 * self.hx / self.width) * (2 * self.hy / self.height)
+        if self.ortho:
+            px, py = local[:, 0], local[:, 1]
+            to_cam = np.broadcast_to(self.rot[:, 2], v.shape)
+            dist = depth
+            factor = np.full(len(v), 1.0 / a_pix)
+        else:
+            z = np.where(front, depth, 1.0)
+            px, py = local[:, 0] / z, local[:, 1] / z
+            dist = np.sqrt(np.einsum("ij,ij->i", v, v))
+            to_cam = -v / np.maximum(dist, 1e-300)[:, None]
+            cos_c = z / np.maximum(dist, 1e-300)
+            factor = 1.0 / (np.maximum(dist, 1e-300) ** 2 * cos_c**3 * a_pix)
+        x = ((px - self.sx) / self.hx + 1.0) * (0.5 * self.width)
+        y = (1.0 - (py - self.sy) / self.hy) * (0.5 * self.height)
+        fw = self.filter_width
+        ok = front & (x > -fw) & (x < self.width + fw) & (y > -fw) & (y < self.height + fw)
+        return x, y, to_cam, dist, factor, ok
+
+    def footprint(self, x: np.ndarray, y: np.ndarray):
+        """The pixels each image point's filter covers: flat pixel indices (B, K*K) and the
+        filter density weights (B, K*K), zero outside the filter or the image."""
+        fw = self.filter_width
+        k = int(np.ceil(2 * fw)) + 1
+        off = np.arange(k)
+        ix = np.floor(x - fw - 0.5).astype(np.int64)[:, None] + 1 + off  # pixel columns (B, K)
+        iy = np.floor(y - fw - 0.5).astype(np.int64)[:, None] + 1 + off
+        # the eye pass's sample at offset t from pixel c counts for c: weight = density(x - c)
+        wx = filter_density(x[:, None] - (ix + 0.5), self.filt) * ((ix >= 0) & (ix < self.width))
+        wy = filter_density(y[:, None] - (iy + 0.5), self.filt) * ((iy >= 0) & (iy < self.height))
+        idx = np.clip(iy, 0, self.height - 1)[:, :, None] * self.width + np.clip(ix, 0, self.width - 1)[:, None, :]
+        w = wy[:, :, None] * wx[:, None, :]
+        return idx.reshape(len(x), -1), w.reshape(len(x), -1)
+
+    def connect(self, prepared, rays, hit, n: int):
+        """The splats of light-path landings (``rays``, ``hit``: transport.Rays / Hit at diffuse
+        hits after a specular bounce): shadow rays to the camera, the contribution of
+        docs/physics.md section 4.9, the filter footprint. Returns (flat pixel indices (M,),
+        values (M, channels) float64) and the number of shadow rays cast. Returns ((pixels (K, F),
+        filter weights (K, F), contributions (K, channels) float64) or None, shadow rays cast):
+        landing k adds weight[k, f] * contribution[k] to pixel pixels[k, f]."""
+        sel = self.materials[hit.mat]
+        if not sel.any():
+            return None, 0
+        r, h = rays.take(sel), hit.take(sel)
+        x, y, to_cam, dist, factor, ok = self.project(h.p)
+        ng = h.ng.astype(np.float64)
+        cos_y = np.einsum("ij,ij->i", to_cam, ng)  # ng faces the side the light arrived from
+        ok &= cos_y > 0
+        keep = np.flatnonzero(ok)
+        if keep.size == 0:
+            return None, 0
+        eps = h.eps[keep].astype(np.float64)
+        o = h.p[keep] + eps[:, None] * ng[keep]
+        tmax = np.maximum(dist[keep] - 2 * eps, 0.0)
+        occ = prepared.accel.occluded(o.astype(np.float32), np.ascontiguousarray(to_cam[keep], np.float32),
+                                      tmax.astype(np.float32))
+        shadow_rays = len(keep)
+        keep = keep[~occ]
+        if keep.size == 0:
+            return None, shadow_rays
+        r, h = r.take(keep), h.take(keep)
+        g = cos_y[keep] * factor[keep] / np.pi  # rho / pi and the camera's importance
+        rho = surface_reflectance(prepared, h, r.lam)
+        if r.lam is None:
+            c = r.dense_w(n) * rho  # (K, n) float32
+            if self.rgb_weights is not None:  # to RGB before the per-pixel work: 3 channels, not n
+                c = c @ self.rgb_weights.astype(np.float32)
+            c = c.astype(np.float64) * g[:, None]
+        else:
+            v = r.w.astype(np.float64) * rho * g  # (K,) at wavelength r.lam
+            if self.rgb_weights is not None:
+                c = v[:, None] * self.rgb_weights[r.lam]
+            else:
+                c = np.zeros((len(v), n))
+                c[np.arange(len(v)), r.lam] = v
+        idx, w = self.footprint(x[keep], y[keep])
+        return (idx, w, c), shadow_rays
+
+
+class SplatBatch:
+    """One batch's splats, summed per pixel at the end (``finish``): deterministic whatever runs it."""
+
+    def __init__(self, connection: CameraConnection):
+        self.connection = connection
+        self._calls: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (pixels, weights, contributions)
+        self.shadow_rays = 0
+
+    def connect(self, prepared, rays, hit, n: int) -> None:
+        out, cast = self.connection.connect(prepared, rays, hit, n)
+        self.shadow_rays += cast
+        if out is not None and len(out[0]):
+            self._calls.append(out)
+
+    def finish(self) -> tuple[np.ndarray, np.ndarray]:
+        """(distinct flat pixel indices (U,) int64, their summed values (U, channels) float32)."""
+        c = self.connection.channels
+        if not self._calls:
+            return np.zeros(0, np.int64), np.zeros((0, c), np.float32)
+        idx = np.concatenate([p.ravel() for p, _, _ in self._calls])
+        w = np.concatenate([q.ravel() for _, q, _ in self._calls])
+        contrib = np.concatenate([v for _, _, v in self._calls])
+        rows = np.repeat(np.arange(len(contrib)), self._calls[0][0].shape[1])
+        keep = w > 0
+        idx, w, rows = idx[keep], w[keep], rows[keep]
+        # the touched pixels (a sort of integers), then one bincount per channel over them: no
+        # (entries x channels) array, so a spectral film costs little more than an RGB one
+        pixels, inv = np.unique(idx, return_inverse=True)
+        out = np.empty((len(pixels), c), np.float32)
+        per_channel = np.ascontiguousarray(contrib.T)  # (channels, K): contiguous gathers below
+        for k in range(c):  # loop over channels (3, or the wavelengths)
+            out[:, k] = np.bincount(inv, weights=w * per_channel[k][rows], minlength=len(pixels))
+        return pixels, out
+
+
+class SplatLog:
+    """A sink that keeps a batch's (pixels, values) for a Dask worker to send back (``calls``)."""
+
+    def __init__(self):
+        self.calls: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def add(self, pixels: np.ndarray, values: np.ndarray) -> None:
+        if len(pixels):
+            self.calls.append((pixels, values))
+
+
+@dataclass
+class CameraSplat:
+    """A light pass's camera film: the summed splats of its paths, for the view ``key``
+    (``view_key``). ``image`` (H, W, 3) linear Rec.709 RGB, or (H, W, n) the spectrum when
+    ``spectral``; None on a Dask worker, which needs only the key."""
+
+    key: tuple
+    image: np.ndarray | None
+    spectral: bool = False
+
+    def add(self, pixels: np.ndarray, values: np.ndarray) -> None:
+        """Add a batch's ``SplatBatch.finish()`` (distinct pixels, so fancy-index += is exact)."""
+        if len(pixels):
+            flat = self.image.reshape(-1, self.image.shape[-1])
+            flat[pixels] += values
+
+    def __iadd__(self, other: "CameraSplat") -> "CameraSplat":
+        self.image += other.image
+        return self
+
+    def matches(self, camera, filter_width: float) -> bool:
+        """Whether this splat was made for that view."""
+        return self.key == view_key(camera, filter_width)
+
+    def images(self, conv, region=None) -> tuple[np.ndarray, np.ndarray | None]:
+        """(RGB (h, w, 3), spectrum (h, w, n) or None) over ``region`` = (x0, y0, x1, y1) (None:
+        the whole image), for Film.result."""
+        img = self.image
+        if region is not None:
+            x0, y0, x1, y1 = region
+            img = img[y0:y1, x0:x1]
+        if self.spectral:
+            return conv.to_rgb(img), img
+        return img, None

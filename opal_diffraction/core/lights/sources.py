@@ -1,0 +1,473 @@
+"""Light sources: emission spectra in Cycles' units, direct-lighting samples, their pdfs, and
+the lights a ray can see.
+
+Units (the contract the Blender layer matches against Cycles, docs/physics.md sections 1.5, 7.5):
+- point / spot of power P (W): radiant intensity I = P / (4 pi) W/sr times the light's
+  Y-normalised spectrum; a spot is the same point light masked by a smoothstep cone
+  (Blender's ``spot_size`` full angle and ``spot_blend``);
+- a point / spot with a radius r > 0 keeps that intensity in total: it is a sphere of radiance
+  L = I / (pi r^2) = P / (4 pi * pi r^2) (Cycles' scene/light.cpp: eval_fac = 1 / (pi * 4 pi r^2)),
+  or, with ``soft_falloff`` (Blender's "Soft Falloff", Cycles' default: ``is_sphere`` false), a
+  disk of radius r and the same radiance facing the shading point (kernel/light/point.h);
+  a spot's cone mask is applied along each sampled ray's direction (kernel/light/spot.h), not
+  inside a sphere;
+- sun of strength S: irradiance S W/m^2 on a surface facing it; with an angle (full angular
+  diameter 2 h) a cone of uniform radiance S / (pi sin^2 h) (Cycles: area = pi sin^2 h);
+- area (rectangle or disk) of power P: one-sided Lambertian emitter of radiance P / (pi A).
+
+For a light at a shading point p, ``sample_light`` returns the direction to the light, its
+distance, and a geometric factor g such that the irradiance arriving at p (before the receiver's
+cosine) is ``g * spectrum`` in expectation: g = (radiance / spectrum) / pdf(wi) for sized lights.
+Sampling (pbrt-v4 section 12.2 SphereLight / Cycles' point.h and distant.h): a sphere seen from
+outside is sampled uniformly in the cone it subtends (sin theta_max = r / d), from inside
+uniformly over the sphere of directions (Cycles' choice for transmissive surfaces; its
+cosine-hemisphere choice needs the normal, which this interface does not take); a soft-falloff
+disk by a uniform point on it; a sun with an angle uniformly in its cone; a rectangle light
+uniformly in the solid angle it subtends (Urena et al. 2013, core/lights/rect_light.py, as Cycles'
+area.h), a disk light by a uniform point on it. ``light_pdf`` is the solid-angle density of
+those samplers, ``intersect_lights`` and ``sun_radiance`` what a ray sees of the sized lights
+(mirrors, glass, the camera, MIS).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..util.enums import LightKind
+from . import rect_light
+from ..util.geometry import orthonormal_basis
+from ..scene.model import Lights
+from ..spectral.spectrum import SpectralConverter
+
+__all__ = ["PreparedLights", "prepare_lights", "sample_light", "sample_light_pdf", "light_pdf", "is_delta",
+           "intersect_lights", "sun_radiance"]
+
+POINT, SPOT, SUN, AREA_RECT, AREA_DISK = (int(k) for k in LightKind)
+
+#: Radiance of a sized light stays below this (W/m^2/sr per spectral unit): a radius whose
+#: radiance I / (pi r^2) would overflow float32 renders as the delta light it is indistinguishable from.
+_MAX_RADIANCE_SCALE = 1e30
+#: Directions handed back in float32 may land this far (in cosine) outside the cone they were
+#: drawn in: light_pdf still counts them in.
+_CONE_SLACK = 4e-7
+
+
+@dataclass
+class PreparedLights:
+    kind: np.ndarray          # (L,) int
+    position: np.ndarray      # (L, 3)
+    direction: np.ndarray     # (L, 3) unit: spot axis, sun travel direction, area emission normal
+    axis_u: np.ndarray        # (L, 3) unit, perpendicular to direction
+    axis_v: np.ndarray        # (L, 3) unit
+    size_u: np.ndarray        # (L,)
+    size_v: np.ndarray        # (L,)
+    area: np.ndarray          # (L,) m^2 for area lights, 0 otherwise
+    cos_half_spot: np.ndarray  # (L,)
+    spot_smooth: np.ndarray   # (L,) width of the blend band in cosine
+    spectrum: np.ndarray      # (L, n) float32: intensity (W/sr), irradiance (W/m^2) or radiance per nm-bin
+    radius: np.ndarray = None      # (L,) m: point / spot radius, 0 for delta points and other kinds
+    sphere: np.ndarray = None      # (L,) bool: a sized point / spot is a sphere (else a facing disk)
+    sun_half: np.ndarray = None    # (L,) rad: half the sun's angular diameter, 0 for delta suns and other kinds
+    sun_omc: np.ndarray = None     # (L,) 1 - cos(sun_half), computed without cancellation
+
+    def __post_init__(self):
+        n = len(self.kind)
+        for name, dtype in (("radius", np.float64), ("sun_half", np.float64), ("sun_omc", np.float64),
+                            ("sphere", bool)):
+            if getattr(self, name) is None:
+                setattr(self, name, np.zeros(n, dtype))
+
+    def __len__(self):
+        return len(self.kind)
+
+
+def _one_minus_cos_from_sin2(s2):
+    """1 - sqrt(1 - s2) without cancellation (Cycles' sin_sqr_to_one_minus_cos)."""
+    s2 = np.clip(s2, 0.0, 1.0)
+    return s2 / (1.0 + np.sqrt(1.0 - s2))
+
+
+def prepare_lights(lights: Lights, conv: SpectralConverter) -> PreparedLights:
+    """Turn the scene's light table into unit vectors, areas and emission spectra on the grid."""
+    n = len(lights)
+    d = np.asarray(lights.direction, np.float64).reshape(n, 3)
+    d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
+    u = np.asarray(lights.axis_u, np.float64).reshape(n, 3)
+    u = u - np.sum(u * d, axis=1, keepdims=True) * d  # Gram-Schmidt against the normal
+    un = np.linalg.norm(u, axis=1, keepdims=True)
+    fallback, _ = orthonormal_basis(d)
+    u = np.where(un > 1e-9, u / np.maximum(un, 1e-30), fallback)
+    v = np.cross(d, u)
+    kind = np.asarray(lights.kind, np.int32)
+    su, sv = np.asarray(lights.size_u, np.float64), np.asarray(lights.size_v, np.float64)
+    area = np.where(kind == AREA_RECT, su * sv, np.where(kind == AREA_DISK, np.pi * su * sv / 4, 0.0))
+
+    spec = conv.illuminant_from_rgb(np.asarray(lights.color, np.float64).reshape(n, 3))
+    temp = np.asarray(lights.temperature, np.float64)
+    if (temp > 0).any():
+        spec[temp > 0] = conv.blackbody(temp[temp > 0])
+    power = np.asarray(lights.power, np.float64)
+    unit = np.select(
+        [np.isin(kind, [POINT, SPOT]), kind == SUN, np.isin(kind, [AREA_RECT, AREA_DISK])],
+        [power / (4 * np.pi), power, power / (np.pi * np.maximum(area, 1e-30))],
+        0.0,
+    )
+    half = 0.5 * np.asarray(lights.spot_size, np.float64)
+    cos_half = np.where(kind == SPOT, np.cos(np.clip(half, 0, np.pi)), -1.0)
+    smooth = np.clip(np.asarray(lights.spot_blend, np.float64), 0, 1) * (1 - cos_half)
+    spectrum = (spec * unit[:, None]).astype(np.float32)
+
+    pointlike = np.isin(kind, [POINT, SPOT])
+    radius = np.where(pointlike, np.maximum(np.asarray(getattr(lights, "radius", np.zeros(n)), np.float64), 0.0), 0.0)
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):  # a black light of radius 0: 0/0
+        peak = spectrum.max(axis=1, initial=0.0).astype(np.float64) / (np.pi * radius**2)
+    radius = np.where((radius > 0) & (peak <= _MAX_RADIANCE_SCALE), radius, 0.0)
+    soft = np.asarray(getattr(lights, "soft_falloff", np.zeros(n)), np.int64) != 0
+    sun_half = np.where(kind == SUN, 0.5 * np.clip(np.asarray(getattr(lights, "angle", np.zeros(n)), np.float64),
+                                                   0.0, np.pi), 0.0)
+    sun_omc = 2.0 * np.sin(0.5 * sun_half) ** 2
+    sun_half = np.where(sun_omc > 1e-14, sun_half, 0.0)  # below this the cone is a delta in float64
+    return PreparedLights(
+        kind=kind,
+        position=np.asarray(lights.position, np.float64).reshape(n, 3),
+        direction=d,
+        axis_u=u,
+        axis_v=v,
+        size_u=su,
+        size_v=sv,
+        area=area,
+        cos_half_spot=cos_half,
+        spot_smooth=smooth,
+        spectrum=spectrum,
+        radius=radius,
+        sphere=(radius > 0) & ~soft,
+        sun_half=sun_half,
+        sun_omc=np.where(sun_half > 0, sun_omc, 0.0),
+    )
+
+
+def _smoothstep(x):
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3 - 2 * x)
+
+
+def _spot_mask(pl: PreparedLights, index: int, travel: np.ndarray) -> np.ndarray:
+    """The spot cone mask for light travelling along ``travel`` (B, 3) unit (Cycles' spot.h:
+    smoothstep((cos - cos_half) / blend band), 0 outside)."""
+    cos_axis = travel @ pl.direction[index].astype(travel.dtype)
+    ch, sm = pl.cos_half_spot[index], pl.spot_smooth[index]
+    cone = np.where(cos_axis > ch, 1.0, 0.0).astype(travel.dtype)
+    if np.float32(sm) > 0:  # a blend band that is 0 in float32 is a hard edge
+        cone = cone * _smoothstep((cos_axis - ch) / travel.dtype.type(sm))
+    return cone
+
+
+def is_delta(pl: PreparedLights, index: int) -> bool:
+    """A light no ray can hit and no other sampler can find: point / spot of radius 0, sun of
+    angle 0 (area lights have an area)."""
+    k = int(pl.kind[index])
+    if k in (POINT, SPOT):
+        return not pl.radius[index] > 0
+    if k == SUN:
+        return not pl.sun_half[index] > 0
+    return False
+
+
+def _basis(ax, ay, az):
+    """A branchless orthonormal basis about the unit vector (ax, ay, az), per component
+    (Duff et al. 2017, "Building an orthonormal basis, revisited"): ((ux, uy, uz), (vx, vy, vz))."""
+    sign = np.where(az >= 0, 1.0, -1.0).astype(ax.dtype)
+    a = -1.0 / (sign + az)
+    b = ax * ay * a
+    return (1.0 + sign * ax * ax * a, sign * b, -sign * ax), (b, sign + ay * ay * a, -ay)
+
+
+def _sample_cone(axis: np.ndarray, omc, rng: np.random.Generator, b: int, dtype=np.float64) -> np.ndarray:
+    """Directions uniform in the cone around unit ``axis`` ((3,) or (B, 3)) with 1 - cos(half
+    angle) = ``omc`` (scalar or (B,)): cos = 1 - u omc, sin from u omc (2 - u omc), so narrow
+    cones keep their precision. (B, 3) of ``dtype``."""
+    axis = np.broadcast_to(np.asarray(axis, dtype), (b, 3))
+    ax, ay, az = axis[:, 0], axis[:, 1], axis[:, 2]
+    x = rng.random(b, dtype) * np.asarray(omc, dtype)
+    cos_t = 1.0 - x
+    sin_t = np.sqrt(np.maximum(x * (2.0 - x), 0.0))
+    phi = dtype(2 * np.pi) * rng.random(b, dtype)
+    cu, cv = sin_t * np.cos(phi), sin_t * np.sin(phi)
+    (ux, uy, uz), (vx, vy, vz) = _basis(ax, ay, az)
+    out = np.empty((b, 3), dtype)
+    out[:, 0] = cos_t * ax + cu * ux + cv * vx
+    out[:, 1] = cos_t * ay + cu * uy + cv * vy
+    out[:, 2] = cos_t * az + cu * uz + cv * vz
+    return out
+
+
+def _sphere_geometry(pl, index, p):
+    """(to_centre unit (B, 3), d (B,), r, omc (B,) of the cone the sphere subtends, inside (B,)),
+    in the dtype of p."""
+    dt = np.float32 if p.dtype == np.float32 else np.float64
+    c = pl.position[index].astype(dt)
+    r = float(pl.radius[index])
+    to_c = c - p
+    d = np.sqrt(np.einsum("ij,ij->i", to_c, to_c))
+    inside = d <= r
+    axis = to_c / np.maximum(d, dt(1e-30))[:, None]
+    omc = np.where(inside, dt(2.0), _one_minus_cos_from_sin2((dt(r) / np.maximum(d, dt(1e-30))) ** 2)).astype(dt)
+    return axis, d, r, omc, inside
+
+
+def _distance_to_sphere(d, cos_t, r, inside):
+    """Distance along a direction at angle acos(cos_t) from the centre direction to the sphere
+    (law of cosines: the near root outside, the far root inside; Cycles' point.h)."""
+    disc = np.sqrt(np.maximum(r * r - d * d * (1.0 - cos_t * cos_t), 0.0))
+    return np.maximum(np.where(inside, d * cos_t + disc, d * cos_t - disc), 0.0)
+
+
+def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.Generator):
+    """One sample of light ``index`` seen from points p (B, 3).
+
+    Returns (wi, dist, g): unit directions towards the light (B, 3) float32, distances (B,) (inf
+    for the sun) and the geometric factor g (B,) described in the module docstring (0 where the
+    point is outside a spot cone or behind an area light). Delta lights are sampled exactly;
+    sized ones with the pdf ``light_pdf`` returns for the same direction.
+    """
+    k = int(pl.kind[index])
+    b = len(p)
+    f32 = np.float32
+    if k == SUN:
+        if pl.sun_half[index] > 0:
+            omc = float(pl.sun_omc[index])
+            wi = _sample_cone(-pl.direction[index], omc, rng, b, f32)
+            # radiance / S = 1 / (pi sin^2 h), pdf = 1 / (2 pi omc), sin^2 h = omc (2 - omc)
+            return wi, np.full(b, np.inf, f32), np.full(b, 2.0 / (2.0 - omc), f32)
+        wi = np.broadcast_to(-pl.direction[index].astype(f32), (b, 3))
+        return wi, np.full(b, np.inf, f32), np.ones(b, f32)
+    if k in (POINT, SPOT) and pl.radius[index] > 0:
+        return _sample_sized_point(pl, index, p, rng)
+    if k in (POINT, SPOT):
+        target = pl.position[index].astype(f32)
+    else:
+        r1, r2 = rng.random(b, f32), rng.random(b, f32)
+        if k == AREA_RECT:  # by solid angle, as Cycles (core/lights/rect_light.py)
+            return rect_light.sample_light_rect(pl, index, p, r1, r2)
+        # a disk: uniform on the ellipse (a polar mapping is fine for a uniform density)
+        rad, phi = np.sqrt(r1), 2 * np.pi * r2
+        a, c = 0.5 * pl.size_u[index] * rad * np.cos(phi), 0.5 * pl.size_v[index] * rad * np.sin(phi)
+        target = (pl.position[index] + a[:, None] * pl.axis_u[index] + c[:, None] * pl.axis_v[index]).astype(f32)
+    to_light = target - p
+    d2 = np.maximum(np.einsum("ij,ij->i", to_light, to_light), f32(1e-30))
+    dist = np.sqrt(d2)
+    wi = to_light / dist[:, None]
+    if k in (POINT, SPOT):
+        g = f32(1.0) / d2
+        if k == SPOT:
+            g = g * _spot_mask(pl, index, -wi)
+        return wi, dist, g
+    cos_l = -(wi @ pl.direction[index].astype(f32))
+    g = np.where(cos_l > 0, cos_l * f32(pl.area[index]) / d2, f32(0.0))
+    return wi, dist, g
+
+
+def _sample_sized_point(pl, index, p, rng):
+    """sample_light for a point / spot with a radius, in float32 (p's own precision)."""
+    b = len(p)
+    f32 = np.float32
+    p = np.asarray(p, f32)
+    r = float(pl.radius[index])
+    if pl.sphere[index]:
+        axis, d, r, omc, inside = _sphere_geometry(pl, index, p)
+        if inside.any():  # uniform over all directions there (pdf 1 / (4 pi)): omc = 2
+            wi = _sample_cone(axis, omc, rng, b, f32)
+            g = np.where(inside, f32(4.0 / (r * r)), f32(2.0 / (r * r)) * omc)
+        else:
+            wi = _sample_cone(axis, omc, rng, b, f32)
+            g = f32(2.0 / (r * r)) * omc  # (1 / (pi r^2)) / (1 / (2 pi omc))
+        cos_t = np.einsum("ij,ij->i", wi, axis)
+        dist = _distance_to_sphere(d, cos_t, f32(r), inside)
+        if int(pl.kind[index]) == SPOT:  # the cone mask along the ray, outside the sphere only (spot.h)
+            g = np.where(inside, g, g * _spot_mask(pl, index, -wi))
+        return wi, dist.astype(f32), g.astype(f32)
+    # soft falloff: a uniform point on the disk of radius r facing p; g = (1/(pi r^2)) / pdf with
+    # pdf = t^2 / (pi r^2 cos_l) and cos_l = d / t (the disk is perpendicular to the centre direction)
+    c = pl.position[index].astype(f32)
+    to_p = p - c
+    d = np.sqrt(np.einsum("ij,ij->i", to_p, to_p))
+    n = to_p / np.maximum(d, f32(1e-30))[:, None]
+    (ux, uy, uz), (vx, vy, vz) = _basis(n[:, 0], n[:, 1], n[:, 2])
+    rad, phi = f32(r) * np.sqrt(rng.random(b, f32)), f32(2 * np.pi) * rng.random(b, f32)
+    cu, cv = rad * np.cos(phi), rad * np.sin(phi)
+    to_q = np.empty((b, 3), f32)  # q - p = (c - p) + cu u + cv v
+    to_q[:, 0] = cu * ux + cv * vx - to_p[:, 0]
+    to_q[:, 1] = cu * uy + cv * vy - to_p[:, 1]
+    to_q[:, 2] = cu * uz + cv * vz - to_p[:, 2]
+    t = np.maximum(np.sqrt(np.einsum("ij,ij->i", to_q, to_q)), f32(1e-30))
+    wi = to_q / t[:, None]
+    g = d / (t * t * t)
+    if int(pl.kind[index]) == SPOT:
+        g = g * _spot_mask(pl, index, -wi)
+    return wi, t, g.astype(f32)
+
+
+def sample_light_pdf(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.Generator):
+    """``sample_light`` and the solid-angle pdf of each direction it drew (B,) float32 (None for
+    a delta light), what ``light_pdf`` gives for it, from the sample's own g instead of a second
+    intersection with the light: the sized lights' radiance is c times the spectrum with c = 1
+    (area), 1 / (pi r^2) (spheres, facing disks) and 1 / (pi sin^2 h) (sun cones), and g = c /
+    pdf (module docstring). A spot's cone mask is in its g, so its pdf is ``light_pdf``'s."""
+    wi, dist, g = sample_light(pl, index, p, rng)
+    if is_delta(pl, index):
+        return wi, dist, g, None
+    k = int(pl.kind[index])
+    if k == SPOT:
+        return wi, dist, g, light_pdf(pl, index, p, wi)
+    if k == SUN:
+        omc = float(pl.sun_omc[index])
+        c = 1.0 / (np.pi * omc * (2.0 - omc))
+    elif k == POINT:
+        c = 1.0 / (np.pi * float(pl.radius[index]) ** 2)
+    else:
+        c = 1.0
+    g = np.asarray(g, np.float32)
+    with np.errstate(divide="ignore"):
+        pdf = np.where(g > 0, np.float32(c) / g, np.float32(0.0)).astype(np.float32)
+    return wi, dist, g, pdf
+
+
+def light_pdf(pl: PreparedLights, index: int, p: np.ndarray, wi: np.ndarray) -> np.ndarray:
+    """(B,) float32 solid-angle density with which ``sample_light`` draws direction ``wi`` (B, 3)
+    unit from points ``p`` (B, 3); 0 for delta lights, for directions it cannot draw, and on the
+    back of an area light (which emits nothing there)."""
+    k = int(pl.kind[index])
+    b = len(p)
+    p = np.asarray(p, np.float64)
+    wi = np.asarray(wi, np.float64)
+    if is_delta(pl, index):
+        return np.zeros(b, np.float32)
+    if k == SUN:
+        omc = float(pl.sun_omc[index])
+        inside = wi @ (-pl.direction[index]) >= 1.0 - omc - _CONE_SLACK
+        return np.where(inside, 1.0 / (2 * np.pi * omc), 0.0).astype(np.float32)
+    if k in (POINT, SPOT):
+        r = float(pl.radius[index])
+        if pl.sphere[index]:
+            axis, d, r, omc, inside = _sphere_geometry(pl, index, p)
+            in_cone = np.einsum("ij,ij->i", wi, axis) >= 1.0 - omc - _CONE_SLACK
+            return np.where(inside, 1.0 / (4 * np.pi), np.where(in_cone, 1.0 / (2 * np.pi * omc), 0.0)).astype(
+                np.float32)
+        to_p = p - pl.position[index]
+        d = np.linalg.norm(to_p, axis=1)
+        n = to_p / np.maximum(d, 1e-300)[:, None]
+        t, ok = _plane_hit(p, wi, pl.position[index], n, np.inf)
+        q = p + t[:, None] * wi
+        ok &= np.sum((q - pl.position[index]) ** 2, axis=1) <= r * r
+        cos_l = -np.einsum("ij,ij->i", wi, n)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pdf = t * t / (np.pi * r * r * cos_l)
+        return np.where(ok & (cos_l > 0), pdf, 0.0).astype(np.float32)
+    t, ok, cos_l = _area_hit(pl, index, p, wi, np.full(b, np.inf))
+    if k == AREA_RECT:
+        return rect_light.pdf_light_rect(pl, index, p, ok, t, cos_l).astype(np.float32)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pdf = t * t / (pl.area[index] * cos_l)
+    return np.where(ok, pdf, 0.0).astype(np.float32)
+
+
+def _plane_hit(o, d, c, n, tmax):
+    """Ray-plane distances t (B,) and whether 0 < t < tmax, for the plane through c with normal
+    n ((3,) or (B, 3))."""
+    n = np.broadcast_to(n, o.shape)
+    denom = np.einsum("ij,ij->i", d, n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.einsum("ij,ij->i", c - o, n) / denom
+    ok = np.isfinite(t) & (t > 0) & (t < tmax)
+    return np.where(ok, t, np.inf), ok
+
+
+def _area_hit(pl, index, o, d, tmax):
+    """Front-side hits of area light ``index``: (t, hit, cos_l) with cos_l = -d . normal > 0."""
+    nrm = pl.direction[index]
+    cos_l = -(d @ nrm)
+    t, ok = _plane_hit(o, d, pl.position[index], nrm, tmax)
+    q = o + np.where(ok, t, 0.0)[:, None] * d - pl.position[index]
+    a, c = q @ pl.axis_u[index], q @ pl.axis_v[index]
+    hu, hv = 0.5 * pl.size_u[index], 0.5 * pl.size_v[index]
+    if int(pl.kind[index]) == AREA_RECT:
+        inside = (np.abs(a) <= hu) & (np.abs(c) <= hv)
+    else:
+        inside = (a / hu) ** 2 + (c / hv) ** 2 <= 1.0
+    ok &= inside & (cos_l > 0)  # one-sided (Cycles' area.h: a ray through the back goes on)
+    return t, ok, cos_l
+
+
+def _sphere_hit(o, d, c, r, tmax):
+    """Nearest ray-sphere distance in (0, tmax): the near root from outside, the far root from inside."""
+    oc = o - c
+    bq = np.einsum("ij,ij->i", d, oc)
+    cq = np.einsum("ij,ij->i", oc, oc) - r * r
+    disc = bq * bq - cq
+    s = np.sqrt(np.maximum(disc, 0.0))
+    t0, t1 = -bq - s, -bq + s
+    t = np.where(t0 > 0, t0, t1)
+    ok = (disc >= 0) & (t > 0) & (t < tmax)
+    return np.where(ok, t, np.inf), ok, cq <= 0
+
+
+def intersect_lights(pl: PreparedLights, o: np.ndarray, d: np.ndarray, tmax: np.ndarray):
+    """The nearest sized light hit by rays o, d (B, 3) before tmax (B,): (index (B,) int32, -1 for
+    none; t (B,) float32, inf for none; scale (B,) float32) with the radiance seen along the ray
+    ``scale * pl.spectrum[index]``.
+
+    Sized lights are area lights (one-sided: a ray through the back passes, as in Cycles), point
+    and spot lights with a radius (spheres, or disks facing the ray origin with soft falloff).
+    Suns are at infinity: ``sun_radiance`` for rays that leave the scene.
+    """
+    o = np.asarray(o, np.float64)
+    d = np.asarray(d, np.float64)
+    b = len(o)
+    best_t = np.broadcast_to(np.asarray(tmax, np.float64), (b,)).copy()
+    idx = np.full(b, -1, np.int32)
+    scale = np.zeros(b, np.float64)
+    for li in range(len(pl)):  # loop over lights (a handful), not rays
+        k = int(pl.kind[li])
+        if k in (AREA_RECT, AREA_DISK):
+            t, ok, _ = _area_hit(pl, li, o, d, best_t)
+            s = np.ones(b)
+        elif k in (POINT, SPOT) and pl.radius[li] > 0:
+            r, c = float(pl.radius[li]), pl.position[li]
+            if pl.sphere[li]:
+                t, ok, inside = _sphere_hit(o, d, c, r, best_t)
+                if k == SPOT:  # one-sided towards the centre (spot.h), masked outside the sphere
+                    ok &= np.einsum("ij,ij->i", d, o - c) < 0
+                    s = np.where(inside, 1.0, _spot_mask(pl, li, d))
+                else:
+                    s = np.ones(b)
+            else:
+                n = o - c
+                n = n / np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+                t, ok = _plane_hit(o, d, c, n, best_t)
+                q = o + np.where(ok, t, 0.0)[:, None] * d
+                ok &= np.sum((q - c) ** 2, axis=1) <= r * r
+                s = _spot_mask(pl, li, d) if k == SPOT else np.ones(b)
+            s = s / (np.pi * r * r)  # intensity -> radiance
+        else:
+            continue
+        ok &= t < best_t
+        best_t = np.where(ok, t, best_t)
+        idx = np.where(ok, li, idx)
+        scale = np.where(ok, s, scale)
+    t_out = np.where(idx >= 0, best_t, np.inf).astype(np.float32)
+    return idx, t_out, scale.astype(np.float32)
+
+
+def sun_radiance(pl: PreparedLights, d: np.ndarray) -> np.ndarray:
+    """(B, n) float32 radiance of the suns with an angle seen along escaping directions d (B, 3):
+    S / (pi sin^2 h) times the spectrum's shape inside each sun's cone, zero outside."""
+    d = np.asarray(d, np.float64)
+    out = np.zeros((len(d), pl.spectrum.shape[1]), np.float32)
+    for li in np.flatnonzero((pl.kind == SUN) & (pl.sun_half > 0)):  # loop over suns
+        omc = float(pl.sun_omc[li])
+        inside = d @ (-pl.direction[li]) >= 1.0 - omc
+        if inside.any():
+            out[inside] += pl.spectrum[li] * np.float32(1.0 / (np.pi * omc * (2.0 - omc)))
+    return out

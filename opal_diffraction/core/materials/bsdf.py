@@ -1,0 +1,802 @@
+"""Rough surfaces: GGX microfacet BSDFs as Cycles renders them, vectorised over a batch of hits.
+
+Methods (formulas in docs/physics.md section 14):
+- Trowbridge-Reitz (GGX) normal distribution D and the height-correlated Smith masking-shadowing
+  G2 = 1 / (1 + Lambda(wo) + Lambda(wi)) (pbrt-v4, Pharr, Jakob & Humphreys 2023, section 9.6;
+  Heitz 2014, "Understanding the masking-shadowing function", JCGT 3(2)).
+- Sampling of the visible normals (Heitz 2018, "Sampling the GGX distribution of visible
+  normals", JCGT 7(4)): pdf(wi) = D_wo(h) / (4 |wo.h|) for reflection, D_wo(h) |wi.h| /
+  (wi.h + wo.h / eta)^2 for refraction (pbrt-v4 section 9.7).
+- Conductors: Schlick's Fresnel with the F82-tint edge term of Cycles
+  (``intern/cycles/kernel/closure/bsdf_util.h`` fresnel_f82 / fresnel_f82tint_B; Hoffman 2019,
+  "Fresnel equations considered harmful"; Kutz et al. 2021, "Novel aspects of the Adobe Standard
+  Material"): F = F_schlick(mu) - b mu (1 - mu)^6, b chosen so that F(1/7) = F_schlick(1/7) * tint.
+- Rough dielectrics: reflection and refraction through microfacets (Walter, Marschner, Li &
+  Torrance 2007, "Microfacet models for refraction through rough surfaces"; pbrt-v4
+  DielectricBxDF) with the exact dielectric Fresnel at the microfacet, reflect / transmit chosen
+  with probability F, and radiance scaled by 1/eta^2 on transmission (camera paths carry radiance).
+- Multiple scattering: Cycles' "Multiscatter GGX" energy preservation
+  (``bsdf_microfacet.h`` microfacet_ggx_preserve_energy; Turquin 2019, "Practical multiple
+  scattering compensation for microfacet models", with the multi-bounce Fresnel of Kulla & Conty
+  2017, "Revisiting physically based shading at Imageworks"): the single-scattering lobe times
+  1 + F_ms (1 - E(mu_o)) / E(mu_o), F_ms = F_avg E_avg / (1 - F_avg (1 - E_avg)). E(mu, roughness)
+  is the single-scattering albedo, tabulated once (first use) by quadrature over the visible-normal
+  parameter square; glass uses its own table of reflect + transmit albedo, as Cycles does. The
+  factor depends on wo only, as in Cycles, so the compensated lobe is not exactly reciprocal
+  (:func:`energy_compensation` gives the factor so that the single-scattering part can be checked).
+- Principled's dielectric specular layer over a diffuse base (PLASTIC): Cycles' generalized
+  Schlick Fresnel F = mix(F0 * tint, 1, s), s = (F_real - F0) / (1 - F0), and the base scaled by
+  1 - E_spec(mu_o), the specular layer's directional albedo (Cycles ``closure_layering_weight``;
+  here per wavelength rather than by the maximum channel), tabulated the same way.
+- Lambert: cosine-weighted sampling (Malley's method, concentric disk).
+
+Conventions: wo points towards the previous path vertex (the camera side), wi is the sampled
+direction; ns is the unit shading normal and ng the geometric normal, both on wo's side. A
+reflection needs wi on wo's side of both, a transmission the far side of both; other pairs
+evaluate to zero (no light leaks). Everything is float32.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+from functools import lru_cache
+
+import numpy as np
+
+
+__all__ = [
+    "LAMBERT", "CONDUCTOR", "DIELECTRIC", "PLASTIC", "GLOSSY",
+    "DIFFUSE_REFLECTION", "GLOSSY_REFLECTION", "TRANSMISSION", "SINGULAR",
+    "MIN_ROUGHNESS", "SurfaceParams", "params_from_materials", "sample", "evaluate", "microfacet_materials",
+    "energy_compensation", "fresnel_f82", "f82_b", "fresnel_dielectric_exact", "with_outgoing", "cosine_hemisphere",
+]
+
+#: Lobe codes per hit. GLOSSY is Blender's Glossy BSDF: GGX with a constant Fresnel (its colour).
+LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY = 0, 1, 2, 3, 4
+#: Flags of a sampled event (0: absorbed / invalid). SINGULAR marks a delta event (pdf = inf).
+DIFFUSE_REFLECTION, GLOSSY_REFLECTION, TRANSMISSION, SINGULAR = 1, 2, 4, 8
+
+#: Blender roughness below which a surface is smooth: the GGX lobe (alpha = roughness^2 = 1e-4,
+#: about 2e-4 rad wide) is narrower than a pixel of any usual camera (a 50 mm lens on a 36 mm
+#: sensor at 1920 px: 3.7e-4 rad), so the image is the mirror's, while next-event estimation
+#: through so sharp a lobe has variance ~ 1/alpha^2 and float32 half vectors (errors ~1e-7)
+#: resolve it only to a few 1e-3. Such surfaces stay on the delta code (core/transport/walker.py);
+#: sample() also treats them as delta events (SINGULAR), evaluate() gives them zero. Cycles'
+#: own threshold is alpha^2 < 2e-10 (roughness 3.8e-3), visually the same.
+MIN_ROUGHNESS = 0.01
+_MIN_ALPHA = MIN_ROUGHNESS * MIN_ROUGHNESS
+
+_F32 = np.float32
+_INV_PI = _F32(1.0 / np.pi)
+
+
+@dataclass
+class SurfaceParams:
+    """One row per hit; spectral arrays are (B, k), k = the grid's n for white rays, 1 for mono rays."""
+
+    lobe: np.ndarray       # (B,) int: LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY
+    base: np.ndarray       # (B, k) albedo (LAMBERT, PLASTIC's diffuse), F0 (CONDUCTOR, GLOSSY), tint (DIELECTRIC)
+    edge: np.ndarray       # (B, k) CONDUCTOR's F82 edge tint (Principled 'Specular Tint' on metals); ones otherwise
+    alpha: np.ndarray      # (B,) GGX alpha = roughness^2 (isotropic)
+    eta: np.ndarray        # (B,) DIELECTRIC: n on the far side / n on wo's side; 1 otherwise
+    spec_f0: np.ndarray    # (B,) PLASTIC: F0 of the specular layer (((ior-1)/(ior+1))^2 * 2 * IOR level); 0: none
+    spec_tint: np.ndarray  # (B, k) PLASTIC: specular tint
+    # What depends on wo only, filled by with_outgoing() for the hits' wo and shading normal
+    # (one next event and the bounce at a hit share them); None: computed in each call.
+    frame_u: np.ndarray | None = None   # (B, 3) the shading frame's tangents (tangent_frame(ns))
+    frame_v: np.ndarray | None = None
+    wo_local: np.ndarray | None = None  # (B, 3) wo in that frame
+    f82: np.ndarray | None = None       # (B, k) CONDUCTOR's F82 factor b (f82_b), every row a conductor
+    ms: np.ndarray | None = None        # (B, k) the multiscatter factor, every row one CONDUCTOR or GLOSSY lobe
+
+    def __len__(self):
+        return len(self.lobe)
+
+    def take(self, idx) -> "SurfaceParams":
+        return SurfaceParams(*(None if v is None else v[idx] for v in (getattr(self, f.name) for f in fields(self))))
+
+
+def _sub(p: SurfaceParams, idx: np.ndarray) -> SurfaceParams:
+    """p.take(idx) for idx from np.flatnonzero (sorted, unique): p itself when it selects every row."""
+    return p if len(idx) == len(p) else p.take(idx)
+
+
+# ---------------------------------------------------------------------------------- Fresnel
+def fresnel_dielectric_exact(cos_i, eta):
+    """Unpolarised Fresnel reflectance and the refracted cosine at a dielectric interface.
+    cos_i >= 0 on the incident side, eta = n_transmitted / n_incident. F = 1 under total internal
+    reflection (cos_t = 0 there)."""
+    cos_i = np.clip(cos_i, 0.0, 1.0)
+    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
+    tir = sin2_t >= 1.0
+    cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
+    r_par = (eta * cos_i - cos_t) / np.maximum(eta * cos_i + cos_t, 1e-30)
+    r_perp = (cos_i - eta * cos_t) / np.maximum(cos_i + eta * cos_t, 1e-30)
+    f = np.where(tir, 1.0, 0.5 * (r_par * r_par + r_perp * r_perp))
+    return f.astype(np.result_type(cos_i, np.float32)), cos_t.astype(np.result_type(cos_i, np.float32))
+
+
+def f82_b(f0, tint):
+    """The F82-tint factor b: F(1/7) = F_schlick(1/7) * tint (Cycles fresnel_f82tint_B)."""
+    f = 6.0 / 7.0
+    f5 = f ** 5
+    return (f0 + (1.0 - f0) * f5) * (7.0 / (f5 * f)) * (1.0 - tint)
+
+
+def fresnel_f82(cos, f0, b):
+    """Conductor Fresnel: Schlick minus b cos (1 - cos)^6, clamped to [0, 1] (Cycles fresnel_f82).
+    cos (B,), f0 and b (B, k)."""
+    s = np.clip(1.0 - cos, 0.0, 1.0)
+    s5 = s ** 5
+    # f0 (1 - s5) + s5 - b cos s5 s: the per-hit factors first, three (B, k) operations then
+    return np.clip(f0 * (1.0 - s5)[:, None] + s5[:, None] - b * (np.asarray(cos) * s5 * s)[:, None], 0.0, 1.0)
+
+
+def _f82_fss(f0, b):
+    """Cosine-weighted average of fresnel_f82: 2 int mu F dmu = mix(f0, 1, 1/21) - b / 126."""
+    return np.clip(f0 + (1.0 - f0) / 21.0 - b / 126.0, 0.0, 1.0)
+
+
+def _dielectric_fss(eta):
+    """Cosine-weighted average dielectric Fresnel, Kulla & Conty's fit (as Cycles' fresnel_dielectric_Fss)."""
+    eta = np.asarray(eta, np.float64)
+    lo = 0.997118 + eta * (0.1014 - eta * (0.965241 + eta * 0.130607))
+    hi = (eta - 1.0) / (4.08567 + 1.00071 * eta)
+    return np.where(eta < 1.0, lo, hi)
+
+
+def _ior_from_f0(f0):
+    r = np.sqrt(np.clip(f0, 0.0, 0.99))
+    return (1.0 + r) / (1.0 - r)
+
+
+def _principled_s(cos, eta, f0):
+    """Cycles' generalized-Schlick remap s = (F_real - F0) / (1 - F0) in [0, 1]."""
+    fr, _ = fresnel_dielectric_exact(cos, eta)
+    return np.clip((fr - f0) / np.maximum(1.0 - f0, 1e-6), 0.0, 1.0)
+
+
+# ---------------------------------------------------------------------------------- GGX
+def _lambda(alpha2, w):
+    """Smith Lambda of GGX for local directions w (..., 3): 0.5 (sqrt(1 + alpha^2 tan^2) - 1).
+    tan^2 from the tangential components (precise near the normal, unlike 1 - cos^2)."""
+    s2 = w[..., 0] ** 2 + w[..., 1] ** 2
+    z2 = np.maximum(w[..., 2] ** 2, 1e-30)
+    return 0.5 * (np.sqrt(1.0 + alpha2 * s2 / z2) - 1.0)
+
+
+def _ggx_d(alpha2, h):
+    """GGX D for local unit half vectors (upper hemisphere)."""
+    d = h[..., 0] ** 2 + h[..., 1] ** 2 + alpha2 * h[..., 2] ** 2
+    return alpha2 / (np.pi * np.maximum(d * d, 1e-38))
+
+
+def _sample_vndf(wo, alpha, u1, u2):
+    """Heitz 2018: a visible normal for local wo (upper hemisphere), isotropic alpha (B,)."""
+    vh = np.stack([alpha * wo[:, 0], alpha * wo[:, 1], wo[:, 2]], axis=1)
+    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
+    lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
+    big = lensq > 1e-7
+    inv = np.where(big, 1.0 / np.sqrt(np.where(big, lensq, 1.0)), 0.0)
+    t1x, t1y = np.where(big, -vh[:, 1] * inv, 1.0), np.where(big, vh[:, 0] * inv, 0.0)
+    t1 = np.stack([t1x, t1y, np.zeros_like(lensq)], axis=1)
+    # vh x t1 written out (t1 has no z): np.cross's general path costs several times more
+    t2 = np.stack([-vh[:, 2] * t1y, vh[:, 2] * t1x, vh[:, 0] * t1y - vh[:, 1] * t1x], axis=1)
+    r = np.sqrt(u1)
+    phi = 2.0 * np.pi * u2
+    p1 = r * np.cos(phi)
+    p2 = r * np.sin(phi)
+    s = 0.5 * (1.0 + vh[:, 2])
+    p2 = (1.0 - s) * np.sqrt(np.maximum(0.0, 1.0 - p1 * p1)) + s * p2
+    nh = p1[:, None] * t1 + p2[:, None] * t2 + np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))[:, None] * vh
+    h = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 0.0)], axis=1)
+    return h / np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-30)
+
+
+def _reflect_local(wo, h, cos_oh):
+    return 2.0 * cos_oh[:, None] * h - wo
+
+
+def _refract_local(wo, h, cos_oh, cos_t, eta):
+    """pbrt's Refract with h on wo's side: wi = -wo / eta + (cos_oh / eta - cos_t) h."""
+    return -wo / eta[:, None] + (cos_oh / eta - cos_t)[:, None] * h
+
+
+# ---------------------------------------------------------------------------------- tables
+# Grid nodes at i / (n - 1) in roughness r = sqrt(alpha), in x = sqrt(mu) (denser at grazing,
+# where E changes fastest) and in z (the index axis). The 3-D tables use every other node of the
+# 2-D grid, so one pass of visible-normal geometry serves all of them.
+_N2 = 31                    # E(r, x) and E_avg(r)
+_N3 = 16                    # the 3-D tables: r x x (x z)
+_NZ_GLASS = 32              # glass tables' z nodes (the albedo inside glass bends sharply with the index)
+_Z_MAX_GLASS = 0.98         # z = sqrt((ior - 1) / (ior + 1)): ior up to ~25 tabulated, clamped above
+_Z_MAX_SPEC = 0.99 ** 0.25  # z = F0^(1/4), F0 up to 0.99 (Cycles' ior_from_F0 clamp)
+_MU_MIN = 1e-4              # the mu = 0 column is computed here
+_QUAD_POINTS = 2048         # visible-normal quadrature: points of the Fibonacci lattice per entry
+_CHUNK = 96                 # table entries per vectorised block (memory)
+
+
+def _vndf_block(r, mu):
+    """Visible-normal quadrature for (roughness, mu) entries (E,) on a Fibonacci lattice of the
+    sampling square, u = ((i + 1/2) / N, frac(i / golden ratio)) (a rank-1 lattice: no aliasing
+    with the curve where reflections drop below the horizon, unlike a tensor grid; ~2e-4
+    against a direct wi quadrature). Returns wo, h, cos(wo, h), Lambda(wo), alpha^2 per point
+    (E * N rows) and the reflection weight G2 / G1(wo) with wi above the surface (0 otherwise)."""
+    alpha = np.maximum(r * r, 1e-7).astype(_F32)  # float32: the tables' accuracy is set by the quadrature
+    mu = np.maximum(mu, _MU_MIN).astype(_F32)
+    i = np.arange(_QUAD_POINTS)
+    u1 = ((i + 0.5) / _QUAD_POINTS).astype(_F32)
+    u2 = np.mod(i * 0.6180339887498949, 1.0).astype(_F32)
+    e, p = len(r), len(u1)
+    wo = np.repeat(np.stack([np.sqrt(1.0 - mu * mu), np.zeros_like(mu), mu], axis=1), p, axis=0)
+    a2 = np.repeat(alpha * alpha, p)
+    h = _sample_vndf(wo, np.repeat(alpha, p), np.tile(u1, e), np.tile(u2, e))
+    cos_oh = np.sum(wo * h, axis=1)
+    wi = _reflect_local(wo, h, cos_oh)
+    lo = _lambda(a2, wo)
+    w = np.where(wi[:, 2] > 0, (1.0 + lo) / (1.0 + lo + _lambda(a2, wi)), 0.0)
+    return wo, h, cos_oh, lo, a2, w
+
+
+@lru_cache(maxsize=None)
+def _tables():
+    """All tables, computed once (about a million quadrature points):
+    e_ss (N2, N2): single-scattering albedo of GGX reflection with F = 1, E(r, x);
+    e_avg (N2,): 2 int_0^1 E mu dmu;
+    s_tab (N3, N3, N3): int s(wo.h) f_ss cos of the Principled remap s (z = F0^(1/4));
+    glass_out / glass_in (N3, N3, NZ_GLASS): reflect + eta^2-undone transmit albedo of a rough
+    dielectric with the exact Fresnel, eta = ior > 1 and eta = 1 / ior (z = sqrt((ior-1)/(ior+1)))."""
+    nodes = _grid(_N2)
+    rr, xx = (a.ravel() for a in np.meshgrid(nodes, nodes, indexing="ij"))
+    e_ss = np.empty(len(rr))
+    even = (np.arange(_N2)[:, None] % 2 == 0) & (np.arange(_N2)[None, :] % 2 == 0)
+    even = even.ravel()
+    s_tab = np.empty((_N3 * _N3, _N3))
+    glass = np.empty((2, _N3 * _N3, _NZ_GLASS))
+    z_spec, z_glass = _grid(_N3, _Z_MAX_SPEC), _grid(_NZ_GLASS, _Z_MAX_GLASS)
+    row3 = np.cumsum(even) - 1
+    for start in range(0, len(rr), _CHUNK):
+        sl = slice(start, start + _CHUNK)
+        wo, h, cos_oh, lo, a2, w = _vndf_block(rr[sl], xx[sl] ** 2)
+        n_e = len(rr[sl])
+        e_ss[sl] = w.reshape(n_e, -1).mean(axis=1)
+        sub = np.flatnonzero(even[sl])
+        if not len(sub):
+            continue
+        p = len(w) // n_e
+        pts = (sub[:, None] * p + np.arange(p)[None, :]).ravel()
+        wo, h, cos_oh, lo, a2, w = wo[pts], h[pts], cos_oh[pts], lo[pts], a2[pts], w[pts]
+        rows = row3[start + sub]
+        for j in range(_N3):  # a loop over 16 F0 values
+            f0 = z_spec[j] ** 4
+            s = _principled_s(cos_oh, np.full(len(cos_oh), _ior_from_f0(f0), _F32), _F32(f0))
+            s_tab[rows, j] = (s * w).reshape(len(sub), -1).mean(axis=1)
+        for j in range(_NZ_GLASS):  # a loop over 32 indices
+            zg = z_glass[j]
+            ior = max((1.0 + zg * zg) / (1.0 - zg * zg), 1.0 + 1e-6)
+            for t, eta_v in enumerate((ior, 1.0 / ior)):
+                eta = np.full(len(cos_oh), eta_v, _F32)
+                f, cos_t = fresnel_dielectric_exact(cos_oh, eta)
+                wt = _refract_local(wo, h, cos_oh, cos_t, eta)
+                w_t = np.where((wt[:, 2] < 0) & (f < 1.0), (1.0 + lo) / (1.0 + lo + _lambda(a2, wt)), 0.0)
+                glass[t, rows, j] = (f * w + (1.0 - f) * w_t).reshape(len(sub), -1).mean(axis=1)
+    e_ss = e_ss.reshape(_N2, _N2)
+    # E_avg = 2 int E mu dmu = 4 int E x^3 dx (mu = x^2), Simpson's rule on the 31 nodes
+    wts = np.ones(_N2)
+    wts[1:-1:2], wts[2:-1:2] = 4.0, 2.0
+    e_avg = 4.0 * (e_ss * nodes ** 3 * wts).sum(axis=1) / (3.0 * (_N2 - 1))
+    shape, gshape = (_N3, _N3, _N3), (_N3, _N3, _NZ_GLASS)
+    return e_ss, e_avg, s_tab.reshape(shape), glass[0].reshape(gshape), glass[1].reshape(gshape)
+
+
+def _grid(n, top=1.0):
+    return np.linspace(0.0, top, n)
+
+
+def _cell(x, n):
+    f = np.clip(x, 0.0, 1.0) * (n - 1)
+    i = np.minimum(f.astype(np.int64), n - 2)
+    return i, (f - i).astype(_F32)
+
+
+def _lookup2(tab, x, y):
+    """Bilinear interpolation of tab (nx, ny, ...) at x, y in [0, 1] (grid nodes at i / (n - 1))."""
+    i, tx = _cell(x, tab.shape[0])
+    j, ty = _cell(y, tab.shape[1])
+    if tab.ndim == 3:
+        tx, ty = tx[:, None], ty[:, None]
+    t = tab.astype(_F32)
+    return (1 - tx) * ((1 - ty) * t[i, j] + ty * t[i, j + 1]) + tx * ((1 - ty) * t[i + 1, j] + ty * t[i + 1, j + 1])
+
+
+def _lookup3(tab, x, y, z):
+    """Trilinear interpolation of tab (nx, ny, nz)."""
+    k, tz = _cell(z, tab.shape[2])
+    rows = _lookup2(tab, x, y)  # (B, nz)
+    b = np.arange(len(k))
+    return (1 - tz) * rows[b, k] + tz * rows[b, k + 1]
+
+
+def _lookup1(tab, x):
+    i, t = _cell(x, len(tab))
+    tb = tab.astype(_F32)
+    return (1 - t) * tb[i] + t * tb[i + 1]
+
+
+def _e_ss(alpha, mu):
+    e_ss, e_avg = _tables()[:2]
+    r = np.sqrt(alpha)
+    return np.maximum(_lookup2(e_ss, r, np.sqrt(np.maximum(mu, 0.0))), 1e-3), _lookup1(e_avg, r)
+
+
+def _ms_factor(alpha, mu, fss):
+    """Cycles' multiscatter factor 1 + F_ms (1 - E) / E for average Fresnel fss (B, k)."""
+    e, e_avg = _e_ss(alpha, mu)
+    missing = ((1.0 - e) / e)[:, None]
+    ea = e_avg[:, None]
+    fms = fss * ea / np.maximum(1.0 - fss * (1.0 - ea), 1e-6)
+    return (1.0 + fms * missing).astype(_F32)
+
+
+def _glass_factor(alpha, mu, eta):
+    t_out, t_in = _tables()[3:]
+    ior = np.where(eta >= 1.0, eta, 1.0 / np.maximum(eta, 1e-6))
+    z = np.sqrt((ior - 1.0) / (ior + 1.0)) / _Z_MAX_GLASS
+    r = np.sqrt(alpha)
+    x = np.sqrt(np.maximum(mu, 0.0))
+    e = np.where(eta >= 1.0, _lookup3(t_out, r, x, z), _lookup3(t_in, r, x, z))
+    return (1.0 / np.maximum(e, 1e-3)).astype(_F32)
+
+
+def _plastic_terms(p, mu):
+    """Per hit: f0t = F0 * tint (B, k), the layer's eta (B,), its multiscatter factor (B, k) and
+    its directional albedo E_spec(mu) (B, k)."""
+    f0 = np.clip(p.spec_f0, 0.0, 0.99)
+    eta = _ior_from_f0(f0)
+    f0t = np.clip(p.spec_f0[:, None] * p.spec_tint, 0.0, 1.0)
+    s_avg = np.clip((_dielectric_fss(eta) - f0) / np.maximum(1.0 - f0, 1e-6), 0.0, 1.0)
+    fss = f0t + (1.0 - f0t) * s_avg[:, None]
+    fac = _ms_factor(p.alpha, mu, fss)
+    e_ss, _ = _e_ss(p.alpha, mu)
+    s_int = _lookup3(_tables()[2], np.sqrt(p.alpha), np.sqrt(np.maximum(mu, 0.0)), f0 ** 0.25 / _Z_MAX_SPEC)
+    e_spec = np.clip(fac * (f0t * e_ss[:, None] + (1.0 - f0t) * s_int[:, None]), 0.0, 1.0)
+    return f0t.astype(_F32), eta.astype(_F32), fac, e_spec.astype(_F32)
+
+
+def _plastic_fresnel(cos, f0t, eta, spec_f0):
+    f0 = np.clip(spec_f0, 0.0, 0.99)
+    s = _principled_s(cos, eta, f0)[:, None]
+    return f0t + (1.0 - f0t) * s
+
+
+def energy_compensation(params: SurfaceParams, cos_o) -> np.ndarray:
+    """(B, k) factor by which the multiple-scattering compensation scales each hit's
+    single-scattering microfacet lobe for cos(wo, ns) = cos_o (1 for LAMBERT and for smooth
+    surfaces); the PLASTIC value is its specular layer's."""
+    p, mu = params, np.asarray(cos_o, _F32)
+    out = np.ones(p.base.shape, _F32)
+    rough = p.alpha >= _MIN_ALPHA
+    for code in (CONDUCTOR, GLOSSY, DIELECTRIC, PLASTIC):
+        idx = np.flatnonzero((p.lobe == code) & rough)
+        if len(idx):
+            out[idx] = _lobe_factor(_sub(p, idx), mu[idx], code)
+    return out
+
+
+def _lobe_factor(p, mu, code, b=None):
+    """The lobe's multiscatter factor (B, k); ``b``: CONDUCTOR's f82_b(p.base, p.edge) when the
+    caller has it already."""
+    if code == CONDUCTOR:
+        return _ms_factor(p.alpha, mu, _f82_fss(p.base, f82_b(p.base, p.edge) if b is None else b))
+    if code == GLOSSY:
+        return _ms_factor(p.alpha, mu, np.clip(p.base, 0.0, 1.0))
+    if code == DIELECTRIC:
+        return np.broadcast_to(_glass_factor(p.alpha, mu, p.eta)[:, None], p.base.shape)
+    return _plastic_terms(p, mu)[2]
+
+
+# ---------------------------------------------------------------------------------- frames
+def tangent_frame(n):
+    """Unit tangents (u, v) (B, 3) float32 with (u, v, n) orthonormal and right-handed (u x v =
+    n), for unit normals n (B, 3): Duff, Burgess, Christensen, Hery, Kensler, Liani & Villemin
+    2017, "Building an Orthonormal Basis, Revisited" (JCGT 6(1)), branchless, no cross product
+    or square root (docs/physics.md section 4.8); discontinuous only across z = 0, which no
+    isotropic lobe sees."""
+    n = np.asarray(n, _F32)
+    x, y, z = n[:, 0], n[:, 1], n[:, 2]
+    sg = np.where(z >= 0, _F32(1), _F32(-1))
+    a = _F32(-1) / (sg + z)
+    b = x * y * a
+    u = np.stack([_F32(1) + sg * x * x * a, sg * b, -sg * x], axis=1)
+    v = np.stack([b, sg + y * y * a, -y], axis=1)
+    return u, v
+
+
+def cosine_hemisphere(n, rng):
+    """Cosine-weighted unit directions about the unit normals n (B, 3) and their cosines (Malley's
+    method: a uniform disk point lifted to the hemisphere; pdf = cos / pi), from two numbers per
+    row of ``rng`` (a Generator or the eye pass's pixel sampler)."""
+    b = len(n)
+    u1, u2 = rng.random(b, _F32), rng.random(b, _F32)
+    r, phi = np.sqrt(u1), _F32(2 * np.pi) * u2
+    tu, tv = tangent_frame(n)
+    cos = np.sqrt(np.maximum(_F32(1) - u1, 0))
+    wi = (r * np.cos(phi))[:, None] * tu + (r * np.sin(phi))[:, None] * tv + cos[:, None] * n
+    return wi.astype(_F32), cos.astype(_F32)
+
+
+def _frame(ns):
+    return tangent_frame(ns)
+
+
+def _to_local(w, u, v, n):
+    return np.stack([np.sum(w * u, 1), np.sum(w * v, 1), np.sum(w * n, 1)], axis=1)
+
+
+def _to_world(w, u, v, n):
+    return w[:, :1] * u + w[:, 1:2] * v + w[:, 2:3] * n
+
+
+def _cosine_sample(u1, u2):
+    """Malley's method on Shirley's concentric disk: local directions, pdf cos / pi."""
+    a, b = 2.0 * u1 - 1.0, 2.0 * u2 - 1.0
+    first = np.abs(a) > np.abs(b)
+    r = np.where(first, a, b)
+    safe_a = np.where(first, a, np.where(b == 0, 1.0, b))
+    phi = np.where(first, (np.pi / 4) * b / np.where(a == 0, 1.0, a), np.pi / 2 - (np.pi / 4) * a / safe_a)
+    x, y = r * np.cos(phi), r * np.sin(phi)
+    z = np.sqrt(np.maximum(0.0, 1.0 - x * x - y * y))
+    return np.stack([x, y, z], axis=1)
+
+
+# ---------------------------------------------------------------------------------- lobes (local frame)
+def _eval_reflection_common(alpha, wo, wi):
+    """D G2 / (4 cos_o) (the f cos of an F = 1 lobe), pdf of VNDF reflection, and wo.h."""
+    a2 = alpha * alpha
+    h = wo + wi
+    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-30)
+    d = _ggx_d(a2, h)
+    lo, li = _lambda(a2, wo), _lambda(a2, wi)
+    mu_o = wo[:, 2]
+    fc = d / ((1.0 + lo + li) * 4.0 * mu_o)
+    pdf = d / ((1.0 + lo) * 4.0 * mu_o)
+    return fc, pdf, np.sum(wo * h, axis=1)
+
+
+def _eval_lobe(p, code, wo, wi, terms=None):
+    """f cos (B, k) and pdf (B,) of one lobe's hits in the local frame (wo.z > 0); wi.z > 0
+    means reflection, < 0 transmission (the caller has checked the geometric side)."""
+    B, k = p.base.shape
+    fcos = np.zeros((B, k), _F32)
+    pdf = np.zeros(B, _F32)
+    up = wi[:, 2] > 0
+    mu_o = wo[:, 2]
+    if code == LAMBERT:
+        c = np.where(up, wi[:, 2], 0.0) * _INV_PI
+        return (p.base * c[:, None]).astype(_F32), c.astype(_F32)
+    rough = p.alpha >= _MIN_ALPHA
+    if code in (CONDUCTOR, GLOSSY) and p.ms is not None:  # wo's factors known: all rows, the rest zeroed
+        ok = up & rough
+        fc, pd, coh = _eval_reflection_common(p.alpha, wo, wi)
+        f = fresnel_f82(coh, p.base, p.f82) if code == CONDUCTOR else p.base
+        return (np.where(ok[:, None], f * (fc[:, None] * p.ms), _F32(0.0)).astype(_F32, copy=False),
+                np.where(ok, pd, _F32(0.0)).astype(_F32, copy=False))
+    if code in (CONDUCTOR, GLOSSY):
+        m = np.flatnonzero(up & rough)
+        if len(m):
+            q = _sub(p, m)
+            fc, pd, coh = _eval_reflection_common(q.alpha, wo[m], wi[m])
+            b = f82_b(q.base, q.edge) if code == CONDUCTOR else None
+            f = fresnel_f82(coh, q.base, b) if code == CONDUCTOR else q.base
+            fcos[m] = f * (fc[:, None] * _lobe_factor(q, mu_o[m], code, b))
+            pdf[m] = pd
+        return fcos, pdf
+    if code == DIELECTRIC:
+        m = np.flatnonzero(up & rough)
+        if len(m):
+            q = _sub(p, m)
+            fc, pd, coh = _eval_reflection_common(q.alpha, wo[m], wi[m])
+            f, _ = fresnel_dielectric_exact(coh, q.eta)
+            fcos[m] = q.base * (f * fc * _glass_factor(q.alpha, mu_o[m], q.eta))[:, None]
+            pdf[m] = f * pd
+        m = np.flatnonzero(~up & rough & (np.abs(p.eta - 1.0) >= 1e-4))
+        if len(m):
+            q = _sub(p, m)
+            a2 = q.alpha * q.alpha
+            o, i, eta = wo[m], wi[m], q.eta
+            h = eta[:, None] * i + o
+            h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-30)
+            h = np.where(h[:, 2:3] < 0, -h, h)
+            coh, cih = np.sum(o * h, 1), np.sum(i * h, 1)
+            ok = (coh > 0) & (cih < 0)
+            f, _ = fresnel_dielectric_exact(coh, eta)
+            d = _ggx_d(a2, h)
+            lo, li = _lambda(a2, o), _lambda(a2, i)
+            denom = cih + coh / eta
+            denom2 = np.maximum(denom * denom, 1e-30)
+            jac = np.abs(cih) / denom2
+            t = np.where(ok, 1.0 - f, 0.0)
+            val = t * d * coh * jac / (o[:, 2] * eta * eta * (1.0 + lo + li))
+            fcos[m] = q.base * (val * _glass_factor(q.alpha, mu_o[m], eta))[:, None]
+            pdf[m] = t * d * coh * jac / (o[:, 2] * (1.0 + lo))
+        return fcos, pdf
+    # PLASTIC
+    f0t, eta, fac, e_spec = _plastic_terms(p, mu_o) if terms is None else terms
+    c = np.where(up, wi[:, 2], 0.0) * _INV_PI
+    fcos = (p.base * (1.0 - e_spec) * c[:, None]).astype(_F32)
+    ps = _plastic_p_spec(p, e_spec)
+    pdf = ((1.0 - ps) * c).astype(_F32)
+    m = np.flatnonzero(up & rough)
+    if len(m):
+        fc, pd, coh = _eval_reflection_common(p.alpha[m], wo[m], wi[m])
+        f = _plastic_fresnel(coh, f0t[m], eta[m], p.spec_f0[m])
+        fcos[m] += f * fac[m] * fc[:, None]
+        pdf[m] += ps[m] * pd
+    return fcos, pdf
+
+
+def _plastic_p_spec(p, e_spec):
+    """Probability of sampling the specular layer: its share of the estimated albedo (as Cycles'
+    sample weights)."""
+    es = e_spec.mean(axis=1)
+    ed = (p.base * (1.0 - e_spec)).mean(axis=1)
+    tot = es + ed
+    return np.where(tot > 0, es / np.where(tot > 0, tot, 1.0), 1.0).astype(_F32)
+
+
+def _sample_lobe(p, code, wo, u):
+    """Local wi, weight (B, k), pdf (B,), flags (B,) for one lobe's hits (wo.z > 0)."""
+    B, k = p.base.shape
+    mu_o = wo[:, 2]
+    wi = np.zeros((B, 3), _F32)
+    wi[:, 2] = 1.0
+    weight = np.zeros((B, k), _F32)
+    pdf = np.zeros(B, _F32)
+    flags = np.zeros(B, np.int32)
+    if code == LAMBERT:
+        wi = _cosine_sample(u[:, 0], u[:, 1]).astype(_F32)
+        ok = wi[:, 2] > 0
+        weight[ok] = p.base[ok]
+        pdf[ok] = wi[ok, 2] * _INV_PI
+        flags[ok] = DIFFUSE_REFLECTION
+        return wi, weight, pdf, flags
+    rough = p.alpha >= _MIN_ALPHA
+    h = np.zeros((B, 3), _F32)
+    h[:, 2] = 1.0
+    r = np.flatnonzero(rough)
+    if len(r):
+        h[r] = _sample_vndf(wo[r], p.alpha[r], u[r, 0], u[r, 1])
+    cos_oh = np.sum(wo * h, axis=1)
+    a2 = p.alpha * p.alpha
+    lo = _lambda(a2, wo)
+    if code in (CONDUCTOR, GLOSSY):
+        wi = _reflect_local(wo, h, cos_oh)
+        ok = (wi[:, 2] > 0) & (cos_oh > 0)
+        b = p.f82 if p.ms is not None else f82_b(p.base, p.edge) if code == CONDUCTOR else None
+        f = fresnel_f82(cos_oh, p.base, b) if code == CONDUCTOR else p.base
+        g = np.where(rough, (1.0 + lo) / (1.0 + lo + _lambda(a2, wi)), 1.0)
+        if p.ms is not None:
+            fac = p.ms
+        elif len(r) == B:
+            fac = _lobe_factor(p, mu_o, code, b)
+        else:
+            fac = np.ones((B, k), _F32)
+            if len(r):
+                fac[r] = _lobe_factor(_sub(p, r), mu_o[r], code, None if b is None else b[r])
+        weight = np.where(ok[:, None], f * fac * g[:, None], 0.0).astype(_F32)
+        pdf = np.where(ok, np.where(rough, _ggx_d(a2, h) / ((1.0 + lo) * 4.0 * mu_o), np.inf), 0.0).astype(_F32)
+        flags = np.where(ok, GLOSSY_REFLECTION | np.where(rough, 0, SINGULAR), 0).astype(np.int32)
+        return wi.astype(_F32), weight, pdf, flags
+    if code == DIELECTRIC:
+        eta = p.eta
+        unit = np.abs(eta - 1.0) < 1e-4  # index-matched: a straight pass, a delta transmission
+        f, cos_t = fresnel_dielectric_exact(cos_oh, eta)
+        f = np.where(unit, 0.0, f)
+        refl = u[:, 2] < f
+        wr = _reflect_local(wo, h, cos_oh)
+        wt = np.where(unit[:, None], -wo, _refract_local(wo, h, cos_oh, cos_t, eta))
+        wi = np.where(refl[:, None], wr, wt)
+        ok = np.where(refl, wi[:, 2] > 0, wi[:, 2] < 0) & (cos_oh > 0)
+        g = np.where(rough, (1.0 + lo) / (1.0 + lo + _lambda(a2, wi)), 1.0)
+        fac = np.ones(B, _F32)
+        if len(r):
+            fac[r] = _glass_factor(p.alpha[r], mu_o[r], eta[r])
+        scale = np.where(refl, 1.0, 1.0 / (eta * eta)) * g * fac
+        weight = np.where(ok[:, None], p.base * scale[:, None], 0.0).astype(_F32)
+        d_vis = _ggx_d(a2, h) * cos_oh / (mu_o * (1.0 + lo))
+        cih = np.sum(wi * h, axis=1)
+        denom = cih + cos_oh / eta
+        pdf_r = f * d_vis / np.maximum(4.0 * cos_oh, 1e-30)
+        pdf_t = (1.0 - f) * d_vis * np.abs(cih) / np.maximum(denom * denom, 1e-30)
+        singular = ~rough | (unit & ~refl)
+        pdf = np.where(ok, np.where(singular, np.inf, np.where(refl, pdf_r, pdf_t)), 0.0).astype(_F32)
+        fl = np.where(refl, GLOSSY_REFLECTION, TRANSMISSION) | np.where(singular, SINGULAR, 0)
+        flags = np.where(ok, fl, 0).astype(np.int32)
+        return wi.astype(_F32), weight, pdf, flags
+    # PLASTIC: the specular layer with its albedo share, else the diffuse base
+    f0t, eta_l, fac, e_spec = _plastic_terms(p, mu_o)
+    ps = _plastic_p_spec(p, e_spec)
+    spec = u[:, 2] < ps
+    wr = _reflect_local(wo, h, cos_oh)
+    wd = _cosine_sample(u[:, 0], u[:, 1])
+    wi = np.where(spec[:, None], wr, wd).astype(_F32)
+    ok = (wi[:, 2] > 0) & np.where(spec, cos_oh > 0, True)
+    delta = spec & ~rough & ok
+    fcos, pd = _eval_lobe(p, PLASTIC, wo, wi, (f0t, eta_l, fac, e_spec))
+    good = ok & ~delta & (pd > 0)
+    weight[good] = fcos[good] / pd[good, None]
+    pdf[good] = pd[good]
+    flags[good] = np.where(spec[good], GLOSSY_REFLECTION, DIFFUSE_REFLECTION)
+    if delta.any():  # a smooth coat: delta reflection, weight F / p_spec
+        dm = np.flatnonzero(delta)
+        f = _plastic_fresnel(mu_o[dm], f0t[dm], eta_l[dm], p.spec_f0[dm])
+        weight[dm] = f / ps[dm, None]
+        pdf[dm] = np.inf
+        flags[dm] = GLOSSY_REFLECTION | SINGULAR
+    return wi, weight, pdf, flags
+
+
+# ---------------------------------------------------------------------------------- public API
+def _prepare(params, wo, ns):
+    wo = np.asarray(wo, _F32)
+    ns = np.asarray(ns, _F32)
+    if params.wo_local is not None:
+        return wo, ns, params.frame_u, params.frame_v, params.wo_local
+    u, v = _frame(ns)
+    return wo, ns, u, v, _to_local(wo, u, v, ns)
+
+
+def with_outgoing(params: SurfaceParams, wo, ns) -> SurfaceParams:
+    """``params`` with what depends on wo only computed once for these hits: the shading frame,
+    wo in it and, where every hit has one CONDUCTOR or GLOSSY lobe, F82's b and the multiscatter
+    factor. ``evaluate`` and ``sample`` then skip them; they must be called with the same wo and
+    ns (rows taken together with ``take``). The values are the ones they compute themselves."""
+    wo, ns, fu, fv, wl = _prepare(params, wo, ns)
+    out = replace(params, frame_u=fu, frame_v=fv, wo_local=wl)
+    lobe = params.lobe
+    if len(lobe) and lobe[0] in (CONDUCTOR, GLOSSY) and (lobe == lobe[0]).all():
+        code = int(lobe[0])
+        b = f82_b(params.base, params.edge).astype(_F32) if code == CONDUCTOR else None
+        rough = params.alpha >= _MIN_ALPHA
+        with np.errstate(all="ignore"):  # rows with wo below ns: evaluate and sample zero them
+            fac = _lobe_factor(params, wl[:, 2], code, b)
+        out.f82, out.ms = b, np.where(rough[:, None], fac, _F32(1.0)).astype(_F32)
+    return out
+
+
+def sample(params: SurfaceParams, wo, ns, ng, u):
+    """Sample wi for each hit. wo (B, 3) unit towards the previous vertex; ns (B, 3) unit shading
+    normal and ng (B, 3) geometric normal, both on wo's side; u (B, 3) uniforms in [0, 1)
+    (u[:, 2], the reflect / transmit or coat / base choice, is read by DIELECTRIC and PLASTIC only).
+
+    Returns wi (B, 3) unit, weight (B, k) = f |cos(wi, ns)| / pdf, pdf (B,) solid-angle density
+    (inf for SINGULAR events), flags (B,) (0: absorbed; weight and pdf are 0 then)."""
+    wo, ns, fu, fv, wl = _prepare(params, wo, ns)
+    ng = np.asarray(ng, _F32)
+    u = np.asarray(u, _F32)
+    B, k = params.base.shape
+    wi_l = np.zeros((B, 3), _F32)
+    wi_l[:, 2] = 1.0
+    weight = np.zeros((B, k), _F32)
+    pdf = np.zeros(B, _F32)
+    flags = np.zeros(B, np.int32)
+    valid = wl[:, 2] > 0
+    for code in (LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY):  # a loop over the 5 lobes
+        mine = params.lobe == code
+        idx = np.flatnonzero(mine & valid)
+        if len(idx) and mine.all():  # one lobe everywhere: all rows, the invalid ones zeroed (no take)
+            with np.errstate(all="ignore"):
+                wi_l, weight, pdf, flags = _sample_lobe(params, code, wl, u)
+            if len(idx) < B:
+                bad = ~valid
+                wi_l[bad], weight[bad], pdf[bad], flags[bad] = (0.0, 0.0, 1.0), 0.0, 0.0, 0
+            break
+        if len(idx):
+            wi_l[idx], weight[idx], pdf[idx], flags[idx] = _sample_lobe(params.take(idx), code, wl[idx], u[idx])
+    wi = _to_world(wi_l, fu, fv, ns)
+    wi /= np.maximum(np.linalg.norm(wi, axis=1, keepdims=True), 1e-30)
+    side = np.sum(wi * ng, axis=1)
+    trans = (flags & TRANSMISSION) != 0
+    bad = (flags != 0) & np.where(trans, side >= 0, side <= 0)
+    weight[bad] = 0.0
+    pdf[bad] = 0.0
+    flags[bad] = 0
+    return wi.astype(_F32), weight, pdf, flags
+
+
+def evaluate(params: SurfaceParams, wo, wi, ns, ng):
+    """f |cos(wi, ns)| (B, k) and the pdf sample() has for wi (B,), for next-event estimation
+    and MIS. Delta (SINGULAR) parts evaluate to zero; so does a wi on the wrong side of ng or ns
+    for its kind of event."""
+    wo, ns, fu, fv, wl = _prepare(params, wo, ns)
+    wi = np.asarray(wi, _F32)
+    ng = np.asarray(ng, _F32)
+    il = _to_local(wi, fu, fv, ns)
+    B, k = params.base.shape
+    fcos = np.zeros((B, k), _F32)
+    pdf = np.zeros(B, _F32)
+    side = np.sum(wi * ng, axis=1)
+    consistent = np.where(il[:, 2] > 0, side > 0, (side < 0) & (il[:, 2] < 0))
+    valid = (wl[:, 2] > 0) & consistent
+    for code in (LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY):
+        mine = params.lobe == code
+        idx = np.flatnonzero(mine & valid)
+        if len(idx) and mine.all():  # one lobe everywhere: all rows, the invalid ones zeroed (no take)
+            with np.errstate(all="ignore"):
+                fcos, pdf = _eval_lobe(params, code, wl, il)
+            if len(idx) < B:
+                fcos[~valid], pdf[~valid] = 0.0, 0.0
+            break
+        if len(idx):
+            fcos[idx], pdf[idx] = _eval_lobe(params.take(idx), code, wl[idx], il[idx])
+    return fcos, pdf
+
+
+# ---------------------------------------------------------------------------------- materials
+def params_from_materials(materials, mat, front, lam=None, base=None, roughness=None, u_layer=None) -> SurfaceParams:
+    """SurfaceParams of hits on materials (core/materials.PreparedMaterials) rows ``mat`` (B,).
+
+    front (B,) bool: the hit is on the side the normal points to (entering a dielectric: eta =
+    ior; else 1 / ior). lam (B,) wavelength indices of mono rays, or None for white rays (a
+    dispersive index then takes its mean over the grid: split such rays first, as
+    core/transport/walker.py does). base (B, k) / roughness (B,) override the table per hit (textures).
+
+    Principled's layers: with u_layer (B,) uniforms the layer is drawn per hit - the metal with
+    probability metallic, else glass with probability transmission, else the dielectric base
+    (PLASTIC, or LAMBERT without a specular layer) - which makes each hit's weight an unbiased
+    estimate of the weighted sum; without u_layer the heaviest layer is used.
+    """
+    m = materials
+    mat = np.asarray(mat, np.int64)
+    front = np.asarray(front, bool)
+    B = len(mat)
+    metallic, transmission = m.metallic[mat], m.transmission[mat]
+    if u_layer is None:  # the heaviest layer (ties: metal, then glass)
+        w_glass, w_base = (1.0 - metallic) * transmission, (1.0 - metallic) * (1.0 - transmission)
+        metal = (metallic >= w_glass) & (metallic >= w_base)
+        glass = ~metal & (w_glass >= w_base)
+    else:
+        u_layer = np.asarray(u_layer, np.float64)
+        metal = u_layer < metallic
+        rest = (u_layer - metallic) / np.maximum(1.0 - metallic, 1e-12)
+        glass = ~metal & (rest < transmission)
+    spec_f0 = np.where(metal | glass, 0.0, m.spec_f0[mat]).astype(_F32)
+    lobe = np.where(metal, np.where(m.conductor_f82[mat], CONDUCTOR, GLOSSY),
+                    np.where(glass, DIELECTRIC, np.where(spec_f0 > 0, PLASTIC, LAMBERT))).astype(np.int32)
+
+    def spectral(table):
+        return table[mat] if lam is None else table[mat, np.asarray(lam, np.int64)][:, None]
+
+    b = spectral(m.reflectance) if base is None else np.asarray(base, _F32)
+    edge = np.where(lobe[:, None] == CONDUCTOR, np.minimum(spectral(m.specular_tint), 1.0), 1.0)
+    tint = spectral(m.specular_tint)
+    rough = m.roughness[mat] if roughness is None else np.asarray(roughness, _F32)
+    alpha = np.clip(rough, 0.0, 1.0) ** 2
+    if lam is None:
+        ior = m.ior[mat].mean(axis=1)
+    else:
+        ior = m.ior[mat, np.asarray(lam, np.int64)]
+    eta = np.where(lobe == DIELECTRIC, np.where(front, ior, 1.0 / ior), 1.0)
+    k = b.shape[1]
+    return SurfaceParams(lobe, np.ascontiguousarray(b, _F32), np.broadcast_to(edge, (B, k)).astype(_F32),
+                         alpha.astype(_F32), eta.astype(_F32), spec_f0,
+                         np.broadcast_to(tint, (B, k)).astype(_F32))
+
+
+def microfacet_materials(materials, textures=None) -> np.ndarray:
+    """(M,) bool: the materials the eye pass shades with this module rather than with the delta
+    mirror / glass code or the plain Lambertian path: rough mirrors and glass (roughness at least
+    MIN_ROUGHNESS, or a roughness texture), Principled's layered mixes (0 < metallic < 1, glass
+    with transmission below 1), and diffuse bases with a specular layer (PLASTIC) or a metal or
+    glass layer. Files without these columns keep their old meaning (nothing is microfacet)."""
+    from .spectra import DIELECTRIC as K_DIELECTRIC, DIFFUSE as K_DIFFUSE, MIRROR as K_MIRROR
+
+    m = materials
+    kind = np.asarray(m.kind)
+    rough = np.asarray(m.roughness) >= MIN_ROUGHNESS
+    if textures is not None and len(textures.roughness):
+        rough = rough | (np.asarray(textures.roughness) >= 0)
+    metallic, transmission = np.asarray(m.metallic), np.asarray(m.transmission)
+    return (((kind == K_MIRROR) & (rough | (metallic < 1)))
+            | ((kind == K_DIELECTRIC) & (rough | (transmission < 1) | (metallic > 0)))
+            | ((kind == K_DIFFUSE) & ((np.asarray(m.spec_f0) > 0) | (metallic > 0) | (transmission > 0))))

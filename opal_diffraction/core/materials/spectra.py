@@ -1,0 +1,72 @@
+"""Materials on the wavelength grid: reflectance / tint spectra and refractive-index spectra.
+
+Three kinds (scene.MATERIAL_KINDS): Lambertian diffuse (BRDF rho / pi, two-sided), tinted
+specular mirror, and a smooth dielectric (Fresnel reflection, Snell refraction, total internal
+reflection) whose index may vary with wavelength (optics.ior_spectrum). A dielectric's colour
+tints reflected and transmitted light alike, as Blender's Glass BSDF does.
+
+Rough surfaces and Principled's layers (core/materials/bsdf.py, docs/physics.md section 14) read the
+per-material roughness, the layer weights metallic and transmission, the specular layer's F0
+(spec_f0 = ((ior - 1) / (ior + 1))^2 x 2 x IOR level, Cycles' Principled v2), the specular /
+edge tint spectrum and whether a metal uses the F82-tint Fresnel (else its colour is constant).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..spectral.optics import DISPERSION_MODELS, ior_spectrum
+from ..util.enums import ConductorFresnel, MaterialKind
+from ..scene.model import Materials
+from ..spectral.spectrum import SpectralConverter
+
+__all__ = ["PreparedMaterials", "prepare_materials", "DIFFUSE", "MIRROR", "DIELECTRIC"]
+
+DIFFUSE, MIRROR, DIELECTRIC = (int(k) for k in (MaterialKind.DIFFUSE, MaterialKind.MIRROR, MaterialKind.DIELECTRIC))
+_MODEL_NAMES = {code: name for name, code in DISPERSION_MODELS.items()}
+
+
+@dataclass
+class PreparedMaterials:
+    kind: np.ndarray         # (M,) int
+    reflectance: np.ndarray  # (M, n) float32: albedo / tint spectrum
+    ior: np.ndarray          # (M, n) float32: refractive index per wavelength (1 for non-dielectrics)
+    dispersive: np.ndarray   # (M,) bool: index varies over the grid
+    emission: np.ndarray     # (M, n) float32 emitted spectral radiance (zero for most)
+    emissive: np.ndarray     # (M,) bool
+    clear: np.ndarray        # (M,) bool: reflectance 1 at every wavelength (untinted glass/mirror)
+    roughness: np.ndarray = None      # (M,) float32 Blender roughness (GGX alpha = roughness^2)
+    metallic: np.ndarray = None       # (M,) float32 weight of the conductor layer
+    transmission: np.ndarray = None   # (M,) float32 weight of the glass layer (of what the metal leaves)
+    spec_f0: np.ndarray = None        # (M,) float32 F0 of the base's specular layer (0: pure Lambert)
+    specular_tint: np.ndarray = None  # (M, n) float32 specular tint / metal edge tint spectrum
+    conductor_f82: np.ndarray = None  # (M,) bool: the metal uses the F82-tint Fresnel (else constant colour)
+
+    @property
+    def has_dispersion(self) -> bool:
+        return bool(self.dispersive.any())
+
+
+def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterials:
+    wl = conv.grid.wavelengths
+    kind = np.asarray(m.kind, np.int32)
+    refl = conv.reflectance_from_rgb(np.asarray(m.color, np.float64).reshape(-1, 3))
+    ior = np.ones((len(kind), len(wl)))
+    for i in np.flatnonzero(kind == DIELECTRIC):  # one row per material, not per ray
+        ior[i] = ior_spectrum(wl, _MODEL_NAMES[int(m.dispersion[i])], float(m.ior[i]), float(m.abbe[i]))
+    dispersive = (kind == DIELECTRIC) & (np.ptp(ior, axis=1) > 0) if len(kind) else np.zeros(0, bool)
+    emission = conv.illuminant_from_rgb(np.asarray(m.emission, np.float64).reshape(-1, 3)).astype(np.float32)
+    refl32 = refl.astype(np.float32)
+    clear = np.all(refl32 == 1.0, axis=1) if len(refl32) else np.zeros(0, bool)
+    n_d = np.asarray(m.ior, np.float64)
+    spec_f0 = ((n_d - 1.0) / (n_d + 1.0)) ** 2 * 2.0 * np.asarray(m.specular_ior_level, np.float64)
+    tint = conv.reflectance_from_rgb(np.asarray(m.specular_tint, np.float64).reshape(-1, 3)).astype(np.float32)
+    return PreparedMaterials(kind, refl32, ior.astype(np.float32), dispersive,
+                             emission, emission.any(axis=1), clear,
+                             roughness=np.asarray(m.roughness, np.float32),
+                             metallic=np.asarray(m.metallic, np.float32),
+                             transmission=np.asarray(m.transmission, np.float32),
+                             spec_f0=spec_f0.astype(np.float32), specular_tint=tint,
+                             conductor_f82=np.asarray(m.conductor_fresnel) == int(ConductorFresnel.F82_TINT))

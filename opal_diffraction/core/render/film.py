@@ -1,0 +1,232 @@
+"""The film: per-pixel sums of the eye pass's tiles, and the finished image they make.
+
+Tiles add their sums (and the parts that are not Direct light) into the film with the number of
+samples they took; ``result()`` divides by each pixel's count, so a partial image after a cancel
+or a time limit is a correct mean of the samples that were taken.
+
+The film sums linear Rec.709 RGB: a tile's (P, n) spectral sums are converted when the tile is
+added (``SpectralConverter.to_rgb``, one (n, 3) matrix), which is exact up to float32 rounding
+because the RGB image is a linear map of the spectrum (sum of conversions = conversion of the
+sum). RGB rather than CIE XYZ because everything read from the film is RGB (the image, the
+passes, adaptive sampling's error estimate), so nothing is converted twice. The (H, W, n)
+spectral sums (61 float32 per pixel: 506 MB at 1920x1080) are kept only when a spectral image is
+asked for (``spectral=True``: a spectral EXR is written, or a caller wants
+``RenderResult.spectral``); otherwise ``RenderResult.spectral`` is None. The RGB image is summed
+the same way in both cases, so it does not depend on whether the spectral film is kept. The
+spectral sums are stored wavelength-major, (n, H, W), and ``RenderResult.spectral`` is the
+(H, W, n) view of them (``np.moveaxis``), so each wavelength's image is already the contiguous
+(H, W) plane a spectral EXR's channel needs (core/render/output.py copies nothing), and the final
+result divides the sums in place: a spectral render holds one (n, H, W) array, not three.
+
+Passes (AOVs for the compositor, (H, W, 3) linear Rec.709): Direct (light reaching diffuse
+surfaces by shadow rays, also seen through mirrors and glass), Caustics (the light pass),
+Diffraction (gratings). Combined = Direct + Caustics + Diffraction + emitted light seen (the
+world and emissive surfaces, directly or via specular paths). Denoising Albedo and Denoising
+Normal are Cycles' feature passes (intern/cycles/kernel/film/denoising_passes.h), the mean over
+a pixel's samples of the first diffuse surface's albedo (linear RGB, times the throughput of the
+mirrors and glass before it) and of its shading normal in Cycles' camera space (x right, y up,
+z forward; not renormalised after averaging, zero where a sample saw no diffuse surface), which
+is what OpenImageDenoise and Blender's Denoise node take (docs/physics.md section 10.6).
+
+With adaptive sampling (core/render/adaptive.py) the film also keeps the RGB sum of the samples of the
+even rounds (the "A" half of Cycles' adaptive buffer) and each pixel's state: a round's tile may
+cover only its active pixels (``pixels``), and ``update_active`` decides which pixels sample in
+the tile's next round.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import adaptive as _adaptive
+from .plan import RenderPlan
+from ..scene.model import SceneError
+from ..spectral.spectrum import SpectralConverter
+
+__all__ = ["Film", "RenderResult", "tile_parts_rgb", "camera_space_rotation", "FEATURE_PASSES", "NO_SPECTRAL",
+           "keeps_spectral"]
+
+#: Cycles' names of the denoising feature passes (a compositor Denoise node links to them)
+FEATURE_PASSES = ("Denoising Albedo", "Denoising Normal")
+
+PARTS = ("background", "indirect", "caustics", "diffraction")  # a TileResult's non-Direct parts
+
+#: why a result has no spectral image (RenderResult.spectral is None)
+NO_SPECTRAL = ("this render kept no spectral film (only RGB): set RenderSettings.spectral_exr, or pass "
+               "spectral_film=True to render / render_prepared, to keep the spectral image")
+
+
+def keeps_spectral(settings, spectral_film: bool | None = None) -> bool:
+    """Whether a render with ``settings`` (settings.RenderSettings) keeps its (H, W, n) spectral
+    film: ``spectral_film`` if given, else whether the settings write a spectral EXR."""
+    return bool(settings.spectral_exr) if spectral_film is None else bool(spectral_film)
+
+
+def tile_parts_rgb(conv: SpectralConverter, tile) -> dict:
+    """An eye_pass.TileResult's non-Direct parts as (P, 3) RGB (None where it wrote none)."""
+    return {name: None if getattr(tile, name) is None else conv.to_rgb(getattr(tile, name)) for name in PARTS}
+
+
+@dataclass
+class RenderResult:
+    spectral: np.ndarray | None   # (H, W, n) float32 mean spectral radiance, row 0 at the top (a view
+    #                               of (n, H, W) planes); None unless the render kept its spectral film
+    rgb: np.ndarray               # (H, W, 3) float32 linear Rec.709
+    wavelengths: np.ndarray       # (n,) nm
+    samples: int                  # samples per pixel actually taken (the minimum over pixels)
+    cancelled: bool
+    plan: RenderPlan
+    warnings: list[str] = field(default_factory=list)
+    stats: dict = field(default_factory=dict)
+    passes: dict = field(default_factory=dict)  # 'Direct', 'Indirect', 'Caustics', 'Diffraction',
+    #                                             'Denoising Albedo', 'Denoising Normal': (H, W, 3)
+    sample_counts: np.ndarray | None = None  # (H, W) float32 samples each pixel took (adaptive sampling varies them)
+
+
+def camera_space_rotation(camera) -> np.ndarray:
+    """(3, 3) world -> Cycles camera space (x right, y up, z the view direction: Blender's camera
+    axes with z flipped, intern/cycles/blender/camera.cpp blender_camera_matrix), for normals."""
+    m = np.asarray(camera.matrix, np.float64)[:3, :3]
+    rot = m / np.linalg.norm(m, axis=0, keepdims=True)
+    return (rot * np.array([1.0, 1.0, -1.0])).T.astype(np.float32)
+
+
+class Film:
+    """Accumulates tiles of one render (``height`` x ``width`` pixels, ``conv``'s grid).
+
+    ``to_camera``: the (3, 3) world -> camera rotation of the Denoising Normal pass (identity if
+    None). ``adaptive``: keep the half buffer and pixel states of adaptive sampling.
+    ``spectral``: keep the (H, W, n) spectral sums too (for a spectral EXR); otherwise
+    ``self.spectral`` is None and only RGB is summed."""
+
+    def __init__(self, width: int, height: int, conv: SpectralConverter, to_camera=None, adaptive: bool = False,
+                 spectral: bool = False):
+        self.conv = conv
+        self.rgb = np.zeros((height, width, 3), np.float32)  # linear Rec.709 sums of everything
+        # wavelength-major (n, H, W): each wavelength's plane is one contiguous EXR channel
+        self.spectral = np.zeros((conv.grid.n, height, width), np.float32) if spectral else None
+        # RGB sums of the parts of the spectral sum that are not Direct light
+        self.parts = {name: np.zeros((height, width, 3), np.float32) for name in PARTS}
+        self.counts = np.zeros((height, width), np.float32)  # samples per pixel so far
+        self.albedo = np.zeros((height, width, 3), np.float32)  # denoising feature sums
+        self.normal = np.zeros((height, width, 3), np.float32)
+        self.to_camera = np.eye(3, dtype=np.float32) if to_camera is None else np.asarray(to_camera, np.float32)
+        self.adaptive = bool(adaptive)
+        if self.adaptive:
+            self.rgb_a = np.zeros((height, width, 3), np.float32)  # RGB sum of the even rounds' samples
+            self.counts_a = np.zeros((height, width), np.float32)
+            self.active = np.ones((height, width), bool)  # pixels that sample in their tile's next round
+
+    @classmethod
+    def for_region(cls, camera, region, conv: SpectralConverter, adaptive: bool = False, spectral: bool = False):
+        """((x0, y0, x1, y1), an empty Film) for ``region`` of ``camera``'s image (None: all of
+        it; rows from the top). SceneError for a region outside the image."""
+        w, h = int(camera.width), int(camera.height)
+        x0, y0, x1, y1 = region if region is not None else (0, 0, w, h)
+        if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h):
+            raise SceneError(f"render region {region} is outside the {camera.width}x{camera.height} image")
+        return (x0, y0, x1, y1), cls(x1 - x0, y1 - y0, conv, camera_space_rotation(camera), adaptive, spectral)
+
+    def add_tile(self, x0: int, y0: int, x1: int, y1: int, tile, samples: int, pixels=None,
+                 half_a: bool = False) -> None:
+        """Add an eye_pass.TileResult covering pixels [x0, x1) x [y0, y1) with ``samples`` each
+        (``pixels``: the tile's flat pixel indices it traced, None: all; ``half_a``: its samples
+        belong to adaptive sampling's half A)."""
+        self.add_converted(x0, y0, x1, y1, self.conv.to_rgb(tile.film), tile_parts_rgb(self.conv, tile), samples,
+                           tile.albedo, tile.normal, pixels, half_a,
+                           spectral=tile.film if self.spectral is not None else None)
+
+    def add_converted(self, x0: int, y0: int, x1: int, y1: int, rgb: np.ndarray, parts_rgb: dict,
+                      samples: int, albedo=None, normal=None, pixels=None, half_a: bool = False,
+                      spectral=None) -> None:
+        """``add_tile`` for a tile already converted to RGB: ``rgb`` (P, 3) = ``conv.to_rgb`` of
+        its spectral sums, its non-Direct parts as ``tile_parts_rgb``, and its (P, n) spectral
+        sums ``spectral`` (needed, and only read, when this film keeps a spectral image). A Dask
+        worker converts, so only RGB (and the spectral sums when asked) crosses the wire."""
+        if self.spectral is not None and spectral is None:
+            raise ValueError("this film keeps a spectral image: add_converted needs the tile's spectral sums")
+        h, w = y1 - y0, x1 - x0
+        if pixels is None:
+            where = (slice(y0, y1), slice(x0, x1))
+            shape = (h, w)
+        else:  # a subset of the tile's pixels (distinct indices: fancy-index += is exact)
+            pixels = np.asarray(pixels, np.int64)
+            where = (y0 + pixels // w, x0 + pixels % w)
+            shape = (len(pixels),)
+        self.rgb[where] += rgb.reshape(*shape, 3)
+        if self.spectral is not None:
+            self.spectral[(slice(None),) + where] += np.moveaxis(spectral.reshape(*shape, -1), -1, 0)
+        for name, arr in self.parts.items():
+            part = parts_rgb.get(name)
+            if part is not None:
+                arr[where] += part.reshape(*shape, 3)
+        for arr, feature in ((self.albedo, albedo), (self.normal, normal)):
+            if feature is not None:
+                arr[where] += feature.reshape(*shape, 3)
+        self.counts[where] += samples
+        if self.adaptive and half_a:
+            self.rgb_a[where] += rgb.reshape(*shape, 3)
+            self.counts_a[where] += samples
+
+    def active_pixels(self, x0: int, y0: int, x1: int, y1: int):
+        """The tile's flat indices of the pixels that sample in its next round (None: all of
+        them, or no adaptive sampling)."""
+        if not self.adaptive:
+            return None
+        act = self.active[y0:y1, x0:x1]
+        return None if act.all() else np.flatnonzero(act)
+
+    def update_active(self, x0: int, y0: int, x1: int, y1: int, threshold: float, min_spp: int) -> int:
+        """After a tile's round: which of its pixels go on sampling (core/render/adaptive.py); returns
+        how many."""
+        tile = (slice(y0, y1), slice(x0, x1))
+        act = self.active[tile]
+        if not act.any():
+            return 0
+        err = _adaptive.error_estimate(self.rgb[tile], self.counts[tile], self.rgb_a[tile], self.counts_a[tile])
+        new = _adaptive.next_active(act, err, self.counts[tile], threshold, min_spp)
+        self.active[tile] = new
+        return int(new.sum())
+
+    def sample_stats(self) -> dict:
+        """Samples per pixel taken: min, mean, max."""
+        c = self.counts
+        if not c.size:
+            return {"samples_min": 0, "samples_mean": 0.0, "samples_max": 0}
+        return {"samples_min": int(c.min()), "samples_mean": float(c.mean()), "samples_max": int(c.max())}
+
+    def result(self, plan: RenderPlan, cancelled: bool, warnings, stats, final: bool = False,
+               splat=None) -> RenderResult:
+        """The mean image so far, with its passes. ``final``: nothing is added after this, so
+        the spectral mean is divided in place in the film's own buffer (no second (H, W, n)
+        copy; the film keeps no spectral sums afterwards). ``splat``: the light pass's camera
+        splat over this film's pixels, (RGB (H, W, 3), spectrum (H, W, n) or None)
+        (core/integrators/light/camera_splat.py), added once to Combined and Caustics: it is not an eye-pass sample."""
+        scale = (1.0 / np.maximum(self.counts, 1.0))[..., None]
+        spectral = None
+        if self.spectral is not None:
+            if final:
+                spectral, self.spectral = self.spectral, None
+                spectral *= scale[..., 0]
+            else:
+                spectral = self.spectral * scale[..., 0]
+            spectral = np.moveaxis(spectral, 0, -1)  # (H, W, n) view of the (n, H, W) planes
+            if splat is not None and splat[1] is not None:
+                spectral += splat[1]
+        rgb = self.rgb * scale
+        caustics = self.parts["caustics"] * scale
+        if splat is not None:  # the RGB film sums RGB either way: the splat's RGB goes to it
+            caustics = caustics + splat[0]
+            rgb = rgb + splat[0]
+        diffraction = self.parts["diffraction"] * scale
+        indirect = self.parts["indirect"] * scale
+        passes = {"Direct": rgb - self.parts["background"] * scale - indirect - diffraction - caustics,
+                  "Indirect": indirect, "Caustics": caustics, "Diffraction": diffraction,
+                  "Denoising Albedo": self.albedo * scale,
+                  "Denoising Normal": (self.normal * scale) @ self.to_camera.T}
+        samples = int(self.counts.min()) if self.counts.size else 0
+        stats = dict(stats, **self.sample_stats())
+        return RenderResult(spectral, rgb, self.conv.grid.wavelengths.copy(), samples, cancelled, plan,
+                            list(warnings), stats, passes, self.counts.copy())

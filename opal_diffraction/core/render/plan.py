@@ -1,0 +1,67 @@
+"""The render plan: which passes a scene needs, and what was skipped and why.
+
+A scene pays only for what it contains: no light pass without a specular or dielectric object
+for light to pass through (and a light that reaches it, and a surface to receive what comes
+out), no grating work without gratings. ``plan_render`` is a pure function of the prepared
+scene: it runs nothing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..materials.spectra import DIELECTRIC, MIRROR
+
+__all__ = ["RenderPlan", "plan_render"]
+
+
+@dataclass(frozen=True)
+class RenderPlan:
+    eye_pass: bool = True
+    light_pass: bool = False
+    gratings: bool = False
+    dispersion: bool = False
+    notes: tuple[str, ...] = ()     # what runs and what is skipped, for the stats
+    warnings: tuple[str, ...] = ()  # things the user should fix or know
+
+    def summary(self) -> str:
+        return "; ".join(self.notes)
+
+
+def plan_render(prepared) -> RenderPlan:
+    """What the prepared scene (prepare.PreparedScene) needs."""
+    settings = prepared.settings
+    used = np.unique(prepared.tri_material) if len(prepared.tri_material) else np.zeros(0, np.int64)
+    kinds = prepared.materials.kind[used] if len(used) else np.zeros(0, np.int32)
+    specular = bool(np.isin(kinds, [MIRROR, DIELECTRIC]).any())
+    bragg = getattr(prepared.gratings, "bragg", None)  # FCC opal planes send light paths on too
+    specular |= bool(bragg is not None and len(used) and bragg[used].any())
+    # line gratings scatter their orders in the light pass too (docs/physics.md section 3.10)
+    scatters = specular or bool(prepared.light_targets.caster_mask.any())
+    dispersion = bool(prepared.materials.dispersive[used].any()) if len(used) else False
+    notes = [f"eye pass: {prepared.grid.n} wavelengths, {settings.samples} samples/pixel"]
+    if dispersion:
+        notes.append(f"dispersion: {settings.dispersion_sampling}")
+    light_pass = False
+    if not scatters:
+        notes.append("light pass skipped: no mirror or glass in the scene")
+    elif len(prepared.lights) == 0 and not (prepared.light_targets.world_budget > 0
+                                            or prepared.light_targets.mesh_budget > 0):
+        notes.append("light pass skipped: no lights")
+    elif settings.light_paths <= 0:
+        notes.append("light pass skipped: light paths set to 0")
+    elif not prepared.light_targets.needed:
+        notes.append("light pass skipped: no light reaches a mirror or glass object")
+    else:
+        light_pass = True
+        notes.append(f"light pass: {settings.light_paths / 1e6:.2f} M paths aimed at "
+                     f"{len(prepared.light_targets.objects)} mirror/glass/grating object(s)")
+    n_gratings = int(prepared.gratings.enabled[used].sum()) if len(used) else 0
+    if n_gratings:
+        notes.append(f"gratings: {n_gratings} material(s), direct light diffracted in the eye pass")
+    else:
+        notes.append("gratings: none in the scene, no grating work")
+    return RenderPlan(eye_pass=True, light_pass=light_pass, gratings=n_gratings > 0, dispersion=dispersion,
+                      notes=tuple(notes))

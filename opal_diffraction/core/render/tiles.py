@@ -1,0 +1,152 @@
+"""The eye pass's units of work: rounds of samples x tiles of pixels, each with its own stream.
+
+The image is split into tiles and the samples into progressive rounds. Every (round, tile) unit
+draws its random numbers from its own stream, ``SeedSequence([seed, EYE_PASS_STREAM, round,
+tile])``, and writes only its own pixels; the film adds the units round by round, so the image
+is the same whatever runs them: threads here (render.py) or Dask workers (distributed.py).
+``EyeWork`` is the split (a pure function of the prepared scene and the region), ``trace_tile``
+runs one unit. With adaptive sampling (core/render/adaptive.py) a unit may trace only some of its
+tile's pixels: which ones follows from the film after the tile's earlier rounds, so it is the
+same wherever the units run; the even rounds are the "A" half of the error estimate
+(``is_half_a``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..sampling.camera import FilterSampler, generate_rays, pixel_samples
+from ..sampling.footprint import camera_differentials, filter_box_width
+from ..sampling.sampler import blue_noise_numbers
+from ..scene.settings import RenderSettings
+
+__all__ = ["EYE_PASS_STREAM", "LIGHT_PASS_SHARE", "MAX_TILE_RAYS", "round_size", "tiles_of", "EyeWork",
+           "trace_tile", "is_half_a", "adaptive_of", "adaptive_rounds"]
+
+EYE_PASS_STREAM = 1  # stream ids keep the passes' random numbers independent
+LIGHT_PASS_SHARE = 0.25  # of the progress bar, when the light pass runs
+MAX_TILE_RAYS = 1 << 18  # camera rays of one tile in one round (bounds memory and time-limit latency)
+#: The cap with a spectral EXR, whose (H, W, n) films leave less room for the rounds' rays: a
+#: 64 x 64 tile at 8 samples. Full HD at 61 wavelengths: peak RSS 2.08 GiB with rounds of 16
+#: samples, 1.82 GiB with 8 (docs/benchmarks.md, "Memory with rounds of 16 samples").
+MAX_TILE_RAYS_SPECTRAL = 1 << 15
+
+
+def tile_ray_cap(settings: RenderSettings) -> int:
+    """The most camera rays one tile's round may cast under these settings."""
+    return MAX_TILE_RAYS_SPECTRAL if getattr(settings, "spectral_exr", "") else MAX_TILE_RAYS
+
+
+def round_size(settings: RenderSettings) -> int:
+    """Samples per pixel per round: the setting, capped so one tile's round casts at most
+    tile_ray_cap camera rays (a round is the unit of memory and of time-limit checks)."""
+    tile_pixels = int(settings.tile_size) ** 2
+    return max(1, min(int(settings.round_samples), tile_ray_cap(settings) // tile_pixels))
+
+
+def is_half_a(r_index: int) -> bool:
+    """Whether round ``r_index``'s samples go into adaptive sampling's half A (the even rounds)."""
+    return r_index % 2 == 0
+
+
+def adaptive_of(settings: RenderSettings):
+    """(threshold, min samples) of adaptive sampling, or None when it is off."""
+    from .adaptive import min_samples
+
+    t = float(settings.adaptive_threshold)
+    return None if t <= 0 else (t, min_samples(t, int(settings.adaptive_min_samples)))
+
+
+def adaptive_rounds(spp: int, per_round: int, min_spp: int, cap: int) -> tuple[int, ...]:
+    """Round sizes with adaptive sampling: ``per_round`` samples up to the minimum, then rounds
+    of a quarter of the samples taken so far (at least ``per_round``, at most ``cap``), so the
+    pixels that go on sampling do so in a few larger rounds (each round of a tile is one call of
+    the tracer, whose fixed cost dominates when few pixels are left), overshooting what they
+    need by at most a quarter."""
+    rounds, taken = [], 0
+    while taken < spp:
+        n = per_round if taken < min_spp else max(per_round, min(cap, taken // 4))
+        n = min(n, spp - taken)
+        rounds.append(n)
+        taken += n
+    return tuple(rounds)
+
+
+def tiles_of(width: int, height: int, size: int, region):
+    """Tiles of the full image's grid that meet ``region``, clipped to it, in region coordinates,
+    each with its stream id (its index in the full grid, so a region render aligned to tile
+    boundaries reproduces the full render's pixels exactly)."""
+    rx0, ry0, rx1, ry1 = region
+    per_row = -(-width // size)
+    out = []
+    for ty in range(ry0 // size, -(-ry1 // size)):
+        for tx in range(rx0 // size, -(-rx1 // size)):
+            x0, y0 = max(tx * size, rx0), max(ty * size, ry0)
+            x1, y1 = min((tx + 1) * size, rx1), min((ty + 1) * size, ry1)
+            out.append((x0 - rx0, y0 - ry0, x1 - rx0, y1 - ry0, ty * per_row + tx))
+    return out
+
+
+@dataclass(frozen=True)
+class EyeWork:
+    """The eye pass of one render: samples per round, tiles (x0, y0, x1, y1, stream) in region
+    coordinates, the region (x0, y0, x1, y1) of the camera's image, the seed, and whether pixels
+    share one blue-noise ordered sequence (settings.blue_noise)."""
+
+    rounds: tuple[int, ...]
+    tiles: tuple[tuple[int, int, int, int, int], ...]
+    region: tuple[int, int, int, int]
+    seed: int
+    blue_noise: bool = False
+
+    @classmethod
+    def of(cls, prepared, region=None) -> "EyeWork":
+        settings, cam = prepared.settings, prepared.scene.camera
+        region = tuple(region) if region is not None else (0, 0, int(cam.width), int(cam.height))
+        spp, per_round = int(settings.samples), round_size(settings)
+        adaptive = adaptive_of(settings)
+        if adaptive is None:
+            rounds = tuple(min(per_round, spp - s) for s in range(0, spp, per_round))
+        else:
+            rounds = adaptive_rounds(spp, per_round, adaptive[1], tile_ray_cap(settings) // int(settings.tile_size) ** 2)
+        tiles = tuple(tiles_of(int(cam.width), int(cam.height), int(settings.tile_size), region))
+        return cls(rounds, tiles, region, int(settings.seed), bool(getattr(settings, "blue_noise", True)))
+
+    @property
+    def units(self) -> int:
+        return len(self.rounds) * len(self.tiles)
+
+
+def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: int, pixels=None):
+    """Trace tile ``t_index`` of round ``r_index`` with ``eye`` (an eye_pass.EyePass):
+    its eye_pass.TileResult. ``pixels``: the tile's flat pixel indices (row-major) to sample,
+    the others take no sample this round (adaptive sampling); the result's rows are those
+    pixels, in that order. None: every pixel (the same stream either way)."""
+    x0, y0, x1, y1, stream = work.tiles[t_index]
+    rx0, ry0 = work.region[:2]
+    rng = np.random.default_rng(np.random.SeedSequence([work.seed, EYE_PASS_STREAM, r_index, stream]))
+    ys, xs = np.mgrid[y0 + ry0:y1 + ry0, x0 + rx0:x1 + rx0]
+    xs, ys = xs.ravel(), ys.ravel()
+    if pixels is not None:
+        xs, ys = xs[pixels], ys[pixels]
+    # low-discrepancy numbers per pixel (core/sampling/sampler.py), numbered on across rounds
+    cam = eye.prepared.scene.camera
+    ids = (ys.astype(np.int64) * int(cam.width) + xs).astype(np.uint32)
+    first = int(sum(work.rounds[:r_index]))
+    spp = work.rounds[r_index]
+    starts = np.full(len(xs), first, np.uint32)
+    if work.blue_noise:  # one shared sequence, a block per pixel in blue-noise order (core/sampling/sampler.py)
+        blocks = blue_noise_numbers(xs, ys, cam.width, cam.height, sum(work.rounds), work.seed)
+        if blocks is not None:
+            ids, starts = np.zeros(len(xs), np.uint32), blocks + np.uint32(first)
+    sx, sy, sl, pidx = pixel_samples(xs.astype(np.float64), ys.astype(np.float64), spp, rng, filt,
+                                     qmc=(ids, starts, work.seed))
+    o, d = generate_rays(cam, sx, sy)
+    rd = None
+    if eye.wants_differentials:  # ray differentials for gratings (core/sampling/footprint.py)
+        rd = camera_differentials(cam, d, (sx - xs[pidx] - 0.5, sy - ys[pidx] - 0.5), filter_box_width(filt.width))
+    return eye.trace(o, d, pidx, len(xs), rng, u_lambda=sl,
+                     sampler_ids=(ids[pidx], (starts[:, None] + np.arange(spp, dtype=np.uint32)).ravel(), work.seed),
+                     differentials=rd)

@@ -1,0 +1,117 @@
+"""Geometric optics at a smooth interface: reflection, refraction, Fresnel, and dispersion.
+
+- Law of reflection and Snell's law in vector form (e.g. Pharr, Jakob & Humphreys, *Physically
+  Based Rendering*, 4th ed., 2023, section 9.3).
+- Fresnel equations for an unpolarised wave at a dielectric interface (ibid., section 9.3.3):
+  R = (R_s + R_p) / 2, total internal reflection when sin(theta_t) > 1.
+- Sellmeier's equation n^2 = 1 + sum B_k lambda^2 / (lambda^2 - C_k), lambda in micrometres, with the
+  coefficients of docs/physics.md section 2.1: SCHOTT N-BK7 (SCHOTT data sheet), fused silica
+  (Malitson, I. H. 1965, JOSA 55(10), doi:10.1364/JOSA.55.001205), diamond (Peter, F. 1923,
+  Z. Physik 15).
+- Cauchy's n = A + B / lambda^2 fitted to an artist's IOR n_d (587.56 nm) and Abbe number V_d, with
+  the Fraunhofer F (486.13 nm) and C (656.27 nm) lines.
+
+Directions are unit vectors; ``d`` is the direction of travel, ``n`` a unit normal. All functions
+are vectorised over leading axes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..util.enums import DispersionModel, codes
+
+__all__ = [
+    "SELLMEIER_PRESETS",
+    "DISPERSION_MODELS",
+    "LAMBDA_D",
+    "LAMBDA_F",
+    "LAMBDA_C",
+    "reflect",
+    "refract",
+    "fresnel_dielectric",
+    "sellmeier_ior",
+    "cauchy_from_abbe",
+    "ior_spectrum",
+]
+
+LAMBDA_D = 587.56  # nm, helium d line
+LAMBDA_F = 486.13  # nm, hydrogen F line
+LAMBDA_C = 656.27  # nm, hydrogen C line
+
+#: Sellmeier coefficients (B1..B3, C1..C3 in um^2) of docs/physics.md section 2.1.
+SELLMEIER_PRESETS: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {
+    "BK7": ((1.03961212, 0.231792344, 1.01046945), (0.00600069867, 0.0200179144, 103.560653)),
+    "FUSED_SILICA": ((0.6961663, 0.4079426, 0.8974794), (0.0684043**2, 0.1162414**2, 9.896161**2)),
+    "DIAMOND": ((0.3306, 4.3356, 0.0), (0.175**2, 0.106**2, 0.0)),
+}
+
+#: Dispersion models: name -> stable code (enums.py; stored in scene files).
+DISPERSION_MODELS = codes(DispersionModel)
+
+
+def reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Mirror direction of travel ``d`` about the normal ``n`` (either side)."""
+    return d - 2.0 * np.sum(d * n, axis=-1, keepdims=True) * n
+
+
+def refract(d: np.ndarray, n: np.ndarray, eta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Snell's law. ``n`` faces the incoming side (dot(d, n) < 0); ``eta`` = n_incident / n_transmitted.
+
+    Returns (transmitted direction, total-internal-reflection mask). Where TIR occurs the direction
+    is the mirror direction, so the result is always a valid unit vector.
+    """
+    eta = np.asarray(eta)
+    cos_i = -np.sum(d * n, axis=-1)
+    sin2_t = eta * eta * np.maximum(0.0, 1.0 - cos_i * cos_i)
+    tir = sin2_t > 1.0
+    cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
+    t = eta[..., None] * d + (eta * cos_i - cos_t)[..., None] * n
+    t = np.where(tir[..., None], reflect(d, n), t)
+    return t, tir
+
+
+def fresnel_dielectric(cos_i: np.ndarray, eta: np.ndarray) -> np.ndarray:
+    """Unpolarised Fresnel reflectance. cos_i >= 0 on the incident side, eta = n_i / n_t; 1 under TIR."""
+    cos_i = np.clip(np.abs(cos_i), 0.0, 1.0)
+    sin2_t = eta * eta * (1.0 - cos_i * cos_i)
+    cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
+    # r_s = (eta cos_i - cos_t)/(eta cos_i + cos_t), r_p = (cos_i - eta cos_t)/(cos_i + eta cos_t)
+    # (both written with n_i/n_t = eta; multiplying through by n_t leaves the ratios unchanged).
+    den_s = eta * cos_i + cos_t
+    den_p = cos_i + eta * cos_t
+    rs = np.where(den_s > 0, (eta * cos_i - cos_t) / np.where(den_s > 0, den_s, 1.0), 1.0)
+    rp = np.where(den_p > 0, (cos_i - eta * cos_t) / np.where(den_p > 0, den_p, 1.0), 1.0)
+    return np.where(sin2_t >= 1.0, 1.0, 0.5 * (rs * rs + rp * rp))
+
+
+def sellmeier_ior(wavelength_nm, b, c) -> np.ndarray:
+    """Sellmeier: n(lambda) = sqrt(1 + sum B_k lambda^2 / (lambda^2 - C_k)), lambda in um, C in um^2."""
+    lam2 = (np.asarray(wavelength_nm, dtype=np.float64) * 1e-3) ** 2
+    n2 = 1.0 + sum(bk * lam2 / (lam2 - ck) for bk, ck in zip(b, c) if bk != 0.0)
+    return np.sqrt(n2)
+
+
+def cauchy_from_abbe(n_d: float, abbe: float) -> tuple[float, float]:
+    """(A, B) of n = A + B / lambda^2 (lambda in nm) matching n_d at 587.56 nm and Abbe number V_d."""
+    if abbe <= 0:
+        raise ValueError(f"Abbe number must be > 0, got {abbe}")
+    b = (n_d - 1.0) / (abbe * (1.0 / LAMBDA_F**2 - 1.0 / LAMBDA_C**2))
+    return n_d - b / LAMBDA_D**2, b
+
+
+def ior_spectrum(wavelengths_nm: np.ndarray, model: str, ior: float = 1.5, abbe: float = 0.0) -> np.ndarray:
+    """Refractive index at each wavelength for a dispersion ``model`` (a DISPERSION_MODELS key).
+
+    'NONE' is the constant ``ior``; 'ABBE' the Cauchy fit to (``ior``, ``abbe``); the others are
+    Sellmeier presets (their own n_d; ``ior`` is ignored).
+    """
+    wl = np.asarray(wavelengths_nm, dtype=np.float64)
+    if model == "NONE":
+        return np.full(wl.shape, float(ior))
+    if model == "ABBE":
+        a, b = cauchy_from_abbe(float(ior), float(abbe))
+        return a + b / wl**2
+    if model in SELLMEIER_PRESETS:
+        return sellmeier_ior(wl, *SELLMEIER_PRESETS[model])
+    raise ValueError(f"unknown dispersion model {model!r}; expected one of {sorted(DISPERSION_MODELS)}")

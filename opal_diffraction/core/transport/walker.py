@@ -1,0 +1,526 @@
+"""Specular transport shared by the eye pass and the light pass: ray populations, hits, and one
+bounce of mirror reflection, Fresnel-sampled refraction and dispersion.
+
+A wavefront tracer: all rays of a batch advance one interaction at a time, in NumPy arrays, with
+no Python loop per ray. Rays live in two populations:
+- *white* rays carry the whole spectrum, a weight array (B, n) (``None``: all ones), or, for
+  light-pass rays whose spectra are combinations of a few spectra the population shares (a
+  light's spectrum; the world map's three RGB basis spectra), coefficients (B, k) over that
+  ``basis`` (k, n): spectral weight = w @ basis. Colourless glass and mirrors and grey tints
+  (reflectance constant over wavelength) scale the k coefficients instead of n samples; a
+  coloured tint, a dispersive split and code that needs spectra expand them (``dense``), and
+  the light pass's deposits take the coefficients (elements.IlluminationMap.deposit);
+- *mono* rays carry one wavelength sample, a scalar weight (B,) and its index (B,).
+A white ray stays white until it meets a dispersive dielectric; there it becomes mono rays:
+``SPLIT`` makes one child per wavelength sample with the parent's weight at that wavelength (the
+children's weights sum to the parent's: energy is conserved exactly), ``SAMPLE`` makes one child
+with wavelength k drawn with probability p_k proportional to the parent's weight and weight
+w_k / p_k (an unbiased one-sample estimator of the SPLIT sum, pbrt-v4's TerminateSecondary idea;
+core/transport/wavelengths.py refines it: 4 hero wavelengths, a sensitivity pdf, white reflection).
+Children inherit the parent's hit, so the split costs no extra ray cast.
+
+At a dielectric the reflect / refract choice is sampled with probability equal to the Fresnel
+reflectance, so the weight is unchanged (for mono rays the index is the one at their wavelength,
+so total internal reflection differs per wavelength). Geometry is assumed closed with outward
+normals (entering vs leaving a dielectric is read from the side of the hit).
+
+Shading normals (docs/physics.md section 4.6): where the scene has per-corner normals, a hit's
+``ns`` is their barycentric interpolation (Phong normal interpolation), normalised and put on the
+side of the triangle's winding normal, then flipped with ``ng`` to face the incoming ray; mirror
+reflection, Fresnel and refraction use it, while offsets and side tests keep ``ng``. Where ``ns``
+would reflect a ray below the geometric surface it is first bent towards ``ng`` just enough that
+the mirror direction leaves at a small angle above it (Cycles' ``ensure_valid_specular_reflection``,
+intern/cycles/kernel/closure/bsdf_util.h, applied to every specular hit); a refracted direction
+that would stay on the incident side is refracted about ``ng`` instead. Without corner normals
+``ns`` is ``ng`` and nothing changes.
+
+Subclasses say what happens where a path leaves the scene (``on_miss``) and at every surface it
+hits (``on_hit``: direct light for the eye pass, deposits for the light pass), and whether a
+path goes on (``survives``: bounce limit, Russian roulette).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..sampling import footprint
+from . import wavelengths
+from ..materials.spectra import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
+from ..spectral.optics import fresnel_dielectric, reflect, refract
+
+__all__ = ["Rays", "Hit", "SpecularWalker", "shading_normals", "hit_shading_normals", "smooth_triangles", "light_spectrum_of", "valid_specular_normal", "MICROFACET", "GRATING"]
+
+#: The kind a hit on a rough (or layered) mirror or glass gets in the walk: not a delta bounce;
+#: the eye pass shades it with core/materials/bsdf.py, the light pass ends its path there.
+MICROFACET = 99
+#: The kind the light pass gives a hit where its path is diffracted by a grating
+#: (core/gratings/order_sampling.py): neither a delta bounce nor a landing; ``scatter`` sends it on.
+GRATING = 98
+
+
+def _indices(mask):
+    """Row indices of a bool mask (None: every row, nothing to copy) or an index array as is.
+    Gathering rows by index (np.take) is several times faster than boolean indexing."""
+    mask = np.asarray(mask)
+    if mask.dtype != bool:
+        return mask
+    if len(mask) and mask.all():
+        return None
+    return np.flatnonzero(mask)
+
+
+def _rows(a, idx):
+    return a.take(idx, axis=0)
+
+
+@dataclass
+class Rays:
+    o: np.ndarray      # (B, 3) float32 origins
+    d: np.ndarray      # (B, 3) float32 unit directions
+    pix: np.ndarray    # (B,) int64 pixel index within the tile
+    w: np.ndarray | None  # (B, n) white or (B,) mono, float32; None: white and all ones (camera rays)
+    lam: np.ndarray | None  # (B,) int wavelength index for mono rays, None for white
+    depth: np.ndarray  # (B,) int specular bounces so far
+    u_lam: np.ndarray  # (B,) float: the sample's stratified number for choosing a wavelength
+    # per-ray arrays a subclass carries along (the eye pass's path state: bounce counts, the last
+    # BSDF pdf for MIS, ...); taken, concatenated and inherited with the rays. None: nothing.
+    extra: dict | None = None
+    # (k, n) float32 spectra shared by the population (k < n): w is (B, k) coefficients over
+    # them (white light rays only); None: w is as above
+    basis: np.ndarray | None = None
+
+    def __len__(self):
+        return len(self.pix)
+
+    def take(self, mask) -> "Rays":
+        """The rays where ``mask`` (B,) bool is set, or at indices ``mask``."""
+        idx = _indices(mask)
+        if idx is None:
+            return self
+        return Rays(_rows(self.o, idx), _rows(self.d, idx), _rows(self.pix, idx),
+                     None if self.w is None else _rows(self.w, idx), None if self.lam is None else _rows(self.lam, idx),
+                     _rows(self.depth, idx), _rows(self.u_lam, idx),
+                     None if self.extra is None else {k: _rows(v, idx) for k, v in self.extra.items()}, self.basis)
+
+    def moved(self, o, d, w, depth=None) -> "Rays":
+        """The same paths (pixels, wavelengths, extra state) continuing from o along d with weight w
+        (coefficients over the same basis if w has the basis's k columns, else spectral)."""
+        basis = self.basis if self.basis is not None and w is not None and w.ndim == 2 and \
+            w.shape[1] == len(self.basis) else None
+        return Rays(o, d, self.pix, w, self.lam, self.depth + 1 if depth is None else depth, self.u_lam,
+                     None if self.extra is None else dict(self.extra), basis)
+
+    def weighted(self, x):
+        """The ray weight times x (x itself for unit-weight camera rays)."""
+        if self.w is None:
+            return x
+        return (self.dense_w(np.shape(x)[-1]) if self.basis is not None else self.w) * x
+
+    def dense_w(self, n: int) -> np.ndarray:
+        """The spectral weight (B, n) (white rays)."""
+        if self.w is None:
+            return np.ones((len(self), n), np.float32)
+        if self.basis is not None:
+            return (self.w @ self.basis).astype(np.float32, copy=False)
+        return self.w
+
+    def dense(self) -> "Rays":
+        """These rays with spectral weights (B, n) instead of coefficients over a basis."""
+        return self if self.basis is None else replace(self, w=self.dense_w(self.basis.shape[1]), basis=None)
+
+    @staticmethod
+    def concat(a: "Rays", b: "Rays") -> "Rays":
+        if a.basis is not None or b.basis is not None:
+            if a.basis is not b.basis and not (a.basis is not None and b.basis is not None
+                                               and a.basis.shape == b.basis.shape
+                                               and np.array_equal(a.basis, b.basis)):
+                a, b = a.dense(), b.dense()  # different bases: join as spectra
+            elif a.basis is not None:
+                basis = a.basis
+                joined = Rays.concat(replace(a, basis=None), replace(b, basis=None))
+                return replace(joined, basis=basis)
+        if (a.w is None) != (b.w is None):  # one side has implicit unit weights: make them explicit
+            n = (a.w if a.w is not None else b.w).shape[1]
+            a, b = replace(a, w=a.dense_w(n)), replace(b, w=b.dense_w(n))
+        extra = None
+        if a.extra is not None or b.extra is not None:
+            if a.extra is None or b.extra is None or a.extra.keys() != b.extra.keys():
+                raise ValueError("cannot join ray populations that carry different state")
+            extra = {k: np.concatenate([a.extra[k], b.extra[k]]) for k in a.extra}
+        return Rays(*(None if x is None else np.concatenate([x, y]) for x, y in
+                       zip((a.o, a.d, a.pix, a.w, a.lam, a.depth, a.u_lam),
+                           (b.o, b.d, b.pix, b.w, b.lam, b.depth, b.u_lam))), extra)
+
+
+@dataclass
+class Hit:
+    p: np.ndarray     # (B, 3) float32 hit points
+    ng: np.ndarray    # (B, 3) float32 geometric normal facing the incoming ray
+    ns: np.ndarray    # (B, 3) float32 unit shading normal, on ng's side of the surface (ng itself when flat)
+    cos_i: np.ndarray  # (B,) cosine between -d and ng (>= 0)
+    front: np.ndarray  # (B,) bool: the ray arrived on the side the triangle's normal points to
+    mat: np.ndarray   # (B,) material index
+    eps: np.ndarray   # (B,) float32 self-intersection offset at the hit
+    prim: np.ndarray  # (B,) triangle index
+    bu: np.ndarray    # (B,) barycentric u (hit = (1-u-v) v0 + u v1 + v v2)
+    bv: np.ndarray    # (B,) barycentric v
+
+    _FIELDS = ("p", "ng", "ns", "cos_i", "front", "mat", "eps", "prim", "bu", "bv")
+
+    def take(self, mask) -> "Hit":
+        """The hits where ``mask`` (B,) bool is set, or at indices ``mask``."""
+        idx = _indices(mask)
+        if idx is None:
+            return self
+        out = {f: _rows(getattr(self, f), idx) for f in self._FIELDS if f != "ns"}
+        out["ns"] = out["ng"] if self.ns is self.ng else _rows(self.ns, idx)  # flat: one array for both
+        return Hit(**out)
+
+    @staticmethod
+    def concat(a: "Hit", b: "Hit") -> "Hit":
+        return Hit(*(np.concatenate([getattr(a, f), getattr(b, f)]) for f in Hit._FIELDS))
+
+
+def light_spectrum_of(spectrum, live, rays: Rays):
+    """A light sample's spectrum ((n,) or (B, n)) for ``rays`` = the rays at entries ``live``:
+    (K, n) or (n,) for white rays, (K,) at their wavelengths for mono rays."""
+    spec = spectrum if np.ndim(spectrum) == 1 else spectrum[live]
+    if rays.lam is None:
+        return spec
+    return spec[rays.lam] if np.ndim(spec) == 1 else spec[np.arange(len(rays)), rays.lam]
+
+
+def shading_normals(corner_normals: np.ndarray, prim, bu, bv, ng: np.ndarray) -> np.ndarray:
+    """Unit shading normals (B, 3) at hits: the corner normals of triangle ``prim`` interpolated
+    with the hit's barycentrics and normalised, on the side of ``ng`` (the triangle's winding
+    normal, (B, 3)): a normal pointing into the other half-space (a bad custom normal) is
+    negated, one that interpolates to zero (opposite corners) is ``ng``."""
+    c = np.take(corner_normals, prim, axis=0)  # (B, 3, 3): a row gather, faster than c[prim]
+    u = np.asarray(bu, c.dtype)
+    v = np.asarray(bv, c.dtype)
+    # geometry.interpolate_corners's (1 - u - v) c0 + u c1 + v c2 in one pass
+    n = np.einsum("bk,bkj->bj", np.stack([1 - u - v, u, v], axis=1), c)
+    l2 = np.einsum("ij,ij->i", n, n)
+    # normalise and put on ng's side with one scale per row
+    s = np.where(np.einsum("ij,ij->i", n, ng) < 0, np.float32(-1), np.float32(1)) / np.sqrt(
+        np.maximum(l2, np.float32(1e-30)))
+    n *= s.astype(n.dtype, copy=False)[:, None]
+    flat = l2 <= np.float32(1e-12)  # interpolated to zero: ng
+    if flat.any():
+        n[flat] = ng[flat]
+    return n.astype(np.float32, copy=False)
+
+
+def smooth_triangles(corner_normals: np.ndarray) -> np.ndarray:
+    """(T,) bool: the triangles whose three corner normals differ (smooth shading); on the others
+    the shading normal is the (one) corner normal, with no interpolation. prepare() computes it
+    once per scene (``PreparedScene.smooth_triangles``)."""
+    c = corner_normals
+    return ~((c[:, 0] == c[:, 1]).all(axis=1) & (c[:, 0] == c[:, 2]).all(axis=1))
+
+
+def hit_shading_normals(corner_normals: np.ndarray, smooth: np.ndarray, prim, bu, bv, ng: np.ndarray) -> np.ndarray:
+    """``shading_normals`` at hits, interpolating only on the ``smooth`` triangles (T,) bool
+    (``smooth_triangles``): a flat-shaded triangle's normal is its corner normal (unit: prepared
+    corner normals are validated), put on ng's side."""
+    sm = np.take(smooth, prim)
+    if sm.all():
+        return shading_normals(corner_normals, prim, bu, bv, ng)
+    # corner 0 = every corner there; unit already (scene validation normalises corner normals)
+    n = np.take(corner_normals[:, 0], prim, axis=0)
+    n *= np.where(np.einsum("ij,ij->i", n, ng) < 0, np.float32(-1), np.float32(1))[:, None]
+    if sm.any():
+        idx = np.flatnonzero(sm)
+        n[idx] = shading_normals(corner_normals, prim[idx], np.asarray(bu)[idx], np.asarray(bv)[idx], ng[idx])
+    return n.astype(np.float32, copy=False)
+
+
+#: The mirror direction about a shading normal leaves at least this cosine above the geometric
+#: surface (or 0.9 of the incoming ray's, if that is shallower): Cycles' threshold.
+SPECULAR_MIN_COS = 0.01
+
+
+def valid_specular_normal(wo: np.ndarray, ng: np.ndarray, ns: np.ndarray) -> np.ndarray:
+    """The shading normal to reflect ``wo`` (unit, pointing away from the surface, wo . ng >= 0)
+    about, for ``ns`` on ng's side: ``ns`` itself where the mirror direction R = 2 (ns . wo) ns - wo
+    lies at least t = min(0.9 wo . ng, SPECULAR_MIN_COS) above the geometric surface, else ns
+    rotated towards ``ng`` (in their common plane) until R . ng = t, as Cycles'
+    ``ensure_valid_specular_reflection`` does. The rotated normal N' = sqrt(1 - z^2) X + z ng
+    (X: ns's part perpendicular to ng) solves 2 (N' . wo) z - wo . ng = t; squared, a quadratic
+    in z^2 (docs/physics.md section 4.6). Also fixes rays arriving behind ns (ns . wo < 0)."""
+    iz = np.einsum("ij,ij->i", wo, ng)
+    c = np.einsum("ij,ij->i", wo, ns)
+    thresh = np.minimum(0.9 * iz, SPECULAR_MIN_COS)
+    bad = 2 * c * np.einsum("ij,ij->i", ns, ng) - iz < thresh
+    if not bad.any():
+        return ns
+    w, g, n = (x[bad].astype(np.float64) for x in (wo, ng, ns))
+    izb, t = iz[bad].astype(np.float64), thresh[bad].astype(np.float64)
+    x = n - np.einsum("ij,ij->i", n, g)[:, None] * g
+    xl = np.linalg.norm(x, axis=1, keepdims=True)
+    x = np.where(xl > 1e-12, x / np.maximum(xl, 1e-300), n)
+    ix = np.einsum("ij,ij->i", w, x)
+    a = np.maximum(ix * ix + izb * izb, 1e-300)
+    b = 2 * (a + izb * t)
+    root = np.sqrt(np.maximum(b * b - 4 * a * (t + izb) ** 2, 0))
+    # of the two roots in z^2, the one that solves the unsquared equation: wo's X part and
+    # t + wo.ng (1 - 2 z^2) have the same sign
+    z2 = np.clip(np.where(ix < 0, b + root, b - root) / (4 * a), 0, 1)
+    fixed = np.sqrt(1 - z2)[:, None] * x + np.sqrt(z2)[:, None] * g
+    out = ns.copy()
+    out[bad] = fixed
+    return out
+
+
+def out_is_plain(rays: Rays) -> bool:
+    """No ray differentials to carry (core/sampling/footprint.py): the fused specular bounce applies."""
+    return rays.extra is None or footprint.KEY not in rays.extra
+
+
+class SpecularWalker:
+    """Advances ray populations through specular interactions; subclasses add the shading."""
+
+    def __init__(self, prepared, rng: np.random.Generator):
+        self.prepared = prepared
+        self.n = prepared.grid.n
+        self.rng = rng
+        self._rays = 0  # rays cast
+        self.microfacet = prepared.microfacet  # (M,) bool, once per prepared scene
+        self.any_microfacet = bool(self.microfacet.any())
+        self._spawned: list[Rays] = []
+        refl = prepared.materials.reflectance
+        # (M,) reflectance constant over wavelength (clear glass and mirrors, grey tints): it
+        # scales coefficient weights without expanding them to spectra
+        self.grey = np.all(refl == refl[:, :1], axis=1) if refl.size else np.zeros(len(refl), bool)
+        # hooks a subclass leaves as they are (the light pass's misses and segments) cost nothing
+        self._hooks_segment = type(self).on_segment is not SpecularWalker.on_segment
+        self._hooks_miss = type(self).on_miss is not SpecularWalker.on_miss
+
+    # hooks ----------------------------------------------------------------------------------
+    def on_segment(self, rays: Rays, t: np.ndarray) -> None:
+        """Every traced segment, before its hit or miss is handled: rays and the distance t (B,)
+        to what they hit (inf: nothing) - where the eye pass finds the lights a ray passes."""
+
+    def on_miss(self, rays: Rays) -> None:
+        """Rays that left the scene."""
+
+    def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
+        """Every surface hit, before the specular bounce (kind: material kind per ray)."""
+
+    def survives(self, rays: Rays, rng) -> np.ndarray:
+        """Which rays may bounce again (default: the bounce limit)."""
+        return rays.depth < self.prepared.settings.max_bounces
+
+    def after_delta(self, rays: Rays, transmitted: np.ndarray) -> Rays:
+        """Rays leaving a mirror or dielectric (``transmitted``: refracted rather than reflected),
+        before they are traced on: a subclass counts bounces by kind and drops those over a limit."""
+        return rays
+
+    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
+        """Rays continuing from the non-specular surfaces (diffuse, rough): None by default (the
+        light pass ends its paths there; the eye pass samples a BSDF). Mono rays returned for a
+        white population (a grating's orders) join the mono population."""
+        return None
+
+    def choice_numbers(self, rays: Rays, rng) -> np.ndarray:
+        """The numbers (B,) in [0, 1) of the reflect / refract choice of ``rays`` at smooth glass
+        (default: ``rng``'s); the eye pass takes them from its pixel sampler."""
+        return rng.random(len(rays))
+
+    def classify(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> np.ndarray:
+        """The kind per hit the walk uses (default: the material's, rough ones MICROFACET); the
+        light pass marks the paths a grating diffracts GRATING."""
+        return kind
+
+    # the loop -------------------------------------------------------------------------------
+    @staticmethod
+    def empty_mono() -> Rays:
+        return Rays(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32), np.zeros(0, np.int64),
+                    np.zeros(0, np.float32), np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0))
+
+    def walk(self, rays: Rays, mono: Rays) -> None:
+        """Follow both populations until every path has ended."""
+        rng = self.rng
+        self._spawned = []  # mono rays a white population's scatter made (grating orders)
+        while len(rays) or len(mono):
+            rays, children, child_hits = self._step(rays, None, rng)
+            for r in self._spawned:
+                mono = Rays.concat(mono, r)
+            self._spawned = []
+            mono, _, _ = self._step(mono, (children, child_hits), rng)
+
+    # ----------------------------------------------------------------- one bounce
+    def _step(self, rays: Rays, pending, rng):
+        """Advance a population by one interaction; returns (continuing rays, mono children, their hits)."""
+        prepared = self.prepared
+        hit = None
+        if len(rays):
+            h = prepared.accel.intersect(rays.o, rays.d)
+            self._rays += len(rays)
+            missed = h.prim < 0
+            if self._hooks_segment:
+                self.on_segment(rays, np.where(missed, np.float32(np.inf), h.t))
+            if self._hooks_miss and missed.any():
+                self.on_miss(rays.take(missed))
+            keep = ~missed
+            rays = rays.take(keep)
+            hit = self._hit_info(rays, h.t[keep], h.prim[keep], h.u[keep], h.v[keep])
+        if pending is not None and pending[0] is not None and len(pending[0]):
+            if hit is None:
+                rays, hit = pending
+            else:
+                rays, hit = Rays.concat(rays, pending[0]), Hit.concat(hit, pending[1])
+        if hit is None or len(rays) == 0:
+            return rays.take(np.zeros(len(rays), bool)), None, None
+
+        kind = prepared.materials.kind[hit.mat]
+        micro = self.microfacet[hit.mat] if self.any_microfacet else None
+        if micro is not None:  # rough mirrors and glass leave the delta code; diffuse bases keep their kind
+            kind = np.where(micro & (kind != DIFFUSE_KIND), MICROFACET, kind)
+        kind = self.classify(rays, hit, kind, rng)
+        self.on_hit(rays, hit, kind, rng)
+
+        can_bounce = self.survives(rays, rng)
+        children = child_hits = None
+        out = []
+        mirror = (kind == MIRROR) & can_bounce
+        if mirror.any():
+            r = self._mirror(rays.take(mirror), hit.take(mirror))
+            out.append(self.after_delta(r, np.zeros(len(r), bool)))
+        diel = (kind == DIELECTRIC) & can_bounce
+        # white rays split at every dispersive glass, smooth or rough (mono children go on)
+        white_split = (diel | ((kind == MICROFACET) & can_bounce)) if rays.lam is None else diel
+        if white_split.any():
+            if rays.lam is None:
+                disp = white_split & prepared.materials.dispersive[hit.mat]
+                if disp.any():  # core/transport/wavelengths.py: smooth glass reflects white, refracts mono
+                    rd = rays.take(disp).dense()
+                    children, child_hits, white = wavelengths.split_at_glass(self, rd, hit.take(disp), rng,
+                                                                             self.choice_numbers(rd, rng))
+                    if white is not None and len(white):
+                        out.append(white)
+                diel = diel & ~disp
+            if diel.any():
+                r = rays.take(diel)
+                r, transmitted = self._dielectric(r, hit.take(diel), rng, self.choice_numbers(r, rng))
+                out.append(self.after_delta(r, transmitted))
+        scattered = self.scatter(rays, hit, kind, can_bounce, rng)
+        if scattered is not None and len(scattered):
+            if scattered.extra is not None and footprint.KEY in scattered.extra:
+                # a diffuse or rough bounce: no footprint any more (a point sample)
+                scattered.extra[footprint.KEY] = footprint.zero_differentials(len(scattered))
+            if (scattered.lam is None) == (rays.lam is None):
+                out.append(scattered)
+            else:  # a white population's mono rays: traced with the mono population
+                self._spawned.append(scattered)
+        out = [r for r in out if len(r)]
+        if not out:
+            return rays.take(np.zeros(len(rays), bool)), children, child_hits
+        nxt = out[0]
+        for r in out[1:]:
+            nxt = Rays.concat(nxt, r)
+        return nxt, children, child_hits
+
+    def _hit_info(self, rays: Rays, t, prim, bu, bv) -> Hit:
+        prepared = self.prepared
+        p = rays.o + t[:, None] * rays.d
+        ng0 = np.take(prepared.tri_normal, prim, axis=0)  # row gathers: np.take is several times faster
+        cos = -np.einsum("ij,ij->i", rays.d, ng0)
+        front = cos > 0
+        ng = ng0 * np.where(front, np.float32(1), np.float32(-1))[:, None]
+        if prepared.corner_normals is None:
+            ns = ng
+        else:  # on the triangle's side first, then flipped with ng: both face the incoming ray's side
+            ns = hit_shading_normals(prepared.corner_normals, prepared.smooth_triangles, prim, bu, bv, ng0)
+            ns *= np.where(front, np.float32(1), np.float32(-1))[:, None]
+        return Hit(p.astype(np.float32, copy=False), ng, ns, np.abs(cos), front, np.take(prepared.tri_material, prim),
+                   np.take(prepared.tri_offset, prim), prim, bu, bv)
+
+    @staticmethod
+    def _per_ray(table, rows, lam):
+        """table[rows] (B, n) for white rays, table[rows, lam] (B,) for mono rays."""
+        return table[rows] if lam is None else table[rows, lam]
+
+    def _tinted(self, rays: Rays, hit: Hit):
+        """The weight after the surface's tint (skipped for clear glass and perfect mirrors)."""
+        m = self.prepared.materials
+        if m.clear[hit.mat].all():
+            return rays.w
+        if rays.basis is not None and self.grey[hit.mat].all():  # coefficients times a grey tint
+            return rays.w * m.reflectance[hit.mat, :1]
+        return rays.weighted(self._per_ray(m.reflectance, hit.mat, rays.lam))
+
+    def _specular_normal(self, rays: Rays, hit: Hit) -> np.ndarray:
+        """The normal specular reflection and refraction use: ng when flat, else ns made valid."""
+        if self.prepared.corner_normals is None:
+            return hit.ng
+        return valid_specular_normal(-rays.d, hit.ng, hit.ns)
+
+    def _mirror(self, rays: Rays, hit: Hit) -> Rays:
+        ns = self._specular_normal(rays, hit)
+        d = reflect(rays.d, ns)
+        o = hit.p + hit.eps[:, None] * hit.ng
+        out = rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit))
+        if out.extra is not None and footprint.KEY in out.extra:  # ray differentials (core/sampling/footprint.py)
+            out.extra[footprint.KEY] = footprint.reflect_differentials(rays.extra[footprint.KEY], rays.o, rays.d,
+                                                                       hit.p, ns)
+        return out
+
+    def _dielectric(self, rays: Rays, hit: Hit, rng, u=None) -> tuple[Rays, np.ndarray]:
+        """Fresnel-sampled reflection or refraction: (the rays going on, refracted (B,) bool);
+        ``u`` (B,): the choice's numbers (reflect where u < F), None: drawn from ``rng``.
+
+        Both directions are a d + b n about the specular normal n (the mirror: a = 1, b = 2 cos;
+        Snell's law: a = eta, b = eta cos - cos_t; under total internal reflection fr = 1, so the
+        mirror is chosen): one pass over (B, 3) for both branches."""
+        prepared = self.prepared
+        ior = prepared.materials.ior
+        # constant over the grid for white rays
+        n = np.take(ior[:, 0], hit.mat) if rays.lam is None else ior[hit.mat, rays.lam]
+        eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
+        ns = self._specular_normal(rays, hit)
+        cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
+        cos = np.asarray(cos_s, np.float32)
+        fr = fresnel_dielectric(cos, eta)
+        refl = (rng.random(len(rays)) if u is None else u) < fr
+        cos_t = np.sqrt(np.maximum(np.float32(0), 1 - eta * eta * np.maximum(np.float32(0), 1 - cos * cos)))
+        a = np.where(refl, np.float32(1), eta)
+        b = np.where(refl, 2 * cos, eta * cos - cos_t)
+        d = a[:, None] * rays.d + b[:, None] * ns
+        dn = np.einsum("ij,ij->i", d, hit.ng)
+        if ns is not hit.ng:
+            # a refraction about ns that stays on the incident side is refracted about ng instead
+            stay = ~refl & (dn >= 0)
+            if stay.any():
+                d[stay] = refract(rays.d[stay], hit.ng[stay], eta[stay])[0]
+                dn[stay] = np.einsum("ij,ij->i", d[stay], hit.ng[stay])
+        # offset to the side the new direction leaves on (a refraction about ng can be a TIR)
+        side = np.where(dn > 0, np.float32(1), np.float32(-1))
+        o = hit.p + (hit.eps * side)[:, None] * hit.ng
+        out = rays.moved(o.astype(np.float32, copy=False), d.astype(np.float32, copy=False), self._tinted(rays, hit))
+        if out.extra is not None and footprint.KEY in out.extra:  # ray differentials (core/sampling/footprint.py)
+            out.extra[footprint.KEY] = footprint.refract_differentials(rays.extra[footprint.KEY], rays.o, rays.d,
+                                                                       hit.p, ns, d, eta)
+        return out, side < 0
+
+    def _split(self, rays: Rays, hit: Hit, rng):
+        """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit.
+
+        SAMPLE draws ``wavelengths.BRANCHES`` wavelengths per ray from the ray's stratified number,
+        importance-sampled by the image's sensitivity (core/transport/wavelengths.py, docs/physics.md
+        section 2.6); SPLIT makes one child per wavelength with the parent's weight there."""
+        n, b = self.n, len(rays)
+        if self.prepared.settings.dispersion_sampling != "SPLIT":
+            parent, lam, w = wavelengths.draw(self.prepared.grid, rays.w, rays.u_lam)
+        elif rays.w is None:  # unit weights: every wavelength alike
+            parent, lam = np.repeat(np.arange(b), n), np.tile(np.arange(n), b)
+            w = np.ones(b * n, np.float32)
+        else:
+            parent, lam = np.nonzero(rays.w > 0)
+            w = rays.w[parent, lam]
+        children = Rays(rays.o[parent], rays.d[parent], rays.pix[parent], w.astype(np.float32),
+                         lam.astype(np.int64), rays.depth[parent], rays.u_lam[parent],
+                         None if rays.extra is None else {k: v[parent] for k, v in rays.extra.items()})
+        return children, hit.take(parent)
