@@ -29,7 +29,7 @@ want=$(sha256sum requirements.txt requirements-dask.txt requirements-denoise.txt
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   .venv/bin/python -m pip install -q --upgrade pip
   # the optional Dask cluster rendering and Open Image Denoise too, so their tests
-  # (tests/test_distributed.py, tests/test_denoise.py) run here
+  # (tests/render/test_distributed.py, tests/render/test_denoise.py) run here
   .venv/bin/python -m pip install -q -r requirements.txt -r requirements-dask.txt -r requirements-denoise.txt
   # the project itself, editable (its dependencies are the pins above): tests, examples,
   # benchmarks and tools import opal_diffraction from this checkout without touching sys.path

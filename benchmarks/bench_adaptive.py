@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/bench_adaptive.py [--pixels 64] [--tile-size 32] [--reference-spp 1024]
                                                   [--threads 1] [--repeats 3]
 
-The scene (tests/test_adaptive.py's): a diffuse plane over three quarters of a top-down view in
+The scene (tests/render/test_adaptive.py's): a diffuse plane over three quarters of a top-down view in
 a uniform grey world, a long wall standing on it; the world seen directly has no noise, the open
 plane little, the plane beside the wall a lot (half of its sky blocked). A non-adaptive render of
 ``--reference-spp`` samples is the reference; every other setting is rendered ``--repeats``

@@ -17,7 +17,7 @@ each configuration in a fresh process:
   and the process's peak RSS (``ru_maxrss``) of the timed run;
 - the caustic map's total flux (W summed over elements and wavelengths) and the splat's sum,
   which must agree between chunked and unchunked within the Monte Carlo noise (the test is
-  tests/test_split_light_chunks.py).
+  tests/integrators/light/test_split_light_chunks.py).
 
     .venv/bin/python benchmarks/bench_split_light.py [--scenes prism gem] [--light-paths 131072]
         [--threads 1] [--repeats 2] [--width 320 --height 200]

@@ -1,4 +1,4 @@
-"""Scenes for tests/test_grating_records.py: gratings lit only through plane mirrors, and the same
+"""Scenes for tests/gratings/test_grating_records.py: gratings lit only through plane mirrors, and the same
 gratings lit by point lights at the mirror images of the light (docs/physics.md section 3.5).
 
 A plane mirror of reflectance R turns a point light at P into a virtual point light at P's mirror

@@ -52,7 +52,7 @@ BUNDLED = [
     ("threadpoolctl", False),
 ]
 #: numpy bundled with Blender releases (the oldest is blender_version_min's): every bundled wheel
-#: that depends on numpy must accept each (tests/test_packaging_meta.py, tests/blender/test_packaging.py).
+#: that depends on numpy must accept each (tests/system/test_packaging_meta.py, tests/blender/test_packaging.py).
 #: 4.2 LTS: numpy 1.24.3 (Blender's build_files/build_environment/cmake/versions.cmake of that
 #: series; also what SciPy's version warning reports inside Blender 4.2); 5.0: 1.26.4 (versions.cmake,
 #: and the bpy 5.0.1 wheel requires numpy>=1.26,<2). 4.3-4.5 bundle a numpy between the two.

@@ -1,6 +1,6 @@
 """F12 and headless renders on a Dask cluster: ``scene.opal.scheduler`` set, the engine renders
 on its workers and Blender receives the image and passes a local render makes, bit for bit
-(tests/test_distributed.py checks the core's side in depth)."""
+(tests/render/test_distributed.py checks the core's side in depth)."""
 
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ TRIANGLE, ``rtcSetNewGeometryBuffer`` VERTEX FLOAT3 stride 16 and INDEX UINT3 st
 the very library embreex loaded, and the buffers are filled with one NumPy copy each; the
 scene is committed with ``rtcCommitScene`` through ctypes, which releases the GIL while Embree
 builds the BVH (so a cancel poll keeps running). The buffers hold the same bytes as embreex's,
-so Embree builds the same BVH and every hit is the same (tests/test_prepare_scale.py).
+so Embree builds the same BVH and every hit is the same (tests/render/test_prepare_scale.py).
 
 embreex keeps the ``RTCScene`` handle in a C field of ``EmbreeScene`` that Python cannot read;
 its place in the object (after the object header: ``scene_i``, then ``is_committed``, then

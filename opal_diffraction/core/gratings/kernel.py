@@ -389,7 +389,7 @@ def fraunhofer_pattern_footprint(u, v, du, dv, edges, a, d, n, length, subdivisi
     direction, ``nodes`` midpoints in the other); the two means are multiplied (the pattern is
     separable in u and v; within a part their common 1/lambda dependence is neglected, as in
     ``fraunhofer_pattern_binned``). Errors against brute-force quadrature of P over the whole box
-    are bounded in tests/test_grating_footprint.py. ``exclude_zeroth``: as in
+    are bounded in tests/gratings/test_grating_footprint.py. ``exclude_zeroth``: as in
     ``fraunhofer_pattern_binned`` (the zeroth order carried by the base's continuation).
     """
     u = np.asarray(u, np.float64)[:, None]

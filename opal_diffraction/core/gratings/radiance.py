@@ -24,7 +24,7 @@ openings, the fill fraction A / A_cell). The product of two sharp factors has no
 average, so each bin takes one stratified random wavelength per sample: unbiased, it converges
 with the samples per pixel (the LINES case is exact per sample). Nearest neighbours are D apart
 and rows (sqrt 3 / 2) D, so its first orders sit at |q| = 2 lambda / (sqrt 3 D) (docs/physics.md
-section 3.4; tests/test_grating_radiometry.py checks it against a phasor sum over a patch).
+section 3.4; tests/gratings/test_grating_radiometry.py checks it against a phasor sum over a patch).
 
 With a ``footprint`` (core/sampling/footprint.py: ray differentials), the LINES pattern is averaged over
 each sample's pixel footprint in (u, v) as well, in closed form

@@ -1220,7 +1220,7 @@ def _validate_corner_normals(value, v: np.ndarray, t: np.ndarray, warns: list) -
     _check_range(cn.reshape(len(cn), 9), lambda i: f"triangle {i}", "shading normal", "")
     # normalised in float64 in chunks of rows (the same values as over the whole array at once,
     # without (T, 3, 3) float64 temporaries), chunks small enough to stay in cache; the length is sqrt((x^2 + y^2) + z^2), the order
-    # np.linalg.norm's reduction adds in (the same values, tests/test_prepare_scale.py)
+    # np.linalg.norm's reduction adds in (the same values, tests/render/test_prepare_scale.py)
     out = np.empty(cn.shape, np.float32)
     n_zero = 0
     for s in range(0, len(cn), _ROWS_PER_CHUNK):

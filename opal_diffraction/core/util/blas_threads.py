@@ -17,7 +17,7 @@ without it the limit is skipped (a render is only slower on CPU time, never wron
 A trap, measured with NumPy 1.26's OpenBLAS 0.3.23: once the main thread has set a thread count,
 a count set from another thread is ignored (the main thread's stays). Blender's F12 render job
 and the viewport's worker set it from their own threads; if a script has set a count in the
-main thread first, that count stays (slower on CPU time only). tests/test_blas_threads.py
+main thread first, that count stays (slower on CPU time only). tests/util/test_blas_threads.py
 checks the limit in the thread that renders.
 """
 

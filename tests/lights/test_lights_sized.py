@@ -17,7 +17,7 @@ from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.spectral.spectrum import SpectralConverter
 
 CONV = SpectralConverter(RenderSettings(wavelength_step=20.0).grid())
-#: chi-square tests in this file and tests/test_mesh_lights.py (Bonferroni)
+#: chi-square tests in this file and tests/lights/test_mesh_lights.py (Bonferroni)
 CHI2_TESTS = 10
 ALPHA = 0.01 / CHI2_TESTS
 Z_MAX = 4.0  # |Z| beyond this: a two-sided probability of 6e-5 per comparison

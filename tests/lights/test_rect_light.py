@@ -2,7 +2,7 @@
 section 7.10). The solid angle against Van Oosterom & Strackee's formula for the rectangle's two
 triangles (an independent closed form), the sampled directions against a uniform density over
 the spherical rectangle (chi-square, Mitsuba's chi2.py scheme) and every sample on the
-rectangle. (tests/test_lights_sized.py checks the light's sampler against ``light_pdf`` and its
+rectangle. (tests/lights/test_lights_sized.py checks the light's sampler against ``light_pdf`` and its
 irradiance against Lambert's polygon formula.)"""
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ from opal_diffraction.core.render.frame import render, render_prepared
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
 
-PACKAGE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "opal_diffraction")
+PACKAGE = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", "opal_diffraction"))
 
 
 def glass_scene(width=24, height=16):

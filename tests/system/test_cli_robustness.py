@@ -26,7 +26,7 @@ from opal_diffraction import cli
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
+ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 FAST = ["--spp", "1", "--light-paths", "0", "--wavelength-step", "50", "-q"]
 
 

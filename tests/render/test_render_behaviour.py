@@ -14,7 +14,7 @@ from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
 import stripe_scenes  # tests/stripe_scenes.py
 
-ROOT = os.path.join(os.path.dirname(__file__), "..")
+ROOT = os.path.join(os.path.dirname(__file__), "..", "..")
 
 
 def prism_and_stripes(pixels=32):

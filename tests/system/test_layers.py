@@ -12,7 +12,7 @@ import os
 
 import pytest
 
-PACKAGE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "opal_diffraction")
+PACKAGE = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", "opal_diffraction"))
 CORE = "opal_diffraction.core"
 
 # room -> the rooms it may import (besides itself); the order is the layer order, low to high

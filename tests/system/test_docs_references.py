@@ -22,7 +22,7 @@ import re
 
 import pytest
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
+ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 FOLDERS = ("opal_diffraction", "tests", "docs", "examples", "benchmarks", "tools")
 TOP_FILES = ("README.md",)
 SKIP_DIRS = {".venv", "__pycache__", ".git", "build", "out", "node_modules"}
@@ -170,7 +170,7 @@ def test_no_file_cites_design_notes_outside_the_repository(files):
 def test_the_scan_covers_the_code_the_tests_and_the_docs(files):
     paths = {p for p, _ in files}
     for must in ("README.md", os.path.join("docs", DOC_NAME), os.path.join("opal_diffraction", "core", "gratings", "radiance.py"),
-                 os.path.join("tests", "test_diffraction.py"), os.path.join("tests", "blender", "test_cycles_units.py")):
+                 os.path.join("tests", "gratings", "test_diffraction.py"), os.path.join("tests", "blender", "test_cycles_units.py")):
         assert must in paths, must
     assert sum(len(citations(t)) for _, t in files) > 30  # the citations themselves are found
 
