@@ -1,9 +1,14 @@
-"""A chi-square goodness-of-fit test for direction samplers, after Mitsuba 3's chi2.py.
+"""The chi-square harness of the tests, after Mitsuba 3's chi2.py: every Pearson test of a sampler
+against its density goes through ``pearson``.
 
-Samples are histogrammed over a (theta, phi) grid around an axis; each cell's expected count is
-the pdf integrated over the cell (a midpoint rule on a fine sub-grid, with the sin(theta)
-Jacobian); cells expecting fewer than 5 are pooled into one; the p-value of Pearson's statistic
-is compared with a threshold divided by the number of tests run (Bonferroni), as Mitsuba does.
+- ``pearson``: observed counts against expected ones; cells expecting fewer than 5 are pooled
+  into one, and samples where nothing is expected fail the test (p = 0). Each test compares the
+  p-value with its threshold divided by the number of tests it runs (Bonferroni), as Mitsuba does.
+- ``chi2_directions``: directions histogrammed over a (theta, phi) grid around an axis, each cell's
+  expected count the pdf integrated over the cell (a midpoint rule on a fine sub-grid, with the
+  sin(theta) Jacobian), then ``pearson``.
+- ``chi2_normal_scores``: the sum of squares of independent standard-normal scores against the
+  chi-square distribution (a Z-test over many cells at once).
 """
 
 from __future__ import annotations
@@ -56,7 +61,17 @@ def chi2_directions(dirs, pdf, axis, theta_max=np.pi, n_theta=16, n_phi=32, sub=
     expected[:-1] = integrate(0.0, theta_max, n_theta).ravel() * n
     if theta_max < np.pi:
         expected[-1] = integrate(theta_max, np.pi, 8).sum() * n
-    # pool the cells expecting few samples (Mitsuba: into one cell)
+    p, details = pearson(observed, expected, min_expected)
+    return p, f"{details}; expected total {expected.sum():.1f} of {n}", expected.sum() / n
+
+
+def pearson(observed, expected, min_expected=5.0):
+    """(p-value, details) of Pearson's statistic of the counts ``observed`` against ``expected``
+    (arrays of one shape), the cells expecting fewer than ``min_expected`` pooled into one (as
+    Mitsuba does). Samples in cells where nothing is expected give p = 0; a single cell left (no
+    degree of freedom) gives p = 1."""
+    observed = np.asarray(observed, np.float64).ravel()
+    expected = np.asarray(expected, np.float64).ravel()
     small = expected < min_expected
     obs = list(observed[~small])
     exp = list(expected[~small])
@@ -65,10 +80,16 @@ def chi2_directions(dirs, pdf, axis, theta_max=np.pi, n_theta=16, n_phi=32, sub=
         obs.append(pooled_o)
         exp.append(pooled_e)
     elif pooled_o > 0:
-        return 0.0, f"{pooled_o:g} samples where the pdf integrates to 0", expected.sum() / n
+        return 0.0, f"{pooled_o:g} samples where nothing is expected"
     obs, exp = np.array(obs), np.array(exp)
     stat = float(np.sum((obs - exp) ** 2 / exp))
     dof = len(obs) - 1
-    p = float(stats.chi2.sf(stat, dof))
-    return p, (f"chi2 {stat:.1f} over {dof} dof, p = {p:.3g}; expected total {expected.sum():.1f} of {n} "
-               f"({len(obs)} cells)"), expected.sum() / n
+    p = float(stats.chi2.sf(stat, dof)) if dof > 0 else 1.0
+    return p, f"chi2 {stat:.1f} over {dof} dof, p = {p:.3g} ({len(obs)} cells)"
+
+
+def chi2_normal_scores(z):
+    """p-value of sum(z^2) for independent standard-normal scores ``z``: chi-square with len(z)
+    degrees of freedom."""
+    z = np.asarray(z, np.float64).ravel()
+    return float(stats.chi2.sf(np.sum(z**2), len(z)))

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from chi2 import pearson
 from opal_diffraction.core.lights.environment import EnvironmentMap, direction_to_uv, uv_to_direction
 
 
@@ -97,23 +98,6 @@ def _cell_integrals(env, n_theta, n_phi, sub=24):
     return out
 
 
-def _chi2_pvalue(observed, expected, min_expected=5.0):
-    """Mitsuba 3's chi2.py: cells with expected counts below min_expected pooled into one."""
-    obs, exp = observed.ravel(), expected.ravel()
-    order = np.argsort(exp)
-    obs, exp = obs[order], exp[order]
-    small = exp < min_expected
-    pooled_obs, pooled_exp = obs[~small], exp[~small]
-    if small.any() and exp[small].sum() >= min_expected:
-        pooled_obs = np.append(pooled_obs, obs[small].sum())
-        pooled_exp = np.append(pooled_exp, exp[small].sum())
-    elif small.any():
-        assert obs[small].sum() < 10, "samples where the density says almost none"
-    chi2 = np.sum((pooled_obs - pooled_exp) ** 2 / pooled_exp)
-    dof = len(pooled_exp) - 1
-    return float(stats.chi2.sf(chi2, dof)), dof
-
-
 @pytest.mark.parametrize("interpolation", ["LINEAR", "CLOSEST"])
 def test_sample_matches_pdf_chi_square(interpolation):
     """Histogram of 400 k samples over a 30 x 60 (theta, phi) grid against the pdf integrated over
@@ -132,9 +116,9 @@ def test_sample_matches_pdf_chi_square(interpolation):
     hist, _, _ = np.histogram2d(theta, phi, bins=[n_theta, n_phi], range=[[0, np.pi], [0, 2 * np.pi]])
     expected = _cell_integrals(env, n_theta, n_phi) * n
     assert abs(expected.sum() / n - 1) < 1e-3
-    p, dof = _chi2_pvalue(hist, expected)
-    print(f"chi2 {interpolation}: p = {p:.3g} over {dof} degrees of freedom")
-    assert p > 0.01 / 2
+    p, info = pearson(hist, expected)
+    print(f"{interpolation}: {info}")
+    assert p > 0.01 / 2, info
 
 
 def test_pdf_integrates_to_one_and_follows_the_radiance():

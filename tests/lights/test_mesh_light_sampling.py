@@ -9,9 +9,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import stats
 
-from chi2 import chi2_directions
+from chi2 import chi2_directions, pearson
 from opal_diffraction.core.lights.mesh_lights import MeshLights, heitz_triangle, sample_spherical_triangle, solid_angle
 from test_lights_sized import Z_MAX, polygon_irradiance
 from test_mesh_lights import light_density, ray_triangles
@@ -31,18 +30,6 @@ EMISSION = np.array([[1.0, 1.0], [5.0, 3.0], [0.5, 2.0]])
 
 def build():
     return MeshLights.build(V, T, TM, EMISSION)
-
-
-def pearson(observed, expected, min_expected=5.0):
-    """Pearson's p-value with the cells expecting fewer than ``min_expected`` pooled into one."""
-    observed, expected = np.asarray(observed, float).ravel(), np.asarray(expected, float).ravel()
-    small = expected < min_expected
-    obs = np.append(observed[~small], observed[small].sum())
-    exp = np.append(expected[~small], expected[small].sum())
-    if exp[-1] == 0:
-        obs, exp = obs[:-1], exp[:-1]
-    chi = float(np.sum((obs - exp) ** 2 / exp))
-    return float(stats.chi2.sf(chi, len(exp) - 1)), f"chi2 {chi:.1f} dof {len(exp) - 1}"
 
 
 def test_pick_rescales_its_number_uniformly_and_independently_of_the_choice():
