@@ -36,7 +36,7 @@ _UNIT_COLUMNS = ("roughness", "metallic", "transmission")
 _OBSERVER_NM = (360.0, 830.0)  # the wavelengths any grid may hold (spectrum.py)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays: compared by identity
 class ValidatedScene:
     """What ``validate`` returns: the clean scene, the warnings, and validation's products.
 
