@@ -22,6 +22,7 @@ from opal_diffraction.core.sampling.camera import generate_rays
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
 
 
@@ -37,7 +38,7 @@ def diffuse_scene(pixels=512) -> Scene:
 
 def raw_throughput(scene: Scene, settings: RenderSettings, n_rays: int, shadow_fraction: float) -> float:
     """Mrays/s of the backend alone, casting camera rays and shadow rays in the eye pass's mix."""
-    scene, _ = scene.validated()
+    scene = validate(scene).scene
     ctx = prepare(scene, settings)
     cam = scene.camera
     rng = np.random.default_rng(0)

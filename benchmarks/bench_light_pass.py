@@ -30,6 +30,7 @@ SCENES = ("sphere", "prism", "gem")
 def build(name: str):
     """The scene ``name`` (a validated Scene)."""
     from opal_diffraction._scripts import load_example, load_script
+    from opal_diffraction.core.scene.validation import validate
 
     if name == "sphere":
         cs = load_script(os.path.join("benchmarks", "caustic_sphere.py"))
@@ -38,7 +39,7 @@ def build(name: str):
         scene = load_example(name).build_scene()
     else:
         raise SystemExit(f"unknown scene {name!r} (one of {', '.join(SCENES)})")
-    return scene.validated()[0]
+    return validate(scene).scene
 
 
 def prepared(name: str, paths: int, threads: int):

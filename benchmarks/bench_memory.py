@@ -168,6 +168,7 @@ def main(argv=None) -> int:
         os.environ["BENCH_TIMELINE"] = str(args.timeline)
 
     from opal_diffraction._scripts import load_example
+    from opal_diffraction.core.scene.npz import save_scene
     from opal_diffraction.core.scene.settings import film_bytes
 
     trees = [("this tree", REPO)] + ([("--tree", os.path.abspath(args.tree))] if args.tree else [])
@@ -175,7 +176,7 @@ def main(argv=None) -> int:
     with (tempfile.TemporaryDirectory() if not args.keep else _Keep(args.keep)) as tmp:
         scene = load_example(args.scene).build_scene(args.width, args.height)
         scene_path = os.path.join(tmp, "scene.npz")
-        scene.save(scene_path)
+        save_scene(scene, scene_path)
         outputs = [False, True] if args.only is None else [args.only == "spectral"]
         configs = [(label, tree, spp, spectral) for spp in args.spp for spectral in outputs
                    for label, tree in trees]  # in turns

@@ -99,7 +99,7 @@ def scene_of(triangles: int, grating_every: int = 8) -> Scene:
 
 # the functions core/render/prepare.py calls, by phase (wrapped in the modules whose names it calls)
 PHASES = [
-    ("validation", Scene, "validated"),
+    ("validation", _prep, "validate"),
     ("materials/lights/gratings", _prep, "prepare_materials"),
     ("materials/lights/gratings", _prep, "prepare_lights"),
     ("materials/lights/gratings", _prep, "prepare_gratings"),

@@ -48,6 +48,7 @@ from opal_diffraction.core.render.plan import plan_render
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.render.frame import render, render_prepared
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
@@ -792,7 +793,7 @@ def profile_light_pass(spec: Spec, paths: int) -> int:
     from opal_diffraction.core.integrators.light.light_pass import run_light_pass
     from opal_diffraction.core.render.prepare import prepare
 
-    scene, _ = our_scene(spec).validated()
+    scene = validate(our_scene(spec)).scene
     st = RenderSettings(samples=1, light_paths=paths, threads=1)
     ctx = prepare(scene, st)
     prof = Profiler(interval=0.002)

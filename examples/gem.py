@@ -21,6 +21,7 @@ import numpy as np
 from opal_diffraction._scripts import load_example
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.scene.model import Camera, Materials, Scene
+from opal_diffraction.core.scene.npz import save_scene
 
 
 def build_scene(width: int = 480, height: int = 360) -> Scene:
@@ -48,7 +49,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
     scene = build_scene(*args.resolution)
-    scene.save(args.out + ".npz")
+    save_scene(scene, args.out + ".npz")
     from opal_diffraction.cli import main as cli
 
     return cli(["render", args.out + ".npz", "-o", args.out + ".exr", "--spp", str(args.spp),

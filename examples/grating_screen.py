@@ -26,6 +26,7 @@ import numpy as np
 
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.npz import save_scene
 
 PERIOD_NM = 1e6 / 600.0  # 600 lines/mm
 
@@ -83,7 +84,7 @@ def main(argv=None) -> int:
 
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, "grating_screen")
-    grating_screen_scene(*args.resolution).save(path + ".npz")
+    save_scene(grating_screen_scene(*args.resolution), path + ".npz")
     rc = cli_main(["render", path + ".npz", "-o", path + ".exr", "--spp", str(args.spp), "--light-paths",
                    str(args.light_paths), "--diffuse-bounces", "0", "--exposure", str(args.exposure)])
     os.unlink(path + ".npz")

@@ -24,6 +24,7 @@ import numpy as np
 
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.npz import save_scene
 
 
 def fig5_scene(width=480, height=240, slit_count=1000) -> Scene:
@@ -98,7 +99,7 @@ def main(argv=None) -> int:
     for name in args.which:
         scene = SCENES[name]()
         path = os.path.join(args.out, name)
-        scene.save(path + ".npz")
+        save_scene(scene, path + ".npz")
         rc = cli_main(["render", path + ".npz", "-o", path + ".exr", "--spp", str(args.spp),
                        "--exposure", str(args.exposure)])
         if rc:

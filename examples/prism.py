@@ -20,6 +20,7 @@ import numpy as np
 from opal_diffraction._scripts import load_example
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.npz import save_scene
 
 
 #: The sky's strength (a multiplier of examples/environments.py's sky).
@@ -61,7 +62,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     scene = build_scene(*args.resolution)
-    scene.save(args.out + ".npz")
+    save_scene(scene, args.out + ".npz")
     from opal_diffraction.cli import main as cli_main
 
     return cli_main(["render", args.out + ".npz", "-o", args.out + ".exr", "--spp", str(args.spp)])

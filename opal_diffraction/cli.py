@@ -347,7 +347,8 @@ def _render(args, sig: _Signals, created: list) -> int:
     from .core.render.output import write_png, write_rgb_exr, write_spectral_exr
     from .core.render.prepare import prepare
     from .core.render.frame import render_prepared
-    from .core.scene.model import Scene, SceneError
+    from .core.scene.npz import load_scene
+    from .core.scene.checks import SceneError
     from .core.scene.settings import RenderSettings
 
     t_start = time.perf_counter()
@@ -361,7 +362,7 @@ def _render(args, sig: _Signals, created: list) -> int:
             raise CliError(f"--denoise needs Open Image Denoise's Python binding pyoidn, which is not installed: "
                            f"{INSTALL_HINT}")
     try:
-        scene = Scene.load(args.scene)
+        scene = load_scene(args.scene)
         if args.resolution:
             if scene.camera is None:
                 raise SceneError("the scene has no camera")

@@ -42,7 +42,9 @@ from ..core.render.distributed import connect
 from ..core.util.enums import Lattice
 from ..core.render.output import write_spectral_exr
 from ..core.render.frame import render as core_render
-from ..core.scene.model import SceneError
+from ..core.scene.checks import SceneError
+from ..core.scene.npz import save_scene
+from ..core.scene.validation import validate
 from .export import ExportCancelled, export_scene, rec709_to_working_space, render_region
 from .settings import render_settings
 from . import viewport
@@ -224,10 +226,10 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         warnings = [w for w in (opal.wavelength_warning(),) if w] + list(exported.warnings)
         last_render["export"] = dict(exported.stats)
         if npz_path:
-            exported.scene.validated()  # do not write a file the command line cannot render
+            validate(exported.scene)  # do not write a file the command line cannot render
             try:
                 os.makedirs(os.path.dirname(npz_path), exist_ok=True)
-                exported.scene.save(npz_path)
+                save_scene(exported.scene, npz_path)
             except OSError as e:
                 warnings.append(f"could not write the scene file '{npz_path}': {e}")
 

@@ -10,7 +10,9 @@ import bpy
 from bpy.props import EnumProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
-from ..core.scene.model import SceneError
+from ..core.scene.checks import SceneError
+from ..core.scene.npz import save_scene
+from ..core.scene.validation import validate
 from .export import ExportCancelled, export_scene
 from .properties import DISPERSION_PRESETS
 
@@ -39,12 +41,12 @@ class OPAL_OT_export_scene(bpy.types.Operator, ExportHelper):
         depsgraph = context.evaluated_depsgraph_get()
         try:
             exported = export_scene(depsgraph)
-            exported.scene.validated()  # the same checks a render makes, before writing anything
+            validate(exported.scene)  # the same checks a render makes, before writing anything
             path = bpy.path.abspath(self.filepath)
             if not path.lower().endswith(".npz"):
                 path += ".npz"
             os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-            exported.scene.save(path)
+            save_scene(exported.scene, path)
         except (SceneError, ExportCancelled, OSError) as e:
             self.report({"ERROR"}, f"Opal Diffraction export failed: {e or 'cancelled'}")
             return {"CANCELLED"}

@@ -38,7 +38,8 @@ from ..core.integrators.light.light_pass import LightPassResult, run_light_pass
 from ..core.render.plan import plan_render
 from ..core.render.prepare import PreparedScene, prepare
 from ..core.render.frame import render_prepared
-from ..core.scene.model import Camera, SceneError
+from ..core.scene.model import Camera
+from ..core.scene.checks import SceneError
 from .settings import render_settings
 
 __all__ = ["preview_levels", "viewport_camera", "prepare_pixels", "Frame", "ProgressiveRenderer", "ViewportSession",

@@ -13,7 +13,8 @@ import pytest
 import blender_scenes as bs
 from opal_diffraction.blender.export import ExportCancelled, export_scene
 from opal_diffraction.core.spectral.optics import DISPERSION_MODELS
-from opal_diffraction.core.scene.model import LIGHT_KINDS, MATERIAL_KINDS, SceneError
+from opal_diffraction.core.scene.model import LIGHT_KINDS, MATERIAL_KINDS
+from opal_diffraction.core.scene.checks import SceneError
 
 
 def _export():
@@ -99,9 +100,9 @@ def test_vertex_instancing(tmp_path, last_render):
     sc.opal.scene_npz = str(tmp_path / "verts.npz")
     bpy.ops.render.render()
     assert last_render["export"]["triangles"] == 4 * 12
-    from opal_diffraction.core.scene.model import Scene
+    from opal_diffraction.core.scene.npz import load_scene
 
-    s = Scene.load(tmp_path / "verts.npz")
+    s = load_scene(tmp_path / "verts.npz")
     centres = s.vertices[s.triangles].reshape(4, -1, 3).mean(axis=1)
     assert sorted(map(tuple, np.round(centres[:, :2], 3))) == [(10, 0), (10, 3), (13, 0), (13, 3)]
 
@@ -394,14 +395,14 @@ def test_world_colour():
 
 def test_export_operator_writes_a_renderable_scene(tmp_path):
     from opal_diffraction.core.render.frame import render
-    from opal_diffraction.core.scene.model import Scene
+    from opal_diffraction.core.scene.npz import load_scene
     from opal_diffraction.core.scene.settings import RenderSettings
 
     _basic_scene()
     bpy.ops.mesh.primitive_cube_add(size=1.0)
     path = tmp_path / "scene.npz"
     assert bpy.ops.opal.export_scene(filepath=str(path)) == {"FINISHED"}
-    s = Scene.load(path)
+    s = load_scene(path)
     assert len(s.triangles) == 12 and len(s.lights) == 1 and s.camera.width == 16
     r = render(s, RenderSettings(samples=1, wavelength_step=20.0))
     assert r.rgb.max() > 0

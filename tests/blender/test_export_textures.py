@@ -25,6 +25,7 @@ from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.materials.surface import shading_normal
 from opal_diffraction.core.materials.textures import sample_texture
 from opal_diffraction.core.transport.walker import Hit
+from opal_diffraction.core.scene.validation import validate
 
 N = 8        # texels per side
 PIXELS = 48  # render size: 6 pixels per texel
@@ -320,7 +321,7 @@ def test_a_missing_image_file_warns_naming_it_and_renders_magenta_as_cycles(case
     assert msgs and all("lost material" in w for w in msgs), ex.warnings
     assert len(ex.scene.textures) == 0
     np.testing.assert_allclose(ex.scene.materials.emission[0], (1, 0, 1))
-    ex.scene.validated()
+    validate(ex.scene)
     got = render_cycles(tmp_path)
     np.testing.assert_allclose(got, [(1, 0, 1)] * len(got), atol=1e-3)
 

@@ -15,6 +15,7 @@ from opal_diffraction.blender.export import export_scene
 from opal_diffraction.blender.export.world import MISSING_IMAGE_RGB
 from opal_diffraction.core.sampling.camera import generate_rays
 from opal_diffraction.core.lights.environment import EnvironmentMap
+from opal_diffraction.core.scene.validation import validate
 
 W, H = 64, 32
 
@@ -212,7 +213,8 @@ def test_a_mapped_world_is_a_light_and_no_lights_is_not_said(tmp_path):
     bs.plane(mat=bs.material("grey"))
     img, _ = pattern_image()
     env_world(image=img)
-    s, warns = _export().scene.validated()
+    checked = validate(_export().scene)
+    s, warns = checked.scene, checked.warnings
     assert s.world_image.shape == (H, W, 3)
     assert not any("no lights" in w for w in warns)
 

@@ -29,6 +29,7 @@ from opal_diffraction.core import opal as core_opal
 from opal_diffraction.core.sampling.camera import generate_rays
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
 
 ATTRS = {"opal_grating_direction": ("FLOAT_VECTOR", "FACE"), "opal_grating_period": ("FLOAT", "FACE"),
@@ -333,7 +334,7 @@ def test_volume_domains_survive_save_and_reload_and_transform_with_the_object(tm
     np.testing.assert_allclose(s.domain_axis, after.axis @ rot.T, atol=1e-5)
     assert (s.tri_domain_group == 0).all() and len(s.tri_domain_group) == len(s.triangles)
     # a world point lies in the cell of its object-space point
-    clean, _ = s.validated()
+    clean = validate(s).scene
     vd = clean.volume_domains()
     rng = np.random.default_rng(1)
     local = rng.uniform((-0.008, -0.006, 0.0), (0.008, 0.006, 0.005), (500, 3))

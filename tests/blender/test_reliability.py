@@ -18,7 +18,7 @@ from opal_diffraction.blender import properties, ui
 from opal_diffraction.blender.engine import ENGINE_ID, OpalRenderEngine, warning_summary
 from opal_diffraction.blender.export import export_scene
 from opal_diffraction.blender.export.nodes import MAX_INTENSITY
-from opal_diffraction.core.scene.model import SceneError
+from opal_diffraction.core.scene.checks import SceneError
 
 FLT_MAX = float(np.finfo(np.float32).max)
 

@@ -16,7 +16,7 @@ import pytest
 import blender_scenes as bs
 from opal_diffraction.blender.engine import OpalRenderEngine
 from opal_diffraction.core.render.output import read_exr
-from opal_diffraction.core.scene.model import Scene
+from opal_diffraction.core.scene.npz import load_scene
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 
@@ -190,7 +190,7 @@ def test_spectral_exr_and_scene_file(tmp_path, last_render):
 
     header = OpenEXR.File(str(path)).header()
     assert header["spectralLayoutVersion"] == "1.0" and header["emissiveUnits"] == "W.m^-2.sr^-1"
-    scene = Scene.load(tmp_path / "scene_03.npz")
+    scene = load_scene(tmp_path / "scene_03.npz")
     assert len(scene.triangles) == 14 and scene.camera.width == 16 and len(scene.lights) == 1
 
 

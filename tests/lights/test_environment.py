@@ -357,7 +357,9 @@ def test_a_bright_patch_throws_the_caustic_of_a_sun_of_its_irradiance():
 # ------------------------------------------------------------------------------ scene, prepare, eye pass
 from opal_diffraction.core.sampling.camera import generate_rays  # noqa: E402
 from opal_diffraction.core.render.frame import render  # noqa: E402
-from opal_diffraction.core.scene.model import MAX_SIDE, SceneError  # noqa: E402
+from opal_diffraction.core.scene.checks import MAX_SIDE, SceneError  # noqa: E402
+from opal_diffraction.core.scene.npz import load_scene, save_scene  # noqa: E402
+from opal_diffraction.core.scene.validation import validate  # noqa: E402
 
 
 def _world_scene(**kw) -> Scene:
@@ -370,17 +372,17 @@ def _world_scene(**kw) -> Scene:
 def test_world_map_saves_loads_and_older_files_have_none(tmp_path):
     img = structured_map(8, 4)
     s = _world_scene(world_color=np.array([2.0, 1.0, 0.5], np.float32), world_image=img, world_rotation=ROT)
-    s.save(tmp_path / "a.npz")
-    t = Scene.load(tmp_path / "a.npz")
+    save_scene(s, tmp_path / "a.npz")
+    t = load_scene(tmp_path / "a.npz")
     np.testing.assert_array_equal(t.world_image, img)
     np.testing.assert_array_equal(t.world_rotation, ROT)
     # a file written before world maps existed
     with np.load(tmp_path / "a.npz") as z:
         old = {k: z[k] for k in z.files if k not in ("world_image", "world_rotation")}
     np.savez(tmp_path / "old.npz", **old)
-    o = Scene.load(tmp_path / "old.npz")
+    o = load_scene(tmp_path / "old.npz")
     assert o.world_image.shape == (0, 0, 3) and np.array_equal(o.world_rotation, np.eye(3))
-    clean, _ = o.validated()
+    clean = validate(o).scene
     assert clean.world_image.size == 0
 
 
@@ -397,16 +399,16 @@ def test_world_map_saves_loads_and_older_files_have_none(tmp_path):
 def test_bad_world_maps_are_clear_errors(image, rotation, message):
     s = _world_scene(world_color=np.ones(3, np.float32), world_image=image, world_rotation=rotation)
     with pytest.raises(SceneError, match=message):
-        s.validated()
+        validate(s)
 
 
 def test_a_mapped_world_lights_the_scene_a_black_one_does_not():
     lit = _world_scene(world_color=np.ones(3, np.float32), world_image=structured_map(8, 4))
-    assert not any("no lights" in w for w in lit.validated()[1])
+    assert not any("no lights" in w for w in validate(lit).warnings)
     dark = _world_scene(world_color=np.ones(3, np.float32), world_image=np.zeros((4, 8, 3), np.float32))
-    assert any("no lights" in w for w in dark.validated()[1])
+    assert any("no lights" in w for w in validate(dark).warnings)
     mirror = np.diag([-1.0, 1.0, 1.0])  # a mirrored map (a Mapping node's negative scale) is allowed
-    _world_scene(world_color=np.ones(3, np.float32), world_image=structured_map(8, 4), world_rotation=mirror).validated()
+    validate(_world_scene(world_color=np.ones(3, np.float32), world_image=structured_map(8, 4), world_rotation=mirror))
 
 
 def test_prepare_builds_the_map_and_keys_the_light_pass_on_it():

@@ -12,7 +12,10 @@ import pytest
 from chi2 import chi2_directions
 from opal_diffraction.core.lights.sources import (intersect_lights, is_delta, light_pdf, prepare_lights, sample_light,
                                           sun_radiance)
-from opal_diffraction.core.scene.model import Lights, Scene, SceneError
+from opal_diffraction.core.scene.model import Lights, Scene
+from opal_diffraction.core.scene.checks import SceneError
+from opal_diffraction.core.scene.npz import load_scene, save_scene
+from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.spectral.spectrum import SpectralConverter
 
@@ -261,8 +264,8 @@ def test_radius_and_angle_round_trip_and_validate(tmp_path):
     s.lights = Lights.from_list([{"kind": "POINT", "radius": 0.25, "soft_falloff": 1},
                                  {"kind": "SUN", "angle": 0.1}])
     path = tmp_path / "s.npz"
-    s.save(path)
-    back = Scene.load(path)
+    save_scene(s, path)
+    back = load_scene(path)
     np.testing.assert_array_equal(back.lights.radius, [0.25, 0.0])
     np.testing.assert_array_equal(back.lights.angle, [0.0, 0.1])
     np.testing.assert_array_equal(back.lights.soft_falloff, [1, 0])
@@ -272,13 +275,13 @@ def test_radius_and_angle_round_trip_and_validate(tmp_path):
         z.pop("light_" + name)
     old = tmp_path / "old.npz"
     np.savez(old, **z)
-    clean, _ = Scene.load(old).validated()
+    clean = validate(load_scene(old)).scene
     assert not clean.lights.radius.any() and not clean.lights.angle.any()
     for bad, msg in (({"kind": "POINT", "radius": -1.0}, "radius"), ({"kind": "SUN", "angle": 4.0}, "angle"),
                      ({"kind": "POINT", "soft_falloff": 2}, "soft falloff")):
         s.lights = Lights.from_list([bad])
         with pytest.raises(SceneError, match=msg):
-            s.validated()
+            validate(s)
 
 
 # ------------------------------------------------------------------------------ the light pass

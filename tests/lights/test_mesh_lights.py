@@ -16,6 +16,7 @@ from opal_diffraction.core.lights.mesh_lights import MeshLights
 from opal_diffraction.core.spectral.optics import fresnel_dielectric
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
 from test_lights_sized import ALPHA, Z_MAX, polygon_irradiance
 
@@ -189,10 +190,10 @@ def test_an_emitting_mesh_is_a_light_for_the_warnings():
     s = Scene(materials=mats)
     s.add_mesh(*primitives.quad((0, 0, 0), (4, 0, 0), (0, 4, 0)), material=0)
     s.camera = Camera.look_at((0, -4, 3), (0, 0, 0), width=8, height=8)
-    _, warns = s.validated()
+    warns = validate(s).warnings
     assert any("no lights" in w for w in warns)
     s.add_mesh(*primitives.quad((0, 0, 1), (1, 0, 0), (0, 1, 0)), material=1)
-    _, warns = s.validated()
+    warns = validate(s).warnings
     assert not any("no lights" in w for w in warns), warns
     ctx = prepare(s, RenderSettings(wavelength_step=20.0))
     assert ctx.mesh_lights is not None and sorted(ctx.mesh_lights.tri.tolist()) == [2, 3]

@@ -28,7 +28,10 @@ from chi2 import pearson
 from opal_diffraction.core.materials import bsdf as B
 from opal_diffraction.core.util.geometry import orthonormal_basis
 from opal_diffraction.core.materials.spectra import prepare_materials
-from opal_diffraction.core.scene.model import Camera, Materials, Scene, SceneError
+from opal_diffraction.core.scene.model import Camera, Materials, Scene
+from opal_diffraction.core.scene.checks import SceneError
+from opal_diffraction.core.scene.npz import load_scene, save_scene
+from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.spectral.spectrum import SpectralConverter
 
 NS = np.array([0.3, -0.5, 0.81])
@@ -381,15 +384,15 @@ def test_material_columns_defaults_and_validation():
                       (dict(specular_ior_level=0.5, ior=0.5), "IOR must be >= 1")):
         s = Scene(materials=Materials.from_list([dict(name="x", **bad)]), camera=Camera())
         with pytest.raises(SceneError, match=text):
-            s.validated()
+            validate(s)
     with pytest.raises(SceneError, match="conductor_fresnel"):
         Materials.from_list([{"conductor_fresnel": "SCHLICK"}])
 
 
 def test_material_columns_npz_round_trip_and_older_files(tmp_path):
     s = Scene(materials=_materials(), camera=Camera())
-    s.save(tmp_path / "a.npz")
-    back = Scene.load(tmp_path / "a.npz").materials
+    save_scene(s, tmp_path / "a.npz")
+    back = load_scene(tmp_path / "a.npz").materials
     for name in ("roughness", "metallic", "transmission", "specular_ior_level", "specular_tint", "conductor_fresnel"):
         np.testing.assert_array_equal(getattr(back, name), getattr(s.materials, name))
     # a file written before the columns: its mirrors are metals, its glass is glass, all smooth
@@ -397,10 +400,10 @@ def test_material_columns_npz_round_trip_and_older_files(tmp_path):
         old = {k: z[k] for k in z.files if not any(k == "material_" + c for c in
                ("roughness", "metallic", "transmission", "specular_ior_level", "specular_tint", "conductor_fresnel"))}
     np.savez(tmp_path / "old.npz", **old)
-    m = Scene.load(tmp_path / "old.npz").materials
+    m = load_scene(tmp_path / "old.npz").materials
     assert list(m.metallic) == [1, 0, 0, 0, 1, 0] and list(m.transmission) == [0, 1, 0, 0, 0, 0]
     assert (m.roughness == 0).all() and (m.specular_ior_level == 0).all() and (m.conductor_fresnel == 0).all()
-    Scene.load(tmp_path / "old.npz").validated()
+    validate(load_scene(tmp_path / "old.npz"))
 
 
 def test_params_from_materials():

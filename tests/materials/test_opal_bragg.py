@@ -26,7 +26,9 @@ from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.materials.bragg_bsdf import BraggLobe, kappa_from_spread
 from opal_diffraction.core.materials.bragg_multilayer import band_table, stack_reflectance
 from opal_diffraction.core.render.frame import render
-from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene, SceneError
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.checks import SceneError
+from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
 
 N_S = 1.45
@@ -337,12 +339,12 @@ def test_bragg_columns_are_validated():
         s.add_mesh(*primitives.quad((0, 0, 0), (1, 0, 0), (0, 1, 0)), material=0)
         s.camera = Camera()
         with pytest.raises(SceneError, match=words):
-            s.validated()
+            validate(s)
     # a grating row of another lattice does not read the BRAGG columns
     s = Scene(materials=Materials.from_list([{"kind": "DIFFUSE", "grating": 1, "sphere_diameter": 50.0}]))
     s.add_mesh(*primitives.quad((0, 0, 0), (1, 0, 0), (0, 1, 0)), material=0)
     s.camera = Camera()
-    s.validated()
+    validate(s)
 
 
 # ------------------------------------------------------------------ a render

@@ -13,7 +13,10 @@ from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.util.enums import TextureEncoding, TextureExtension, TextureInterpolation
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.render.frame import render
-from opal_diffraction.core.scene.model import MAX_SIDE, Materials, Scene, SceneError
+from opal_diffraction.core.scene.model import Materials, Scene
+from opal_diffraction.core.scene.checks import MAX_SIDE, SceneError
+from opal_diffraction.core.scene.npz import load_scene, save_scene
+from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.materials.surface import (shading_normal, surface_emission, surface_metallic, surface_reflectance,
                                            surface_roughness)
@@ -286,7 +289,7 @@ def scene_with_texture(**material):
 
 def error_of(s: Scene) -> str:
     with pytest.raises(SceneError) as e:
-        s.validated()
+        validate(s)
     return str(e.value)
 
 
@@ -321,7 +324,7 @@ def test_validation_names_bad_texture_data():
 def test_textures_without_uvs_are_warned():
     s = scene_with_texture(normal_texture=0)
     s.corner_uvs = np.zeros((0, 3, 2), np.float32)
-    _, warns = s.validated()
+    warns = validate(s).warnings
     assert any("no UVs" in w for w in warns) and any("no tangents" in w for w in warns)
 
 
@@ -331,7 +334,8 @@ def test_dropped_degenerate_triangles_keep_the_corner_data_in_step():
                uvs=np.array([[[0, 0], [1, 0], [0, 1]], [[5, 5], [5, 5], [5, 5]], [[1, 0], [2, 0], [0, 1]]]),
                uv_tangents=True)
     s.camera = top_down_camera(2.0, 4)
-    clean, warns = s.validated()
+    checked = validate(s)
+    clean, warns = checked.scene, checked.warnings
     assert any("degenerate" in w for w in warns)
     np.testing.assert_array_equal(clean.corner_uvs, [[[0, 0], [1, 0], [0, 1]], [[1, 0], [2, 0], [0, 1]]])
     assert clean.corner_tangents.shape == (2, 3, 4)
@@ -353,8 +357,8 @@ def test_npz_round_trip_and_older_files(tmp_path):
     s = scene_with_texture(normal_texture=0, normal_strength=0.5)
     s.add_texture(np.random.default_rng(0).random((3, 5, 4)), "CLOSEST", "CLIP", "SRGB")
     s.corner_tangents = np.random.default_rng(1).random((len(s.triangles), 3, 4)).astype(np.float32)
-    s.save(tmp_path / "s.npz")
-    t = Scene.load(tmp_path / "s.npz")
+    save_scene(s, tmp_path / "s.npz")
+    t = load_scene(tmp_path / "s.npz")
     assert len(t.textures) == 2
     for a, b in zip(s.textures, t.textures):
         np.testing.assert_array_equal(a, b)
@@ -364,7 +368,7 @@ def test_npz_round_trip_and_older_files(tmp_path):
     np.testing.assert_array_equal(t.corner_uvs, s.corner_uvs)
     np.testing.assert_array_equal(t.corner_tangents, s.corner_tangents)
     np.testing.assert_array_equal(t.materials.normal_strength, [0.5])
-    t.validated()
+    validate(t)
     # a file written before textures existed: no texture arrays, no texture columns
     with np.load(tmp_path / "s.npz") as z:
         old = {k: z[k] for k in z.files if not k.startswith(("texture", "corner_"))
@@ -372,10 +376,10 @@ def test_npz_round_trip_and_older_files(tmp_path):
                                                        "emission_texture", "normal_texture", "normal_strength",
                                                        "emission_strength")}}
     np.savez(tmp_path / "old.npz", **old)
-    o = Scene.load(tmp_path / "old.npz")
+    o = load_scene(tmp_path / "old.npz")
     assert o.textures == [] and o.corner_uvs.shape == (0, 3, 2)
     np.testing.assert_array_equal(o.materials.color_texture, [-1])
-    o.validated()
+    validate(o)
 
 
 def test_preparation_reuse_and_the_wire_format_carry_textures():
@@ -410,4 +414,4 @@ def test_roughness_and_metallic_read_one_channel_where_the_material_says():
     np.testing.assert_allclose(surface_metallic(p, hit), texel[:, 3], atol=1e-7)
     s.materials.roughness_channel[:] = 4
     with pytest.raises(SceneError, match="roughness channel 4"):
-        s.validated()
+        validate(s)

@@ -18,7 +18,10 @@ from opal_diffraction.core.opal.volume import (
     inside_mesh,
     transform_domains,
 )
-from opal_diffraction.core.scene.model import Camera, Materials, Scene, SceneError
+from opal_diffraction.core.scene.model import Camera, Materials, Scene
+from opal_diffraction.core.scene.checks import SceneError
+from opal_diffraction.core.scene.npz import load_scene, save_scene
+from opal_diffraction.core.scene.validation import validate
 
 #: Chi-square tests in this file; each must pass at p > 1e-3 / TESTS (Bonferroni).
 CHI2_TESTS = 4
@@ -204,11 +207,11 @@ def test_scene_carries_domains_through_validation_and_the_npz(tmp_path):
     g = sc.add_domains(seeds, np.zeros(20), axis, np.full(20, 250.0), triangles=slice(12, 24))
     assert g == 0
     assert (sc.tri_domain_group[:12] == -1).all() and (sc.tri_domain_group[12:] == 0).all()
-    clean, _ = sc.validated()
+    clean = validate(sc).scene
     np.testing.assert_allclose(np.linalg.norm(clean.domain_axis, axis=1), 1.0, atol=1e-6)
     path = tmp_path / "s.npz"
-    sc.save(path)
-    back = Scene.load(path)
+    save_scene(sc, path)
+    back = load_scene(path)
     for name in ("domain_seeds", "domain_weight", "domain_axis", "domain_diameter", "domain_group",
                  "tri_domain_group"):
         np.testing.assert_array_equal(getattr(back, name), getattr(sc, name), err_msg=name)
@@ -223,15 +226,15 @@ def test_scene_rejects_bad_domains():
     sc.add_domains(np.zeros((2, 3)), np.zeros(2), np.array([[0, 0, 1.0], [0, 0, 0]]), np.full(2, 250.0),
                    triangles=slice(0, 12))
     with pytest.raises(SceneError, match="axis"):
-        sc.validated()
+        validate(sc)
     sc = _scene()
     sc.add_domains(np.zeros((2, 3)), np.zeros(2), np.ones((2, 3)), np.array([250.0, -1.0]), triangles=slice(0, 12))
     with pytest.raises(SceneError, match="diameter"):
-        sc.validated()
+        validate(sc)
     sc = _scene()
     sc.add_domains(np.zeros((2, 3)), np.array([0.0, np.nan]), np.ones((2, 3)), np.full(2, 250.0))
     with pytest.raises(SceneError, match="weight"):
-        sc.validated()
+        validate(sc)
 
 
 def _hue(rgb):
@@ -308,4 +311,4 @@ def test_bragg_material_columns_are_validated(column, value, words):
     sc = _scene()
     sc.materials = Materials.from_list([{"kind": "DIFFUSE", "grating": 1, "lattice": "BRAGG", column: value}])
     with pytest.raises(SceneError, match=words):
-        sc.validated()
+        validate(sc)

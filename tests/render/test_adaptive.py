@@ -21,7 +21,8 @@ from opal_diffraction.core.sampling.camera import FilterSampler
 from opal_diffraction.core.integrators.eye.eye_pass import EyePass
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.render.frame import render
-from opal_diffraction.core.scene.model import Materials, Scene, SceneError
+from opal_diffraction.core.scene.model import Materials, Scene
+from opal_diffraction.core.scene.checks import SceneError
 from opal_diffraction.core.scene.settings import EYE_ONLY_SETTINGS, RenderSettings
 from opal_diffraction.core.render.tiles import EyeWork, adaptive_rounds, trace_tile
 

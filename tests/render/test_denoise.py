@@ -18,6 +18,7 @@ from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.render.output import read_exr
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.npz import save_scene
 from opal_diffraction.core.scene.settings import RenderSettings
 
 from scenes import top_down_camera
@@ -125,7 +126,7 @@ def run_main(argv) -> tuple[int, str]:
 def test_cli_denoise_writes_the_denoised_and_the_noisy_image(tmp_path, converged):
     pytest.importorskip("pyoidn")
     path = tmp_path / "scene.npz"
-    noisy_scene().save(path)
+    save_scene(noisy_scene(), path)
     args = ["render", str(path), "--spp", "2", "--seed", "1", "--wavelength-step", "20", "--diffuse-bounces", "1",
             "--light-paths", "0", "-q", "--no-preview"]
     code, err = run_main(args + ["-o", str(tmp_path / "out.exr"), "--denoise"])
@@ -142,7 +143,7 @@ def test_cli_denoise_writes_the_denoised_and_the_noisy_image(tmp_path, converged
 def test_cli_denoise_without_pyoidn_is_a_one_line_error_before_rendering(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "pyoidn", None)  # import pyoidn raises ImportError
     path = tmp_path / "scene.npz"
-    noisy_scene(8).save(path)
+    save_scene(noisy_scene(8), path)
     code, err = run_main(["render", str(path), "-o", str(tmp_path / "out.exr"), "--denoise", "-q"])
     assert code == 2 and err.startswith("error: ") and len(err.strip().splitlines()) == 1, err
     assert "pyoidn" in err and "requirements-denoise.txt" in err
@@ -151,7 +152,7 @@ def test_cli_denoise_without_pyoidn_is_a_one_line_error_before_rendering(tmp_pat
 
 def test_cli_adaptive_flags_reach_the_render(tmp_path):
     path = tmp_path / "scene.npz"
-    noisy_scene(16).save(path)
+    save_scene(noisy_scene(16), path)
     base = ["render", str(path), "--spp", "64", "--wavelength-step", "20", "--diffuse-bounces", "1",
             "--light-paths", "0", "--no-preview"]
     code, err = run_main(base + ["-o", str(tmp_path / "a.exr"), "--adaptive-threshold", "0.05",

@@ -24,6 +24,7 @@ from opal_diffraction.core.render.plan import plan_render
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.npz import save_scene
 from opal_diffraction.core.scene.settings import RenderSettings
 
 SETTINGS = RenderSettings(samples=4, round_samples=2, light_paths=150_000, seed=11, threads=2, tile_size=8)
@@ -244,7 +245,7 @@ def test_scheduler_addresses_fail_with_a_readable_error():
 def test_cli_renders_the_same_exr_on_local_workers(tmp_path):
     pytest.importorskip("distributed")
     scene = tmp_path / "scene.npz"
-    every_pass_scene(24, 16).save(str(scene))
+    save_scene(every_pass_scene(24, 16), str(scene))
     common = [sys.executable, "-m", "opal_diffraction", "render", str(scene), "--spp", "2", "--light-paths",
               "40000", "--seed", "4", "-q"]
     subprocess.run(common + ["-o", str(tmp_path / "a.exr"), "--spectral-exr", str(tmp_path / "a_s.exr")],

@@ -12,7 +12,8 @@ from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.render.film import Film
 from opal_diffraction.core.render.output import read_exr, spectral_channel_name, write_spectral_exr
 from opal_diffraction.core.render.frame import render
-from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene, SceneError
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.checks import SceneError
 from opal_diffraction.core.scene.settings import RenderSettings, film_bytes
 from opal_diffraction.core.spectral.spectrum import SpectralConverter
 from stripe_scenes import prism_and_stripes

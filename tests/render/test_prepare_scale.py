@@ -165,7 +165,7 @@ def test_triangle_offsets_are_the_per_triangle_maxima():
 
 
 def test_chunked_corner_normals_equal_the_whole_array_formula(monkeypatch):
-    from opal_diffraction.core.scene import model as scene_mod
+    from opal_diffraction.core.scene import validation as scene_mod
     from opal_diffraction.core.util.geometry import triangle_normals
 
     rng = np.random.default_rng(5)
@@ -190,7 +190,7 @@ def test_chunked_corner_normals_equal_the_whole_array_formula(monkeypatch):
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf, 1e39, -5e20, -1e-3])
 def test_fast_range_check_agrees_with_the_full_one(bad):
-    from opal_diffraction.core.scene.model import FLOAT32_MAX, _within
+    from opal_diffraction.core.scene.checks import FLOAT32_MAX, within as _within
 
     rng = np.random.default_rng(6)
     a = rng.normal(size=(1000, 3))
@@ -262,7 +262,8 @@ def test_smooth_corner_tangents_equal_the_float64_version():
 def test_prepare_uses_validations_cross_products_for_its_normals():
     from opal_diffraction.core.util.geometry import triangle_normals
     from opal_diffraction.core.render.prepare import prepare
-    from opal_diffraction.core.scene.model import TRIANGLE_CROSS_ATTR, Camera, Lights, Materials, Scene
+    from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+    from opal_diffraction.core.scene.validation import validate
     from opal_diffraction.core.scene.settings import RenderSettings
 
     v, t = primitives.icosphere((0, 0, 1), 1.0, 2)
@@ -272,9 +273,8 @@ def test_prepare_uses_validations_cross_products_for_its_normals():
                materials=Materials.from_list([{"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)}]))
     sc.lights = Lights.from_list([{"kind": "POINT", "position": (0, 0, 4), "power": 10.0}])
     sc.camera = Camera.look_at((0, -5, 2), (0, 0, 1), width=8, height=8)
-    clean, _ = sc.validated()
-    assert clean.__dict__[TRIANGLE_CROSS_ATTR].shape == (len(t) - 2, 3)
+    checked = validate(sc)  # the products are returned, not attached to the clean scene
+    assert checked.triangle_cross.shape == (len(t) - 2, 3) and checked.triangle_cross_norm.shape == (len(t) - 2,)
     p = prepare(sc, RenderSettings(samples=1, light_paths=0))
-    assert TRIANGLE_CROSS_ATTR not in p.scene.__dict__  # not kept with the prepared scene
     assert np.array_equal(p.tri_normal, triangle_normals(p.scene.vertices, p.scene.triangles).astype(np.float32))
     assert len(p.tri_normal) == len(t) - 2

@@ -11,6 +11,7 @@ from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.render.output import read_exr, spectral_channel_name
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.npz import save_scene
 from opal_diffraction.core.scene.settings import RenderSettings
 import stripe_scenes  # tests/stripe_scenes.py
 
@@ -72,7 +73,7 @@ def test_progress_reaches_one_and_partial_results_arrive_per_round():
 @pytest.mark.slow  # a subprocess: python -m opal_diffraction render
 def test_cli_renders_exr_png_and_spectral_exr(tmp_path):
     s = prism_and_stripes(pixels=12)
-    s.save(tmp_path / "scene.npz")
+    save_scene(s, tmp_path / "scene.npz")
     out = tmp_path / "out.exr"
     spec = tmp_path / "spec.exr"
     cmd = [sys.executable, "-m", "opal_diffraction", "render", str(tmp_path / "scene.npz"), "-o", str(out),
@@ -101,7 +102,7 @@ def test_cli_renders_exr_png_and_spectral_exr(tmp_path):
 def test_cli_reports_bad_input_without_a_traceback(tmp_path):
     s = prism_and_stripes(pixels=8)
     s.vertices[0, 0] = np.inf
-    s.save(tmp_path / "bad.npz")
+    save_scene(s, tmp_path / "bad.npz")
     p = subprocess.run([sys.executable, "-m", "opal_diffraction", "render", str(tmp_path / "bad.npz"), "-o",
                         str(tmp_path / "o.exr")], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert p.returncode == 2
@@ -129,7 +130,7 @@ def test_region_renders_the_same_pixels_as_the_full_image():
     np.testing.assert_array_equal(part, full[16:32, 8:24])
     odd = render(s, RenderSettings(light_paths=0, samples=2, seed=4, tile_size=8), region=(5, 3, 20, 30)).rgb
     assert odd.shape == (27, 15, 3)
-    from opal_diffraction.core.scene.model import SceneError
+    from opal_diffraction.core.scene.checks import SceneError
     with pytest.raises(SceneError, match="outside"):
         render(s, RenderSettings(light_paths=0, samples=1), region=(0, 0, 64, 8))
 

@@ -5,7 +5,10 @@ import pytest
 
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.render.frame import render
-from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene, SceneError
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.checks import SceneError
+from opal_diffraction.core.scene.npz import load_scene, save_scene
+from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
 
 from scenes import plane_under_light
@@ -22,8 +25,8 @@ def small_scene():
 def test_npz_round_trip(tmp_path):
     s = small_scene()
     s.world_color = np.array([0.1, 0.2, 0.3], np.float32)
-    s.save(tmp_path / "s.npz")
-    t = Scene.load(tmp_path / "s.npz")
+    save_scene(s, tmp_path / "s.npz")
+    t = load_scene(tmp_path / "s.npz")
     np.testing.assert_array_equal(t.vertices, s.vertices)
     np.testing.assert_array_equal(t.triangles, s.triangles)
     np.testing.assert_array_equal(t.tri_material, s.tri_material)
@@ -42,18 +45,18 @@ def test_nan_coordinates_are_an_error_naming_the_vertex():
     s = small_scene()
     s.vertices[5, 1] = np.nan
     with pytest.raises(SceneError, match=r"NaN or infinite.*vertex 5"):
-        s.validated()
+        validate(s)
 
 
 def test_index_out_of_range_is_an_error():
     s = small_scene()
     s.triangles[3, 2] = len(s.vertices) + 10
     with pytest.raises(SceneError, match="triangle 3 uses vertex index"):
-        s.validated()
+        validate(s)
     s = small_scene()
     s.tri_material[1] = 7
     with pytest.raises(SceneError, match="triangle 1 uses material 7"):
-        s.validated()
+        validate(s)
 
 
 def test_missing_camera_is_an_error():
@@ -68,7 +71,8 @@ def test_degenerate_triangles_are_dropped_and_counted():
     n = len(s.triangles)
     s.add_mesh([[0, 0, 0], [1, 1, 1], [2, 2, 2]], [[0, 1, 2]], material=0)  # collinear
     s.add_mesh([[0, 0, 0], [1, 0, 0]], [[0, 0, 1]], material=0)  # repeated vertex
-    clean, warns = s.validated()
+    checked = validate(s)
+    clean, warns = checked.scene, checked.warnings
     assert len(clean.triangles) == n
     assert any("dropped 2 degenerate" in w for w in warns)
 
@@ -85,11 +89,11 @@ def test_bad_material_and_light_values_are_errors():
     s = small_scene()
     s.materials.ior[1] = 0.5
     with pytest.raises(SceneError, match="IOR must be >= 1"):
-        s.validated()
+        validate(s)
     s = small_scene()
     s.lights.power[0] = -1
     with pytest.raises(SceneError, match="power must be >= 0"):
-        s.validated()
+        validate(s)
     with pytest.raises(SceneError, match="unknown kind"):
         Materials.from_list([{"kind": "VELVET"}])
     with pytest.raises(SceneError, match="unknown kind"):
@@ -107,23 +111,23 @@ def test_loading_a_non_scene_file_is_a_clear_error(tmp_path):
     p = tmp_path / "x.npz"
     np.savez(p, a=np.zeros(3))
     with pytest.raises(SceneError, match="not an opal_diffraction scene"):
-        Scene.load(p)
+        load_scene(p)
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     with pytest.raises(SceneError, match="cannot read"):
-        Scene.load(tmp_path / "junk.npz")
+        load_scene(tmp_path / "junk.npz")
     with pytest.raises(SceneError, match="not found"):
-        Scene.load(tmp_path / "missing.npz")
+        load_scene(tmp_path / "missing.npz")
 
 
 def test_grating_settings_are_validated():
     s = small_scene()
     s.materials = Materials.from_list([{"kind": "DIFFUSE"}, {"kind": "DIFFUSE", "grating": 1, "period": 0.0, "name": "cd"}])
     with pytest.raises(SceneError, match="'cd': grating period must be > 0"):
-        s.validated()
+        validate(s)
     s.materials = Materials.from_list([{"kind": "DIFFUSE"}, {"kind": "DIFFUSE", "grating": 1, "period": 500.0,
                                                               "slit_width": 800.0}])
     with pytest.raises(SceneError, match="slit width 800.0 nm is larger than the period"):
-        s.validated()
+        validate(s)
     with pytest.raises(SceneError, match="unknown lattice"):
         Materials.from_list([{"grating": 1, "lattice": "CUBIC"}])
     with pytest.raises(SceneError, match="unknown setting"):
@@ -135,11 +139,11 @@ def test_grating_data_round_trips_and_follows_dropped_triangles(tmp_path):
               camera=Camera(width=4, height=4))
     s.add_mesh(*primitives.quad((0, 0, 0), (1, 0, 0), (0, 1, 0)), material=0, tangent=(1, 0, 0), period=[250.0, 260.0])
     s.add_mesh([[0, 0, 0], [1, 1, 1], [2, 2, 2]], [[0, 1, 2]], material=0, tangent=(0, 1, 0), period=0.0)
-    s.save(tmp_path / "g.npz")
-    t = Scene.load(tmp_path / "g.npz")
+    save_scene(s, tmp_path / "g.npz")
+    t = load_scene(tmp_path / "g.npz")
     np.testing.assert_array_equal(t.tri_period, [250, 260, 0])
     assert int(t.materials.lattice[0]) == 1
-    clean, _ = t.validated()
+    clean = validate(t).scene
     np.testing.assert_array_equal(clean.tri_period, [250, 260])
     assert clean.tri_tangent.shape == (2, 3)
 

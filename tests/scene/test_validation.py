@@ -8,7 +8,9 @@ import pytest
 
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.render.frame import render
-from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene, SceneError
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.checks import SceneError
+from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
 
 
@@ -32,7 +34,7 @@ def error_of(mutate) -> str:
     s = scene()
     mutate(s)
     with pytest.raises(SceneError) as e:
-        s.validated()
+        validate(s)
     msg = str(e.value)
     assert "\n" not in msg and msg
     return msg
@@ -46,7 +48,8 @@ def setattr_(obj_name, name, value):
 
 def test_a_clean_scene_validates_to_the_same_arrays():
     s = scene()
-    clean, warns = s.validated()
+    checked = validate(s)
+    clean, warns = checked.scene, checked.warnings
     assert warns == []
     assert clean.materials is s.materials and clean.lights is s.lights and clean.camera is s.camera
     assert clean.vertices is s.vertices and clean.tri_tangent is s.tri_tangent
@@ -108,7 +111,7 @@ def test_light_temperature():
         assert msg.startswith("light 1: temperature")
     s = scene()
     s.lights.temperature = np.array([0.0, 5000.0, 0.0])  # 0: no temperature, the colour
-    s.validated()
+    validate(s)
 
 
 def test_light_kind_and_spot_ranges():
@@ -190,7 +193,8 @@ def test_world_colour_and_grating_data():
 def test_tiny_triangles_are_dropped_with_a_warning():
     s = scene()
     s.add_mesh([[0, 0, 0], [1e-16, 0, 0], [0, 1e-16, 0]], [[0, 1, 2]], material=0)
-    clean, warns = s.validated()
+    checked = validate(s)
+    clean, warns = checked.scene, checked.warnings
     assert len(clean.triangles) == len(s.triangles) - 1
     assert any("too small for float32" in w for w in warns)
 

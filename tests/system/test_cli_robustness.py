@@ -25,6 +25,7 @@ import pytest
 from opal_diffraction import cli
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.npz import save_scene
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 FAST = ["--spp", "1", "--light-paths", "0", "--wavelength-step", "50", "-q"]
@@ -215,7 +216,7 @@ def test_malformed_scene_files_are_one_line_errors(tmp_path):
 
 def test_bad_arguments_and_output_paths_are_one_line_errors(tmp_path):
     scene = tmp_path / "scene.npz"
-    small_scene().save(scene)
+    save_scene(small_scene(), scene)
     out = str(tmp_path / "out.exr")
     (tmp_path / "a-dir.exr").mkdir()
     (tmp_path / "file").write_text("x")
@@ -268,7 +269,7 @@ def test_bad_arguments_and_output_paths_are_one_line_errors(tmp_path):
 @pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="needs a non-root POSIX user (root writes anywhere)")
 def test_unwritable_folder_is_an_error_before_the_render(tmp_path):
     scene = tmp_path / "scene.npz"
-    small_scene().save(scene)
+    save_scene(small_scene(), scene)
     ro = tmp_path / "ro"
     ro.mkdir()
     ro.chmod(0o500)
@@ -357,7 +358,7 @@ def slow_scene(tmp_path_factory):
     folder = tmp_path_factory.mktemp("signals")
     s = small_scene(pixels=160)
     path = folder / "scene.npz"
-    s.save(path)
+    save_scene(s, path)
     return path
 
 

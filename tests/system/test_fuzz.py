@@ -38,9 +38,9 @@ from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E
 
 from opal_diffraction.core.scene import primitives  # noqa: E402
 from opal_diffraction.core.render.frame import render  # noqa: E402
-from opal_diffraction.core.scene.model import (  # noqa: E402
-    Camera, Lights, Materials, Scene, SceneError,
-)
+from opal_diffraction.core.scene.checks import SceneError  # noqa: E402
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene  # noqa: E402
+from opal_diffraction.core.scene.validation import validate  # noqa: E402
 from opal_diffraction.core.scene.settings import RenderSettings  # noqa: E402
 
 EXAMPLES = int(os.environ.get("OPAL_FUZZ_EXAMPLES", "0") or 0)
@@ -384,7 +384,7 @@ def check_case(s: Scene, rs: RenderSettings, notes) -> str:
         signal.signal(signal.SIGALRM, old)
     dt = time.perf_counter() - t0
     COUNTS["slowest_ms"] = max(COUNTS["slowest_ms"], int(dt * 1000))
-    clean, _ = s.validated()
+    clean = validate(s).scene
     h, w = int(clean.camera.height), int(clean.camera.width)
     n = rs.grid().n
     assert res.spectral.shape == (h, w, n), f"spectral shape {res.spectral.shape} != {(h, w, n)}"

@@ -21,7 +21,10 @@ from opal_diffraction.core.integrators.light.light_pass import run_light_pass
 from opal_diffraction.core.materials.spectra import DIELECTRIC
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.render.frame import render
-from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene, SceneError
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.checks import SceneError
+from opal_diffraction.core.scene.npz import load_scene, save_scene
+from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.transport.walker import Rays, SpecularWalker, valid_specular_normal
 
@@ -73,7 +76,8 @@ def test_validation_normalises_falls_back_to_the_face_normal_and_keeps_step_with
     s.triangles = np.array([[0, 1, 2], [4, 4, 4], [0, 2, 3]], np.int32)
     s.tri_material = np.zeros(3, np.int32)
     s.corner_normals = np.stack([s.corner_normals[0], np.full((3, 3), 7.0), s.corner_normals[1]])
-    clean, warns = s.validated()
+    checked = validate(s)
+    clean, warns = checked.scene, checked.warnings
     assert len(clean.triangles) == 2 and clean.corner_normals.shape == (2, 3, 3)
     np.testing.assert_allclose(np.linalg.norm(clean.corner_normals, axis=2), 1, atol=1e-6)
     np.testing.assert_allclose(clean.corner_normals[0, 0], [0, 0, 1])
@@ -96,7 +100,7 @@ def test_bad_corner_normals_are_one_line_scene_errors(bad, message):
     s.add_mesh(*primitives.quad((0, 0, 0), (1, 0, 0), (0, 1, 0)), 0)
     s.corner_normals = bad
     with pytest.raises(SceneError, match=message) as e:
-        s.validated()
+        validate(s)
     assert "\n" not in str(e.value)
 
 
@@ -104,13 +108,13 @@ def test_corner_normals_survive_the_npz_and_older_files_load_flat(tmp_path):
     s = base_scene({})
     v, t, nrm = smooth_sphere((0, 0, 0), 1.0, 8, 4)
     s.add_mesh(v, t, 0, normals=nrm)
-    s.save(tmp_path / "a.npz")
-    back = Scene.load(tmp_path / "a.npz")
+    save_scene(s, tmp_path / "a.npz")
+    back = load_scene(tmp_path / "a.npz")
     np.testing.assert_array_equal(back.corner_normals, s.corner_normals)
     with np.load(tmp_path / "a.npz") as z:  # a file written before shading normals existed
         old = {k: z[k] for k in z.files if k != "corner_normals"}
     np.savez(tmp_path / "old.npz", **old)
-    flat = Scene.load(tmp_path / "old.npz")
+    flat = load_scene(tmp_path / "old.npz")
     assert flat.corner_normals.shape == (0, 3, 3)
     assert prepare(flat).corner_normals is None
 
@@ -129,7 +133,7 @@ def test_prepared_corner_normals_are_read_only_and_part_of_the_reuse_identity():
     b = prepare(other, reuse=a)
     assert b.key != a.key            # the light pass bends light with them: its result is stale
     assert b.accel is a.accel        # the ray caster does not depend on them
-    np.testing.assert_array_equal(b.corner_normals, np.asarray(other.validated()[0].corner_normals))
+    np.testing.assert_array_equal(b.corner_normals, np.asarray(validate(other).scene.corner_normals))
 
 
 # ============================================================================ transport

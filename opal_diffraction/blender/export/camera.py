@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.scene.model import Camera, SceneError
+from ...core.scene.model import Camera
+from ...core.scene.checks import SceneError
 from .messages import Warnings
 
 __all__ = ["render_size", "render_region", "camera_from_object", "export_camera"]

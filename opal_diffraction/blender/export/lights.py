@@ -20,7 +20,8 @@ import math
 
 import numpy as np
 
-from ...core.scene.model import Lights, SceneError
+from ...core.scene.model import Lights
+from ...core.scene.checks import SceneError
 from .colour import BLACKBODY_MIN_K, blackbody_rgb, in_rec709, rgb, working_space_to_rec709
 from .messages import Warnings
 from .nodes import MAX_INTENSITY, NodeReader, missing_output, surface_socket

@@ -19,7 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...core.scene.model import Materials, SceneError
+from ...core.scene.model import Materials
+from ...core.scene.checks import SceneError
 from .colour import in_rec709, rgb, working_space_to_rec709
 from .images import TextureTable
 from .messages import Warnings

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...core.util.geometry import triangle_normals
-from ...core.scene.model import SceneError
+from ...core.scene.checks import SceneError
 from ..mesh_io import GRATING_ATTRIBUTE, PERIOD_ATTRIBUTE, attribute_ok, foreach
 
 __all__ = [

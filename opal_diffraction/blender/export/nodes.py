@@ -29,7 +29,7 @@ import bpy
 import numpy as np
 from mathutils import Euler
 
-from ...core.scene.model import SceneError
+from ...core.scene.checks import SceneError
 from .colour import blackbody_rgb, in_rec709, rgb
 from .images import image_mean
 from .messages import Warnings

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...core.scene.model import SceneError
+from ...core.scene.checks import SceneError
 from .colour import in_rec709, rgb, working_space_to_rec709
 from .images import read_image
 from .messages import Warnings

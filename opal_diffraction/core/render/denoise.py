@@ -22,7 +22,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..scene.model import SceneError
+from ..scene.checks import SceneError
 
 __all__ = ["DenoiserUnavailable", "available", "denoise_rgb", "denoise_result", "NOISY_PASS", "INSTALL_HINT"]
 

@@ -65,7 +65,8 @@ from ..integrators.light.camera_splat import CameraConnection, CameraSplat, Spla
 from ..integrators.light.light_pass import (LANES, DepositLog, LightPassResult, LightWork, finish_light_pass, trace_batch)
 from .plan import plan_render
 from .prepare import prepare
-from ..scene.model import Camera, Lights, Materials, Scene, SceneError
+from ..scene.model import Camera, Lights, Materials, Scene
+from ..scene.checks import SceneError
 from ..scene.settings import RenderSettings
 from .tiles import LIGHT_PASS_SHARE, EyeWork, adaptive_of, is_half_a, trace_tile
 

@@ -42,7 +42,7 @@ import numpy as np
 
 from . import adaptive as _adaptive
 from .plan import RenderPlan
-from ..scene.model import SceneError
+from ..scene.checks import SceneError
 from ..spectral.spectrum import SpectralConverter
 
 __all__ = ["Film", "RenderResult", "tile_parts_rgb", "camera_space_rotation", "FEATURE_PASSES", "NO_SPECTRAL",

@@ -94,7 +94,7 @@ def write_spectral_exr(path, spectral: np.ndarray | None, wavelengths_nm: np.nda
     copied one channel at a time into the contiguous arrays OpenEXR needs)."""
     if spectral is None:
         from .film import NO_SPECTRAL
-        from ..scene.model import SceneError
+        from ..scene.checks import SceneError
 
         raise SceneError(f"cannot write the spectral EXR {os.fspath(path)}: {NO_SPECTRAL}")
     spectral = np.asarray(spectral)

@@ -39,7 +39,8 @@ from ..materials.spectra import PreparedMaterials, prepare_materials
 from ..materials.bsdf import microfacet_materials
 from ..lights.mesh_lights import MeshLights
 from ..opal.volume import VolumeDomains
-from ..scene.model import TRIANGLE_CROSS_ATTR, TRIANGLE_CROSS_NORM_ATTR, Camera, Scene
+from ..scene.model import Camera, Scene
+from ..scene.validation import validate
 from ..scene.settings import AUTO_LIGHT_PATHS_RANGE, EYE_ONLY_SETTINGS, RenderSettings, auto_light_paths
 from ..spectral.spectrum import SpectralConverter, WavelengthGrid
 from ..materials.textures import PreparedTextures, prepare_textures
@@ -219,9 +220,10 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
     t0 = time.perf_counter()
     settings = settings or RenderSettings()
     settings.validate()
-    scene, warnings = scene.validated()
-    cross = scene.__dict__.pop(TRIANGLE_CROSS_ATTR, None)  # validation's products (not kept with the scene)
-    cross_norm = scene.__dict__.pop(TRIANGLE_CROSS_NORM_ATTR, None)
+    checked = validate(scene)
+    scene, warnings = checked.scene, checked.warnings
+    cross, cross_norm = checked.triangle_cross, checked.triangle_cross_norm  # validation's products
+    del checked  # cross and cross_norm are freed below, once the normals are made
     if settings.light_paths is None:  # automatic: sized to the image (settings.auto_light_paths)
         cam = scene.camera
         settings = replace(settings, light_paths=auto_light_paths(cam.width, cam.height, settings.samples) if cam is not None

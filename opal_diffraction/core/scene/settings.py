@@ -15,7 +15,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from .model import COORD_LIMIT, SceneError, _g, _number
+from .checks import COORD_LIMIT, SceneError, as_number as _number, number_text as _g
 from ..spectral.spectrum import _MAX_NM, _MIN_NM, WavelengthGrid
 
 __all__ = ["RenderSettings", "DISPERSION_SAMPLING", "EYE_ONLY_SETTINGS", "BACKENDS", "MAX_WAVELENGTHS",

@@ -16,6 +16,7 @@ from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.transport.elements import IlluminationMap
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.transport.walker import Rays
 
@@ -71,7 +72,7 @@ def reference_batch(ctx, job, sink):
 
 
 def maps(scene, paths, **kw):
-    ctx = prepare(scene.validated()[0], RenderSettings(samples=1, light_paths=paths, **kw))
+    ctx = prepare(validate(scene).scene, RenderSettings(samples=1, light_paths=paths, **kw))
     work = lp.LightWork.of(ctx, paths)
     new = Counting.empty(work.layout, ctx.grid.n)
     ref = DenseReference(work.layout, ctx.grid.n)
@@ -157,7 +158,7 @@ def test_world_coefficients_reproduce_the_illuminant_upsampling():
     rng = np.random.default_rng(3)
     s.world_image = (rng.random((8, 16, 3)) ** 3 * 20).astype(np.float32)
     s.world_color = np.ones(3, np.float32)
-    ctx = prepare(s.validated()[0], RenderSettings(samples=1, light_paths=1000))
+    ctx = prepare(validate(s).scene, RenderSettings(samples=1, light_paths=1000))
     _, _, coeff, basis = lp._emit_world(ctx, 4000, np.random.default_rng(1))
     np.testing.assert_allclose(coeff @ basis, ctx.conv.illuminant_from_rgb(coeff), rtol=1e-9, atol=0)
 
