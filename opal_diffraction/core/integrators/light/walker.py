@@ -61,7 +61,7 @@ class LightWalker(SpecularWalker):
         self.illum = illum
         self.records = records
         self.splat = splat  # the camera connection of the landings (core/integrators/light/camera_splat.py), or None
-        self.bounces = None  # core/splat_bounce.BounceLog: the landings continued by a diffuse bounce, or None
+        self.bounces = None  # splat_bounce.BounceLog: the landings continued by a diffuse bounce, or None
         self.deposited = 0
         self.bragg = BraggShading.for_prepared(prepared)  # FCC opal lobes scatter light paths on
 
