@@ -65,7 +65,8 @@ def time_once(name: str, paths: int, threads: int) -> dict:
 def profile(name: str, paths: int, lines: int) -> None:
     from pyinstrument import Profiler
 
-    from opal_diffraction.core.integrators.light.light_pass import LightWork, trace_batch
+    from opal_diffraction.core.integrators.light.light_pass import LightWork
+    from opal_diffraction.core.integrators.light.walker import trace_batch
 
     ctx = prepared(name, paths, 1)
     prof = Profiler(interval=0.002)

@@ -29,7 +29,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from opal_diffraction.core.integrators.light import light_pass as _lp
+from opal_diffraction.core.integrators.light import targets as _targets
 from opal_diffraction.core.render import prepare as _prep
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.lights.mesh_lights import MeshLights
@@ -112,7 +112,7 @@ PHASES = [
     ("grating frames", _prep, "triangle_tangents"),
     ("grating frames", _prep, "smooth_corner_tangents"),
     ("mesh lights", MeshLights, "build"),
-    ("light targets: caster objects", _lp, "caster_objects"),
+    ("light targets: caster objects", _targets, "caster_objects"),
     ("light targets: rest", _prep, "find_light_targets"),  # minus caster_objects, below
     ("freeze (read-only views)", _prep, "_read_only"),
 ]

@@ -32,7 +32,8 @@ from scipy.stats import norm
 from chi2 import pearson
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.gratings.order_sampling import SPREAD_LOBES, sample_orders, sample_sinc2
-from opal_diffraction.core.integrators.light.light_pass import LightWork, trace_batch, DepositLog
+from opal_diffraction.core.integrators.light.light_pass import LightWork, DepositLog
+from opal_diffraction.core.integrators.light.walker import trace_batch
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings

@@ -218,7 +218,8 @@ def test_importance_sampled_irradiance_matches_quadrature():
 # ------------------------------------------------------------------------------ the light pass
 from opal_diffraction.core.scene import primitives  # noqa: E402
 from opal_diffraction.core.transport.elements import IlluminationMap  # noqa: E402
-from opal_diffraction.core.integrators.light.light_pass import BATCH_PATHS, LightWork, trace_batch  # noqa: E402
+from opal_diffraction.core.integrators.light.light_pass import LightWork  # noqa: E402
+from opal_diffraction.core.integrators.light.walker import BATCH_PATHS, trace_batch  # noqa: E402
 from opal_diffraction.core.render.prepare import prepare  # noqa: E402
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene  # noqa: E402
 from opal_diffraction.core.scene.settings import RenderSettings  # noqa: E402

@@ -17,7 +17,7 @@ import pytest
 
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.util.geometry import compact_indices
-from opal_diffraction.core.integrators.light.light_pass import caster_objects
+from opal_diffraction.core.lights.aiming import caster_objects
 from opal_diffraction.core.lights.mesh_lights import MeshLights
 
 embree_direct = pytest.importorskip("opal_diffraction.core.accel.embree_direct")

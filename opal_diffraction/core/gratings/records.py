@@ -433,7 +433,7 @@ def record_layout(prepared, n_paths: int, mask, trace, batch_paths: int) -> tupl
     """Grating-record elements for a light pass of ``n_paths`` paths, sized by a pilot pass.
 
     ``trace(light, batch, start, light_paths, illum, records)`` traces one batch of the pilot
-    (light_pass.trace_batch on the PILOT_STREAM: the light pass hands it in, so this module does
+    (walker.trace_batch on the PILOT_STREAM: the light pass hands it in, so this module does
     not import it) in batches of ``batch_paths``. Returns (layout, warning or "", pilot stats)."""
     mask = np.asarray(mask, bool)
     area = triangle_areas(prepared.scene.vertices, prepared.scene.triangles)

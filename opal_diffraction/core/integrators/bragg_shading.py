@@ -180,7 +180,7 @@ class BraggShading:
         return Rays.concat(out, nxt)
 
     def scatter_light(self, rays, hit, can_bounce, rng):
-        """The light pass's bounce at BRAGG planes (core/integrators/light/light_pass.py): light arriving from
+        """The light pass's bounce at BRAGG planes (core/integrators/light/walker.py): light arriving from
         outside the stone goes on along a direction drawn from the lobe, its flux times the
         lobe's f cos / pdf (the lobe is reciprocal, so sampling it from the light's side is
         light tracing's own sampling); counted as a specular bounce, so what it lights is a

@@ -42,7 +42,7 @@ from ..scene.model import Lights
 from ..spectral.spectrum import SpectralConverter
 
 __all__ = ["PreparedLights", "prepare_lights", "sample_light", "sample_light_pdf", "light_pdf", "is_delta",
-           "intersect_lights", "sun_radiance"]
+           "intersect_lights", "sun_radiance", "smoothstep", "spot_mask", "sample_cone"]
 
 POINT, SPOT, SUN, AREA_RECT, AREA_DISK = (int(k) for k in LightKind)
 
@@ -148,19 +148,20 @@ def prepare_lights(lights: Lights, conv: SpectralConverter) -> PreparedLights:
     )
 
 
-def _smoothstep(x):
+def smoothstep(x):
+    """3 x^2 - 2 x^3 of x clipped to [0, 1]: the spot cone's blend (Cycles' smoothstep)."""
     x = np.clip(x, 0.0, 1.0)
     return x * x * (3 - 2 * x)
 
 
-def _spot_mask(pl: PreparedLights, index: int, travel: np.ndarray) -> np.ndarray:
+def spot_mask(pl: PreparedLights, index: int, travel: np.ndarray) -> np.ndarray:
     """The spot cone mask for light travelling along ``travel`` (B, 3) unit (Cycles' spot.h:
     smoothstep((cos - cos_half) / blend band), 0 outside)."""
     cos_axis = travel @ pl.direction[index].astype(travel.dtype)
     ch, sm = pl.cos_half_spot[index], pl.spot_smooth[index]
     cone = np.where(cos_axis > ch, 1.0, 0.0).astype(travel.dtype)
     if np.float32(sm) > 0:  # a blend band that is 0 in float32 is a hard edge
-        cone = cone * _smoothstep((cos_axis - ch) / travel.dtype.type(sm))
+        cone = cone * smoothstep((cos_axis - ch) / travel.dtype.type(sm))
     return cone
 
 
@@ -184,7 +185,7 @@ def _basis(ax, ay, az):
     return (1.0 + sign * ax * ax * a, sign * b, -sign * ax), (b, sign + ay * ay * a, -ay)
 
 
-def _sample_cone(axis: np.ndarray, omc, rng: np.random.Generator, b: int, dtype=np.float64) -> np.ndarray:
+def sample_cone(axis: np.ndarray, omc, rng: np.random.Generator, b: int, dtype=np.float64) -> np.ndarray:
     """Directions uniform in the cone around unit ``axis`` ((3,) or (B, 3)) with 1 - cos(half
     angle) = ``omc`` (scalar or (B,)): cos = 1 - u omc, sin from u omc (2 - u omc), so narrow
     cones keep their precision. (B, 3) of ``dtype``."""
@@ -238,7 +239,7 @@ def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.G
     if k == SUN:
         if pl.sun_half[index] > 0:
             omc = float(pl.sun_omc[index])
-            wi = _sample_cone(-pl.direction[index], omc, rng, b, f32)
+            wi = sample_cone(-pl.direction[index], omc, rng, b, f32)
             # radiance / S = 1 / (pi sin^2 h), pdf = 1 / (2 pi omc), sin^2 h = omc (2 - omc)
             return wi, np.full(b, np.inf, f32), np.full(b, 2.0 / (2.0 - omc), f32)
         wi = np.broadcast_to(-pl.direction[index].astype(f32), (b, 3))
@@ -262,7 +263,7 @@ def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.G
     if k in (POINT, SPOT):
         g = f32(1.0) / d2
         if k == SPOT:
-            g = g * _spot_mask(pl, index, -wi)
+            g = g * spot_mask(pl, index, -wi)
         return wi, dist, g
     cos_l = -(wi @ pl.direction[index].astype(f32))
     g = np.where(cos_l > 0, cos_l * f32(pl.area[index]) / d2, f32(0.0))
@@ -278,15 +279,15 @@ def _sample_sized_point(pl, index, p, rng):
     if pl.sphere[index]:
         axis, d, r, omc, inside = _sphere_geometry(pl, index, p)
         if inside.any():  # uniform over all directions there (pdf 1 / (4 pi)): omc = 2
-            wi = _sample_cone(axis, omc, rng, b, f32)
+            wi = sample_cone(axis, omc, rng, b, f32)
             g = np.where(inside, f32(4.0 / (r * r)), f32(2.0 / (r * r)) * omc)
         else:
-            wi = _sample_cone(axis, omc, rng, b, f32)
+            wi = sample_cone(axis, omc, rng, b, f32)
             g = f32(2.0 / (r * r)) * omc  # (1 / (pi r^2)) / (1 / (2 pi omc))
         cos_t = np.einsum("ij,ij->i", wi, axis)
         dist = _distance_to_sphere(d, cos_t, f32(r), inside)
         if int(pl.kind[index]) == SPOT:  # the cone mask along the ray, outside the sphere only (spot.h)
-            g = np.where(inside, g, g * _spot_mask(pl, index, -wi))
+            g = np.where(inside, g, g * spot_mask(pl, index, -wi))
         return wi, dist.astype(f32), g.astype(f32)
     # soft falloff: a uniform point on the disk of radius r facing p; g = (1/(pi r^2)) / pdf with
     # pdf = t^2 / (pi r^2 cos_l) and cos_l = d / t (the disk is perpendicular to the centre direction)
@@ -305,7 +306,7 @@ def _sample_sized_point(pl, index, p, rng):
     wi = to_q / t[:, None]
     g = d / (t * t * t)
     if int(pl.kind[index]) == SPOT:
-        g = g * _spot_mask(pl, index, -wi)
+        g = g * spot_mask(pl, index, -wi)
     return wi, t, g.astype(f32)
 
 
@@ -439,7 +440,7 @@ def intersect_lights(pl: PreparedLights, o: np.ndarray, d: np.ndarray, tmax: np.
                 t, ok, inside = _sphere_hit(o, d, c, r, best_t)
                 if k == SPOT:  # one-sided towards the centre (spot.h), masked outside the sphere
                     ok &= np.einsum("ij,ij->i", d, o - c) < 0
-                    s = np.where(inside, 1.0, _spot_mask(pl, li, d))
+                    s = np.where(inside, 1.0, spot_mask(pl, li, d))
                 else:
                     s = np.ones(b)
             else:
@@ -448,7 +449,7 @@ def intersect_lights(pl: PreparedLights, o: np.ndarray, d: np.ndarray, tmax: np.
                 t, ok = _plane_hit(o, d, c, n, best_t)
                 q = o + np.where(ok, t, 0.0)[:, None] * d
                 ok &= np.sum((q - c) ** 2, axis=1) <= r * r
-                s = _spot_mask(pl, li, d) if k == SPOT else np.ones(b)
+                s = spot_mask(pl, li, d) if k == SPOT else np.ones(b)
             s = s / (np.pi * r * r)  # intensity -> radiance
         else:
             continue

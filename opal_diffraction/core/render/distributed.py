@@ -62,7 +62,8 @@ from ..integrators.eye.eye_pass import EyePass
 from ..gratings.records import GratingRecords
 from .film import Film, RenderResult, keeps_spectral, tile_parts_rgb
 from ..integrators.light.camera_splat import CameraConnection, CameraSplat, SplatLog, usable_splat, view_key
-from ..integrators.light.light_pass import (LANES, DepositLog, LightPassResult, LightWork, finish_light_pass, trace_batch)
+from ..integrators.light.light_pass import LANES, DepositLog, LightPassResult, LightWork, finish_light_pass
+from ..integrators.light.walker import trace_batch
 from .plan import plan_render
 from .prepare import prepare
 from ..scene.model import Camera, Lights, Materials, Scene

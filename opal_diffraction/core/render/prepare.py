@@ -33,7 +33,7 @@ from ..util.geometry import normals_from_cross, triangle_normals
 from ..gratings.radiance import PreparedGratings, prepare_gratings, triangle_tangents
 from ..gratings.layering import attach_layering
 from ..gratings.directions import smooth_corner_tangents
-from ..integrators.light.light_pass import LightTargets, find_light_targets
+from ..integrators.light.targets import LightTargets, find_light_targets
 from ..lights.sources import PreparedLights, prepare_lights
 from ..materials.spectra import PreparedMaterials, prepare_materials
 from ..materials.bsdf import microfacet_materials

@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 
 from opal_diffraction.core.integrators.light import light_pass as lp
+from opal_diffraction.core.integrators.light import walker
+from opal_diffraction.core.lights import aiming, emission
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.transport.elements import IlluminationMap
 from opal_diffraction.core.render.prepare import prepare
@@ -51,23 +53,23 @@ class Counting(IlluminationMap):
 
 def reference_batch(ctx, job, sink):
     """light_pass.trace_batch as it was before coefficients: (B, n) weights from the emitter on."""
-    rng = np.random.default_rng(np.random.SeedSequence([int(ctx.settings.seed), lp.LIGHT_PASS_STREAM, job.light,
+    rng = np.random.default_rng(np.random.SeedSequence([int(ctx.settings.seed), walker.LIGHT_PASS_STREAM, job.light,
                                                         job.batch]))
     b, n_lights = job.paths, len(ctx.lights)
     if job.light < n_lights:
-        o, d, weight = lp._emit(ctx, job.light, b, rng)
+        o, d, weight = emission.emit_light(ctx, job.light, b, rng)
         live = weight > 0
         w = (weight[live, None] / float(job.light_paths)) * ctx.lights.spectrum[job.light][None, :]
     else:
         assert job.light == n_lights + 1, "these scenes have no emissive meshes"
-        o, d, coeff, _ = lp._emit_world(ctx, b, rng)
+        o, d, coeff, _ = emission.emit_world(ctx, b, rng)
         live = coeff.max(axis=1) > 0
         # the map's colour times the emission weight, upsampled per path as the dense pass did
         w = ctx.conv.illuminant_from_rgb(coeff[live]) / float(job.light_paths)
     m = int(live.sum())
     rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(m, np.int64), w.astype(np.float32),
                 None, np.zeros(m, np.int32), rng.random(m))
-    tr = lp._LightTrace(ctx, rng, sink, None)
+    tr = walker.LightWalker(ctx, rng, sink, None)
     tr.walk(rays, tr.empty_mono())
 
 
@@ -77,7 +79,7 @@ def maps(scene, paths, **kw):
     new = Counting.empty(work.layout, ctx.grid.n)
     ref = DenseReference(work.layout, ctx.grid.n)
     for job in work.batches:
-        lp.trace_batch(ctx, job, new, None)
+        walker.trace_batch(ctx, job, new, None)
         reference_batch(ctx, job, ref)
     return ctx, new, ref
 
@@ -159,7 +161,7 @@ def test_world_coefficients_reproduce_the_illuminant_upsampling():
     s.world_image = (rng.random((8, 16, 3)) ** 3 * 20).astype(np.float32)
     s.world_color = np.ones(3, np.float32)
     ctx = prepare(validate(s).scene, RenderSettings(samples=1, light_paths=1000))
-    _, _, coeff, basis = lp._emit_world(ctx, 4000, np.random.default_rng(1))
+    _, _, coeff, basis = emission.emit_world(ctx, 4000, np.random.default_rng(1))
     np.testing.assert_allclose(coeff @ basis, ctx.conv.illuminant_from_rgb(coeff), rtol=1e-9, atol=0)
 
 
@@ -168,10 +170,10 @@ def test_chunked_cone_sampling_is_the_unchunked_sampling(objects):
     """Area-light path starts sample the casters' cones in chunks of CONE_CHUNK paths: the same
     directions and pdfs as one call over the whole batch (the numbers drawn for it first)."""
     rng = np.random.default_rng(objects)
-    obj = lp.CasterObjects(rng.normal(size=(objects, 3)) * 3, rng.random(objects) * 0.5 + 0.1)
-    origin = rng.normal(size=(3 * lp.CONE_CHUNK + 17, 3)) * 0.3 + np.array([0, 0, 8.0])
-    d, pdf = lp._sample_towards_casters(origin, obj, np.random.default_rng(7))
-    axis, cos_max, omega = lp._cones(origin, obj)
-    d0, pdf0 = lp._sample_cones(origin, omega, axis, cos_max, omega, np.random.default_rng(7))
+    obj = aiming.CasterObjects(rng.normal(size=(objects, 3)) * 3, rng.random(objects) * 0.5 + 0.1)
+    origin = rng.normal(size=(3 * aiming.CONE_CHUNK + 17, 3)) * 0.3 + np.array([0, 0, 8.0])
+    d, pdf = aiming.sample_towards_casters(origin, obj, np.random.default_rng(7))
+    axis, cos_max, omega = aiming.caster_cones(origin, obj)
+    d0, pdf0 = aiming.sample_cones(origin, omega, axis, cos_max, omega, np.random.default_rng(7))
     np.testing.assert_array_equal(d, d0)
     np.testing.assert_array_equal(pdf, pdf0)

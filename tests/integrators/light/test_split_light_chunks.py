@@ -16,7 +16,8 @@ from scipy import stats
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.transport import wavelengths
 from opal_diffraction.core.transport.elements import IlluminationMap
-from opal_diffraction.core.integrators.light.light_pass import LightBatch, LightWork, trace_batch
+from opal_diffraction.core.integrators.light.light_pass import LightWork
+from opal_diffraction.core.integrators.light.walker import LightBatch, trace_batch
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings

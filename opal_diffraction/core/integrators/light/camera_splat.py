@@ -1,7 +1,7 @@
 """Light paths connected to the camera (light tracing's t = 1 strategy), splatted into a film.
 
 Where a light path lands on a diffuse surface after one or more specular bounces (the landings
-``light_pass._LightTrace.on_hit`` deposits into the caustic map), it is also joined to the
+``walker.LightWalker.on_hit`` deposits into the caustic map), it is also joined to the
 pinhole camera by a shadow ray and its contribution is splatted into the pixels whose
 reconstruction filter covers the point it projects to: Veach 1997, section 10.2 (light tracing),
 pbrt-v4 section 5.2.3 (``PerspectiveCamera::SampleWi``, the importance W_e of a pinhole) and

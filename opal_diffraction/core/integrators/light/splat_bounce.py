@@ -92,7 +92,7 @@ def mark_bounce(mask: np.ndarray | None, rays: Rays, hit: Hit) -> np.ndarray:
 class BounceLog:
     """The landings of one light batch (or SPLIT piece) to continue (``add`` from the light
     pass's on_hit), traced after its walk by ``trace_bounces`` with a random stream of their own
-    (light_pass.trace_batch), so the walk's random numbers, its map and its direct splats are
+    (walker.trace_batch), so the walk's random numbers, its map and its direct splats are
     those of a light pass without them."""
 
     def __init__(self, prepared):

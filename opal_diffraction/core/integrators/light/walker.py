@@ -1,0 +1,194 @@
+"""The light pass's walker: one batch of light paths traced from its emitter to where it lands.
+
+The source paper's bidirectional half (Kobayashi & Kawai; docs/physics.md section 4.1): light
+paths carry the whole spectrum from their emitter (core/lights/emission.py), follow specular
+reflection and refraction with Fresnel, dispersion and Russian roulette (``LightWalker``, a
+transport.SpecularWalker), and where a path that has been specular at least once lands on a
+diffuse surface its spectral flux is added to that surface element of the illumination map
+(core/transport/elements.py). Where such a path reaches a grating, the grating's element records
+the incoming spectral flux by the direction it came from and its wavelength band
+(gratings.records.GratingRecords: sparse directional lobes, on elements a pilot pass sizes where
+grating flux lands; docs/physics.md section 3.5), for the eye pass to diffract. Line gratings
+are casters as well: a path that meets one is diffracted (kind GRATING from ``classify``, the
+order sampled by core/gratings/order_sampling.py in ``scatter``) and goes on as a specular path,
+so the orders land on diffuse surfaces as caustics (docs/physics.md section 3.10). Direct light
+stays the eye pass's job, so a path that reaches a diffuse surface or grating first deposits
+nothing: no double counting. The same landings on plain diffuse surfaces are also joined to the
+camera and splatted into a film for that view (core/integrators/light/camera_splat.py,
+docs/physics.md section 4.9). On smooth-shaded casters the paths bend about the shading normals
+(core/transport/walker.py, docs/physics.md section 4.6); deposits and records stay indexed by the
+geometric hit (triangle, barycentrics, side).
+
+Every batch of paths (``LightBatch``) draws its random numbers from its own stream (seed, light
+pass, emitter, batch), and ``trace_batch`` traces it into any pair of sinks with a ``deposit``
+method (a lane's maps, or a DepositLog on a Dask worker: core/integrators/light/light_pass.py).
+With SPLIT dispersion a batch is walked in pieces of ``wavelengths.SPLIT_CHUNK_RAYS / n`` white
+paths, so the n mono paths each becomes at a dispersive glass stay bounded (docs/physics.md
+section 2.6).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...transport import wavelengths
+from .camera_splat import CameraConnection, SplatBatch
+from . import splat_bounce
+from ...transport.elements import IlluminationMap
+from ...gratings.records import GratingRecords
+from ...gratings.order_sampling import diffracting, scatter_at_gratings
+from ...lights.emission import emit
+from ...materials.spectra import DIFFUSE
+from ..bragg_shading import BraggShading
+from ...transport.walker import GRATING, Hit, Rays, SpecularWalker
+
+__all__ = ["LightWalker", "LightBatch", "trace_batch", "LIGHT_PASS_STREAM", "BATCH_PATHS"]
+
+LIGHT_PASS_STREAM = 2
+BATCH_PATHS = 1 << 15
+RR_START_DEPTH = 3
+RR_SURVIVAL = 0.8
+
+
+class LightWalker(SpecularWalker):
+    """Light paths: deposit at diffuse surfaces after a specular bounce, Russian roulette."""
+
+    def __init__(self, prepared, rng, illum: IlluminationMap, records: GratingRecords | None,
+                 splat: SplatBatch | None = None):
+        super().__init__(prepared, rng)
+        self.illum = illum
+        self.records = records
+        self.splat = splat  # the camera connection of the landings (core/integrators/light/camera_splat.py), or None
+        self.bounces = None  # splat_bounce.BounceLog: the landings continued by a diffuse bounce, or None
+        self.deposited = 0
+        self.bragg = BraggShading.for_prepared(prepared)  # FCC opal lobes scatter light paths on
+
+    def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
+        if self.records is not None:
+            at_grating = self.prepared.gratings.enabled[hit.mat] & (rays.depth >= 1)
+            if at_grating.any():
+                r, h = rays.take(at_grating), hit.take(at_grating)
+                idx, valid = self.records.layout.index(h.prim, h.bu, h.bv, h.front)
+                if valid.any():
+                    src, at = -r.d[valid], h.p[valid]
+                    if r.lam is None:
+                        self.records.deposit(idx[valid], r.take(valid).dense_w(self.n), towards_source=src, at=at)
+                    else:
+                        self.records.deposit(idx[valid], r.w[valid], r.lam[valid], towards_source=src, at=at)
+        land = (kind == DIFFUSE) & (rays.depth >= 1)
+        if not land.any():
+            return
+        r, h = rays.take(land), hit.take(land)
+        if self.splat is not None:  # the same landings, seen by the camera (docs/physics.md section 4.9)
+            self.splat.connect(self.prepared, r, h, self.n)
+            if self.bounces is not None:  # and one diffuse bounce on, to the camera (section 4.11)
+                self.bounces.add(self.prepared, r, h)
+        idx, valid = self.illum.layout.index(h.prim, h.bu, h.bv, h.front)
+        if not valid.any():
+            return
+        self.deposited += int(valid.sum())
+        if r.lam is None:
+            self.illum.deposit(idx[valid], r.dense_w(self.n)[valid] if r.basis is None else r.w[valid], basis=r.basis)
+        else:
+            self.illum.deposit(idx[valid], r.w[valid], r.lam[valid])
+
+    def classify(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> np.ndarray:
+        """Paths a grating diffracts (core/gratings/order_sampling.py, docs/physics.md section 3.10) are
+        kind GRATING: they neither bounce off the base nor land on it."""
+        if not self.prepared.gratings.any:
+            return kind
+        return np.where(diffracting(self.prepared, hit, kind, rng), GRATING, kind)
+
+    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
+        """The orders of the gratings' paths (mono rays; section 3.10): diffracted paths are
+        specular ones, so they deposit caustics where they land on diffuse surfaces."""
+        if rays.basis is not None and (self.bragg is not None or self.prepared.gratings.any):
+            rays = rays.dense()  # the opal lobes and the gratings' orders weigh spectra
+        opal = None if self.bragg is None else self.bragg.scatter_light(rays, hit, can_bounce, rng)  # FCC opal lobes
+        sel = (kind == GRATING) & can_bounce
+        if not sel.any():
+            return opal
+        orders = scatter_at_gratings(self, rays.take(sel), hit.take(sel), rng)
+        if opal is None or not len(opal):
+            return orders
+        if orders is None or not len(orders):
+            return opal
+        if (orders.lam is None) == (opal.lam is None):
+            return Rays.concat(opal, orders)
+        self._spawned.append(orders)  # white paths' orders are mono rays: traced with the mono population
+        return opal
+
+    def survives(self, rays: Rays, rng) -> np.ndarray:
+        ok = rays.depth < self.prepared.settings.max_bounces
+        deep = ok & (rays.depth >= RR_START_DEPTH)
+        if deep.any():
+            # Russian roulette: survivors carry 1 / survival more, so the expectation is unchanged
+            killed = deep & (rng.random(len(rays)) >= RR_SURVIVAL)
+            ok &= ~killed
+            if rays.w is not None:
+                rays.w[deep & ~killed] /= np.float32(RR_SURVIVAL)
+        return ok
+
+
+@dataclass(frozen=True)
+class LightBatch:
+    """One batch of light paths: ``paths`` paths of light ``light`` (its ``batch``-th), starting at
+    path ``start`` of that light's ``light_paths``; its random stream is
+    SeedSequence([seed, LIGHT_PASS_STREAM, light, batch])."""
+
+    light: int
+    batch: int
+    start: int
+    light_paths: int
+
+    @property
+    def paths(self) -> int:
+        return min(BATCH_PATHS, self.light_paths - self.start)
+
+
+def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_PASS_STREAM, splat=None) -> dict:
+    """Trace one batch of light paths, depositing into ``illum`` and ``records`` (objects with a
+    ``layout`` and IlluminationMap's ``deposit``: maps, or DepositLogs; ``records`` None
+    without gratings). ``stream``: the random stream id (the records' pilot pass has its own).
+    ``splat``: where the batch's camera splats go (an object with CameraSplat's ``add``: a
+    lane's film or a camera_splat.SplatLog), or None: no camera connection.
+    Returns its counts: paths, deposits, rays."""
+    seed = int(prepared.settings.seed)
+    b = job.paths
+    rng = np.random.default_rng(np.random.SeedSequence([seed, stream, job.light, job.batch]))
+    n = prepared.grid.n
+    o, d, coeff, basis = emit(prepared, job.light, b, rng)  # core/lights/emission.py
+    live = coeff.max(axis=1) > 0
+    w = (coeff[live] / float(job.light_paths)).astype(np.float32)
+    if basis is not None and len(basis) >= n:  # no fewer coefficients than samples: plain spectra
+        w, basis = (w @ basis).astype(np.float32), None
+    m = int(live.sum())
+    rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(m, np.int64),
+                w, None, np.zeros(m, np.int32), rng.random(m),
+                basis=None if basis is None else np.ascontiguousarray(basis, np.float32))
+    connection = CameraConnection.of(prepared) if splat is not None else None
+    batch = SplatBatch(connection) if connection is not None else None
+    tr = LightWalker(prepared, rng, illum, records, batch)
+    bounce_rng = None
+    if batch is not None and splat_bounce.enabled(prepared):
+        tr.bounces = splat_bounce.BounceLog(prepared)
+        # the continued landings (core/integrators/light/splat_bounce.py) draw from a stream of their own, so the
+        # map and the direct splats are those of the same seed without them
+        bounce_rng = np.random.default_rng(np.random.SeedSequence([seed, stream, job.light, job.batch, 1]))
+    # SPLIT: the batch's white paths in pieces (core/wavelengths.split_chunks), so the mono paths
+    # they become stay bounded, and each piece's camera splats are summed per pixel before the
+    # next piece (a loop over a batch's few pieces, drawing the batch's stream one after another)
+    chunks = wavelengths.split_chunks(prepared, m)
+    shadow = 0
+    for c in [slice(0, m)] if chunks is None else chunks:
+        tr.walk(rays if chunks is None else rays.take(np.arange(c.start, c.stop)), tr.empty_mono())
+        if tr.bounces is not None:  # the piece's landings, one diffuse bounce on
+            tr._rays += splat_bounce.trace_bounces(prepared, tr.bounces, tr.splat, bounce_rng)
+            tr.bounces = splat_bounce.BounceLog(prepared)
+        if tr.splat is not None:
+            splat.add(*tr.splat.finish())
+            shadow += tr.splat.shadow_rays
+            tr.splat = SplatBatch(connection)
+    return {"paths": b, "deposits": tr.deposited, "rays": tr._rays + shadow}

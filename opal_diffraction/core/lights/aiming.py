@@ -1,0 +1,171 @@
+"""Aiming light paths at the objects that bend light: the casters' bounding spheres, and
+unbiased mixture sampling of directions and points towards them.
+
+The light pass (core/integrators/light/, docs/physics.md section 4.1) aims its paths at the
+*casters* (mirrors, glass, gratings): their triangles are grouped into connected objects with
+bounding spheres (``caster_objects``). From a point or spot light, or a point sampled on an area
+light, a direction is drawn in the cone that subtends one object's sphere, the object chosen in
+proportion to its cone's solid angle; the pdf of a direction is the mixture
+sum_c P_c [w in cone c] / Omega_c, so overlapping cones are accounted for (``sample_cones``,
+``sample_towards_casters``). Parallel light (a sun, the world) draws a point on the disk one
+object's sphere casts across its direction, with the matching mixture pdf per unit area
+(``caster_disk_points``; docs/physics.md sections 7.7, 7.9). core/lights/emission.py builds each
+light kind's path starts on these.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..util.geometry import compact_indices, group_extrema, orthonormal_basis
+
+__all__ = ["CasterObjects", "caster_objects", "MAX_OBJECTS", "caster_cones", "sample_cones", "CONE_CHUNK",
+           "sample_towards_casters", "caster_disk_points"]
+
+MAX_OBJECTS = 64
+
+
+@dataclass(frozen=True)
+class CasterObjects:
+    """Bounding spheres of the connected caster objects: what light paths are aimed at."""
+
+    centre: np.ndarray  # (C, 3)
+    radius: np.ndarray  # (C,)
+
+    def __len__(self):
+        return len(self.radius)
+
+
+def caster_objects(vertices, triangles, mask) -> CasterObjects:
+    """Bounding spheres of the connected groups of caster triangles (sharing vertex indices).
+
+    Linear in the triangles (connected components of the vertex graph); a mesh whose pieces do
+    not share vertices simply makes more, tighter groups. More than MAX_OBJECTS groups are merged
+    on a coarse spatial grid so the mixture stays cheap.
+    """
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    t = np.asarray(triangles)[np.asarray(mask, bool)]
+    if len(t) == 0:
+        return CasterObjects(np.zeros((0, 3)), np.zeros(0))
+    used, node = compact_indices(t)  # compact the vertex ids of the casters (np.unique's result)
+    pts = np.asarray(vertices)[used].astype(np.float64)  # the casters' vertices only, in float64
+    extent = float(np.ptp(pts, axis=0).max()) or max(float(np.abs(pts).max()), 1e-30)
+    n_nodes = len(used)
+    # int32 indices and float64 weights, in CSR: what connected_components converts to otherwise
+    rows = np.concatenate([node[:, 0], node[:, 1]]).astype(np.int32)
+    cols = np.concatenate([node[:, 1], node[:, 2]]).astype(np.int32)
+    graph = csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_nodes, n_nodes))
+    n_comp, label = connected_components(graph, directed=False)
+    if n_comp > MAX_OBJECTS:  # many separate pieces: group them by a spatial grid instead
+        cells = np.floor((pts - pts.min(axis=0)) / (extent / 4 + 1e-12 * extent)).astype(np.int64)
+        key = (cells[:, 0] * 5 + cells[:, 1]) * 5 + cells[:, 2]  # cells are 0..4 per axis
+        _, label = compact_indices(key)
+        n_comp = int(label.max()) + 1
+    # per-group bounding box centre and radius, over the group's vertices (O(V) per pass)
+    lo, hi = group_extrema(label, n_comp, pts)  # np.minimum.at / np.maximum.at without the scatter
+    centre = 0.5 * (lo + hi)
+    d2 = np.maximum(group_extrema(label, n_comp, np.sum((pts - centre[label]) ** 2, axis=1), ops=(np.maximum,))[0], 0.0)
+    radius = np.sqrt(d2) * (1 + 1e-6) + 1e-9 * extent
+    return CasterObjects(centre, radius)
+
+
+def caster_cones(origin: np.ndarray, objects: CasterObjects):
+    """Per (origin, object): unit axis, cos of the half angle, solid angle. origin (B, 3)."""
+    to_c = objects.centre[None, :, :] - origin[:, None, :]
+    dist = np.linalg.norm(to_c, axis=2)
+    inside = dist <= objects.radius[None, :]
+    axis = to_c / np.maximum(dist, 1e-30)[..., None]
+    sin2 = np.clip((objects.radius[None, :] / np.maximum(dist, 1e-30)) ** 2, 0, 1)
+    cos_max = np.where(inside, -1.0, np.sqrt(1 - sin2))
+    omega = 2 * np.pi * (1 - cos_max)
+    return axis, cos_max, omega
+
+
+def sample_cones(origin, weights, axis, cos_max, omega, rng, u=None):
+    """Directions from ``origin`` (B, 3): choose object c with probability weights (B, C)
+    (normalised per row), then uniformly in its cone. Returns (dirs, pdf) with the mixture pdf.
+    ``u``: the uniform numbers ((B, 1), (B,), (B,)) to use instead of drawing them from rng."""
+    b, c = weights.shape
+    uni = (rng.random((b, 1)), rng.random(b), rng.random(b)) if u is None else u
+    # one origin for every path (a point light): the mixture, the cones' frames and the pdf's
+    # cone tests once per object, not once per path
+    shared = all(x.strides[0] == 0 for x in (weights, axis, cos_max, omega))
+    if shared:
+        w0 = weights[0]
+        prob0 = w0 / max(float(w0.sum()), 1e-300)
+        pick = np.minimum(np.searchsorted(np.cumsum(prob0), uni[0][:, 0], side="left"), c - 1)  # = (u > cdf).sum()
+        u0, v0 = orthonormal_basis(axis[0])
+        if c == 1:  # one cone: its axis and frame broadcast over the paths
+            ax, cm, u, v = axis[0, 0], cos_max[0, 0], u0[0], v0[0]
+        else:
+            ax, cm, u, v = axis[0][pick], cos_max[0][pick], u0[pick], v0[pick]
+        cos_t = 1 - uni[1] * (1 - cm)
+        sin_t = np.sqrt(np.maximum(0, 1 - cos_t * cos_t))
+        phi = 2 * np.pi * uni[2]
+        d = cos_t[:, None] * ax + (sin_t * np.cos(phi))[:, None] * u + (sin_t * np.sin(phi))[:, None] * v
+        if c == 1:  # the one cone holds every direction drawn in it
+            return d, np.full(b, prob0[0] / max(float(omega[0, 0]), 1e-300))
+        inside = d @ axis[0].T >= cos_max[0] - 1e-12
+        return d, inside @ (prob0 / np.maximum(omega[0], 1e-300))
+    prob = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-300)
+    cdf = np.cumsum(prob, axis=1)
+    pick = np.minimum((uni[0] > cdf).sum(axis=1), c - 1)
+    rows = np.arange(b)
+    ax, cm = axis[rows, pick], cos_max[rows, pick]
+    cos_t = 1 - uni[1] * (1 - cm)
+    sin_t = np.sqrt(np.maximum(0, 1 - cos_t * cos_t))
+    phi = 2 * np.pi * uni[2]
+    u, v = orthonormal_basis(ax)
+    d = cos_t[:, None] * ax + (sin_t * np.cos(phi))[:, None] * u + (sin_t * np.sin(phi))[:, None] * v
+    inside = np.einsum("bcj,bj->bc", axis, d) >= cos_max - 1e-12
+    pdf = np.sum(np.where(inside, prob / np.maximum(omega, 1e-300), 0.0), axis=1)
+    return d, pdf
+
+
+#: Paths per chunk where every path has its own origin (area lights, sized lights, emissive
+#: meshes): the (paths, objects, 3) cone arrays stay near 6 MB even with MAX_OBJECTS objects.
+CONE_CHUNK = 4096
+
+
+def sample_towards_casters(origin, obj: CasterObjects, rng):
+    """``sample_cones`` from per-path origins (B, 3), each path choosing an object by its cone's
+    solid angle: in chunks of CONE_CHUNK paths (bounded temporaries), with the random numbers
+    drawn for the whole batch first (the same numbers as one unchunked call)."""
+    b = len(origin)
+    u = (rng.random((b, 1)), rng.random(b), rng.random(b))
+    d = np.empty((b, 3))
+    pdf = np.empty(b)
+    for s in range(0, b, CONE_CHUNK):  # loop over chunks of a batch, not over paths
+        sl = slice(s, min(b, s + CONE_CHUNK))
+        axis, cos_max, omega = caster_cones(origin[sl], obj)
+        d[sl], pdf[sl] = sample_cones(origin[sl], omega, axis, cos_max, omega, None, tuple(x[sl] for x in u))
+    return d, pdf
+
+
+def caster_disk_points(obj: CasterObjects, d: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Points for parallel light along unit directions d (B, 3): an object chosen by the area of
+    the disk its bounding sphere casts across d, a uniform point on that disk (in the plane
+    through the origin normal to d), and the mixture pdf per unit area over all objects' disks
+    (they overlap for some d). The suns' and the world's path starts share it."""
+    b = len(d)
+    area = np.pi * obj.radius**2
+    prob = area / area.sum()
+    pick = np.minimum((rng.random((b, 1)) > np.cumsum(prob)[None, :]).sum(axis=1), len(obj) - 1)
+    r = obj.radius[pick] * np.sqrt(rng.random(b))
+    phi = 2 * np.pi * rng.random(b)
+    u, v = orthonormal_basis(d)
+    c = obj.centre[pick]
+    c_plane = c - np.einsum("ij,ij->i", c, d)[:, None] * d
+    pts = c_plane + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
+    if len(obj) == 1:  # one object: every point drawn lies on its disk
+        return pts, np.full(b, 1.0 / area[0])
+    # |pts - proj(centre)|^2 = |pts - centre|^2 - ((pts - centre) . d)^2 (pts . d = 0), every object at once
+    cd = d @ obj.centre.T  # (B, C)
+    dist2 = (np.sum(pts**2, axis=1)[:, None] - 2 * pts @ obj.centre.T + np.sum(obj.centre**2, axis=1)[None, :]
+             - cd**2)
+    pdf = np.sum(np.where(dist2 <= obj.radius**2 * (1 + 1e-9), prob / area, 0.0), axis=1)
+    return pts, pdf
