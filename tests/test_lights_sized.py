@@ -15,6 +15,7 @@ from opal_diffraction.core.lights.sources import (intersect_lights, is_delta, li
 from opal_diffraction.core.scene.model import Lights, Scene, SceneError
 from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.spectral.spectrum import SpectralConverter
+from opal_diffraction.core.render.plan import plan_render
 
 CONV = SpectralConverter(RenderSettings(wavelength_step=20.0).grid())
 #: chi-square tests in this file and tests/test_mesh_lights.py (Bonferroni)
@@ -332,7 +333,7 @@ def test_sized_lights_send_the_analytic_flux_through_a_glass_slab(case):
     runs = []
     for seed in range(6):
         ctx = prepare(s, RenderSettings(light_paths=40_000, max_bounces=32, seed=seed, wavelength_step=20.0))
-        runs.append(float(run_light_pass(ctx).caustics.flux.sum(axis=0).mean()))
+        runs.append(float(run_light_pass(ctx, plan=plan_render(ctx)).caustics.flux.sum(axis=0).mean()))
     spectrum = float(ctx.lights.spectrum[0].mean())  # I (W/sr) or S (W/m^2) per bin
     th = np.linspace(0, np.pi / 2, 200_001)
     mid = 0.5 * (th[1:] + th[:-1])

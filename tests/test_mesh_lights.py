@@ -17,6 +17,7 @@ from opal_diffraction.core.spectral.optics import fresnel_dielectric
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.render.plan import plan_render
 from test_lights_sized import ALPHA, Z_MAX, polygon_irradiance
 
 # three emitting triangles of different sizes, orientations and brightness, one dark one
@@ -149,7 +150,7 @@ def test_glowing_panel_throws_the_analytic_flux_through_a_glass_slab():
     for seed in range(6):  # independent runs: their spread is the Monte Carlo error
         ctx = prepare(s, RenderSettings(light_paths=60_000, max_bounces=32, seed=seed, wavelength_step=20.0))
         assert ctx.mesh_lights is not None and len(ctx.mesh_lights) == 2
-        lp = run_light_pass(ctx)
+        lp = run_light_pass(ctx, plan=plan_render(ctx))
         tri, _, _ = lp.caustics.layout.barycentric_centres()
         on_floor = tri < 2  # the floor's two triangles (light reflected up onto the panel's back is not counted)
         runs.append(float(lp.caustics.flux[on_floor].sum(axis=0).mean()))

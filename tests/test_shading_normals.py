@@ -24,6 +24,7 @@ from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene, SceneError
 from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.transport.walker import Rays, SpecularWalker, valid_specular_normal
+from opal_diffraction.core.render.plan import plan_render
 
 
 def smooth_sphere(center, radius, segments, rings):
@@ -339,7 +340,7 @@ def caustics():
     for smooth in (True, False):
         ctx = prepare(ball_lens_scene(smooth), RenderSettings(light_paths=CAUSTIC_PATHS, element_size=0.002,
                                                               wavelength_step=100.0, max_bounces=16))
-        out[smooth] = ctx, run_light_pass(ctx)
+        out[smooth] = ctx, run_light_pass(ctx, plan=plan_render(ctx))
     return out
 
 

@@ -508,12 +508,14 @@ class SpecularWalker:
     def _split(self, rays: Rays, hit: Hit, rng):
         """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit.
 
-        SAMPLE draws ``wavelengths.BRANCHES`` wavelengths per ray from the ray's stratified number,
+        SAMPLE draws ``dispersion_branches`` (a setting) wavelengths per ray from the ray's stratified number,
         importance-sampled by the image's sensitivity (core/transport/wavelengths.py, docs/physics.md
         section 2.6); SPLIT makes one child per wavelength with the parent's weight there."""
         n, b = self.n, len(rays)
         if self.prepared.settings.dispersion_sampling != "SPLIT":
-            parent, lam, w = wavelengths.draw(self.prepared.grid, rays.w, rays.u_lam)
+            s = self.prepared.settings
+            parent, lam, w = wavelengths.draw(self.prepared.grid, rays.w, rays.u_lam, s.dispersion_branches,
+                                              s.dispersion_importance)
         elif rays.w is None:  # unit weights: every wavelength alike
             parent, lam = np.repeat(np.arange(b), n), np.tile(np.arange(n), b)
             w = np.ones(b * n, np.float32)

@@ -13,7 +13,9 @@ every bounce, and there the choice's share of the variance is small (docs/physic
 child is kept. Russian roulette (eye_pass ``survives``) divides the split weight out of the
 throughput it judges by (the path's ``split`` state), so a child of weight F is kept as often as
 its unsplit path would be (any survival probability keeps the estimate unbiased; this one adds
-no roulette noise where the unsplit path had none).
+no roulette noise where the unsplit path had none). The setting ``fresnel_split`` (render/plan.py's
+``fresnel_split``, off where gratings layer their bases) switches it off, as
+benchmarks/caustic_sphere.py does to measure the difference.
 """
 
 from __future__ import annotations
@@ -23,10 +25,7 @@ import numpy as np
 from ...spectral.optics import fresnel_dielectric
 from ...transport.walker import Hit, Rays
 
-__all__ = ["ENABLED", "split_first_dielectric"]
-
-#: The eye pass splits (benchmarks/caustic_sphere.py switches it off to measure the difference).
-ENABLED = True
+__all__ = ["split_first_dielectric"]
 
 
 def split_first_dielectric(walker, rays: Rays, hit: Hit, rng, u, dielectric):

@@ -487,13 +487,15 @@ class LightWork:
                 GratingRecords.empty(self.record_layout, n) if self.record_layout else None)
 
 
-def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_PASS_STREAM, splat=None) -> dict:
+def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_PASS_STREAM, splat=None,
+                bounce: bool = False) -> dict:
     """Trace one batch of light paths, depositing into ``illum`` and ``records`` (objects with a
     ``layout`` and IlluminationMap's ``deposit``: maps, or DepositLogs; ``records`` None
     without gratings). ``stream``: the random stream id (the records' pilot pass has its own).
     ``splat``: where the batch's camera splats go (an object with CameraSplat's ``add``: a
-    lane's film or a camera_splat.SplatLog), or None: no camera connection.
-    Returns its counts: paths, deposits, rays."""
+    lane's film or a camera_splat.SplatLog), or None: no camera connection (the plan's
+    ``camera_splat`` off). ``bounce``: with a ``splat``, continue the landings by a diffuse
+    bounce (the plan's ``splat_bounce``). Returns its counts: paths, deposits, rays."""
     seed = int(prepared.settings.seed)
     b = job.paths
     rng = np.random.default_rng(np.random.SeedSequence([seed, stream, job.light, job.batch]))
@@ -518,7 +520,7 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
     batch = SplatBatch(connection) if connection is not None else None
     tr = _LightTrace(prepared, rng, illum, records, batch)
     bounce_rng = None
-    if batch is not None and splat_bounce.enabled(prepared):
+    if batch is not None and bounce:
         tr.bounces = splat_bounce.BounceLog(prepared)
         # the continued landings (core/integrators/light/splat_bounce.py) draw from a stream of their own, so the
         # map and the direct splats are those of the same seed without them
@@ -606,8 +608,9 @@ def finish_light_pass(prepared, work: LightWork, maps, counts, t0: float, timed_
 
 @one_blas_thread()  # the lanes are the parallelism (core/util/blas_threads.py)
 def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_cancel=None,
-                   deadline: float | None = None) -> LightPassResult:
-    """Run the light pass over ``prepared`` (``n_paths``: default the settings' light paths).
+                   deadline: float | None = None, *, plan) -> LightPassResult:
+    """Run the light pass over ``prepared`` (``n_paths``: default the settings' light paths) as
+    ``plan`` (render/plan.RenderPlan of ``prepared``: its ``camera_splat`` and ``splat_bounce``).
 
     The batches are dealt to LANES fixed lanes (LightWork: batch j to lane j % LANES), each with
     its own maps, run on up to ``prepared.threads`` threads and summed in lane order at the end,
@@ -622,7 +625,8 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
     total = work.total
     maps = [work.empty_maps(prepared.grid.n) for _ in range(LANES)]
     counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
-    connection = CameraConnection.of(prepared)  # the camera splat (core/integrators/light/camera_splat.py), or None: off
+    # the camera splat (core/integrators/light/camera_splat.py), or None: off
+    connection = CameraConnection.of(prepared) if plan.camera_splat else None
     splats = [connection.empty() for _ in range(LANES)] if connection is not None else None
     stop = threading.Event()
     cancelled = False
@@ -633,7 +637,7 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
             if stop.is_set():
                 return
             done = trace_batch(prepared, work.batches[j], illum, records,
-                               splat=None if splats is None else splats[k])
+                               splat=None if splats is None else splats[k], bounce=plan.splat_bounce)
             for name, value in done.items():
                 counts[k][name] += value
 
