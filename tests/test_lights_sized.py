@@ -300,10 +300,10 @@ def _big_slab_scene(light: dict) -> Scene:
 
 def _slab_transmission(cos_i):
     """(1 - R) / (1 + R): a clear slab's transmitted fraction with all internal reflections,
-    R the unpolarised Fresnel reflectance entering from air (eta = 1 / 1.5)."""
+    R the unpolarised Fresnel reflectance entering from air (eta = n_t / n_i = 1.5)."""
     from opal_diffraction.core.spectral.optics import fresnel_dielectric
 
-    r = fresnel_dielectric(cos_i, np.full(np.shape(cos_i), 1 / 1.5))
+    r, _ = fresnel_dielectric(cos_i, np.full(np.shape(cos_i), 1.5))
     return (1 - r) / (1 + r)
 
 

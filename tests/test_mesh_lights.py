@@ -124,7 +124,7 @@ def test_irradiance_from_emitting_triangles_is_lamberts_formula():
 def slab_transmission(cos_i, n=1.5):
     """Flux fraction through a clear slab at incidence cos_i with all internal reflections:
     (1 - R) / (1 + R), R the unpolarised Fresnel reflectance (the transport's, optics.py)."""
-    r = fresnel_dielectric(np.asarray(cos_i, np.float64), np.full(np.shape(cos_i), 1.0 / n))  # eta = n_i / n_t
+    r, _ = fresnel_dielectric(np.asarray(cos_i, np.float64), np.full(np.shape(cos_i), n))  # eta = n_t / n_i
     return (1 - r) / (1 + r)
 
 

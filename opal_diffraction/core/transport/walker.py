@@ -483,7 +483,7 @@ class SpecularWalker:
         ns = self._specular_normal(rays, hit)
         cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
         cos = np.asarray(cos_s, np.float32)
-        fr = fresnel_dielectric(cos, eta)
+        fr, _ = fresnel_dielectric(np.abs(cos), np.where(hit.front, n, 1.0 / n).astype(np.float32))
         refl = (rng.random(len(rays)) if u is None else u) < fr
         cos_t = np.sqrt(np.maximum(np.float32(0), 1 - eta * eta * np.maximum(np.float32(0), 1 - cos * cos)))
         a = np.where(refl, np.float32(1), eta)

@@ -163,7 +163,8 @@ def split_at_glass(walker, rays, hit, rng, u=None):
     eta = np.where(hit.front[:, None], 1.0 / ior, ior)
     ns = walker._specular_normal(rays, hit)
     cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
-    fr = fresnel_dielectric(np.asarray(cos_s, np.float64)[:, None], eta)  # (B, n)
+    fr, _ = fresnel_dielectric(np.abs(np.asarray(cos_s, np.float64))[:, None],
+                               np.where(hit.front[:, None], ior, 1.0 / ior))  # (B, n)
     wt = walker._tinted(rays, hit)  # (B, n) or None: the glass's tint applies to both branches
     q = importance(grid, wt, b, settings.dispersion_importance)
     qs = q.sum(axis=1)

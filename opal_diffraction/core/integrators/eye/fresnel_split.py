@@ -41,10 +41,10 @@ def split_first_dielectric(walker, rays: Rays, hit: Hit, rng, u, dielectric):
     rf, hf = rays.take(idx), hit.take(idx)
     ior = walker.prepared.materials.ior
     n = np.take(ior[:, 0], hf.mat) if rf.lam is None else ior[hf.mat, rf.lam]
-    eta = np.where(hf.front, 1.0 / n, n).astype(np.float32)
+    eta = np.where(hf.front, n, 1.0 / n).astype(np.float32)  # n_t / n_i
     ns = walker._specular_normal(rf, hf)
     cos = hf.cos_i if ns is hf.ng else -np.einsum("ij,ij->i", rf.d, ns)
-    fr = np.asarray(fresnel_dielectric(cos, eta), np.float32)
+    fr = np.asarray(fresnel_dielectric(np.abs(cos), eta)[0], np.float32)
     # reflected children where F > 0, refracted ones where F < 1 (not under total internal reflection)
     refl, refr = np.flatnonzero(fr > 0), np.flatnonzero(fr < 1)
     pick = np.concatenate([refl, refr])
