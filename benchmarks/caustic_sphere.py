@@ -46,7 +46,7 @@ from opal_diffraction.core.sampling.camera import generate_rays
 from opal_diffraction.core.integrators.light.light_pass import run_light_pass
 from opal_diffraction.core.render.plan import plan_render
 from opal_diffraction.core.render.prepare import prepare
-from opal_diffraction.core.render.frame import render, render_prepared
+from opal_diffraction.core.render.frame import render_prepared
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
 

@@ -18,7 +18,6 @@ import pytest
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.util.geometry import triangle_normals
 from opal_diffraction.core.integrators.light.light_pass import run_light_pass
-from opal_diffraction.core.materials.spectra import DIELECTRIC
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene, SceneError

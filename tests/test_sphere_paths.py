@@ -5,7 +5,6 @@ camera (core/integrators/light/splat_bounce.py, docs/physics.md section 4.11), a
 import dataclasses
 
 import numpy as np
-import pytest
 
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.integrators.light import splat_bounce

@@ -40,7 +40,7 @@ from .prepare import PreparedScene, prepare
 from ..scene.model import Scene
 from ..scene.settings import RenderSettings
 from ..spectral.spectrum import SpectralConverter
-from .tiles import (EYE_PASS_STREAM, LIGHT_PASS_SHARE, MAX_TILE_RAYS, EyeWork, adaptive_of, is_half_a, round_size, trace_tile)
+from .tiles import LIGHT_PASS_SHARE, EyeWork, adaptive_of, is_half_a, trace_tile
 
 __all__ = ["RenderResult", "render", "render_prepared"]
 

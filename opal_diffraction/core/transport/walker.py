@@ -274,11 +274,6 @@ def valid_specular_normal(wo: np.ndarray, ng: np.ndarray, ns: np.ndarray) -> np.
     return out
 
 
-def out_is_plain(rays: Rays) -> bool:
-    """No ray differentials to carry (core/sampling/footprint.py): the fused specular bounce applies."""
-    return rays.extra is None or footprint.KEY not in rays.extra
-
-
 class SpecularWalker:
     """Advances ray populations through specular interactions; subclasses add the shading."""
 
