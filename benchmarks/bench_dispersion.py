@@ -1,16 +1,16 @@
 """Benchmark (not a test): dispersion noise and SPLIT's memory on the gem example (issue 14).
 
 **Wavelength sampling** (core/transport/wavelengths.py): the gem of examples/gem.py at 160 x 120 (the
-camera of the example), SAMPLE dispersion, rendered with each combination of the module's
-switches in turn (alternating, in one process, ``--repeats`` times; the best time is kept):
+camera of the example), SAMPLE dispersion, rendered with each combination of the settings
+``dispersion_importance``, ``dispersion_white_reflection`` and ``dispersion_branches`` in turn (alternating, in one process, ``--repeats`` times; the best time is kept):
 
 - ``uniform``: one wavelength per ray, uniform over the grid, the reflect / refract choice per
   mono ray: the code before core/transport/wavelengths.py;
 - ``importance``: the wavelength drawn by the image's sensitivity;
 - ``white-refl``: smooth glass reflects the white ray (the choice made once, on the white ray);
-- ``both``: importance + white reflection (the default);
+- ``both``: importance + white reflection (with K = 1);
 - ``hero4``, ``hero8``, ``hero16``: both, with K = 4 (pbrt-v4's count), 8 or 16 rotated hero
-  wavelengths per refracted ray, each its own mono ray of weight 1/K.
+  wavelengths per refracted ray, each its own mono ray of weight 1/K (``hero4``: the default settings).
 
 Each is compared with the converged reference of benchmarks/bench_examples_error.py (the cached
 ``ref_gem_160x120_<spp>.npz``; its commit is printed) by the 8 x 8-box-filtered relative RMSE,
@@ -41,7 +41,7 @@ import numpy as np
 from opal_diffraction._scripts import REPO_ROOT, load_script
 
 OUT = os.path.join(REPO_ROOT, "out", "bench_dispersion")
-VARIANTS = {  # name: (IMPORTANCE, WHITE_REFLECTION, BRANCHES)
+VARIANTS = {  # name: RenderSettings (dispersion_importance, dispersion_white_reflection, dispersion_branches)
     "uniform": (False, False, 1),
     "importance": (True, False, 1),
     "white-refl": (False, True, 1),
@@ -52,10 +52,13 @@ VARIANTS = {  # name: (IMPORTANCE, WHITE_REFLECTION, BRANCHES)
 }
 
 
-def set_variant(name: str) -> None:
-    from opal_diffraction.core.transport import wavelengths
+def variant(settings, name: str):
+    """``settings`` with the wavelength-sampling choices of VARIANTS[name]."""
+    from dataclasses import replace
 
-    wavelengths.IMPORTANCE, wavelengths.WHITE_REFLECTION, wavelengths.BRANCHES = VARIANTS[name]
+    importance, white, branches = VARIANTS[name]
+    return replace(settings, dispersion_importance=importance, dispersion_white_reflection=white,
+                   dispersion_branches=branches)
 
 
 def save_png(path: str, img: np.ndarray, scale: int = 3) -> None:
@@ -117,15 +120,13 @@ def main(argv=None) -> int:
         for spp in args.spp:
             for rep in range(args.repeats):
                 for v in args.variants:  # alternating: the machine's load hits every variant alike
-                    set_variant(v)
-                    img, wall, cpu, _ = bex.render_rgb(scene, base, spp, 3)
+                    img, wall, cpu, _ = bex.render_rgb(scene, variant(base, v), spp, 3)
                     row = rows[v].setdefault(spp, {"wall": np.inf, "cpu": np.inf})
                     row["wall"], row["cpu"] = min(row["wall"], wall), min(row["cpu"], cpu)
                     row["error"] = bex.errors(img, ref["a"], ref["b"], cp)
                     if rep == 0:
                         save_png(os.path.join(OUT, f"gem_{v}_{spp}spp.png"), img)
                         row["image"] = img
-        set_variant("both")
         print("| variant | spp | wall s | cpu s | err display | err linear | cpu s to display 0.05 | to 0.02 |")
         print("|---|---|---|---|---|---|---|---|")
         for v in args.variants:
@@ -142,8 +143,7 @@ def main(argv=None) -> int:
         if "uniform" in rows and best != "uniform":
             t_u = rows["uniform"][top]["cpu"]
             spp_b = max(1, int(round(top * t_u / rows[best][top]["cpu"])))
-            set_variant(best)
-            img, wall, cpu, _ = bex.render_rgb(scene, base, spp_b, 3)
+            img, wall, cpu, _ = bex.render_rgb(scene, variant(base, best), spp_b, 3)
             e = bex.errors(img, ref["a"], ref["b"], cp)["display"]["corrected"]
             side = np.concatenate([rows["uniform"][top]["image"], img], axis=1)
             save_png(os.path.join(OUT, f"gem_equal_time_uniform{top}_vs_{best}{spp_b}.png"), side)
@@ -151,7 +151,6 @@ def main(argv=None) -> int:
                   f"{rows['uniform'][top]['error']['display']['corrected']:.4f}; {best} {spp_b} spp {cpu:.1f} cpu s, "
                   f"display error {e:.4f}")
             results["equal_time"] = {"uniform": [top, t_u], best: [spp_b, cpu, e]}
-            set_variant("both")
         for v in rows:
             for row in rows[v].values():
                 row.pop("image", None)

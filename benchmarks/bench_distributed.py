@@ -45,6 +45,7 @@ from opal_diffraction._scripts import load_example  # noqa: E402
 from opal_diffraction.core.render import distributed as dist  # noqa: E402
 from opal_diffraction.core.render.film import Film  # noqa: E402
 from opal_diffraction.core.integrators.light.light_pass import LANES, LightWork, run_light_pass  # noqa: E402
+from opal_diffraction.core.render.plan import plan_render  # noqa: E402
 from opal_diffraction.core.render.prepare import prepare  # noqa: E402
 from opal_diffraction.core.render.frame import render  # noqa: E402
 from opal_diffraction.core.scene.settings import RenderSettings  # noqa: E402
@@ -123,7 +124,7 @@ def wire_sizes(scene, settings, spectral: bool = False):
         if records is not None:
             dist.DepositLog.replay_calls(out["records"], records)
         replay_s.append(time.perf_counter() - t)
-    light = run_light_pass(prepared)
+    light = run_light_pass(prepared, plan=plan_render(prepared))
     light_w = {"token": "0" * 12, "caustics": dist.pack_map(light.caustics),
                "grating_records": dist.pack_map(light.grating_records),
                "splat": light.splat is not None, "splat_spectral": light.splat is not None and light.splat.spectral}

@@ -18,6 +18,7 @@ import numpy as np
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.lights.environment import EnvironmentMap
 from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+from opal_diffraction.core.render.plan import plan_render
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene.model import Camera, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
@@ -56,7 +57,7 @@ def main() -> None:
     s.camera = Camera(width=4, height=4)
     prepared = prepare(s, RenderSettings(light_paths=1_000_000, wavelength_step=10.0))
     t = time.perf_counter()
-    lp = run_light_pass(prepared)
+    lp = run_light_pass(prepared, plan=plan_render(prepared))
     print(f"light pass, 1 M world paths: {time.perf_counter() - t:.2f} s "
           f"({lp.stats['light_deposits']} deposits, {prepared.threads} threads)")
     # the same light pass from a SUN (the emission's own cost is the difference)
@@ -67,7 +68,7 @@ def main() -> None:
     s.lights = Lights.from_list([{"kind": "SUN", "direction": (0.3, 0.2, -1.0), "power": 3.0}])
     prepared = prepare(s, RenderSettings(light_paths=1_000_000, wavelength_step=10.0))
     t = time.perf_counter()
-    lp = run_light_pass(prepared)
+    lp = run_light_pass(prepared, plan=plan_render(prepared))
     print(f"light pass, 1 M sun paths: {time.perf_counter() - t:.2f} s ({lp.stats['light_deposits']} deposits)")
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from opal_diffraction._scripts import load_example
 from opal_diffraction.core.gratings.order_sampling import sample_orders
 from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+from opal_diffraction.core.render.plan import plan_render
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene.settings import RenderSettings
 
@@ -45,7 +46,7 @@ def main(argv=None) -> int:
     scene = ex.grating_screen_scene()
     p = prepare(scene, RenderSettings(light_paths=args.paths))
     t0 = time.perf_counter()
-    res = run_light_pass(p)
+    res = run_light_pass(p, plan=plan_render(p))
     dt = time.perf_counter() - t0
     st = res.stats
     print(f"classroom light pass: {st['light_paths'] / 1e6:.2f} M paths in {dt:.2f} s "

@@ -52,10 +52,11 @@ def prepared(name: str, paths: int, threads: int):
 def time_once(name: str, paths: int, threads: int) -> dict:
     """One timed light pass: wall and CPU seconds (this process, all threads), paths, rays, deposits."""
     from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+    from opal_diffraction.core.render.plan import plan_render
 
     ctx = prepared(name, paths, threads)
     t0, c0 = time.perf_counter(), time.process_time()
-    res = run_light_pass(ctx, paths)
+    res = run_light_pass(ctx, paths, plan=plan_render(ctx))
     dt, cpu = time.perf_counter() - t0, time.process_time() - c0
     s = res.stats
     return {"s": dt, "cpu": cpu, "paths": int(s["light_paths"]), "rays": int(s["light_rays"]),

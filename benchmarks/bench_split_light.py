@@ -50,6 +50,7 @@ def probe(scene_name: str, mode: str, chunk: int, paths: int, threads: int, widt
     from opal_diffraction._scripts import load_example
     from opal_diffraction.core.transport import wavelengths
     from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+    from opal_diffraction.core.render.plan import plan_render
     from opal_diffraction.core.render.prepare import prepare
     from opal_diffraction.core.scene.settings import RenderSettings
 
@@ -61,7 +62,7 @@ def probe(scene_name: str, mode: str, chunk: int, paths: int, threads: int, widt
         tracemalloc.reset_peak()
         base = tracemalloc.get_traced_memory()[0]
     t, c = time.perf_counter(), time.process_time()
-    light = run_light_pass(prepared)
+    light = run_light_pass(prepared, plan=plan_render(prepared))
     wall, cpu = time.perf_counter() - t, time.process_time() - c
     out = {"scene": scene_name, "mode": mode, "chunk": chunk, "wall_s": wall, "cpu_s": cpu,
            "maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,

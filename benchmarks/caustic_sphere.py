@@ -46,7 +46,7 @@ from opal_diffraction.core.sampling.camera import generate_rays
 from opal_diffraction.core.integrators.light.light_pass import run_light_pass
 from opal_diffraction.core.render.plan import plan_render
 from opal_diffraction.core.render.prepare import prepare
-from opal_diffraction.core.render.frame import render, render_prepared
+from opal_diffraction.core.render.frame import render_prepared
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
@@ -140,7 +140,8 @@ def run_ours(spec: Spec, light_paths: int, samples: int, threads=2, plane_only=F
     t0, c0 = time.perf_counter(), time.process_time()
     prepared = prepare(scene, st)
     c1 = time.process_time()
-    light = run_light_pass(prepared) if plan_render(prepared).light_pass else None
+    plan = plan_render(prepared)
+    light = run_light_pass(prepared, plan=plan) if plan.light_pass else None
     c2 = time.process_time()
     res = render_prepared(prepared, light, started_at=t0)
     dt, c3 = time.perf_counter() - t0, time.process_time()
@@ -745,16 +746,14 @@ def splat_benchmark(args, log) -> int:
                 return (*out, time.process_time() - c0)
             return run
 
-        from opal_diffraction.core.integrators.eye import fresnel_split
         # (light paths, spp, splat, Fresnel split at the first glass hit)
         cfgs = [(100_000, 16, True, True), (100_000, 24, True, True), (250_000, 8, True, True),
                 (250_000, 32, True, True), (100_000, 24, True, False), (250_000, 32, False, True)]
         if not args.quick:
             cfgs += [(1_000_000, 64, True, True)]
         for lp, spp, splat, split in cfgs:
-            fresnel_split.ENABLED = split
-            img, dt, res = best_of(args.repeats, lambda: run_ours(spec, lp, spp, args.threads, caustic_splat=splat))
-            fresnel_split.ENABLED = True
+            img, dt, res = best_of(args.repeats, lambda: run_ours(spec, lp, spp, args.threads, caustic_splat=splat,
+                                                                  fresnel_split=split))
             caus = res.passes["Caustics"].astype(np.float64)
             st = res.stats
             label = f"ours, splat {'on' if splat else 'off'}" + ("" if split else ", no Fresnel split")
@@ -798,7 +797,7 @@ def profile_light_pass(spec: Spec, paths: int) -> int:
     ctx = prepare(scene, st)
     prof = Profiler(interval=0.002)
     prof.start()
-    run_light_pass(ctx, paths)
+    run_light_pass(ctx, paths, plan=plan_render(ctx))
     prof.stop()
     print(prof.output_text(unicode=False, color=False, show_all=False))
     return 0

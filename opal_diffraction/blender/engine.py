@@ -39,7 +39,6 @@ import numpy as np
 
 from ..core.render import denoise as _denoise
 from ..core.render.distributed import connect
-from ..core.util.enums import Lattice
 from ..core.render.output import write_spectral_exr
 from ..core.render.frame import render as core_render
 from ..core.scene.checks import SceneError
@@ -287,10 +286,6 @@ class OpalRenderEngine(bpy.types.RenderEngine):
             core_warnings = [w for w in core_warnings if w not in notes]
             message = notes[0] if notes else "cancelled"
         warnings += core_warnings
-        mats = exported.scene.materials
-        surface_gratings = (np.asarray(mats.grating) != 0) & (np.asarray(mats.lattice) != Lattice.BRAGG)
-        if surface_gratings.any() and not getattr(rr.plan, "gratings", False):
-            warnings.append("diffraction gratings are not rendered yet: surfaces with a grating render without it")
         stats = dict(rr.stats, **{"export_" + k: v for k, v in exported.stats.items()})
         stats["total_s"] = time.perf_counter() - t0
         if spectral_path and rr.samples > 0:

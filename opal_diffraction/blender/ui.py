@@ -10,14 +10,14 @@ was added to.
 from __future__ import annotations
 
 import bpy
-from bpy.types import Menu, Panel
+from bpy.types import Panel
 
 from ..core.spectral.optics import SELLMEIER_PRESETS
 from .engine import ENGINE_ID
 from .export.nodes import missing_output, output_node
 from .opal_presets import OPAL_MT_glass_presets, OPAL_MT_opal_presets
 from .operators import OPAL_OT_export_scene
-from .properties import DISPERSION_PRESETS, MIN_GOOD_WAVELENGTHS
+from .properties import MIN_GOOD_WAVELENGTHS
 
 __all__ = ["register", "unregister", "builtin_panels", "classes"]
 
@@ -302,7 +302,8 @@ class OPAL_WORLD_PT_surface(OpalButtonsPanel, Panel):
         world = context.world
         if not _draw_node_input(layout, world, "Surface", "World Output"):
             layout.prop(world, "color")
-        layout.label(text="Rendered as a uniform background colour", icon="INFO")
+        # blender/export/world.py: a colour, or an equirectangular Environment Texture as a map
+        layout.label(text="Lights the scene: a colour, or an equirectangular environment map", icon="INFO")
 
 
 classes = (

@@ -219,8 +219,9 @@ class ProgressiveRenderer:
         cam = prepared.scene.camera
         stale = lambda: self._stale(gen)  # noqa: E731
         try:
-            if light is None and plan_render(prepared).light_pass:
-                light = run_light_pass(prepared, should_cancel=stale)
+            plan = plan_render(prepared)
+            if light is None and plan.light_pass:
+                light = run_light_pass(prepared, should_cancel=stale, plan=plan)
                 if light.cancelled:
                     return
                 if self.on_light is not None:

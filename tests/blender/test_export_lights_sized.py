@@ -225,6 +225,6 @@ def test_export_keeps_radius_soft_falloff_and_angle(tmp_path):
     assert lt.power[un] == pytest.approx(10.0 * 4 * math.pi * 0.25)
     big = [i for i in suns if lt.angle[i] > math.radians(15)][0]
     assert lt.power[big] == pytest.approx(2.0 * math.pi * math.sin(math.radians(10)) ** 2)
-    assert not any("hard shadows" in w or "not rendered yet" in w for w in ex.warnings), ex.warnings
+    assert not any("hard shadows" in w for w in ex.warnings), ex.warnings
     # an area light's spread is not rendered: said once, naming the light
     assert [w for w in ex.warnings if "spread" in w and "narrow_panel" in w], ex.warnings

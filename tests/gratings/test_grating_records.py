@@ -23,6 +23,7 @@ from opal_diffraction.core.integrators.light.light_pass import run_light_pass
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.render.plan import plan_render
 
 PIXELS = 40
 BLOCK = 4       # pixel blocks of BLOCK x BLOCK
@@ -222,7 +223,8 @@ def test_record_elements_hold_the_target_deposits_whatever_the_path_count():
     element stays near the target as the paths grow (so the records' noise falls with more
     paths, through finer elements), instead of being fixed by the whole grating's area."""
     for paths in (60_000, 240_000):
-        light = run_light_pass(prepare(two_mirror_scene(8), RenderSettings(light_paths=paths, threads=1)))
+        prepared = prepare(two_mirror_scene(8), RenderSettings(light_paths=paths, threads=1))
+        light = run_light_pass(prepared, plan=plan_render(prepared))
         st = light.stats
         assert st["pilot_grating_hits"] > 0
         assert 0.5 * RECORD_DEPOSITS < st["record_deposits_per_occupied"] < 2 * RECORD_DEPOSITS, (paths, dict(st))
@@ -231,8 +233,8 @@ def test_record_elements_hold_the_target_deposits_whatever_the_path_count():
 def test_records_are_the_same_bits_whatever_the_threads():
     """The lanes' records add in lane order and the pilot runs once, so the thread count does not
     change a bit (docs/physics.md section 9.2)."""
-    maps = [run_light_pass(prepare(two_mirror_scene(8), RenderSettings(light_paths=3 * 32768, threads=t))).grating_records
-            for t in (1, 2)]
+    prepared = [prepare(two_mirror_scene(8), RenderSettings(light_paths=3 * 32768, threads=t)) for t in (1, 2)]
+    maps = [run_light_pass(p, plan=plan_render(p)).grating_records for p in prepared]
     for name in ("keys", "flux", "direction", "count"):
         assert getattr(maps[0], name).tobytes() == getattr(maps[1], name).tobytes(), name
     assert maps[0].arrays()["moments"].tobytes() == maps[1].arrays()["moments"].tobytes()
@@ -249,7 +251,7 @@ def test_a_prism_before_the_grating_leaves_each_band_its_own_snell_direction():
     # three bounces: through the wedge (2) onto the grating, whose diffracted light (the light
     # pass scatters at gratings, docs/physics.md section 3.10) then stops before it can come back
     prepared = prepare(sun_through_wedge_scene(), RenderSettings(light_paths=60_000, threads=1, max_bounces=3))
-    rec = run_light_pass(prepared).grating_records
+    rec = run_light_pass(prepared, plan=plan_render(prepared)).grating_records
     n_glass = prepared.materials.ior[1].astype(np.float64)
     # Snell at the exit face: incidence alpha inside the glass, outward normal (sin a, 0, -cos a);
     # the direction of travel turns away from the normal to theta_t = asin(n sin a)

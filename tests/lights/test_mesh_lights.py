@@ -18,6 +18,7 @@ from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.render.plan import plan_render
 from test_lights_sized import ALPHA, Z_MAX, polygon_irradiance
 
 # three emitting triangles of different sizes, orientations and brightness, one dark one
@@ -124,7 +125,7 @@ def test_irradiance_from_emitting_triangles_is_lamberts_formula():
 def slab_transmission(cos_i, n=1.5):
     """Flux fraction through a clear slab at incidence cos_i with all internal reflections:
     (1 - R) / (1 + R), R the unpolarised Fresnel reflectance (the transport's, optics.py)."""
-    r = fresnel_dielectric(np.asarray(cos_i, np.float64), np.full(np.shape(cos_i), 1.0 / n))  # eta = n_i / n_t
+    r, _ = fresnel_dielectric(np.asarray(cos_i, np.float64), np.full(np.shape(cos_i), n))  # eta = n_t / n_i
     return (1 - r) / (1 + r)
 
 
@@ -150,7 +151,7 @@ def test_glowing_panel_throws_the_analytic_flux_through_a_glass_slab():
     for seed in range(6):  # independent runs: their spread is the Monte Carlo error
         ctx = prepare(s, RenderSettings(light_paths=60_000, max_bounces=32, seed=seed, wavelength_step=20.0))
         assert ctx.mesh_lights is not None and len(ctx.mesh_lights) == 2
-        lp = run_light_pass(ctx)
+        lp = run_light_pass(ctx, plan=plan_render(ctx))
         tri, _, _ = lp.caustics.layout.barycentric_centres()
         on_floor = tri < 2  # the floor's two triangles (light reflected up onto the panel's back is not counted)
         runs.append(float(lp.caustics.flux[on_floor].sum(axis=0).mean()))

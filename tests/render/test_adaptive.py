@@ -25,6 +25,7 @@ from opal_diffraction.core.scene.model import Materials, Scene
 from opal_diffraction.core.scene.checks import SceneError
 from opal_diffraction.core.scene.settings import EYE_ONLY_SETTINGS, RenderSettings
 from opal_diffraction.core.render.tiles import EyeWork, adaptive_rounds, trace_tile
+from opal_diffraction.core.render.plan import plan_render
 
 from scenes import top_down_camera
 
@@ -151,7 +152,7 @@ def test_off_and_never_converging_are_the_plain_sum_of_every_tile():
     off = render(scene, s, spectral_film=True)
     never = render(scene, replace(s, adaptive_threshold=1e-9), spectral_film=True)
     prepared = prepare(scene, s)
-    work, eye, filt = EyeWork.of(prepared), EyePass(prepared), FilterSampler(s.filter_width)
+    work, eye, filt = EyeWork.of(prepared), EyePass(prepared, plan=plan_render(prepared)), FilterSampler(s.filter_width)
     total = np.zeros((16, 16, prepared.grid.n), np.float32)
     for r in range(len(work.rounds)):
         for t, (x0, y0, x1, y1, _) in enumerate(work.tiles):

@@ -92,7 +92,7 @@ def test_the_scene_exercises_every_pass():
     prepared = prepare(every_pass_scene(), SETTINGS)
     plan = plan_render(prepared)
     assert plan.light_pass and plan.gratings and plan.dispersion
-    light = run_light_pass(prepared)
+    light = run_light_pass(prepared, plan=plan_render(prepared))
     assert light.caustics.flux.sum() > 0 and light.grating_records.flux.sum() > 0
     assert light.splat is not None and light.splat.image.sum() > 0  # caustics the camera sees directly, splatted
     assert len(LightWork.of(prepared).batches) >= 4  # several light tasks, both lanes used
@@ -196,7 +196,7 @@ def test_the_wire_names_none_of_our_modules_and_round_trips():
 
 def test_light_maps_travel_as_their_rows_that_hold_flux_exactly():
     prepared = prepare(every_pass_scene(), SETTINGS)
-    light = run_light_pass(prepared)
+    light = run_light_pass(prepared, plan=plan_render(prepared))
     m = light.caustics
     m.flux[0, 0] = -0.0  # a negative zero is bits too
     packed = pack_map(m)

@@ -41,7 +41,7 @@ def test_render_equals_the_pipeline_run_step_by_step():
     prepared = prepare(glass_scene(), SETTINGS)
     plan = plan_render(prepared)
     assert plan.light_pass and plan.dispersion
-    light = run_light_pass(prepared)
+    light = run_light_pass(prepared, plan=plan_render(prepared))
     staged = render_prepared(prepared, light, spectral_film=True)
     np.testing.assert_array_equal(full.spectral, staged.spectral)
     for k in full.passes:
@@ -53,7 +53,7 @@ def test_a_camera_move_reuses_the_light_pass_exactly():
     the moved camera, bit for bit - one without the camera splat, which the kept light pass made
     for the first camera only (docs/physics.md section 4.7)."""
     prepared = prepare(glass_scene(), SETTINGS)
-    light = run_light_pass(prepared)
+    light = run_light_pass(prepared, plan=plan_render(prepared))
     moved_cam = Camera.look_at((1, -5, 3), (0, 0, 0.5), width=24, height=16)
     moved = prepared.with_view(moved_cam, samples=3)
     assert moved.key == prepared.key and moved.accel is prepared.accel
@@ -88,7 +88,7 @@ def test_prepare_reuses_what_did_not_change():
     assert moved.accel is not first.accel and moved.key != first.key
     # and a light pass never crosses preparations
     with pytest.raises(ValueError, match="another prepared scene"):
-        EyePass(moved, run_light_pass(brighter))
+        EyePass(moved, run_light_pass(brighter, plan=plan_render(brighter)), plan=plan_render(moved))
 
 
 def test_hand_offs_are_immutable():
@@ -106,7 +106,7 @@ def test_hand_offs_are_immutable():
     plan = plan_render(prepared)
     with pytest.raises(FrozenInstanceError):
         plan.light_pass = False
-    light = run_light_pass(prepared)
+    light = run_light_pass(prepared, plan=plan_render(prepared))
     with pytest.raises(TypeError):
         light.stats["light_paths"] = 0
 

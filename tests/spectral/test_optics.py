@@ -13,10 +13,13 @@ from opal_diffraction.core.spectral.optics import (
 
 @pytest.mark.parametrize("n", [1.33, 1.5, 2.42])
 def test_fresnel_normal_incidence(n):
+    """eta = n_t / n_i: n entering the medium from air, 1 / n leaving it; cos_t = 1 both ways."""
     expected = ((n - 1) / (n + 1)) ** 2
-    assert fresnel_dielectric(np.array(1.0), np.array(1 / n)) == pytest.approx(expected, rel=1e-12)
+    f, cos_t = fresnel_dielectric(np.array(1.0), np.array(n))
+    assert f == pytest.approx(expected, rel=1e-12) and cos_t == 1.0
     # same from inside the medium
-    assert fresnel_dielectric(np.array(1.0), np.array(n)) == pytest.approx(expected, rel=1e-12)
+    f, cos_t = fresnel_dielectric(np.array(1.0), np.array(1 / n))
+    assert f == pytest.approx(expected, rel=1e-12) and cos_t == 1.0
 
 
 @pytest.mark.parametrize("n", [1.33, 1.5, 2.42])
@@ -25,8 +28,9 @@ def test_fresnel_at_brewster_angle_is_half_the_s_reflectance(n):
     theta_b = np.arctan(n)
     theta_t = np.pi / 2 - theta_b
     rs = (np.sin(theta_b - theta_t) / np.sin(theta_b + theta_t)) ** 2
-    r = fresnel_dielectric(np.cos(theta_b), np.array(1 / n))
+    r, cos_t = fresnel_dielectric(np.cos(theta_b), np.array(n))
     assert r == pytest.approx(rs / 2, rel=1e-9)
+    assert cos_t == pytest.approx(np.cos(theta_t), rel=1e-12)
     # and it is a minimum of R_p: the p part is zero there, so R is below R at nearby angles' s/2 only
     assert rs == pytest.approx(np.cos(2 * theta_b) ** 2, rel=1e-9)
 
@@ -35,8 +39,8 @@ def test_total_internal_reflection_beyond_critical_angle():
     n = 1.5
     crit = np.arcsin(1 / n)
     cos_in = np.cos(np.array([crit - 1e-3, crit + 1e-3]))
-    r = fresnel_dielectric(cos_in, np.array(n))
-    assert r[0] < 1 and r[1] == 1.0
+    r, cos_t = fresnel_dielectric(cos_in, np.array(1 / n))
+    assert r[0] < 1 and r[1] == 1.0 and cos_t[0] > 0 and cos_t[1] == 0.0
     d = np.array([[np.sin(crit + 0.01), 0, -np.cos(crit + 0.01)]])
     t, tir = refract(d, np.array([[0.0, 0, 1]]), np.array([n]))
     assert tir[0] and np.allclose(t, reflect(d, np.array([[0.0, 0, 1]])))

@@ -14,6 +14,7 @@ from opal_diffraction.core.spectral.optics import ior_spectrum
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene.model import Camera, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.render.plan import plan_render
 
 
 def prism_context(dispersion="BK7", dispersion_sampling="SAMPLE"):
@@ -37,7 +38,7 @@ def deviation_through_prism(ctx, lam_index, incidence_deg, n_rays=4000):
     face_centre = face_centre + tangent_down * 0.15
     o = face_centre + rng.uniform(-0.05, 0.05, (n_rays, 1)) * tangent_down + rng.uniform(-0.5, 0.5, (n_rays, 1)) * [0, 1, 0]
     o = o - 5.0 * d
-    esc = EyePass(ctx).trace_escapes(o, np.tile(d, (n_rays, 1)), rng, wavelength_index=lam_index)
+    esc = EyePass(ctx, plan=plan_render(ctx)).trace_escapes(o, np.tile(d, (n_rays, 1)), rng, wavelength_index=lam_index)
     two = esc["depth"] == 2
     out = esc["direction"][two]
     assert two.sum() > 0.8 * n_rays  # Fresnel: about 9 % are reflected at one of the faces
@@ -69,7 +70,7 @@ def test_white_ray_splits_into_a_fan_ordered_by_wavelength():
     d = -np.cos(th) * normal + np.sin(th) * up
     o = np.array([-0.5, 0, 0]) + 0.15 * up - 5 * d
     rng = np.random.default_rng(0)
-    esc = EyePass(ctx).trace_escapes(np.tile(o, (200, 1)), np.tile(d, (200, 1)), rng)
+    esc = EyePass(ctx, plan=plan_render(ctx)).trace_escapes(np.tile(o, (200, 1)), np.tile(d, (200, 1)), rng)
     two = esc["depth"] == 2
     lam, out = esc["lam"][two], esc["direction"][two]
     dev = np.degrees(np.arccos(np.clip(out @ d, -1, 1)))

@@ -18,7 +18,6 @@ import pytest
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.util.geometry import triangle_normals
 from opal_diffraction.core.integrators.light.light_pass import run_light_pass
-from opal_diffraction.core.materials.spectra import DIELECTRIC
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
@@ -27,6 +26,7 @@ from opal_diffraction.core.scene.npz import load_scene, save_scene
 from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.transport.walker import Rays, SpecularWalker, valid_specular_normal
+from opal_diffraction.core.render.plan import plan_render
 
 
 def smooth_sphere(center, radius, segments, rings):
@@ -343,7 +343,7 @@ def caustics():
     for smooth in (True, False):
         ctx = prepare(ball_lens_scene(smooth), RenderSettings(light_paths=CAUSTIC_PATHS, element_size=0.002,
                                                               wavelength_step=100.0, max_bounces=16))
-        out[smooth] = ctx, run_light_pass(ctx)
+        out[smooth] = ctx, run_light_pass(ctx, plan=plan_render(ctx))
     return out
 
 

@@ -36,19 +36,20 @@ def test_sensitivity_is_the_norm_of_the_rec709_matching_functions():
     assert 500.0 < peak < 620.0
 
 
-@pytest.mark.parametrize("weighted", [False, True])
-def test_chi2_of_the_wavelength_sampler(weighted):
-    """Histogram of drawn wavelengths vs the (defended) importance pdf, one number per ray."""
+@pytest.mark.parametrize("weighted,by_sensitivity", [(False, True), (True, True), (True, False)])
+def test_chi2_of_the_wavelength_sampler(weighted, by_sensitivity):
+    """Histogram of drawn wavelengths vs the (defended) importance pdf, one number per ray
+    (without ``by_sensitivity``: the weights' own distribution, no defensive share)."""
     rng = np.random.default_rng(1)
     b, n = 200_000, GRID.n
     w = None
     if weighted:  # a tint: a smooth spectrum with a zero band (never drawn)
         w = np.tile(np.clip(np.sin(np.linspace(0, 3, n)), 0, None), (b, 1))
         w[:, 10:14] = 0.0
-    q = wavelengths.importance(GRID, w, b)
-    p = wavelengths._defended(q[:1])[0]
+    q = wavelengths.importance(GRID, w, b, by_sensitivity)
+    p = wavelengths._defended(q[:1], by_sensitivity)[0]
     assert p.sum() == pytest.approx(1.0, abs=1e-12)
-    parent, lam, _ = wavelengths.draw(GRID, w, rng.random(b), k=1)
+    parent, lam, _ = wavelengths.draw(GRID, w, rng.random(b), 1, by_sensitivity)
     assert len(parent) == b
     counts = np.bincount(lam, minlength=n)
     assert counts[p == 0].sum() == 0  # nothing where the pdf is zero
@@ -62,7 +63,7 @@ def test_chi2_of_each_rotated_hero_wavelength(k):
     rng = np.random.default_rng(2 + k)
     b, n = 100_000, GRID.n
     u = rng.random(b)
-    p = wavelengths._defended(wavelengths.importance(GRID, None, 1))[0]
+    p = wavelengths._defended(wavelengths.importance(GRID, None, 1, True), True)[0]
     lam = wavelengths.sample_indices(np.broadcast_to(p, (b, n)), wavelengths.rotated(u, k))
     for j in (0, k - 1):
         counts = np.bincount(lam[:, j], minlength=n)
@@ -82,7 +83,7 @@ def test_draw_is_unbiased_for_the_exact_sum(k, extra):
     b, n = 100_000, GRID.n
     w = np.tile(0.2 + np.cos(np.linspace(0, 2, n)) ** 2, (b, 1)).astype(np.float32)
     q = np.tile(np.linspace(0.3, 0.9, n), (b, 1)) if extra else None
-    parent, lam, weight = wavelengths.draw(GRID, w, rng.random(b), q_extra=q, k=k)
+    parent, lam, weight = wavelengths.draw(GRID, w, rng.random(b), k, True, q_extra=q)
     per_ray = np.zeros((b, n))
     np.add.at(per_ray, (parent, lam), weight)
     mean, sem = per_ray.mean(axis=0), per_ray.std(axis=0, ddof=1) / np.sqrt(b)

@@ -11,9 +11,11 @@ converted to the core's linear Rec.709.
 Image Texture nodes on a BSDF's colour, roughness, metallic, emission colour and (through a
 tangent-space Normal Map node) normal are exported as images (``Scene.textures``, each image read
 once), per-material bindings and per-corner UVs and tangents, sampled per hit by the core
-(docs/physics.md section 13). What the core cannot render yet is approximated and named in the
-warnings rather than failing: other textures and procedural nodes (averaged; a world's equirectangular Environment Texture is
-exported as a map), rough reflection and refraction (made smooth), volume shaders (a volume-only material's faces are left out, as Cycles draws no
+(docs/physics.md section 13); rough reflection and refraction are exported as roughness (and
+Principled's metallic / transmission layers) for the core's GGX microfacets (core/materials/bsdf.py),
+a world's equirectangular Environment Texture as a map. What the core cannot render is
+approximated and named in the warnings rather than failing: other textures and procedural nodes
+(averaged), volume shaders (a volume-only material's faces are left out, as Cycles draws no
 surface for it); hair (curves objects and hair particle systems), point clouds and volume
 objects are skipped with counts. Values that would overflow the tracer's float32 (an emission or
 light power up to Blender's FLT_MAX) are clamped with a warning, NaN is an error naming the

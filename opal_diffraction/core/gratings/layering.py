@@ -34,7 +34,7 @@ import numpy as np
 
 from .kernel import harvey_shack_factor, hexagonal_harvey_shack_factor
 from ..util.enums import MaterialKind
-from .radiance import HARVEY_SHACK, PreparedGratings, grating_frame
+from .radiance import PreparedGratings, grating_frame
 
 __all__ = ["attach_layering", "strip_fraction", "base_scale", "zeroth_order_efficiency",
            "scale_base", "continue_specular", "active"]
@@ -72,7 +72,7 @@ def active(prepared) -> bool:
 
 
 def zeroth_order_efficiency(g: PreparedGratings, mat: int, w_i, t, s, period, wavelength,
-                            renormalise: bool = HARVEY_SHACK) -> np.ndarray:
+                            renormalise: bool = True) -> np.ndarray:
     """eta_0 = f^2 K: the fraction of the power from w_i (B, 3) the zeroth order carries, per
     sample and wavelength (``wavelength`` (B, K) or (B, 1) nm; ``period`` (B,) nm)."""
     f = strip_fraction(g)[mat]
@@ -102,7 +102,7 @@ def scale_base(prepared, rays, hit):
     return dataclasses.replace(rays, w=np.ascontiguousarray(w, np.float32))
 
 
-def continue_specular(prepared, out, hit, transmitted, renormalise: bool = HARVEY_SHACK):
+def continue_specular(prepared, out, hit, transmitted, renormalise: bool = True):
     """The rays ``out`` leaving a smooth mirror (``transmitted`` None) or glass (``transmitted``
     (B,) bool) at ``hit``, weighted by the layering: eta_0 of the continuation's direction where
     it is the grating's zeroth order, 1 for the Fresnel reflection under a transmission grating,

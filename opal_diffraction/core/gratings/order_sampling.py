@@ -218,7 +218,7 @@ def scatter_at_gratings(walker, rays, hit, rng):
     eta_i = np.where(glass & ~hit.front, ior, 1.0)
     eta_t = np.where(glass & hit.front, ior, 1.0)
     # over glass, Fresnel (of the zeroth order, at the geometric normal) picks the branch
-    fr = np.where(glass, fresnel_dielectric(hit.cos_i.astype(np.float64), eta_i / eta_t), 0.0)
+    fr = np.where(glass, fresnel_dielectric(np.abs(hit.cos_i.astype(np.float64)), eta_t / eta_i)[0], 0.0)
     reflected = glass & (rng.random(b) < fr)
     grating_acts = ~glass | (reflected != trans_type)
     transmits = np.where(glass, ~reflected, trans_type)

@@ -11,9 +11,11 @@ with P the normalised Fraunhofer pattern of ``diffraction.py``, averaged over ea
 bin in closed form (so orders narrower than a bin are neither missed nor flickering). The pattern
 lives in direction cosines (du dv = cos theta_o d omega_o), so there is no 1/cos theta_o
 (docs/physics.md section 3.2; Harvey et al., Appl. Opt. 38, 6469, 1999): the orders together
-carry a / D of the incident power. With ``renormalise`` (the default, HARVEY_SHACK) the
+carry a / D of the incident power. With ``renormalise`` (the default: the grating then
+delivers exactly the power its layering takes from the surface budget, a / D, and energy does not
+silently vanish where an order turns evanescent; docs/physics.md section 3.2 argues the choice) the
 propagating orders are rescaled by the Harvey-Shack factor so that they carry all of it
-(diffraction.harvey_shack_factor).
+(kernel.harvey_shack_factor).
 
 A HEXAGONAL lattice (opal-like) is the product of two N-slit factors along t and t rotated by
 60 degrees, with the Airy envelope of disk apertures of diameter a: P = [2 J1(x)/x]^2 *
@@ -48,14 +50,7 @@ from scipy.special import j1
 from ..util.enums import GratingType, Lattice
 from .kernel import (fraunhofer_pattern_binned, fraunhofer_pattern_footprint, harvey_shack_factor, hexagonal_harvey_shack_factor, multislit)
 
-__all__ = ["PreparedGratings", "prepare_gratings", "triangle_tangents", "grating_frame", "diffracted_radiance",
-           "HARVEY_SHACK"]
-
-#: Harvey-Shack renormalisation of the evanescent orders' power into the propagating ones, on by
-#: default: the grating then delivers exactly the power its layering takes from the surface
-#: budget (a / D), and energy does not silently vanish where an order turns evanescent
-#: (docs/physics.md section 3.2 argues the choice).
-HARVEY_SHACK = True
+__all__ = ["PreparedGratings", "prepare_gratings", "triangle_tangents", "grating_frame", "diffracted_radiance"]
 
 NM = 1e-9
 UM = 1e-6
@@ -163,7 +158,7 @@ def _airy(x):
 
 
 def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, period, edges_nm, rng,
-                        renormalise: bool = HARVEY_SHACK, exclude_zeroth: bool | None = None, footprint=None):
+                        renormalise: bool = True, exclude_zeroth: bool | None = None, footprint=None):
     """Radiance per unit irradiance (1/sr) towards w_o, per wavelength bin: (B, K).
 
     ``mat``: the material (one grating's parameters per call); w_o, w_i, t, s, normal: (B, 3);

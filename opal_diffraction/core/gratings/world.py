@@ -38,7 +38,6 @@ import numpy as np
 
 from .kernel import harvey_shack_factor
 from .order_sampling import sample_orders
-from .radiance import HARVEY_SHACK
 
 __all__ = ["diffracts_world", "world_through_grating", "WAVELENGTHS"]
 
@@ -60,7 +59,7 @@ def diffracts_world(prepared) -> np.ndarray:
     return np.asarray(g.enabled, bool) & ~np.asarray(g.hexagonal, bool) & ~np.asarray(g.transmission, bool)
 
 
-def world_through_grating(prepared, rays, hit, mat: int, t, s, period, rng, renormalise: bool = HARVEY_SHACK):
+def world_through_grating(prepared, rays, hit, mat: int, t, s, period, rng, renormalise: bool = True):
     """The world radiance grating ``mat`` diffracts towards ``rays`` at ``hit`` (one sample each).
 
     ``t``, ``s`` (B, 3): the grating vector and slit direction at the hits; ``period`` (B,) nm.

@@ -207,10 +207,6 @@ class EnvironmentMap:
         return np.take(m, back, axis=0) @ self.rotation, np.take(pdf, back), np.take(rgb, back, axis=0)
 
     # ----------------------------------------------------------------- totals
-    def solid_angles(self) -> np.ndarray:
-        """(H,) float64: the solid angle of one texel of each row (sum over the map: 4 pi)."""
-        return self._omega_row.copy()
-
     def mean_rgb(self) -> np.ndarray:
         """(3,) float64: the map's radiance averaged over the sphere (texel values times their
         solid angle, / 4 pi): the uniform world of the same total power."""

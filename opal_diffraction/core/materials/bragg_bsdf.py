@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bsdf import fresnel_dielectric_exact
+from ..spectral.optics import fresnel_dielectric
 from ..util.geometry import orthonormal_basis
 
 __all__ = ["BraggLobe", "MIN_SPREAD_DEG", "kappa_from_spread", "inside", "outside", "vmf_sample", "vmf_pdf"]
@@ -138,7 +138,7 @@ class BraggLobe:
         return ok, co, ci, cvo, cvi, vh, pax
 
     def _transmittance(self, cos_ext):
-        f, _ = fresnel_dielectric_exact(cos_ext, self.n_eff)
+        f, _ = fresnel_dielectric(cos_ext, self.n_eff)
         return 1.0 - f
 
     def evaluate(self, wo, wi, n, edges, lam=None):

@@ -180,11 +180,6 @@ class BandTable:
         b = flat[(i0 + 1) * n + j0] * (1 - ty) + flat[(i0 + 1) * n + j0 + 1] * ty
         return a * (1 - tc) + b * tc
 
-    def reflectance_at(self, wavelength, cos_int, diameter):
-        """R at wavelengths (nm) for D_s (nm), broadcast: the table's nodes interpolated."""
-        y = np.asarray(wavelength) / (2.0 * d111_spacing(diameter) * self.n_eff * np.maximum(cos_int, self.COS_MIN))
-        return self._lookup(self.reflectance, cos_int, y)
-
     def band_average(self, edges, cos_int, diameter, bins=None):
         """The average of R over wavelength bins: (B, n) for bin ``edges`` (n + 1,) nm, or (B,)
         over the single bins ``bins`` (B,) int. ``cos_int`` and ``diameter`` (nm) are (B,)."""

@@ -43,12 +43,13 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..spectral.optics import fresnel_dielectric
 
 __all__ = [
     "LAMBERT", "CONDUCTOR", "DIELECTRIC", "PLASTIC", "GLOSSY",
     "DIFFUSE_REFLECTION", "GLOSSY_REFLECTION", "TRANSMISSION", "SINGULAR",
     "MIN_ROUGHNESS", "SurfaceParams", "params_from_materials", "sample", "evaluate", "microfacet_materials",
-    "energy_compensation", "fresnel_f82", "f82_b", "fresnel_dielectric_exact", "with_outgoing", "cosine_hemisphere",
+    "energy_compensation", "fresnel_f82", "f82_b", "with_outgoing", "cosine_hemisphere",
 ]
 
 #: Lobe codes per hit. GLOSSY is Blender's Glossy BSDF: GGX with a constant Fresnel (its colour).
@@ -102,20 +103,6 @@ def _sub(p: SurfaceParams, idx: np.ndarray) -> SurfaceParams:
 
 
 # ---------------------------------------------------------------------------------- Fresnel
-def fresnel_dielectric_exact(cos_i, eta):
-    """Unpolarised Fresnel reflectance and the refracted cosine at a dielectric interface.
-    cos_i >= 0 on the incident side, eta = n_transmitted / n_incident. F = 1 under total internal
-    reflection (cos_t = 0 there)."""
-    cos_i = np.clip(cos_i, 0.0, 1.0)
-    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
-    tir = sin2_t >= 1.0
-    cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
-    r_par = (eta * cos_i - cos_t) / np.maximum(eta * cos_i + cos_t, 1e-30)
-    r_perp = (cos_i - eta * cos_t) / np.maximum(cos_i + eta * cos_t, 1e-30)
-    f = np.where(tir, 1.0, 0.5 * (r_par * r_par + r_perp * r_perp))
-    return f.astype(np.result_type(cos_i, np.float32)), cos_t.astype(np.result_type(cos_i, np.float32))
-
-
 def f82_b(f0, tint):
     """The F82-tint factor b: F(1/7) = F_schlick(1/7) * tint (Cycles fresnel_f82tint_B)."""
     f = 6.0 / 7.0
@@ -152,7 +139,7 @@ def _ior_from_f0(f0):
 
 def _principled_s(cos, eta, f0):
     """Cycles' generalized-Schlick remap s = (F_real - F0) / (1 - F0) in [0, 1]."""
-    fr, _ = fresnel_dielectric_exact(cos, eta)
+    fr, _ = fresnel_dielectric(cos, eta)
     return np.clip((fr - f0) / np.maximum(1.0 - f0, 1e-6), 0.0, 1.0)
 
 
@@ -276,7 +263,7 @@ def _tables():
             ior = max((1.0 + zg * zg) / (1.0 - zg * zg), 1.0 + 1e-6)
             for t, eta_v in enumerate((ior, 1.0 / ior)):
                 eta = np.full(len(cos_oh), eta_v, _F32)
-                f, cos_t = fresnel_dielectric_exact(cos_oh, eta)
+                f, cos_t = fresnel_dielectric(cos_oh, eta)
                 wt = _refract_local(wo, h, cos_oh, cos_t, eta)
                 w_t = np.where((wt[:, 2] < 0) & (f < 1.0), (1.0 + lo) / (1.0 + lo + _lambda(a2, wt)), 0.0)
                 glass[t, rows, j] = (f * w + (1.0 - f) * w_t).reshape(len(sub), -1).mean(axis=1)
@@ -496,7 +483,7 @@ def _eval_lobe(p, code, wo, wi, terms=None):
         if len(m):
             q = _sub(p, m)
             fc, pd, coh = _eval_reflection_common(q.alpha, wo[m], wi[m])
-            f, _ = fresnel_dielectric_exact(coh, q.eta)
+            f, _ = fresnel_dielectric(coh, q.eta)
             fcos[m] = q.base * (f * fc * _glass_factor(q.alpha, mu_o[m], q.eta))[:, None]
             pdf[m] = f * pd
         m = np.flatnonzero(~up & rough & (np.abs(p.eta - 1.0) >= 1e-4))
@@ -509,7 +496,7 @@ def _eval_lobe(p, code, wo, wi, terms=None):
             h = np.where(h[:, 2:3] < 0, -h, h)
             coh, cih = np.sum(o * h, 1), np.sum(i * h, 1)
             ok = (coh > 0) & (cih < 0)
-            f, _ = fresnel_dielectric_exact(coh, eta)
+            f, _ = fresnel_dielectric(coh, eta)
             d = _ggx_d(a2, h)
             lo, li = _lambda(a2, o), _lambda(a2, i)
             denom = cih + coh / eta
@@ -590,7 +577,7 @@ def _sample_lobe(p, code, wo, u):
     if code == DIELECTRIC:
         eta = p.eta
         unit = np.abs(eta - 1.0) < 1e-4  # index-matched: a straight pass, a delta transmission
-        f, cos_t = fresnel_dielectric_exact(cos_oh, eta)
+        f, cos_t = fresnel_dielectric(cos_oh, eta)
         f = np.where(unit, 0.0, f)
         refl = u[:, 2] < f
         wr = _reflect_local(wo, h, cos_oh)

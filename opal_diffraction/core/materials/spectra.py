@@ -44,10 +44,6 @@ class PreparedMaterials:
     specular_tint: np.ndarray = None  # (M, n) float32 specular tint / metal edge tint spectrum
     conductor_f82: np.ndarray = None  # (M,) bool: the metal uses the F82-tint Fresnel (else constant colour)
 
-    @property
-    def has_dispersion(self) -> bool:
-        return bool(self.dispersive.any())
-
 
 def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterials:
     wl = conv.grid.wavelengths

@@ -33,7 +33,6 @@ __all__ = [
     "LUMINANCE_709",
     "srgb_to_linear",
     "sample_texture",
-    "uv_tangents",
     "PreparedTextures",
     "prepare_textures",
     "TEXTURE_SLOTS",

@@ -255,6 +255,7 @@ class _Frame:
                                f"client's '{job['backend']}': install the same packages (embreex) on every machine")
         self.filt = FilterSampler(self.prepared.settings.filter_width)
         self.eye_work = EyeWork.of(self.prepared, job["region"])
+        self.plan = plan_render(self.prepared)
         self._light_work = None
         self._light = (None, None)  # (token, LightPassResult) of the maps last unpacked here
 
@@ -303,8 +304,8 @@ def light_batch_task(job: dict, index: int) -> dict:
     work = frame.light_work
     illum = DepositLog(work.layout)
     records = DepositLog(work.record_layout) if work.record_layout is not None else None
-    splat = SplatLog() if CameraConnection.of(frame.prepared) is not None else None
-    counts = trace_batch(frame.prepared, work.batches[index], illum, records, splat=splat)
+    splat = SplatLog() if frame.plan.camera_splat else None
+    counts = trace_batch(frame.prepared, work.batches[index], illum, records, splat=splat, bounce=frame.plan.splat_bounce)
     return {"illum": illum.calls, "records": None if records is None else records.calls, "counts": counts,
             "elements": work.layout.total, "splat": None if splat is None else splat.calls}
 
@@ -317,7 +318,7 @@ def tile_task(job: dict, light: dict | None, r_index: int, t_index: int, pixels=
     keeps a spectral film, its (P, n) spectral sums (else None: 12 bytes a pixel cross the wire
     instead of 4 n)."""
     frame = _frame(job)
-    eye = EyePass(frame.prepared, frame.light(light))
+    eye = EyePass(frame.prepared, frame.light(light), plan=frame.plan)
     tile = trace_tile(eye, frame.filt, frame.eye_work, r_index, t_index, pixels)
     conv = frame.prepared.conv
     return {"rgb": conv.to_rgb(tile.film), "spectral": tile.film if job.get("spectral") else None,
@@ -497,7 +498,7 @@ def render_on_cluster(client, scene: Scene, settings: RenderSettings, prepared, 
         light = None
         if plan.light_pass:
             lp_progress = (lambda f, m: progress(LIGHT_PASS_SHARE * f, m)) if progress else None
-            light = _light_pass(client, job_f, prepared, lp_progress, should_cancel, deadline, uid, threads,
+            light = _light_pass(client, job_f, prepared, plan, lp_progress, should_cancel, deadline, uid, threads,
                                 scattered)
             warnings += light.warnings
             stats.update(light.stats)
@@ -542,14 +543,15 @@ def _cancel(client, pending: dict) -> None:
         pending.clear()
 
 
-def _light_pass(client, job_f, prepared, progress, should_cancel, deadline, uid, threads,
+def _light_pass(client, job_f, prepared, plan, progress, should_cancel, deadline, uid, threads,
                 scattered: _Replicas) -> LightPassResult:
     """The light pass as one task per batch; deposits replayed into the lanes in lane order."""
     t0 = time.perf_counter()
     work = LightWork.of(prepared)
     maps = [work.empty_maps(prepared.grid.n) for _ in range(LANES)]
     counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
-    connection = CameraConnection.of(prepared)  # the camera splat, added batch by batch in lane order
+    # the camera splat, added batch by batch in lane order
+    connection = CameraConnection.of(prepared) if plan.camera_splat else None
     splats = [connection.empty() for _ in range(LANES)] if connection is not None else None
     lanes = [work.lane(k) for k in range(LANES)]
     position = [0] * LANES  # how many of its batches each lane has added

@@ -40,7 +40,7 @@ from .prepare import PreparedScene, prepare
 from ..scene.model import Scene
 from ..scene.settings import RenderSettings
 from ..spectral.spectrum import SpectralConverter
-from .tiles import (EYE_PASS_STREAM, LIGHT_PASS_SHARE, MAX_TILE_RAYS, EyeWork, adaptive_of, is_half_a, round_size, trace_tile)
+from .tiles import LIGHT_PASS_SHARE, EyeWork, adaptive_of, is_half_a, trace_tile
 
 __all__ = ["RenderResult", "render", "render_prepared"]
 
@@ -136,7 +136,7 @@ def render_prepared(
     deadline = t_start + settings.time_limit if settings.time_limit else None
     if plan.light_pass and light is None:
         lp_progress = (lambda f, m: progress(LIGHT_PASS_SHARE * f, m)) if progress else None
-        light = run_light_pass(prepared, None, lp_progress, should_cancel, deadline)
+        light = run_light_pass(prepared, None, lp_progress, should_cancel, deadline, plan=plan)
     elif not plan.light_pass:
         light = None
     if light is not None:
@@ -150,7 +150,7 @@ def render_prepared(
     work = EyeWork.of(prepared, (rx0, ry0, rx1, ry1))
     rounds, tiles = work.rounds, work.tiles
     filt = FilterSampler(settings.filter_width)
-    eye = EyePass(prepared, light)
+    eye = EyePass(prepared, light, plan=plan)
     threads = prepared.threads
     total_work = work.units
 

@@ -1,9 +1,11 @@
-"""The render plan: which passes a scene needs, and what was skipped and why.
+"""The render plan: which passes a scene needs, what was skipped and why, and how each pass runs.
 
 A scene pays only for what it contains: no light pass without a specular or dielectric object
 for light to pass through (and a light that reaches it, and a surface to receive what comes
 out), no grating work without gratings. ``plan_render`` is a pure function of the prepared
-scene: it runs nothing.
+scene: it runs nothing. It also makes every decision the passes would otherwise make per tile
+or per batch (the camera splat, the light paths' diffuse bounce, the Fresnel split, grey path
+weights, ray differentials): the passes read them from the plan.
 """
 
 from __future__ import annotations
@@ -12,6 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..gratings import layering as grating_layering
+from ..integrators.bragg_shading import bragg_materials
+from ..integrators.light import camera_splat as camera_splat_rules
+from ..integrators.light import splat_bounce as splat_bounce_rules
 from ..materials.spectra import DIELECTRIC, MIRROR
 
 __all__ = ["RenderPlan", "plan_render"]
@@ -23,6 +29,18 @@ class RenderPlan:
     light_pass: bool = False
     gratings: bool = False
     dispersion: bool = False
+    # how the passes run (the light pass and the eye pass read these):
+    # the light pass joins its landings on plain diffuse surfaces to the camera
+    # (core/integrators/light/camera_splat.py, docs/physics.md section 4.9)
+    camera_splat: bool = False
+    # ... and continues them by one diffuse bounce (core/integrators/light/splat_bounce.py, section 4.11)
+    splat_bounce: bool = False
+    # camera rays take both branches at their first smooth glass (core/integrators/eye/fresnel_split.py)
+    fresnel_split: bool = False
+    # white eye paths through grey materials carry one number (core/integrators/eye/grey_paths.py)
+    grey_paths: bool = False
+    # camera rays carry ray differentials to integrate gratings over pixel footprints (core/sampling/footprint.py)
+    ray_differentials: bool = False
     notes: tuple[str, ...] = ()     # what runs and what is skipped, for the stats
     warnings: tuple[str, ...] = ()  # things the user should fix or know
 
@@ -63,5 +81,15 @@ def plan_render(prepared) -> RenderPlan:
         notes.append(f"gratings: {n_gratings} material(s), direct light diffracted in the eye pass")
     else:
         notes.append("gratings: none in the scene, no grating work")
+    camera_splat = camera_splat_rules.applies(prepared)
+    layered = grating_layering.active(prepared)  # gratings take their power from the base (section 3.3)
+    m = prepared.scene.materials
+    bragg = bool(len(m) and bragg_materials(m).any())  # FCC opal lobes
     return RenderPlan(eye_pass=True, light_pass=light_pass, gratings=n_gratings > 0, dispersion=dispersion,
+                      camera_splat=camera_splat,
+                      splat_bounce=camera_splat and bool(settings.splat_bounce) and splat_bounce_rules.applies(prepared),
+                      fresnel_split=bool(settings.fresnel_split) and not layered,
+                      # gratings, their layers and the opal's lobes read spectral weights
+                      grey_paths=not (prepared.gratings.any or layered or bragg),
+                      ray_differentials=bool(prepared.gratings.any and settings.grating_footprint),
                       notes=tuple(notes))

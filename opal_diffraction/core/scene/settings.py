@@ -28,7 +28,7 @@ BACKENDS = ("auto", "embree", "numpy", "brute")
 #: Settings only the eye pass reads: changing them keeps a prepared scene and its light pass.
 EYE_ONLY_SETTINGS = frozenset({"samples", "round_samples", "tile_size", "filter_width", "time_limit", "spectral_exr",
                                "diffuse_bounces", "glossy_bounces", "transmission_bounces", "adaptive_threshold",
-                               "adaptive_min_samples", "grating_footprint", "blue_noise"})
+                               "adaptive_min_samples", "grating_footprint", "blue_noise", "fresnel_split"})
 
 #: The wavelength grid holds 2 to 4001 samples (360-830 nm at 0.1175 nm at most); below 16 the
 #: colours are coarse (a warning, not an error).
@@ -47,6 +47,7 @@ _INT_RANGES = {
     "tile_size": (1, 65536),
     "round_samples": (1, 1 << 16),
     "adaptive_min_samples": (0, 1 << 24),
+    "dispersion_branches": (1, 1024),
 }
 _FLOAT_FIELDS = ("element_size", "wavelength_min", "wavelength_max", "wavelength_step", "time_limit", "filter_width",
                  "adaptive_threshold")
@@ -56,7 +57,10 @@ _WORDS = {"samples": "samples", "light_paths": "light paths", "max_bounces": "ma
           "threads": "threads", "tile_size": "tile size", "round_samples": "round samples",
           "element_size": "element size", "wavelength_min": "wavelength min", "wavelength_max": "wavelength max",
           "wavelength_step": "wavelength step", "time_limit": "time limit", "filter_width": "filter width",
-          "adaptive_threshold": "adaptive threshold", "adaptive_min_samples": "adaptive min samples"}
+          "adaptive_threshold": "adaptive threshold", "adaptive_min_samples": "adaptive min samples",
+          "dispersion_branches": "dispersion branches"}
+_BOOL_FIELDS = ("grating_footprint", "caustic_splat", "blue_noise", "dispersion_importance",
+                "dispersion_white_reflection", "fresnel_split", "splat_bounce")
 FILTER_WIDTH_MAX = 100.0  # pixels
 
 #: light_paths=None (automatic): this many light paths per camera sample (pixels x samples),
@@ -132,6 +136,22 @@ class RenderSettings:
     # pixels share one low-discrepancy sequence in a blue-noise order, as Cycles' default
     # pattern (core/sampling/sampler.py, docs/physics.md section 6.6); False: each pixel its own sequence
     blue_noise: bool = True
+    # the estimator's choices below are on by default; each switch exists so a benchmark or a test
+    # can measure a render without it (benchmarks/bench_dispersion.py, benchmarks/caustic_sphere.py)
+    # SAMPLE at dispersive glass (core/transport/wavelengths.py, docs/physics.md section 2.6): mono
+    # rays per white ray (pbrt-v4's hero wavelengths), the wavelengths importance-sampled by the
+    # image's sensitivity (False: uniform over the grid), and the reflect / refract choice made on
+    # the white ray at smooth glass (False: the white ray splits at the hit, each child chooses)
+    dispersion_branches: int = 4
+    dispersion_importance: bool = True
+    dispersion_white_reflection: bool = True
+    # camera rays take both Fresnel branches at their first smooth glass hit
+    # (core/integrators/eye/fresnel_split.py, docs/physics.md section 4.12); False: one branch by F
+    fresnel_split: bool = True
+    # light paths landing after glass continue by a diffuse bounce and splat where they land again
+    # (core/integrators/light/splat_bounce.py, docs/physics.md section 4.11; only with the camera
+    # splat); False: the eye pass reads that light from the caustic map after its own bounce
+    splat_bounce: bool = True
 
     def __post_init__(self):
         # normalise number types only (never raise here: validate() names what is wrong)
@@ -204,7 +224,8 @@ class RenderSettings:
                 continue  # automatic
             v = _number(getattr(self, name), _WORDS[name], integer=True)
             if v < lo:
-                rule = {"samples": "at least 1", "tile_size": "at least 1", "round_samples": "at least 1"}.get(name, ">= 0")
+                rule = {"samples": "at least 1", "tile_size": "at least 1", "round_samples": "at least 1",
+                        "dispersion_branches": "at least 1"}.get(name, ">= 0")
                 raise SceneError(f"{_WORDS[name]} must be {rule}, got {v}")
             if v > hi:
                 raise SceneError(f"{_WORDS[name]} {v} is above the maximum {hi}")
@@ -225,12 +246,9 @@ class RenderSettings:
             raise SceneError(f"dispersion sampling must be SPLIT or SAMPLE, got {self.dispersion_sampling!r}")
         if not isinstance(self.spectral_exr, (str, os.PathLike)):
             raise SceneError(f"spectral EXR must be a path (a string), got {type(self.spectral_exr).__name__}")
-        if not isinstance(self.grating_footprint, (bool, np.bool_)):
-            raise SceneError(f"grating footprint must be True or False, got {self.grating_footprint!r}")
-        if not isinstance(self.caustic_splat, (bool, np.bool_)):
-            raise SceneError(f"caustic splat must be True or False, got {self.caustic_splat!r}")
-        if not isinstance(self.blue_noise, (bool, np.bool_)):
-            raise SceneError(f"blue noise must be True or False, got {self.blue_noise!r}")
+        for name in _BOOL_FIELDS:
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise SceneError(f"{name.replace('_', ' ')} must be True or False, got {getattr(self, name)!r}")
         _validate_backend(self.backend)
         self._validate_grid()
 

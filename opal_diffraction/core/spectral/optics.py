@@ -3,7 +3,11 @@
 - Law of reflection and Snell's law in vector form (e.g. Pharr, Jakob & Humphreys, *Physically
   Based Rendering*, 4th ed., 2023, section 9.3).
 - Fresnel equations for an unpolarised wave at a dielectric interface (ibid., section 9.3.3):
-  R = (R_s + R_p) / 2, total internal reflection when sin(theta_t) > 1.
+  R = (R_s + R_p) / 2, total internal reflection when sin(theta_t) >= 1. The one Fresnel function
+  of the renderer (smooth glass, rough glass at the microfacet, Principled's specular layer, the
+  opal's surface): its ``eta`` is n_transmitted / n_incident, pbrt-v4's ``FrDielectric`` convention.
+  ``refract``'s is the inverse, n_incident / n_transmitted: the factor Snell's law multiplies the
+  incident direction by.
 - Sellmeier's equation n^2 = 1 + sum B_k lambda^2 / (lambda^2 - C_k), lambda in micrometres, with the
   coefficients of docs/physics.md section 2.1: SCHOTT N-BK7 (SCHOTT data sheet), fused silica
   (Malitson, I. H. 1965, JOSA 55(10), doi:10.1364/JOSA.55.001205), diamond (Peter, F. 1923,
@@ -71,18 +75,22 @@ def refract(d: np.ndarray, n: np.ndarray, eta: np.ndarray) -> tuple[np.ndarray, 
     return t, tir
 
 
-def fresnel_dielectric(cos_i: np.ndarray, eta: np.ndarray) -> np.ndarray:
-    """Unpolarised Fresnel reflectance. cos_i >= 0 on the incident side, eta = n_i / n_t; 1 under TIR."""
-    cos_i = np.clip(np.abs(cos_i), 0.0, 1.0)
-    sin2_t = eta * eta * (1.0 - cos_i * cos_i)
+def fresnel_dielectric(cos_i, eta) -> tuple[np.ndarray, np.ndarray]:
+    """(F, cos_t): the unpolarised Fresnel reflectance and the refracted cosine at a dielectric
+    interface. ``cos_i`` >= 0 on the incident side (negative values count as 0, grazing),
+    ``eta`` = n_transmitted / n_incident. F = 1 under total internal reflection (cos_t = 0 there).
+    Float32 in, float32 out (float64 stays float64)."""
+    cos_i = np.clip(cos_i, 0.0, 1.0)
+    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
+    tir = sin2_t >= 1.0
     cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
-    # r_s = (eta cos_i - cos_t)/(eta cos_i + cos_t), r_p = (cos_i - eta cos_t)/(cos_i + eta cos_t)
-    # (both written with n_i/n_t = eta; multiplying through by n_t leaves the ratios unchanged).
-    den_s = eta * cos_i + cos_t
-    den_p = cos_i + eta * cos_t
-    rs = np.where(den_s > 0, (eta * cos_i - cos_t) / np.where(den_s > 0, den_s, 1.0), 1.0)
-    rp = np.where(den_p > 0, (cos_i - eta * cos_t) / np.where(den_p > 0, den_p, 1.0), 1.0)
-    return np.where(sin2_t >= 1.0, 1.0, 0.5 * (rs * rs + rp * rp))
+    # r_par = (n_t cos_i - n_i cos_t) / (n_t cos_i + n_i cos_t), r_perp = (n_i cos_i - n_t cos_t) /
+    # (n_i cos_i + n_t cos_t), both divided through by n_i
+    r_par = (eta * cos_i - cos_t) / np.maximum(eta * cos_i + cos_t, 1e-30)
+    r_perp = (cos_i - eta * cos_t) / np.maximum(cos_i + eta * cos_t, 1e-30)
+    f = np.where(tir, 1.0, 0.5 * (r_par * r_par + r_perp * r_perp))
+    dtype = np.result_type(np.asarray(cos_i).dtype, np.float32)  # by dtype, not value: a float64 scalar stays float64
+    return f.astype(dtype), cos_t.astype(dtype)
 
 
 def sellmeier_ior(wavelength_nm, b, c) -> np.ndarray:

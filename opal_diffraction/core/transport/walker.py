@@ -274,11 +274,6 @@ def valid_specular_normal(wo: np.ndarray, ng: np.ndarray, ns: np.ndarray) -> np.
     return out
 
 
-def out_is_plain(rays: Rays) -> bool:
-    """No ray differentials to carry (core/sampling/footprint.py): the fused specular bounce applies."""
-    return rays.extra is None or footprint.KEY not in rays.extra
-
-
 class SpecularWalker:
     """Advances ray populations through specular interactions; subclasses add the shading."""
 
@@ -483,7 +478,7 @@ class SpecularWalker:
         ns = self._specular_normal(rays, hit)
         cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
         cos = np.asarray(cos_s, np.float32)
-        fr = fresnel_dielectric(cos, eta)
+        fr, _ = fresnel_dielectric(np.abs(cos), np.where(hit.front, n, 1.0 / n).astype(np.float32))
         refl = (rng.random(len(rays)) if u is None else u) < fr
         cos_t = np.sqrt(np.maximum(np.float32(0), 1 - eta * eta * np.maximum(np.float32(0), 1 - cos * cos)))
         a = np.where(refl, np.float32(1), eta)
@@ -508,12 +503,14 @@ class SpecularWalker:
     def _split(self, rays: Rays, hit: Hit, rng):
         """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit.
 
-        SAMPLE draws ``wavelengths.BRANCHES`` wavelengths per ray from the ray's stratified number,
+        SAMPLE draws ``dispersion_branches`` (a setting) wavelengths per ray from the ray's stratified number,
         importance-sampled by the image's sensitivity (core/transport/wavelengths.py, docs/physics.md
         section 2.6); SPLIT makes one child per wavelength with the parent's weight there."""
         n, b = self.n, len(rays)
         if self.prepared.settings.dispersion_sampling != "SPLIT":
-            parent, lam, w = wavelengths.draw(self.prepared.grid, rays.w, rays.u_lam)
+            s = self.prepared.settings
+            parent, lam, w = wavelengths.draw(self.prepared.grid, rays.w, rays.u_lam, s.dispersion_branches,
+                                              s.dispersion_importance)
         elif rays.w is None:  # unit weights: every wavelength alike
             parent, lam = np.repeat(np.arange(b), n), np.tile(np.arange(n), b)
             w = np.ones(b * n, np.float32)

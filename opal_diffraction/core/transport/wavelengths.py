@@ -1,12 +1,13 @@
 """Wavelength sampling at a dispersive interface: which wavelengths a white ray becomes.
 
 A white ray carries the whole grid (n wavelengths); at a dispersive glass its directions part,
-so it becomes mono rays (core/transport/walker.py ``_split``). SAMPLE draws K of them (K = ``BRANCHES``)
+so it becomes mono rays (core/transport/walker.py ``_split``). SAMPLE draws K of them (K: the
+setting ``dispersion_branches``)
 and weights each w_k / (K p_k), an unbiased estimator of the exact sum over the grid that SPLIT
 traces (docs/physics.md section 2.6). Three things make its colour noise smaller than a uniform
 one-wavelength pick:
 
-- **importance by the image's sensitivity** (pbrt-v4's ``SampleVisibleWavelengths`` idea,
+- **importance by the image's sensitivity** (``dispersion_importance``; pbrt-v4's ``SampleVisibleWavelengths`` idea,
   src/pbrt/util/spectrum.h, with the pdf derived from our own film instead of its cosh^2 fit):
   a unit sample at wavelength k adds w_k x rgb_weights[k] to the linear Rec.709 image, so the
   pdf that minimises the summed variance of R, G and B for a ray of weight w is
@@ -17,15 +18,15 @@ one-wavelength pick:
 - **stratification**: the K numbers of a ray are its pixel's low-discrepancy number u (the
   Sobol-Burley dimension of core/camera.pixel_samples) rotated by j / K (pbrt-v4's hero
   wavelength rotation, Wilkie et al. 2014), inverted through the pdf's CDF;
-- **reflection stays white** (``WHITE_REFLECTION``): a smooth dispersive surface reflects every
+- **reflection stays white** (``dispersion_white_reflection``): a smooth dispersive surface reflects every
   wavelength the same way, so the reflect / refract choice is made once for the white ray, with
   probability P = sum_k p_k F_k (F_k the Fresnel reflectance at wavelength k, p the importance
   above); a reflected ray goes on white with weight w_k F_k / P, a refracted one becomes mono rays
   drawn from p with weights w_k (1 - F_k) / ((1 - P) K p_k): the facets' white
   reflections of the lights keep their colour exact, only light that enters the glass is split.
 
-``BRANCHES``, ``IMPORTANCE`` and ``WHITE_REFLECTION`` are module settings so that
-benchmarks/bench_dispersion.py can measure each choice against the others in one process.
+The three choices are RenderSettings fields (core/scene/settings.py), passed down as arguments, so
+benchmarks/bench_dispersion.py can measure each against the others.
 """
 
 from __future__ import annotations
@@ -34,17 +35,8 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["BRANCHES", "IMPORTANCE", "WHITE_REFLECTION", "DEFENSIVE", "sensitivity", "importance",
-           "sample_indices", "rotated", "draw"]
+__all__ = ["DEFENSIVE", "sensitivity", "importance", "sample_indices", "rotated", "draw"]
 
-#: Mono rays per white ray at a dispersive refraction (SAMPLE), pbrt-v4's count of hero
-#: wavelengths: on the gem 4 halves the display error of 1 at 16 spp for 1.4x the time, and 8 or
-#: 16 gain little more (benchmarks/bench_dispersion.py, docs/benchmarks.md).
-BRANCHES = 4
-#: Importance-sample wavelengths by the image's sensitivity (False: uniform over the grid).
-IMPORTANCE = True
-#: Make the reflect / refract choice on the white ray at a smooth dispersive glass.
-WHITE_REFLECTION = True
 #: The uniform share of the importance pdf.
 DEFENSIVE = 0.1
 
@@ -68,23 +60,25 @@ def sensitivity(grid, white: bool = False) -> np.ndarray:
     return out
 
 
-def importance(grid, w: np.ndarray | None, b: int) -> np.ndarray:
+def importance(grid, w: np.ndarray | None, b: int, by_sensitivity: bool) -> np.ndarray:
     """(B, n) float64 unnormalised importance of each wavelength for B rays of weights ``w``
-    ((B, n), or None for unit weights): w_k x sensitivity_k, or 1 where IMPORTANCE is off."""
+    ((B, n), or None for unit weights): w_k x sensitivity_k, or w_k (1 for unit weights) without
+    ``by_sensitivity`` (the setting ``dispersion_importance``)."""
     n = grid.n
-    if not IMPORTANCE:
+    if not by_sensitivity:
         return np.ones((b, n)) if w is None else np.asarray(w, np.float64)
     if w is None:
         return np.broadcast_to(sensitivity(grid, white=True), (b, n))
     return np.asarray(w, np.float64) * sensitivity(grid)[None, :]
 
 
-def _defended(q: np.ndarray, support: np.ndarray | None = None) -> np.ndarray:
-    """Rows of q (B, n) >= 0 normalised to pdfs, mixed with DEFENSIVE x uniform over ``support``
-    (B, n) bool (default q > 0: where the estimated spectrum can be non-zero)."""
+def _defended(q: np.ndarray, by_sensitivity: bool, support: np.ndarray | None = None) -> np.ndarray:
+    """Rows of q (B, n) >= 0 normalised to pdfs, mixed (``by_sensitivity``: q is ``importance``'s)
+    with DEFENSIVE x uniform over ``support`` (B, n) bool (default q > 0: where the estimated
+    spectrum can be non-zero)."""
     total = q.sum(axis=1, keepdims=True)
     p = q / np.where(total > 0, total, 1.0)
-    if IMPORTANCE and DEFENSIVE > 0:
+    if by_sensitivity and DEFENSIVE > 0:
         support = q > 0 if support is None else support
         cnt = support.sum(axis=1, keepdims=True)
         p = (1.0 - DEFENSIVE) * p + DEFENSIVE * support / np.maximum(cnt, 1)
@@ -106,24 +100,26 @@ def sample_indices(p: np.ndarray, u: np.ndarray) -> np.ndarray:
     return np.minimum(lam, p.shape[1] - 1)
 
 
-def draw(grid, w: np.ndarray | None, u: np.ndarray, q_extra: np.ndarray | None = None, k: int | None = None):
+def draw(grid, w: np.ndarray | None, u: np.ndarray, k: int, by_sensitivity: bool, q_extra: np.ndarray | None = None):
     """Mono wavelengths for B white rays of weights ``w`` (None: unit) with numbers ``u`` (B,).
 
-    ``q_extra`` (B, n): a factor of the target distribution beyond the weight (the transmitted
-    share 1 - F_k at a refraction), which the weights include too. Returns (parent (M,), lam (M,),
-    weight (M,) float64): each ray's K = ``k`` (default BRANCHES) children with weight
-    w_k q_k / (K p_k), rays whose target is zero everywhere left out.
+    ``k``: children per ray (the setting ``dispersion_branches``); ``by_sensitivity``: the pdf
+    follows ``importance`` (the setting ``dispersion_importance``). ``q_extra`` (B, n): a factor
+    of the target distribution beyond the weight (the transmitted share 1 - F_k at a refraction),
+    which the weights include too. Returns (parent (M,), lam (M,), weight (M,) float64): each
+    ray's K = ``k`` children with weight w_k q_k / (K p_k), rays whose target is zero everywhere
+    left out.
     """
-    k = BRANCHES if k is None else int(k)
+    k = int(k)
     b, n = len(u), grid.n
     target = np.ones((b, n)) if w is None else np.asarray(w, np.float64)
     if q_extra is not None:
         target = target * q_extra
-    q = importance(grid, w, b)
+    q = importance(grid, w, b, by_sensitivity)
     if q_extra is not None:
         q = q * q_extra
     live = q.sum(axis=1) > 0
-    p = _defended(q[live], target[live] > 0)
+    p = _defended(q[live], by_sensitivity, target[live] > 0)
     lam = sample_indices(p, rotated(np.asarray(u)[live], k))
     parent = np.repeat(np.flatnonzero(live), k)
     lam = lam.ravel()
@@ -136,7 +132,7 @@ def split_at_glass(walker, rays, hit, rng, u=None):
     """White ``rays`` at dispersive hits ``hit`` (smooth or rough glass) -> (mono children at the
     hit or None, their hits, white rays reflected by smooth glass or None).
 
-    SPLIT, or ``WHITE_REFLECTION`` off: ``walker._split`` (children at the hit, which take their
+    SPLIT, or the setting ``dispersion_white_reflection`` off: ``walker._split`` (children at the hit, which take their
     own Fresnel choice). Otherwise smooth glass chooses reflect / refract for the white ray (module
     docstring): reflected rays go on white (returned, bounce counted), refracted ones become mono
     rays already refracted at their wavelengths, handed to ``walker._spawned`` (the walk traces
@@ -148,7 +144,8 @@ def split_at_glass(walker, rays, hit, rng, u=None):
     from ..sampling import footprint
 
     prepared = walker.prepared
-    if prepared.settings.dispersion_sampling == "SPLIT" or not WHITE_REFLECTION:
+    settings = prepared.settings
+    if settings.dispersion_sampling == "SPLIT" or not settings.dispersion_white_reflection:
         return (*walker._split(rays, hit, rng), None)
     smooth = prepared.materials.kind[hit.mat] == DIELECTRIC
     children = child_hits = None
@@ -166,9 +163,10 @@ def split_at_glass(walker, rays, hit, rng, u=None):
     eta = np.where(hit.front[:, None], 1.0 / ior, ior)
     ns = walker._specular_normal(rays, hit)
     cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
-    fr = fresnel_dielectric(np.asarray(cos_s, np.float64)[:, None], eta)  # (B, n)
+    fr, _ = fresnel_dielectric(np.abs(np.asarray(cos_s, np.float64))[:, None],
+                               np.where(hit.front[:, None], ior, 1.0 / ior))  # (B, n)
     wt = walker._tinted(rays, hit)  # (B, n) or None: the glass's tint applies to both branches
-    q = importance(grid, wt, b)
+    q = importance(grid, wt, b, settings.dispersion_importance)
     qs = q.sum(axis=1)
     p_refl = np.where(qs > 0, (q * fr).sum(axis=1) / np.where(qs > 0, qs, 1.0), 1.0)
     refl = u < p_refl
@@ -189,7 +187,8 @@ def split_at_glass(walker, rays, hit, rng, u=None):
         r, h = rays.take(tr), hit.take(tr)
         # the wavelengths from the ray's number and weight alone (not from the Fresnel factor, which
         # moves with the hit point's rounding: the image stays the same on every ray-casting backend)
-        parent, lam, w = draw(grid, None if wt is None else wt[tr], r.u_lam)
+        parent, lam, w = draw(grid, None if wt is None else wt[tr], r.u_lam, settings.dispersion_branches,
+                              settings.dispersion_importance)
         w = w * (1.0 - fr[tr][parent, lam]) / (1.0 - p_refl[tr][parent])
         keep = w > 0  # a wavelength that cannot refract (total internal reflection) has no child
         if not keep.all():

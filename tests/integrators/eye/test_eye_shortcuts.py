@@ -38,7 +38,7 @@ def test_lambertian_next_events_equal_the_bsdf_modules_lambert_lobe(weights):
     s = _room()
     prepared = prepare(s, RenderSettings(samples=1, wavelength_step=20.0))
     assert prepared.mesh_lights is not None and prepared.environment is not None
-    tr = _TileTrace(EyePass(prepared), 16, np.random.default_rng(0))
+    tr = _TileTrace(EyePass(prepared, plan=plan_render(prepared)), 16, np.random.default_rng(0))
     rng = np.random.default_rng(1)
     b = 4000
     o = np.column_stack([rng.uniform(-1.5, 1.5, b), rng.uniform(-1.5, 1.5, b), np.full(b, 3.0)]).astype(np.float32)

@@ -5,9 +5,7 @@ camera (core/integrators/light/splat_bounce.py, docs/physics.md section 4.11), a
 import dataclasses
 
 import numpy as np
-import pytest
 
-from opal_diffraction.core.integrators.eye import fresnel_split
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.integrators.light import splat_bounce
 from opal_diffraction.core.integrators.eye.eye_pass import EyePass, _TileTrace
@@ -17,6 +15,7 @@ from opal_diffraction.core.render.frame import render, render_prepared
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.transport.walker import Rays
+from opal_diffraction.core.render.plan import plan_render
 
 
 def _sphere_scene(res=48, subdivisions=3) -> Scene:
@@ -71,7 +70,7 @@ def test_camera_rays_at_glass_take_both_branches_with_the_fresnel_weights():
     theta = np.radians([5.0, 30.0, 60.0, 80.0])
     d = np.stack([np.sin(theta), np.zeros(4), -np.cos(theta)], axis=1).astype(np.float32)
     o = (np.array([0.0, 0.0, 1.0]) - d).astype(np.float32)
-    tr = _TileTrace(EyePass(prepared), 4, np.random.default_rng(1))
+    tr = _TileTrace(EyePass(prepared, plan=plan_render(prepared)), 4, np.random.default_rng(1))
     n = prepared.grid.n
     for depth in (0, 1):
         rays = Rays(o, d, np.arange(4), None, None, np.full(4, depth, np.int32), np.zeros(4), tr._new_state(4))
@@ -93,7 +92,7 @@ def test_camera_rays_at_glass_take_both_branches_with_the_fresnel_weights():
             np.testing.assert_allclose(out.d[refr[0]], [np.sin(theta_t[k]), 0, -np.cos(theta_t[k])], atol=1e-6)
 
 
-def test_splitting_keeps_the_sphere_and_lowers_its_noise(monkeypatch):
+def test_splitting_keeps_the_sphere_and_lowers_its_noise():
     """The glass sphere's pixels with and without the split: the same mean (Z-test over pixels
     of two independent renders: each pixel's samples are its own, so pixels are independent), and
     a smaller per-pixel variance (F-test on the differences of two seeds of each, p < 1e-4)."""
@@ -107,8 +106,7 @@ def test_splitting_keeps_the_sphere_and_lowers_its_noise(monkeypatch):
     assert sphere.sum() > 150
 
     def runs(flag):
-        monkeypatch.setattr(fresnel_split, "ENABLED", flag)
-        return [render(scene, RenderSettings(seed=s, **st)).rgb.mean(axis=2)[sphere].astype(np.float64)
+        return [render(scene, RenderSettings(seed=s, fresnel_split=flag, **st)).rgb.mean(axis=2)[sphere].astype(np.float64)
                 for s in (11, 12)]
 
     split, chosen = runs(True), runs(False)
@@ -120,7 +118,7 @@ def test_splitting_keeps_the_sphere_and_lowers_its_noise(monkeypatch):
     assert v_split < v_chosen and p < 1e-4, (v_split, v_chosen, p)
 
 
-def test_the_light_paths_bounce_carries_what_the_eye_read_from_the_map(monkeypatch):
+def test_the_light_paths_bounce_carries_what_the_eye_read_from_the_map():
     """On the floor the camera sees, the caustic after one diffuse bounce through the glass
     (E -> floor -> glass -> caustic): with the continuation (core/integrators/light/splat_bounce.py) the light
     paths splat it, without it the eye pass reads it from the map after its bounce. The light
@@ -134,9 +132,9 @@ def test_the_light_paths_bounce_carries_what_the_eye_read_from_the_map(monkeypat
     floor = _labels(prepare(scene, st), 0)
 
     def run(flag):
-        monkeypatch.setattr(splat_bounce, "enabled", ENABLED if flag else (lambda p: False))
-        p = prepare(scene, st)
-        light = run_light_pass(p)
+        p = prepare(scene, dataclasses.replace(st, splat_bounce=flag))
+        assert plan_render(p).splat_bounce is flag
+        light = run_light_pass(p, plan=plan_render(p))
         splat_rgb = light.splat.images(p.conv)[0].mean(axis=2).astype(np.float64)
         return render_prepared(p, light).passes["Caustics"].mean(axis=2).astype(np.float64), light, splat_rgb
 
@@ -158,9 +156,6 @@ def test_the_light_paths_bounce_carries_what_the_eye_read_from_the_map(monkeypat
     assert abs(d.mean()) < 4 * se, (a.mean(), b.mean(), se)
     assert a.mean() > 4 * a.std(ddof=1) / np.sqrt(len(a)), (a.mean(), a.std())
     assert a.std() < b.std(), (a.std(), b.std())
-
-
-ENABLED = splat_bounce.enabled
 
 
 def test_the_continued_light_paths_directions_are_cosine_distributed():

@@ -21,6 +21,7 @@ from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.render.frame import render, render_prepared
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.render.plan import plan_render
 
 SUN_UP = np.array([-1.5, 0.0, 1.0]) / np.hypot(1.5, 1.0)  # travelling up to the mirror at z = 1
 CAM = dict(eye=(-2.0, -3.0, 3.0), target=(0.5, 0.0, 0.0))
@@ -142,7 +143,7 @@ def test_another_view_of_a_kept_light_pass_uses_the_map_everywhere():
     pass's random streams do not depend on the splat)."""
     st = RenderSettings(samples=4, light_paths=50_000, wavelength_step=20.0, diffuse_bounces=0)
     prepared = prepare(_scene(True, 24, 24), st)
-    light = run_light_pass(prepared)
+    light = run_light_pass(prepared, plan=plan_render(prepared))
     assert light.splat is not None and light.splat.image.shape[:2] == (24, 24)
     cam2 = Camera.look_at((-2.5, -2.0, 3.2), CAM["target"], lens=35, width=24, height=24)
     moved = render_prepared(prepared.with_view(cam2), light)

@@ -12,12 +12,13 @@ from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.render.plan import plan_render
 
 
 def light_map(scene, **kw):
     st = RenderSettings(**kw)
     ctx = prepare(scene, st)
-    lp = run_light_pass(ctx)
+    lp = run_light_pass(ctx, plan=plan_render(ctx))
     return ctx, lp, lp.caustics, lp.stats
 
 

@@ -60,29 +60,31 @@ class TileResult:
 
 class EyePass:
     """Traces tiles of camera samples through a prepared scene (prepare.PreparedScene), with the
-    light pass's caustics and grating records (light_pass.LightPassResult; None: no light pass).
+    light pass's caustics and grating records (light_pass.LightPassResult; None: no light pass),
+    as ``plan`` (render/plan.RenderPlan of ``prepared``) says.
 
     Stateless between calls, so several threads may trace tiles at once.
     """
 
-    def __init__(self, prepared, light=None):
+    def __init__(self, prepared, light=None, *, plan):
         if light is not None and light.key != prepared.key:
             raise ValueError("the light-pass result belongs to another prepared scene")
         self.prepared = prepared
+        self.plan = plan
         self.caustic_map = None if light is None else light.caustics
         # the triangles the caustic map holds flux on: the lookup runs only for hits there
         self.caustic_lit = None if self.caustic_map is None else self.caustic_map.lit_triangles()
         self.record_map = None if light is None else light.grating_records
         # (M,) bool: materials whose directly seen caustics the light pass splatted for this
         # camera (core/integrators/light/camera_splat.py, docs/physics.md section 4.9); None: the map everywhere
-        self.direct_splat = (None if self.caustic_map is None or usable_splat(prepared, light) is None
-                             else direct_materials(prepared))
+        self.direct_splat = (None if self.caustic_map is None or not plan.camera_splat
+                             or usable_splat(prepared, light) is None else direct_materials(prepared))
         # (M,) bool: where the light pass's paths also took a diffuse bounce to the camera
         # (core/integrators/light/splat_bounce.py, docs/physics.md section 4.11); None: no such paths
         self.splat_bounce = (splat_bounce.receivers(prepared) if self.direct_splat is not None
-                             and splat_bounce.enabled(prepared) else None)
+                             and plan.splat_bounce else None)
         # camera rays carry ray differentials (core/sampling/footprint.py) only to integrate gratings
-        self.wants_differentials = bool(prepared.gratings.any and getattr(prepared.settings, "grating_footprint", True))
+        self.wants_differentials = plan.ray_differentials
         # (M,) Principled mixes whose layer is drawn per hit (metallic or transmission strictly
         # between 0 and 1); elsewhere the layer is fixed and no number is drawn for it
         mt, tr = np.asarray(prepared.materials.metallic), np.asarray(prepared.materials.transmission)
@@ -195,9 +197,9 @@ class _TileTrace(SpecularWalker):
         pm = eye.prepared
         self.scattering = (scattering_materials(pm.gratings, pm.materials.kind, pm.microfacet)
                            if self.caustic_map is not None and pm.gratings.any else None)
-        # grey path weights (core/integrators/eye/grey_paths.py), in the plain path tracer only: gratings, their
-        # layers and the opal's lobes read spectral weights
-        self.greys = GreyPaths(pm, enabled=not (pm.gratings.any or self.layers or self.bragg is not None))
+        # grey path weights (core/integrators/eye/grey_paths.py) where the plan allows them (the plain path tracer)
+        self.greys = GreyPaths(pm, enabled=eye.plan.grey_paths)
+        self.fresnel_split = eye.plan.fresnel_split  # camera rays split at their first glass
         self.mixed_layers, self._probe = eye.mixed_layers, eye.probe
 
     def _reflects(self, albedo: np.ndarray) -> np.ndarray:
@@ -575,7 +577,7 @@ class _TileTrace(SpecularWalker):
         return bounce_choice(rays.extra, rays.depth, self.sampler_seed, self.rng)
 
     def _dielectric(self, rays: Rays, hit: Hit, rng, u=None):
-        if fresnel_split.ENABLED and not self.layers and self.escapes is None:
+        if self.fresnel_split and self.escapes is None:
             # camera rays take both branches (core/integrators/eye/fresnel_split.py, docs/physics.md section 4.12)
             return fresnel_split.split_first_dielectric(self, rays, hit, rng, u, super()._dielectric)
         out, transmitted = super()._dielectric(rays, hit, rng, u)

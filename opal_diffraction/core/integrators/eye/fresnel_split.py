@@ -13,7 +13,9 @@ every bounce, and there the choice's share of the variance is small (docs/physic
 child is kept. Russian roulette (eye_pass ``survives``) divides the split weight out of the
 throughput it judges by (the path's ``split`` state), so a child of weight F is kept as often as
 its unsplit path would be (any survival probability keeps the estimate unbiased; this one adds
-no roulette noise where the unsplit path had none).
+no roulette noise where the unsplit path had none). The setting ``fresnel_split`` (render/plan.py's
+``fresnel_split``, off where gratings layer their bases) switches it off, as
+benchmarks/caustic_sphere.py does to measure the difference.
 """
 
 from __future__ import annotations
@@ -23,10 +25,7 @@ import numpy as np
 from ...spectral.optics import fresnel_dielectric
 from ...transport.walker import Hit, Rays
 
-__all__ = ["ENABLED", "split_first_dielectric"]
-
-#: The eye pass splits (benchmarks/caustic_sphere.py switches it off to measure the difference).
-ENABLED = True
+__all__ = ["split_first_dielectric"]
 
 
 def split_first_dielectric(walker, rays: Rays, hit: Hit, rng, u, dielectric):
@@ -42,10 +41,10 @@ def split_first_dielectric(walker, rays: Rays, hit: Hit, rng, u, dielectric):
     rf, hf = rays.take(idx), hit.take(idx)
     ior = walker.prepared.materials.ior
     n = np.take(ior[:, 0], hf.mat) if rf.lam is None else ior[hf.mat, rf.lam]
-    eta = np.where(hf.front, 1.0 / n, n).astype(np.float32)
+    eta = np.where(hf.front, n, 1.0 / n).astype(np.float32)  # n_t / n_i
     ns = walker._specular_normal(rf, hf)
     cos = hf.cos_i if ns is hf.ng else -np.einsum("ij,ij->i", rf.d, ns)
-    fr = np.asarray(fresnel_dielectric(cos, eta), np.float32)
+    fr = np.asarray(fresnel_dielectric(np.abs(cos), eta)[0], np.float32)
     # reflected children where F > 0, refracted ones where F < 1 (not under total internal reflection)
     refl, refr = np.flatnonzero(fr > 0), np.flatnonzero(fr < 1)
     pick = np.concatenate([refl, refr])

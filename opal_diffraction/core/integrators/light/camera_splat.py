@@ -47,7 +47,7 @@ from ...materials.spectra import DIFFUSE
 from ...materials.surface import surface_reflectance
 
 __all__ = ["CameraConnection", "CameraSplat", "SplatBatch", "SplatLog", "view_key", "direct_materials",
-           "blackman_harris_density", "filter_density", "usable_splat"]
+           "blackman_harris_density", "filter_density", "usable_splat", "applies"]
 
 _BH = (0.35875, 0.48829, 0.14128, 0.01168)
 SPECTRAL_CAP = 32_000_000  # floats per lane: a spectral splat film up to this size (the caustic map's cap)
@@ -101,6 +101,16 @@ def direct_materials(prepared) -> np.ndarray:
     return ok
 
 
+def applies(prepared) -> bool:
+    """Whether the light pass splats for ``prepared``'s view (render/plan.py's ``camera_splat``):
+    the setting is on, the filter has a width (a zero width point-samples pixel centres, which a
+    splat cannot estimate) and some material takes the splat (``direct_materials``)."""
+    s = prepared.settings
+    if not s.caustic_splat or float(s.filter_width) <= 0:
+        return False
+    return bool(direct_materials(prepared).any())
+
+
 def usable_splat(prepared, light) -> "CameraSplat | None":
     """The light pass's camera splat if it was made for ``prepared``'s view (camera and filter
     width) and holds the spectrum when a spectral EXR is asked; None: the eye pass looks up the
@@ -134,18 +144,13 @@ class CameraConnection:
     channels: int
 
     @classmethod
-    def of(cls, prepared) -> "CameraConnection | None":
-        """The connection for ``prepared``'s camera, or None when the splat is off (the setting,
-        a zero filter width: the eye pass then point-samples pixel centres, which a splat cannot
-        estimate, or no material it applies to)."""
+    def of(cls, prepared) -> "CameraConnection":
+        """The connection for ``prepared``'s camera (made where the plan's ``camera_splat``
+        is on: ``applies``)."""
         from ...sampling.camera import FilterSampler, _shift_extent, camera_frame
 
         s = prepared.settings
-        if not getattr(s, "caustic_splat", True) or float(s.filter_width) <= 0:
-            return None
         mats = direct_materials(prepared)
-        if not mats.any():
-            return None
         cam = prepared.scene.camera
         hx, hy = camera_frame(cam)
         shift = _shift_extent(cam)

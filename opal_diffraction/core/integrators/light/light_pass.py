@@ -218,8 +218,9 @@ def finish_light_pass(prepared, work: LightWork, maps, counts, t0: float, timed_
 
 @one_blas_thread()  # the lanes are the parallelism (core/util/blas_threads.py)
 def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_cancel=None,
-                   deadline: float | None = None) -> LightPassResult:
-    """Run the light pass over ``prepared`` (``n_paths``: default the settings' light paths).
+                   deadline: float | None = None, *, plan) -> LightPassResult:
+    """Run the light pass over ``prepared`` (``n_paths``: default the settings' light paths) as
+    ``plan`` (render/plan.RenderPlan of ``prepared``: its ``camera_splat`` and ``splat_bounce``).
 
     The batches are dealt to LANES fixed lanes (LightWork: batch j to lane j % LANES), each with
     its own maps, run on up to ``prepared.threads`` threads and summed in lane order at the end,
@@ -234,7 +235,8 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
     total = work.total
     maps = [work.empty_maps(prepared.grid.n) for _ in range(LANES)]
     counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
-    connection = CameraConnection.of(prepared)  # the camera splat (core/integrators/light/camera_splat.py), or None: off
+    # the camera splat (core/integrators/light/camera_splat.py), or None: off
+    connection = CameraConnection.of(prepared) if plan.camera_splat else None
     splats = [connection.empty() for _ in range(LANES)] if connection is not None else None
     stop = threading.Event()
     cancelled = False
@@ -245,7 +247,7 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
             if stop.is_set():
                 return
             done = trace_batch(prepared, work.batches[j], illum, records,
-                               splat=None if splats is None else splats[k])
+                               splat=None if splats is None else splats[k], bounce=plan.splat_bounce)
             for name, value in done.items():
                 counts[k][name] += value
 

@@ -23,7 +23,8 @@ geometric one (to 1e-5), so the bounce at X needs no adjoint shading-normal corr
 1997, section 5.3). The continuation is off in scenes with gratings or opal lobes (their
 light-pass scattering is not followed here), with rough or layered materials (a singular layer
 is a specular bounce to the eye pass and an end to a light path) and wherever the camera splat
-is off.
+is off; render/plan.py's ``splat_bounce`` decides it once per render (``applies``, the setting
+``splat_bounce``), and both passes read the plan.
 """
 
 from __future__ import annotations
@@ -35,18 +36,16 @@ from ...materials.spectra import DIFFUSE
 from ...materials.surface import surface_reflectance
 from ...transport.walker import Hit, Rays, SpecularWalker
 
-__all__ = ["enabled", "receivers", "receives", "covered", "BounceLog", "trace_bounces"]
+__all__ = ["applies", "receivers", "receives", "covered", "BounceLog", "trace_bounces"]
 
 FLAT_TOLERANCE = 1e-5  # 1 - |ns . ng| below this: the hit's shading normal is its geometric one
 
 
-def enabled(prepared) -> bool:
-    """Whether the light pass continues its landings by a diffuse bounce (and so the eye pass
-    leaves those paths out): the camera splat is on and nothing it cannot follow scatters light
-    paths (gratings, opal lobes)."""
-    s = prepared.settings
-    if not getattr(s, "caustic_splat", True) or float(s.filter_width) <= 0:
-        return False
+def applies(prepared) -> bool:
+    """Whether the scene lets the light pass continue its landings by a diffuse bounce (and so
+    the eye pass leave those paths out), given the camera splat is on (the plan's
+    ``camera_splat``): nothing it cannot follow scatters light paths (gratings, opal lobes, rough
+    or layered surfaces) and some material receives (``receivers``)."""
     if prepared.gratings.any or getattr(prepared.gratings, "bragg", None) is not None and np.any(prepared.gratings.bragg):
         return False
     if prepared.microfacet is not None and np.any(prepared.microfacet):

@@ -148,13 +148,15 @@ class LightBatch:
         return min(BATCH_PATHS, self.light_paths - self.start)
 
 
-def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_PASS_STREAM, splat=None) -> dict:
+def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_PASS_STREAM, splat=None,
+                bounce: bool = False) -> dict:
     """Trace one batch of light paths, depositing into ``illum`` and ``records`` (objects with a
     ``layout`` and IlluminationMap's ``deposit``: maps, or DepositLogs; ``records`` None
     without gratings). ``stream``: the random stream id (the records' pilot pass has its own).
     ``splat``: where the batch's camera splats go (an object with CameraSplat's ``add``: a
-    lane's film or a camera_splat.SplatLog), or None: no camera connection.
-    Returns its counts: paths, deposits, rays."""
+    lane's film or a camera_splat.SplatLog), or None: no camera connection (the plan's
+    ``camera_splat`` off). ``bounce``: with a ``splat``, continue the landings by a diffuse
+    bounce (the plan's ``splat_bounce``). Returns its counts: paths, deposits, rays."""
     seed = int(prepared.settings.seed)
     b = job.paths
     rng = np.random.default_rng(np.random.SeedSequence([seed, stream, job.light, job.batch]))
@@ -172,7 +174,7 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
     batch = SplatBatch(connection) if connection is not None else None
     tr = LightWalker(prepared, rng, illum, records, batch)
     bounce_rng = None
-    if batch is not None and splat_bounce.enabled(prepared):
+    if batch is not None and bounce:
         tr.bounces = splat_bounce.BounceLog(prepared)
         # the continued landings (core/integrators/light/splat_bounce.py) draw from a stream of their own, so the
         # map and the direct splats are those of the same seed without them
