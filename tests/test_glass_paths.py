@@ -46,7 +46,8 @@ def test_bounce_choice_is_the_vertex_samplers_bounce_number():
     extra = {"pid": rng.integers(0, 4096, b).astype(np.uint32), "sid": rng.integers(0, 256, b).astype(np.uint32)}
     depth = rng.integers(0, 12, b)
     ps = PixelSampler(rng, extra["pid"], extra["sid"], vertex_pair(depth, SLOT_BOUNCE), 11)
-    np.testing.assert_array_equal(bounce_choice(extra, depth, 11, rng).astype(np.float64), ps.random(b))
+    np.testing.assert_array_equal(bounce_choice(extra["pid"], extra["sid"], depth, 11, rng).astype(np.float64),
+                                  ps.random(b))
 
 
 def test_the_fresnel_choice_is_stratified_over_a_pixels_samples():
@@ -61,7 +62,7 @@ def test_the_fresnel_choice_is_stratified_over_a_pixels_samples():
     pid = np.repeat(np.arange(n_pix, dtype=np.uint32) * 37 + 5, n)
     sid = np.tile(np.arange(n, dtype=np.uint32), n_pix)
     for depth in (0, 1, 5):
-        u = bounce_choice({"pid": pid, "sid": sid}, np.full(n_pix * n, depth), 123, rng)
+        u = bounce_choice(pid, sid, np.full(n_pix * n, depth), 123, rng)
         counts = (u.reshape(n_pix, n) < fr[:, None]).sum(axis=1)
         lo = np.floor(n * fr)
         assert np.all((counts == lo) | (counts == lo + 1)), depth

@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..util.enums import Lattice
+from ..transport.path_state import MAX_DIFFUSE_VERTICES, Caustic
 from ..transport.walker import Rays, light_spectrum_of
 from ..opal.bragg import effective_index
 from ..materials.bragg_bsdf import BraggLobe, kappa_from_spread
@@ -122,7 +123,7 @@ class BraggShading:
         lobe = self.lobe(h)
         # a path from a caustic receiver (through mirrors, glass or other opal) to a light via
         # these planes is the light pass's (it scatters off BRAGG planes, scatter_light)
-        nee = r.extra["caustic"] == 0 if trace.caustics_cover_lights else np.ones(len(r), bool)
+        nee = r.state.caustic == Caustic.NONE if trace.caustics_cover_lights else np.ones(len(r), bool)
         if nee.all():
             self._next_events(trace, r, h, lobe, rng)
         elif nee.any():
@@ -146,8 +147,7 @@ class BraggShading:
         if pending is None or pending[0] is not hit:
             return out
         _, idx, lobe, body = pending
-        st = rays.extra
-        go = (can_bounce[idx] | (rays.depth[idx] >= trace.limits[0])) & ~st["final"][idx]
+        go = (can_bounce[idx] | (rays.depth[idx] >= trace.limits[0])) & ~rays.state.final[idx]
         if not go.any():
             return out
         keep = np.flatnonzero(go)
@@ -166,15 +166,15 @@ class BraggShading:
         w0 = r.w / body  # the weight before the body's share (with Russian roulette's 1/q)
         o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
         nxt = r.moved(o, wi, (w0 * weight).astype(np.float32))
-        s = nxt.extra
-        s["nd"] = np.minimum(s["nd"] + 1, 100).astype(np.int8)
-        s["glossy"] = s["glossy"] + 1
-        s["pdf"] = pdf.astype(np.float32)
+        s = nxt.state
+        s.nd = np.minimum(s.nd + 1, MAX_DIFFUSE_VERTICES).astype(np.int8)
+        s.glossy = s.glossy + 1
+        s.pdf = pdf.astype(np.float32)
         # like a specular bounce: after a caustic receiver, a caustic path (the light pass's)
-        s["caustic"] = np.where(s["caustic"] >= 1, np.int8(2), np.int8(0)).astype(np.int8)
+        s.caustic = np.where(s.caustic >= Caustic.RECEIVER, np.int8(Caustic.PATH), np.int8(Caustic.NONE)).astype(np.int8)
         lim = trace.limits
-        s["final"] = ((s["diffuse"] > lim[1]) | (s["glossy"] > lim[2]) | (s["transmission"] > lim[3])
-                      | (nxt.depth > lim[0]))
+        s.final = ((s.diffuse > lim[1]) | (s.glossy > lim[2]) | (s.transmission > lim[3])
+                   | (nxt.depth > lim[0]))
         if out is None or not len(out):
             return nxt
         return Rays.concat(out, nxt)
@@ -209,7 +209,7 @@ class BraggShading:
         wo = -np.asarray(rays.d, np.float64)
         ns = np.asarray(hit.ns, np.float64)
         samples = trace.light_samples(hit, rng)  # the eye pass's one sample per emitter
-        nd = rays.extra["nd"]
+        nd = rays.state.nd
         for wi, dist, g, spectrum, p_light, pad in samples:
             f_cos, p_lobe = lobe.evaluate(wo, wi, ns, self.edges, rays.lam)
             scale = np.asarray(g, np.float32)

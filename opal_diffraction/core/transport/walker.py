@@ -47,6 +47,7 @@ import numpy as np
 
 from ..sampling import footprint
 from . import wavelengths
+from .path_state import PathState
 from ..materials.spectra import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
 from ..spectral.optics import fresnel_dielectric, reflect, refract
 
@@ -84,9 +85,9 @@ class Rays:
     lam: np.ndarray | None  # (B,) int wavelength index for mono rays, None for white
     depth: np.ndarray  # (B,) int specular bounces so far
     u_lam: np.ndarray  # (B,) float: the sample's stratified number for choosing a wavelength
-    # per-ray arrays a subclass carries along (the eye pass's path state: bounce counts, the last
-    # BSDF pdf for MIS, ...); taken, concatenated and inherited with the rays. None: nothing.
-    extra: dict | None = None
+    # the eye pass's path state (core/transport/path_state.py: bounce counts, the last BSDF pdf
+    # for MIS, ray differentials, ...); taken, concatenated and inherited with the rays. None: nothing.
+    state: PathState | None = None
     # (k, n) float32 spectra shared by the population (k < n): w is (B, k) coefficients over
     # them (white light rays only); None: w is as above
     basis: np.ndarray | None = None
@@ -102,15 +103,15 @@ class Rays:
         return Rays(_rows(self.o, idx), _rows(self.d, idx), _rows(self.pix, idx),
                      None if self.w is None else _rows(self.w, idx), None if self.lam is None else _rows(self.lam, idx),
                      _rows(self.depth, idx), _rows(self.u_lam, idx),
-                     None if self.extra is None else {k: _rows(v, idx) for k, v in self.extra.items()}, self.basis)
+                     None if self.state is None else self.state.take(idx), self.basis)
 
     def moved(self, o, d, w, depth=None) -> "Rays":
-        """The same paths (pixels, wavelengths, extra state) continuing from o along d with weight w
+        """The same paths (pixels, wavelengths, path state) continuing from o along d with weight w
         (coefficients over the same basis if w has the basis's k columns, else spectral)."""
         basis = self.basis if self.basis is not None and w is not None and w.ndim == 2 and \
             w.shape[1] == len(self.basis) else None
         return Rays(o, d, self.pix, w, self.lam, self.depth + 1 if depth is None else depth, self.u_lam,
-                     None if self.extra is None else dict(self.extra), basis)
+                     None if self.state is None else self.state.copy(), basis)
 
     def weighted(self, x):
         """The ray weight times x (x itself for unit-weight camera rays)."""
@@ -144,14 +145,19 @@ class Rays:
         if (a.w is None) != (b.w is None):  # one side has implicit unit weights: make them explicit
             n = (a.w if a.w is not None else b.w).shape[1]
             a, b = replace(a, w=a.dense_w(n)), replace(b, w=b.dense_w(n))
-        extra = None
-        if a.extra is not None or b.extra is not None:
-            if a.extra is None or b.extra is None or a.extra.keys() != b.extra.keys():
+        state = None
+        if a.state is not None or b.state is not None:
+            if a.state is None or b.state is None:
                 raise ValueError("cannot join ray populations that carry different state")
-            extra = {k: np.concatenate([a.extra[k], b.extra[k]]) for k in a.extra}
+            state = PathState.concat(a.state, b.state)
         return Rays(*(None if x is None else np.concatenate([x, y]) for x, y in
                        zip((a.o, a.d, a.pix, a.w, a.lam, a.depth, a.u_lam),
-                           (b.o, b.d, b.pix, b.w, b.lam, b.depth, b.u_lam))), extra)
+                           (b.o, b.d, b.pix, b.w, b.lam, b.depth, b.u_lam))), state)
+
+    @property
+    def differentials(self) -> np.ndarray | None:
+        """The rays' differentials (B, 5, 3) (core/sampling/footprint.py), or None where not carried."""
+        return None if self.state is None else self.state.rd
 
 
 @dataclass
@@ -272,11 +278,6 @@ def valid_specular_normal(wo: np.ndarray, ng: np.ndarray, ns: np.ndarray) -> np.
     out = ns.copy()
     out[bad] = fixed
     return out
-
-
-def out_is_plain(rays: Rays) -> bool:
-    """No ray differentials to carry (core/sampling/footprint.py): the fused specular bounce applies."""
-    return rays.extra is None or footprint.KEY not in rays.extra
 
 
 class SpecularWalker:
@@ -408,9 +409,9 @@ class SpecularWalker:
                 out.append(self.after_delta(r, transmitted))
         scattered = self.scatter(rays, hit, kind, can_bounce, rng)
         if scattered is not None and len(scattered):
-            if scattered.extra is not None and footprint.KEY in scattered.extra:
+            if scattered.differentials is not None:
                 # a diffuse or rough bounce: no footprint any more (a point sample)
-                scattered.extra[footprint.KEY] = footprint.zero_differentials(len(scattered))
+                scattered.state.rd = footprint.zero_differentials(len(scattered))
             if (scattered.lam is None) == (rays.lam is None):
                 out.append(scattered)
             else:  # a white population's mono rays: traced with the mono population
@@ -463,9 +464,8 @@ class SpecularWalker:
         d = reflect(rays.d, ns)
         o = hit.p + hit.eps[:, None] * hit.ng
         out = rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit))
-        if out.extra is not None and footprint.KEY in out.extra:  # ray differentials (core/sampling/footprint.py)
-            out.extra[footprint.KEY] = footprint.reflect_differentials(rays.extra[footprint.KEY], rays.o, rays.d,
-                                                                       hit.p, ns)
+        if out.differentials is not None:  # ray differentials (core/sampling/footprint.py)
+            out.state.rd = footprint.reflect_differentials(rays.differentials, rays.o, rays.d, hit.p, ns)
         return out
 
     def _dielectric(self, rays: Rays, hit: Hit, rng, u=None) -> tuple[Rays, np.ndarray]:
@@ -500,9 +500,8 @@ class SpecularWalker:
         side = np.where(dn > 0, np.float32(1), np.float32(-1))
         o = hit.p + (hit.eps * side)[:, None] * hit.ng
         out = rays.moved(o.astype(np.float32, copy=False), d.astype(np.float32, copy=False), self._tinted(rays, hit))
-        if out.extra is not None and footprint.KEY in out.extra:  # ray differentials (core/sampling/footprint.py)
-            out.extra[footprint.KEY] = footprint.refract_differentials(rays.extra[footprint.KEY], rays.o, rays.d,
-                                                                       hit.p, ns, d, eta)
+        if out.differentials is not None:  # ray differentials (core/sampling/footprint.py)
+            out.state.rd = footprint.refract_differentials(rays.differentials, rays.o, rays.d, hit.p, ns, d, eta)
         return out, side < 0
 
     def _split(self, rays: Rays, hit: Hit, rng):
@@ -522,5 +521,5 @@ class SpecularWalker:
             w = rays.w[parent, lam]
         children = Rays(rays.o[parent], rays.d[parent], rays.pix[parent], w.astype(np.float32),
                          lam.astype(np.int64), rays.depth[parent], rays.u_lam[parent],
-                         None if rays.extra is None else {k: v[parent] for k, v in rays.extra.items()})
+                         None if rays.state is None else rays.state.take(parent))
         return children, hit.take(parent)

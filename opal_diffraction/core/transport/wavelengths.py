@@ -181,8 +181,8 @@ def split_at_glass(walker, rays, hit, rng, u=None):
             wr = wr * wt[refl]
         o = h.p + h.eps[:, None] * h.ng
         white = r.moved(o.astype(np.float32), reflect(r.d, nr).astype(np.float32), wr)
-        if white.extra is not None and footprint.KEY in white.extra:
-            white.extra[footprint.KEY] = footprint.reflect_differentials(r.extra[footprint.KEY], r.o, r.d, h.p, nr)
+        if white.differentials is not None:
+            white.state.rd = footprint.reflect_differentials(r.differentials, r.o, r.d, h.p, nr)
         white = walker.after_delta(white, np.zeros(len(white), bool))
     tr = ~refl
     if tr.any():
@@ -205,13 +205,12 @@ def split_at_glass(walker, rays, hit, rng, u=None):
                 t_dir[stay] = refract(d[stay], hp.ng[stay], e[stay])[0]
         side = np.where(np.einsum("ij,ij->i", t_dir, hp.ng) > 0, 1.0, -1.0).astype(np.float32)
         o = hp.p + (hp.eps * side)[:, None] * hp.ng
-        extra = None if r.extra is None else {k: v[parent] for k, v in r.extra.items()}
+        state = None if r.state is None else r.state.take(parent)
         # type(r): transport.Rays, without importing the module that imports this one
         mono = type(r)(o.astype(np.float32), t_dir.astype(np.float32), r.pix[parent], w.astype(np.float32),
-                    lam.astype(np.int64), r.depth[parent] + 1, r.u_lam[parent], extra)
-        if extra is not None and footprint.KEY in extra:
-            mono.extra[footprint.KEY] = footprint.refract_differentials(extra[footprint.KEY], r.o[parent], d, hp.p, nr,
-                                                                        t_dir, e)
+                    lam.astype(np.int64), r.depth[parent] + 1, r.u_lam[parent], state)
+        if mono.differentials is not None:
+            mono.state.rd = footprint.refract_differentials(state.rd, r.o[parent], d, hp.p, nr, t_dir, e)
         mono = walker.after_delta(mono, side < 0)
         if len(mono):
             walker._spawned.append(mono)

@@ -30,6 +30,7 @@ from ...lights.sources import (intersect_lights, is_delta, light_pdf, sample_lig
 from ...lights.sources import AREA_DISK, AREA_RECT, POINT, SPOT, SUN
 from ...materials.spectra import DIFFUSE
 from ...materials.surface import shading_normal, surface_emission, surface_reflectance, surface_roughness
+from ...transport.path_state import MAX_DIFFUSE_VERTICES, Caustic, PathState
 from ...transport.walker import MICROFACET, Hit, Rays, SpecularWalker, light_spectrum_of, shading_normals
 from ...materials import bsdf
 from ..bragg_shading import BraggShading
@@ -142,7 +143,7 @@ class EyePass:
 
 class _TileTrace(SpecularWalker):
     """The state of one tile's trace: its film accumulators, ray count and the path tracer's
-    per-path state (``Rays.extra``, see ``_new_state``)."""
+    per-path state (``Rays.state``, core/transport/path_state.py)."""
 
     def __init__(self, eye: EyePass, n_pixels: int, rng: np.random.Generator):
         super().__init__(eye.prepared, rng)
@@ -236,29 +237,14 @@ class _TileTrace(SpecularWalker):
         vertices: 0 emitted light seen (through mirrors and glass), 1 direct, 2+ indirect."""
         return self._background if vertices == 0 else self._film if vertices == 1 else self._part("indirect")
 
-    @staticmethod
-    def _new_state(b: int) -> dict:
-        """The path tracer's per-path state, carried in ``Rays.extra``:
-        nd: diffuse vertices so far; diffuse / glossy / transmission: bounces of each kind (the
-        total is ``Rays.depth``); pdf: solid-angle pdf of the last BSDF-sampled direction (0: a
-        camera ray or a specular bounce - no MIS partner); caustic: 0, 1 = the last diffuse vertex
-        receives the light pass's caustics, 2 = and specular bounces followed it (a caustic path,
-        counted by the light pass); final: the bounce limit was reached - this segment only
-        gathers emitted light (for MIS), nothing more; seen: the last diffuse vertex was seen
-        straight from the camera on a core/integrators/light/splat_bounce.py receiver; split: the Fresnel weight a
-        split gave the path (core/integrators/eye/fresnel_split.py; 1: none), which Russian roulette divides out; pid, sid: the pixel and sample numbers
-        of core/sampling/sampler.py's points (``_numbers``)."""
-        return {"nd": np.zeros(b, np.int8), "diffuse": np.zeros(b, np.int16), "glossy": np.zeros(b, np.int16),
-                "transmission": np.zeros(b, np.int16), "pdf": np.zeros(b, np.float32),
-                "caustic": np.zeros(b, np.int8), "final": np.zeros(b, bool), "seen": np.zeros(b, bool),
-                "split": np.ones(b, np.float32),
-                "pid": np.zeros(b, np.uint32), "sid": np.zeros(b, np.uint32)}
+    def _new_state(self, b: int) -> PathState:
+        """The path tracer's per-path state of ``b`` camera paths (core/transport/path_state.py),
+        with ray differentials where the tile carries them."""
+        return PathState.new(b, differentials=self.footprints)
 
     def empty_mono(self) -> Rays:
         r = super().empty_mono()
-        r.extra = self._new_state(0)
-        if self.footprints:
-            r.extra[footprint.KEY] = footprint.zero_differentials(0)
+        r.state = self._new_state(0)
         return r
 
     def run(self, origins, directions, pix, u_lambda, wavelength_index=None, ids=None, differentials=None) -> TileResult:
@@ -266,15 +252,14 @@ class _TileTrace(SpecularWalker):
         rays = Rays(origins, directions, pix.astype(np.int64), None, None,
                      np.zeros(b, np.int32), np.asarray(u_lambda, np.float64), self._new_state(b))
         if ids is not None:
-            rays.extra["pid"][:] = ids[0]
-            rays.extra["sid"][:] = ids[1]
-        if self.footprints:
-            rays.extra[footprint.KEY] = (footprint.zero_differentials(b) if differentials is None
-                                         else np.asarray(differentials, np.float32).reshape(b, 5, 3))
+            rays.state.pid[:] = ids[0]
+            rays.state.sid[:] = ids[1]
+        if self.footprints and differentials is not None:
+            rays.state.rd = np.asarray(differentials, np.float32).reshape(b, 5, 3)
         mono = self.empty_mono()
         if wavelength_index is not None:  # start monochromatic (tools and tests)
             lam = np.broadcast_to(np.asarray(wavelength_index, np.int64), (b,)).copy()
-            mono = Rays(rays.o, rays.d, rays.pix, np.ones(b, np.float32), lam, rays.depth, rays.u_lam, rays.extra)
+            mono = Rays(rays.o, rays.d, rays.pix, np.ones(b, np.float32), lam, rays.depth, rays.u_lam, rays.state)
             rays = rays.take(np.zeros(b, bool))
         self.walk(rays, mono)
         shape = (self._n_pixels, n)
@@ -306,7 +291,7 @@ class _TileTrace(SpecularWalker):
         for li in np.unique(idx):  # the few lights met
             sel = idx == li
             p_light[sel] = light_pdf(self.prepared.lights, int(li), r.o[sel], r.d[sel])
-        scale = scale * _power_heuristic(r.extra["pdf"], p_light)
+        scale = scale * _power_heuristic(r.state.pdf, p_light)
         spectrum = self.prepared.lights.spectrum
         radiance = scale[:, None] * spectrum[idx] if r.lam is None else scale * spectrum[idx, r.lam]
         self._add_by_vertices(r, r.weighted(radiance))
@@ -315,7 +300,7 @@ class _TileTrace(SpecularWalker):
         """Rays whose emitter hit is not a caustic path the light pass counted (section 4.5)."""
         if not self.caustics_cover_lights:
             return np.ones(len(rays), bool)
-        return rays.extra["caustic"] != 2
+        return rays.state.caustic != Caustic.PATH
 
     def _numbers(self, rays: Rays, slot: int):
         """The random numbers of one decision (``slot``: sampler.SLOT_LIGHT, SLOT_PARAMS or
@@ -324,14 +309,14 @@ class _TileTrace(SpecularWalker):
         decisions on one path share numbers); the tile's pseudo-random stream without ids."""
         if self.sampler_seed is None or len(rays) == 0:
             return self.rng
-        st = rays.extra
-        return PixelSampler(self.rng, st["pid"], st["sid"], vertex_pair(rays.depth, slot), self.sampler_seed,
+        st = rays.state
+        return PixelSampler(self.rng, st.pid, st.sid, vertex_pair(rays.depth, slot), self.sampler_seed,
                             pairs=SLOT_WIDTH[slot])
 
     def _add_by_vertices(self, rays: Rays, contrib):
         """Accumulate light found at the end of a path segment into the part its diffuse-vertex
         count says (``_light_film``)."""
-        nd = rays.extra["nd"]
+        nd = rays.state.nd
         if len(nd) and (nd == nd[0]).all():
             self._accumulate(rays, contrib, self._light_film(min(int(nd[0]), 2)))
             return
@@ -346,11 +331,11 @@ class _TileTrace(SpecularWalker):
                 r = rays.take(seen)
                 lights = self.prepared.lights
                 p_light = sum(light_pdf(lights, int(li), r.o, r.d) for li in self.soft_suns)
-                rad = sun_radiance(lights, r.d) * _power_heuristic(r.extra["pdf"], p_light)[:, None]
+                rad = sun_radiance(lights, r.d) * _power_heuristic(r.state.pdf, p_light)[:, None]
                 self._add_by_vertices(r, r.weighted(rad) if r.lam is None else r.w * rad[np.arange(len(r)), r.lam])
-        st = rays.extra
+        st = rays.state
         if self.escapes is not None:
-            first = st["nd"] == 0  # paths that met only mirrors and glass
+            first = st.nd == 0  # paths that met only mirrors and glass
             r = rays.take(first)
             self.escapes.append({"origin": r.o, "direction": r.d, "weight": r.dense_w(self.n),
                                  "lam": r.lam, "depth": r.depth, "ray": r.pix})
@@ -359,17 +344,17 @@ class _TileTrace(SpecularWalker):
         keep = self._not_covered(rays)
         if not keep.all():
             rays = rays.take(keep)
-            st = rays.extra
-        for nd in np.unique(st["nd"]):
-            self._add_background(rays.take(st["nd"] == nd), self._light_film(min(int(nd), 2)))
+            st = rays.state
+        for nd in np.unique(st.nd):
+            self._add_background(rays.take(st.nd == nd), self._light_film(min(int(nd), 2)))
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
         prepared = self.prepared
-        st = rays.extra
+        st = rays.state
         emits = prepared.materials.emissive[hit.mat]
         if emits.any() and not self._emitted_unit(rays, hit, emits):
             self._emitted(rays.take(emits), hit.take(emits))
-        live = ~st["final"]  # a final segment only gathers emission
+        live = ~st.final  # a final segment only gathers emission
         if not live.any():
             return
         if self.normal_maps:  # bend the shading normal of diffuse hits (core/materials/surface.py); scatter reuses it
@@ -397,11 +382,11 @@ class _TileTrace(SpecularWalker):
         full_hit, full_live = hit, live
         if not live.all():
             rays, hit, kind = rays.take(live), hit.take(live), kind[live]
-            st = rays.extra
+            st = rays.state
         if prepared.gratings.any:
             on_grating = prepared.gratings.enabled[hit.mat]
             if self.scattering is not None:  # diffuse -> grating -> light: the light pass's caustic
-                on_grating &= ~(self.scattering[hit.mat] & (st["caustic"] == 1))
+                on_grating &= ~(self.scattering[hit.mat] & (st.caustic == Caustic.RECEIVER))
             if on_grating.any():
                 self._grating_light(rays.take(on_grating), hit.take(on_grating), rng)
         diffuse = kind == DIFFUSE
@@ -409,7 +394,7 @@ class _TileTrace(SpecularWalker):
             black = diffuse & self.black[hit.mat]
             if black.any():
                 diffuse = diffuse & ~black
-                first = black & (st["nd"] == 0)
+                first = black & (st.nd == 0)
                 if first.any():
                     self._denoising_features(rays.take(first), hit.take(first))
         if diffuse.any():
@@ -417,7 +402,7 @@ class _TileTrace(SpecularWalker):
             r_full = r
             if self.layers:
                 r = grating_layering.scale_base(prepared, r, h)
-            first = r.extra["nd"] == 0
+            first = r.state.nd == 0
             if first.any():
                 self._denoising_features(r.take(first), h.take(first))
             # the base colour once per hit: next events and the bounce (scatter) share it;
@@ -457,12 +442,12 @@ class _TileTrace(SpecularWalker):
         """Specular bounces go on below the total limit and past Russian roulette (after three
         bounces, survival probability = the largest spectral throughput, at most 1, survivors
         reweighted by 1 / that: unbiased; pbrt-v4's rule). Mono rays are not rouletted."""
-        ok = (rays.depth < self.limits[0]) & ~rays.extra["final"]
+        ok = (rays.depth < self.limits[0]) & ~rays.state.final
         if rays.lam is None and rays.w is not None:
             deep = ok & (rays.depth >= 3)
             if deep.any():
                 # a Fresnel-split child (core/integrators/eye/fresnel_split.py) is rouletted as its unsplit path
-                q = np.minimum(rays.w.max(axis=1) / rays.extra["split"], np.float32(1.0))
+                q = np.minimum(rays.w.max(axis=1) / rays.state.split, np.float32(1.0))
                 roulette = deep & (q < 1)
                 if roulette.any():
                     alive = rng.random(len(rays), np.float32) < q
@@ -475,12 +460,12 @@ class _TileTrace(SpecularWalker):
         """Count a mirror or dielectric bounce (reflection: glossy, refraction: transmission, as
         Cycles counts them) and drop paths over their kind's limit. A specular bounce has no BSDF
         pdf for MIS, and makes a path that left a caustic receiver a caustic path."""
-        st = rays.extra
-        st["glossy"] = st["glossy"] + ~transmitted
-        st["transmission"] = st["transmission"] + transmitted
-        st["pdf"] = np.zeros(len(rays), np.float32)
-        st["caustic"] = np.where(st["caustic"] == 1, np.int8(2), st["caustic"])
-        ok = np.where(transmitted, st["transmission"] <= self.limits[3], st["glossy"] <= self.limits[2])
+        st = rays.state
+        st.glossy = st.glossy + ~transmitted
+        st.transmission = st.transmission + transmitted
+        st.pdf = np.zeros(len(rays), np.float32)
+        st.caustic = np.where(st.caustic == Caustic.RECEIVER, np.int8(Caustic.PATH), st.caustic)
+        ok = np.where(transmitted, st.transmission <= self.limits[3], st.glossy <= self.limits[2])
         return rays.take(ok)
 
     def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
@@ -493,14 +478,14 @@ class _TileTrace(SpecularWalker):
         cosine-weighted direction (the BRDF's importance sampling, weight = albedo). A path at its diffuse or total bounce limit still takes one
         last, emission-only segment ('final'), so light sources and the world that the next
         event estimation does not sample are still seen once (and MIS stays whole)."""
-        st = rays.extra
+        st = rays.state
         micro_out = None
         if self._micro is not None and self._micro[0] is hit:
             _, micro, params = self._micro
             self._micro = None
             micro_out = self._scatter_microfacet(rays, hit, micro, params, can_bounce)
             kind = np.where(micro, -1, kind)
-        sel = (kind == DIFFUSE) & ~st["final"]
+        sel = (kind == DIFFUSE) & ~st.final
         if self.black is not None:  # a black surface reflects nothing: the path ends
             sel &= ~self.black[hit.mat]
         if not sel.any():
@@ -540,13 +525,13 @@ class _TileTrace(SpecularWalker):
             out = r.moved(o, wi, r.weighted(albedo))
         if self.layers:
             out = grating_layering.scale_base(self.prepared, out, h)
-        s = out.extra
-        s["nd"] = np.minimum(s["nd"] + 1, 100).astype(np.int8)
-        s["diffuse"] = s["diffuse"] + 1
-        s["pdf"] = (cos * np.float32(1 / np.pi)).astype(np.float32)
-        s["caustic"] = np.full(b, 1 if self.caustic_map is not None else 0, np.int8)
-        s["seen"] = splat_bounce.mark_bounce(self.splat_bounce, r, h)
-        s["final"] = (s["diffuse"] > self.limits[1]) | (out.depth > self.limits[0])
+        s = out.state
+        s.nd = np.minimum(s.nd + 1, MAX_DIFFUSE_VERTICES).astype(np.int8)
+        s.diffuse = s.diffuse + 1
+        s.pdf = (cos * np.float32(1 / np.pi)).astype(np.float32)
+        s.caustic = np.full(b, Caustic.RECEIVER if self.caustic_map is not None else Caustic.NONE, np.int8)
+        s.seen = splat_bounce.mark_bounce(self.splat_bounce, r, h)
+        s.final = (s.diffuse > self.limits[1]) | (out.depth > self.limits[0])
         return out if micro_out is None or not len(micro_out) else Rays.concat(out, micro_out)
 
     def _cached_albedo(self, hit: Hit, sel: np.ndarray):
@@ -572,7 +557,8 @@ class _TileTrace(SpecularWalker):
         """Smooth glass's reflect / refract choice from the vertex's bounce numbers (stratified
         over the pixel's samples, as Cycles draws its glass closure's choice; core/sampling/specular_numbers.py),
         not the tile's pseudo-random stream: glass_sphere's error at 64 spp 0.0054 -> 0.0038."""
-        return bounce_choice(rays.extra, rays.depth, self.sampler_seed, self.rng)
+        st = rays.state
+        return bounce_choice(st.pid, st.sid, rays.depth, self.sampler_seed, self.rng)
 
     def _dielectric(self, rays: Rays, hit: Hit, rng, u=None):
         if fresnel_split.ENABLED and not self.layers and self.escapes is None:
@@ -601,7 +587,7 @@ class _TileTrace(SpecularWalker):
         """Next-event estimation at rough and layered surfaces: every light, the emissive meshes
         and the world map, each weighted against BSDF sampling by the power heuristic; and the
         caustic map on a diffuse base (its diffuse lobe, approximately: base colour / pi)."""
-        first = rays.extra["nd"] == 0
+        first = rays.state.nd == 0
         if first.any():
             self._denoising_features(rays.take(first), hit.take(first))
         for sel, film in ((first, self._film), (~first, None)):
@@ -708,24 +694,25 @@ class _TileTrace(SpecularWalker):
         out = r.moved(o, wi, r.weighted(weight) if r.lam is None else r.w * weight[:, 0])
         if self.layers:
             out = grating_layering.scale_base(self.prepared, out, h)
-        s = out.extra
+        s = out.state
         singular = (flags & bsdf.SINGULAR) != 0
         diffuse = (flags & bsdf.DIFFUSE_REFLECTION) != 0
         transmitted = (flags & bsdf.TRANSMISSION) != 0
         glossy = ~diffuse & ~transmitted
-        s["diffuse"] = s["diffuse"] + diffuse
-        s["glossy"] = s["glossy"] + glossy
-        s["transmission"] = s["transmission"] + transmitted
-        s["nd"] = np.where(singular, s["nd"], np.minimum(s["nd"] + 1, 100)).astype(np.int8)
-        s["pdf"] = np.where(singular, np.float32(0.0), pdf).astype(np.float32)
+        s.diffuse = s.diffuse + diffuse
+        s.glossy = s.glossy + glossy
+        s.transmission = s.transmission + transmitted
+        s.nd = np.where(singular, s.nd, np.minimum(s.nd + 1, MAX_DIFFUSE_VERTICES)).astype(np.int8)
+        s.pdf = np.where(singular, np.float32(0.0), pdf).astype(np.float32)
         receiver = diffuse & (self.prepared.materials.kind[h.mat] == DIFFUSE) & (self.caustic_map is not None)
-        s["caustic"] = np.where(singular, np.where(s["caustic"] == 1, np.int8(2), s["caustic"]),
-                                receiver.astype(np.int8)).astype(np.int8)
-        over = ((s["diffuse"] > self.limits[1]) | (s["glossy"] > self.limits[2])
-                | (s["transmission"] > self.limits[3]) | (out.depth > self.limits[0]))
+        # a delta event after a receiver makes a caustic path; a diffuse one at a receiver: RECEIVER (1), else NONE
+        s.caustic = np.where(singular, np.where(s.caustic == Caustic.RECEIVER, np.int8(Caustic.PATH), s.caustic),
+                             receiver.astype(np.int8)).astype(np.int8)
+        over = ((s.diffuse > self.limits[1]) | (s.glossy > self.limits[2])
+                | (s.transmission > self.limits[3]) | (out.depth > self.limits[0]))
         # over a limit: a delta bounce ends; a scattering one takes its emission-only segment
         keep = ~(over & singular)
-        s["final"] = over & ~singular
+        s.final = over & ~singular
         return out.take(keep)
 
     # ----------------------------------------------------------------- films
@@ -794,7 +781,7 @@ class _TileTrace(SpecularWalker):
                 return
             spectra = self.prepared.conv.illuminant_from_rgb(env.radiance_rgb(rays.d)).astype(np.float32)
             # a BSDF sample, weighted against the map's next-event estimation (power heuristic)
-            spectra *= _power_heuristic(rays.extra["pdf"], env.pdf(rays.d).astype(np.float32))[:, None]
+            spectra *= _power_heuristic(rays.state.pdf, env.pdf(rays.d).astype(np.float32))[:, None]
             contrib = rays.weighted(spectra) if rays.lam is None else rays.w * spectra[np.arange(len(rays)), rays.lam]
             self._accumulate(rays, contrib, film)
             return
@@ -817,16 +804,16 @@ class _TileTrace(SpecularWalker):
         nothing added (the general path does it)."""
         if rays.lam is not None or rays.w is not None or self.prepared.textures.uses("emission"):
             return False
-        st = rays.extra
+        st = rays.state
         sel = emits & self._not_covered(rays)
-        if self.mesh_lights is not None and (st["pdf"][sel] > 0).any():
+        if self.mesh_lights is not None and (st.pdf[sel] > 0).any():
             return False  # weighted against the mesh lights' next events: the general path
         idx = np.flatnonzero(sel)
-        nd = np.minimum(st["nd"][idx], 2)
+        nd = np.minimum(st.nd[idx], 2)
         groups = [idx] if len(nd) == 0 or (nd == nd[0]).all() else [idx[nd == k] for k in np.unique(nd)]
         table = self.prepared.materials.emission
         for j in groups:
-            if len(j) and not add_scaled_spectra(self._light_film(min(int(st["nd"][j[0]]), 2)), self._n_pixels,
+            if len(j) and not add_scaled_spectra(self._light_film(min(int(st.nd[j[0]]), 2)), self._n_pixels,
                                                  rays.pix[j], hit.mat[j], 1.0, table):
                 self._emitted(rays.take(j), hit.take(j))
         return True
@@ -841,7 +828,7 @@ class _TileTrace(SpecularWalker):
         if len(rays) == 0:
             return
         e = surface_emission(self.prepared, hit, rays.lam)
-        pdf = rays.extra["pdf"]
+        pdf = rays.state.pdf
         if self.mesh_lights is not None and (pdf > 0).any():
             wgt = _power_heuristic(pdf, self.mesh_lights.pdf(hit.prim, rays.o, hit.p).astype(np.float32))
             e = e * (wgt[:, None] if rays.lam is None else wgt)
@@ -1062,7 +1049,7 @@ def _footprint(rays: Rays, hit: Hit, idx, t, s, wi, dist, aligned: bool = False)
     """(du, dv) of rays[idx]'s pixel footprints at their grating hits (core/sampling/footprint.py), or
     None where the rays carry no differentials. ``aligned``: ``wi`` is already one row per
     entry of ``idx`` (the records' lobes, several per hit)."""
-    rd = None if rays.extra is None else rays.extra.get(footprint.KEY)
+    rd = rays.differentials
     if rd is None:
         return None
     return footprint.grating_footprint(rd[idx], rays.o[idx], rays.d[idx], hit.p[idx], hit.ng[idx], t[idx], s[idx],
