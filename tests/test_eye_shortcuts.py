@@ -59,7 +59,7 @@ def test_lambertian_next_events_equal_the_bsdf_modules_lambert_lobe(weights):
     rays = Rays(o, d, rng.integers(0, 16, b).astype(np.int64), w, lam, np.ones(b, np.int32), rng.random(b),
                 tr._new_state(b))
     hh = prepared.accel.intersect(o, d)
-    hit = tr._hit_info(rays, hh.t, hh.prim, hh.u, hh.v)
+    hit = tr.hit_info(rays, hh.t, hh.prim, hh.u, hh.v)
     film_a, film_b = tr._new_film(), tr._new_film()
     tr._nee_lambert(rays, hit, surface_reflectance(prepared, hit, rays.lam), np.random.default_rng(7), film_a)
     params = tr._surface_params(rays, hit, np.random.default_rng(8))

@@ -102,7 +102,7 @@ def test_smooth_glass_refracts_by_snell_and_reflects_about_the_interpolated_norm
                 np.zeros(b, np.int32), np.zeros(b))
     h = prepared.accel.intersect(rays.o, rays.d)
     assert np.all(h.prim >= 0)
-    hit = walker._hit_info(rays, h.t, h.prim, h.u, h.v)
+    hit = walker.hit_info(rays, h.t, h.prim, h.u, h.v)
     # the expected directions in float64 about the Phong normal, facing the incoming ray
     n = w @ nrm
     n /= np.linalg.norm(n, axis=1, keepdims=True)
@@ -116,7 +116,7 @@ def test_smooth_glass_refracts_by_snell_and_reflects_about_the_interpolated_norm
     assert ok.mean() > 0.5
     refracted = eta * d + (eta * cos_i - np.sqrt(np.maximum(0, 1 - sin2_t)))[:, None] * n
     for u, expected, crossed in ((np.zeros(b), reflected, False), (np.ones(b), refracted, True)):
-        out, transmitted = walker._dielectric(rays, hit, walker.rng, u.astype(np.float32))
+        out, transmitted = walker.dielectric_bounce(rays, hit, walker.rng, u.astype(np.float32))
         np.testing.assert_allclose(out.d[ok], expected[ok], atol=3e-5)
         assert np.all(transmitted[ok] == crossed)
         # offset to the side the ray leaves on

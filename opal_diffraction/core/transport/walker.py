@@ -36,7 +36,10 @@ that would stay on the incident side is refracted about ``ng`` instead. Without 
 
 Subclasses say what happens where a path leaves the scene (``on_miss``) and at every surface it
 hits (``on_hit``: direct light for the eye pass, deposits for the light pass), and whether a
-path goes on (``survives``: bounce limit, Russian roulette).
+path goes on (``survives``: bounce limit, Russian roulette). ``SpecularWalker``'s hooks (the
+methods under "hooks") and its public operations (``hit_info``, ``specular_normal``,
+``tinted_weight``, ``split_white``, ``spawn``, ``rays_cast``) are the only extension point: code
+outside this module uses nothing else of it, so its internals may change freely.
 """
 
 from __future__ import annotations
@@ -287,7 +290,7 @@ class SpecularWalker:
         self.prepared = prepared
         self.n = prepared.grid.n
         self.rng = rng
-        self._rays = 0  # rays cast
+        self.rays_cast = 0  # rays cast (a subclass adds its shadow rays)
         self.microfacet = prepared.microfacet  # (M,) bool, once per prepared scene
         self.any_microfacet = bool(self.microfacet.any())
         self._spawned: list[Rays] = []
@@ -347,7 +350,7 @@ class SpecularWalker:
         self._spawned = []  # mono rays a white population's scatter made (grating orders)
         while len(rays) or len(mono):
             rays, children, child_hits = self._step(rays, None, rng)
-            for r in self._spawned:
+            for r in self._spawned:  # spawn()
                 mono = Rays.concat(mono, r)
             self._spawned = []
             mono, _, _ = self._step(mono, (children, child_hits), rng)
@@ -359,7 +362,7 @@ class SpecularWalker:
         hit = None
         if len(rays):
             h = prepared.accel.intersect(rays.o, rays.d)
-            self._rays += len(rays)
+            self.rays_cast += len(rays)
             missed = h.prim < 0
             if self._hooks_segment:
                 self.on_segment(rays, np.where(missed, np.float32(np.inf), h.t))
@@ -367,7 +370,7 @@ class SpecularWalker:
                 self.on_miss(rays.take(missed))
             keep = ~missed
             rays = rays.take(keep)
-            hit = self._hit_info(rays, h.t[keep], h.prim[keep], h.u[keep], h.v[keep])
+            hit = self.hit_info(rays, h.t[keep], h.prim[keep], h.u[keep], h.v[keep])
         if pending is not None and pending[0] is not None and len(pending[0]):
             if hit is None:
                 rays, hit = pending
@@ -388,7 +391,7 @@ class SpecularWalker:
         out = []
         mirror = (kind == MIRROR) & can_bounce
         if mirror.any():
-            r = self._mirror(rays.take(mirror), hit.take(mirror))
+            r = self.mirror_bounce(rays.take(mirror), hit.take(mirror))
             out.append(self.after_delta(r, np.zeros(len(r), bool)))
         diel = (kind == DIELECTRIC) & can_bounce
         # white rays split at every dispersive glass, smooth or rough (mono children go on)
@@ -405,7 +408,7 @@ class SpecularWalker:
                 diel = diel & ~disp
             if diel.any():
                 r = rays.take(diel)
-                r, transmitted = self._dielectric(r, hit.take(diel), rng, self.choice_numbers(r, rng))
+                r, transmitted = self.dielectric_bounce(r, hit.take(diel), rng, self.choice_numbers(r, rng))
                 out.append(self.after_delta(r, transmitted))
         scattered = self.scatter(rays, hit, kind, can_bounce, rng)
         if scattered is not None and len(scattered):
@@ -415,7 +418,7 @@ class SpecularWalker:
             if (scattered.lam is None) == (rays.lam is None):
                 out.append(scattered)
             else:  # a white population's mono rays: traced with the mono population
-                self._spawned.append(scattered)
+                self.spawn(scattered)
         out = [r for r in out if len(r)]
         if not out:
             return rays.take(np.zeros(len(rays), bool)), children, child_hits
@@ -424,7 +427,10 @@ class SpecularWalker:
             nxt = Rays.concat(nxt, r)
         return nxt, children, child_hits
 
-    def _hit_info(self, rays: Rays, t, prim, bu, bv) -> Hit:
+    # ----------------------------------------------------------------- operations for subclasses and helpers
+    def hit_info(self, rays: Rays, t, prim, bu, bv) -> Hit:
+        """The hits (Hit) of ``rays`` at distances ``t`` on triangles ``prim`` with barycentrics
+        (bu, bv): point, normals facing the ray, material, offset."""
         prepared = self.prepared
         p = rays.o + t[:, None] * rays.d
         ng0 = np.take(prepared.tri_normal, prim, axis=0)  # row gathers: np.take is several times faster
@@ -444,7 +450,7 @@ class SpecularWalker:
         """table[rows] (B, n) for white rays, table[rows, lam] (B,) for mono rays."""
         return table[rows] if lam is None else table[rows, lam]
 
-    def _tinted(self, rays: Rays, hit: Hit):
+    def tinted_weight(self, rays: Rays, hit: Hit):
         """The weight after the surface's tint (skipped for clear glass and perfect mirrors)."""
         m = self.prepared.materials
         if m.clear[hit.mat].all():
@@ -453,24 +459,28 @@ class SpecularWalker:
             return rays.w * m.reflectance[hit.mat, :1]
         return rays.weighted(self._per_ray(m.reflectance, hit.mat, rays.lam))
 
-    def _specular_normal(self, rays: Rays, hit: Hit) -> np.ndarray:
+    def specular_normal(self, rays: Rays, hit: Hit) -> np.ndarray:
         """The normal specular reflection and refraction use: ng when flat, else ns made valid."""
         if self.prepared.corner_normals is None:
             return hit.ng
         return valid_specular_normal(-rays.d, hit.ng, hit.ns)
 
-    def _mirror(self, rays: Rays, hit: Hit) -> Rays:
-        ns = self._specular_normal(rays, hit)
+    def mirror_bounce(self, rays: Rays, hit: Hit) -> Rays:
+        """Rays reflected by the smooth mirrors they hit: about the specular normal, weight times
+        the tint, differentials reflected (a hook: a subclass adds a grating layer's share)."""
+        ns = self.specular_normal(rays, hit)
         d = reflect(rays.d, ns)
         o = hit.p + hit.eps[:, None] * hit.ng
-        out = rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit))
+        out = rays.moved(o.astype(np.float32), d.astype(np.float32), self.tinted_weight(rays, hit))
         if out.differentials is not None:  # ray differentials (core/sampling/footprint.py)
             out.state.rd = footprint.reflect_differentials(rays.differentials, rays.o, rays.d, hit.p, ns)
         return out
 
-    def _dielectric(self, rays: Rays, hit: Hit, rng, u=None) -> tuple[Rays, np.ndarray]:
-        """Fresnel-sampled reflection or refraction: (the rays going on, refracted (B,) bool);
-        ``u`` (B,): the choice's numbers (reflect where u < F), None: drawn from ``rng``.
+    def dielectric_bounce(self, rays: Rays, hit: Hit, rng, u=None) -> tuple[Rays, np.ndarray]:
+        """Fresnel-sampled reflection or refraction at smooth glass: (the rays going on, refracted
+        (B,) bool); ``u`` (B,): the choice's numbers (reflect where u < F), None: drawn from
+        ``rng``. A hook: a subclass may split both branches (core/integrators/eye/fresnel_split.py)
+        or add a grating layer, calling this for the plain choice.
 
         Both directions are a d + b n about the specular normal n (the mirror: a = 1, b = 2 cos;
         Snell's law: a = eta, b = eta cos - cos_t; under total internal reflection fr = 1, so the
@@ -480,7 +490,7 @@ class SpecularWalker:
         # constant over the grid for white rays
         n = np.take(ior[:, 0], hit.mat) if rays.lam is None else ior[hit.mat, rays.lam]
         eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
-        ns = self._specular_normal(rays, hit)
+        ns = self.specular_normal(rays, hit)
         cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
         cos = np.asarray(cos_s, np.float32)
         fr = fresnel_dielectric(cos, eta)
@@ -499,12 +509,18 @@ class SpecularWalker:
         # offset to the side the new direction leaves on (a refraction about ng can be a TIR)
         side = np.where(dn > 0, np.float32(1), np.float32(-1))
         o = hit.p + (hit.eps * side)[:, None] * hit.ng
-        out = rays.moved(o.astype(np.float32, copy=False), d.astype(np.float32, copy=False), self._tinted(rays, hit))
+        out = rays.moved(o.astype(np.float32, copy=False), d.astype(np.float32, copy=False),
+                         self.tinted_weight(rays, hit))
         if out.differentials is not None:  # ray differentials (core/sampling/footprint.py)
             out.state.rd = footprint.refract_differentials(rays.differentials, rays.o, rays.d, hit.p, ns, d, eta)
         return out, side < 0
 
-    def _split(self, rays: Rays, hit: Hit, rng):
+    def spawn(self, mono: Rays) -> None:
+        """Mono rays made from a white population during its step (a dispersive refraction, a
+        grating's orders): the walk traces them with the mono population from its next step."""
+        self._spawned.append(mono)
+
+    def split_white(self, rays: Rays, hit: Hit, rng):
         """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit.
 
         SAMPLE draws ``wavelengths.BRANCHES`` wavelengths per ray from the ray's stratified number,

@@ -268,7 +268,7 @@ class _TileTrace(SpecularWalker):
             total = total + part
         get = lambda k: self._parts[k].reshape(shape) if k in self._parts else None  # noqa: E731
         return TileResult(total.reshape(shape), get("background"), get("indirect"), get("diffraction"),
-                          get("caustics"), self._rays, self._albedo, self._normal)
+                          get("caustics"), self.rays_cast, self._albedo, self._normal)
 
     # ----------------------------------------------------------------- hooks
     def on_segment(self, rays: Rays, t: np.ndarray) -> None:
@@ -549,8 +549,8 @@ class _TileTrace(SpecularWalker):
             return None  # a hit on_hit did not shade as diffuse
         return albedo[pos]
 
-    def _mirror(self, rays: Rays, hit: Hit) -> Rays:
-        out = super()._mirror(rays, hit)  # a grating's zeroth order, or the base's share (section 3.3)
+    def mirror_bounce(self, rays: Rays, hit: Hit) -> Rays:
+        out = super().mirror_bounce(rays, hit)  # a grating's zeroth order, or the base's share (section 3.3)
         return grating_layering.continue_specular(self.prepared, out, hit, None) if self.layers else out
 
     def choice_numbers(self, rays: Rays, rng) -> np.ndarray:
@@ -560,11 +560,11 @@ class _TileTrace(SpecularWalker):
         st = rays.state
         return bounce_choice(st.pid, st.sid, rays.depth, self.sampler_seed, self.rng)
 
-    def _dielectric(self, rays: Rays, hit: Hit, rng, u=None):
+    def dielectric_bounce(self, rays: Rays, hit: Hit, rng, u=None):
         if fresnel_split.ENABLED and not self.layers and self.escapes is None:
             # camera rays take both branches (core/integrators/eye/fresnel_split.py, docs/physics.md section 4.12)
-            return fresnel_split.split_first_dielectric(self, rays, hit, rng, u, super()._dielectric)
-        out, transmitted = super()._dielectric(rays, hit, rng, u)
+            return fresnel_split.split_first_dielectric(self, rays, hit, rng, u, super().dielectric_bounce)
+        out, transmitted = super().dielectric_bounce(rays, hit, rng, u)
         if self.layers:
             out = grating_layering.continue_specular(self.prepared, out, hit, transmitted)
         return out, transmitted
@@ -639,7 +639,7 @@ class _TileTrace(SpecularWalker):
         d = np.asarray(dist, np.float32)[live]
         tmax = np.where(np.isinf(d), np.inf, d - 2 * eps - np.asarray(pad if np.ndim(pad) == 0 else pad[live]))
         occ = self.prepared.accel.occluded(o, np.ascontiguousarray(wi[live], np.float32), tmax.astype(np.float32))
-        self._rays += len(occ)
+        self.rays_cast += len(occ)
         return live[~occ]
 
     def light_samples(self, hit: Hit, rng, analytic: bool = True) -> list:
@@ -920,7 +920,7 @@ class _TileTrace(SpecularWalker):
         occ = prepared.accel.occluded(np.concatenate(origins).astype(np.float32),
                                  np.concatenate(dirs).astype(np.float32),
                                  np.concatenate(tmax).astype(np.float32))
-        self._rays += len(occ)
+        self.rays_cast += len(occ)
         factors.reshape(-1)[np.concatenate(idx)[occ]] = 0.0
         if (rays.lam is None and rays.w is None and not prepared.textures.uses("color")
                 and self._accumulate_factored(rays.pix, hit.mat, factors, film)):
@@ -966,7 +966,7 @@ class _TileTrace(SpecularWalker):
                 seen = world_through_grating(prepared, r, h, int(m), t, s, period, rng)
                 if seen is not None:
                     sub, contrib, casts = seen
-                    self._rays += casts
+                    self.rays_cast += casts
                     self._accumulate(sub, contrib, self._diffraction)
             for li in range(len(lights)):  # loop over lights, not rays
                 wi, dist, gfac = sample_light(lights, li, h.p, rng)
@@ -981,7 +981,7 @@ class _TileTrace(SpecularWalker):
                 o = h.p[idx] + (side * eps)[:, None] * h.ng[idx]
                 tmax = np.where(np.isinf(dist[idx]), np.inf, dist[idx] - 2 * eps).astype(np.float32)
                 occ = prepared.accel.occluded(o.astype(np.float32), np.ascontiguousarray(wi[idx], np.float32), tmax)
-                self._rays += len(occ)
+                self.rays_cast += len(occ)
                 idx = idx[~occ]
                 if idx.size == 0:
                     continue

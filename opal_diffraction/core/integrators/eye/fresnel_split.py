@@ -43,7 +43,7 @@ def split_first_dielectric(walker, rays: Rays, hit: Hit, rng, u, dielectric):
     ior = walker.prepared.materials.ior
     n = np.take(ior[:, 0], hf.mat) if rf.lam is None else ior[hf.mat, rf.lam]
     eta = np.where(hf.front, 1.0 / n, n).astype(np.float32)
-    ns = walker._specular_normal(rf, hf)
+    ns = walker.specular_normal(rf, hf)
     cos = hf.cos_i if ns is hf.ng else -np.einsum("ij,ij->i", rf.d, ns)
     fr = np.asarray(fresnel_dielectric(cos, eta), np.float32)
     # reflected children where F > 0, refracted ones where F < 1 (not under total internal reflection)

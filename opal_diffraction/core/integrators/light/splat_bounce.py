@@ -154,7 +154,7 @@ def trace_bounces(prepared, log: BounceLog, batch, rng: np.random.Generator) -> 
         white = Rays(white.o, white.d, white.pix, np.zeros((0, prepared.grid.n), np.float32), None, white.depth,
                      white.u_lam)
     tr.walk(white, mono)
-    return tr._rays
+    return tr.rays_cast
 
 
 def _concat(rs):
