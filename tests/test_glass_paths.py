@@ -40,7 +40,7 @@ def test_sobol_owen_x_is_the_2d_samplers_first_coordinate(seed):
 
 
 def test_bounce_choice_is_the_vertex_samplers_bounce_number():
-    """The same number PixelSampler gives the vertex's SLOT_BOUNCE decision (eye_pass._numbers)."""
+    """The same number PixelSampler gives the vertex's SLOT_BOUNCE decision (eye_pass._TileTrace.numbers)."""
     rng = np.random.default_rng(2)
     b = 3000
     extra = {"pid": rng.integers(0, 4096, b).astype(np.uint32), "sid": rng.integers(0, 256, b).astype(np.uint32)}
@@ -174,7 +174,7 @@ def test_add_scaled_spectra_is_the_per_ray_sum():
 def test_a_glass_ball_before_emitters_renders_the_same_with_and_without_the_factored_emission():
     """The regrouped film add is the same sum: one render with the factored emission and one
     with it switched off (the per-ray spectra), same seed, agree to float rounding."""
-    from opal_diffraction.core.integrators.eye import eye_pass
+    from opal_diffraction.core.integrators.eye import emission
     from opal_diffraction.core.render.frame import render
 
     s = Scene(materials=Materials.from_list([
@@ -187,15 +187,15 @@ def test_a_glass_ball_before_emitters_renders_the_same_with_and_without_the_fact
     s.add_mesh(*primitives.quad((0, 2, -1.5), (6, 0, 0), (0, 0, 3)), 1)  # two emitters behind the ball
     s.add_mesh(*primitives.quad((0, 2, 1.5), (6, 0, 0), (0, 0, 3)), 2)
     settings = RenderSettings(samples=8, seed=3)
-    orig = eye_pass._TileTrace._emitted_unit
+    orig = emission.surface_emission_unit
     used = []
     try:
-        eye_pass._TileTrace._emitted_unit = lambda self, rays, hit, emits: used.append(orig(self, rays, hit, emits)) or used[-1]
+        emission.surface_emission_unit = lambda *args: used.append(orig(*args)) or used[-1]
         a = render(s, settings)
-        eye_pass._TileTrace._emitted_unit = lambda self, rays, hit, emits: False
+        emission.surface_emission_unit = lambda *args: False
         b = render(s, settings)
     finally:
-        eye_pass._TileTrace._emitted_unit = orig
+        emission.surface_emission_unit = orig
     ia, ib = a.rgb, b.rgb
     assert any(used)  # the factored add ran
     assert ia.max() > 0.5

@@ -310,8 +310,10 @@ class SpecularWalker:
     def on_miss(self, rays: Rays) -> None:
         """Rays that left the scene."""
 
-    def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
-        """Every surface hit, before the specular bounce (kind: material kind per ray)."""
+    def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng):
+        """Every surface hit, before the specular bounce (kind: material kind per ray). What it
+        returns (None by default) is handed to ``scatter`` of the same hits as ``shaded``: the
+        shading it computed that the bounce reuses, passed explicitly."""
 
     def survives(self, rays: Rays, rng) -> np.ndarray:
         """Which rays may bounce again (default: the bounce limit)."""
@@ -322,10 +324,12 @@ class SpecularWalker:
         before they are traced on: a subclass counts bounces by kind and drops those over a limit."""
         return rays
 
-    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
+    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng,
+                shaded=None) -> Rays | None:
         """Rays continuing from the non-specular surfaces (diffuse, rough): None by default (the
-        light pass ends its paths there; the eye pass samples a BSDF). Mono rays returned for a
-        white population (a grating's orders) join the mono population."""
+        light pass ends its paths there; the eye pass samples a BSDF). ``shaded``: what
+        ``on_hit`` returned for these hits. Mono rays returned for a white population (a
+        grating's orders) join the mono population."""
         return None
 
     def choice_numbers(self, rays: Rays, rng) -> np.ndarray:
@@ -384,7 +388,7 @@ class SpecularWalker:
         if micro is not None:  # rough mirrors and glass leave the delta code; diffuse bases keep their kind
             kind = np.where(micro & (kind != DIFFUSE_KIND), MICROFACET, kind)
         kind = self.classify(rays, hit, kind, rng)
-        self.on_hit(rays, hit, kind, rng)
+        shaded = self.on_hit(rays, hit, kind, rng)
 
         can_bounce = self.survives(rays, rng)
         children = child_hits = None
@@ -410,7 +414,7 @@ class SpecularWalker:
                 r = rays.take(diel)
                 r, transmitted = self.dielectric_bounce(r, hit.take(diel), rng, self.choice_numbers(r, rng))
                 out.append(self.after_delta(r, transmitted))
-        scattered = self.scatter(rays, hit, kind, can_bounce, rng)
+        scattered = self.scatter(rays, hit, kind, can_bounce, rng, shaded)
         if scattered is not None and len(scattered):
             if scattered.differentials is not None:
                 # a diffuse or rough bounce: no footprint any more (a point sample)

@@ -253,7 +253,7 @@ class _LightTrace(SpecularWalker):
             return kind
         return np.where(diffracting(self.prepared, hit, kind, rng), GRATING, kind)
 
-    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
+    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng, shaded=None) -> Rays | None:
         """The orders of the gratings' paths (mono rays; section 3.10): diffracted paths are
         specular ones, so they deposit caustics where they land on diffuse surfaces."""
         if rays.basis is not None and (self.bragg is not None or self.prepared.gratings.any):
