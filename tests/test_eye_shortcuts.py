@@ -68,7 +68,8 @@ def test_lambertian_next_events_equal_the_bsdf_modules_lambert_lobe(weights):
     next_event.lambert_next_events(c, out, rays, hit, np.random.default_rng(7), film_a,
                                    surface_reflectance(prepared, hit, rays.lam))
     params = surface_params(prepared, c.mixed_layers, rays, hit, np.random.default_rng(8))
-    next_event.microfacet_next_events(c, out, rays, hit, params, np.random.default_rng(7), film_b, analytic=False)
+    next_event.next_events(c, out, rays, hit, next_event.MicrofacetLobe(c, rays, hit, params), np.random.default_rng(7),
+                           film_b, analytic=False)
     assert film_b.sum() > 0
     np.testing.assert_allclose(film_a, film_b, rtol=2e-5, atol=1e-6 * film_b.max())
 

@@ -40,7 +40,7 @@ from . import emission, fresnel_split
 from .constants import EyeConstants, eye_constants
 from .continuation import count_delta, lambert_bounce, microfacet_bounce, russian_roulette
 from .grating_hits import grating_light
-from .next_event import bragg_next_events, caustic_light, lambert_next_events, microfacet_next_events
+from .next_event import BraggLobeEvents, MicrofacetLobe, caustic_light, lambert_next_events, next_events
 from .surface_interaction import HitShading, bend_normals, reflects, surface_params
 from .tile_output import TileOutput, TileResult
 
@@ -292,10 +292,11 @@ class _TileTrace(SpecularWalker):
         # these planes is the light pass's (it scatters off BRAGG planes, scatter_light)
         nee = r.state.caustic == Caustic.NONE if c.caustics_cover_lights else np.ones(len(r), bool)
         if nee.all():
-            bragg_next_events(c, self.out, r, h, lobe, rng)
+            next_events(c, self.out, r, h, BraggLobeEvents(c, r, h, lobe), rng)
         elif nee.any():
             k = np.flatnonzero(nee)
-            bragg_next_events(c, self.out, r.take(nee), h.take(nee), lobe.take(k), rng)
+            rn, hn = r.take(nee), h.take(nee)
+            next_events(c, self.out, rn, hn, BraggLobeEvents(c, rn, hn, lobe.take(k)), rng)
         return bragg.body_share(rays, r, h, sel, lobe)
 
     def _shade_microfacet(self, rays: Rays, hit: Hit, params, rng):
@@ -310,8 +311,8 @@ class _TileTrace(SpecularWalker):
             if sel.any():
                 r, h = rays.take(sel), hit.take(sel)
                 p = params.take(np.flatnonzero(sel)) if not sel.all() else params
-                microfacet_next_events(c, out, r, h, p, self.numbers(r, SLOT_LIGHT),
-                                       out.film if direct else out.indirect)
+                next_events(c, out, r, h, MicrofacetLobe(c, r, h, p), self.numbers(r, SLOT_LIGHT),
+                            out.film if direct else out.indirect)
         if c.caustic_map is not None:
             base = self.prepared.materials.kind[hit.mat] == DIFFUSE
             if base.any():

@@ -22,9 +22,8 @@ from ...materials.surface import surface_reflectance
 from ...transport.walker import Hit, Rays, light_spectrum_of
 from .surface_interaction import bump
 
-__all__ = ["power_heuristic", "power_heuristic_f64", "light_samples", "visible", "lambert_next_events",
-           "bragg_next_events",
-           "microfacet_next_events", "direct_light", "caustic_light"]
+__all__ = ["power_heuristic", "power_heuristic_f64", "light_samples", "visible", "next_events", "MicrofacetLobe",
+           "LambertLobe", "BraggLobeEvents", "lambert_next_events", "direct_light", "caustic_light"]
 
 
 def power_heuristic(p_this: np.ndarray, p_other: np.ndarray, light_first: bool = False) -> np.ndarray:
@@ -40,6 +39,15 @@ def power_heuristic(p_this: np.ndarray, p_other: np.ndarray, light_first: bool =
     if not light_first:
         w = np.where(a > 0, w, np.float32(1.0))
     return np.where(np.isfinite(w), w, np.float32(1.0)).astype(np.float32)
+
+
+def power_heuristic_f64(p_light, p_lobe) -> np.ndarray:
+    """The power heuristic of a light sample against a lobe's sampling, in float64 (the opal
+    lobe's pdfs are float64; ``power_heuristic`` with ``light_first`` in float32)."""
+    a, b = np.asarray(p_light, np.float64), np.asarray(p_lobe, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = np.where(a * a + b * b > 0, a * a / (a * a + b * b), 1.0)
+    return np.where(np.isfinite(w), w, 1.0).astype(np.float32)
 
 
 class _RowsOf:
@@ -98,119 +106,135 @@ def visible(prepared, out, hit: Hit, wi, dist, pad, live, side=None) -> np.ndarr
     return live[~occ]
 
 
-def microfacet_next_events(c, out, rays: Rays, hit: Hit, params, rng, film, analytic: bool = True):
-    """One sample of each light (``analytic``), of the emissive meshes (core/lights/mesh_lights.py:
-    power-proportional points) and of the world map (its luminance distribution), each by
-    shadow ray and weighted against BSDF sampling by the power heuristic; the BSDF is
-    core/materials/bsdf.py's (``params``), with Cycles' bump-terminator term on Lambertian lobes."""
+def next_events(c, out, rays: Rays, hit: Hit, lobe, rng, film=None, analytic: bool = True) -> None:
+    """Next-event estimation at ``hit`` for the lobe ``lobe`` (a ``MicrofacetLobe``,
+    ``LambertLobe`` or ``BraggLobeEvents``: its evaluate and pdf towards each light sample, the
+    MIS weight against its own sampling, its contribution): one sample of each light
+    (``analytic``), of the emissive meshes and of the world map (``light_samples``, numbers from
+    ``rng``), each kept where the lobe reflects it and its shadow ray reaches the light, added to
+    ``film``, or (None) to the film part of each path's vertex count + 1."""
     prepared = c.prepared
-    wo = -rays.d
-    samples = light_samples(prepared, hit, rng, analytic)
-    lambert = params.lobe == bsdf.LAMBERT
-    for wi, dist, g, spectrum, p_light, pad in samples:
-        f_cos, p_bsdf = bsdf.evaluate(params, wo, wi, hit.ns, hit.ng)
-        scale = np.asarray(g, np.float32)
-        if c.normal_maps and lambert.any():
-            scale = scale * np.where(lambert, bump(prepared, c.normal_maps, hit, wi), np.float32(1.0))
-        if p_light is not None:
-            scale = scale * power_heuristic(p_light, p_bsdf, light_first=True)
-        live = np.flatnonzero((scale > 0) & (f_cos.max(axis=1) > 0))
+    nd = None if film is not None else rays.state.nd
+    for wi, dist, g, spectrum, p_light, pad in light_samples(prepared, hit, rng, analytic):
+        value, scale, live = lobe.weigh(wi, g, p_light)
         if live.size == 0:
             continue
-        side = np.where(np.einsum("ij,ij->i", wi[live], hit.ng[live]) > 0, 1.0, -1.0).astype(np.float32)
-        live = visible(prepared, out, hit, wi, dist, pad, live, side)
+        live = visible(prepared, out, hit, wi, dist, pad, live, lobe.shadow_side(wi, live))
         if live.size == 0:
             continue
         r = rays.take(live)
         spec = light_spectrum_of(spectrum, live, r)
+        contrib = lobe.contribution(r, live, value, scale, spec)
+        if film is not None:
+            out.accumulate(r, contrib, film)
+            continue
+        k_nd = nd[live]
+        for k in np.unique(k_nd):  # the path's vertex counts (0, 1, 2+)
+            part = k_nd == k
+            out.accumulate(r.take(part), contrib[part], out.light_film(min(int(k) + 1, 2)))
+
+
+class MicrofacetLobe:
+    """core/materials/bsdf.py's lobes (``params``) at ``hit`` for ``next_events``, with Cycles'
+    bump-terminator term on Lambertian lobes; shadow rays leave on the light's side (a light
+    behind a rough glass is seen through it)."""
+
+    def __init__(self, c, rays: Rays, hit: Hit, params):
+        self.prepared, self.normal_maps, self.hit, self.params = c.prepared, c.normal_maps, hit, params
+        self.wo = -rays.d
+        self.lambert = params.lobe == bsdf.LAMBERT
+
+    def weigh(self, wi, g, p_light):
+        """(f cos (B, n') of the lobe, scale (B,): the sample's weight times the MIS weight and
+        the bump term, the entries that reach the film) for light samples ``wi``."""
+        hit = self.hit
+        f_cos, p_bsdf = bsdf.evaluate(self.params, self.wo, wi, hit.ns, hit.ng)
+        scale = np.asarray(g, np.float32)
+        if self.normal_maps and self.lambert.any():
+            scale = scale * np.where(self.lambert, bump(self.prepared, self.normal_maps, hit, wi), np.float32(1.0))
+        if p_light is not None:
+            scale = scale * power_heuristic(p_light, p_bsdf, light_first=True)
+        return f_cos, scale, np.flatnonzero((scale > 0) & (f_cos.max(axis=1) > 0))
+
+    def shadow_side(self, wi, live):
+        return np.where(np.einsum("ij,ij->i", wi[live], self.hit.ng[live]) > 0, 1.0, -1.0).astype(np.float32)
+
+    @staticmethod
+    def contribution(r: Rays, live, f_cos, scale, spec):
         val = f_cos[live] * scale[live, None]
-        contrib = r.weighted(val * spec) if r.lam is None else r.w * val[:, 0] * spec
-        out.accumulate(r, contrib, film)
+        return r.weighted(val * spec) if r.lam is None else r.w * val[:, 0] * spec
+
+
+class LambertLobe:
+    """The Lambertian lobe of base colours ``albedo`` at ``hit`` for ``next_events``, written out:
+    f cos = albedo / pi * cos(wi, ns) and pdf = cos / pi where wo and wi are above ns and wi above
+    ng (bsdf.evaluate's LAMBERT, without its frames and parameter tables), times Cycles'
+    bump-terminator term on normal-mapped hits."""
+
+    def __init__(self, c, rays: Rays, hit: Hit, albedo):
+        self.prepared, self.normal_maps, self.hit, self.albedo = c.prepared, c.normal_maps, hit, albedo
+        self.wo_up = np.einsum("ij,ij->i", rays.d, hit.ns) < 0  # (on_hit passes lit surfaces only: albedo > 0)
+
+    def weigh(self, wi, g, p_light):
+        """(the base colours, scale (B,) = g cos / pi times the bump term and the MIS weight, the
+        entries that reach the film) for light samples ``wi`` (never delta: meshes, the world)."""
+        hit = self.hit
+        cos_s = np.einsum("ij,ij->i", wi, hit.ns)
+        ok = self.wo_up & (cos_s > 0) & (np.einsum("ij,ij->i", wi, hit.ng) > 0)
+        p_bsdf = np.where(ok, cos_s * np.float32(1 / np.pi), np.float32(0.0)).astype(np.float32)
+        scale = np.asarray(g, np.float32) * p_bsdf  # g cos / pi
+        if self.normal_maps:
+            scale = scale * bump(self.prepared, self.normal_maps, hit, wi)
+        scale = scale * power_heuristic(p_light, p_bsdf, light_first=True)
+        return self.albedo, scale, np.flatnonzero(scale > 0)
+
+    @staticmethod
+    def shadow_side(wi, live):
+        return None  # above the surface (weigh keeps wi . ng > 0)
+
+    @staticmethod
+    def contribution(r: Rays, live, albedo, scale, spec):
+        if r.lam is None:
+            return r.weighted(albedo[live] * scale[live, None] * spec)
+        return r.w * albedo[live] * scale[live] * spec
+
+
+class BraggLobeEvents:
+    """The opal's Bragg lobe (core/materials/bragg_bsdf.py ``BraggLobe``) at ``hit`` for
+    ``next_events``, in float64 as the lobe computes (power heuristic against the lobe's
+    sampling where the light can also be found by it)."""
+
+    def __init__(self, c, rays: Rays, hit: Hit, lobe):
+        self.lobe, self.edges, self.lam = lobe, c.bragg.edges, rays.lam
+        self.wo = -np.asarray(rays.d, np.float64)
+        self.ns = np.asarray(hit.ns, np.float64)
+
+    def weigh(self, wi, g, p_light):
+        f_cos, p_lobe = self.lobe.evaluate(self.wo, wi, self.ns, self.edges, self.lam)
+        scale = np.asarray(g, np.float32)
+        if p_light is not None:
+            scale = scale * power_heuristic_f64(p_light, p_lobe)
+        peak = f_cos.max(axis=1) if self.lam is None else f_cos
+        return f_cos, scale, np.flatnonzero((scale > 0) & (peak > 0))
+
+    @staticmethod
+    def shadow_side(wi, live):
+        return None  # from outside the stone, offset along ng
+
+    contribution = staticmethod(LambertLobe.contribution)  # f cos (B, n) or (B,) in the base colours' place
 
 
 def lambert_next_events(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
     """Next-event estimation at Lambertian vertices: every light (with the factored fast path
-    of ``direct_light``), then the emissive meshes and the world map (``_nee_lambert``).
+    of ``direct_light``), then the emissive meshes and the world map (``next_events`` with the
+    ``LambertLobe``).
     ``albedo``: the hits' base colours (surface_reflectance), computed here if None; ``rng``:
     the vertices' SLOT_LIGHT numbers."""
     direct_light(c, out, rays, hit, rng, film, albedo)
     if c.mesh_lights is not None or c.prepared.environment is not None:
         if albedo is None:
             albedo = surface_reflectance(c.prepared, hit, rays.lam)
-        _nee_lambert(c, out, rays, hit, albedo, rng, film)
-
-
-def _nee_lambert(c, out, rays: Rays, hit: Hit, albedo, rng, film):
-    """``microfacet_next_events``'s emissive-mesh and world-map samples at Lambertian vertices,
-    with the lobe written out: f cos = albedo / pi * cos(wi, ns) and pdf = cos / pi where wo
-    and wi are above ns and wi above ng (bsdf.evaluate's LAMBERT, without its frames and
-    parameter tables), times Cycles' bump-terminator term on normal-mapped hits."""
-    prepared = c.prepared
-    wo_up = np.einsum("ij,ij->i", rays.d, hit.ns) < 0  # (on_hit passes lit surfaces only: albedo > 0)
-    for wi, dist, g, spectrum, p_light, pad in light_samples(prepared, hit, rng, analytic=False):
-        cos_s = np.einsum("ij,ij->i", wi, hit.ns)
-        ok = wo_up & (cos_s > 0) & (np.einsum("ij,ij->i", wi, hit.ng) > 0)
-        p_bsdf = np.where(ok, cos_s * np.float32(1 / np.pi), np.float32(0.0)).astype(np.float32)
-        scale = np.asarray(g, np.float32) * p_bsdf  # g cos / pi
-        if c.normal_maps:
-            scale = scale * bump(prepared, c.normal_maps, hit, wi)
-        scale = scale * power_heuristic(p_light, p_bsdf, light_first=True)
-        live = np.flatnonzero(scale > 0)
-        if live.size == 0:
-            continue
-        live = visible(prepared, out, hit, wi, dist, pad, live)
-        if live.size == 0:
-            continue
-        r = rays.take(live)
-        spec = light_spectrum_of(spectrum, live, r)
-        if r.lam is None:
-            contrib = r.weighted(albedo[live] * scale[live, None] * spec)
-        else:
-            contrib = r.w * albedo[live] * scale[live] * spec
-        out.accumulate(r, contrib, film)
-
-
-def power_heuristic_f64(p_light, p_lobe) -> np.ndarray:
-    """The power heuristic of a light sample against a lobe's sampling, in float64 (the opal
-    lobe's pdfs are float64; ``power_heuristic`` with ``light_first`` in float32)."""
-    a, b = np.asarray(p_light, np.float64), np.asarray(p_lobe, np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        w = np.where(a * a + b * b > 0, a * a / (a * a + b * b), 1.0)
-    return np.where(np.isfinite(w), w, 1.0).astype(np.float32)
-
-
-def bragg_next_events(c, out, rays: Rays, hit: Hit, lobe, rng) -> None:
-    """One sample of every light, of the emissive meshes and of the world map at opal hits, each
-    by shadow ray, the Bragg ``lobe`` (core/materials/bragg_bsdf.py) evaluated there (power
-    heuristic against the lobe's sampling where the light can also be found by it); into the
-    film part of the path's vertex count + 1."""
-    edges = c.bragg.edges
-    wo = -np.asarray(rays.d, np.float64)
-    ns = np.asarray(hit.ns, np.float64)
-    samples = light_samples(c.prepared, hit, rng)  # one sample per emitter
-    nd = rays.state.nd
-    for wi, dist, g, spectrum, p_light, pad in samples:
-        f_cos, p_lobe = lobe.evaluate(wo, wi, ns, edges, rays.lam)
-        scale = np.asarray(g, np.float32)
-        if p_light is not None:
-            scale = scale * power_heuristic_f64(p_light, p_lobe)
-        peak = f_cos.max(axis=1) if rays.lam is None else f_cos
-        live = np.flatnonzero((scale > 0) & (peak > 0))
-        if live.size == 0:
-            continue
-        live = visible(c.prepared, out, hit, wi, dist, pad, live)
-        if live.size == 0:
-            continue
-        r = rays.take(live)
-        spec = light_spectrum_of(spectrum, live, r)
-        if r.lam is None:
-            contrib = r.weighted(f_cos[live] * scale[live, None] * spec)
-        else:
-            contrib = r.w * f_cos[live] * scale[live] * spec
-        k_nd = nd[live]
-        for k in np.unique(k_nd):  # the path's vertex counts (0, 1, 2+)
-            part = k_nd == k
-            out.accumulate(r.take(part), contrib[part], out.light_film(min(int(k) + 1, 2)))
+        next_events(c, out, rays, hit, LambertLobe(c, rays, hit, albedo), rng, film, analytic=False)
 
 
 def direct_light(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
