@@ -1,6 +1,6 @@
 """The eye pass's shortcuts that must leave every estimate unchanged (docs/physics.md section
-4.7): the Lambertian next events written out (``_nee_lambert``) against the same samples
-through core/materials/bsdf.py's LAMBERT lobe (``_nee_microfacet``), and black (emission-only) surfaces,
+4.7): the Lambertian next events written out (``next_event.LambertLobe``) against the same samples
+through core/materials/bsdf.py's LAMBERT lobe (``next_event.MicrofacetLobe``), and black (emission-only) surfaces,
 which receive no caustics, so a scene whose only diffuse surfaces are black needs no light pass."""
 
 from __future__ import annotations
