@@ -8,7 +8,8 @@ sampler numbers, and its ray differentials (core/sampling/footprint.py). ``PathS
 them as structure-of-arrays, one row per ray, carried in ``Rays.state``: gathered by
 ``Rays.take``, joined by ``Rays.concat`` and inherited by ``Rays.moved`` (a shallow copy: a
 stage that changes a field assigns a new array to it, so the parent's rows stay as they were).
-The light pass's rays carry none (``Rays.state`` None).
+The light pass's rays carry none (``Rays.state`` None). A subclass with more array fields
+(benchmarks/sphere_noise.py tags paths by their first event) is carried the same way.
 """
 
 from __future__ import annotations
@@ -65,7 +66,7 @@ class PathState:
 
     def take(self, idx: np.ndarray) -> "PathState":
         """The rows at indices ``idx``."""
-        return PathState(*(None if v is None else v.take(idx, axis=0) for v in self._arrays()))
+        return type(self)(*(None if v is None else v.take(idx, axis=0) for v in self._arrays()))
 
     def copy(self) -> "PathState":
         """A new state holding the same arrays (fields reassigned on it leave this one alone)."""
@@ -75,7 +76,7 @@ class PathState:
     def concat(a: "PathState", b: "PathState") -> "PathState":
         if (a.rd is None) != (b.rd is None):
             raise ValueError("cannot join ray populations that carry different state")
-        return PathState(*(None if x is None else np.concatenate([x, y]) for x, y in zip(a._arrays(), b._arrays())))
+        return type(a)(*(None if x is None else np.concatenate([x, y]) for x, y in zip(a._arrays(), b._arrays())))
 
     def _arrays(self) -> tuple:
         return tuple(getattr(self, f.name) for f in fields(self))
