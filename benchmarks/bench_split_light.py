@@ -1,7 +1,7 @@
 """Benchmark (not a test): the light pass's SPLIT dispersion in chunks, memory and time (issue 14).
 
 With ``dispersion_sampling = 'SPLIT'`` a white light path becomes one mono path per wavelength
-sample (n = 61) at the first dispersive glass it meets (core/transport/walker.py ``_split``): a batch
+sample (n = 61) at the first dispersive glass it meets (core/transport/walker.py ``SpecularWalker.split_white``): a batch
 of 2^15 paths (light_pass.BATCH_PATHS) becomes up to 2 M mono rays, each with its hit and path
 state. ``light_pass.trace_batch`` now walks a batch's white paths in pieces of
 ``wavelengths.SPLIT_CHUNK_RAYS / n`` paths (the eye pass's bound, docs/physics.md section 2.6),

@@ -20,6 +20,7 @@ class and by diffuse-vertex count.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import time
@@ -28,8 +29,10 @@ import numpy as np
 
 from opal_diffraction import _scripts
 from opal_diffraction.core.integrators.eye import eye_pass as ep
+from opal_diffraction.core.integrators.eye.tile_output import TileOutput
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.transport.path_state import PathState
 
 cs = _scripts.load_script("benchmarks/caustic_sphere.py")
 
@@ -37,58 +40,75 @@ FILMS = ("direct", "indirect", "caustics", "background")
 FIRST = ("floor", "R", "T")
 
 
+@dataclasses.dataclass
+class TaggedState(PathState):
+    """The eye pass's path state with each path's first event at the glass and whether it met
+    total internal reflection (carried by take / concat / moved as the other fields)."""
+    first: np.ndarray | None = None  # int8 0: floor first (or nothing), 1: R, 2: T
+    tir: np.ndarray | None = None    # int8 total internal reflection met
+    row: np.ndarray | None = None    # int64 the input row of a dielectric bounce's output (a split makes two)
+
+
 def instrument(n_pix: int, spp: int):
-    """Patch eye_pass._TileTrace to record per-sample class sums; returns the (classes, P, spp) array."""
+    """Patch eye_pass._TileTrace and TileOutput to record per-sample class sums; returns the
+    (classes, P, spp) array and a function that undoes the patches."""
     acc = np.zeros((len(FILMS) * len(FIRST) * 2, n_pix * spp), np.float64)
-    orig_state, orig_diel, orig_acc = ep._TileTrace._new_state, ep._TileTrace._dielectric, ep._TileTrace._accumulate
+    orig_state, orig_diel = ep._TileTrace._new_state, ep._TileTrace.dielectric_bounce
+    orig_acc, orig_fact = TileOutput.accumulate, TileOutput.accumulate_factored
 
-    def new_state(b):
-        st = orig_state(b)
-        st["first"] = np.zeros(b, np.int8)  # 0: floor first (or nothing), 1: R, 2: T
-        st["tir"] = np.zeros(b, np.int8)
-        return st
+    def new_state(self, b):
+        st = orig_state(self, b)
+        return TaggedState(**{f.name: getattr(st, f.name) for f in dataclasses.fields(st)},
+                           first=np.zeros(b, np.int8), tir=np.zeros(b, np.int8))
 
-    def dielectric(self, rays, hit, rng):
-        first = (rays.extra["first"] == 0) & (rays.extra["nd"] == 0)
+    def dielectric(self, rays, hit, rng, u=None):
+        st = rays.state
+        first = (st.first == 0) & (st.nd == 0)
         # total internal reflection: no transmitted direction (Fresnel = 1)
         n = np.take(self.prepared.materials.ior[:, 0], hit.mat)
         eta = np.where(hit.front, 1.0 / n, n)
-        ns = self._specular_normal(rays, hit)
+        ns = self.specular_normal(rays, hit)
         cos = -np.einsum("ij,ij->i", rays.d, ns)
         tir = eta * eta * (1 - cos * cos) >= 1
-        rays.extra["row"] = np.arange(len(rays))  # which input row each output comes from (a split makes two)
-        out, transmitted = orig_diel(self, rays, hit, rng)
-        row = out.extra.pop("row")
-        del rays.extra["row"]
-        out.extra["first"] = np.where(first[row], np.where(transmitted, 2, 1), rays.extra["first"][row]).astype(np.int8)
-        out.extra["tir"] = (rays.extra["tir"][row] | tir[row]).astype(np.int8)
+        st.row = np.arange(len(rays))
+        out, transmitted = orig_diel(self, rays, hit, rng, u)
+        row, out.state.row, st.row = out.state.row, None, None
+        out.state.first = np.where(first[row], np.where(transmitted, 2, 1), st.first[row]).astype(np.int8)
+        out.state.tir = (st.tir[row] | tir[row]).astype(np.int8)
         return out, transmitted
 
     def accumulate(self, rays, contrib, film=None):
         orig_acc(self, rays, contrib, film)
         if len(rays) == 0:
             return
-        film = self._film if film is None else film
-        part = 0 if film is self._film else next(
-            (FILMS.index(k) for k, v in self._parts.items() if v is film), None)
+        film = self.film if film is None else film
+        part = 0 if film is self.film else next(
+            (FILMS.index(k) for k, v in self.parts.items() if v is film), None)
         if part is None:
             return
         val = np.asarray(contrib, np.float64)
-        w = self.prepared.conv.rgb_weights.mean(axis=1)  # the mean of R, G, B, per wavelength sample
+        w = self.conv.rgb_weights.mean(axis=1)  # the mean of R, G, B, per wavelength sample
         val = val @ w if val.ndim == 2 else val * w[rays.lam]
-        cls = (part * len(FIRST) + rays.extra["first"].astype(np.int64)) * 2 + rays.extra["tir"].astype(np.int64)
-        idx = rays.extra["pid"].astype(np.int64) * spp + rays.extra["sid"].astype(np.int64)
+        st = rays.state
+        cls = (part * len(FIRST) + st.first.astype(np.int64)) * 2 + st.tir.astype(np.int64)
+        idx = st.pid.astype(np.int64) * spp + st.sid.astype(np.int64)
         np.add.at(acc, (cls, idx), val)
 
-    orig_fact = ep._TileTrace._accumulate_factored
-    ep._TileTrace._accumulate_factored = lambda self, *a: False  # the same estimate, through _accumulate
-    ep._TileTrace._new_state = staticmethod(new_state)
-    ep._TileTrace._dielectric = dielectric
-    ep._TileTrace._accumulate = accumulate
-    return acc.reshape(len(acc), n_pix, spp), lambda: (setattr(ep._TileTrace, "_new_state", staticmethod(orig_state)),
-                                                         setattr(ep._TileTrace, "_dielectric", orig_diel),
-                                                         setattr(ep._TileTrace, "_accumulate", orig_acc),
-                                                         setattr(ep._TileTrace, "_accumulate_factored", orig_fact))
+    def trace_init(self, eye, *a, **k):
+        orig_init(self, eye, *a, **k)
+        self.out.conv = eye.prepared.conv  # the spectral converter, for accumulate's RGB weights
+
+    orig_init = ep._TileTrace.__init__
+    TileOutput.accumulate_factored = lambda self, *a: False  # the same estimate, through accumulate
+    ep._TileTrace.__init__ = trace_init
+    ep._TileTrace._new_state = new_state
+    ep._TileTrace.dielectric_bounce = dielectric
+    TileOutput.accumulate = accumulate
+    return acc.reshape(len(acc), n_pix, spp), lambda: (setattr(ep._TileTrace, "_new_state", orig_state),
+                                                         setattr(ep._TileTrace, "dielectric_bounce", orig_diel),
+                                                         setattr(ep._TileTrace, "__init__", orig_init),
+                                                         setattr(TileOutput, "accumulate", orig_acc),
+                                                         setattr(TileOutput, "accumulate_factored", orig_fact))
 
 
 def label(c: int) -> str:

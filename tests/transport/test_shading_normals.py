@@ -147,7 +147,7 @@ def one_bounce(scene, o, d, **kw):
                 np.zeros(b, np.int32), np.zeros(b))
     h = prepared.accel.intersect(rays.o, rays.d)
     keep = h.prim >= 0
-    hit = walker._hit_info(rays.take(keep), h.t[keep], h.prim[keep], h.u[keep], h.v[keep])
+    hit = walker.hit_info(rays.take(keep), h.t[keep], h.prim[keep], h.u[keep], h.v[keep])
     out, _, _ = walker._step(rays, None, walker.rng)
     return prepared, out, hit, rays.d[keep].astype(np.float64)
 

@@ -193,14 +193,14 @@ def diffracting(prepared, hit, kind: np.ndarray, rng) -> np.ndarray:
     return on
 
 
-def scatter_at_gratings(walker, rays, hit, rng):
+def scatter_at_gratings(prepared, rays, hit, rng, split_white):
     """Mono rays leaving the grating hits ``hit`` of ``rays`` (all of them diffract, see
-    ``diffracting``): white rays are split first (walker._split: SPLIT or SAMPLE, section 2.4),
-    then each path takes one order (``sample_orders``), or the plain Fresnel branch of a glass
-    base that the grating does not act on. Returns mono Rays (weight 0 paths dropped)."""
-    prepared = walker.prepared
+    ``diffracting``): white rays are split first (``split_white(rays, hit, rng) -> (mono rays,
+    their hits)``, the walker's SPLIT or SAMPLE: transport.SpecularWalker.split_white, section
+    2.4), then each path takes one order (``sample_orders``), or the plain Fresnel branch of a
+    glass base that the grating does not act on. Returns mono Rays (weight 0 paths dropped)."""
     if rays.lam is None:
-        rays, hit = walker._split(rays, hit, rng)
+        rays, hit = split_white(rays, hit, rng)
     b = len(rays)
     g, mats = prepared.gratings, prepared.materials
     kind = mats.kind[hit.mat]

@@ -1,5 +1,5 @@
-"""The eye pass's BRAGG (FCC opal) vertices: next-event estimation of the opal lobe, its
-BSDF-sampled continuation, and the body underneath scaled by what the planes did not reflect.
+"""The eye pass's BRAGG (FCC opal) vertices: the opal lobe at a hit, its BSDF-sampled
+continuation, and the body underneath scaled by what the planes did not reflect.
 
 docs/physics.md section 5.8. A material with ``grating = 1, lattice = BRAGG`` is its base (the
 body tone: black or white diffuse, clear glass, an orange fire opal) under the lobe of
@@ -14,8 +14,11 @@ core/materials/bragg_bsdf.py. At each hit from outside the stone:
   directional albedo (``BraggLobe.albedo``): the light the planes sent back does not reach the
   body (the layering rule of Principled's specular layer, docs/physics.md section 14.5).
 
-The eye pass calls :meth:`BraggShading.shade` from ``on_hit`` (before the body is shaded) and
-:meth:`BraggShading.continue_paths` from ``scatter``. The domains (``prepared.opal_domains``,
+The eye pass (core/integrators/eye/eye_pass.py) selects the hits (:meth:`BraggShading.opal_hits`),
+estimates the lobe's next events with its one next-event routine
+(core/integrators/eye/next_event.py, the lobe's ``evaluate`` as the BSDF) and scales the body
+(:meth:`BraggShading.body_share`) in ``on_hit``, before the body is shaded, and calls
+:meth:`BraggShading.continue_paths` from ``scatter`` with what ``body_share`` returned. The domains (``prepared.opal_domains``,
 core/opal/ volume domains; absent: one domain whose planes are parallel to each face) give each
 hit its (111) axis and sphere diameter.
 """
@@ -25,7 +28,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..util.enums import Lattice
-from ..transport.walker import Rays, light_spectrum_of
+from ..transport.path_state import MAX_DIFFUSE_VERTICES, Caustic
+from ..transport.walker import Rays
 from ..opal.bragg import effective_index
 from ..materials.bragg_bsdf import BraggLobe, kappa_from_spread
 from ..materials.bragg_multilayer import band_table
@@ -37,15 +41,6 @@ __all__ = ["BraggShading", "bragg_materials"]
 _MIN_BODY = 1e-3
 
 
-def _light_weight(p_light, p_lobe) -> np.ndarray:
-    """Veach's power heuristic for a light sample against the lobe's sampling (as the eye pass's
-    _power_heuristic with light_first; not imported from it: the eye pass imports this module)."""
-    a, b = np.asarray(p_light, np.float64), np.asarray(p_lobe, np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        w = np.where(a * a + b * b > 0, a * a / (a * a + b * b), 1.0)
-    return np.where(np.isfinite(w), w, 1.0).astype(np.float32)
-
-
 def bragg_materials(materials) -> np.ndarray:
     """(M,) bool: materials whose grating layer is the BRAGG lattice."""
     return (np.asarray(materials.grating) != 0) & (np.asarray(materials.lattice) == int(Lattice.BRAGG))
@@ -53,7 +48,7 @@ def bragg_materials(materials) -> np.ndarray:
 
 class BraggShading:
     """Per-render state of the BRAGG materials: their tables (multilayer.band_table, built once
-    per parameter set and process) and per-material parameters; one per tile trace."""
+    per parameter set and process) and per-material parameters; nothing changes while tracing."""
 
     def __init__(self, prepared):
         m = prepared.scene.materials
@@ -78,7 +73,6 @@ class BraggShading:
             self.kappa[i] = kappa_from_spread(float(m.mosaic_spread[i]))
         self.domains = getattr(prepared, "opal_domains", None)
         self.edges = np.asarray(prepared.grid.bin_edges, np.float64)
-        self._pending = None
 
     @classmethod
     def for_prepared(cls, prepared) -> "BraggShading | None":
@@ -106,54 +100,47 @@ class BraggShading:
                 diameter[found] = np.asarray(d_diam, np.float64)[found]
         return BraggLobe(axis, diameter, self.n_eff[mat], self.kappa[mat], self.tables, self.table_of[mat])
 
-    # ------------------------------------------------------------------ eye pass hooks
-    def shade(self, trace, rays, hit, live, rng) -> None:
-        """At BRAGG hits among ``live``: next events of the lobe into the film, the lobe kept
-        for ``continue_paths``, and ``rays.w`` of those hits scaled by 1 - albedo (the body's
-        share). ``trace`` is the eye pass's tile trace."""
-        self._pending = None
+    # ------------------------------------------------------------------ the eye pass's opal vertices
+    def opal_hits(self, rays, hit, live) -> np.ndarray:
+        """(B,) bool: the hits among ``live`` on BRAGG planes from outside the stone, where the eye
+        pass shades the lobe (white rays at a dispersive body split first; their mono children
+        shade)."""
         sel = live & self.mask[hit.mat] & hit.front
-        if rays.lam is None:  # white rays at a dispersive body split first; their mono children shade
+        if rays.lam is None:
             sel &= ~self.prepared.materials.dispersive[hit.mat]
+        return sel
+
+    def body_share(self, rays, r, h, sel, lobe) -> tuple:
+        """Scale ``rays.w`` at the opal hits ``sel`` (B,) bool (``r``, ``h``: those rays and hits,
+        ``lobe`` their lobe) by 1 - albedo, the body's share; returns what ``continue_paths``
+        needs: (rows, lobe, body share)."""
         idx = np.flatnonzero(sel)
-        if idx.size == 0:
-            return
-        r, h = rays.take(sel), hit.take(sel)
-        lobe = self.lobe(h)
-        # a path from a caustic receiver (through mirrors, glass or other opal) to a light via
-        # these planes is the light pass's (it scatters off BRAGG planes, scatter_light)
-        nee = r.extra["caustic"] == 0 if trace.caustics_cover_lights else np.ones(len(r), bool)
-        if nee.all():
-            self._next_events(trace, r, h, lobe, rng)
-        elif nee.any():
-            k = np.flatnonzero(nee)
-            self._next_events(trace, r.take(nee), h.take(nee), lobe.take(k), rng)
         wo = -np.asarray(r.d, np.float64)
         body = 1.0 - self._clamped_albedo(lobe, wo, h.ns, r.lam)
         n = len(self.edges) - 1
         w = np.ones((len(rays), n), np.float32) if rays.w is None else rays.w.copy()  # never a shared array
         w[idx] *= body
         rays.w = w
-        self._pending = (hit, idx, lobe, body)
+        return idx, lobe, body
 
     def _clamped_albedo(self, lobe, wo, ns, lam):
         a = lobe.albedo(wo, ns, self.edges, lam)
         return np.minimum(a, np.float32(1.0 - _MIN_BODY))
 
-    def continue_paths(self, trace, rays, hit, can_bounce, out):
-        """``out`` (the body's bounces, or None) joined with the lobe's sampled continuations."""
-        pending, self._pending = self._pending, None
-        if pending is None or pending[0] is not hit:
+    def continue_paths(self, limits, rng, rays, hit, can_bounce, out, pending):
+        """``out`` (the body's bounces, or None) joined with the lobe's sampled continuations of
+        the opal hits ``pending`` (``body_share``'s, or None), under the bounce ``limits`` (total,
+        diffuse, glossy, transmission); ``rng``: the tile's stream."""
+        if pending is None:
             return out
-        _, idx, lobe, body = pending
-        st = rays.extra
-        go = (can_bounce[idx] | (rays.depth[idx] >= trace.limits[0])) & ~st["final"][idx]
+        idx, lobe, body = pending
+        go = (can_bounce[idx] | (rays.depth[idx] >= limits[0])) & ~rays.state.final[idx]
         if not go.any():
             return out
         keep = np.flatnonzero(go)
         idx, lobe, body = idx[keep], lobe.take(keep), body[keep]
         r, h = rays.take(idx), hit.take(idx)
-        u = trace.rng.random((len(r), 2))
+        u = rng.random((len(r), 2))
         wi, weight, pdf, ok = lobe.sample(-np.asarray(r.d, np.float64), np.asarray(h.ns, np.float64), u,
                                           self.edges, r.lam)
         if rays.lam is None:
@@ -166,15 +153,15 @@ class BraggShading:
         w0 = r.w / body  # the weight before the body's share (with Russian roulette's 1/q)
         o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
         nxt = r.moved(o, wi, (w0 * weight).astype(np.float32))
-        s = nxt.extra
-        s["nd"] = np.minimum(s["nd"] + 1, 100).astype(np.int8)
-        s["glossy"] = s["glossy"] + 1
-        s["pdf"] = pdf.astype(np.float32)
+        s = nxt.state
+        s.nd = np.minimum(s.nd + 1, MAX_DIFFUSE_VERTICES).astype(np.int8)
+        s.glossy = s.glossy + 1
+        s.pdf = pdf.astype(np.float32)
         # like a specular bounce: after a caustic receiver, a caustic path (the light pass's)
-        s["caustic"] = np.where(s["caustic"] >= 1, np.int8(2), np.int8(0)).astype(np.int8)
-        lim = trace.limits
-        s["final"] = ((s["diffuse"] > lim[1]) | (s["glossy"] > lim[2]) | (s["transmission"] > lim[3])
-                      | (nxt.depth > lim[0]))
+        s.caustic = np.where(s.caustic >= Caustic.RECEIVER, np.int8(Caustic.PATH), np.int8(Caustic.NONE)).astype(np.int8)
+        lim = limits
+        s.final = ((s.diffuse > lim[1]) | (s.glossy > lim[2]) | (s.transmission > lim[3])
+                   | (nxt.depth > lim[0]))
         if out is None or not len(out):
             return nxt
         return Rays.concat(out, nxt)
@@ -201,35 +188,3 @@ class BraggShading:
         r, h, wi, weight = r.take(ok), h.take(ok), wi[ok], weight[ok]
         o = (h.p + h.eps[:, None] * h.ng).astype(np.float32)
         return r.moved(o, wi, r.weighted(weight).astype(np.float32))
-
-    def _next_events(self, trace, rays, hit, lobe, rng) -> None:
-        """One sample of every light, of the emissive meshes and of the world map, each by shadow
-        ray, the lobe evaluated there (power heuristic against the lobe's sampling where the light
-        can also be found by it); into the film part of the path's vertex count + 1."""
-        wo = -np.asarray(rays.d, np.float64)
-        ns = np.asarray(hit.ns, np.float64)
-        samples = trace.light_samples(hit, rng)  # the eye pass's one sample per emitter
-        nd = rays.extra["nd"]
-        for wi, dist, g, spectrum, p_light, pad in samples:
-            f_cos, p_lobe = lobe.evaluate(wo, wi, ns, self.edges, rays.lam)
-            scale = np.asarray(g, np.float32)
-            if p_light is not None:
-                scale = scale * _light_weight(p_light, p_lobe)
-            peak = f_cos.max(axis=1) if rays.lam is None else f_cos
-            live = np.flatnonzero((scale > 0) & (peak > 0))
-            if live.size == 0:
-                continue
-            live = trace.visible(hit, wi, dist, pad, live)
-            if live.size == 0:
-                continue
-            r = rays.take(live)
-            spec = light_spectrum_of(spectrum, live, r)
-            if r.lam is None:
-                contrib = r.weighted(f_cos[live] * scale[live, None] * spec)
-            else:
-                contrib = r.w * f_cos[live] * scale[live] * spec
-            k_nd = nd[live]
-            for k in np.unique(k_nd):  # the path's vertex counts (0, 1, 2+)
-                part = k_nd == k
-                film = trace._light_film(min(int(k) + 1, 2))
-                trace._accumulate(r.take(part), contrib[part], film)

@@ -16,7 +16,7 @@ footprint is carried through a curved mirror as through a flat one (named in doc
 section 3.7). Rays without differentials (the light pass, paths after a diffuse or rough
 bounce) carry zeros: a zero footprint is a point sample, today's behaviour.
 
-The differentials live in ``Rays.extra['rd']``: (B, 5, 3) float32 = (do/dx, dd/dx, do/dy, dd/dy,
+The differentials live in ``PathState.rd`` (core/transport/path_state.py): (B, 5, 3) float32 = (do/dx, dd/dx, do/dy, dd/dy,
 (ox, oy, width)), present only when the scene has gratings and footprint integration is on;
 (ox, oy) is the sample's offset from its pixel centre in pixels, width the footprint's in pixels.
 
@@ -45,12 +45,8 @@ import numpy as np
 
 from .camera import camera_frame
 
-__all__ = ["KEY", "filter_box_width", "camera_differentials", "zero_differentials", "transfer", "reflect_differentials",
+__all__ = ["filter_box_width", "camera_differentials", "zero_differentials", "transfer", "reflect_differentials",
            "refract_differentials", "grating_footprint"]
-
-#: The key of the differentials in ``Rays.extra``.
-KEY = "rd"
-
 
 def zero_differentials(b: int) -> np.ndarray:
     return np.zeros((b, 5, 3), np.float32)

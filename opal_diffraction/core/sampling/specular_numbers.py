@@ -20,11 +20,13 @@ from .sampler import SLOT_BOUNCE, sobol_owen_x, vertex_pair
 __all__ = ["bounce_choice"]
 
 
-def bounce_choice(extra: dict, depth: np.ndarray, seed: int | None, rng: np.random.Generator) -> np.ndarray:
-    """The choice's numbers (B,) float32 for path vertices with state ``extra`` (the eye pass's
-    'pid', 'sid') at bounce ``depth``: the first number of their SLOT_BOUNCE pair, the same one
-    ``PixelSampler.random`` would give; pseudo-random from ``rng`` without a sampler seed."""
+def bounce_choice(pid: np.ndarray, sid: np.ndarray, depth: np.ndarray, seed: int | None,
+                  rng: np.random.Generator) -> np.ndarray:
+    """The choice's numbers (B,) float32 for path vertices of pixels ``pid`` and samples ``sid``
+    (the eye pass's PathState.pid, .sid) at bounce ``depth``: the first number of their SLOT_BOUNCE
+    pair, the same one ``PixelSampler.random`` would give; pseudo-random from ``rng`` without a
+    sampler seed."""
     b = len(depth)
     if seed is None or b == 0:
         return rng.random(b, np.float32)
-    return sobol_owen_x(extra["pid"], extra["sid"], vertex_pair(depth, SLOT_BOUNCE), seed)
+    return sobol_owen_x(pid, sid, vertex_pair(depth, SLOT_BOUNCE), seed)

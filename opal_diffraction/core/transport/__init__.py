@@ -1,1 +1,1 @@
-"""Ray populations, hits and the specular walker (mirror, glass, dispersion) with its hooks, and the surface elements where light paths leave flux. Imports the rooms below it: util/ to materials/, sampling/."""
+"""Ray populations, hits, the eye pass's typed path state (path_state.PathState) and the specular walker (mirror, glass, dispersion) with its hooks, and the surface elements where light paths leave flux. Imports the rooms below it: util/ to materials/, sampling/."""

@@ -36,7 +36,10 @@ that would stay on the incident side is refracted about ``ng`` instead. Without 
 
 Subclasses say what happens where a path leaves the scene (``on_miss``) and at every surface it
 hits (``on_hit``: direct light for the eye pass, deposits for the light pass), and whether a
-path goes on (``survives``: bounce limit, Russian roulette).
+path goes on (``survives``: bounce limit, Russian roulette). ``SpecularWalker``'s hooks (the
+methods under "hooks") and its public operations (``hit_info``, ``specular_normal``,
+``tinted_weight``, ``split_white``, ``spawn``, ``rays_cast``) are the only extension point: code
+outside this module uses nothing else of it, so its internals may change freely.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ import numpy as np
 
 from ..sampling import footprint
 from . import wavelengths
+from .path_state import PathState
 from ..materials.spectra import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
 from ..spectral.optics import fresnel_dielectric, reflect, refract
 
@@ -84,9 +88,9 @@ class Rays:
     lam: np.ndarray | None  # (B,) int wavelength index for mono rays, None for white
     depth: np.ndarray  # (B,) int specular bounces so far
     u_lam: np.ndarray  # (B,) float: the sample's stratified number for choosing a wavelength
-    # per-ray arrays a subclass carries along (the eye pass's path state: bounce counts, the last
-    # BSDF pdf for MIS, ...); taken, concatenated and inherited with the rays. None: nothing.
-    extra: dict | None = None
+    # the eye pass's path state (core/transport/path_state.py: bounce counts, the last BSDF pdf
+    # for MIS, ray differentials, ...); taken, concatenated and inherited with the rays. None: nothing.
+    state: PathState | None = None
     # (k, n) float32 spectra shared by the population (k < n): w is (B, k) coefficients over
     # them (white light rays only); None: w is as above
     basis: np.ndarray | None = None
@@ -102,15 +106,15 @@ class Rays:
         return Rays(_rows(self.o, idx), _rows(self.d, idx), _rows(self.pix, idx),
                      None if self.w is None else _rows(self.w, idx), None if self.lam is None else _rows(self.lam, idx),
                      _rows(self.depth, idx), _rows(self.u_lam, idx),
-                     None if self.extra is None else {k: _rows(v, idx) for k, v in self.extra.items()}, self.basis)
+                     None if self.state is None else self.state.take(idx), self.basis)
 
     def moved(self, o, d, w, depth=None) -> "Rays":
-        """The same paths (pixels, wavelengths, extra state) continuing from o along d with weight w
+        """The same paths (pixels, wavelengths, path state) continuing from o along d with weight w
         (coefficients over the same basis if w has the basis's k columns, else spectral)."""
         basis = self.basis if self.basis is not None and w is not None and w.ndim == 2 and \
             w.shape[1] == len(self.basis) else None
         return Rays(o, d, self.pix, w, self.lam, self.depth + 1 if depth is None else depth, self.u_lam,
-                     None if self.extra is None else dict(self.extra), basis)
+                     None if self.state is None else self.state.copy(), basis)
 
     def weighted(self, x):
         """The ray weight times x (x itself for unit-weight camera rays)."""
@@ -144,14 +148,19 @@ class Rays:
         if (a.w is None) != (b.w is None):  # one side has implicit unit weights: make them explicit
             n = (a.w if a.w is not None else b.w).shape[1]
             a, b = replace(a, w=a.dense_w(n)), replace(b, w=b.dense_w(n))
-        extra = None
-        if a.extra is not None or b.extra is not None:
-            if a.extra is None or b.extra is None or a.extra.keys() != b.extra.keys():
+        state = None
+        if a.state is not None or b.state is not None:
+            if a.state is None or b.state is None:
                 raise ValueError("cannot join ray populations that carry different state")
-            extra = {k: np.concatenate([a.extra[k], b.extra[k]]) for k in a.extra}
+            state = PathState.concat(a.state, b.state)
         return Rays(*(None if x is None else np.concatenate([x, y]) for x, y in
                        zip((a.o, a.d, a.pix, a.w, a.lam, a.depth, a.u_lam),
-                           (b.o, b.d, b.pix, b.w, b.lam, b.depth, b.u_lam))), extra)
+                           (b.o, b.d, b.pix, b.w, b.lam, b.depth, b.u_lam))), state)
+
+    @property
+    def differentials(self) -> np.ndarray | None:
+        """The rays' differentials (B, 5, 3) (core/sampling/footprint.py), or None where not carried."""
+        return None if self.state is None else self.state.rd
 
 
 @dataclass
@@ -281,7 +290,7 @@ class SpecularWalker:
         self.prepared = prepared
         self.n = prepared.grid.n
         self.rng = rng
-        self._rays = 0  # rays cast
+        self.rays_cast = 0  # rays cast (a subclass adds its shadow rays)
         self.microfacet = prepared.microfacet  # (M,) bool, once per prepared scene
         self.any_microfacet = bool(self.microfacet.any())
         self._spawned: list[Rays] = []
@@ -301,8 +310,10 @@ class SpecularWalker:
     def on_miss(self, rays: Rays) -> None:
         """Rays that left the scene."""
 
-    def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
-        """Every surface hit, before the specular bounce (kind: material kind per ray)."""
+    def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng):
+        """Every surface hit, before the specular bounce (kind: material kind per ray). What it
+        returns (None by default) is handed to ``scatter`` of the same hits as ``shaded``: the
+        shading it computed that the bounce reuses, passed explicitly."""
 
     def survives(self, rays: Rays, rng) -> np.ndarray:
         """Which rays may bounce again (default: the bounce limit)."""
@@ -313,10 +324,12 @@ class SpecularWalker:
         before they are traced on: a subclass counts bounces by kind and drops those over a limit."""
         return rays
 
-    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
+    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng,
+                shaded=None) -> Rays | None:
         """Rays continuing from the non-specular surfaces (diffuse, rough): None by default (the
-        light pass ends its paths there; the eye pass samples a BSDF). Mono rays returned for a
-        white population (a grating's orders) join the mono population."""
+        light pass ends its paths there; the eye pass samples a BSDF). ``shaded``: what
+        ``on_hit`` returned for these hits. Mono rays returned for a white population (a
+        grating's orders) join the mono population."""
         return None
 
     def choice_numbers(self, rays: Rays, rng) -> np.ndarray:
@@ -341,7 +354,7 @@ class SpecularWalker:
         self._spawned = []  # mono rays a white population's scatter made (grating orders)
         while len(rays) or len(mono):
             rays, children, child_hits = self._step(rays, None, rng)
-            for r in self._spawned:
+            for r in self._spawned:  # spawn()
                 mono = Rays.concat(mono, r)
             self._spawned = []
             mono, _, _ = self._step(mono, (children, child_hits), rng)
@@ -353,7 +366,7 @@ class SpecularWalker:
         hit = None
         if len(rays):
             h = prepared.accel.intersect(rays.o, rays.d)
-            self._rays += len(rays)
+            self.rays_cast += len(rays)
             missed = h.prim < 0
             if self._hooks_segment:
                 self.on_segment(rays, np.where(missed, np.float32(np.inf), h.t))
@@ -361,7 +374,7 @@ class SpecularWalker:
                 self.on_miss(rays.take(missed))
             keep = ~missed
             rays = rays.take(keep)
-            hit = self._hit_info(rays, h.t[keep], h.prim[keep], h.u[keep], h.v[keep])
+            hit = self.hit_info(rays, h.t[keep], h.prim[keep], h.u[keep], h.v[keep])
         if pending is not None and pending[0] is not None and len(pending[0]):
             if hit is None:
                 rays, hit = pending
@@ -375,14 +388,14 @@ class SpecularWalker:
         if micro is not None:  # rough mirrors and glass leave the delta code; diffuse bases keep their kind
             kind = np.where(micro & (kind != DIFFUSE_KIND), MICROFACET, kind)
         kind = self.classify(rays, hit, kind, rng)
-        self.on_hit(rays, hit, kind, rng)
+        shaded = self.on_hit(rays, hit, kind, rng)
 
         can_bounce = self.survives(rays, rng)
         children = child_hits = None
         out = []
         mirror = (kind == MIRROR) & can_bounce
         if mirror.any():
-            r = self._mirror(rays.take(mirror), hit.take(mirror))
+            r = self.mirror_bounce(rays.take(mirror), hit.take(mirror))
             out.append(self.after_delta(r, np.zeros(len(r), bool)))
         diel = (kind == DIELECTRIC) & can_bounce
         # white rays split at every dispersive glass, smooth or rough (mono children go on)
@@ -399,17 +412,17 @@ class SpecularWalker:
                 diel = diel & ~disp
             if diel.any():
                 r = rays.take(diel)
-                r, transmitted = self._dielectric(r, hit.take(diel), rng, self.choice_numbers(r, rng))
+                r, transmitted = self.dielectric_bounce(r, hit.take(diel), rng, self.choice_numbers(r, rng))
                 out.append(self.after_delta(r, transmitted))
-        scattered = self.scatter(rays, hit, kind, can_bounce, rng)
+        scattered = self.scatter(rays, hit, kind, can_bounce, rng, shaded)
         if scattered is not None and len(scattered):
-            if scattered.extra is not None and footprint.KEY in scattered.extra:
+            if scattered.differentials is not None:
                 # a diffuse or rough bounce: no footprint any more (a point sample)
-                scattered.extra[footprint.KEY] = footprint.zero_differentials(len(scattered))
+                scattered.state.rd = footprint.zero_differentials(len(scattered))
             if (scattered.lam is None) == (rays.lam is None):
                 out.append(scattered)
             else:  # a white population's mono rays: traced with the mono population
-                self._spawned.append(scattered)
+                self.spawn(scattered)
         out = [r for r in out if len(r)]
         if not out:
             return rays.take(np.zeros(len(rays), bool)), children, child_hits
@@ -418,7 +431,10 @@ class SpecularWalker:
             nxt = Rays.concat(nxt, r)
         return nxt, children, child_hits
 
-    def _hit_info(self, rays: Rays, t, prim, bu, bv) -> Hit:
+    # ----------------------------------------------------------------- operations for subclasses and helpers
+    def hit_info(self, rays: Rays, t, prim, bu, bv) -> Hit:
+        """The hits (Hit) of ``rays`` at distances ``t`` on triangles ``prim`` with barycentrics
+        (bu, bv): point, normals facing the ray, material, offset."""
         prepared = self.prepared
         p = rays.o + t[:, None] * rays.d
         ng0 = np.take(prepared.tri_normal, prim, axis=0)  # row gathers: np.take is several times faster
@@ -438,7 +454,7 @@ class SpecularWalker:
         """table[rows] (B, n) for white rays, table[rows, lam] (B,) for mono rays."""
         return table[rows] if lam is None else table[rows, lam]
 
-    def _tinted(self, rays: Rays, hit: Hit):
+    def tinted_weight(self, rays: Rays, hit: Hit):
         """The weight after the surface's tint (skipped for clear glass and perfect mirrors)."""
         m = self.prepared.materials
         if m.clear[hit.mat].all():
@@ -447,25 +463,28 @@ class SpecularWalker:
             return rays.w * m.reflectance[hit.mat, :1]
         return rays.weighted(self._per_ray(m.reflectance, hit.mat, rays.lam))
 
-    def _specular_normal(self, rays: Rays, hit: Hit) -> np.ndarray:
+    def specular_normal(self, rays: Rays, hit: Hit) -> np.ndarray:
         """The normal specular reflection and refraction use: ng when flat, else ns made valid."""
         if self.prepared.corner_normals is None:
             return hit.ng
         return valid_specular_normal(-rays.d, hit.ng, hit.ns)
 
-    def _mirror(self, rays: Rays, hit: Hit) -> Rays:
-        ns = self._specular_normal(rays, hit)
+    def mirror_bounce(self, rays: Rays, hit: Hit) -> Rays:
+        """Rays reflected by the smooth mirrors they hit: about the specular normal, weight times
+        the tint, differentials reflected (a hook: a subclass adds a grating layer's share)."""
+        ns = self.specular_normal(rays, hit)
         d = reflect(rays.d, ns)
         o = hit.p + hit.eps[:, None] * hit.ng
-        out = rays.moved(o.astype(np.float32), d.astype(np.float32), self._tinted(rays, hit))
-        if out.extra is not None and footprint.KEY in out.extra:  # ray differentials (core/sampling/footprint.py)
-            out.extra[footprint.KEY] = footprint.reflect_differentials(rays.extra[footprint.KEY], rays.o, rays.d,
-                                                                       hit.p, ns)
+        out = rays.moved(o.astype(np.float32), d.astype(np.float32), self.tinted_weight(rays, hit))
+        if out.differentials is not None:  # ray differentials (core/sampling/footprint.py)
+            out.state.rd = footprint.reflect_differentials(rays.differentials, rays.o, rays.d, hit.p, ns)
         return out
 
-    def _dielectric(self, rays: Rays, hit: Hit, rng, u=None) -> tuple[Rays, np.ndarray]:
-        """Fresnel-sampled reflection or refraction: (the rays going on, refracted (B,) bool);
-        ``u`` (B,): the choice's numbers (reflect where u < F), None: drawn from ``rng``.
+    def dielectric_bounce(self, rays: Rays, hit: Hit, rng, u=None) -> tuple[Rays, np.ndarray]:
+        """Fresnel-sampled reflection or refraction at smooth glass: (the rays going on, refracted
+        (B,) bool); ``u`` (B,): the choice's numbers (reflect where u < F), None: drawn from
+        ``rng``. A hook: a subclass may split both branches (core/integrators/eye/fresnel_split.py)
+        or add a grating layer, calling this for the plain choice.
 
         Both directions are a d + b n about the specular normal n (the mirror: a = 1, b = 2 cos;
         Snell's law: a = eta, b = eta cos - cos_t; under total internal reflection fr = 1, so the
@@ -475,7 +494,7 @@ class SpecularWalker:
         # constant over the grid for white rays
         n = np.take(ior[:, 0], hit.mat) if rays.lam is None else ior[hit.mat, rays.lam]
         eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
-        ns = self._specular_normal(rays, hit)
+        ns = self.specular_normal(rays, hit)
         cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
         cos = np.asarray(cos_s, np.float32)
         fr, _ = fresnel_dielectric(np.abs(cos), np.where(hit.front, n, 1.0 / n).astype(np.float32))
@@ -494,13 +513,18 @@ class SpecularWalker:
         # offset to the side the new direction leaves on (a refraction about ng can be a TIR)
         side = np.where(dn > 0, np.float32(1), np.float32(-1))
         o = hit.p + (hit.eps * side)[:, None] * hit.ng
-        out = rays.moved(o.astype(np.float32, copy=False), d.astype(np.float32, copy=False), self._tinted(rays, hit))
-        if out.extra is not None and footprint.KEY in out.extra:  # ray differentials (core/sampling/footprint.py)
-            out.extra[footprint.KEY] = footprint.refract_differentials(rays.extra[footprint.KEY], rays.o, rays.d,
-                                                                       hit.p, ns, d, eta)
+        out = rays.moved(o.astype(np.float32, copy=False), d.astype(np.float32, copy=False),
+                         self.tinted_weight(rays, hit))
+        if out.differentials is not None:  # ray differentials (core/sampling/footprint.py)
+            out.state.rd = footprint.refract_differentials(rays.differentials, rays.o, rays.d, hit.p, ns, d, eta)
         return out, side < 0
 
-    def _split(self, rays: Rays, hit: Hit, rng):
+    def spawn(self, mono: Rays) -> None:
+        """Mono rays made from a white population during its step (a dispersive refraction, a
+        grating's orders): the walk traces them with the mono population from its next step."""
+        self._spawned.append(mono)
+
+    def split_white(self, rays: Rays, hit: Hit, rng):
         """White rays at a dispersive interface -> mono rays (SPLIT or SAMPLE), keeping the hit.
 
         SAMPLE draws ``dispersion_branches`` (a setting) wavelengths per ray from the ray's stratified number,
@@ -519,5 +543,5 @@ class SpecularWalker:
             w = rays.w[parent, lam]
         children = Rays(rays.o[parent], rays.d[parent], rays.pix[parent], w.astype(np.float32),
                          lam.astype(np.int64), rays.depth[parent], rays.u_lam[parent],
-                         None if rays.extra is None else {k: v[parent] for k, v in rays.extra.items()})
+                         None if rays.state is None else rays.state.take(parent))
         return children, hit.take(parent)

@@ -1,7 +1,7 @@
 """Wavelength sampling at a dispersive interface: which wavelengths a white ray becomes.
 
 A white ray carries the whole grid (n wavelengths); at a dispersive glass its directions part,
-so it becomes mono rays (core/transport/walker.py ``_split``). SAMPLE draws K of them (K: the
+so it becomes mono rays (core/transport/walker.py ``SpecularWalker.split_white``). SAMPLE draws K of them (K: the
 setting ``dispersion_branches``)
 and weights each w_k / (K p_k), an unbiased estimator of the exact sum over the grid that SPLIT
 traces (docs/physics.md section 2.6). Three things make its colour noise smaller than a uniform
@@ -132,10 +132,10 @@ def split_at_glass(walker, rays, hit, rng, u=None):
     """White ``rays`` at dispersive hits ``hit`` (smooth or rough glass) -> (mono children at the
     hit or None, their hits, white rays reflected by smooth glass or None).
 
-    SPLIT, or the setting ``dispersion_white_reflection`` off: ``walker._split`` (children at the hit, which take their
+    SPLIT, or the setting ``dispersion_white_reflection`` off: ``walker.split_white`` (children at the hit, which take their
     own Fresnel choice). Otherwise smooth glass chooses reflect / refract for the white ray (module
     docstring): reflected rays go on white (returned, bounce counted), refracted ones become mono
-    rays already refracted at their wavelengths, handed to ``walker._spawned`` (the walk traces
+    rays already refracted at their wavelengths, handed to ``walker.spawn`` (the walk traces
     them with the mono population); rough glass still splits at the hit. ``u`` (B,): the
     numbers of the reflect / refract choice (None: drawn from ``rng``).
     """
@@ -146,14 +146,14 @@ def split_at_glass(walker, rays, hit, rng, u=None):
     prepared = walker.prepared
     settings = prepared.settings
     if settings.dispersion_sampling == "SPLIT" or not settings.dispersion_white_reflection:
-        return (*walker._split(rays, hit, rng), None)
+        return (*walker.split_white(rays, hit, rng), None)
     smooth = prepared.materials.kind[hit.mat] == DIELECTRIC
     children = child_hits = None
     if u is None:  # the reflect / refract choice's numbers, one per ray (the eye pass: its sampler's)
         u = rng.random(len(rays))
     if not smooth.all():
         rough = ~smooth
-        children, child_hits = walker._split(rays.take(rough), hit.take(rough), rng)
+        children, child_hits = walker.split_white(rays.take(rough), hit.take(rough), rng)
         rays, hit, u = rays.take(smooth), hit.take(smooth), u[smooth]
     if not len(rays):
         return children, child_hits, None
@@ -161,11 +161,11 @@ def split_at_glass(walker, rays, hit, rng, u=None):
     b = len(rays)
     ior = prepared.materials.ior[hit.mat].astype(np.float64)  # (B, n)
     eta = np.where(hit.front[:, None], 1.0 / ior, ior)
-    ns = walker._specular_normal(rays, hit)
+    ns = walker.specular_normal(rays, hit)
     cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
     fr, _ = fresnel_dielectric(np.abs(np.asarray(cos_s, np.float64))[:, None],
                                np.where(hit.front[:, None], ior, 1.0 / ior))  # (B, n)
-    wt = walker._tinted(rays, hit)  # (B, n) or None: the glass's tint applies to both branches
+    wt = walker.tinted_weight(rays, hit)  # (B, n) or None: the glass's tint applies to both branches
     q = importance(grid, wt, b, settings.dispersion_importance)
     qs = q.sum(axis=1)
     p_refl = np.where(qs > 0, (q * fr).sum(axis=1) / np.where(qs > 0, qs, 1.0), 1.0)
@@ -179,8 +179,8 @@ def split_at_glass(walker, rays, hit, rng, u=None):
             wr = wr * wt[refl]
         o = h.p + h.eps[:, None] * h.ng
         white = r.moved(o.astype(np.float32), reflect(r.d, nr).astype(np.float32), wr)
-        if white.extra is not None and footprint.KEY in white.extra:
-            white.extra[footprint.KEY] = footprint.reflect_differentials(r.extra[footprint.KEY], r.o, r.d, h.p, nr)
+        if white.differentials is not None:
+            white.state.rd = footprint.reflect_differentials(r.differentials, r.o, r.d, h.p, nr)
         white = walker.after_delta(white, np.zeros(len(white), bool))
     tr = ~refl
     if tr.any():
@@ -204,16 +204,15 @@ def split_at_glass(walker, rays, hit, rng, u=None):
                 t_dir[stay] = refract(d[stay], hp.ng[stay], e[stay])[0]
         side = np.where(np.einsum("ij,ij->i", t_dir, hp.ng) > 0, 1.0, -1.0).astype(np.float32)
         o = hp.p + (hp.eps * side)[:, None] * hp.ng
-        extra = None if r.extra is None else {k: v[parent] for k, v in r.extra.items()}
+        state = None if r.state is None else r.state.take(parent)
         # type(r): transport.Rays, without importing the module that imports this one
         mono = type(r)(o.astype(np.float32), t_dir.astype(np.float32), r.pix[parent], w.astype(np.float32),
-                    lam.astype(np.int64), r.depth[parent] + 1, r.u_lam[parent], extra)
-        if extra is not None and footprint.KEY in extra:
-            mono.extra[footprint.KEY] = footprint.refract_differentials(extra[footprint.KEY], r.o[parent], d, hp.p, nr,
-                                                                        t_dir, e)
+                    lam.astype(np.int64), r.depth[parent] + 1, r.u_lam[parent], state)
+        if mono.differentials is not None:
+            mono.state.rd = footprint.refract_differentials(state.rd, r.o[parent], d, hp.p, nr, t_dir, e)
         mono = walker.after_delta(mono, side < 0)
         if len(mono):
-            walker._spawned.append(mono)
+            walker.spawn(mono)
     return children, child_hits, white
 
 

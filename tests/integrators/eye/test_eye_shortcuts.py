@@ -1,6 +1,6 @@
 """The eye pass's shortcuts that must leave every estimate unchanged (docs/physics.md section
-4.7): the Lambertian next events written out (``_nee_lambert``) against the same samples
-through core/materials/bsdf.py's LAMBERT lobe (``_nee_microfacet``), and black (emission-only) surfaces,
+4.7): the Lambertian next events written out (``next_event.LambertLobe``) against the same samples
+through core/materials/bsdf.py's LAMBERT lobe (``next_event.MicrofacetLobe``), and black (emission-only) surfaces,
 which receive no caustics, so a scene whose only diffuse surfaces are black needs no light pass."""
 
 from __future__ import annotations
@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.integrators.eye import next_event
 from opal_diffraction.core.integrators.eye.eye_pass import EyePass, _TileTrace
+from opal_diffraction.core.integrators.eye.surface_interaction import surface_params
 from opal_diffraction.core.render.plan import plan_render
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
@@ -59,11 +61,15 @@ def test_lambertian_next_events_equal_the_bsdf_modules_lambert_lobe(weights):
     rays = Rays(o, d, rng.integers(0, 16, b).astype(np.int64), w, lam, np.ones(b, np.int32), rng.random(b),
                 tr._new_state(b))
     hh = prepared.accel.intersect(o, d)
-    hit = tr._hit_info(rays, hh.t, hh.prim, hh.u, hh.v)
-    film_a, film_b = tr._new_film(), tr._new_film()
-    tr._nee_lambert(rays, hit, surface_reflectance(prepared, hit, rays.lam), np.random.default_rng(7), film_a)
-    params = tr._surface_params(rays, hit, np.random.default_rng(8))
-    tr._nee_microfacet(rays, hit, params, np.random.default_rng(7), film_b, analytic=False)
+    hit = tr.hit_info(rays, hh.t, hh.prim, hh.u, hh.v)
+    c, out = tr.c, tr.out
+    film_a, film_b = np.zeros(16 * n, np.float32), np.zeros(16 * n, np.float32)
+    assert len(prepared.lights) == 0  # the emissive meshes and the world only
+    next_event.lambert_next_events(c, out, rays, hit, np.random.default_rng(7), film_a,
+                                   surface_reflectance(prepared, hit, rays.lam))
+    params = surface_params(prepared, c.mixed_layers, rays, hit, np.random.default_rng(8))
+    next_event.next_events(c, out, rays, hit, next_event.MicrofacetLobe(c, rays, hit, params), np.random.default_rng(7),
+                           film_b, analytic=False)
     assert film_b.sum() > 0
     np.testing.assert_allclose(film_a, film_b, rtol=2e-5, atol=1e-6 * film_b.max())
 

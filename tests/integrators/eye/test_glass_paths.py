@@ -40,13 +40,14 @@ def test_sobol_owen_x_is_the_2d_samplers_first_coordinate(seed):
 
 
 def test_bounce_choice_is_the_vertex_samplers_bounce_number():
-    """The same number PixelSampler gives the vertex's SLOT_BOUNCE decision (eye_pass._numbers)."""
+    """The same number PixelSampler gives the vertex's SLOT_BOUNCE decision (eye_pass._TileTrace.numbers)."""
     rng = np.random.default_rng(2)
     b = 3000
     extra = {"pid": rng.integers(0, 4096, b).astype(np.uint32), "sid": rng.integers(0, 256, b).astype(np.uint32)}
     depth = rng.integers(0, 12, b)
     ps = PixelSampler(rng, extra["pid"], extra["sid"], vertex_pair(depth, SLOT_BOUNCE), 11)
-    np.testing.assert_array_equal(bounce_choice(extra, depth, 11, rng).astype(np.float64), ps.random(b))
+    np.testing.assert_array_equal(bounce_choice(extra["pid"], extra["sid"], depth, 11, rng).astype(np.float64),
+                                  ps.random(b))
 
 
 def test_the_fresnel_choice_is_stratified_over_a_pixels_samples():
@@ -61,7 +62,7 @@ def test_the_fresnel_choice_is_stratified_over_a_pixels_samples():
     pid = np.repeat(np.arange(n_pix, dtype=np.uint32) * 37 + 5, n)
     sid = np.tile(np.arange(n, dtype=np.uint32), n_pix)
     for depth in (0, 1, 5):
-        u = bounce_choice({"pid": pid, "sid": sid}, np.full(n_pix * n, depth), 123, rng)
+        u = bounce_choice(pid, sid, np.full(n_pix * n, depth), 123, rng)
         counts = (u.reshape(n_pix, n) < fr[:, None]).sum(axis=1)
         lo = np.floor(n * fr)
         assert np.all((counts == lo) | (counts == lo + 1)), depth
@@ -101,7 +102,7 @@ def test_smooth_glass_refracts_by_snell_and_reflects_about_the_interpolated_norm
                 np.zeros(b, np.int32), np.zeros(b))
     h = prepared.accel.intersect(rays.o, rays.d)
     assert np.all(h.prim >= 0)
-    hit = walker._hit_info(rays, h.t, h.prim, h.u, h.v)
+    hit = walker.hit_info(rays, h.t, h.prim, h.u, h.v)
     # the expected directions in float64 about the Phong normal, facing the incoming ray
     n = w @ nrm
     n /= np.linalg.norm(n, axis=1, keepdims=True)
@@ -115,7 +116,7 @@ def test_smooth_glass_refracts_by_snell_and_reflects_about_the_interpolated_norm
     assert ok.mean() > 0.5
     refracted = eta * d + (eta * cos_i - np.sqrt(np.maximum(0, 1 - sin2_t)))[:, None] * n
     for u, expected, crossed in ((np.zeros(b), reflected, False), (np.ones(b), refracted, True)):
-        out, transmitted = walker._dielectric(rays, hit, walker.rng, u.astype(np.float32))
+        out, transmitted = walker.dielectric_bounce(rays, hit, walker.rng, u.astype(np.float32))
         np.testing.assert_allclose(out.d[ok], expected[ok], atol=3e-5)
         assert np.all(transmitted[ok] == crossed)
         # offset to the side the ray leaves on
@@ -173,7 +174,7 @@ def test_add_scaled_spectra_is_the_per_ray_sum():
 def test_a_glass_ball_before_emitters_renders_the_same_with_and_without_the_factored_emission():
     """The regrouped film add is the same sum: one render with the factored emission and one
     with it switched off (the per-ray spectra), same seed, agree to float rounding."""
-    from opal_diffraction.core.integrators.eye import eye_pass
+    from opal_diffraction.core.integrators.eye import emission
     from opal_diffraction.core.render.frame import render
 
     s = Scene(materials=Materials.from_list([
@@ -186,15 +187,15 @@ def test_a_glass_ball_before_emitters_renders_the_same_with_and_without_the_fact
     s.add_mesh(*primitives.quad((0, 2, -1.5), (6, 0, 0), (0, 0, 3)), 1)  # two emitters behind the ball
     s.add_mesh(*primitives.quad((0, 2, 1.5), (6, 0, 0), (0, 0, 3)), 2)
     settings = RenderSettings(samples=8, seed=3)
-    orig = eye_pass._TileTrace._emitted_unit
+    orig = emission.surface_emission_unit
     used = []
     try:
-        eye_pass._TileTrace._emitted_unit = lambda self, rays, hit, emits: used.append(orig(self, rays, hit, emits)) or used[-1]
+        emission.surface_emission_unit = lambda *args: used.append(orig(*args)) or used[-1]
         a = render(s, settings)
-        eye_pass._TileTrace._emitted_unit = lambda self, rays, hit, emits: False
+        emission.surface_emission_unit = lambda *args: False
         b = render(s, settings)
     finally:
-        eye_pass._TileTrace._emitted_unit = orig
+        emission.surface_emission_unit = orig
     ia, ib = a.rgb, b.rgb
     assert any(used)  # the factored add ran
     assert ia.max() > 0.5

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opal_diffraction.core.integrators.eye import eye_pass, grey_paths
+from opal_diffraction.core.integrators.eye import constants, grey_paths
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
@@ -44,7 +44,7 @@ def _scene(world_map: bool, coloured: bool, textured: bool) -> Scene:
 
 def _render(scene, monkeypatch, grey: bool):
     if not grey:
-        monkeypatch.setattr(eye_pass, "GreyPaths", lambda pm, enabled=True: grey_paths.GreyPaths(pm, enabled=False))
+        monkeypatch.setattr(constants, "GreyPaths", lambda pm, enabled=True: grey_paths.GreyPaths(pm, enabled=False))
     settings = RenderSettings(samples=16, light_paths=0, threads=1, wavelength_step=20.0, seed=3, diffuse_bounces=6,
                               max_bounces=8)
     out = render(scene, settings)

@@ -110,7 +110,7 @@ def test_max_bounces_zero_is_direct_light_only():
 def test_bump_shadowing_is_the_conty_estevez_smith_term():
     """Conty Estevez et al. 2019: G1 of GGX with alpha^2 = tan^2(theta_d) / 8 towards the light;
     1 for an unbent normal, 0 below the interpolated surface (values by hand)."""
-    from opal_diffraction.core.integrators.eye.eye_pass import bump_shadowing
+    from opal_diffraction.core.integrators.eye.surface_interaction import bump_shadowing
 
     ni = np.array([[0.0, 0.0, 1.0]] * 3, np.float32)
     d45 = np.float32(np.sqrt(0.5))

@@ -75,8 +75,8 @@ def test_camera_rays_at_glass_take_both_branches_with_the_fresnel_weights():
     for depth in (0, 1):
         rays = Rays(o, d, np.arange(4), None, None, np.full(4, depth, np.int32), np.zeros(4), tr._new_state(4))
         h = prepared.accel.intersect(o, d)
-        hit = tr._hit_info(rays, h.t, h.prim, h.u, h.v)
-        out, transmitted = tr._dielectric(rays, hit, np.random.default_rng(2))
+        hit = tr.hit_info(rays, h.t, h.prim, h.u, h.v)
+        out, transmitted = tr.dielectric_bounce(rays, hit, np.random.default_rng(2))
         if depth == 1:
             assert len(out) == 4
             continue

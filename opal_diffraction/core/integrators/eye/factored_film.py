@@ -7,7 +7,7 @@ s_i E_{k(i)}(lambda): a scalar s_i (1, or an MIS weight) times the emission spec
 material k(i) it hit. Summing the scalars per (pixel, spectrum) first and expanding once per
 pixel, film[p] += sum_k (sum_{i: pix_i = p, k(i) = k} s_i) E_k, costs O(B + P U n) instead of
 the O(B n) of building and reducing a (B, n) spectrum per ray (U: spectra present in the batch).
-It is the same sum regrouped (docs/physics.md section 4.10); eye_pass._accumulate_factored
+It is the same sum regrouped (docs/physics.md section 4.10); tile_output.TileOutput.accumulate_factored
 does the same for next events of unit-weight rays.
 """
 

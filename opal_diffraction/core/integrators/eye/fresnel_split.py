@@ -11,7 +11,7 @@ the first specular vertex from the camera (depth 0): deeper vertices would doubl
 every bounce, and there the choice's share of the variance is small (docs/physics.md section
 4.12, benchmarks/sphere_noise.py). Under total internal reflection (F = 1) only the reflected
 child is kept. Russian roulette (eye_pass ``survives``) divides the split weight out of the
-throughput it judges by (the path's ``split`` state), so a child of weight F is kept as often as
+throughput it judges by (the path's ``PathState.split``), so a child of weight F is kept as often as
 its unsplit path would be (any survival probability keeps the estimate unbiased; this one adds
 no roulette noise where the unsplit path had none). The setting ``fresnel_split`` (render/plan.py's
 ``fresnel_split``, off where gratings layer their bases) switches it off, as
@@ -42,7 +42,7 @@ def split_first_dielectric(walker, rays: Rays, hit: Hit, rng, u, dielectric):
     ior = walker.prepared.materials.ior
     n = np.take(ior[:, 0], hf.mat) if rf.lam is None else ior[hf.mat, rf.lam]
     eta = np.where(hf.front, n, 1.0 / n).astype(np.float32)  # n_t / n_i
-    ns = walker._specular_normal(rf, hf)
+    ns = walker.specular_normal(rf, hf)
     cos = hf.cos_i if ns is hf.ng else -np.einsum("ij,ij->i", rf.d, ns)
     fr = np.asarray(fresnel_dielectric(np.abs(cos), eta)[0], np.float32)
     # reflected children where F > 0, refracted ones where F < 1 (not under total internal reflection)
@@ -59,8 +59,8 @@ def split_first_dielectric(walker, rays: Rays, hit: Hit, rng, u, dielectric):
     else:
         w = out.w * factor
     out.w = w.astype(np.float32, copy=False)
-    if out.extra is not None and "split" in out.extra:  # Russian roulette judges the unsplit path
-        out.extra["split"] = out.extra["split"] * np.maximum(factor, np.float32(1e-30))
+    if out.state is not None:  # Russian roulette judges the unsplit path
+        out.state.split = out.state.split * np.maximum(factor, np.float32(1e-30))
     if idx.size == len(rays):
         return out, transmitted
     rest = np.flatnonzero(~first)

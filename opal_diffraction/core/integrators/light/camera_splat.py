@@ -89,7 +89,7 @@ def view_key(camera, filter_width: float) -> tuple:
 def direct_materials(prepared) -> np.ndarray:
     """(M,) bool: the materials whose directly seen caustics the splat carries: plain Lambertian
     ones (kind DIFFUSE, not rough or layered, no grating, no opal), where the eye pass's caustic
-    lookup is exactly irradiance * rho / pi (eye_pass._caustic_light)."""
+    lookup is exactly irradiance * rho / pi (eye/next_event.caustic_light)."""
     mats = prepared.materials
     ok = np.asarray(mats.kind) == DIFFUSE
     if prepared.microfacet is not None:

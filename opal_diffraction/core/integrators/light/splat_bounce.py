@@ -34,6 +34,7 @@ import numpy as np
 from ...materials.bsdf import cosine_hemisphere
 from ...materials.spectra import DIFFUSE
 from ...materials.surface import surface_reflectance
+from ...transport.path_state import Caustic
 from ...transport.walker import Hit, Rays, SpecularWalker
 
 __all__ = ["applies", "receivers", "receives", "covered", "BounceLog", "trace_bounces"]
@@ -73,11 +74,11 @@ def receives(mask: np.ndarray, hit: Hit) -> np.ndarray:
 
 def covered(mask: np.ndarray, rays: Rays, hit: Hit) -> np.ndarray:
     """(B,) bool: eye-path diffuse vertices X whose caustic-map light the continuation carries:
-    one diffuse vertex before (``nd`` = 1), that vertex seen straight from the camera on a
+    one diffuse vertex before (``PathState.nd`` = 1), that vertex seen straight from the camera on a
     receiving material (``seen``, set by ``mark_bounce``), specular bounces since (``caustic`` =
-    2), and X receiving (``receives``)."""
-    st = rays.extra
-    return (st["nd"] == 1) & st["seen"] & (st["caustic"] == 2) & receives(mask, hit)
+    Caustic.PATH), and X receiving (``receives``)."""
+    st = rays.state
+    return (st.nd == 1) & st.seen & (st.caustic == Caustic.PATH) & receives(mask, hit)
 
 
 def mark_bounce(mask: np.ndarray | None, rays: Rays, hit: Hit) -> np.ndarray:
@@ -152,7 +153,7 @@ def trace_bounces(prepared, log: BounceLog, batch, rng: np.random.Generator) -> 
         white = Rays(white.o, white.d, white.pix, np.zeros((0, prepared.grid.n), np.float32), None, white.depth,
                      white.u_lam)
     tr.walk(white, mono)
-    return tr._rays
+    return tr.rays_cast
 
 
 def _concat(rs):

@@ -101,7 +101,7 @@ class LightWalker(SpecularWalker):
             return kind
         return np.where(diffracting(self.prepared, hit, kind, rng), GRATING, kind)
 
-    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng) -> Rays | None:
+    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng, shaded=None) -> Rays | None:
         """The orders of the gratings' paths (mono rays; section 3.10): diffracted paths are
         specular ones, so they deposit caustics where they land on diffuse surfaces."""
         if rays.basis is not None and (self.bragg is not None or self.prepared.gratings.any):
@@ -110,14 +110,14 @@ class LightWalker(SpecularWalker):
         sel = (kind == GRATING) & can_bounce
         if not sel.any():
             return opal
-        orders = scatter_at_gratings(self, rays.take(sel), hit.take(sel), rng)
+        orders = scatter_at_gratings(self.prepared, rays.take(sel), hit.take(sel), rng, self.split_white)
         if opal is None or not len(opal):
             return orders
         if orders is None or not len(orders):
             return opal
         if (orders.lam is None) == (opal.lam is None):
             return Rays.concat(opal, orders)
-        self._spawned.append(orders)  # white paths' orders are mono rays: traced with the mono population
+        self.spawn(orders)  # white paths' orders are mono rays: traced with the mono population
         return opal
 
     def survives(self, rays: Rays, rng) -> np.ndarray:
@@ -187,10 +187,10 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
     for c in [slice(0, m)] if chunks is None else chunks:
         tr.walk(rays if chunks is None else rays.take(np.arange(c.start, c.stop)), tr.empty_mono())
         if tr.bounces is not None:  # the piece's landings, one diffuse bounce on
-            tr._rays += splat_bounce.trace_bounces(prepared, tr.bounces, tr.splat, bounce_rng)
+            tr.rays_cast += splat_bounce.trace_bounces(prepared, tr.bounces, tr.splat, bounce_rng)
             tr.bounces = splat_bounce.BounceLog(prepared)
         if tr.splat is not None:
             splat.add(*tr.splat.finish())
             shadow += tr.splat.shadow_rays
             tr.splat = SplatBatch(connection)
-    return {"paths": b, "deposits": tr.deposited, "rays": tr._rays + shadow}
+    return {"paths": b, "deposits": tr.deposited, "rays": tr.rays_cast + shadow}

@@ -1,0 +1,150 @@
+"""The emission stage of the eye pass: emitted light a path finds by itself, weighted by MIS.
+
+What a BSDF-sampled (or camera) segment meets (docs/physics.md sections 4.5, 7.9): sized lights
+it passes (``lights_passed``), soft suns and the world where it leaves the scene
+(``escaped``), and emissive surfaces it hits (``surface_emission``), each weighted against the
+next-event stage's sampling of the same emitter by the power heuristic (Veach 1997, section 9.2;
+core/integrators/eye/next_event.py), which the path's last BSDF pdf (``PathState.pdf``) feeds.
+Lights are invisible to camera rays and transparent to paths, as Cycles' default ray visibility
+has them; a caustic path the light pass counted is left out (``not_covered``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...lights.sources import intersect_lights, light_pdf, sun_radiance
+from ...materials.surface import surface_emission
+from ...transport.path_state import Caustic
+from ...transport.walker import Hit, Rays
+from .factored_film import add_scaled_spectra
+from .next_event import power_heuristic
+
+__all__ = ["not_covered", "lights_passed", "escaped", "world_seen", "surface_emission_unit", "surface_emitted"]
+
+
+def not_covered(c, rays: Rays) -> np.ndarray:
+    """Rays whose emitter hit is not a caustic path the light pass counted (section 4.5)."""
+    if not c.caustics_cover_lights:
+        return np.ones(len(rays), bool)
+    return rays.state.caustic != Caustic.PATH
+
+
+def lights_passed(c, out, rays: Rays, t: np.ndarray) -> None:
+    """Sized lights a segment passes before it hits anything (at distance ``t`` (B,)): their
+    radiance, weighted against next-event estimation by the power heuristic."""
+    if not c.hittable.any():
+        return
+    seen = not_covered(c, rays) & (rays.depth > 0)
+    if not seen.any():
+        return
+    r = rays.take(seen)
+    lights = c.prepared.lights
+    idx, _, scale = intersect_lights(lights, r.o, r.d, t[seen])
+    met = idx >= 0
+    if not met.any():
+        return
+    r, idx, scale = r.take(met), idx[met], scale[met]
+    p_light = np.zeros(len(r), np.float32)
+    for li in np.unique(idx):  # the few lights met
+        sel = idx == li
+        p_light[sel] = light_pdf(lights, int(li), r.o[sel], r.d[sel])
+    scale = scale * power_heuristic(r.state.pdf, p_light)
+    spectrum = lights.spectrum
+    radiance = scale[:, None] * spectrum[idx] if r.lam is None else scale * spectrum[idx, r.lam]
+    out.add_by_vertices(r, r.weighted(radiance))
+
+
+def escaped(c, out, rays: Rays, escapes: list | None) -> None:
+    """Rays that left the scene: the soft suns they see (MIS-weighted) and the world behind
+    them; ``escapes``: a list to record the paths that met only mirrors and glass (trace_escapes),
+    or None."""
+    if len(c.soft_suns):
+        seen = not_covered(c, rays) & (rays.depth > 0)
+        if seen.any():
+            r = rays.take(seen)
+            lights = c.prepared.lights
+            p_light = sum(light_pdf(lights, int(li), r.o, r.d) for li in c.soft_suns)
+            rad = sun_radiance(lights, r.d) * power_heuristic(r.state.pdf, p_light)[:, None]
+            out.add_by_vertices(r, r.weighted(rad) if r.lam is None else r.w * rad[np.arange(len(r)), r.lam])
+    st = rays.state
+    if escapes is not None:
+        first = st.nd == 0  # paths that met only mirrors and glass
+        r = rays.take(first)
+        escapes.append({"origin": r.o, "direction": r.d, "weight": r.dense_w(c.n),
+                        "lam": r.lam, "depth": r.depth, "ray": r.pix})
+    # the world through glass after a diffuse vertex is a caustic path the light pass
+    # counted (it emits from the world too)
+    keep = not_covered(c, rays)
+    if not keep.all():
+        rays = rays.take(keep)
+        st = rays.state
+    for nd in np.unique(st.nd):
+        world_seen(c, out, rays.take(st.nd == nd), out.light_film(min(int(nd), 2)))
+
+
+def world_seen(c, out, rays: Rays, film):
+    """The world along escaping rays into ``film``: the map (weighted against its next events)
+    or the uniform background spectrum."""
+    prepared = c.prepared
+    env = prepared.environment
+    if env is not None:  # the world map seen along the escaping rays (docs/physics.md section 7.9)
+        if len(rays) == 0:
+            return
+        spectra = prepared.conv.illuminant_from_rgb(env.radiance_rgb(rays.d)).astype(np.float32)
+        # a BSDF sample, weighted against the map's next-event estimation (power heuristic)
+        spectra *= power_heuristic(rays.state.pdf, env.pdf(rays.d).astype(np.float32))[:, None]
+        contrib = rays.weighted(spectra) if rays.lam is None else rays.w * spectra[np.arange(len(rays)), rays.lam]
+        out.accumulate(rays, contrib, film)
+        return
+    bg = prepared.world_spectrum
+    if not bg.any() or len(rays) == 0:
+        return
+    if c.greys.add_constant(film, rays, bg, out.n_pixels):  # grey weights: sums per pixel
+        return
+    if rays.lam is None and rays.w is None:  # unit weights: count rays per pixel
+        counts = np.bincount(rays.pix, minlength=out.n_pixels).astype(np.float32)
+        film[:] += (counts[:, None] * bg[None, :]).ravel()
+        return
+    contrib = rays.weighted(np.broadcast_to(bg, (len(rays), c.n)) if rays.lam is None else bg[rays.lam])
+    out.accumulate(rays, contrib, film)
+
+
+def surface_emission_unit(c, out, rays: Rays, hit: Hit, emits: np.ndarray) -> bool:
+    """``surface_emitted`` for unit-weight white rays (camera rays, through clear glass and
+    mirrors) at untextured emitters with no MIS partner: the emission spectra added per pixel and
+    material (core/integrators/eye/factored_film.py), no (B, n) spectrum per ray. False: not
+    applicable, nothing added (the general path does it)."""
+    prepared = c.prepared
+    if rays.lam is not None or rays.w is not None or prepared.textures.uses("emission"):
+        return False
+    st = rays.state
+    sel = emits & not_covered(c, rays)
+    if c.mesh_lights is not None and (st.pdf[sel] > 0).any():
+        return False  # weighted against the mesh lights' next events: the general path
+    idx = np.flatnonzero(sel)
+    nd = np.minimum(st.nd[idx], 2)
+    groups = [idx] if len(nd) == 0 or (nd == nd[0]).all() else [idx[nd == k] for k in np.unique(nd)]
+    table = prepared.materials.emission
+    for j in groups:
+        if len(j) and not add_scaled_spectra(out.light_film(min(int(st.nd[j[0]]), 2)), out.n_pixels,
+                                             rays.pix[j], hit.mat[j], 1.0, table):
+            surface_emitted(c, out, rays.take(j), hit.take(j))
+    return True
+
+
+def surface_emitted(c, out, rays: Rays, hit: Hit):
+    """Emission of the surfaces hit (Cycles' units: the material's emission is radiance, seen
+    from both sides), weighted against the mesh lights' next-event estimation by the power
+    heuristic where a BSDF sample found it; a caustic path the light pass counted is left out."""
+    keep = not_covered(c, rays)
+    if not keep.all():
+        rays, hit = rays.take(keep), hit.take(keep)
+    if len(rays) == 0:
+        return
+    e = surface_emission(c.prepared, hit, rays.lam)
+    pdf = rays.state.pdf
+    if c.mesh_lights is not None and (pdf > 0).any():
+        wgt = power_heuristic(pdf, c.mesh_lights.pdf(hit.prim, rays.o, hit.p).astype(np.float32))
+        e = e * (wgt[:, None] if rays.lam is None else wgt)
+    out.add_by_vertices(rays, rays.weighted(e) if rays.lam is None else rays.w * e)

@@ -1,0 +1,98 @@
+"""The gratings stage of the eye pass: light diffracted towards the viewer at a grating hit.
+
+At a hit on a grating layer (docs/physics.md sections 3.1-3.5, 3.11): every light's exact
+incident direction by shadow ray (so no noise from the light side) diffracted by
+core/gratings/radiance.py's kernel into the viewer's direction, over the pixel's footprint where
+the rays carry differentials (core/sampling/footprint.py, section 3.7); the world seen through
+the grating's orders (core/gratings/world.py); and every directional lobe of the light pass's
+grating records (light that reached the grating through mirrors and glass). All of it goes to
+the Diffraction part of the film.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...gratings.directions import tangents_at
+from ...gratings.radiance import diffracted_radiance, grating_frame
+from ...gratings.world import world_through_grating
+from ...lights.sources import sample_light
+from ...sampling import footprint
+from ...transport.walker import Hit, Rays
+
+__all__ = ["grating_light"]
+
+
+def grating_light(c, out, rays: Rays, hit: Hit, rng):
+    """Light of every light diffracted by the grating layer towards the viewer (exact w_i by
+    shadow ray, so no noise from the light side), into the Diffraction part of ``out``."""
+    prepared = c.prepared
+    g, lights = prepared.gratings, prepared.lights
+    edges = prepared.grid.bin_edges
+    for m in np.unique(hit.mat):  # loop over grating materials present (a few)
+        sel = hit.mat == m
+        r, h = rays.take(sel), hit.take(sel)
+        b = len(r)
+        t, s = grating_frame(tangents_at(prepared.corner_grating_tangent, prepared.tri_grating_tangent, h.prim,
+                                         h.bu, h.bv, h.ng), h.ng, np.full(b, g.cos_rot[m]), np.full(b, g.sin_rot[m]))
+        over = prepared.tri_period[h.prim] if len(prepared.tri_period) else np.zeros(b, np.float32)
+        period = np.where(over > 0, over, g.period[m])
+        w_o = -r.d
+        if c.world_gratings[m]:  # the world, orders sampled from the viewer (docs/physics.md section 3.11)
+            seen = world_through_grating(prepared, r, h, int(m), t, s, period, rng)
+            if seen is not None:
+                sub, contrib, casts = seen
+                out.shadow_rays += casts
+                out.accumulate(sub, contrib, out.diffraction)
+        for li in range(len(lights)):  # loop over lights, not rays
+            wi, dist, gfac = sample_light(lights, li, h.p, rng)
+            cos_l = np.einsum("ij,ij->i", wi, h.ng)
+            valid = (cos_l < 0) if g.transmission[m] else (cos_l > 0)
+            valid &= gfac > 0
+            idx = np.flatnonzero(valid)
+            if idx.size == 0:
+                continue
+            side = np.float32(-1.0 if g.transmission[m] else 1.0)
+            eps = h.eps[idx]
+            o = h.p[idx] + (side * eps)[:, None] * h.ng[idx]
+            tmax = np.where(np.isinf(dist[idx]), np.inf, dist[idx] - 2 * eps).astype(np.float32)
+            occ = prepared.accel.occluded(o.astype(np.float32), np.ascontiguousarray(wi[idx], np.float32), tmax)
+            out.shadow_rays += len(occ)
+            idx = idx[~occ]
+            if idx.size == 0:
+                continue
+            rad = diffracted_radiance(g, m, w_o[idx], wi[idx], t[idx], s[idx], h.ng[idx], period[idx], edges, rng,
+                                      footprint=_footprint(r, h, idx, t, s, wi, dist))
+            e = (gfac[idx] * np.abs(cos_l[idx])).astype(np.float32)
+            spec = rad * e[:, None] * lights.spectrum[li][None, :]
+            sub = r.take(idx)
+            contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(idx)), sub.lam]
+            out.accumulate(sub, contrib, out.diffraction)
+        if c.record_map is not None:
+            # light that reached the grating through mirrors and glass: every directional lobe
+            # of the light pass's records (grating_records.py, docs/physics.md section 3.5),
+            # on the viewer's side (h.ng faces it) for reflection, the far side for transmission
+            hit_of, irr, src = c.record_map.lobes(h.prim, h.bu, h.bv, rng, at=h.p)
+            cos_l = np.einsum("ij,ij->i", src, h.ng[hit_of])
+            keep = (cos_l < 0) if g.transmission[m] else (cos_l > 0)
+            hit_of, irr, src = hit_of[keep], irr[keep], src[keep]
+            chunk = c.record_map.max_pairs
+            for c0 in range(0, len(hit_of), chunk):  # (hit, lobe) pairs in bounded chunks
+                j, sl = hit_of[c0:c0 + chunk], slice(c0, c0 + chunk)
+                rad = diffracted_radiance(g, m, w_o[j], src[sl], t[j], s[j], h.ng[j], period[j], edges, rng,
+                                          footprint=_footprint(r, h, j, t, s, src[sl], None, aligned=True))
+                spec = rad * irr[sl]
+                sub = r.take(j)
+                contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(j)), sub.lam]
+                out.accumulate(sub, contrib, out.diffraction)
+
+
+def _footprint(rays: Rays, hit: Hit, idx, t, s, wi, dist, aligned: bool = False):
+    """(du, dv) of rays[idx]'s pixel footprints at their grating hits (core/sampling/footprint.py), or
+    None where the rays carry no differentials. ``aligned``: ``wi`` is already one row per
+    entry of ``idx`` (the records' lobes, several per hit)."""
+    rd = rays.differentials
+    if rd is None:
+        return None
+    return footprint.grating_footprint(rd[idx], rays.o[idx], rays.d[idx], hit.p[idx], hit.ng[idx], t[idx], s[idx],
+                                       wi if aligned else wi[idx], None if dist is None else dist[idx])

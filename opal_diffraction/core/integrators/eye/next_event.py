@@ -1,0 +1,302 @@
+"""The next-event stage of the eye pass: light sampled at a path vertex, by shadow ray, with MIS.
+
+At a diffuse, rough or layered vertex (docs/physics.md section 4.5; pbrt-v4's PathIntegrator
+``SampleLd``): one sample of every light, of the emissive meshes (core/lights/mesh_lights.py:
+power-proportional points) and of the world map (its luminance distribution), each weighted
+against BSDF sampling by Veach's power heuristic (Veach 1997, section 9.2) where BSDF sampling
+can also find the emitter, and added to the film if its shadow ray reaches it. ``next_events``
+is the one routine for every lobe: Lambertian, core/materials/bsdf.py's microfacet lobes and the
+opal's Bragg lobe (core/integrators/bragg_shading.py) differ only in the ``NextEventLobe`` they
+pass. The Lambertian vertices' analytic lights take a factored fast path (``direct_light``:
+all shadow rays in one call, unit-weight rays summed per (material, light)). The caustic map's
+irradiance (the light pass's caustics, section 4.2) is looked up here too (``caustic_light``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...lights.sources import sample_light_pdf
+from ...materials import bsdf
+from ...materials.surface import surface_reflectance
+from ...transport.walker import Hit, Rays, light_spectrum_of
+from .surface_interaction import bump
+
+__all__ = ["power_heuristic", "power_heuristic_f64", "light_samples", "visible", "next_events", "MicrofacetLobe",
+           "LambertLobe", "BraggLobeEvents", "lambert_next_events", "direct_light", "caustic_light"]
+
+
+def power_heuristic(p_this: np.ndarray, p_other: np.ndarray, light_first: bool = False) -> np.ndarray:
+    """Veach's power heuristic (beta = 2) for one sample of each of two strategies: the weight of
+    a BSDF sample with pdf ``p_this`` against light sampling's ``p_other`` (``light_first``: the
+    arguments are the light sample's pdf and then the BSDF's). A zero pdf for the sample's own
+    strategy means a specular or camera ray with no competitor: weight 1."""
+    a = np.asarray(p_this, np.float32)
+    b = np.asarray(p_other, np.float32)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # pdfs past 1e19: inf, mapped below
+        a2, b2 = a * a, b * b
+        w = np.where(a2 + b2 > 0, a2 / (a2 + b2), np.float32(1.0))
+    if not light_first:
+        w = np.where(a > 0, w, np.float32(1.0))
+    return np.where(np.isfinite(w), w, np.float32(1.0)).astype(np.float32)
+
+
+def power_heuristic_f64(p_light, p_lobe) -> np.ndarray:
+    """The power heuristic of a light sample against a lobe's sampling, in float64 (the opal
+    lobe's pdfs are float64; ``power_heuristic`` with ``light_first`` in float32)."""
+    a, b = np.asarray(p_light, np.float64), np.asarray(p_lobe, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = np.where(a * a + b * b > 0, a * a / (a * a + b * b), 1.0)
+    return np.where(np.isfinite(w), w, 1.0).astype(np.float32)
+
+
+class _RowsOf:
+    """``table[rows]`` (B, n) without forming it: indexing with the entries a next event keeps
+    (``light_spectrum_of``) gathers those rows only."""
+
+    ndim = 2
+
+    def __init__(self, table, rows):
+        self.table, self.rows = table, rows
+
+    def __getitem__(self, idx):
+        return self.table[self.rows[idx]]
+
+    def __array__(self, dtype=None, copy=None):
+        out = self.table[self.rows]
+        return out if dtype is None else out.astype(dtype)
+
+
+def light_samples(prepared, hit: Hit, rng, analytic: bool = True) -> list:
+    """One next-event sample per emitter at the hits: every light (``analytic``), the emissive
+    meshes (core/lights/mesh_lights.py: power-proportional points) and the world map (its luminance
+    distribution). Each is (wi (B, 3), distance (B,), scalar weight (B,), spectrum (n,) or
+    (B, n), light pdf (B,) or None for delta lights, shadow-ray end pad)."""
+    lights = prepared.lights
+    b = len(hit.p)
+    samples = []
+    for li in range(len(lights) if analytic else 0):  # the lights (a handful)
+        wi, dist, g, pl = sample_light_pdf(lights, li, hit.p, rng)
+        samples.append((np.asarray(wi, np.float32), dist, g, lights.spectrum[li], pl, 0.0))
+    if prepared.mesh_lights is not None:
+        wi, dist, g, prim, pdf = prepared.mesh_lights.sample(hit.p, rng)
+        em = _RowsOf(prepared.materials.emission, prepared.tri_material[prim])  # gathered for the lit rows only
+        samples.append((wi, dist, g, em, pdf, 2 * prepared.tri_offset[prim]))
+    if prepared.environment is not None:
+        wi, pdf, rgb = prepared.environment.sample(rng.random(b), rng.random(b))
+        with np.errstate(divide="ignore"):
+            g = np.where(pdf > 0, 1.0 / pdf, 0.0)
+        radiance = prepared.conv.illuminant_from_rgb(rgb).astype(np.float32)
+        samples.append((wi.astype(np.float32), np.full(b, np.inf, np.float32), g, radiance,
+                        pdf.astype(np.float32), 0.0))
+    return samples
+
+
+def visible(prepared, out, hit: Hit, wi, dist, pad, live, side=None) -> np.ndarray:
+    """The entries of ``live`` whose shadow ray from the hit along ``wi`` reaches its light
+    sample (``dist`` less twice the offset and ``pad``), offset along ng (times ``side``,
+    -1 for samples below the surface); counts the rays in ``out`` (a TileOutput)."""
+    eps = hit.eps[live]
+    off = eps if side is None else side * eps
+    o = (hit.p[live] + off[:, None] * hit.ng[live]).astype(np.float32)
+    d = np.asarray(dist, np.float32)[live]
+    tmax = np.where(np.isinf(d), np.inf, d - 2 * eps - np.asarray(pad if np.ndim(pad) == 0 else pad[live]))
+    occ = prepared.accel.occluded(o, np.ascontiguousarray(wi[live], np.float32), tmax.astype(np.float32))
+    out.shadow_rays += len(occ)
+    return live[~occ]
+
+
+def next_events(c, out, rays: Rays, hit: Hit, lobe, rng, film=None, analytic: bool = True) -> None:
+    """Next-event estimation at ``hit`` for the lobe ``lobe`` (a ``MicrofacetLobe``,
+    ``LambertLobe`` or ``BraggLobeEvents``: its evaluate and pdf towards each light sample, the
+    MIS weight against its own sampling, its contribution): one sample of each light
+    (``analytic``), of the emissive meshes and of the world map (``light_samples``, numbers from
+    ``rng``), each kept where the lobe reflects it and its shadow ray reaches the light, added to
+    ``film``, or (None) to the film part of each path's vertex count + 1."""
+    prepared = c.prepared
+    nd = None if film is not None else rays.state.nd
+    for wi, dist, g, spectrum, p_light, pad in light_samples(prepared, hit, rng, analytic):
+        value, scale, live = lobe.weigh(wi, g, p_light)
+        if live.size == 0:
+            continue
+        live = visible(prepared, out, hit, wi, dist, pad, live, lobe.shadow_side(wi, live))
+        if live.size == 0:
+            continue
+        r = rays.take(live)
+        spec = light_spectrum_of(spectrum, live, r)
+        contrib = lobe.contribution(r, live, value, scale, spec)
+        if film is not None:
+            out.accumulate(r, contrib, film)
+            continue
+        k_nd = nd[live]
+        for k in np.unique(k_nd):  # the path's vertex counts (0, 1, 2+)
+            part = k_nd == k
+            out.accumulate(r.take(part), contrib[part], out.light_film(min(int(k) + 1, 2)))
+
+
+class MicrofacetLobe:
+    """core/materials/bsdf.py's lobes (``params``) at ``hit`` for ``next_events``, with Cycles'
+    bump-terminator term on Lambertian lobes; shadow rays leave on the light's side (a light
+    behind a rough glass is seen through it)."""
+
+    def __init__(self, c, rays: Rays, hit: Hit, params):
+        self.prepared, self.normal_maps, self.hit, self.params = c.prepared, c.normal_maps, hit, params
+        self.wo = -rays.d
+        self.lambert = params.lobe == bsdf.LAMBERT
+
+    def weigh(self, wi, g, p_light):
+        """(f cos (B, n') of the lobe, scale (B,): the sample's weight times the MIS weight and
+        the bump term, the entries that reach the film) for light samples ``wi``."""
+        hit = self.hit
+        f_cos, p_bsdf = bsdf.evaluate(self.params, self.wo, wi, hit.ns, hit.ng)
+        scale = np.asarray(g, np.float32)
+        if self.normal_maps and self.lambert.any():
+            scale = scale * np.where(self.lambert, bump(self.prepared, self.normal_maps, hit, wi), np.float32(1.0))
+        if p_light is not None:
+            scale = scale * power_heuristic(p_light, p_bsdf, light_first=True)
+        return f_cos, scale, np.flatnonzero((scale > 0) & (f_cos.max(axis=1) > 0))
+
+    def shadow_side(self, wi, live):
+        return np.where(np.einsum("ij,ij->i", wi[live], self.hit.ng[live]) > 0, 1.0, -1.0).astype(np.float32)
+
+    @staticmethod
+    def contribution(r: Rays, live, f_cos, scale, spec):
+        val = f_cos[live] * scale[live, None]
+        return r.weighted(val * spec) if r.lam is None else r.w * val[:, 0] * spec
+
+
+class LambertLobe:
+    """The Lambertian lobe of base colours ``albedo`` at ``hit`` for ``next_events``, written out:
+    f cos = albedo / pi * cos(wi, ns) and pdf = cos / pi where wo and wi are above ns and wi above
+    ng (bsdf.evaluate's LAMBERT, without its frames and parameter tables), times Cycles'
+    bump-terminator term on normal-mapped hits."""
+
+    def __init__(self, c, rays: Rays, hit: Hit, albedo):
+        self.prepared, self.normal_maps, self.hit, self.albedo = c.prepared, c.normal_maps, hit, albedo
+        self.wo_up = np.einsum("ij,ij->i", rays.d, hit.ns) < 0  # (on_hit passes lit surfaces only: albedo > 0)
+
+    def weigh(self, wi, g, p_light):
+        """(the base colours, scale (B,) = g cos / pi times the bump term and the MIS weight, the
+        entries that reach the film) for light samples ``wi`` (never delta: meshes, the world)."""
+        hit = self.hit
+        cos_s = np.einsum("ij,ij->i", wi, hit.ns)
+        ok = self.wo_up & (cos_s > 0) & (np.einsum("ij,ij->i", wi, hit.ng) > 0)
+        p_bsdf = np.where(ok, cos_s * np.float32(1 / np.pi), np.float32(0.0)).astype(np.float32)
+        scale = np.asarray(g, np.float32) * p_bsdf  # g cos / pi
+        if self.normal_maps:
+            scale = scale * bump(self.prepared, self.normal_maps, hit, wi)
+        scale = scale * power_heuristic(p_light, p_bsdf, light_first=True)
+        return self.albedo, scale, np.flatnonzero(scale > 0)
+
+    @staticmethod
+    def shadow_side(wi, live):
+        return None  # above the surface (weigh keeps wi . ng > 0)
+
+    @staticmethod
+    def contribution(r: Rays, live, albedo, scale, spec):
+        if r.lam is None:
+            return r.weighted(albedo[live] * scale[live, None] * spec)
+        return r.w * albedo[live] * scale[live] * spec
+
+
+class BraggLobeEvents:
+    """The opal's Bragg lobe (core/materials/bragg_bsdf.py ``BraggLobe``) at ``hit`` for
+    ``next_events``, in float64 as the lobe computes (power heuristic against the lobe's
+    sampling where the light can also be found by it)."""
+
+    def __init__(self, c, rays: Rays, hit: Hit, lobe):
+        self.lobe, self.edges, self.lam = lobe, c.bragg.edges, rays.lam
+        self.wo = -np.asarray(rays.d, np.float64)
+        self.ns = np.asarray(hit.ns, np.float64)
+
+    def weigh(self, wi, g, p_light):
+        f_cos, p_lobe = self.lobe.evaluate(self.wo, wi, self.ns, self.edges, self.lam)
+        scale = np.asarray(g, np.float32)
+        if p_light is not None:
+            scale = scale * power_heuristic_f64(p_light, p_lobe)
+        peak = f_cos.max(axis=1) if self.lam is None else f_cos
+        return f_cos, scale, np.flatnonzero((scale > 0) & (peak > 0))
+
+    @staticmethod
+    def shadow_side(wi, live):
+        return None  # from outside the stone, offset along ng
+
+    contribution = staticmethod(LambertLobe.contribution)  # f cos (B, n) or (B,) in the base colours' place
+
+
+def lambert_next_events(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
+    """Next-event estimation at Lambertian vertices: every light (with the factored fast path
+    of ``direct_light``), then the emissive meshes and the world map (``next_events`` with the
+    ``LambertLobe``).
+    ``albedo``: the hits' base colours (surface_reflectance), computed here if None; ``rng``:
+    the vertices' SLOT_LIGHT numbers."""
+    direct_light(c, out, rays, hit, rng, film, albedo)
+    if c.mesh_lights is not None or c.prepared.environment is not None:
+        if albedo is None:
+            albedo = surface_reflectance(c.prepared, hit, rays.lam)
+        next_events(c, out, rays, hit, LambertLobe(c, rays, hit, albedo), rng, film, analytic=False)
+
+
+def direct_light(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
+    """The analytic lights at Lambertian vertices: one sample per light per ray, all shadow rays
+    in a single any-hit call, the power heuristic against cosine sampling for the lights BSDF
+    sampling can find; unit-weight white rays on untextured surfaces summed per (material,
+    light) (``TileOutput.accumulate_factored``)."""
+    prepared = c.prepared
+    lights = prepared.lights
+    nl, b = len(lights), len(rays)
+    if nl == 0 or b == 0:
+        return
+    # One sample per light per ray; all shadow rays in a single any-hit call.
+    flat = not c.bent
+    factors = np.zeros((b, nl), np.float32)
+    origins, dirs, tmax, idx = [], [], [], []
+    for li in range(nl):  # loop over lights (a handful), not rays
+        wi, dist, g, p_light = sample_light_pdf(lights, li, hit.p, rng)
+        # shaded with ns; light from below the geometric surface does not reach it (no leaks)
+        cos_s = np.einsum("ij,ij->i", wi, hit.ns)
+        above = True if flat else np.einsum("ij,ij->i", wi, hit.ng) > 0
+        f = np.where((cos_s > 0) & above, g * cos_s * bump(prepared, c.normal_maps, hit, wi), np.float32(0.0))
+        if p_light is not None:  # a light BSDF sampling can also find: the power heuristic
+            f = f * power_heuristic(p_light, np.maximum(cos_s, 0) * np.float32(1 / np.pi), light_first=True)
+        live = np.flatnonzero(f > 0)
+        if live.size == 0:
+            continue
+        eps = hit.eps[live]
+        origins.append(hit.p[live] + eps[:, None] * hit.ng[live])
+        dirs.append(wi[live])
+        tmax.append(np.where(np.isinf(dist[live]), np.inf, dist[live] - 2 * eps))
+        idx.append(live * nl + li)
+        factors.reshape(-1)[live * nl + li] = f[live]
+    if not idx:
+        return
+    occ = prepared.accel.occluded(np.concatenate(origins).astype(np.float32),
+                                  np.concatenate(dirs).astype(np.float32),
+                                  np.concatenate(tmax).astype(np.float32))
+    out.shadow_rays += len(occ)
+    factors.reshape(-1)[np.concatenate(idx)[occ]] = 0.0
+    if (rays.lam is None and rays.w is None and not prepared.textures.uses("color")
+            and out.accumulate_factored(prepared, rays.pix, hit.mat, factors, film)):
+        return
+    brdf = (surface_reflectance(prepared, hit, rays.lam) if albedo is None else albedo) * np.float32(1 / np.pi)
+    if rays.lam is None:
+        irradiance = factors @ lights.spectrum          # (B, L) @ (L, n)
+    else:
+        irradiance = np.sum(factors * lights.spectrum[:, rays.lam].T, axis=1)
+    out.accumulate(rays, rays.weighted(brdf * irradiance), film)
+
+
+def caustic_light(c, out, rays: Rays, hit: Hit, rng):
+    """Caustic radiance at diffuse hits: the illumination map's irradiance * albedo / pi
+    (looked up with a one-element jitter: a box filter over neighbouring elements)."""
+    prepared = c.prepared
+    lit = c.caustic_lit[hit.prim]
+    if not lit.all():
+        rays, hit = rays.take(lit), hit.take(lit)
+    if not len(rays):
+        return
+    irr = c.caustic_map.irradiance(hit.prim, hit.bu, hit.bv, hit.front, rng)
+    brdf = surface_reflectance(prepared, hit) * np.float32(1 / np.pi)
+    radiance = irr * brdf
+    contrib = rays.weighted(radiance) if rays.lam is None else rays.w * radiance[np.arange(len(rays)), rays.lam]
+    out.accumulate(rays, contrib, out.caustics)
