@@ -30,6 +30,7 @@ import tempfile
 import threading
 import time
 import warnings
+from contextlib import nullcontext
 
 __all__ = ["main", "CliError"]
 
@@ -346,6 +347,7 @@ def main(argv=None) -> int:
 def _render(args, sig: _Signals, created: list) -> int:
     from .core.render.output import write_png, write_rgb_exr, write_spectral_exr
     from .core.render.prepare import prepare
+    from .core.render.distributed import DaskExecutor, connect
     from .core.render.frame import render_prepared
     from .core.scene.npz import load_scene
     from .core.scene.checks import SceneError
@@ -391,14 +393,11 @@ def _render(args, sig: _Signals, created: list) -> int:
     bar = None if args.quiet else _ProgressBar()
     sig.phase = "render"
     try:
-        if args.scheduler:  # the same image, rendered on a Dask cluster (core/render/distributed.py)
-            from .core.render.distributed import connect, render_on_cluster
-
-            with connect(args.scheduler) as client:
-                result = render_on_cluster(client, scene, settings, prepared, progress=bar,
-                                           should_cancel=sig.should_cancel, started_at=t_start)
-        else:
-            result = render_prepared(prepared, progress=bar, should_cancel=sig.should_cancel, started_at=t_start)
+        with connect(args.scheduler) if args.scheduler else nullcontext() as client:
+            # on a Dask cluster the same image (core/render/distributed.py), else this process's threads
+            executor = None if client is None else DaskExecutor(client, scene)
+            result = render_prepared(prepared, progress=bar, should_cancel=sig.should_cancel, started_at=t_start,
+                                     executor=executor)
     except SceneError as e:
         raise CliError(str(e)) from None
     finally:

@@ -11,17 +11,17 @@ newest image as a float texture through the scene's display transform
 
 The session keeps its PreparedScene and LightPassResult between redraws, so a camera move
 re-renders only the eye pass. The preview renders in a background thread with the core's
-``render_prepared``: first at 1/8 of the region's resolution with one sample (the first image
-comes quickly), then 1/4, 1/2, and the full resolution refined round after round up to the
-scene's preview samples. Every restart bumps a generation number; the old render stops at its
-next tile (the core polls ``should_cancel`` between tiles) and its images are dropped. Leaving
+``render_levels`` (core/render/progressive.py, through the core's scheduler): first at 1/8 of
+the region's resolution with one sample (the first image comes quickly), then 1/4, 1/2, and the
+full resolution refined round after round up to the scene's preview samples. Every restart bumps
+a generation number; the old render stops at its next tile (the scheduler polls
+``should_cancel`` between tiles) and its images are dropped. Leaving
 Rendered mode frees the engine, which cancels the thread. A main-thread timer tags the 3D views
 for redraw while new images arrive (the thread never touches bpy).
 
 This module never imports the engine: the engine passes itself to ``update`` and ``draw``.
 
-The logic is plain Python for tests without a display: :func:`preview_levels` (the schedule),
-:func:`viewport_camera` (view and window matrices to a core Camera), :func:`prepare_pixels`
+The logic is plain Python for tests without a display: :func:`viewport_camera` (view and window matrices to a core Camera), :func:`prepare_pixels`
 (the texture buffer) and :class:`ProgressiveRenderer` (the thread).
 """
 
@@ -34,41 +34,18 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..core.integrators.light.light_pass import LightPassResult, run_light_pass
-from ..core.render.plan import plan_render
+from ..core.render.frame import LightPassResult
 from ..core.render.prepare import PreparedScene, prepare
-from ..core.render.frame import render_prepared
-from ..core.scene.model import Camera
+from ..core.render.progressive import preview_levels, render_levels
 from ..core.scene.checks import SceneError
+from ..core.scene.model import Camera
 from .settings import render_settings
 
-__all__ = ["preview_levels", "viewport_camera", "prepare_pixels", "Frame", "ProgressiveRenderer", "ViewportSession",
+__all__ = ["viewport_camera", "prepare_pixels", "Frame", "ProgressiveRenderer", "ViewportSession",
            "REDRAW_INTERVAL"]
 
 #: Seconds between redraw checks while a preview is rendering.
 REDRAW_INTERVAL = 0.1
-
-
-def preview_levels(samples: int, start_scale: int = 8) -> list[tuple[int, int]]:
-    """The progressive schedule: (downscale factor, samples per pixel) per level.
-
-    Powers of two from ``start_scale`` down to 2 with one sample each (quick, coarse images),
-    then the full resolution with ``samples`` (refined round by round).
-    """
-    levels = []
-    s = 1
-    while s * 2 <= max(int(start_scale), 1):
-        s *= 2
-    while s > 1:
-        levels.append((s, 1))
-        s //= 2
-    levels.append((1, max(int(samples), 1)))
-    return levels
-
-
-def level_size(width: int, height: int, scale: int) -> tuple[int, int]:
-    """Image size of a level: the region divided by ``scale``, rounded up, at least 1x1."""
-    return max(1, -(-int(width) // scale)), max(1, -(-int(height) // scale))
 
 
 def viewport_camera(view_matrix, window_matrix, is_perspective: bool, width: int, height: int,
@@ -216,27 +193,11 @@ class ProgressiveRenderer:
                 pass
 
     def _run(self, gen: int, prepared: PreparedScene, light: LightPassResult | None, levels) -> None:
-        cam = prepared.scene.camera
-        stale = lambda: self._stale(gen)  # noqa: E731
         try:
-            plan = plan_render(prepared)
-            if light is None and plan.light_pass:
-                light = run_light_pass(prepared, should_cancel=stale, plan=plan)
-                if light.cancelled:
-                    return
-                if self.on_light is not None:
-                    self.on_light(light)
-            for li, (scale, spp) in enumerate(levels):
-                if self._stale(gen):
-                    return
-                w, h = level_size(cam.width, cam.height, scale)
-                level = prepared.with_view(replace(cam, width=w, height=h), samples=int(spp),
-                                           round_samples=max(1, min(int(spp), 4)), spectral_exr="", time_limit=0.0)
-                rr = render_prepared(level, light, should_cancel=stale,
-                                     on_round=lambda r, li=li: self._publish(gen, li, r))
-                if not self._stale(gen):
-                    self.warnings = list(rr.warnings)
-            if not self._stale(gen):
+            last = render_levels(prepared, levels, light, should_cancel=lambda: self._stale(gen),
+                                 on_round=lambda li, r: self._publish(gen, li, r), on_light=self.on_light)
+            if last is not None and not self._stale(gen):
+                self.warnings = list(last.warnings)
                 self.done = True
         except SceneError as e:
             if not self._stale(gen):

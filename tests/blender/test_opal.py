@@ -27,6 +27,7 @@ from opal_diffraction.blender.opal_presets import PRESET_ITEMS, preset_file, pre
 from opal_diffraction.core.util import enums as core_enums
 from opal_diffraction.core import opal as core_opal
 from opal_diffraction.core.sampling.camera import generate_rays
+from opal_diffraction.core.render import progressive
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.validation import validate
@@ -673,10 +674,10 @@ def test_render_reads_the_attributes_a_rotated_domain_changes_only_its_pixels(tm
 
 # ---------------------------------------------------------------------------- viewport logic
 def test_preview_levels_start_small_and_end_at_full_resolution():
-    assert viewport.preview_levels(16, 8) == [(8, 1), (4, 1), (2, 1), (1, 16)]
-    assert viewport.preview_levels(4, 1) == [(1, 4)]
-    assert viewport.preview_levels(4, 6) == [(4, 1), (2, 1), (1, 4)]
-    assert viewport.level_size(100, 61, 8) == (13, 8)
+    assert progressive.preview_levels(16, 8) == [(8, 1), (4, 1), (2, 1), (1, 16)]
+    assert progressive.preview_levels(4, 1) == [(1, 4)]
+    assert progressive.preview_levels(4, 6) == [(4, 1), (2, 1), (1, 4)]
+    assert progressive.level_size(100, 61, 8) == (13, 8)
 
 
 @pytest.mark.parametrize("kind,shift", [("PERSP", (0.0, 0.0)), ("PERSP", (0.1, -0.05)), ("ORTHO", (0.05, 0.1))])
@@ -727,7 +728,7 @@ def test_progressive_renderer_runs_levels_restarts_and_cancels():
     r = viewport.ProgressiveRenderer(on_image=lambda: images.append(r.frame()))
     settings = RenderSettings(wavelength_step=20.0, threads=1, tile_size=16)
     scene = _tiny_core_scene(32)
-    levels = viewport.preview_levels(4, 8)
+    levels = progressive.preview_levels(4, 8)
     r.start(prepare(scene, settings), levels)
     assert r.wait(60.0) and r.done and not r.error
     frames = [f for f in images if f is not None]

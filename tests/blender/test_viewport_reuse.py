@@ -11,6 +11,7 @@ import numpy as np
 
 import blender_scenes as bs
 from opal_diffraction.blender import viewport
+from opal_diffraction.core.render import scheduler
 from opal_diffraction.blender.engine import OpalRenderEngine
 
 
@@ -56,7 +57,7 @@ def test_camera_moves_reuse_the_preparation_and_the_light_pass(monkeypatch):
     assert light is not None and light.key == prepared.key  # the light pass ran once, and was kept
     reads = session.mesh_cache.reads
     light_runs = []
-    monkeypatch.setattr(viewport, "run_light_pass", lambda *a, **k: light_runs.append(1))
+    monkeypatch.setattr(scheduler, "run_light_pass", lambda *a, **k: light_runs.append(1))
 
     # the view moves: a new preview with the same preparation and light pass, and no re-export
     restarts = session.restarts

@@ -1,7 +1,8 @@
 """One frame on a Dask cluster (``dask.distributed``), bit for bit the image one process renders.
 
-``render(scene, settings, client=client)`` (render.py) prepares the scene here, as a local
-render does, and then runs its units of work on the cluster's workers:
+``render(scene, settings, client=client)`` (frame.py) prepares the scene here, as a local
+render does, and then the scheduler (scheduler.py) runs its units of work through
+``DaskExecutor`` on the cluster's workers:
 
 1. The job - the plain scene and settings, the render region, and a digest of this core's
    source - is scattered ONCE to every worker (``client.scatter(..., broadcast=True)``: one copy
@@ -19,10 +20,11 @@ render does, and then runs its units of work on the cluster's workers:
    scattered job and light maps; a task returns its tile's sums and its non-Direct parts
    already in RGB (and its (P, n) spectral sums only when the job keeps a spectral film: a
    spectral EXR is written), added to the Film here in the local render's order (round by
-   round), at most ``window`` tasks ahead of the one the film needs.
+   round), at most the scheduler's window of tasks ahead of the one the film needs.
 
-Progress is reported as tasks finish; ``should_cancel`` is polled every POLL_S and cancels the
-pending tasks. A worker that dies takes its running tasks and the results it held with it; the
+Cancel, the time limit, progress and adaptive sampling follow the scheduler's rules, as in a
+local render (scheduler.py); the light pass's loop here polls the same control every POLL_S. A
+stop cancels the pending tasks. A worker that dies takes its running tasks and the results it held with it; the
 scheduler runs them again elsewhere (up to ``distributed.scheduler.allowed-failures`` deaths per
 task) and a task that raises is retried ``RETRIES`` times: a rerun draws the same random stream,
 so the image does not change.
@@ -34,8 +36,8 @@ Blender extension is ``bl_ext.<repo>.opal_diffraction``) drives workers that ``p
 it. Workers must run the same core (checked: the source digest) and the same ray caster backend
 (checked), and for bit-identity the same NumPy build on the same kind of CPU.
 
-Dask is optional: this module imports it only inside the functions that need it, and nothing
-else in the core imports this module except ``render`` when it is given a client.
+Dask is optional: this module imports it only inside ``connect``; the executor only calls the
+client it is given.
 """
 
 from __future__ import annotations
@@ -60,23 +62,23 @@ from ..sampling.camera import FilterSampler
 from ..transport.elements import ElementLayout, IlluminationMap
 from ..integrators.eye.eye_pass import EyePass
 from ..gratings.records import GratingRecords
-from .film import Film, RenderResult, keeps_spectral, tile_parts_rgb
-from ..integrators.light.camera_splat import CameraConnection, CameraSplat, SplatLog, usable_splat, view_key
+from .film import tile_parts_rgb
+from ..integrators.light.camera_splat import CameraConnection, CameraSplat, SplatLog, view_key
 from ..integrators.light.light_pass import LANES, DepositLog, LightPassResult, LightWork, finish_light_pass
 from ..integrators.light.walker import trace_batch
 from .plan import plan_render
 from .prepare import prepare
-from ..scene.model import Camera, Lights, Materials, Scene
+from .scheduler import POLL_S
 from ..scene.checks import SceneError
+from ..scene.model import Camera, Lights, Materials, Scene
 from ..scene.settings import RenderSettings
-from .tiles import LIGHT_PASS_SHARE, EyeWork, adaptive_of, is_half_a, trace_tile
+from .tiles import EyeWork, trace_tile
 
-__all__ = ["render_on_cluster", "connect", "ClusterError", "to_wire", "from_wire", "RETRIES", "LOCAL_PREFIX"]
+__all__ = ["DaskExecutor", "connect", "ClusterError", "to_wire", "from_wire", "RETRIES", "LOCAL_PREFIX"]
 
 #: The name workers import this module by, whatever the client's package path.
 MODULE = "opal_diffraction.core.render.distributed"
 RETRIES = 2          # reruns of a task that raised (a dead worker's tasks are rerun by the scheduler)
-POLL_S = 0.1         # seconds between cancel / time-limit checks while waiting for tasks
 WORKER_WAIT_S = 60.0  # how long to wait for a first worker to join the scheduler
 REPLICATE_S = 1.0    # seconds between checks for new workers that need the scattered data
 LOCAL_PREFIX = "local:"
@@ -250,12 +252,12 @@ class _Frame:
             raise RuntimeError(f"{_MISMATCH}a worker (pid {os.getpid()}) runs a different opal_diffraction core "
                                "than the client: install the same version on every machine")
         self.prepared = prepare(from_wire(job["scene"]), from_wire(job["settings"]))
+        self.plan = plan_render(self.prepared)  # the pass decisions, as the client's plan made them
         if self.prepared.accel.name != job["backend"]:
             raise RuntimeError(f"{_MISMATCH}a worker's ray caster is '{self.prepared.accel.name}', the "
                                f"client's '{job['backend']}': install the same packages (embreex) on every machine")
         self.filt = FilterSampler(self.prepared.settings.filter_width)
         self.eye_work = EyeWork.of(self.prepared, job["region"])
-        self.plan = plan_render(self.prepared)
         self._light_work = None
         self._light = (None, None)  # (token, LightPassResult) of the maps last unpacked here
 
@@ -305,7 +307,8 @@ def light_batch_task(job: dict, index: int) -> dict:
     illum = DepositLog(work.layout)
     records = DepositLog(work.record_layout) if work.record_layout is not None else None
     splat = SplatLog() if frame.plan.camera_splat else None
-    counts = trace_batch(frame.prepared, work.batches[index], illum, records, splat=splat, bounce=frame.plan.splat_bounce)
+    counts = trace_batch(frame.prepared, work.batches[index], illum, records, splat=splat,
+                         bounce=frame.plan.splat_bounce)
     return {"illum": illum.calls, "records": None if records is None else records.calls, "counts": counts,
             "elements": work.layout.total, "splat": None if splat is None else splat.calls}
 
@@ -461,74 +464,84 @@ class _Finished:
         return done
 
 
-def render_on_cluster(client, scene: Scene, settings: RenderSettings, prepared, progress=None, should_cancel=None,
-                      on_round=None, region=None, started_at: float | None = None,
-                      spectral_film: bool | None = None) -> RenderResult:
-    """``render(scene, settings, ..., client=client)`` (see render.render for the callbacks and
-    ``spectral_film``): ``prepared`` is this process's preparation of ``scene`` and ``settings``."""
-    t_start = time.perf_counter() if started_at is None else started_at
-    settings = prepared.settings
-    plan = plan_render(prepared)
-    warnings = list(prepared.warnings) + list(plan.warnings)
-    spectral = keeps_spectral(settings, spectral_film)
-    (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv,
-                                                 adaptive_of(settings) is not None, spectral)
-    stats = {"rays": 0, "prepare_s": prepared.prepare_s, "backend": prepared.accel.name,
-             "triangles": len(prepared.scene.triangles), "scheduler": str(client.scheduler.address)}
-    deadline = t_start + settings.time_limit if settings.time_limit else None
-    uid = uuid.uuid4().hex[:12]
-    scattered = _Replicas(client)  # the job and the light-pass maps, released at the end
+class DaskExecutor:
+    """The scheduler's executor on a Dask cluster (core/render/scheduler.py): the job scattered
+    once, the light pass as one task per batch, the eye pass as one task per (round, tile).
+    ``scene``: the scene as given to ``prepare`` (what the workers prepare again)."""
 
-    splat_images = [None]  # the light pass's camera splat over the region, once it ran (core/integrators/light/camera_splat.py)
+    def __init__(self, client, scene: Scene):
+        self.client, self.scene = client, scene
+        self.threads = 1
+        self.stats: dict = {"scheduler": str(client.scheduler.address)}
+        self._uid = uuid.uuid4().hex[:12]
+        self._scattered = _Replicas(client)  # the job and the light-pass maps, released at the end
+        self._finished = _Finished()
+        self._pending: dict[int, object] = {}
+        self._job_f = self._light_f = None
+        self._received = 0
 
-    def finish(cancelled, final=False):
-        return film.result(plan, cancelled, warnings, stats, final=final, splat=splat_images[0])
+    def __enter__(self):
+        return self
 
-    try:
-        threads = _worker_threads(client, should_cancel)
-        if threads == 0:  # cancelled while waiting for workers
-            return finish(True, final=True)
-        stats["workers"] = len(client.nthreads())
-        stats["worker_threads"] = threads
-        job = make_job(scene, settings, (rx0, ry0, rx1, ry1), prepared.accel.name, spectral)
-        stats["sent_job_bytes"] = _nbytes(job)
-        (job_f,) = client.scatter([job], broadcast=True, hash=False)
-        scattered.add(job_f)
+    def __exit__(self, *exc):
+        _cancel(self.client, self._pending)
+        self._scattered.release()
+        return False
 
-        light = None
-        if plan.light_pass:
-            lp_progress = (lambda f, m: progress(LIGHT_PASS_SHARE * f, m)) if progress else None
-            light = _light_pass(client, job_f, prepared, plan, lp_progress, should_cancel, deadline, uid, threads,
-                                scattered)
-            warnings += light.warnings
-            stats.update(light.stats)
-            stats["rays"] += light.stats.get("light_rays", 0)
-        if light is not None and light.cancelled:
-            return finish(True, final=True)
-        splat = usable_splat(prepared, light)
-        if splat is not None:
-            splat_images[0] = splat.images(prepared.conv, (rx0, ry0, rx1, ry1))
-        light_f = None
-        if light is not None:
-            light_w = {"token": uid, "caustics": pack_map(light.caustics),
-                       "grating_records": pack_map(light.grating_records),
-                       "splat": light.splat is not None,
-                       "splat_spectral": light.splat is not None and light.splat.spectral}
-            stats["sent_light_bytes"] = _nbytes(light_w)
-            (light_f,) = client.scatter([light_w], broadcast=True, hash=False)
-            scattered.add(light_f)
-        t_eye = time.perf_counter()
-        stop = _eye_pass(client, job_f, light_f, prepared, film, plan, stats, (rx0, ry0, rx1, ry1), progress,
-                         should_cancel, on_round, deadline, uid, threads, finish, scattered)
-    finally:
-        scattered.release()
-    if stop == "time":
-        warnings.append(f"time limit reached after {int(film.counts.min())} of {int(settings.samples)} "
-                        f"samples per pixel")
-    stats["render_s"] = time.perf_counter() - t_start
-    stats["mrays_per_s"] = stats["rays"] / max(time.perf_counter() - t_eye + stats.get("light_pass_s", 0.0),
-                                               1e-9) / 1e6
-    return finish(stop == "cancel", final=True)
+    def start(self, prepared, region, spectral: bool, control) -> bool:
+        self.threads = _worker_threads(self.client, control.cancelled)
+        if self.threads == 0:  # cancelled while waiting for workers
+            return False
+        self.stats.update(workers=len(self.client.nthreads()), worker_threads=self.threads)
+        job = make_job(self.scene, prepared.settings, region, prepared.accel.name, spectral)
+        self.stats["sent_job_bytes"] = _nbytes(job)
+        (self._job_f,) = self.client.scatter([job], broadcast=True, hash=False)
+        self._scattered.add(self._job_f)
+        return True
+
+    def light_pass(self, prepared, plan, control, progress) -> LightPassResult:
+        return _light_pass(self.client, self._job_f, prepared, plan, progress, control, self._uid, self.threads,
+                           self._scattered)
+
+    def start_eye(self, prepared, plan, light: LightPassResult | None, work: EyeWork) -> None:
+        self.stats.update(eye_tasks=0, received_tile_bytes=0)
+        if light is None:
+            return
+        light_w = {"token": self._uid, "caustics": pack_map(light.caustics),
+                   "grating_records": pack_map(light.grating_records),
+                   "splat": light.splat is not None,
+                   "splat_spectral": light.splat is not None and light.splat.spectral}
+        self.stats["sent_light_bytes"] = _nbytes(light_w)
+        (self._light_f,) = self.client.scatter([light_w], broadcast=True, hash=False)
+        self._scattered.add(self._light_f)
+
+    def submit(self, key: int, r_index: int, t_index: int, pixels) -> None:
+        self._pending[key] = self._finished.watch(
+            self.client.submit(TILE_TASK, self._job_f, self._light_f, r_index, t_index, pixels,
+                               key=f"opal-tile-{self._uid}-{r_index}-{t_index}", retries=RETRIES))
+        self.stats["eye_tasks"] += 1
+
+    def finished(self, timeout: float) -> list:
+        self._scattered.check()
+        out = []
+        for key in self._finished.wait(self._pending, timeout):
+            res = _result(self._pending.pop(key))
+            self._received += _nbytes(res)
+            out.append((key, res))
+        self.stats["received_tile_bytes"] = self._received
+        return out
+
+    def add(self, film, tile, samples: int, pixels, half_a: bool, result) -> int:
+        x0, y0, x1, y1, _ = tile
+        film.add_converted(x0, y0, x1, y1, result["rgb"], result["parts"], samples, result["albedo"],
+                           result["normal"], pixels, half_a, result["spectral"])
+        return int(result["rays"])
+
+    def cancel_pending(self) -> None:
+        _cancel(self.client, self._pending)
+
+    def note(self) -> str:
+        return f", {self.threads} worker thread(s)"
 
 
 def _cancel(client, pending: dict) -> None:
@@ -543,9 +556,11 @@ def _cancel(client, pending: dict) -> None:
         pending.clear()
 
 
-def _light_pass(client, job_f, prepared, plan, progress, should_cancel, deadline, uid, threads,
-                scattered: _Replicas) -> LightPassResult:
-    """The light pass as one task per batch; deposits replayed into the lanes in lane order."""
+def _light_pass(client, job_f, prepared, plan, progress, control, uid, threads, scattered: _Replicas) -> LightPassResult:
+    """The light pass as one task per batch; deposits replayed into the lanes in lane order.
+    ``control`` (scheduler.RenderControl) is polled every POLL_S for a cancel and the time limit;
+    progress counts the paths added to the lanes (a batch that finished before its lane's
+    earlier ones waits), so a cancel right after a report keeps what it reported."""
     t0 = time.perf_counter()
     work = LightWork.of(prepared)
     maps = [work.empty_maps(prepared.grid.n) for _ in range(LANES)]
@@ -560,7 +575,7 @@ def _light_pass(client, job_f, prepared, plan, progress, should_cancel, deadline
                for j in range(len(work.batches))}
     ready: dict[int, dict] = {}  # finished batches a lane cannot add yet (an earlier one is missing)
     cancelled = timed_out = False
-    received = 0
+    received = reported = 0
     try:
         while True:
             for k in range(LANES):  # add what each lane can, in its order
@@ -578,12 +593,17 @@ def _light_pass(client, job_f, prepared, plan, progress, should_cancel, deadline
                     for name, value in out["counts"].items():
                         counts[k][name] += value
                     position[k] += 1
+            traced = sum(c["paths"] for c in counts)
+            if progress and traced > reported:  # the paths in the map, as a local light pass reports
+                reported = traced
+                progress(traced / max(work.total, 1), f"light pass: {traced / 1e6:.2f} M of "
+                                                      f"{work.total / 1e6:.2f} M paths on {threads} worker thread(s)")
             if all(position[k] == len(lanes[k]) for k in range(LANES)):
                 break
-            if should_cancel and should_cancel():
+            if control.cancelled():
                 cancelled = True
                 break
-            if deadline is not None and time.perf_counter() > deadline:
+            if control.out_of_time():
                 timed_out = True  # each lane keeps the prefix it added, as a local lane stops at a batch
                 break
             scattered.check()
@@ -592,96 +612,8 @@ def _light_pass(client, job_f, prepared, plan, progress, should_cancel, deadline
                 out = _result(pending.pop(j))
                 received += _nbytes(out)
                 ready[j] = out
-            if progress and done:
-                traced = sum(b.paths for i, b in enumerate(work.batches) if i not in pending)
-                progress(traced / max(work.total, 1), f"light pass: {traced / 1e6:.2f} M of "
-                                                      f"{work.total / 1e6:.2f} M paths on {threads} worker thread(s)")
     finally:
         _cancel(client, pending)
     result = finish_light_pass(prepared, work, maps, counts, t0, timed_out, cancelled, splats)
     stats = dict(result.stats, light_tasks=len(work.batches), received_light_bytes=received)
     return replace(result, stats=MappingProxyType(stats))
-
-
-def _eye_pass(client, job_f, light_f, prepared, film, plan, stats, region, progress, should_cancel, on_round,
-              deadline, uid, threads, finish, scattered: _Replicas) -> str:
-    """The eye pass as one task per (round, tile), added to the film in the local order. Returns
-    why it stopped early: "cancel", "time" or "". With adaptive sampling a tile's round is
-    submitted once the film holds the tile's previous round (its pixels follow from it), and a
-    tile whose pixels have all converged gets no task."""
-    work = EyeWork.of(prepared, region)
-    adaptive = adaptive_of(prepared.settings)
-    n_tiles = len(work.tiles)
-    units = [(r, t) for r in range(len(work.rounds)) for t in range(n_tiles)]
-    window = max(16, 4 * threads)  # tasks in flight ahead of the one the film needs next
-    if adaptive is not None:
-        window = min(window, n_tiles)  # a tile's next round waits for its previous one
-    finished = _Finished()
-    pending: dict[int, object] = {}
-    results: dict[int, dict] = {}  # finished tiles the film cannot add yet
-    pixels_of: dict[int, object] = {}  # the pixels each submitted unit traces (None: all)
-    submitted = cursor = completed = received = tasks = 0
-    stop = ""
-    base = LIGHT_PASS_SHARE if plan.light_pass else 0.0
-    try:
-        while cursor < len(units) and not stop:
-            while submitted < len(units) and submitted - cursor < window:
-                r, t = units[submitted]
-                px = film.active_pixels(*work.tiles[t][:4]) if adaptive is not None else None
-                pixels_of[submitted] = px
-                if px is not None and len(px) == 0:  # converged: nothing to trace
-                    results[submitted] = None
-                else:
-                    pending[submitted] = finished.watch(client.submit(TILE_TASK, job_f, light_f, r, t, px,
-                                                                      key=f"opal-tile-{uid}-{r}-{t}",
-                                                                      retries=RETRIES))
-                    tasks += 1
-                submitted += 1
-            while cursor in results and not stop:  # the film adds tiles in the local render's order
-                r_index, t_index = units[cursor]
-                res = results.pop(cursor)
-                px = pixels_of.pop(cursor)
-                x0, y0, x1, y1, _ = work.tiles[t_index]
-                if res is not None:
-                    film.add_converted(x0, y0, x1, y1, res["rgb"], res["parts"], work.rounds[r_index],
-                                       res["albedo"], res["normal"], px, is_half_a(r_index), res["spectral"])
-                    if adaptive is not None:
-                        film.update_active(x0, y0, x1, y1, *adaptive)
-                    stats["rays"] += res["rays"]
-                cursor += 1
-                if res is None:
-                    if t_index == n_tiles - 1 and on_round:
-                        on_round(finish(False))
-                    continue  # a skipped unit: no time passed, nothing to poll
-                if should_cancel and should_cancel():
-                    stop = "cancel"
-                elif deadline is not None and r_index > 0 and time.perf_counter() > deadline:
-                    stop = "time"  # as locally: between tiles once every pixel has a sample
-                elif t_index == n_tiles - 1:  # a round is complete
-                    if on_round:
-                        on_round(finish(False))
-                    if r_index + 1 < len(work.rounds) and deadline is not None and time.perf_counter() > deadline:
-                        stop = "time"
-            if stop or cursor == len(units):
-                break
-            if cursor >= submitted:
-                continue  # everything submitted so far was skipped: submit more
-            if should_cancel and should_cancel():
-                stop = "cancel"
-                break
-            scattered.check()
-            done = finished.wait(pending, POLL_S)
-            for i in done:
-                out = _result(pending.pop(i))
-                received += _nbytes(out)
-                results[i] = out
-                completed += 1
-                if progress:
-                    progress(base + (1 - base) * completed / len(units),
-                             f"eye pass: round {units[i][0] + 1}/{len(work.rounds)}, {stats['rays'] / 1e6:.1f} M "
-                             f"rays, {threads} worker thread(s)")
-    finally:
-        _cancel(client, pending)
-    stats["eye_tasks"] = tasks
-    stats["received_tile_bytes"] = received
-    return stop

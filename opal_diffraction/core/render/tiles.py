@@ -3,7 +3,7 @@
 The image is split into tiles and the samples into progressive rounds. Every (round, tile) unit
 draws its random numbers from its own stream, ``SeedSequence([seed, EYE_PASS_STREAM, round,
 tile])``, and writes only its own pixels; the film adds the units round by round, so the image
-is the same whatever runs them: threads here (render.py) or Dask workers (distributed.py).
+is the same whatever runs them: threads or Dask workers (the executors of scheduler.py).
 ``EyeWork`` is the split (a pure function of the prepared scene and the region), ``trace_tile``
 runs one unit. With adaptive sampling (core/render/adaptive.py) a unit may trace only some of its
 tile's pixels: which ones follows from the film after the tile's earlier rounds, so it is the
@@ -21,6 +21,7 @@ from ..sampling.camera import FilterSampler, generate_rays, pixel_samples
 from ..sampling.footprint import camera_differentials, filter_box_width
 from ..sampling.sampler import blue_noise_numbers
 from ..scene.settings import RenderSettings
+from .adaptive import min_samples
 
 __all__ = ["EYE_PASS_STREAM", "LIGHT_PASS_SHARE", "MAX_TILE_RAYS", "round_size", "tiles_of", "EyeWork",
            "trace_tile", "is_half_a", "adaptive_of", "adaptive_rounds"]
@@ -53,8 +54,6 @@ def is_half_a(r_index: int) -> bool:
 
 def adaptive_of(settings: RenderSettings):
     """(threshold, min samples) of adaptive sampling, or None when it is off."""
-    from .adaptive import min_samples
-
     t = float(settings.adaptive_threshold)
     return None if t <= 0 else (t, min_samples(t, int(settings.adaptive_min_samples)))
 

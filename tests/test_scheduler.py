@@ -1,0 +1,232 @@
+"""The scheduler's rules (core/render/scheduler.py) with a fake clock and fake units of work: units
+enter the film in order whatever order they finish in, the time limit is honoured between units
+(never before every pixel has round 0), a cancel stops at once and drops what is pending,
+progress increases and reaches 1, adaptive sampling skips converged tiles and ends the render
+when none is left. One small render checks that render_prepared runs on the injected clock, and
+the viewport reaches the passes only through render/."""
+
+from __future__ import annotations
+
+import ast
+import os
+import time
+
+import numpy as np
+import pytest
+
+from opal_diffraction.core.render.frame import render_prepared
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.render.scheduler import RenderControl, eye_window, run_eye_pass
+from opal_diffraction.core.render.tiles import EyeWork
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+# 3 rounds of 2 samples over 2 tiles of 4 x 4 pixels: units 0..5, unit i = round i // 2, tile i % 2
+WORK = EyeWork(rounds=(2, 2, 2), tiles=((0, 0, 4, 4, 0), (4, 0, 8, 4, 1)), region=(0, 0, 8, 4), seed=0)
+
+
+class FakeClock:
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+class FakeFilm:
+    """Which (round, tile) units were added, in order; a tile converges after ``rounds_to_converge``
+    of its rounds (adaptive sampling): its active pixels are then none."""
+
+    def __init__(self, rounds_to_converge=None):
+        self.added: list[tuple[int, int]] = []
+        self.rounds_to_converge = rounds_to_converge
+
+    def rounds_of(self, t_index: int) -> int:
+        return sum(1 for _, t in self.added if t == t_index)
+
+    def active_pixels(self, x0, y0, x1, y1):
+        if self.rounds_to_converge is None:
+            return None
+        t_index = [t[:4] for t in WORK.tiles].index((x0, y0, x1, y1))
+        if self.rounds_of(t_index) >= self.rounds_to_converge[t_index]:
+            return np.zeros(0, np.int64)
+        return np.arange(16)
+
+    def update_active(self, x0, y0, x1, y1, threshold, min_spp):
+        return 0
+
+
+class FakeExecutor:
+    """Runs nothing: each unit takes ``seconds`` on the fake clock; ``finished`` returns the
+    pending units one at a time, newest first (the film must still add them in order) or oldest
+    first, after ``idle`` calls that return none (waiting for a slow unit)."""
+
+    def __init__(self, clock: FakeClock, seconds: float = 1.0, threads: int = 2, newest_first: bool = True,
+                 idle: int = 0):
+        self.clock, self.seconds, self.threads = clock, seconds, threads
+        self.newest_first, self.idle = newest_first, idle
+        self.pending: dict[int, tuple] = {}
+        self.submitted: list[tuple[int, int, int]] = []  # (key, round, tile)
+        self.dropped: list[int] = []
+        self.film: FakeFilm | None = None
+
+    def submit(self, key, r_index, t_index, pixels):
+        if self.film is not None and r_index > 0:  # adaptive: a tile's round waits for its previous one
+            assert (r_index - 1, t_index) in self.film.added
+        self.pending[key] = (r_index, t_index)
+        self.submitted.append((key, r_index, t_index))
+
+    def finished(self, timeout):
+        if self.idle > 0:
+            self.idle -= 1
+            self.clock.now += timeout
+            return []
+        if not self.pending:
+            return []
+        key = max(self.pending) if self.newest_first else min(self.pending)
+        self.clock.now += self.seconds
+        return [(key, self.pending.pop(key))]
+
+    def add(self, film, tile, samples, pixels, half_a, result):
+        film.added.append(result)
+        return 10
+
+    def cancel_pending(self):
+        self.dropped += sorted(self.pending)
+        self.pending.clear()
+
+    def note(self):
+        return ""
+
+
+def _run(film=None, time_limit=0.0, should_cancel=None, threads=2, adaptive=None, progress_from=0.0,
+         newest_first=True, idle=0):
+    clock = FakeClock()
+    film = FakeFilm() if film is None else film
+    executor = FakeExecutor(clock, 1.0, threads, newest_first, idle)
+    if adaptive is not None:  # the executor checks that a tile's rounds are submitted in turn
+        executor.film = film
+    reports, rounds = [], []
+    control = RenderControl(should_cancel, lambda f, m: reports.append((f, m)), time_limit, clock=clock)
+    outcome = run_eye_pass(WORK, film, executor, control, adaptive, lambda: rounds.append(len(film.added)),
+                           progress_from)
+    return outcome, film, executor, reports, rounds
+
+
+def test_units_enter_the_film_in_order_whatever_order_they_finish_in():
+    outcome, film, executor, reports, rounds = _run()
+    assert film.added == [(r, t) for r in range(3) for t in range(2)]
+    assert outcome.stop == "" and outcome.rays == 60 and outcome.submitted == 6
+    assert rounds == [2, 4, 6]  # on_round after each round, once its tiles are in
+
+
+def test_time_limit_is_checked_between_units_after_round_0():
+    # 1 s per unit. A limit of 0.5 s: round 0 still completes (every pixel gets a sample), then it stops
+    outcome, film, executor, _, rounds = _run(time_limit=0.5, newest_first=False)
+    assert outcome.stop == "time" and film.added == [(0, 0), (0, 1)] and rounds == [2]
+    assert executor.dropped == [2, 3, 4, 5]  # the units submitted ahead were cancelled
+    # 2.5 s: the first unit of round 1 ends at 3 s, past the limit: the round stops midway
+    outcome, film, _, _, rounds = _run(time_limit=2.5, newest_first=False)
+    assert outcome.stop == "time" and film.added == [(0, 0), (0, 1), (1, 0)] and rounds == [2]
+    # 10 s: every unit runs
+    outcome, film, _, _, _ = _run(time_limit=10.0, newest_first=False)
+    assert outcome.stop == "" and len(film.added) == 6
+
+
+def test_cancel_stops_after_the_unit_in_hand_and_drops_the_pending_ones():
+    film = FakeFilm()
+    outcome, film, executor, reports, rounds = _run(film=film, should_cancel=lambda: len(film.added) >= 3,
+                                                    newest_first=False)
+    assert outcome.stop == "cancel" and len(film.added) == 3 and rounds == [2]
+    assert executor.dropped == [3, 4, 5] and len(executor.submitted) == 6
+    assert reports[-1][0] < 1.0  # a cancelled render does not claim to be done
+
+
+def test_cancel_is_polled_while_waiting_for_a_unit():
+    """A first unit that takes long: the cancel is seen while waiting for it, not after it."""
+    asked = []
+
+    def should_cancel():
+        asked.append(1)
+        return len(asked) > 2
+
+    outcome, film, executor, *_ = _run(should_cancel=should_cancel, idle=100)
+    assert outcome.stop == "cancel" and film.added == [] and executor.idle == 98
+    assert executor.dropped == [0, 1, 2, 3, 4, 5]
+
+
+@pytest.mark.parametrize("progress_from", [0.0, 0.25])
+def test_progress_increases_and_reaches_one(progress_from):
+    _, _, _, reports, _ = _run(progress_from=progress_from)
+    fractions = [f for f, _ in reports]
+    assert len(fractions) == 6 and np.all(np.diff(fractions) > 0)
+    assert fractions[0] == pytest.approx(progress_from + (1 - progress_from) / 6) and fractions[-1] == 1.0
+    assert all(m.startswith("eye pass: round") for _, m in reports)
+
+
+def test_adaptive_sampling_skips_converged_tiles_and_stops_when_none_is_left():
+    film = FakeFilm(rounds_to_converge=(2, 1))  # tile 1 converges after its first round, tile 0 after two
+    outcome, film, executor, reports, rounds = _run(film=film, adaptive=(0.01, 4), threads=8)
+    assert [(r, t) for _, r, t in executor.submitted] == [(0, 0), (0, 1), (1, 0)]
+    assert film.added == [(0, 0), (0, 1), (1, 0)]
+    assert outcome.stop == "converged" and outcome.submitted == 3
+    assert rounds == [2, 3]  # round 2 added nothing: no image for it
+    fractions = [f for f, _ in reports]
+    assert np.all(np.diff(fractions) > 0) and fractions[-1] == 1.0
+    assert reports[-1][1] == "eye pass: every pixel has converged"
+
+
+def test_the_window_keeps_threads_busy_and_adaptive_rounds_in_order():
+    assert eye_window(2, 100, False) == 16 and eye_window(8, 100, False) == 32
+    assert eye_window(8, 10, True) == 10 and eye_window(2, 100, True) == 16
+
+
+def test_the_control_keeps_a_cancel_maps_stages_and_never_goes_back():
+    answers = iter([False, True, False])
+    clock = FakeClock()
+    seen = []
+    control = RenderControl(lambda: next(answers), lambda f, m: seen.append(f), time_limit=5.0, started_at=1.0,
+                            clock=clock)
+    assert not control.cancelled() and control.cancelled() and control.cancelled()  # once asked, it stays
+    stage = control.stage(0.0, 0.25)
+    stage(0.0, "a")
+    stage(0.5, "b")
+    stage(0.5, "c")  # the same fraction again: not passed on
+    control.report(0.1, "d")  # backwards: not passed on
+    control.report(0.5, "e")
+    assert seen == [0.0, 0.125, 0.5]
+    clock.now = 6.0
+    assert not control.out_of_time()
+    clock.now = 6.5
+    assert control.out_of_time()
+    assert RenderControl(time_limit=0.0, clock=clock).perf_deadline() is None
+    before = time.perf_counter()
+    clock.now = 2.0  # 4 s left on the fake clock: the light pass gets 4 s from now
+    assert before + 4.0 <= control.perf_deadline() <= time.perf_counter() + 4.0
+
+
+def test_render_prepared_measures_its_time_limit_on_the_injected_clock():
+    """A clock that jumps an hour after each reading: the render stops after round 0 whatever
+    the real time, and says so."""
+    mats = Materials.from_list([{"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)}])
+    scene = Scene(materials=mats)
+    scene.add_mesh(*primitives.quad((0, 0, 0), (4, 0, 0), (0, 4, 0)), material=0)
+    scene.lights = Lights.from_list([{"kind": "POINT", "position": (0, 0, 2), "power": 100.0}])
+    scene.camera = Camera.look_at((0, -3, 3), (0, 0, 0), width=8, height=8)
+    prepared = prepare(scene, RenderSettings(samples=8, round_samples=2, tile_size=4, light_paths=0, threads=1,
+                                             wavelength_step=40.0, time_limit=60.0))
+    hours = iter(range(0, 10 ** 6, 3600))
+    res = render_prepared(prepared, clock=lambda: float(next(hours)))
+    assert res.samples == 2 and not res.cancelled
+    assert "time limit reached after 2 of 8 samples per pixel" in res.warnings
+
+
+def test_the_viewport_reaches_the_passes_only_through_render():
+    path = os.path.join(ROOT, "opal_diffraction", "blender", "viewport.py")
+    tree = ast.parse(open(path, encoding="utf-8").read())
+    targets = [node.module or "" for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)]
+    assert any(t.startswith("core.render") for t in targets)
+    assert not [t for t in targets if t.startswith("core.integrators")], targets
