@@ -33,6 +33,7 @@ from ..sampling.camera import FilterSampler
 from ..integrators.light.camera_splat import usable_splat
 from ..integrators.eye.eye_pass import EyePass
 from ..util.cancel import RenderCancelled
+from ..util.jit import kernel_mode
 from .film import Film, RenderResult, keeps_spectral
 from ..integrators.light.light_pass import LightPassResult, run_light_pass
 from .plan import RenderPlan, plan_render
@@ -85,7 +86,8 @@ def render(
     """
     t_start = time.perf_counter()
     try:
-        prepared = prepare(scene, settings, should_cancel=should_cancel)
+        with kernel_mode((settings or RenderSettings()).kernels):  # prepare's spectra take the render's path
+            prepared = prepare(scene, settings, should_cancel=should_cancel)
     except RenderCancelled:
         return _cancelled_before_start(scene, settings or RenderSettings(), region, spectral_film)
     if client is not None:
@@ -121,8 +123,18 @@ def render_prepared(
 
     ``light``: a finished light pass of the same prepared scene (``prepared.with_view`` keeps it
     valid) to reuse; None runs the light pass when the plan asks for it. ``started_at``: the
-    perf_counter time the time limit counts from (default: now).
+    perf_counter time the time limit counts from (default: now). The passes run the compiled
+    kernels or the NumPy reference as ``settings.kernels`` says (core/util/jit.py); the stats'
+    ``kernels`` names which.
     """
+    with kernel_mode(prepared.settings.kernels) as kernels:
+        return _render_prepared(prepared, light, progress, should_cancel, on_round, region, started_at,
+                                spectral_film, kernels)
+
+
+def _render_prepared(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
+                     kernels: str) -> RenderResult:
+    """render_prepared's body, inside its kernel mode (``kernels``: the path taken, for the stats)."""
     t_start = time.perf_counter() if started_at is None else started_at
     settings = prepared.settings
     plan = plan_render(prepared)
@@ -131,7 +143,7 @@ def render_prepared(
     (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv, adaptive is not None,
                                                  keeps_spectral(settings, spectral_film))
     stats = {"rays": 0, "prepare_s": prepared.prepare_s, "backend": prepared.accel.name,
-             "triangles": len(prepared.scene.triangles)}
+             "triangles": len(prepared.scene.triangles), "kernels": kernels}
 
     deadline = t_start + settings.time_limit if settings.time_limit else None
     if plan.light_pass and light is None:

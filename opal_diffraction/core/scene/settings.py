@@ -17,6 +17,7 @@ import numpy as np
 
 from .model import COORD_LIMIT, SceneError, _g, _number
 from ..spectral.spectrum import _MAX_NM, _MIN_NM, WavelengthGrid
+from ..util.jit import KERNEL_MODES
 
 __all__ = ["RenderSettings", "DISPERSION_SAMPLING", "EYE_ONLY_SETTINGS", "BACKENDS", "MAX_WAVELENGTHS",
            "MIN_WAVELENGTHS", "FEW_WAVELENGTHS", "film_bytes", "AUTO_LIGHT_PATHS_PER_SAMPLE",
@@ -132,6 +133,10 @@ class RenderSettings:
     # pixels share one low-discrepancy sequence in a blue-noise order, as Cycles' default
     # pattern (core/sampling/sampler.py, docs/physics.md section 6.6); False: each pixel its own sequence
     blue_noise: bool = True
+    # the hot NumPy functions' compiled kernels (core/util/jit.py): 'auto' runs them where numba is
+    # available, 'numpy' forces the NumPy reference (the tests' and tools/example_images.py's
+    # bit-for-bit check of refactors); the stats line names the path that ran
+    kernels: str = "auto"
 
     def __post_init__(self):
         # normalise number types only (never raise here: validate() names what is wrong)
@@ -231,6 +236,8 @@ class RenderSettings:
             raise SceneError(f"caustic splat must be True or False, got {self.caustic_splat!r}")
         if not isinstance(self.blue_noise, (bool, np.bool_)):
             raise SceneError(f"blue noise must be True or False, got {self.blue_noise!r}")
+        if not isinstance(self.kernels, str) or self.kernels not in KERNEL_MODES:
+            raise SceneError(f"kernels must be one of {', '.join(KERNEL_MODES)}, got {self.kernels!r}")
         _validate_backend(self.backend)
         self._validate_grid()
 
