@@ -223,3 +223,28 @@ def test_sampler_kernel_on_empty_and_odd_batches():
     x, y = sampler.sobol_owen_2d(np.zeros(16, np.int64), np.arange(16), 3, 9)
     cells = np.floor(x * 4).astype(int) * 4 + np.floor(y * 4).astype(int)
     assert sorted(cells) == list(range(16))
+
+
+# ------------------------------------------------------------------------------ illumination map
+@needs_numba
+@pytest.mark.parametrize("map_dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("flux_dtype", [np.float32, np.float64])
+def test_illumination_deposit_kernel_is_the_reference_bit_for_bit(map_dtype, flux_dtype):
+    """Runs of every length NumPy's pairwise sum treats apart (1, < 8, 8-128, > 128, recursive);
+    a float64 map shows the summation order itself, unrounded."""
+    from opal_diffraction.core.transport.elements import ElementLayout, IlluminationMap
+
+    rng = np.random.default_rng(5)
+    layout = ElementLayout.from_areas(np.ones(20), np.ones(20, bool), 0.01)
+    for rows in (0, 1, 9, 200, 3000):
+        elements = rng.integers(0, layout.total, rows)
+        elements[: rows // 2] = 17  # one long run (pairwise halves above 128 rows)
+        elements[rows // 2: rows // 2 + min(rows // 4, 130)] = 3
+        flux = rng.exponential(1.0, (rows, 31)).astype(flux_dtype)
+        flux[::7] = 0.0  # zero weights
+        start = rng.random((layout.total, 31)).astype(map_dtype)
+        got, want = IlluminationMap(layout, start.copy()), IlluminationMap(layout, start.copy())
+        got.deposit(elements, flux)
+        with jit.kernel_mode("numpy"):
+            want.deposit(elements, flux)
+        same_bits(got.flux, want.flux)
