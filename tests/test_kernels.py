@@ -248,3 +248,21 @@ def test_illumination_deposit_kernel_is_the_reference_bit_for_bit(map_dtype, flu
         with jit.kernel_mode("numpy"):
             want.deposit(elements, flux)
         same_bits(got.flux, want.flux)
+
+
+@needs_numba
+def test_row_sums_kernel_on_sorted_and_unsorted_rows():
+    """add_row_sums as a film takes per-ray spectra (rows already in pixel order skip the sort)."""
+    from opal_diffraction.core.util.row_sums import add_row_sums
+
+    rng = np.random.default_rng(9)
+    for rows in (np.sort(rng.integers(0, 50, 4000)), rng.integers(0, 50, 4000), np.zeros(1, np.int64)):
+        values = rng.normal(size=(len(rows), 13)).astype(np.float32)
+        got, want = np.zeros((50, 13), np.float32), np.zeros((50, 13), np.float32)
+        add_row_sums(got, rows, values)
+        with jit.kernel_mode("numpy"):
+            add_row_sums(want, rows, values)
+        same_bits(got, want)
+        plain = np.zeros((50, 13))
+        np.add.at(plain, rows, values.astype(np.float64))
+        np.testing.assert_allclose(got, plain, rtol=1e-4, atol=1e-4)

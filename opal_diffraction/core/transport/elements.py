@@ -7,11 +7,8 @@ i = floor(k u), j = floor(k v), the cell's upper half when frac(k u) + frac(k v)
 row i of the triangle holds 2 (k - i) - 1 cells starting at 2 k i - i^2. No per-element Python
 objects: the map is one (E, n) array of spectral flux that partial maps simply add to.
 
-A white deposit sums each element's rows in their order and adds the sum to the map once; where
-the compiled kernels run (core/util/jit.py) one pass over the stably sorted rows does it
-(``_add_runs``) instead of gathering the sorted (B, n) copy and ``np.add.reduceat``: the same
-additions in the same order (reduceat's first row plus NumPy's pairwise sum of the rest), so the
-same bits.
+A white deposit sums each element's rows in their order and adds the sum to the map once
+(core/util/row_sums.py: a compiled pass where the kernels run, the same bits as the NumPy lines).
 """
 
 from __future__ import annotations
@@ -21,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..util.geometry import triangle_areas
-from ..util.jit import kernels_enabled, njit
+from ..util.row_sums import add_row_sums
 
 __all__ = ["ElementLayout", "IlluminationMap", "MAX_SUBDIVISION"]
 
@@ -131,13 +128,7 @@ class IlluminationMap:
             flat = self.flux.reshape(-1)
             flat[keys] += sums.astype(np.float32)
             return
-        order = np.argsort(elements, kind="stable")
-        if kernels_enabled() and isinstance(flux, np.ndarray) and flux.ndim == 2 and flux.dtype.kind == "f":
-            _add_runs(self.flux, elements, order, flux, flux.dtype.type(-0.0))
-            return
-        e, f = elements[order], flux[order]
-        starts = np.flatnonzero(np.concatenate([[True], e[1:] != e[:-1]]))
-        self.flux[e[starts]] += np.add.reduceat(f, starts, axis=0)
+        add_row_sums(self.flux, elements, flux)
 
     def lit_triangles(self) -> np.ndarray:
         """(T,) bool: the triangles with flux on any of their elements (a finished map's hits
@@ -186,58 +177,3 @@ class IlluminationMap:
     def __iadd__(self, other: "IlluminationMap") -> "IlluminationMap":
         self.flux += other.flux
         return self
-
-
-
-@njit
-def _pairwise_sum(values, order, lo, n, k, res):
-    """NumPy's pairwise sum (``pairwise_sum`` of its add loops: sequential below 8 terms, eight
-    interleaved partial sums up to 128, halves above) of ``values[order[lo:lo + n], k]``;
-    ``res`` is the dtype's -0.0, NumPy's start."""
-    if n < 8:
-        for i in range(n):
-            res += values[order[lo + i], k]
-        return res
-    if n <= 128:
-        r0, r1, r2, r3 = values[order[lo], k], values[order[lo + 1], k], values[order[lo + 2], k], values[order[lo + 3], k]
-        r4, r5, r6, r7 = values[order[lo + 4], k], values[order[lo + 5], k], values[order[lo + 6], k], values[order[lo + 7], k]
-        i = 8
-        while i < n - n % 8:
-            r0 += values[order[lo + i], k]
-            r1 += values[order[lo + i + 1], k]
-            r2 += values[order[lo + i + 2], k]
-            r3 += values[order[lo + i + 3], k]
-            r4 += values[order[lo + i + 4], k]
-            r5 += values[order[lo + i + 5], k]
-            r6 += values[order[lo + i + 6], k]
-            r7 += values[order[lo + i + 7], k]
-            i += 8
-        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-        while i < n:
-            res += values[order[lo + i], k]
-            i += 1
-        return res
-    half = n // 2
-    half -= half % 8
-    return (_pairwise_sum(values, order, lo, half, k, res)
-            + _pairwise_sum(values, order, lo + half, n - half, k, res))
-
-
-@njit
-def _add_runs(target, rows_of, order, values, neg_zero):
-    """``target[rows_of[i]] += values[i]`` summed per target row first, in ``order`` (a stable
-    sort of ``rows_of``), exactly as np.add.reduceat over the sorted rows and one += do: a run's
-    sum is its first value plus NumPy's pairwise sum of the others (reduceat's inner loop is a
-    reduction along the rows), added to ``target`` in the wider of the two precisions."""
-    b = 0
-    while b < order.shape[0]:
-        row = rows_of[order[b]]
-        end = b + 1
-        while end < order.shape[0] and rows_of[order[end]] == row:
-            end += 1
-        for k in range(values.shape[1]):
-            s = values[order[b], k]
-            if end - b > 1:
-                s += _pairwise_sum(values, order, b + 1, end - b - 1, k, neg_zero)
-            target[row, k] += s
-        b = end
