@@ -6,8 +6,8 @@
 1. Each kernel through its public function, kernels on ('auto') and forced off ('numpy'), at each
    row count: Fresnel over (B,) float32 (the walker's) and (B, 1) x (B, n) float64 (the SPLIT
    wavelength step's), the RGB -> spectrum uplift of (B, 3) float32 environment colours, the
-   environment lookup of (B,) directions, and Sobol-Burley points (the (B, n) cases up to
-   MAX_SPECTRAL_ROWS rows). The best of ``--repeats``
+   environment lookup of (B,) directions, Sobol-Burley points, and the run sums of (B, n) spectra
+   into 4096 film rows (core/util/row_sums.py; the (B, n) cases up to MAX_SPECTRAL_ROWS rows). The best of ``--repeats``
    runs after one warm-up call (which also compiles, or loads from the cache).
 2. The README example's scene (examples/prism.py ``build_scene``: the core-side copy of
    examples/render_example.py's Blender scene) at ``--resolution`` and ``--spp``: wall and CPU
@@ -34,6 +34,7 @@ from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.spectral.optics import fresnel_dielectric
 from opal_diffraction.core.spectral.spectrum import SpectralConverter
 from opal_diffraction.core.util import jit
+from opal_diffraction.core.util.row_sums import add_row_sums
 
 
 #: (B, n) cases stop at this many rows: at 1e6 rows one (B, 61) float64 array is 488 MB, and the
@@ -63,6 +64,9 @@ def kernel_cases(rows: int, rng):
     env = EnvironmentMap(load_example("environments").sky(256, 128))
     d = rng.normal(size=(rows, 3)).astype(np.float32)
     pixel, sample, pair = rng.integers(0, 1 << 18, rows), rng.integers(0, 1 << 20, rows), rng.integers(0, 64, rows)
+    film = np.zeros((4096, n), np.float32)
+    spectral_rows = min(rows, MAX_SPECTRAL_ROWS)
+    pix, contrib = rng.integers(0, len(film), spectral_rows), rng.random((spectral_rows, n)).astype(np.float32)
     cases = [
         ("fresnel_dielectric (B,) float32", lambda: fresnel_dielectric(cos32, eta32)),
         ("EnvironmentMap.radiance_rgb (B, 3)", lambda: env.radiance_rgb(d)),
@@ -73,6 +77,7 @@ def kernel_cases(rows: int, rng):
             (f"fresnel_dielectric (B, {n}) float64", lambda: fresnel_dielectric(cos64, eta64)),
             (f"illuminant_from_rgb (B, 3) -> (B, {n})", lambda: conv.illuminant_from_rgb(rgb)),
             (f"reflectance_from_rgb (B, 3) -> (B, {n})", lambda: conv.reflectance_from_rgb(rgb)),
+            (f"add_row_sums (B, {n}) into 4096 rows", lambda: add_row_sums(film, pix, contrib)),
         ]
     return cases
 
