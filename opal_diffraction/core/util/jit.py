@@ -7,15 +7,17 @@ so its callers do not change. A kernel loops over rows in one pass instead of Nu
 temporaries, and runs without the GIL (``nogil``), so render threads run it side by side.
 
 How:
-- ``njit`` is ``numba.njit(nogil=True, cache=True)``; without numba (not installed, or it fails to
-  import, e.g. a NumPy it does not support) it returns the Python function unchanged, and
-  ``kernels_enabled()`` is False, so only the reference ever runs (``AVAILABLE``, ``UNAVAILABLE_REASON``).
-- Compiled kernels are cached on disk in a user cache folder (``cache_dir()``: ``$NUMBA_CACHE_DIR`` if
-  set, else the platform's user cache, ``.../opal_diffraction/numba``): numba's default, a
-  ``__pycache__`` beside the source, is read-only inside an installed Blender extension.
-  NUMBA_CACHE_DIR is read when numba is imported, so it is set here before the import (and on
-  numba's config when another add-on imported numba first). The first render after an install
-  compiles each kernel once (about a second each); later processes load them from the cache.
+- ``njit`` is ``numba.njit(nogil=True, cache=True, error_model='numpy')`` (NumPy's x / 0 = inf or
+  NaN instead of numba's ZeroDivisionError); without numba (not installed, or it fails to import,
+  e.g. a NumPy it does not support) it returns the Python function unchanged, and
+  ``kernels_enabled()`` is False, so only the reference ever runs (``AVAILABLE``,
+  ``UNAVAILABLE_REASON``).
+- Compiled kernels are cached on disk in a user cache folder (``cache_dir()``: ``$NUMBA_CACHE_DIR``
+  if set, else the platform's user cache, ``.../opal_diffraction/numba-<options digest>``):
+  numba's default, a ``__pycache__`` beside the source, is read-only inside an installed Blender
+  extension. NUMBA_CACHE_DIR is read when numba is imported, so it is set here before the import
+  (and on numba's config when another add-on imported numba first). The first render after an
+  install compiles each kernel once (about a second each); later processes load them from the cache.
 - The choice: ``RenderSettings.kernels`` ('auto': the kernels when numba is available; 'numpy': the
   reference) or the environment variable OPAL_KERNELS=numpy (which wins, for whole processes
   such as Dask workers). A render holds its choice with ``kernel_mode(mode)`` for its duration. The
@@ -32,6 +34,7 @@ is bit-identical to it; each kernel's test (tests/test_kernels.py) says which on
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import sys
 import tempfile
@@ -46,6 +49,11 @@ KERNEL_MODES = ("auto", "numpy")
 KERNELS_ENV = "OPAL_KERNELS"
 
 
+#: numba.njit's options for every kernel: no GIL, cached on disk, and NumPy's floating-point
+#: error model (x / 0 is inf or NaN as in the NumPy reference; numba's default raises ZeroDivisionError).
+_OPTIONS = {"nogil": True, "cache": True, "error_model": "numpy"}
+
+
 def _user_cache_root() -> str:
     """The platform's per-user cache folder (XDG on Linux, Library/Caches on macOS, LOCALAPPDATA on Windows)."""
     if sys.platform == "win32":
@@ -57,9 +65,12 @@ def _user_cache_root() -> str:
 
 def cache_dir() -> str:
     """The writable folder the compiled kernels are cached in (created if missing): NUMBA_CACHE_DIR
-    when set, else ``<user cache>/opal_diffraction/numba``, else one in the temporary folder."""
-    for folder in (os.environ.get("NUMBA_CACHE_DIR"), os.path.join(_user_cache_root(), "opal_diffraction", "numba"),
-                   os.path.join(tempfile.gettempdir(), "opal_diffraction-numba")):
+    when set, else ``<user cache>/opal_diffraction/numba-<options>``, else one in the temporary
+    folder. ``<options>`` is a digest of _OPTIONS: numba's cache notices a changed kernel source
+    file, not changed compile options, so other options get another folder."""
+    tag = "numba-" + hashlib.sha1(repr(sorted(_OPTIONS.items())).encode()).hexdigest()[:8]
+    for folder in (os.environ.get("NUMBA_CACHE_DIR"), os.path.join(_user_cache_root(), "opal_diffraction", tag),
+                   os.path.join(tempfile.gettempdir(), "opal_diffraction-" + tag)):
         if not folder:
             continue
         try:
@@ -91,13 +102,13 @@ AVAILABLE = _numba is not None
 
 
 def njit(fn=None, **options):
-    """``numba.njit(nogil=True, cache=True, **options)`` of ``fn`` (as ``@njit`` or ``@njit(...)``);
-    without numba the function itself (never called on the render path then: kernels_enabled()
-    is False)."""
+    """``numba.njit(nogil=True, cache=True, error_model='numpy', **options)`` of ``fn`` (as ``@njit``
+    or ``@njit(...)``); without numba the function itself (never called on the render path then:
+    kernels_enabled() is False)."""
     def wrap(f):
         if _numba is None:
             return f
-        return _numba.njit(nogil=True, cache=True, **options)(f)
+        return _numba.njit(**dict(_OPTIONS, **options))(f)
 
     return wrap(fn) if fn is not None else wrap
 
