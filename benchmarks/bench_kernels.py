@@ -7,7 +7,8 @@
    row count: Fresnel over (B,) float32 (the walker's) and (B, 1) x (B, n) float64 (the SPLIT
    wavelength step's), the RGB -> spectrum uplift of (B, 3) float32 environment colours, the
    environment lookup of (B,) directions, Sobol-Burley points, and the run sums of (B, n) spectra
-   into 4096 film rows (core/util/row_sums.py; the (B, n) cases up to MAX_SPECTRAL_ROWS rows). The best of ``--repeats``
+   into 4096 film rows (core/util/row_sums.py), GGX reflection terms (core/materials/ggx.py; the
+   (B, n) cases up to MAX_SPECTRAL_ROWS rows). The best of ``--repeats``
    runs after one warm-up call (which also compiles, or loads from the cache).
 2. The README example's scene (examples/prism.py ``build_scene``: the core-side copy of
    examples/render_example.py's Blender scene) at ``--resolution`` and ``--spp``: wall and CPU
@@ -28,6 +29,7 @@ import numpy as np
 
 from opal_diffraction._scripts import load_example
 from opal_diffraction.core.lights.environment import EnvironmentMap
+from opal_diffraction.core.materials.ggx import reflection_terms
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.sampling.sampler import sobol_owen_2d
 from opal_diffraction.core.scene.settings import RenderSettings
@@ -64,6 +66,10 @@ def kernel_cases(rows: int, rng):
     env = EnvironmentMap(load_example("environments").sky(256, 128))
     d = rng.normal(size=(rows, 3)).astype(np.float32)
     pixel, sample, pair = rng.integers(0, 1 << 18, rows), rng.integers(0, 1 << 20, rows), rng.integers(0, 64, rows)
+    wo, wi = (np.abs(rng.normal(size=(rows, 3))).astype(np.float32) for _ in range(2))
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    alpha = rng.uniform(0.05, 1.0, rows).astype(np.float32)
     film = np.zeros((4096, n), np.float32)
     spectral_rows = min(rows, MAX_SPECTRAL_ROWS)
     pix, contrib = rng.integers(0, len(film), spectral_rows), rng.random((spectral_rows, n)).astype(np.float32)
@@ -79,6 +85,7 @@ def kernel_cases(rows: int, rng):
             (f"reflectance_from_rgb (B, 3) -> (B, {n})", lambda: conv.reflectance_from_rgb(rgb)),
             (f"add_row_sums (B, {n}) into 4096 rows", lambda: add_row_sums(film, pix, contrib)),
         ]
+    cases.append(("GGX reflection_terms (B,) float32", lambda: reflection_terms(alpha, wo, wi)))
     return cases
 
 
