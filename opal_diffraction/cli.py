@@ -446,7 +446,7 @@ def _render(args, sig: _Signals, created: list) -> int:
     if not args.quiet:
         print(f"{result.plan.summary()}", file=sys.stderr)
         print(f"wrote {written}: {s['render_s']:.2f} s, {s['rays'] / 1e6:.2f} M rays "
-              f"({s['mrays_per_s']:.2f} Mrays/s, {s['backend']})", file=sys.stderr)
+              f"({s['mrays_per_s']:.2f} Mrays/s, {s['backend']}, {s.get('kernels', 'numpy')} kernels)", file=sys.stderr)
         if settings.adaptive_threshold > 0:
             print(f"adaptive sampling: {s['samples_min']} to {s['samples_max']} samples per pixel, "
                   f"{s['samples_mean']:.1f} on average", file=sys.stderr)

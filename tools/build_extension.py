@@ -12,8 +12,10 @@ Steps:
    ``platforms``. Blender ships numpy; it does not ship colour-science (spectra, CIE observer,
    blackbody) or the scipy and typing-extensions it imports, OpenEXR's Python binding (spectral
    EXR output), embreex (Embree ray casting, x86-64 only; without it the core falls back to its
-   NumPy BVH) or threadpoolctl (one BLAS thread while a render runs: core/util/blas_threads.py). Their versions are the ``==`` pins of ``requirements.txt``: the zip ships exactly
-   what the test venv runs.
+   NumPy BVH) or threadpoolctl (one BLAS thread while a render runs: core/util/blas_threads.py), nor
+   numba and its LLVM binding llvmlite (the compiled kernels, core/util/jit.py; numba 0.68 has no
+   macOS x86-64 wheels, so that zip goes without them and renders with the NumPy reference). Their
+   versions are the ``==`` pins of ``requirements.txt``: the zip ships exactly what the test venv runs.
 3. ``blender_ext.py build`` (the extension CLI inside the bpy wheel), ``--split-platforms`` when
    wheels are bundled (one zip per platform), then ``blender_ext.py validate`` on every zip.
 
@@ -39,7 +41,8 @@ PACKAGE = os.path.join(ROOT, "opal_diffraction")
 MANIFEST = os.path.join(ROOT, "blender_manifest.toml")
 REQUIREMENTS = os.path.join(ROOT, "requirements.txt")
 
-#: Runtime dependencies Blender does not ship, bundled as wheels; (distribution, optional). Each is
+#: Runtime dependencies Blender does not ship, bundled as wheels; (distribution, optional: the core
+#: falls back to NumPy code where it has no wheel: embreex's BVH, numba's reference path). Each is
 #: pinned (``==``) in requirements.txt, the one source of their versions (see wheel_requirements).
 #: The scipy pin must support every numpy Blender bundles from blender_version_min on (Blender
 #: 4.2 LTS: numpy 1.24.3; 5.0: 1.26.4).
@@ -50,6 +53,8 @@ BUNDLED = [
     ("OpenEXR", False),
     ("embreex", True),
     ("threadpoolctl", False),
+    ("numba", True),
+    ("llvmlite", True),
 ]
 #: numpy bundled with Blender releases (the oldest is blender_version_min's): every bundled wheel
 #: that depends on numpy must accept each (tests/system/test_packaging_meta.py, tests/blender/test_packaging.py).
@@ -183,7 +188,8 @@ def download_wheels(plat: str, cache: str, offline: bool) -> list[str]:
         res = subprocess.run(cmd, capture_output=True, text=True)
         if res.returncode != 0:
             if optional:
-                print(f"note: {req} has no wheel for {plat}: skipped (the NumPy BVH is used there)")
+                fallback = "the NumPy BVH" if name == "embreex" else "the NumPy reference of the kernels"
+                print(f"note: {req} has no wheel for {plat}: skipped ({fallback} is used there)")
                 continue
             raise SystemExit(f"error: pip could not download {req} for {plat}:\n{res.stderr.strip()}")
         have = _cached_wheels(folder, key)

@@ -1,6 +1,7 @@
 """Render every example's scene at a fixed seed and save the spectral films, or compare two runs.
 
-A refactor must not change images: run this before and after and compare.
+A refactor must not change images: run this before and after and compare. The renders run the
+NumPy reference (``RenderSettings.kernels = 'numpy'``), not the compiled kernels.
 
     python tools/example_images.py render OUT.npz      # prism, fig5, cd (core); bpy prism, opal (exported)
     python tools/example_images.py compare A.npz B.npz # max |difference| per image
@@ -15,6 +16,7 @@ from __future__ import annotations
 import inspect
 import os
 import sys
+from dataclasses import fields
 
 import numpy as np
 
@@ -65,10 +67,13 @@ def render_all(out: str) -> None:
 
     # the spectral films are compared (a checkout from before the RGB films keeps them always)
     keep = {"spectral_film": True} if "spectral_film" in inspect.signature(render).parameters else {}
+    # the NumPy reference, not the compiled kernels (core/util/jit.py): a refactor is checked bit
+    # for bit against it (a checkout from before the kernels has only the reference)
+    reference = {"kernels": "numpy"} if "kernels" in {f.name for f in fields(RenderSettings)} else {}
     films = {}
     for scenes in (_core_scenes, _blender_scenes):
         for name, scene in scenes():
-            settings = RenderSettings(samples=4, light_paths=100_000, seed=3, threads=2)
+            settings = RenderSettings(samples=4, light_paths=100_000, seed=3, threads=2, **reference)
             r = render(scene, settings, **keep)
             films[name] = r.spectral
             for k, v in r.passes.items():

@@ -298,7 +298,8 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         for w in warnings:
             self.report({"WARNING"}, f"Opal Diffraction: {w}")
         summary = (f"{rr.samples} samples | {stats.get('rays', 0) / 1e6:.1f} M rays | "
-                   f"{exported.stats['triangles']} triangles | {stats['total_s']:.1f} s")
+                   f"{exported.stats['triangles']} triangles | {stats['total_s']:.1f} s | "
+                   f"{stats.get('kernels', 'numpy')} kernels")
         if rr.cancelled:
             summary = "Cancelled | " + summary
         summary += warning_summary(warnings)

@@ -44,6 +44,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..spectral.optics import fresnel_dielectric
+from .ggx import ggx_d as _ggx_d, reflection_terms as _eval_reflection_common, smith_lambda as _lambda
 
 __all__ = [
     "LAMBERT", "CONDUCTOR", "DIELECTRIC", "PLASTIC", "GLOSSY",
@@ -144,20 +145,6 @@ def _principled_s(cos, eta, f0):
 
 
 # ---------------------------------------------------------------------------------- GGX
-def _lambda(alpha2, w):
-    """Smith Lambda of GGX for local directions w (..., 3): 0.5 (sqrt(1 + alpha^2 tan^2) - 1).
-    tan^2 from the tangential components (precise near the normal, unlike 1 - cos^2)."""
-    s2 = w[..., 0] ** 2 + w[..., 1] ** 2
-    z2 = np.maximum(w[..., 2] ** 2, 1e-30)
-    return 0.5 * (np.sqrt(1.0 + alpha2 * s2 / z2) - 1.0)
-
-
-def _ggx_d(alpha2, h):
-    """GGX D for local unit half vectors (upper hemisphere)."""
-    d = h[..., 0] ** 2 + h[..., 1] ** 2 + alpha2 * h[..., 2] ** 2
-    return alpha2 / (np.pi * np.maximum(d * d, 1e-38))
-
-
 def _sample_vndf(wo, alpha, u1, u2):
     """Heitz 2018: a visible normal for local wo (upper hemisphere), isotropic alpha (B,)."""
     vh = np.stack([alpha * wo[:, 0], alpha * wo[:, 1], wo[:, 2]], axis=1)
@@ -437,19 +424,6 @@ def _cosine_sample(u1, u2):
 
 
 # ---------------------------------------------------------------------------------- lobes (local frame)
-def _eval_reflection_common(alpha, wo, wi):
-    """D G2 / (4 cos_o) (the f cos of an F = 1 lobe), pdf of VNDF reflection, and wo.h."""
-    a2 = alpha * alpha
-    h = wo + wi
-    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-30)
-    d = _ggx_d(a2, h)
-    lo, li = _lambda(a2, wo), _lambda(a2, wi)
-    mu_o = wo[:, 2]
-    fc = d / ((1.0 + lo + li) * 4.0 * mu_o)
-    pdf = d / ((1.0 + lo) * 4.0 * mu_o)
-    return fc, pdf, np.sum(wo * h, axis=1)
-
-
 def _eval_lobe(p, code, wo, wi, terms=None):
     """f cos (B, k) and pdf (B,) of one lobe's hits in the local frame (wo.z > 0); wi.z > 0
     means reflection, < 0 transmission (the caller has checked the geometric side)."""

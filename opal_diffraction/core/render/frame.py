@@ -32,6 +32,7 @@ from ..util.blas_threads import one_blas_thread
 from ..integrators.light.camera_splat import usable_splat
 from ..util.cancel import RenderCancelled
 from .distributed import DaskExecutor
+from ..util.jit import kernel_mode
 from .film import Film, RenderResult, keeps_spectral
 from ..integrators.light.light_pass import LightPassResult
 from .plan import RenderPlan, plan_render
@@ -73,7 +74,8 @@ def render(
     """
     t_start = time.perf_counter()
     try:
-        prepared = prepare(scene, settings, should_cancel=should_cancel)
+        with kernel_mode((settings or RenderSettings()).kernels):  # prepare's spectra take the render's path
+            prepared = prepare(scene, settings, should_cancel=should_cancel)
     except RenderCancelled:
         return _cancelled_before_start(scene, settings or RenderSettings(), region, spectral_film)
     executor = None if client is None else DaskExecutor(client, scene)
@@ -109,8 +111,18 @@ def render_prepared(
     valid) to reuse; None runs the light pass when the plan asks for it. ``started_at``: the
     ``clock()`` time the time limit counts from (default: now). ``executor``: where the units
     run (core/render/scheduler.py; default: a LocalExecutor on ``prepared.threads``;
-    distributed.DaskExecutor for a cluster). ``clock``: the scheduler's clock, in seconds.
+    distributed.DaskExecutor for a cluster). ``clock``: the scheduler's clock, in seconds. The
+    passes run the compiled kernels or the NumPy reference as ``settings.kernels`` says
+    (core/util/jit.py); the stats' ``kernels`` names which.
     """
+    with kernel_mode(prepared.settings.kernels) as kernels:
+        return _render_prepared(prepared, light, progress, should_cancel, on_round, region, started_at,
+                                spectral_film, executor, clock, kernels)
+
+
+def _render_prepared(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
+                     executor, clock, kernels: str) -> RenderResult:
+    """render_prepared's body, inside its kernel mode (``kernels``: the path taken, for the stats)."""
     settings = prepared.settings
     control = RenderControl(should_cancel, progress, settings.time_limit, started_at, clock)
     plan = plan_render(prepared)
@@ -120,7 +132,7 @@ def render_prepared(
     (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv, adaptive is not None,
                                                  spectral)
     stats = {"rays": 0, "prepare_s": prepared.prepare_s, "backend": prepared.accel.name,
-             "triangles": len(prepared.scene.triangles)}
+             "triangles": len(prepared.scene.triangles), "kernels": kernels}
     executor = LocalExecutor() if executor is None else executor
     splat_images = None  # the light pass's camera splat over the region, once it ran
 

@@ -30,6 +30,10 @@ samples together are one stratified net and its pixels' errors cancel against ea
 ``random(size, dtype)``: each call for the sampler's batch size takes the next dimension (two
 consecutive calls form one 2-D pair), any other call falls through to the pseudo-random
 generator. Numbers are multiples of 2^-24, so they stay below 1 in float32 as well.
+
+Where the compiled kernels run (core/util/jit.py), ``sobol_owen_2d`` and ``sobol_owen_x`` compute
+each point in one pass (key hash, index shuffle, both scrambles) instead of some sixty whole-array
+integer operations: integer arithmetic, so the same bits.
 """
 
 from __future__ import annotations
@@ -37,6 +41,8 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
+
+from ..util.jit import kernels_enabled, njit
 
 __all__ = ["sobol_owen_2d", "sobol_owen_x", "PixelSampler", "CAMERA_PAIRS", "PAIRS_PER_VERTEX", "SLOT_LIGHT", "SLOT_PARAMS",
            "SLOT_BOUNCE", "SLOT_WIDTH", "vertex_pair", "morton2d", "blue_noise_rank", "blue_noise_numbers"]
@@ -108,14 +114,20 @@ def _sobol_y(index: np.ndarray) -> np.ndarray:
     return _reverse_bits(_superset_parity(index))
 
 
-def _key(seed: int, pixel: np.ndarray, pair: np.ndarray) -> np.ndarray:
+def _seed_word(seed: int) -> np.ndarray:
+    """(1,) uint32: every 32-bit word of the seed (a render seed can exceed 2^32), each hashed in turn."""
     with np.errstate(over="ignore"):
-        # every 32-bit word of the seed (a render seed can exceed 2^32), each hashed in turn
         s = _hash(np.full(1, seed & 0xFFFFFFFF, _U32))
         rest = (int(seed) % (1 << 128)) >> 32  # non-negative: the loop ends
         while rest:
             s = _hash(s ^ np.full(1, rest & 0xFFFFFFFF, _U32))
             rest >>= 32
+    return s
+
+
+def _key(seed: int, pixel: np.ndarray, pair: np.ndarray) -> np.ndarray:
+    s = _seed_word(seed)
+    with np.errstate(over="ignore"):
         k = _hash(np.asarray(pixel, np.uint64).astype(_U32) ^ s)
         return _hash(k ^ _hash(np.asarray(pair, np.int64).astype(_U32) * _U32(0x9E3779B9)))
 
@@ -138,6 +150,10 @@ def _scrambled_x(key, index):
 def sobol_owen_2d(pixel, sample, pair, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """The 2-D point of ``sample`` (B,) in pixel ``pixel`` (B,) for dimension pair ``pair``
     (scalar or (B,)): two float64 arrays in [0, 1), multiples of 2^-24."""
+    if kernels_enabled():
+        points = _points_by_kernel(pixel, sample, pair, seed, True)
+        if points is not None:
+            return points
     key, index = _shuffled(pixel, sample, pair, seed)
     with np.errstate(over="ignore"):
         x = _scrambled_x(key, index)
@@ -196,10 +212,87 @@ def sobol_owen_x(pixel, sample, pair, seed: int) -> np.ndarray:
     """The x coordinate of ``sobol_owen_2d(pixel, sample, pair, seed)`` alone, as float32 in
     [0, 1) (multiples of 2^-24, exact in float32): where a decision needs one number (the glass
     choice, the wavelength), without the y coordinate's work."""
+    if kernels_enabled():
+        points = _points_by_kernel(pixel, sample, pair, seed, False)
+        if points is not None:
+            return points[0].astype(np.float32)  # multiples of 2^-24 below 1: exact in float32
     key, index = _shuffled(pixel, sample, pair, seed)
     with np.errstate(over="ignore"):
         x = _scrambled_x(key, index)
     return (x >> _U32(8)).astype(np.float32) * np.float32(1.0 / (1 << 24))
+
+
+def _points_by_kernel(pixel, sample, pair, seed: int, with_y: bool):
+    """(x, y) float64 of sobol_owen_2d by _sobol_owen_kernel (y None without ``with_y``), or None
+    for input shapes the NumPy lines handle (anything but (B,) pixels and samples)."""
+    pixel, sample = np.asarray(pixel), np.asarray(sample)
+    if pixel.ndim != 1 or sample.shape != pixel.shape or pixel.dtype.kind not in "iu" or sample.dtype.kind not in "iu":
+        return None
+    pair = np.asarray(pair, np.int64)
+    if pair.shape not in ((), pixel.shape):
+        return None
+    x = np.empty(len(pixel))
+    y = np.empty(len(pixel) if with_y else 0)
+    _sobol_owen_kernel(pixel, sample, np.broadcast_to(pair, pixel.shape), np.uint64(_seed_word(seed)[0]), with_y, x, y)
+    return x, (y if with_y else None)
+
+
+_M32 = np.uint64(0xFFFFFFFF)
+
+
+@njit
+def _hash_word(x):
+    """_hash of one 32-bit word held in a uint64."""
+    x ^= x >> np.uint64(16)
+    x = (x * np.uint64(0x7FEB352D)) & _M32
+    x ^= x >> np.uint64(15)
+    x = (x * np.uint64(0x846CA68B)) & _M32
+    return x ^ (x >> np.uint64(16))
+
+
+@njit
+def _reverse_word(x):
+    """_reverse_bits of one 32-bit word held in a uint64."""
+    x = ((x >> np.uint64(1)) & np.uint64(0x55555555)) | ((x & np.uint64(0x55555555)) << np.uint64(1))
+    x = ((x >> np.uint64(2)) & np.uint64(0x33333333)) | ((x & np.uint64(0x33333333)) << np.uint64(2))
+    x = ((x >> np.uint64(4)) & np.uint64(0x0F0F0F0F)) | ((x & np.uint64(0x0F0F0F0F)) << np.uint64(4))
+    return (((x & np.uint64(0xFF)) << np.uint64(24)) | ((x & np.uint64(0xFF00)) << np.uint64(8))
+            | ((x >> np.uint64(8)) & np.uint64(0xFF00)) | (x >> np.uint64(24)))
+
+
+@njit
+def _laine_karras_word(x, seed):
+    """_laine_karras of one 32-bit word held in a uint64."""
+    x = (x + seed) & _M32
+    x ^= (x * np.uint64(0x6C50B47C)) & _M32
+    x ^= (x * np.uint64(0xB82F1E52)) & _M32
+    x ^= (x * np.uint64(0xC7AFE638)) & _M32
+    x ^= (x * np.uint64(0x8D22F6E6)) & _M32
+    return x
+
+
+@njit
+def _sobol_owen_kernel(pixel, sample, pair, seed_word, with_y, x_out, y_out):
+    """sobol_owen_2d per point on 32-bit words held in uint64 (every product masked back to 32
+    bits, as uint32 arithmetic wraps): the key of (pixel, pair), the shuffled index, then x's
+    and (``with_y``) y's Owen scramble, as multiples of 2^-24. The integer inputs (any integer
+    type) are cut to their low 32 bits, as the reference's conversions to uint32 cut them."""
+    scale = 1.0 / (1 << 24)
+    for b in range(pixel.shape[0]):
+        k = _hash_word((np.uint64(pixel[b]) & _M32) ^ seed_word)
+        key = _hash_word(k ^ _hash_word((np.uint64(pair[b]) * np.uint64(0x9E3779B9)) & _M32))
+        index = _reverse_word(_laine_karras_word(_reverse_word(np.uint64(sample[b]) & _M32), key))
+        x = _reverse_word(_laine_karras_word(index, _hash_word(key ^ np.uint64(0x68BC21EB))))
+        x_out[b] = np.float64(x >> np.uint64(8)) * scale
+        if with_y:
+            w = index
+            w ^= (w >> np.uint64(1)) & np.uint64(0x55555555)
+            w ^= (w >> np.uint64(2)) & np.uint64(0x33333333)
+            w ^= (w >> np.uint64(4)) & np.uint64(0x0F0F0F0F)
+            w ^= (w >> np.uint64(8)) & np.uint64(0x00FF00FF)
+            w ^= (w >> np.uint64(16)) & np.uint64(0x0000FFFF)
+            y = _reverse_word(_laine_karras_word(w, _hash_word(key ^ np.uint64(0x02E5BE93))))
+            y_out[b] = np.float64(y >> np.uint64(8)) * scale
 
 
 def vertex_pair(depth: np.ndarray, slot: int) -> np.ndarray:

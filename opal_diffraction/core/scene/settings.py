@@ -17,6 +17,7 @@ import numpy as np
 
 from .checks import COORD_LIMIT, SceneError, as_number as _number, number_text as _g
 from ..spectral.spectrum import _MAX_NM, _MIN_NM, WavelengthGrid
+from ..util.jit import KERNEL_MODES
 
 __all__ = ["RenderSettings", "DISPERSION_SAMPLING", "EYE_ONLY_SETTINGS", "BACKENDS", "MAX_WAVELENGTHS",
            "MIN_WAVELENGTHS", "FEW_WAVELENGTHS", "film_bytes", "AUTO_LIGHT_PATHS_PER_SAMPLE",
@@ -152,6 +153,10 @@ class RenderSettings:
     # (core/integrators/light/splat_bounce.py, docs/physics.md section 4.11; only with the camera
     # splat); False: the eye pass reads that light from the caustic map after its own bounce
     splat_bounce: bool = True
+    # the hot NumPy functions' compiled kernels (core/util/jit.py): 'auto' runs them where numba is
+    # available, 'numpy' forces the NumPy reference (the tests' and tools/example_images.py's
+    # bit-for-bit check of refactors); the stats line names the path that ran
+    kernels: str = "auto"
 
     def __post_init__(self):
         # normalise number types only (never raise here: validate() names what is wrong)
@@ -249,6 +254,8 @@ class RenderSettings:
         for name in _BOOL_FIELDS:
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise SceneError(f"{name.replace('_', ' ')} must be True or False, got {getattr(self, name)!r}")
+        if not isinstance(self.kernels, str) or self.kernels not in KERNEL_MODES:
+            raise SceneError(f"kernels must be one of {', '.join(KERNEL_MODES)}, got {self.kernels!r}")
         _validate_backend(self.backend)
         self._validate_grid()
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..util.enums import DispersionModel, codes
+from ..util.jit import kernels_enabled, njit
 
 __all__ = [
     "SELLMEIER_PRESETS",
@@ -79,7 +80,10 @@ def fresnel_dielectric(cos_i, eta) -> tuple[np.ndarray, np.ndarray]:
     """(F, cos_t): the unpolarised Fresnel reflectance and the refracted cosine at a dielectric
     interface. ``cos_i`` >= 0 on the incident side (negative values count as 0, grazing),
     ``eta`` = n_transmitted / n_incident. F = 1 under total internal reflection (cos_t = 0 there).
-    Float32 in, float32 out (float64 stays float64)."""
+    Float32 in, float32 out (float64 stays float64). Arrays run the compiled kernel when kernels
+    are on (core/util/jit.py): the same operations in the same precisions, so the same bits."""
+    if kernels_enabled() and _fits_fresnel_kernel(cos_i, eta):
+        return _fresnel_with_kernel(cos_i, eta)
     cos_i = np.clip(cos_i, 0.0, 1.0)
     sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
     tir = sin2_t >= 1.0
@@ -91,6 +95,61 @@ def fresnel_dielectric(cos_i, eta) -> tuple[np.ndarray, np.ndarray]:
     f = np.where(tir, 1.0, 0.5 * (r_par * r_par + r_perp * r_perp))
     dtype = np.result_type(np.asarray(cos_i).dtype, np.float32)  # by dtype, not value: a float64 scalar stays float64
     return f.astype(dtype), cos_t.astype(dtype)
+
+
+_FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
+
+
+def _fits_fresnel_kernel(cos_i, eta) -> bool:
+    """Float32/float64 arrays (not scalars, whose NumPy promotion rules differ) of at least one dimension."""
+    return (isinstance(cos_i, np.ndarray) and isinstance(eta, np.ndarray) and cos_i.dtype in _FLOATS
+            and eta.dtype in _FLOATS and cos_i.ndim >= 1 and eta.ndim >= 1)
+
+
+def _fresnel_with_kernel(cos_i: np.ndarray, eta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """fresnel_dielectric by _fresnel_kernel over the broadcast arrays (viewed as 2-D rows)."""
+    shape = np.broadcast_shapes(cos_i.shape, eta.shape)
+    c, e = np.broadcast_to(cos_i, shape), np.broadcast_to(eta, shape)  # read-only views, no copies
+    work = np.result_type(cos_i.dtype, eta.dtype).type  # the precision NumPy computes in
+    out_type = np.result_type(cos_i.dtype, np.float32)  # the reference's result dtype
+    if c.ndim != 2:
+        c, e = c.reshape(-1, shape[-1] if shape[-1] else 1), e.reshape(-1, shape[-1] if shape[-1] else 1)
+    f, cos_t = np.empty(c.shape, out_type), np.empty(c.shape, out_type)
+    one_c = cos_i.dtype.type(1.0)
+    _fresnel_kernel(c, e, one_c - one_c, one_c, work(1.0), work(1e-30), f, cos_t)
+    return f.reshape(shape), cos_t.reshape(shape)
+
+
+@njit
+def _fresnel_kernel(cos_i, eta, zero_c, one_c, one, tiny, f_out, cos_t_out):
+    """fresnel_dielectric's NumPy lines per element: cos_i's own precision (``one_c``) up to
+    1 - cos_i^2, the working precision (``one``, ``tiny`` = 1e-30) from there, stored in the
+    outputs' dtype; NaN propagates as through np.clip / np.maximum (comparisons with NaN are false)."""
+    zero = one - one
+    half = one / (one + one)
+    for r in range(cos_i.shape[0]):
+        for k in range(cos_i.shape[1]):
+            c = cos_i[r, k]
+            if c < zero_c:
+                c = zero_c
+            if c > one_c:
+                c = one_c
+            e = eta[r, k]
+            sin2_t = (one_c - c * c) / (e * e)
+            t = one - sin2_t
+            if t < zero:
+                t = zero
+            cos_t = np.sqrt(t)
+            den_par = e * c + cos_t
+            if den_par < tiny:
+                den_par = tiny
+            den_perp = c + e * cos_t
+            if den_perp < tiny:
+                den_perp = tiny
+            r_par = (e * c - cos_t) / den_par
+            r_perp = (c - e * cos_t) / den_perp
+            f_out[r, k] = one if sin2_t >= one else half * (r_par * r_par + r_perp * r_perp)
+            cos_t_out[r, k] = cos_t
 
 
 def sellmeier_ior(wavelength_nm, b, c) -> np.ndarray:

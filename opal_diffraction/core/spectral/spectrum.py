@@ -21,6 +21,14 @@ film holding bin averages (the diffraction kernel returns those) converts to XYZ
 even at 20 nm steps. Truncation to 400-700 nm loses a little of X, Y, Z (docs/physics.md
 section 1.3); a per-channel white balance on the final matrix makes a flat reflector under
 white light exactly neutral instead of slightly yellow.
+
+RGB -> spectrum on the hot path (a light's colour, an environment lookup, per hit): where the
+compiled kernels run (core/util/jit.py) ``reflectance_from_rgb`` and ``illuminant_from_rgb`` take
+one pass per row over a tabulated basis, the Mallett-Yuksel basis and, for lights, that basis
+already multiplied by the white illuminant (``emission_basis``), instead of NumPy's temporaries
+and a (B, 3) @ (3, n) product; they agree with the NumPy lines to rounding (a few units in the
+last place: the white factor is applied to the basis first, and the sum of three products is
+not BLAS's).
 """
 
 from __future__ import annotations
@@ -29,6 +37,8 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
+
+from ..util.jit import kernels_enabled, njit
 
 __all__ = ["WavelengthGrid", "SpectralConverter", "DEFAULT_GRID"]
 
@@ -164,6 +174,17 @@ class SpectralConverter:
         cal = b @ np.linalg.inv(m).T
         return cal if cal.min() >= 0 and cal.max() <= 1 else b
 
+    @cached_property
+    def _reflectance_basis_t(self) -> np.ndarray:
+        """(3, n) float64 contiguous: the Mallett-Yuksel basis, one row per channel (the kernel's table)."""
+        return np.ascontiguousarray(self._mallett_basis.T)
+
+    @cached_property
+    def emission_basis(self) -> np.ndarray:
+        """(3, n) float64: the basis times the white illuminant, one row per channel: a light of
+        colour c with max(c) = 1 emits c @ emission_basis (the tabulated uplift of illuminant_from_rgb)."""
+        return np.ascontiguousarray((self._mallett_basis * self.white_illuminant[:, None]).T)
+
     # --- conversions ---------------------------------------------------------------------
     def to_xyz(self, spectra: np.ndarray) -> np.ndarray:
         """(..., n) -> (..., 3) CIE XYZ."""
@@ -181,6 +202,10 @@ class SpectralConverter:
         Bounded in [0, 1] for inputs in [0, 1]; inputs are clipped to [0, 1] first, since a
         reflectance above 1 would create energy.
         """
+        if kernels_enabled():
+            rows = _rgb_rows(rgb)
+            if rows is not None:
+                return self._uplift(rgb, rows, self._reflectance_basis_t, False)
         rgb = np.clip(np.asarray(rgb, dtype=np.float64), 0.0, 1.0)
         return rgb @ self._mallett_basis.T
 
@@ -190,10 +215,20 @@ class SpectralConverter:
         The colour is split into a scale (its maximum) times a [0, 1] reflectance-like spectrum
         that multiplies the white illuminant, so colours brighter than 1 keep their intensity.
         """
+        if kernels_enabled():
+            rows = _rgb_rows(rgb)
+            if rows is not None:
+                return self._uplift(rgb, rows, self.emission_basis, True)
         rgb = np.maximum(np.asarray(rgb, dtype=np.float64), 0.0)
         scale = rgb.max(axis=-1, keepdims=True)
         shape = np.where(scale > 0, rgb / np.where(scale > 0, scale, 1.0), 0.0)
         return scale * self.reflectance_from_rgb(shape) * self.white_illuminant
+
+    def _uplift(self, rgb, rows: np.ndarray, basis_t: np.ndarray, as_light: bool) -> np.ndarray:
+        """reflectance_from_rgb / illuminant_from_rgb by _uplift_kernel: (..., n) float64."""
+        out = np.empty((rows.shape[0], basis_t.shape[1]))
+        _uplift_kernel(rows, basis_t, as_light, out)
+        return out.reshape(np.shape(rgb)[:-1] + (basis_t.shape[1],))
 
     def blackbody(self, temperature_k) -> np.ndarray:
         """Planck spectrum at temperature(s) T (K), scaled to Y = 1 like the white illuminant."""
@@ -215,3 +250,40 @@ class SpectralConverter:
         out = np.stack(rows)
         out = out / (out @ self.cmf_weights[:, 1])[:, None]
         return out.reshape(np.shape(temperature_k) + (self.grid.n,))
+
+
+def _rgb_rows(rgb) -> np.ndarray | None:
+    """``rgb`` (..., 3) as (B, 3) float32/float64 rows for _uplift_kernel (float32 stays float32:
+    widening it in the kernel is exact); None for input the NumPy lines handle (or reject)."""
+    a = np.asarray(rgb)
+    if a.ndim == 0 or a.shape[-1] != 3:
+        return None
+    if a.dtype != np.float32:
+        a = a.astype(np.float64, copy=False)
+    return a.reshape(-1, 3)
+
+
+@njit
+def _uplift_kernel(rgb, basis_t, as_light, out):
+    """Per row of ``rgb`` (B, 3): ``out[b] = rgb[b] @ basis_t`` with the colour clipped to [0, 1]
+    (a reflectance), or, ``as_light``, split into its maximum s times a [0, 1] shape:
+    ``s * (shape @ basis_t)`` (basis_t = emission_basis). NaN propagates as through the NumPy lines."""
+    for b in range(rgb.shape[0]):
+        r, g, bl = np.float64(rgb[b, 0]), np.float64(rgb[b, 1]), np.float64(rgb[b, 2])
+        scale = 1.0
+        if as_light:
+            r, g, bl = (0.0 if r < 0.0 else r), (0.0 if g < 0.0 else g), (0.0 if bl < 0.0 else bl)
+            scale = r
+            if g > scale or g != g:
+                scale = g
+            if (bl > scale or bl != bl) and scale == scale:
+                scale = bl
+            if scale > 0.0:
+                r, g, bl = r / scale, g / scale, bl / scale
+            else:
+                r = g = bl = 0.0
+        r = 0.0 if r < 0.0 else (1.0 if r > 1.0 else r)
+        g = 0.0 if g < 0.0 else (1.0 if g > 1.0 else g)
+        bl = 0.0 if bl < 0.0 else (1.0 if bl > 1.0 else bl)
+        for k in range(basis_t.shape[1]):
+            out[b, k] = scale * (r * basis_t[0, k] + g * basis_t[1, k] + bl * basis_t[2, k])

@@ -6,6 +6,9 @@ element a hit falls in follows in O(1) from the triangle id and barycentrics (u,
 i = floor(k u), j = floor(k v), the cell's upper half when frac(k u) + frac(k v) > 1, and
 row i of the triangle holds 2 (k - i) - 1 cells starting at 2 k i - i^2. No per-element Python
 objects: the map is one (E, n) array of spectral flux that partial maps simply add to.
+
+A white deposit sums each element's rows in their order and adds the sum to the map once
+(core/util/row_sums.py: a compiled pass where the kernels run, the same bits as the NumPy lines).
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..util.geometry import triangle_areas
+from ..util.row_sums import add_row_sums
 
 __all__ = ["ElementLayout", "IlluminationMap", "MAX_SUBDIVISION"]
 
@@ -124,10 +128,7 @@ class IlluminationMap:
             flat = self.flux.reshape(-1)
             flat[keys] += sums.astype(np.float32)
             return
-        order = np.argsort(elements, kind="stable")
-        e, f = elements[order], flux[order]
-        starts = np.flatnonzero(np.concatenate([[True], e[1:] != e[:-1]]))
-        self.flux[e[starts]] += np.add.reduceat(f, starts, axis=0)
+        add_row_sums(self.flux, elements, flux)
 
     def lit_triangles(self) -> np.ndarray:
         """(T,) bool: the triangles with flux on any of their elements (a finished map's hits
