@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 
 from ..util.geometry import triangle_cross, triangle_normals, uv_tangents as uv_tangent_frames
-from ..util.enums import (ConductorFresnel, GratingDirection, GratingType, Lattice, LightKind, MaterialKind, TextureEncoding, TextureExtension, TextureInterpolation, codes)
+from ..util.enums import (ConductorFresnel, GlassTint, GratingDirection, GratingType, Lattice, LightKind, MaterialKind, TextureEncoding, TextureExtension, TextureInterpolation, codes)
 from ..spectral.optics import DISPERSION_MODELS, ior_spectrum
 
 __all__ = [
@@ -27,6 +27,7 @@ __all__ = [
     "GRATING_DIRECTIONS",
     "MATERIAL_KINDS",
     "CONDUCTOR_FRESNELS",
+    "GLASS_TINTS",
     "LIGHT_KINDS",
     "TEXTURE_INTERPOLATIONS",
     "TEXTURE_EXTENSIONS",
@@ -43,6 +44,7 @@ FORMAT_VERSION = 1
 #: Material kinds and light kinds: name -> stable code (enums.py).
 MATERIAL_KINDS = codes(MaterialKind)
 CONDUCTOR_FRESNELS = codes(ConductorFresnel)
+GLASS_TINTS = codes(GlassTint)
 LIGHT_KINDS = codes(LightKind)
 
 
@@ -106,6 +108,8 @@ _MATERIAL_COLUMNS = {
     "specular_ior_level": (np.float32, (), 0.0, None),
     "specular_tint": (np.float32, (3,), (1.0, 1.0, 1.0), None),
     "conductor_fresnel": (np.int32, (), "CONSTANT", CONDUCTOR_FRESNELS),
+    # what a glass's colour is the colour of (docs/physics.md section 2.7)
+    "glass_tint": (np.int32, (), "REFRACTION", GLASS_TINTS),
     # the BRAGG (FCC opal) lattice (docs/physics.md section 5.7; core/materials/bragg_bsdf.py)
     "sphere_diameter": (np.float32, (), 250.0, None),
     "sphere_ior": (np.float32, (), 1.45, None),
@@ -150,7 +154,7 @@ class Materials:
     """Material table, one row per material.
 
     kind: MATERIAL_KINDS code. color: base colour (diffuse albedo, mirror tint, or dielectric
-    tint applied to transmission and reflection alike). ior: index of refraction at the d line
+    tint applied to transmission and reflection alike, read as glass_tint says). ior: index of refraction at the d line
     (used by 'NONE' and 'ABBE' dispersion). dispersion: DISPERSION_MODELS code. abbe: Abbe number V_d.
     emission: emitted radiance as linear RGB (Cycles' units: Emission colour x strength; a white
     emitter of strength 1 has the radiance of the world colour (1, 1, 1)), both sides, any kind.
@@ -168,7 +172,10 @@ class Materials:
     linear RGB, Principled's Specular Tint - the specular layer's F0 tint and, on metals, the
     F82 edge tint (a Metallic BSDF's Edge Tint). conductor_fresnel (CONDUCTOR_FRESNELS): CONSTANT
     (the metal reflects color at every angle: Glossy BSDF and older files) or F82_TINT (Schlick
-    from F0 = color with the edge tint: Principled and Metallic BSDF).
+    from F0 = color with the edge tint: Principled and Metallic BSDF). glass_tint (GLASS_TINTS,
+    docs/physics.md section 2.7): what a glass's color is the colour of - REFRACTION (one
+    refraction's, the default: Glass BSDF and older files) or PASS (one pass through a closed
+    object, two refractions: Principled's Base Color).
 
     Grating layer (docs/physics.md section 3), on top of the base kind: grating (0/1), grating_type
     (GRATING_TYPES), lattice (LATTICES), period D (nm), slit_width a (nm), slit_count N,
@@ -219,6 +226,7 @@ class Materials:
     specular_ior_level: np.ndarray = field(default_factory=lambda: _material_column_default("specular_ior_level", 0))
     specular_tint: np.ndarray = field(default_factory=lambda: _material_column_default("specular_tint", 0))
     conductor_fresnel: np.ndarray = field(default_factory=lambda: _material_column_default("conductor_fresnel", 0))
+    glass_tint: np.ndarray = field(default_factory=lambda: _material_column_default("glass_tint", 0))
     sphere_diameter: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_diameter", 0))
     sphere_ior: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_ior", 0))
     void_ior: np.ndarray = field(default_factory=lambda: _material_column_default("void_ior", 0))
@@ -1272,7 +1280,7 @@ def _validate_materials(m: Materials) -> Materials:
     _enum_check(kind, MATERIAL_KINDS, label, "kind")
     _enum_check(out["dispersion"], DISPERSION_MODELS, label, "dispersion")
     for name, enum in (("grating_type", GRATING_TYPES), ("lattice", LATTICES), ("grating_direction", GRATING_DIRECTIONS),
-                       ("conductor_fresnel", CONDUCTOR_FRESNELS)):
+                       ("conductor_fresnel", CONDUCTOR_FRESNELS), ("glass_tint", GLASS_TINTS)):
         _enum_check(out[name], enum, label, name.replace("_", " "))
     g = out["grating"].astype(np.int64)
     bad = (g != 0) & (g != 1)
