@@ -19,6 +19,7 @@ from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.scene.model import Camera, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.spectral.optics import ior_spectrum
 from opal_diffraction.core.spectral.spectrum import SpectralConverter
 from opal_diffraction.core.util.enums import GlassTint
 
@@ -84,10 +85,10 @@ def test_only_pure_glass_rows_take_the_rule():
 
 
 # ---------------------------------------------------------------------------- through the renderer
-def _slab_before_wall(color, glass_tint, pixels=12):
+def _slab_before_wall(color, glass_tint, pixels=12, dispersion="NONE"):
     """A glass slab (IOR 1.5, 0.4 thick) above a white emissive wall (radiance 1), seen straight
     down by an orthographic camera that frames the slab's middle; no world light."""
-    glass = {"kind": "DIELECTRIC", "color": color, "ior": 1.5, "glass_tint": glass_tint}
+    glass = {"kind": "DIELECTRIC", "color": color, "ior": 1.5, "glass_tint": glass_tint, "dispersion": dispersion}
     wall = {"kind": "DIFFUSE", "color": (0.0, 0.0, 0.0), "emission": (1.0, 1.0, 1.0)}
     s = Scene(materials=Materials.from_list([glass, wall]))
     s.add_mesh(*primitives.box((0, 0, 0), (4.0, 4.0, 0.4)), material=0)
@@ -99,8 +100,9 @@ def _slab_before_wall(color, glass_tint, pixels=12):
 
 
 def _slab_closed_form(color, glass_tint, ior=1.5):
-    """RGB of T = (1 - F)^2 t^2 / (1 - F^2 t^2) per wavelength, times the wall's white spectrum."""
-    f = ((ior - 1) / (ior + 1)) ** 2
+    """RGB of T = (1 - F)^2 t^2 / (1 - F^2 t^2) per wavelength, times the wall's white spectrum
+    (``ior``: a number, or the index per wavelength of a dispersive glass)."""
+    f = ((np.asarray(ior) - 1) / (np.asarray(ior) + 1)) ** 2
     t2 = glass_tint_spectra([color], [int(GlassTint[glass_tint])], CONV)[0] ** 2
     return _rgb_under_white((1 - f) ** 2 * t2 / (1 - f * f * t2))
 
@@ -122,3 +124,16 @@ def test_a_slab_before_a_white_wall_renders_the_closed_form(name, glass_tint):
     c = np.array(color)
     cycles = 0.9216 * c / (1 - 0.0016) if glass_tint == "PASS" else 0.9216 * c * c / (1 - 0.0016 * c ** 4)
     np.testing.assert_allclose(mean, cycles, rtol=5e-3, atol=2e-5)
+
+
+@pytest.mark.parametrize("glass_tint", ["PASS", "REFRACTION"])
+def test_a_dispersive_slab_tints_each_wavelength_by_the_rule(glass_tint):
+    """BK7: the white rays split into single wavelengths at the first hit (SAMPLE), each tinted by
+    the rule's spectrum at its wavelength, with the Fresnel factor of its own index."""
+    color = TINTS["ruby"]
+    res = render(_slab_before_wall(color, glass_tint, dispersion="BK7"), RenderSettings(samples=256, threads=1, seed=2))
+    px = res.rgb.reshape(-1, 3).astype(np.float64)
+    expected = _slab_closed_form(color, glass_tint, ior_spectrum(CONV.grid.wavelengths, "BK7", 1.5, 64.0))
+    mean, sem = px.mean(axis=0), px.std(axis=0, ddof=1) / np.sqrt(len(px))
+    print(glass_tint, "rendered", np.round(mean, 5), "closed form", np.round(expected, 5))
+    assert np.all(np.abs(mean - expected) < 4.5 * sem + 1e-3 * expected)
