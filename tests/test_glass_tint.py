@@ -6,7 +6,9 @@ Checked against closed forms: the spectra's round trip (two refractions' tint un
 is the pass colour in RGB), grey REFRACTION tints unchanged to the bit, layered rows untouched,
 and whole renders of a slab before a white emissive wall at normal incidence, whose pixels must
 equal T = (1 - F)^2 t^2 / (1 - F^2 t^2) (all internal reflections summed, per wavelength) in RGB
-to within the pixels' own noise (a Z-test of the mean) and 0.5 %.
+to within the pixels' own noise (a Z-test of the mean) and 0.5 % - also for a dispersive (BK7)
+slab, per wavelength - and the light pass's caustic flux under a tinted slab (the same closed
+form, within the Fresnel choices' 1 %).
 """
 
 from __future__ import annotations
@@ -15,9 +17,11 @@ import numpy as np
 import pytest
 
 from opal_diffraction.core.materials.spectra import glass_tint_spectra, prepare_materials
+from opal_diffraction.core.integrators.light.light_pass import run_light_pass
 from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene import primitives
-from opal_diffraction.core.scene.model import Camera, Materials, Scene
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.spectral.optics import ior_spectrum
 from opal_diffraction.core.spectral.spectrum import SpectralConverter
@@ -137,3 +141,28 @@ def test_a_dispersive_slab_tints_each_wavelength_by_the_rule(glass_tint):
     mean, sem = px.mean(axis=0), px.std(axis=0, ddof=1) / np.sqrt(len(px))
     print(glass_tint, "rendered", np.round(mean, 5), "closed form", np.round(expected, 5))
     assert np.all(np.abs(mean - expected) < 4.5 * sem + 1e-3 * expected)
+
+
+@pytest.mark.parametrize("glass_tint", ["PASS", "REFRACTION"])
+def test_caustic_flux_through_a_tinted_slab_is_the_closed_form(glass_tint):
+    """The light pass (caustics through tinted glass): a sun straight down on a 1 x 1 m tinted slab
+    above a grey floor puts E A (1 - F)^2 t^2 / (1 - F^2 t^2) per wavelength on the floor, whose RGB
+    is the pass colour times (1 - F)^2 / (1 - F^2) to within F^2."""
+    color = TINTS["ruby"]
+    mats = Materials.from_list([{"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)},
+                                {"kind": "DIELECTRIC", "ior": 1.5, "color": color, "glass_tint": glass_tint}])
+    s = Scene(materials=mats)
+    s.add_mesh(*primitives.quad((0, 0, 0), (8, 0, 0), (0, 8, 0)), material=0)
+    s.add_mesh(*primitives.box((0, 0, 1.0), (1.0, 1.0, 0.2)), material=1)
+    s.lights = Lights.from_list([{"kind": "SUN", "direction": (0, 0, -1), "power": 2.0}])
+    s.camera = Camera.look_at((0, -4, 3), (0, 0, 0), width=16, height=16)
+    ctx = prepare(s, RenderSettings(light_paths=200_000, max_bounces=32))
+    flux = run_light_pass(ctx).caustics.flux.sum(axis=0)
+    f = 0.04
+    t2 = glass_tint_spectra([mats.color[1]], [int(GlassTint[glass_tint])], CONV)[0] ** 2
+    expected = ctx.lights.spectrum[0] * (1 - f) ** 2 * t2 / (1 - f * f * t2)
+    # binomial noise of the Fresnel choices over ~N paths: well under 1 %
+    np.testing.assert_allclose(flux, expected, rtol=0.01)
+    c = np.array(color)
+    np.testing.assert_allclose(CONV.to_rgb(flux.astype(np.float64)) / CONV.to_rgb(ctx.lights.spectrum[0]),
+                               (c if glass_tint == "PASS" else c * c) * 0.9216 / 0.9984, rtol=0.012)
