@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from opal_diffraction.core.materials import bsdf
 from opal_diffraction.core.materials.spectra import glass_tint_spectra, prepare_materials
 from opal_diffraction.core.integrators.light.light_pass import run_light_pass
 from opal_diffraction.core.render.frame import render
@@ -67,7 +68,8 @@ def test_grey_refraction_tints_are_unchanged_to_the_bit():
 
 def test_only_pure_glass_rows_take_the_rule():
     """Mirrors, diffuse rows and layered Principled (its row is also the base's albedo and the metal's
-    F0) keep the uplift of their colour; older files (no glass_tint column) read REFRACTION."""
+    F0) keep the uplift of their colour in the table, the layered rows' glass layer has the rule's
+    tint of its own; older files (no glass_tint column) read REFRACTION."""
     ruby = TINTS["ruby"]
     rows = [{"kind": "DIELECTRIC", "color": ruby, "glass_tint": "PASS"},
             {"kind": "DIELECTRIC", "color": ruby},
@@ -84,8 +86,31 @@ def test_only_pure_glass_rows_take_the_rule():
     np.testing.assert_array_equal(refl[1], glass_tint_spectra([ruby32], [REFRACTION], CONV)[0].astype(np.float32))
     for i in range(2, 6):
         np.testing.assert_array_equal(refl[i], uplift)
+    layered = prepare_materials(m, CONV).glass_tint
+    for i in (2, 3):  # their glass layer follows the rule (bsdf.params_from_materials' glass lobe)
+        np.testing.assert_array_equal(layered[i], refl[0])
     columns = {k: getattr(m, k) for k in ("kind", "color", "ior")}
     assert list(Materials.from_columns(columns, len(rows)).glass_tint) == [REFRACTION] * len(rows)
+
+
+def test_the_glass_lobe_of_a_layered_principled_takes_the_rule():
+    """Principled with transmission 0.5: a hit that draws the glass layer is tinted by the rule's
+    spectrum, one that draws the base by the uplifted Base Color; a colour-textured glass keeps
+    the texture's colour (the base the caller passes)."""
+    ruby = TINTS["ruby"]
+    m = Materials.from_list([{"kind": "DIELECTRIC", "color": ruby, "glass_tint": "PASS", "transmission": 0.5,
+                              "roughness": 0.3},
+                             {"kind": "DIELECTRIC", "color": ruby, "glass_tint": "PASS", "roughness": 0.3,
+                              "color_texture": 0}])
+    pm = prepare_materials(m, CONV)
+    mat, front = np.array([0, 0, 1]), np.ones(3, bool)
+    given = pm.reflectance[mat].copy()
+    given[2] = 0.25  # what a texture lookup would give
+    p = bsdf.params_from_materials(pm, mat, front, base=given, u_layer=np.array([0.2, 0.8, 0.2]))
+    assert list(p.lobe) == [bsdf.DIELECTRIC, bsdf.LAMBERT, bsdf.DIELECTRIC]
+    np.testing.assert_array_equal(p.base[0], glass_tint_spectra([m.color[0]], [PASS], CONV)[0].astype(np.float32))
+    np.testing.assert_array_equal(p.base[1], CONV.reflectance_from_rgb(np.asarray(m.color[0], np.float64)).astype(np.float32))
+    np.testing.assert_array_equal(p.base[2], given[2])
 
 
 # ---------------------------------------------------------------------------- through the renderer

@@ -46,6 +46,8 @@ class PreparedMaterials:
     spec_f0: np.ndarray = None        # (M,) float32 F0 of the base's specular layer (0: pure Lambert)
     specular_tint: np.ndarray = None  # (M, n) float32 specular tint / metal edge tint spectrum
     conductor_f82: np.ndarray = None  # (M,) bool: the metal uses the F82-tint Fresnel (else constant colour)
+    glass_tint: np.ndarray = None     # (M, n) float32 the glass layer's tint per refraction (glass_tint_spectra)
+    color_textured: np.ndarray = None  # (M,) bool: a texture gives the colour per hit (its glass keeps that tint)
 
     @property
     def has_dispersion(self) -> bool:
@@ -70,10 +72,16 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
     wl = conv.grid.wavelengths
     kind = np.asarray(m.kind, np.int32)
     refl = conv.reflectance_from_rgb(np.asarray(m.color, np.float64).reshape(-1, 3))
-    # pure glass (no metal or base layer to share its colour): the tint per refraction
-    glass = (kind == DIELECTRIC) & (np.asarray(m.transmission) >= 1) & (np.asarray(m.metallic) <= 0)
-    if glass.any():
-        refl[glass] = glass_tint_spectra(np.asarray(m.color).reshape(-1, 3)[glass], np.asarray(m.glass_tint)[glass], conv)
+    transmission, metallic = np.asarray(m.transmission), np.asarray(m.metallic)
+    # every row with a glass layer: its tint per refraction (the rough and layered BSDF's glass lobe)
+    layer = (transmission > 0) & (metallic < 1)
+    glass_tint = refl.copy()
+    if layer.any():
+        glass_tint[layer] = glass_tint_spectra(np.asarray(m.color).reshape(-1, 3)[layer], np.asarray(m.glass_tint)[layer],
+                                               conv)
+    # pure glass (no metal or base layer sharing the row): the tint is the row's colour everywhere
+    pure = (kind == DIELECTRIC) & (transmission >= 1) & (metallic <= 0)
+    refl[pure] = glass_tint[pure]
     ior = np.ones((len(kind), len(wl)))
     for i in np.flatnonzero(kind == DIELECTRIC):  # one row per material, not per ray
         ior[i] = ior_spectrum(wl, _MODEL_NAMES[int(m.dispersion[i])], float(m.ior[i]), float(m.abbe[i]))
@@ -90,4 +98,5 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
                              metallic=np.asarray(m.metallic, np.float32),
                              transmission=np.asarray(m.transmission, np.float32),
                              spec_f0=spec_f0.astype(np.float32), specular_tint=tint,
-                             conductor_f82=np.asarray(m.conductor_fresnel) == int(ConductorFresnel.F82_TINT))
+                             conductor_f82=np.asarray(m.conductor_fresnel) == int(ConductorFresnel.F82_TINT),
+                             glass_tint=glass_tint.astype(np.float32), color_textured=np.asarray(m.color_texture) >= 0)
