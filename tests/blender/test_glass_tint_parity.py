@@ -123,6 +123,27 @@ def measure(shape: str, shader: str, tmp_path, roughness: float = 0.0):
     return out, ref, ours
 
 
+def test_the_export_says_what_each_glass_colour_is_the_colour_of():
+    """Principled -> glass_tint PASS, Glass and Refraction BSDF
+    -> REFRACTION (docs/physics.md section 2.7); the colour column is the node's colour either way."""
+    from opal_diffraction.blender.export import export_scene
+    from opal_diffraction.core.scene.model import GLASS_TINTS
+
+    bs.empty_scene(8, 8)
+    bs.camera(location=(0.0, 0.0, 5.0), ortho_scale=3.0)
+    mats = {"principled": _material("PRINCIPLED", "principled", TINTS["ruby"], 0.0),
+            "glass": _material("GLASS", "glass", TINTS["ruby"], 0.0),
+            "refraction": bs.material("refraction", "ShaderNodeBsdfRefraction", TINTS["ruby"])}
+    for i, mat in enumerate(mats.values()):
+        ps._cube(mat.name, 0.5, (i - 1.0, 0.0, 0.0), mat)
+    m = export_scene(bpy.context.evaluated_depsgraph_get()).scene.materials
+    rows = {str(n): i for i, n in enumerate(m.name)}
+    assert {name: int(m.glass_tint[rows[name]]) for name in mats} == {
+        "principled": GLASS_TINTS["PASS"], "glass": GLASS_TINTS["REFRACTION"], "refraction": GLASS_TINTS["REFRACTION"]}
+    for name in mats:
+        np.testing.assert_allclose(m.color[rows[name]], TINTS["ruby"], atol=1e-6)
+
+
 CASES = [("SLAB", "PRINCIPLED", 0.0), ("SLAB", "GLASS", 0.0), ("SPHERE", "PRINCIPLED", 0.0),
          ("SPHERE", "GLASS", 0.0), ("SLAB", "PRINCIPLED", 0.3), ("SLAB", "GLASS", 0.3)]
 
