@@ -22,7 +22,7 @@ from opal_diffraction.core.integrators.light.light_pass import run_light_pass
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene import primitives
-from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene, SceneError
 from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.spectral.optics import ior_spectrum
 from opal_diffraction.core.spectral.spectrum import SpectralConverter
@@ -91,6 +91,25 @@ def test_only_pure_glass_rows_take_the_rule():
         np.testing.assert_array_equal(layered[i], refl[0])
     columns = {k: getattr(m, k) for k in ("kind", "color", "ior")}
     assert list(Materials.from_columns(columns, len(rows)).glass_tint) == [REFRACTION] * len(rows)
+
+
+def test_the_glass_tint_column_round_trips_and_is_validated(tmp_path):
+    """Saved and loaded with the scene; a file without the column loads as REFRACTION (what its
+    colour meant: one refraction's); unknown names and codes are errors naming the column."""
+    s = Scene(materials=Materials.from_list([{"kind": "DIELECTRIC", "color": TINTS["ruby"], "glass_tint": "PASS"}]))
+    s.add_mesh(*primitives.box((0, 0, 0), (1.0, 1.0, 1.0)), material=0)
+    s.camera = Camera.look_at((0, -4, 0), (0, 0, 0))
+    s.save(tmp_path / "new.npz")
+    assert list(Scene.load(tmp_path / "new.npz").materials.glass_tint) == [PASS]
+    with np.load(tmp_path / "new.npz") as z:
+        old = {k: z[k] for k in z.files if k != "material_glass_tint"}
+    np.savez(tmp_path / "old.npz", **old)
+    assert list(Scene.load(tmp_path / "old.npz").materials.glass_tint) == [REFRACTION]
+    with pytest.raises(SceneError, match="glass_tint"):
+        Materials.from_list([{"kind": "DIELECTRIC", "glass_tint": "BOTH"}])
+    s.materials.glass_tint[:] = 7
+    with pytest.raises(SceneError, match="glass tint code 7"):
+        s.validated()
 
 
 def test_the_glass_lobe_of_a_layered_principled_takes_the_rule():
