@@ -347,9 +347,9 @@ def tinted_glass_spheres(image_dir):
     principled = bs.material("principled_glass", "PRINCIPLED", (0.8, 0.8, 0.8),
                              **{"Transmission Weight": 1.0, "IOR": 1.5, "Roughness": 0.0})
     ruby = bs.material("ruby_glass", "GLASS", (0.8, 0.1, 0.1), IOR=1.5, Roughness=0.0)
-    _smooth_sphere("principled", 0.5, (-0.55, 0.0, 0.8), principled)
-    _smooth_sphere("ruby", 0.5, (0.55, 0.0, 0.8), ruby)
-    look_at((0.0, -3.2, 0.9), (0.0, 0.0, 0.8))
+    _smooth_sphere("principled", 0.7, (-0.72, 0.0, 0.8), principled)
+    _smooth_sphere("ruby", 0.7, (0.72, 0.0, 0.8), ruby)
+    look_at((0.0, -2.9, 0.9), (0.0, 0.0, 0.8), lens=35.0)
     return sc
 
 
