@@ -154,7 +154,7 @@ class Materials:
     """Material table, one row per material.
 
     kind: MATERIAL_KINDS code. color: base colour (diffuse albedo, mirror tint, or dielectric
-    tint applied to transmission and reflection alike, read as glass_tint says). ior: index of refraction at the d line
+    tint applied to transmission and reflection alike). ior: index of refraction at the d line
     (used by 'NONE' and 'ABBE' dispersion). dispersion: DISPERSION_MODELS code. abbe: Abbe number V_d.
     emission: emitted radiance as linear RGB (Cycles' units: Emission colour x strength; a white
     emitter of strength 1 has the radiance of the world colour (1, 1, 1)), both sides, any kind.
