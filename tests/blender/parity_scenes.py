@@ -328,6 +328,31 @@ def glass_sphere(image_dir):
     return sc
 
 
+def tinted_glass_spheres(image_dir):
+    """Two smooth-shaded tinted glass spheres before an emissive wall of white and dim white stripes
+    (docs/physics.md section 2.7): a default Principled glass (Base Color 0.8, Transmission 1,
+    IOR 1.5, roughness 0) and a ruby Glass BSDF (Color (0.8, 0.1, 0.1), IOR 1.5)."""
+    sc = _scene()
+    bright = bs.material("bright", "EMISSION", (1.0, 1.0, 1.0), Strength=2.0)
+    dim = bs.material("dim", "EMISSION", (1.0, 1.0, 1.0), Strength=0.5)
+    n, half, y0 = 16, 2.5, 1.5
+    xs = np.linspace(-half, half, n + 1)
+    verts = [(x, y0, z) for z in (-half + 0.8, half + 0.8) for x in xs]
+    faces = [(i, i + 1, n + 2 + i, n + 1 + i) for i in range(n)]
+    ob = bs.mesh_object("stripes", verts, faces)
+    ob.data.materials.append(bright)
+    ob.data.materials.append(dim)
+    ob.data.polygons.foreach_set("material_index", [i % 2 for i in range(n)])
+    ob.data.update()
+    principled = bs.material("principled_glass", "PRINCIPLED", (0.8, 0.8, 0.8),
+                             **{"Transmission Weight": 1.0, "IOR": 1.5, "Roughness": 0.0})
+    ruby = bs.material("ruby_glass", "GLASS", (0.8, 0.1, 0.1), IOR=1.5, Roughness=0.0)
+    _smooth_sphere("principled", 0.7, (-0.72, 0.0, 0.8), principled)
+    _smooth_sphere("ruby", 0.7, (0.72, 0.0, 0.8), ruby)
+    look_at((0.0, -2.9, 0.9), (0.0, 0.0, 0.8), lens=35.0)
+    return sc
+
+
 def mirror_area(image_dir):
     """An area light seen in a smooth mirror sphere (Glossy BSDF, roughness 0) over a dark floor."""
     sc = _scene()
@@ -363,7 +388,7 @@ def normal_mapped(image_dir):
 
 
 SCENES = {f.__name__: f for f in (world_only, world_env, textured_floor, emissive_room, rough_metal,
-                                  glass_sphere, mirror_area, normal_mapped)}
+                                  glass_sphere, tinted_glass_spheres, mirror_area, normal_mapped)}
 
 
 def build(name: str, image_dir: str):

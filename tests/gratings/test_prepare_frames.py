@@ -19,6 +19,8 @@ from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.util.geometry import triangle_normals
 from opal_diffraction.core.gratings.radiance import triangle_tangents
 
+from grating_frames import corner_tangents_by_loop
+
 
 def _mesh(seed=0):
     """Two icospheres (one smooth, one rough: jittered vertices), two grating materials with a
@@ -78,30 +80,6 @@ def test_vertex_sums_equal_the_pair_enumeration_bit_for_bit(monkeypatch):
     assert calls == [n_corners]
     assert np.array_equal(fast, pairs)
     assert np.array_equal(fast[~grating], np.repeat(tt[~grating, None, :], 3, axis=1))
-
-
-def corner_tangents_by_loop(t, n, tt, mat, grating, ang):
-    """The smoothed grating tangents (T, 3, 3) by their definition, one loop per corner: the
-    corner-angle-weighted (``ang`` (T, 3)), sign-aligned sum over the grating corners at the vertex
-    with the same material, tangent within MAX_TANGENT_ANGLE and normal within MAX_NORMAL_ANGLE,
-    normalised (its own tangent when it vanishes); non-grating rows keep their tangent."""
-    tt64 = tt.astype(np.float64)
-    cos_t, cos_n = np.cos(np.radians(gd.MAX_TANGENT_ANGLE)), np.cos(np.radians(gd.MAX_NORMAL_ANGLE))
-    at_vertex = {}
-    for i in np.flatnonzero(grating):
-        for c in range(3):
-            at_vertex.setdefault(int(t[i, c]), []).append((i, c))
-    ref = np.repeat(tt64[:, None, :], 3, axis=1)
-    for i in np.flatnonzero(grating):
-        for c in range(3):
-            acc = np.zeros(3)
-            for j, cj in at_vertex[int(t[i, c])]:
-                d = tt64[i] @ tt64[j]
-                if abs(d) >= cos_t and mat[i] == mat[j] and n[i] @ n[j] >= cos_n:
-                    acc += ang[j, cj] * np.sign(d) * tt64[j]
-            ln = np.linalg.norm(acc)
-            ref[i, c] = acc / ln if ln > 1e-12 else tt64[i]
-    return ref
 
 
 def test_smooth_corner_tangents_match_a_per_corner_loop():

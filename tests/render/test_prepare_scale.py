@@ -242,7 +242,7 @@ def test_smooth_corner_tangents_equal_the_float64_version():
     from opal_diffraction.core.gratings import directions as gd
     from opal_diffraction.core.util.geometry import triangle_normals
     from opal_diffraction.core.gratings.radiance import triangle_tangents
-    from test_prepare_frames import corner_tangents_by_loop
+    from grating_frames import corner_tangents_by_loop
 
     v, t = primitives.icosphere((0, 0, 0), 1.0, 3)
     n = triangle_normals(v, t)

@@ -157,6 +157,7 @@ class MaterialTable:
             "specular_ior_level": float(max(surf.specular_ior_level, 0.0)) if surf.kind is not None else 0.0,
             "specular_tint": tuple(float(c) for c in np.clip(surf.specular_tint, 0.0, MAX_INTENSITY)),
             "conductor_fresnel": surf.conductor_fresnel,
+            "glass_tint": surf.glass_tint,
         }
         row.update(self._texture_columns(surf, owner))
         opal = getattr(mat, "opal", None)

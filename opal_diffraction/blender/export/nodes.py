@@ -85,6 +85,10 @@ class Surface:
     specular_ior_level: float = 0.0     # the base's specular layer (Principled); 0: none
     specular_tint: np.ndarray = field(default_factory=lambda: np.ones(3))
     conductor_fresnel: str = "CONSTANT"  # 'CONSTANT' (Glossy BSDF) | 'F82_TINT' (Principled, Metallic BSDF)
+    # what the glass's colour is the colour of (docs/physics.md section 2.7): 'REFRACTION' (Glass /
+    # Refraction BSDF: Cycles tints each refraction by Color) | 'PASS' (Principled: sqrt(Base Color)
+    # per refraction, so one pass through a closed object gives Base Color)
+    glass_tint: str = "REFRACTION"
 
     def layers(self) -> tuple[float, float]:
         """(metallic, transmission), from the kind where not given."""
@@ -561,7 +565,9 @@ class NodeReader(TextureBindings):
         """Principled BSDF v2: the metal (F0 = Base Color, F82 edge tint = Specular Tint), glass
         and the dielectric base (diffuse under a specular layer of IOR, IOR Level and Specular
         Tint), with the layer weights Metallic and Transmission Weight carried to the core (which
-        samples between the layers). The table's kind is the heaviest layer."""
+        samples between the layers). The table's kind is the heaviest layer. The glass's colour
+        is the colour of one pass (glass_tint 'PASS': Cycles tints each refraction by
+        sqrt(Base Color), docs/physics.md section 2.7)."""
         base = self.color(node, "Base Color")
         metallic = min(max(self.value(node, "Metallic", 0.0), 0.0), 1.0)
         rough = self._roughness(node, 0.5)
@@ -586,7 +592,8 @@ class NodeReader(TextureBindings):
         weights = {"MIRROR": metallic, "DIELECTRIC": (1.0 - metallic) * trans, "DIFFUSE": (1.0 - metallic) * (1.0 - trans)}
         kind = max(weights, key=weights.get)  # ties: metal, then glass
         return Surface(kind, base, ior, rough, emission, metallic=metallic, transmission=trans,
-                       specular_ior_level=level, specular_tint=np.clip(tint, 0.0, None), conductor_fresnel="F82_TINT")
+                       specular_ior_level=level, specular_tint=np.clip(tint, 0.0, None), conductor_fresnel="F82_TINT",
+                       glass_tint="PASS")
 
     def _combine(self, a: Surface, b: Surface, wa: float, wb: float, node) -> Surface:
         out = self._combine_surfaces(a, b, wa, wb, node)
@@ -610,7 +617,8 @@ class NodeReader(TextureBindings):
                            metallic=(1 - t) * ma + t * mb, transmission=(1 - t) * ta + t * tb,
                            specular_ior_level=(1 - t) * a.specular_ior_level + t * b.specular_ior_level,
                            specular_tint=(1 - t) * a.specular_tint + t * b.specular_tint,
-                           conductor_fresnel=(a if t < 0.5 else b).conductor_fresnel)
+                           conductor_fresnel=(a if t < 0.5 else b).conductor_fresnel,
+                           glass_tint=(a if t < 0.5 else b).glass_tint)
         keep = a if wa >= wb else b
         self.warn(f"{self.owner}: '{node.name}' mixes {a.kind.lower()} and {b.kind.lower()} surfaces: rendered as "
                   f"{keep.kind.lower()}")
@@ -620,7 +628,7 @@ class NodeReader(TextureBindings):
 def _copy(s: Surface, emission) -> Surface:
     return Surface(s.kind, s.color, s.ior, s.roughness, emission, metallic=s.metallic, transmission=s.transmission,
                    specular_ior_level=s.specular_ior_level, specular_tint=s.specular_tint,
-                   conductor_fresnel=s.conductor_fresnel)
+                   conductor_fresnel=s.conductor_fresnel, glass_tint=s.glass_tint)
 
 
 def _conductor_fresnel(cos: float, n: np.ndarray, k: np.ndarray) -> np.ndarray:

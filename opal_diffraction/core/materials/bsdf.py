@@ -729,6 +729,9 @@ def params_from_materials(materials, mat, front, lam=None, base=None, roughness=
         return table[mat] if lam is None else table[mat, np.asarray(lam, np.int64)][:, None]
 
     b = spectral(m.reflectance) if base is None else np.asarray(base, _F32)
+    if m.glass_tint is not None:  # the glass layer's tint per refraction (docs/physics.md section 2.7)
+        own = glass & ~m.color_textured[mat]  # a colour texture's hits keep the texture's tint
+        b = np.where(own[:, None], spectral(m.glass_tint), b) if own.any() else b
     edge = np.where(lobe[:, None] == CONDUCTOR, np.minimum(spectral(m.specular_tint), 1.0), 1.0)
     tint = spectral(m.specular_tint)
     rough = m.roughness[mat] if roughness is None else np.asarray(roughness, _F32)

@@ -2,8 +2,11 @@
 
 Three kinds (scene.MATERIAL_KINDS): Lambertian diffuse (BRDF rho / pi, two-sided), tinted
 specular mirror, and a smooth dielectric (Fresnel reflection, Snell refraction, total internal
-reflection) whose index may vary with wavelength (optics.ior_spectrum). A dielectric's colour
-tints reflected and transmitted light alike, as Blender's Glass BSDF does.
+reflection) whose index may vary with wavelength (optics.ior_spectrum). A glass's colour tints
+reflected and transmitted light alike; its tint spectrum is the square root of the uplifted
+colour of one pass through a closed object (docs/physics.md section 2.7: Base Color for
+Principled, glass_tint PASS; Color^2 for the Glass BSDF, glass_tint REFRACTION), so that two
+refractions give that colour's RGB exactly, as Cycles' RGB product does.
 
 Rough surfaces and Principled's layers (core/materials/bsdf.py, docs/physics.md section 14) read the
 per-material roughness, the layer weights metallic and transmission, the specular layer's F0
@@ -18,11 +21,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..spectral.optics import DISPERSION_MODELS, ior_spectrum
-from ..util.enums import ConductorFresnel, MaterialKind
+from ..util.enums import ConductorFresnel, GlassTint, MaterialKind
 from ..scene.model import Materials
 from ..spectral.spectrum import SpectralConverter
 
-__all__ = ["PreparedMaterials", "prepare_materials", "DIFFUSE", "MIRROR", "DIELECTRIC"]
+__all__ = ["PreparedMaterials", "prepare_materials", "glass_tint_spectra", "DIFFUSE", "MIRROR", "DIELECTRIC"]
 
 DIFFUSE, MIRROR, DIELECTRIC = (int(k) for k in (MaterialKind.DIFFUSE, MaterialKind.MIRROR, MaterialKind.DIELECTRIC))
 _MODEL_NAMES = {code: name for name, code in DISPERSION_MODELS.items()}
@@ -31,7 +34,7 @@ _MODEL_NAMES = {code: name for name, code in DISPERSION_MODELS.items()}
 @dataclass
 class PreparedMaterials:
     kind: np.ndarray         # (M,) int
-    reflectance: np.ndarray  # (M, n) float32: albedo / tint spectrum
+    reflectance: np.ndarray  # (M, n) float32: albedo / tint spectrum (a glass's: per refraction, glass_tint_spectra)
     ior: np.ndarray          # (M, n) float32: refractive index per wavelength (1 for non-dielectrics)
     dispersive: np.ndarray   # (M,) bool: index varies over the grid
     emission: np.ndarray     # (M, n) float32 emitted spectral radiance (zero for most)
@@ -43,12 +46,38 @@ class PreparedMaterials:
     spec_f0: np.ndarray = None        # (M,) float32 F0 of the base's specular layer (0: pure Lambert)
     specular_tint: np.ndarray = None  # (M, n) float32 specular tint / metal edge tint spectrum
     conductor_f82: np.ndarray = None  # (M,) bool: the metal uses the F82-tint Fresnel (else constant colour)
+    glass_tint: np.ndarray = None     # (M, n) float32 the glass layer's tint per refraction (glass_tint_spectra)
+    color_textured: np.ndarray = None  # (M,) bool: a texture gives the colour per hit (its glass keeps that tint)
+
+
+def glass_tint_spectra(color, glass_tint, conv: SpectralConverter) -> np.ndarray:
+    """(G, n) float64: the tint per refraction of glasses of linear RGB ``color`` (G, 3) whose
+    colour is the colour of ``glass_tint`` (G,) (GlassTint codes; docs/physics.md section 2.7).
+
+    The colour of one pass (two refractions) is uplifted and its square root taken, so a pass's
+    spectrum is the uplift of the pass colour, whose RGB under white light is that colour
+    (Mallett-Yuksel's calibrated round trip): Base Color for PASS (Principled), Color^2 for
+    REFRACTION (the Glass BSDF: Cycles multiplies Color per refraction in RGB, and the uplifts'
+    product would not be the RGB product for a saturated colour)."""
+    rgb = np.clip(np.asarray(color, np.float64).reshape(-1, 3), 0.0, 1.0)
+    per_pass = np.where((np.asarray(glass_tint) == int(GlassTint.PASS))[:, None], rgb, rgb * rgb)
+    return np.sqrt(conv.reflectance_from_rgb(per_pass))
 
 
 def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterials:
     wl = conv.grid.wavelengths
     kind = np.asarray(m.kind, np.int32)
     refl = conv.reflectance_from_rgb(np.asarray(m.color, np.float64).reshape(-1, 3))
+    transmission, metallic = np.asarray(m.transmission), np.asarray(m.metallic)
+    # every row with a glass layer: its tint per refraction (the rough and layered BSDF's glass lobe)
+    layer = (transmission > 0) & (metallic < 1)
+    glass_tint = refl.copy()
+    if layer.any():
+        glass_tint[layer] = glass_tint_spectra(np.asarray(m.color).reshape(-1, 3)[layer], np.asarray(m.glass_tint)[layer],
+                                               conv)
+    # pure glass (no metal or base layer sharing the row): the tint is the row's colour everywhere
+    pure = (kind == DIELECTRIC) & (transmission >= 1) & (metallic <= 0)
+    refl[pure] = glass_tint[pure]
     ior = np.ones((len(kind), len(wl)))
     for i in np.flatnonzero(kind == DIELECTRIC):  # one row per material, not per ray
         ior[i] = ior_spectrum(wl, _MODEL_NAMES[int(m.dispersion[i])], float(m.ior[i]), float(m.abbe[i]))
@@ -65,4 +94,5 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
                              metallic=np.asarray(m.metallic, np.float32),
                              transmission=np.asarray(m.transmission, np.float32),
                              spec_f0=spec_f0.astype(np.float32), specular_tint=tint,
-                             conductor_f82=np.asarray(m.conductor_fresnel) == int(ConductorFresnel.F82_TINT))
+                             conductor_f82=np.asarray(m.conductor_fresnel) == int(ConductorFresnel.F82_TINT),
+                             glass_tint=glass_tint.astype(np.float32), color_textured=np.asarray(m.color_texture) >= 0)

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from ..util.geometry import triangle_normals, uv_tangents as uv_tangent_frames
-from ..util.enums import (ConductorFresnel, GratingDirection, GratingType, Lattice, LightKind, MaterialKind, TextureEncoding, TextureExtension, TextureInterpolation, codes)
+from ..util.enums import (ConductorFresnel, GlassTint, GratingDirection, GratingType, Lattice, LightKind, MaterialKind, TextureEncoding, TextureExtension, TextureInterpolation, codes)
 from ..spectral.optics import DISPERSION_MODELS
 from ..opal.volume import VolumeDomains
 from .checks import SceneError
@@ -32,6 +32,7 @@ __all__ = [
     "GRATING_DIRECTIONS",
     "MATERIAL_KINDS",
     "CONDUCTOR_FRESNELS",
+    "GLASS_TINTS",
     "LIGHT_KINDS",
     "TEXTURE_INTERPOLATIONS",
     "TEXTURE_EXTENSIONS",
@@ -48,6 +49,7 @@ __all__ = [
 #: Material kinds and light kinds: name -> stable code (enums.py).
 MATERIAL_KINDS = codes(MaterialKind)
 CONDUCTOR_FRESNELS = codes(ConductorFresnel)
+GLASS_TINTS = codes(GlassTint)
 LIGHT_KINDS = codes(LightKind)
 
 #: Image texture settings: name -> stable code (enums.py).
@@ -95,6 +97,8 @@ MATERIAL_COLUMNS = {
     "specular_ior_level": (np.float32, (), 0.0, None),
     "specular_tint": (np.float32, (3,), (1.0, 1.0, 1.0), None),
     "conductor_fresnel": (np.int32, (), "CONSTANT", CONDUCTOR_FRESNELS),
+    # what a glass's colour is the colour of (docs/physics.md section 2.7)
+    "glass_tint": (np.int32, (), "REFRACTION", GLASS_TINTS),
     # the BRAGG (FCC opal) lattice (docs/physics.md section 5.7; core/materials/bragg_bsdf.py)
     "sphere_diameter": (np.float32, (), 250.0, None),
     "sphere_ior": (np.float32, (), 1.45, None),
@@ -150,7 +154,10 @@ class Materials:
     linear RGB, Principled's Specular Tint - the specular layer's F0 tint and, on metals, the
     F82 edge tint (a Metallic BSDF's Edge Tint). conductor_fresnel (CONDUCTOR_FRESNELS): CONSTANT
     (the metal reflects color at every angle: Glossy BSDF and older files) or F82_TINT (Schlick
-    from F0 = color with the edge tint: Principled and Metallic BSDF).
+    from F0 = color with the edge tint: Principled and Metallic BSDF). glass_tint (GLASS_TINTS,
+    docs/physics.md section 2.7): what a glass's color is the colour of - REFRACTION (one
+    refraction's, the default: Glass BSDF and older files) or PASS (one pass through a closed
+    object, two refractions: Principled's Base Color).
 
     Grating layer (docs/physics.md section 3), on top of the base kind: grating (0/1), grating_type
     (GRATING_TYPES), lattice (LATTICES), period D (nm), slit_width a (nm), slit_count N,
@@ -201,6 +208,7 @@ class Materials:
     specular_ior_level: np.ndarray = field(default_factory=lambda: _material_column_default("specular_ior_level", 0))
     specular_tint: np.ndarray = field(default_factory=lambda: _material_column_default("specular_tint", 0))
     conductor_fresnel: np.ndarray = field(default_factory=lambda: _material_column_default("conductor_fresnel", 0))
+    glass_tint: np.ndarray = field(default_factory=lambda: _material_column_default("glass_tint", 0))
     sphere_diameter: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_diameter", 0))
     sphere_ior: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_ior", 0))
     void_ior: np.ndarray = field(default_factory=lambda: _material_column_default("void_ior", 0))

@@ -424,7 +424,7 @@ def _validate_materials(m: Materials) -> Materials:
     _enum_check(kind, MATERIAL_KINDS, label, "kind")
     _enum_check(out["dispersion"], DISPERSION_MODELS, label, "dispersion")
     for name, enum in (("grating_type", GRATING_TYPES), ("lattice", LATTICES), ("grating_direction", GRATING_DIRECTIONS),
-                       ("conductor_fresnel", CONDUCTOR_FRESNELS)):
+                       ("conductor_fresnel", CONDUCTOR_FRESNELS), ("glass_tint", GLASS_TINTS)):
         _enum_check(out[name], enum, label, name.replace("_", " "))
     g = out["grating"].astype(np.int64)
     bad = (g != 0) & (g != 1)

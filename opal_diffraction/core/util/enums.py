@@ -13,6 +13,7 @@ from enum import IntEnum
 __all__ = [
     "MaterialKind",
     "ConductorFresnel",
+    "GlassTint",
     "LightKind",
     "DispersionModel",
     "GratingType",
@@ -40,6 +41,15 @@ class ConductorFresnel(IntEnum):
 
     CONSTANT = 0
     F82_TINT = 1
+
+
+class GlassTint(IntEnum):
+    """What a glass's colour is the colour of (docs/physics.md section 2.7): REFRACTION (one
+    refraction's: the Glass / Refraction BSDF, and every glass before the column existed) or
+    PASS (one pass through a closed object, two refractions: Principled's Base Color)."""
+
+    REFRACTION = 0
+    PASS = 1
 
 
 class LightKind(IntEnum):
