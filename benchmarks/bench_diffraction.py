@@ -74,7 +74,7 @@ def main():
                     err = np.sqrt(np.mean((shown(img) - shown(ref)) ** 2))
                     print(f"{n:7d} {mode:>3s} {step:7.0f} {spp:4d} {t:7.2f} {err:12.4f}", flush=True)
     if args.cd:
-        print(f"\nCD, L = 1000 um, 80 x 60 px, 20 nm bins: per-pixel RMSE / mean and image mean vs 256 spp")
+        print("\nCD, L = 1000 um, 80 x 60 px, 20 nm bins: per-pixel RMSE / mean and image mean vs 256 spp")
         print(f"{'fp':>3s} {'spp':>4s} {'time s':>7s} {'RMSE/mean':>10s} {'mean ratio':>10s}")
         scene = ex.cd_scene(80, 60)
         scene.materials.coherence_length[1] = 1000.0
