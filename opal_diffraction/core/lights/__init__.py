@@ -1,1 +1,1 @@
-"""Every light kind (point, spot, sun, area, emissive mesh, environment map): emission of light paths aimed at the casters, sampling of incident light, pdfs. Imports util/, spectral/, scene/."""
+"""Every light kind (point, spot, sun, area, emissive mesh, environment map): emission spectra, samples of incident light and their pdfs, and the emission of light paths aimed at the casters. Imports util/, spectral/, accel/, scene/, sampling/ and materials/."""
