@@ -5,7 +5,7 @@ whose header states its physics: the spheres' diameter D_s and spread, the void 
 follows from them, n_eff = sqrt(0.74 n_s^2 + 0.26 n_void^2) and the Bragg colour at normal
 incidence lambda = 2 d111 n_eff for D_s +- spread (core/opal/bragg.py, docs/physics.md section
 5.2). The table below is the one place those numbers are written; this tool writes the files
-from it and checks that the shipped ones are what it writes (tests/test_opal_presets.py runs the
+from it and checks that the shipped ones are what it writes (tests/opal/test_opal_presets.py runs the
 check; docs/opal.md's preset table shows the same rows).
 
     python tools/opal_presets.py write    # rewrite opal_diffraction/presets/opal/*.py

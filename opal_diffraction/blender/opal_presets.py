@@ -12,7 +12,7 @@ The body tone lives in the material's Principled BSDF; the presets set it throug
 properties without storage that read and write the node (blender/properties.py).
 
 Opal presets (each file states its physics in its header; docs/opal.md has the table; the files
-are written from one table by tools/opal_presets.py, and tests/test_opal_presets.py checks them):
+are written from one table by tools/opal_presets.py, and tests/opal/test_opal_presets.py checks them):
 
 - Black, White, Crystal, Boulder, Harlequin (few large domains), Pinfire (many small): the BRAGG
   lattice (FCC opal, docs/physics.md section 5.2) - sphere diameter D_s and its spread, the void

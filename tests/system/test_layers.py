@@ -148,3 +148,12 @@ def test_nothing_edits_sys_path():
                     if "sys.path.insert" in text or "sys.path.append" in text:
                         found.append(os.path.join(d, f))
     assert found == []
+
+
+def test_tests_mirror_the_rooms():
+    """tests/ holds the shared helpers only; every test file sits in the folder of the room (or
+    tests/system/, tests/blender/) it tests, and each room has its folder."""
+    tests = os.path.join(os.path.dirname(PACKAGE), "tests")
+    assert sorted(f for f in os.listdir(tests) if f.startswith("test_") and f.endswith(".py")) == []
+    for room in MAY_IMPORT:
+        assert os.path.isdir(os.path.join(tests, *room.split("."))), room

@@ -32,7 +32,7 @@ The rules, the same for every executor:
   render stopped during it.
 
 The clock and the cancel check are injectable (``RenderControl(clock=...)``), so the rules are
-tested with a fake clock and fake units of work (tests/test_scheduler.py).
+tested with a fake clock and fake units of work (tests/render/test_scheduler.py).
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ How:
 
 Kernels use no ``fastmath``: without it LLVM neither reorders nor contracts (no FMA) floating-point
 operations, so a kernel doing the reference's operations in the reference's order and precision
-is bit-identical to it; each kernel's test (tests/test_kernels.py) says which ones are.
+is bit-identical to it; each kernel's test (tests/util/test_kernels.py) says which ones are.
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ Where the compiled kernels run (core/util/jit.py), ``_add_runs`` does it in one 
 sorted order without the sorted (B, n) copy and reduceat's output: the same additions in the same
 order, so the same bits. That order is reduceat's: a run's sum is its first row plus NumPy's
 pairwise sum of the others, since reduceat's inner loop is a reduction along the rows
-(``pairwise_sum`` in NumPy's add loops; tests/test_kernels.py checks every branch of it).
+(``pairwise_sum`` in NumPy's add loops; tests/util/test_kernels.py checks every branch of it).
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 # 3 rounds of 2 samples over 2 tiles of 4 x 4 pixels: units 0..5, unit i = round i // 2, tile i % 2
 WORK = EyeWork(rounds=(2, 2, 2), tiles=((0, 0, 4, 4, 0), (4, 0, 8, 4, 1)), region=(0, 0, 8, 4), seed=0)

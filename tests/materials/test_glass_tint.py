@@ -22,7 +22,11 @@ from opal_diffraction.core.integrators.light.light_pass import run_light_pass
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene import primitives
-from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene, SceneError
+from opal_diffraction.core.render.plan import plan_render
+from opal_diffraction.core.scene.checks import SceneError
+from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+from opal_diffraction.core.scene.npz import load_scene, save_scene
+from opal_diffraction.core.scene.validation import validate
 from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.spectral.optics import ior_spectrum
 from opal_diffraction.core.spectral.spectrum import SpectralConverter
@@ -99,17 +103,17 @@ def test_the_glass_tint_column_round_trips_and_is_validated(tmp_path):
     s = Scene(materials=Materials.from_list([{"kind": "DIELECTRIC", "color": TINTS["ruby"], "glass_tint": "PASS"}]))
     s.add_mesh(*primitives.box((0, 0, 0), (1.0, 1.0, 1.0)), material=0)
     s.camera = Camera.look_at((0, -4, 0), (0, 0, 0))
-    s.save(tmp_path / "new.npz")
-    assert list(Scene.load(tmp_path / "new.npz").materials.glass_tint) == [PASS]
+    save_scene(s, tmp_path / "new.npz")
+    assert list(load_scene(tmp_path / "new.npz").materials.glass_tint) == [PASS]
     with np.load(tmp_path / "new.npz") as z:
         old = {k: z[k] for k in z.files if k != "material_glass_tint"}
     np.savez(tmp_path / "old.npz", **old)
-    assert list(Scene.load(tmp_path / "old.npz").materials.glass_tint) == [REFRACTION]
+    assert list(load_scene(tmp_path / "old.npz").materials.glass_tint) == [REFRACTION]
     with pytest.raises(SceneError, match="glass_tint"):
         Materials.from_list([{"kind": "DIELECTRIC", "glass_tint": "BOTH"}])
     s.materials.glass_tint[:] = 7
     with pytest.raises(SceneError, match="glass tint code 7"):
-        s.validated()
+        validate(s)
 
 
 def test_the_glass_lobe_of_a_layered_principled_takes_the_rule():
@@ -201,7 +205,7 @@ def test_caustic_flux_through_a_tinted_slab_is_the_closed_form(glass_tint):
     s.lights = Lights.from_list([{"kind": "SUN", "direction": (0, 0, -1), "power": 2.0}])
     s.camera = Camera.look_at((0, -4, 3), (0, 0, 0), width=16, height=16)
     ctx = prepare(s, RenderSettings(light_paths=200_000, max_bounces=32))
-    flux = run_light_pass(ctx).caustics.flux.sum(axis=0)
+    flux = run_light_pass(ctx, plan=plan_render(ctx)).caustics.flux.sum(axis=0)
     f = 0.04
     t2 = glass_tint_spectra([mats.color[1]], [int(GlassTint[glass_tint])], CONV)[0] ** 2
     expected = ctx.lights.spectrum[0] * (1 - f) ** 2 * t2 / (1 - f * f * t2)
