@@ -266,6 +266,18 @@ def _sinc2_cumsum_table(ratio: float, m_max: int) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(sinc2(np.pi * m * ratio))])
 
 
+def _in_unit_disk(alpha: np.ndarray, beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(alpha, beta) scaled onto the unit disk where rounding puts them just outside it.
+
+    They are the tangential components of a unit vector, so alpha^2 + beta^2 <= 1 exactly; for
+    grazing light (a light on the surface) float rounding can give 1 + 1e-16, which would make
+    even the specular (zeroth) order evanescent and the Harvey-Shack factor 1 / 0. On the disk
+    the zeroth order always propagates, which bounds K (docs/physics.md section 3.2)."""
+    rho2 = alpha * alpha + beta * beta
+    shrink = np.where(rho2 > 1.0, 1.0 / np.sqrt(np.maximum(rho2, 1.0)), 1.0)
+    return alpha * shrink, beta * shrink
+
+
 def propagating_power(alpha_i, beta_i, wavelength, ratio, d) -> np.ndarray:
     """The fraction of the incident power a LINES grating sends into its propagating orders:
     sum over m with (m lambda / D - alpha_i)^2 + beta_i^2 <= 1 of (a/D)^2 sinc^2(pi m a / D).
@@ -275,8 +287,7 @@ def propagating_power(alpha_i, beta_i, wavelength, ratio, d) -> np.ndarray:
     orders' own widths (lambda / (N D) in u, lambda / L in v) are neglected. Broadcasts alpha_i,
     beta_i, wavelength, d (d and wavelength in one unit); ``ratio`` = a / D, a scalar.
     """
-    alpha = np.asarray(alpha_i, np.float64)
-    beta = np.asarray(beta_i, np.float64)
+    alpha, beta = _in_unit_disk(np.asarray(alpha_i, np.float64), np.asarray(beta_i, np.float64))
     lam = np.asarray(wavelength, np.float64)
     d = np.asarray(d, np.float64)
     r = np.sqrt(np.maximum(1.0 - beta * beta, 0.0))
@@ -318,8 +329,7 @@ def hexagonal_harvey_shack_factor(alpha_i, beta_i, wavelength, ratio, d) -> np.n
     """
     from scipy.special import j1
 
-    alpha = np.asarray(alpha_i, np.float64)
-    beta = np.asarray(beta_i, np.float64)
+    alpha, beta = _in_unit_disk(np.asarray(alpha_i, np.float64), np.asarray(beta_i, np.float64))
     scale = np.asarray(d, np.float64) / np.asarray(wavelength, np.float64)  # D / lambda
     shape = np.broadcast_shapes(alpha.shape, beta.shape, scale.shape)
     ratio = float(ratio)
