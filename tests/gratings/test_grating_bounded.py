@@ -63,3 +63,20 @@ def test_below_the_cap_nothing_changes(monkeypatch):
     k = kernel.hexagonal_harvey_shack_factor(a, b, lam, 0.8, 3000.0)
     monkeypatch.setattr(kernel, "HEX_SCALE_CAP", 1e9)
     np.testing.assert_array_equal(k, kernel.hexagonal_harvey_shack_factor(a, b, lam, 0.8, 3000.0))
+
+
+@pytest.mark.parametrize("period", [1e6, 1e7])
+def test_a_long_period_hexagonal_grating_renders(period):
+    """Through the renderer (issue 27: a raw MemoryError, the CLI then blaming the resolution)."""
+    from opal_diffraction.core.render.frame import render
+    from opal_diffraction.core.scene import primitives
+    from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
+    from opal_diffraction.core.scene.settings import RenderSettings
+
+    s = Scene(materials=Materials.from_list([{"kind": "DIFFUSE", "grating": 1, "lattice": "HEXAGONAL",
+                                              "period": period, "slit_width": period / 2, "slit_count": 64}]))
+    s.add_mesh(*primitives.box((0, 0, 0), (1, 1, 1)), material=0)
+    s.lights = Lights.from_list([{"kind": "POINT", "position": (1, -2, 3), "power": 100.0}])
+    s.camera = Camera.look_at((0, -4, 3), (0, 0, 0), width=8, height=8)
+    res = render(s, RenderSettings(samples=1, wavelength_step=20, threads=1, light_paths=0))
+    assert np.isfinite(res.rgb).all() and not res.warnings, res.warnings
