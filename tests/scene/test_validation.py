@@ -278,3 +278,28 @@ def test_blackbody_on_odd_grids():
     res = render(s, RenderSettings(samples=1, light_paths=0, wavelength_min=475.55, wavelength_max=731.72,
                                    wavelength_step=25.617, threads=1), spectral_film=True)
     assert np.isfinite(res.spectral).all() and res.spectral.shape[-1] == 11
+
+
+@pytest.mark.parametrize("lo, hi, step", [(360, 830, 0.1174), (360, 830, 0.117), (400, 700, 0.07), (380, 780, 0.0999)])
+def test_the_suggested_smallest_wavelength_step_is_accepted_and_above_the_refused_one(lo, hi, step):
+    """"use a step of at least X" must name an X the check accepts (and so above the step refused)."""
+    import re
+    with pytest.raises(SceneError) as e:
+        RenderSettings(wavelength_min=lo, wavelength_max=hi, wavelength_step=step).validate()
+    msg = str(e.value)
+    assert f"wavelength step {step:g} nm" in msg, msg  # the step as given, not rounded to a neighbour
+    bound = float(re.search(r"at least ([0-9.e+-]+) nm", msg).group(1))
+    assert bound > step, msg
+    # the grid the check counts: lo + i * step <= hi, at most 4001 samples
+    assert int(np.floor((hi - lo) / bound + 1e-9)) + 1 <= 4001, msg
+    RenderSettings(wavelength_min=lo, wavelength_max=hi, wavelength_step=bound).validate()
+
+
+def test_the_suggested_largest_wavelength_step_gives_enough_samples():
+    import re
+    with pytest.raises(SceneError) as e:
+        RenderSettings(wavelength_min=360, wavelength_max=830, wavelength_step=500).validate()
+    bound = float(re.search(r"at most ([0-9.e+-]+) nm", str(e.value)).group(1))
+    assert int(np.floor(470 / bound + 1e-9)) + 1 >= 16, str(e.value)
+    assert not any("only" in w for w in RenderSettings(wavelength_min=360, wavelength_max=830,
+                                                        wavelength_step=bound).warnings())

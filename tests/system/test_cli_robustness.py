@@ -409,3 +409,17 @@ def test_a_malformed_file_in_a_real_process(tmp_path):
                         str(tmp_path / "o.exr")], cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=120)
     assert_clean_error(p.returncode, p.stderr, "bad colour shape")
     assert "material table column 'color'" in p.stderr
+
+
+@pytest.mark.parametrize("key", ["format_version", "material_kind", "camera_matrix", "camera_width", "vertices"])
+def test_a_member_that_is_not_an_npy_array_is_an_input_error(tmp_path, key):
+    """A zip member stored without the .npy format (NpzFile hands back its raw bytes): exit 2, one line."""
+    path = tmp_path / "raw-member.npz"
+    base = scene_arrays(small_scene())
+    np.savez(path, **{k: v for k, v in base.items() if k != key})
+    with zipfile.ZipFile(path, "a") as zf:
+        zf.writestr(key, b"not an array")
+    out = tmp_path / "out.exr"
+    code, err = run_main(["render", str(path), "-o", str(out)] + FAST)
+    assert_clean_error(code, err, key)
+    assert not out.exists()

@@ -18,6 +18,11 @@ spectral sums are stored wavelength-major, (n, H, W), and ``RenderResult.spectra
 (H, W) plane a spectral EXR's channel needs (core/render/output.py copies nothing), and the final
 result divides the sums in place: a spectral render holds one (n, H, W) array, not three.
 
+The last check of every result (``black_non_finite``): a pixel holding a NaN or an infinity in
+the image, a pass or the spectrum is set to black in all of them, and the result's warnings say
+how many (an overflow the grating or light arithmetic did not prevent is never a silent success;
+the CLI prints every warning, with ``-q`` too).
+
 Passes (AOVs for the compositor, (H, W, 3) linear Rec.709): Direct (light reaching diffuse
 surfaces by shadow rays, also seen through mirrors and glass), Caustics (the light pass),
 Diffraction (gratings). Combined = Direct + Caustics + Diffraction + emitted light seen (the
@@ -45,7 +50,7 @@ from .plan import RenderPlan
 from ..scene.checks import SceneError
 from ..spectral.spectrum import SpectralConverter
 
-__all__ = ["Film", "RenderResult", "tile_parts_rgb", "camera_space_rotation", "FEATURE_PASSES", "NO_SPECTRAL",
+__all__ = ["Film", "RenderResult", "black_non_finite", "tile_parts_rgb", "camera_space_rotation", "FEATURE_PASSES", "NO_SPECTRAL",
            "keeps_spectral"]
 
 #: Cycles' names of the denoising feature passes (a compositor Denoise node links to them)
@@ -228,5 +233,28 @@ class Film:
                   "Denoising Normal": (self.normal * scale) @ self.to_camera.T}
         samples = int(self.counts.min()) if self.counts.size else 0
         stats = dict(stats, **self.sample_stats())
+        warnings = list(warnings)
+        bad = black_non_finite(rgb, spectral, passes)
+        if bad:
+            warnings.append(f"{bad} pixel{'s' if bad != 1 else ''} of {rgb.shape[0] * rgb.shape[1]} had a non-finite "
+                            f"value (NaN or infinite radiance: an overflow from the scene's numbers) and "
+                            f"{'are' if bad != 1 else 'is'} black in the image and every pass")
+            stats["non_finite_pixels"] = bad
         return RenderResult(spectral, rgb, self.conv.grid.wavelengths.copy(), samples, cancelled, plan,
-                            list(warnings), stats, passes, self.counts.copy())
+                            warnings, stats, passes, self.counts.copy())
+
+
+def black_non_finite(rgb: np.ndarray, spectral, passes: dict) -> int:
+    """The last finite check of a film's mean: the pixels where the image, a pass or the spectrum
+    holds a NaN or an infinity are set to 0 in all of them (in place); returns how many (the
+    caller warns with the count: never a silent success). Finite images are left untouched."""
+    bad = ~np.isfinite(rgb).all(axis=-1)
+    for arr in passes.values():
+        bad |= ~np.isfinite(arr).all(axis=-1)
+    if spectral is not None:
+        bad |= ~np.isfinite(spectral).all(axis=-1)
+    count = int(bad.sum())
+    if count:
+        for arr in [rgb, *passes.values()] + ([spectral] if spectral is not None else []):
+            arr[bad] = 0.0
+    return count

@@ -2,7 +2,7 @@
 
 ``save_scene(scene, path)`` writes a Scene; ``load_scene(path)`` reads one back, or raises a
 one-line SceneError when the file is not one (missing, a directory, empty, not a .npz archive, a
-corrupted or missing member, a newer format). Columns a file written before they existed lacks
+corrupted, missing or non-.npy member, a newer format). Columns a file written before they existed lacks
 load with the value that file rendered with (the loaded scene is checked by
 validation.validate, as every render does).
 """
@@ -89,11 +89,14 @@ def load_scene(path) -> Scene:
     with z:
         def read(name):
             try:
-                return z[name]
+                val = z[name]
             except KeyError:
                 raise SceneError(f"{shown} has no {name!r} array: not a complete scene file") from None
             except Exception as e:  # zipfile.BadZipFile, zlib.error, EOFError, ValueError, MemoryError, ...
                 raise SceneError(f"{shown}: array {name!r} is corrupted or unreadable ({one_line(e)})") from None
+            if not isinstance(val, np.ndarray):  # a member not stored as .npy: NpzFile hands back its raw bytes
+                raise SceneError(f"{shown}: member {name!r} is not a NumPy array (.npy) but {len(val)} raw bytes")
+            return val
 
         try:
             names = set(z.files)

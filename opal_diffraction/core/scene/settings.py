@@ -87,6 +87,16 @@ def _wavelength_count(lo: float, hi: float, step: float) -> float:
     return math.floor((hi - lo) / step + 1e-9) + 1 if (hi - lo) / step < 1e15 else math.inf
 
 
+def _step_text(step: float, ok) -> str:
+    """``step`` for a message with the fewest digits (3 or more) whose printed value ``ok`` still accepts
+    (``step`` itself is accepted): a bound the user can type, never one the check refuses."""
+    for digits in range(3, 18):
+        text = f"{step:.{digits}g}"
+        if ok(float(text)):
+            return text
+    return repr(step)
+
+
 def film_bytes(width: int, height: int, wavelengths: int, spectral: bool = False) -> int:
     """Memory (bytes) of a render's film (core/render/film.py), per pixel: the RGB sums of the image,
     of its four non-Direct parts and of the two denoising features, adaptive sampling's half
@@ -196,15 +206,17 @@ class RenderSettings:
         if lo < _MIN_NM or hi > _MAX_NM:
             raise SceneError(f"wavelength grid: {lo}-{hi} nm is outside the observer's {_MIN_NM:.0f}-{_MAX_NM:.0f} nm")
         n = _wavelength_count(lo, hi, step)
+        def enough(s): return _wavelength_count(lo, hi, s) >= FEW_WAVELENGTHS  # noqa: E704
+        def not_too_many(s): return _wavelength_count(lo, hi, s) <= MAX_WAVELENGTHS  # noqa: E704
         if n < MIN_WAVELENGTHS:
-            raise SceneError(f"wavelength step {_g(step)} nm leaves {n} sample from {_g(lo)} to {_g(hi)} nm: at "
+            raise SceneError(f"wavelength step {step:g} nm leaves {n} sample from {_g(lo)} to {_g(hi)} nm: at "
                              f"least {MIN_WAVELENGTHS} are needed, and fewer than {FEW_WAVELENGTHS} make colours "
-                             f"coarse (use a step of at most {_g((hi - lo) / (FEW_WAVELENGTHS - 1))} nm)")
+                             f"coarse (use a step of at most {_step_text((hi - lo) / (FEW_WAVELENGTHS - 1), enough)} nm)")
         if n > MAX_WAVELENGTHS:
             shown = f"{n:.0f}" if n < 1e15 else "over 1e15"
-            raise SceneError(f"wavelength step {_g(step)} nm gives {shown} samples from {_g(lo)} to {_g(hi)} nm, "
+            raise SceneError(f"wavelength step {step:g} nm gives {shown} samples from {_g(lo)} to {_g(hi)} nm, "
                              f"more than the {MAX_WAVELENGTHS} allowed (use a step of at least "
-                             f"{_g((hi - lo) / (MAX_WAVELENGTHS - 1))} nm)")
+                             f"{_step_text((hi - lo) / (MAX_WAVELENGTHS - 1), not_too_many)} nm)")
         return int(n)
 
     def warnings(self) -> list[str]:
