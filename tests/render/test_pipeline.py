@@ -1,10 +1,8 @@
-"""The one-way pipeline: immutable hand-offs, reuse of a prepared scene and its light pass, and
-a package without import cycles."""
+"""The one-way pipeline: immutable hand-offs and the reuse of a prepared scene and its light pass
+(the import graph's checks are in tests/system/test_layers.py)."""
 
 from __future__ import annotations
 
-import ast
-import os
 from dataclasses import FrozenInstanceError, replace
 
 import numpy as np
@@ -19,7 +17,6 @@ from opal_diffraction.core.render.frame import render, render_prepared
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
 
-PACKAGE = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", "opal_diffraction"))
 
 
 def glass_scene(width=24, height=16):
@@ -109,59 +106,3 @@ def test_hand_offs_are_immutable():
     light = run_light_pass(prepared, plan=plan_render(prepared))
     with pytest.raises(TypeError):
         light.stats["light_paths"] = 0
-
-
-def _imports(path: str, module: str) -> set[str]:
-    """Modules of the package that ``module`` (its file ``path``) imports, anywhere in the file
-    (an import deferred into a function still ties the two modules together)."""
-    tree = ast.parse(open(path, encoding="utf-8").read())
-    out = set()
-    pkg = module.rsplit(".", 1)[0] if not path.endswith("__init__.py") else module
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = pkg.split(".")
-                base = base[: len(base) - (node.level - 1)] if node.level > 1 else base
-                target = ".".join(base + ([node.module] if node.module else []))
-            else:
-                target = node.module or ""
-            if target.startswith("opal_diffraction"):
-                out.add(target)
-                out.update(f"{target}.{a.name}" for a in node.names)
-        elif isinstance(node, ast.Import):
-            out.update(a.name for a in node.names if a.name.startswith("opal_diffraction"))
-    return out
-
-
-def test_the_package_has_no_import_cycle_and_core_never_imports_blender():
-    modules = {}
-    root = os.path.dirname(PACKAGE)
-    for folder, _, files in os.walk(PACKAGE):
-        for f in files:
-            if f.endswith(".py"):
-                path = os.path.join(folder, f)
-                rel = os.path.relpath(path, root)[:-3].replace(os.sep, ".")
-                modules[rel[: -len(".__init__")] if rel.endswith(".__init__") else rel] = path
-    graph = {m: {t for t in _imports(p, m) if t in modules and t != m} for m, p in modules.items()}
-    for m, targets in graph.items():
-        if m.startswith("opal_diffraction.core"):
-            assert not any(t.startswith("opal_diffraction.blender") for t in targets), m
-    # depth-first search for a back edge; a submodule importing from its own package's
-    # __init__ (``from . import x``) is not a cycle between concepts
-    state: dict[str, int] = {}
-    stack: list[str] = []
-
-    def visit(m):
-        state[m] = 1
-        stack.append(m)
-        for t in sorted(graph[m]):
-            if state.get(t) == 1 and not m.startswith(t + "."):
-                raise AssertionError("import cycle: " + " -> ".join(stack[stack.index(t):] + [t]))
-            if t not in state:
-                visit(t)
-        stack.pop()
-        state[m] = 2
-
-    for m in sorted(graph):
-        if m not in state:
-            visit(m)

@@ -103,6 +103,29 @@ def import_graph() -> dict[str, set[str]]:
     return {m: imported_modules(p, m, known) - {m} for m, p in known.items()}
 
 
+def test_the_package_has_no_import_cycle():
+    """Depth-first search for a back edge over the whole package (the add-on too); a submodule
+    importing from its own package's __init__ (``from . import x``) is not a cycle between concepts."""
+    graph = import_graph()
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(m):
+        state[m] = 1
+        stack.append(m)
+        for t in sorted(graph[m]):
+            if state.get(t) == 1 and not m.startswith(t + "."):
+                raise AssertionError("import cycle: " + " -> ".join(stack[stack.index(t):] + [t]))
+            if t not in state:
+                visit(t)
+        stack.pop()
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m)
+
+
 def test_every_room_imports_only_the_rooms_below_it():
     assert violations(import_graph()) == []
 
