@@ -302,6 +302,25 @@ def _one_line(e: BaseException) -> str:
 
 
 # ------------------------------------------------------------------------------ main
+def _sampled_fraction(result) -> float:
+    """The fraction of the image's pixels that took at least one sample."""
+    counts = result.sample_counts
+    if counts is None or not counts.size:
+        return 1.0 if result.samples > 0 else 0.0
+    return float((counts > 0).sum()) / counts.size
+
+
+def _partial_samples(result, requested: int) -> str:
+    """How many samples a partial image's pixels have, e.g. '16 of 64 samples per pixel' or
+    '0-16 of 64 samples per pixel; 31 % of the pixels have none'."""
+    counts = result.sample_counts
+    if counts is None or not counts.size or counts.min() == counts.max():
+        return f"{result.samples} of {requested} samples per pixel"
+    text = f"{int(counts.min())}-{int(counts.max())} of {requested} samples per pixel"
+    none = 1.0 - _sampled_fraction(result)
+    return text + (f"; {100 * none:.0f} % of the pixels have none" if none > 0 else "")
+
+
 def main(argv=None) -> int:
     try:
         args = _parser().parse_args(argv)
@@ -412,6 +431,10 @@ def _render(args, sig: _Signals, created: list) -> int:
         sig.phase = "done"
         print("interrupted: nothing written (--save-partial writes the image rendered so far)", file=sys.stderr)
         return EXIT_INTERRUPTED
+    if interrupted and _sampled_fraction(result) == 0.0:
+        sig.phase = "done"  # an all-black "partial image" would only mislead
+        print("interrupted before any pixel had a sample: nothing written", file=sys.stderr)
+        return EXIT_INTERRUPTED
     for w in result.warnings:
         print(f"warning: {w}", file=sys.stderr)
 
@@ -439,8 +462,8 @@ def _render(args, sig: _Signals, created: list) -> int:
     sig.phase = "done"
     written = " and ".join(p for p in (paths["exr"], paths["noisy"], paths["png"], paths["spectral"]) if p)
     if interrupted:
-        print(f"interrupted: wrote the partial image ({result.samples} of {settings.samples} samples per pixel) to "
-              f"{written}", file=sys.stderr)
+        print(f"interrupted: wrote the partial image ({_partial_samples(result, settings.samples)}) to {written}",
+              file=sys.stderr)
         return EXIT_INTERRUPTED
     s = result.stats
     if not args.quiet:

@@ -423,3 +423,21 @@ def test_a_member_that_is_not_an_npy_array_is_an_input_error(tmp_path, key):
     code, err = run_main(["render", str(path), "-o", str(out)] + FAST)
     assert_clean_error(code, err, key)
     assert not out.exists()
+
+
+def test_ctrl_c_in_the_light_pass_with_save_partial_writes_nothing_and_says_so(tmp_path):
+    """No pixel has a sample yet: a 'partial image' would be all black, so none is written."""
+    from opal_diffraction._scripts import load_example
+
+    scene = tmp_path / "prism.npz"
+    save_scene(load_example("prism").build_scene(64, 40), scene)
+    out = tmp_path / "out.exr"
+    proc = _start(["render", str(scene), "-o", str(out), "--spp", "4", "--light-paths", "50000000",
+                   "--threads", "1", "--save-partial"])
+    seen = _wait_for(proc, b"light pass:")
+    proc.send_signal(signal.SIGINT)
+    rc, err = _finish(proc, seen)
+    assert rc == 130, err
+    assert "Traceback" not in err, err
+    assert "before any pixel had a sample: nothing written" in err, err
+    assert not out.exists() and not tmp_files(tmp_path)
