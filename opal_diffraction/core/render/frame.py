@@ -42,6 +42,7 @@ from ..scene.model import Scene
 from ..scene.settings import RenderSettings
 from ..spectral.spectrum import SpectralConverter
 from .tiles import LIGHT_PASS_SHARE, EyeWork, adaptive_of
+from .view_check import camera_sees_nothing
 
 __all__ = ["RenderResult", "LightPassResult", "render", "render_prepared"]
 
@@ -127,6 +128,9 @@ def _render_prepared(prepared, light, progress, should_cancel, on_round, region,
     control = RenderControl(should_cancel, progress, settings.time_limit, started_at, clock)
     plan = plan_render(prepared)
     warnings = list(prepared.warnings) + list(plan.warnings)
+    blind = camera_sees_nothing(prepared)
+    if blind is not None:
+        warnings.append(blind)
     adaptive = adaptive_of(settings)
     spectral = keeps_spectral(settings, spectral_film)
     (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv, adaptive is not None,
