@@ -4,7 +4,7 @@ The image size is the resolution times its percentage and the border rectangle i
 pixels as Blender does, so the render fills exactly the pixels Blender expects. Perspective and
 orthographic cameras keep their lens, sensor size and fit, orthographic scale and shift; what
 the core's pinhole camera cannot do (panoramic cameras: an error; depth of field, non-square
-pixels: warnings) is named.
+pixels, and clip start / end where they would hide part of the scene in Cycles: warnings) is named.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from ...core.scene.model import Camera
 from ...core.scene.checks import SceneError
 from .messages import Warnings
 
-__all__ = ["render_size", "render_region", "camera_from_object", "export_camera"]
+__all__ = ["render_size", "render_region", "camera_from_object", "export_camera", "clipped_share", "warn_clipping"]
 
 
 def render_size(scene) -> tuple[int, int]:
@@ -76,3 +76,43 @@ def export_camera(depsgraph, *, width: int | None = None, height: int | None = N
         return None
     cam_eval = cam_ob.evaluated_get(depsgraph) if not cam_ob.is_evaluated else cam_ob
     return camera_from_object(cam_eval, width, height, scene, warn if warn is not None else Warnings())
+
+
+def clipped_share(camera: Camera, vertices: np.ndarray, clip_start: float, clip_end: float) -> float:
+    """The share of the vertices in the camera's view that lie nearer than ``clip_start`` or
+    farther than ``clip_end`` (depths along the view axis, as Cycles clips: planes, not spheres)."""
+    from ...core.sampling.camera import camera_frame
+
+    v = np.asarray(vertices, np.float64).reshape(-1, 3)
+    if not len(v):
+        return 0.0
+    m = np.asarray(camera.matrix, np.float64)
+    rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
+    local = (v - m[:3, 3]) @ rot  # camera space: x right, y up, looking down -z
+    depth = -local[:, 2]
+    hx, hy = camera_frame(camera)
+    extent = 2 * (hx if (camera.sensor_fit == "HORIZONTAL" or camera.sensor_fit == "AUTO"
+                        and camera.width >= camera.height) else hy)
+    if camera.kind == "ORTHO":
+        px, py, ahead = local[:, 0], local[:, 1], np.ones(len(v), bool)
+    else:
+        ahead = depth > 0
+        safe = np.where(ahead, depth, 1.0)
+        px, py = local[:, 0] / safe, local[:, 1] / safe
+    seen = (ahead & (np.abs(px - camera.shift_x * extent) <= hx) & (np.abs(py - camera.shift_y * extent) <= hy))
+    if not seen.any():
+        return 0.0
+    clipped = seen & ((depth < clip_start) | (depth > clip_end))
+    return float(clipped.sum()) / float(seen.sum())
+
+
+def warn_clipping(cam_ob, camera: Camera | None, vertices: np.ndarray, warn) -> None:
+    """Warn when the camera object's clip start / end would hide part of what it sees (the core
+    renders without clipping: it shows what Cycles would cut away)."""
+    if cam_ob is None or camera is None or getattr(cam_ob, "type", None) != "CAMERA":
+        return
+    start, end = float(cam_ob.data.clip_start), float(cam_ob.data.clip_end)
+    share = clipped_share(camera, vertices, start, end)
+    if share > 0:
+        warn(f"camera '{cam_ob.name}': clip start {start:g} m / end {end:g} m would hide {100 * share:.0f} % of the "
+             "scene's vertices in view (as Cycles clips); clipping is not rendered yet: shown unclipped")
