@@ -368,6 +368,7 @@ def _render(args, sig: _Signals, created: list) -> int:
     from .core.render.prepare import prepare
     from .core.render.distributed import DaskExecutor, connect
     from .core.render.frame import render_prepared
+    from .core.util.cancel import OutOfTime
     from .core.scene.npz import load_scene
     from .core.scene.checks import SceneError
     from .core.scene.settings import RenderSettings
@@ -402,9 +403,12 @@ def _render(args, sig: _Signals, created: list) -> int:
         )
         settings.validate()
         sig.phase = "prepare"
-        prepared = prepare(scene, settings)
+        prepared = prepare(scene, settings, deadline=t_start + args.time_limit if args.time_limit else None)
     except SceneError as e:
         raise CliError(str(e)) from None
+    except OutOfTime:
+        raise CliError(f"the time limit ({args.time_limit:g} s) ran out while preparing the scene "
+                       f"({len(scene.triangles)} triangles): nothing rendered; allow more time") from None
     _check_memory(prepared)
     for w in settings.warnings():
         print(f"warning: {w}", file=sys.stderr)

@@ -12,6 +12,7 @@ from opal_diffraction.core.render.output import read_exr, spectral_channel_name
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.npz import save_scene
+from opal_diffraction.core.scene.checks import SceneError
 from opal_diffraction.core.scene.settings import RenderSettings
 import stripe_scenes  # tests/stripe_scenes.py
 
@@ -177,6 +178,7 @@ def test_time_limit_is_honoured_inside_the_light_pass_and_inside_a_round():
     s.add_mesh(*primitives.box((0, 0, 1.0), (1.0, 1.0, 0.5)), material=1)
     s.lights = Lights.from_list([{"kind": "POINT", "position": (0, 0, 4), "power": 500.0}])
     s.camera = Camera.look_at((0, -5, 3), (0, 0, 0), width=64, height=64)
+    render(s, RenderSettings(samples=1, light_paths=1000))  # imports and kernels loaded: the limit counts preparing
     res = render(s, RenderSettings(samples=4096, round_samples=4096, light_paths=20_000_000, time_limit=1.0,
                                    threads=2), spectral_film=True)
     assert res.stats["light_paths"] < 20_000_000
@@ -193,3 +195,38 @@ def test_cancel_while_preparing_returns_a_cancelled_black_image():
     res = render(s, RenderSettings(samples=4), should_cancel=lambda: True)
     assert res.cancelled and res.samples == 0 and res.rgb.shape == (6, 8, 3) and not res.rgb.any()
     assert "cancelled while preparing the scene" in res.warnings
+
+
+def _quad_scene(width=8, height=6):
+    s = Scene(materials=Materials.from_list([{"kind": "DIFFUSE"}]))
+    s.add_mesh(*primitives.quad((0, 0, 0), (1, 0, 0), (0, 1, 0)), material=0)
+    s.camera = Camera.look_at((0, -2, 2), (0, 0, 0), width=width, height=height)
+    return s
+
+
+def test_a_time_limit_that_runs_out_while_preparing_says_so_and_renders_nothing():
+    res = render(_quad_scene(), RenderSettings(samples=4, time_limit=1e-9))
+    assert not res.cancelled and res.samples == 0 and not res.rgb.any()
+    assert "time limit (1e-09 s) reached while preparing the scene: nothing rendered" in res.warnings
+
+
+def test_bad_input_is_named_before_a_time_limit_can_run_out():
+    s = _quad_scene()
+    s.vertices[0, 0] = np.nan
+    with pytest.raises(SceneError):
+        render(s, RenderSettings(samples=4, time_limit=1e-9))
+
+
+@pytest.mark.parametrize("spp, per_round, expected", [(40, 16, (1, 16, 16, 7)), (17, 16, (1, 16)), (1, 16, (1,)),
+                                                      (5, 2, (1, 2, 2))])
+def test_a_time_limited_render_takes_one_sample_first(spp, per_round, expected):
+    """With a time limit the first round holds one sample: the limit can stop the render as soon as
+    every pixel has one; without a limit the rounds are unchanged."""
+    from opal_diffraction.core.render.prepare import prepare
+    from opal_diffraction.core.render.tiles import EyeWork
+
+    s = _quad_scene()
+    limited = EyeWork.of(prepare(s, RenderSettings(samples=spp, round_samples=per_round, time_limit=60.0)))
+    assert limited.rounds == expected and sum(limited.rounds) == spp
+    plain = EyeWork.of(prepare(s, RenderSettings(samples=spp, round_samples=per_round)))
+    assert plain.rounds == tuple(min(per_round, spp - k) for k in range(0, spp, per_round))

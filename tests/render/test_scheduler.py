@@ -209,8 +209,8 @@ def test_the_control_keeps_a_cancel_maps_stages_and_never_goes_back():
 
 
 def test_render_prepared_measures_its_time_limit_on_the_injected_clock():
-    """A clock that jumps an hour after each reading: the render stops after round 0 whatever
-    the real time, and says so."""
+    """A clock that jumps an hour after each reading: the render stops after round 0 (one sample:
+    a time-limited render's first round) whatever the real time, and says so."""
     mats = Materials.from_list([{"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)}])
     scene = Scene(materials=mats)
     scene.add_mesh(*primitives.quad((0, 0, 0), (4, 0, 0), (0, 4, 0)), material=0)
@@ -220,8 +220,8 @@ def test_render_prepared_measures_its_time_limit_on_the_injected_clock():
                                              wavelength_step=40.0, time_limit=60.0))
     hours = iter(range(0, 10 ** 6, 3600))
     res = render_prepared(prepared, clock=lambda: float(next(hours)))
-    assert res.samples == 2 and not res.cancelled
-    assert "time limit reached after 2 of 8 samples per pixel" in res.warnings
+    assert res.samples == 1 and not res.cancelled
+    assert "time limit reached after 1 of 8 samples per pixel" in res.warnings
 
 
 def test_the_viewport_reaches_the_passes_only_through_render():

@@ -441,3 +441,19 @@ def test_ctrl_c_in_the_light_pass_with_save_partial_writes_nothing_and_says_so(t
     assert "Traceback" not in err, err
     assert "before any pixel had a sample: nothing written" in err, err
     assert not out.exists() and not tmp_files(tmp_path)
+
+
+def test_a_time_limit_that_runs_out_while_preparing_is_a_one_line_error(tmp_path):
+    """A 330k-triangle sphere takes longer than 1 ms to prepare: exit 2, nothing written."""
+    from opal_diffraction.core.scene import primitives
+
+    s = small_scene()
+    s.add_mesh(*primitives.icosphere((0, 0, 0.5), 0.3, 7), material=0)
+    path = tmp_path / "big.npz"
+    save_scene(s, path)
+    out = tmp_path / "out.exr"
+    p = subprocess.run([sys.executable, "-m", "opal_diffraction", "render", str(path), "-o", str(out),
+                        "--time-limit", "0.001"], cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=300)
+    assert_clean_error(p.returncode, p.stderr, "time limit while preparing")
+    assert "time limit (0.001 s) ran out while preparing the scene" in p.stderr and "triangles" in p.stderr
+    assert not out.exists() and not tmp_files(tmp_path)

@@ -30,7 +30,7 @@ from typing import Callable
 
 from ..util.blas_threads import one_blas_thread
 from ..integrators.light.camera_splat import usable_splat
-from ..util.cancel import RenderCancelled
+from ..util.cancel import OutOfTime, RenderCancelled
 from .distributed import DaskExecutor
 from ..util.jit import kernel_mode
 from .film import Film, RenderResult, keeps_spectral
@@ -74,9 +74,14 @@ def render(
     when ``settings.spectral_exr`` is set. Otherwise the film is RGB only and ``spectral`` is None.
     """
     t_start = time.perf_counter()
+    limit = float((settings or RenderSettings()).time_limit or 0.0)
     try:
         with kernel_mode((settings or RenderSettings()).kernels):  # prepare's spectra take the render's path
-            prepared = prepare(scene, settings, should_cancel=should_cancel)
+            prepared = prepare(scene, settings, should_cancel=should_cancel,
+                               deadline=t_start + limit if limit > 0 else None)
+    except OutOfTime:
+        return _cancelled_before_start(scene, settings or RenderSettings(), region, spectral_film,
+                                       f"time limit ({limit:g} s) reached while preparing the scene: nothing rendered")
     except RenderCancelled:
         return _cancelled_before_start(scene, settings or RenderSettings(), region, spectral_film)
     executor = None if client is None else DaskExecutor(client, scene)
@@ -84,13 +89,16 @@ def render(
                            spectral_film=spectral_film, executor=executor)
 
 
-def _cancelled_before_start(scene: Scene, settings: RenderSettings, region, spectral_film=None) -> RenderResult:
-    """The (black, zero-sample) result of a render cancelled while it was being prepared."""
+def _cancelled_before_start(scene: Scene, settings: RenderSettings, region, spectral_film=None,
+                            reason: str | None = None) -> RenderResult:
+    """The (black, zero-sample) result of a render stopped while it was being prepared: cancelled,
+    or out of time (``reason`` says so; the result is then not marked cancelled)."""
     cam = scene.camera
     x0, y0, x1, y1 = region if region is not None else (0, 0, int(cam.width), int(cam.height))
     film = Film(x1 - x0, y1 - y0, SpectralConverter(settings.grid()), spectral=keeps_spectral(settings, spectral_film))
-    plan = RenderPlan(eye_pass=False, notes=("cancelled while preparing the scene",))
-    return film.result(plan, True, ["cancelled while preparing the scene"], {"rays": 0})
+    why = reason or "cancelled while preparing the scene"
+    plan = RenderPlan(eye_pass=False, notes=(why,))
+    return film.result(plan, reason is None, [why], {"rays": 0})
 
 
 @one_blas_thread()  # the tile threads are the parallelism (core/util/blas_threads.py)

@@ -27,7 +27,7 @@ from dataclasses import dataclass, fields, is_dataclass, replace
 import numpy as np
 
 from ..accel import build_accelerator, default_threads
-from ..util.cancel import check, run_cancellable
+from ..util.cancel import OutOfTime, check, run_cancellable
 from ..lights.environment import EnvironmentMap
 from ..util.geometry import normals_from_cross, triangle_normals
 from ..gratings.radiance import PreparedGratings, prepare_gratings, triangle_tangents
@@ -203,7 +203,7 @@ def _light_pass_settings(s: RenderSettings) -> dict:
 
 
 def prepare(scene: Scene, settings: RenderSettings | None = None, conv: SpectralConverter | None = None,
-            reuse: PreparedScene | None = None, should_cancel=None) -> PreparedScene:
+            reuse: PreparedScene | None = None, should_cancel=None, deadline: float | None = None) -> PreparedScene:
     """Validate ``scene`` and ``settings`` (SceneError with a readable message) and prepare them.
 
     ``conv``: a SpectralConverter for the same grid to reuse.
@@ -212,8 +212,26 @@ def prepare(scene: Scene, settings: RenderSettings | None = None, conv: Spectral
     when the geometry is the same, the spectra when the grid is), and when nothing the light pass
     reads has changed the result keeps its ``key``, so the earlier light-pass result stays valid.
     ``should_cancel()``: polled every cancel.POLL_S while preparing; raises cancel.RenderCancelled.
+    ``deadline``: a time.perf_counter() time (the render's time limit): checked between the stages
+    after validation (so bad input is still named) and while the ray caster builds; raises
+    cancel.OutOfTime once passed.
     """
-    return run_cancellable(lambda stopped: _prepare(scene, settings, conv, reuse, stopped), should_cancel)
+    return run_cancellable(lambda stopped: _prepare(scene, settings, conv, reuse, _with_deadline(stopped, deadline)),
+                           should_cancel)
+
+
+def _with_deadline(stopped, deadline: float | None):
+    """``stopped`` that also raises OutOfTime once ``deadline`` has passed."""
+    if deadline is None:
+        return stopped
+
+    def check_both() -> bool:
+        if stopped():
+            return True
+        if time.perf_counter() > deadline:
+            raise OutOfTime()
+        return False
+    return check_both
 
 
 def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
@@ -300,6 +318,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         targets = find_light_targets(v, t, tri_material, materials, gratings, lights, conv, settings.light_paths,
                                      mesh_lights=mesh_lights, world_spectrum=world_spectrum, microfacet=microfacet)
         key = next(_keys)
+    check(stopped)
     prepared = PreparedScene(
         scene=scene,
         settings=settings,

@@ -106,7 +106,11 @@ class EyeWork:
         region = tuple(region) if region is not None else (0, 0, int(cam.width), int(cam.height))
         spp, per_round = int(settings.samples), round_size(settings)
         adaptive = adaptive_of(settings)
-        if adaptive is None:
+        if adaptive is None and float(settings.time_limit) > 0 and spp > 1:
+            # a time limit stops between units once every pixel has a sample: a first round of one
+            # sample brings that moment (a whole image) 1/per_round of a round's time after the start
+            rounds = (1,) + tuple(min(per_round, spp - 1 - s) for s in range(0, spp - 1, per_round))
+        elif adaptive is None:
             rounds = tuple(min(per_round, spp - s) for s in range(0, spp, per_round))
         else:
             rounds = adaptive_rounds(spp, per_round, adaptive[1], tile_ray_cap(settings) // int(settings.tile_size) ** 2)

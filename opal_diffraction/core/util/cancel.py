@@ -15,7 +15,7 @@ from __future__ import annotations
 import threading
 from typing import Callable, TypeVar
 
-__all__ = ["RenderCancelled", "run_cancellable", "check", "POLL_S"]
+__all__ = ["RenderCancelled", "OutOfTime", "run_cancellable", "check", "POLL_S"]
 
 T = TypeVar("T")
 POLL_S = 0.05
@@ -23,6 +23,10 @@ POLL_S = 0.05
 
 class RenderCancelled(Exception):
     """The user cancelled (Esc in Blender, Ctrl-C, a should_cancel callback returning True)."""
+
+
+class OutOfTime(RenderCancelled):
+    """The render's time limit ran out before it could produce a sample (while preparing)."""
 
 
 def check(stopped: Callable[[], bool] | None) -> None:
