@@ -107,3 +107,17 @@ def test_parts_follow_the_vertex_counts():
     expect = np.zeros((P, N))
     np.add.at(expect, rays.pix[::2], contrib[::2].astype(np.float64))
     np.testing.assert_allclose(out.parts["indirect"].reshape(P, N), expect, rtol=1e-5)
+
+
+@pytest.mark.parametrize("mono", [False, True])
+def test_an_index_out_of_range_raises_as_the_reference_does(mono):
+    rng = np.random.default_rng(4)
+    rays = _rays(rng, 20, mono)
+    rays.pix[7] = P  # one past the tile
+    contrib = _contrib(rng, 20, mono)
+    for mode in ("numpy", "auto"):
+        out = TileOutput(P, N)
+        with jit.kernel_mode(mode), pytest.raises(IndexError):
+            out.accumulate(rays, contrib)
+        if mode == "auto":
+            assert not out.film.any()  # the kernel wrote nothing before the reference raised

@@ -141,10 +141,12 @@ class TileOutput:
             # the parts written, allocated in add_by_vertices' order (ascending counts)
             films = tuple(self.light_film(k) if min(lo, 2) <= k <= min(hi, 2) else self.film for k in range(3))
             groups = hi + 1
+        if not all(f.dtype == np.float32 and f.flags.c_contiguous and f.size == self.n_pixels * n for f in films):
+            return False
         films = tuple(f.reshape(self.n_pixels, n) for f in films)
-        _deposit_kernel(rays.pix, nd, groups, rays.lam if mono else _NO_PART, c.reshape(b, 1) if mono else c,
-                        films[0], films[1], films[2], self.n_pixels)
-        return True
+        # False: a pixel or wavelength index out of range (nothing written; the NumPy lines raise)
+        return _deposit_kernel(rays.pix, nd, groups, rays.lam if mono else _NO_PART, c.reshape(b, 1) if mono else c,
+                               films[0], films[1], films[2], self.n_pixels)
 
     def accumulate_factored(self, prepared, pix, mat, factors, film) -> bool:
         """Direct light of unit-weight white rays without a per-ray spectrum.
@@ -255,15 +257,20 @@ def _deposit_kernel(pix, nd, groups, lam, c, f0, f1, f2, n_pixels):
     (``lam`` given; c (B, 1)) one by one, as np.add.at; white rays (c (B, n)) grouped per
     (count, pixel) in ray order (a stable counting sort), each group's sum formed as
     np.add.reduceat forms it (its first row + the pairwise sum of the rest) and added to its
-    film row, the groups of one film in ascending counts (add_by_vertices' order)."""
+    film row, the groups of one film in ascending counts (add_by_vertices' order). Returns False,
+    having written nothing, if a pixel or wavelength index is out of range."""
     b = pix.shape[0]
     has_part = nd.shape[0] > 0
-    if lam.shape[0] > 0:
+    mono = lam.shape[0] > 0
+    for i in range(b):
+        if pix[i] < 0 or pix[i] >= n_pixels or (mono and (lam[i] < 0 or lam[i] >= f0.shape[1])):
+            return False
+    if mono:
         for i in range(b):
             k = nd[i] if has_part else 0
             f = f0 if k == 0 else (f1 if k == 1 else f2)
             f[pix[i], lam[i]] += c[i, 0]
-        return
+        return True
     n = c.shape[1]
     keys = groups * n_pixels
     start = np.zeros(keys + 1, np.int64)
@@ -295,3 +302,4 @@ def _deposit_kernel(pix, nd, groups, lam, c, f0, f1, f2, n_pixels):
         _pairwise_rows(c, rows, lo + 1, hi, rest, acc)
         for q in range(n):
             f[p, q] += c[first, q] + rest[q]
+    return True
