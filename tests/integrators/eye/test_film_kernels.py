@@ -2,6 +2,8 @@
 against the NumPy reference: the same bits (the kernel sums each pixel's run as np.add.reduceat
 does), and against a brute-force float64 sum."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -121,3 +123,26 @@ def test_an_index_out_of_range_raises_as_the_reference_does(mono):
             out.accumulate(rays, contrib)
         if mode == "auto":
             assert not out.film.any()  # the kernel wrote nothing before the reference raised
+
+
+@pytest.mark.parametrize("kind", ["unit", "white", "mono"])
+def test_denoising_features_are_bit_identical_to_the_reference(kind):
+    from opal_diffraction.core.transport.walker import Hit
+
+    rng = np.random.default_rng(12)
+    b = 500
+    rays = _rays(rng, b, kind == "mono")
+    if kind == "white":
+        rays.w = rng.random((b, N)).astype(np.float32)
+    elif kind == "unit":
+        rays.w = None
+    ns = rng.normal(size=(b, 3)).astype(np.float32)
+    mat = rng.integers(0, 4, b)
+    hit = SimpleNamespace(mat=mat, ns=ns)
+    albedo_rgb = rng.random((4, 3)).astype(np.float32)
+    ref, ker = _both(lambda out: out.denoising_features(rays, hit, albedo_rgb))
+    for a, r in ((ker.albedo, ref.albedo), (ker.normal, ref.normal)):
+        np.testing.assert_array_equal(a.view(np.uint32), r.view(np.uint32))
+    assert ker.albedo.any() and ker.normal.any()
+    assert Hit  # the real Hit has these fields
+    assert {"mat", "ns"} <= set(Hit.__dataclass_fields__)

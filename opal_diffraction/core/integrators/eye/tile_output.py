@@ -8,7 +8,8 @@ pixel sums are formed run by run (rays of a pixel are contiguous after a stable 
 unit-weight rays, factored per (material, light) combination (``accumulate_factored``,
 section 4.10).
 
-Where the kernels run (core/util/jit.py) the deposits are one compiled pass (``_deposit_kernel``)
+Where the kernels run (core/util/jit.py) the deposits are one compiled pass (``_deposit_kernel``;
+the denoising features ``_features_kernel``, np.bincount's float64 sums in ray order)
 instead of the argsort, ``np.add.reduceat`` and fancy-indexed add: a stable counting sort of the
 rays by (film part, pixel), then each pixel's run summed as ``np.add.reduceat`` sums it (its first
 row plus NumPy's pairwise sum of the others, ``_pairwise_rows``) and added to the film row; mono
@@ -182,11 +183,22 @@ class TileOutput:
             grey = rays.w.mean(axis=1)
         else:
             grey = rays.w / np.float32(self.n)
+        if kernels_enabled() and self._features(rays, hit, albedo_rgb, grey):
+            return
         albedo = albedo_rgb[hit.mat] * grey[:, None]
         normal = hit.ns
         for arr, val in ((self.albedo, albedo), (self.normal, normal)):
             for c in range(3):
                 arr[:, c] += np.bincount(rays.pix, weights=val[:, c], minlength=self.n_pixels).astype(np.float32)
+
+    def _features(self, rays: Rays, hit: Hit, albedo_rgb, grey) -> bool:
+        """denoising_features' sums by _features_kernel; False for input the NumPy lines handle."""
+        b = len(rays)
+        arrays = (albedo_rgb, grey, hit.ns)
+        if not all(isinstance(a, np.ndarray) and a.dtype == np.float32 for a in arrays) or \
+                albedo_rgb.ndim != 2 or albedo_rgb.shape[1] != 3 or grey.shape != (b,) or hit.ns.shape != (b, 3):
+            return False
+        return _features_kernel(rays.pix, hit.mat, grey, albedo_rgb, hit.ns, self.albedo, self.normal)
 
     def result(self, rays_cast: int) -> TileResult:
         """The tile's TileResult; ``rays_cast``: the walk's own rays (the shadow rays are added)."""
@@ -302,4 +314,28 @@ def _deposit_kernel(pix, nd, groups, lam, c, f0, f1, f2, n_pixels):
         _pairwise_rows(c, rows, lo + 1, hi, rest, acc)
         for q in range(n):
             f[p, q] += c[first, q] + rest[q]
+    return True
+
+
+@njit
+def _features_kernel(pix, mat, grey, albedo_rgb, ns, albedo, normal):
+    """denoising_features' NumPy lines: per pixel the float64 sums (np.bincount's, in ray order)
+    of albedo_rgb[mat] * grey (float32 products) and of the normals, rounded to float32 and added
+    to every pixel's row. False, having written nothing, for an index out of range."""
+    p_count, m_count = albedo.shape[0], albedo_rgb.shape[0]
+    for i in range(pix.shape[0]):
+        if pix[i] < 0 or pix[i] >= p_count or mat[i] < -m_count or mat[i] >= m_count:
+            return False
+    sums = np.zeros((p_count, 6))
+    for i in range(pix.shape[0]):
+        p, m = pix[i], mat[i]
+        if m < 0:
+            m += m_count  # NumPy's negative index
+        for c in range(3):
+            sums[p, c] += np.float64(albedo_rgb[m, c] * grey[i])
+            sums[p, 3 + c] += np.float64(ns[i, c])
+    for p in range(p_count):
+        for c in range(3):
+            albedo[p, c] += np.float32(sums[p, c])
+            normal[p, c] += np.float32(sums[p, 3 + c])
     return True
