@@ -29,7 +29,11 @@ the sphere uniformly (density 1 / 4 pi) and returns zero radiance.
 
 The texel lookup runs as a compiled kernel where the kernels run (core/util/jit.py): the NumPy
 lines' operations in their order and precisions, one pass per direction (four texel gathers and
-the bilinear blend) instead of a dozen (B, 3) temporaries; the same bits.
+the bilinear blend) instead of a dozen (B, 3) temporaries; the same bits. So do the lookups of
+float32 directions (``radiance_rgb``, ``pdf``, ``lookup``: rotation, (u, v), texel and density
+in one pass, ``_directions_kernel``) and ``sample`` (``_sample_kernel``: per number a binary
+search of the marginal CDF and one of the chosen row's conditional CDF, which finds the entry
+NumPy's searchsorted of the whole stacked CDF finds, in the callers' order, with no sort).
 """
 
 from __future__ import annotations
@@ -52,6 +56,10 @@ def direction_to_uv(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Cycles' equirectangular (u, v) of map-frame directions m (B, 3) (any length > 0), in
     float32 for float32 input, else float64."""
     m = np.asarray(m)
+    if kernels_enabled() and m.dtype == np.float32 and m.ndim == 2 and m.shape[1] == 3:
+        u, v = np.empty(len(m), np.float32), np.empty(len(m), np.float32)
+        _uv_kernel(m, u, v)
+        return u, v
     if m.dtype != np.float32:
         m = m.astype(np.float64, copy=False)
     ln = np.sqrt(np.einsum("ij,ij->i", m, m))
@@ -127,6 +135,10 @@ class EnvironmentMap:
         #: (H, W) float64 solid-angle density of each texel (sample() and pdf()).
         self.density = weights / (total * omega_row[:, None])
         self._omega_row = omega_row
+        #: The rotation is the identity: the kernels rotate float32 directions themselves (d * 1 + 0s,
+        #: as the matrix product does), else the NumPy product does (BLAS' operation order).
+        self._identity = bool(np.array_equal(rot, np.eye(3)))
+        self._rot32 = np.ascontiguousarray(rot.T.astype(np.float32))  # d @ _rot32 is _map_dirs(d)
         for a in (self.rgb, self._texels, self.rotation, self._row_cdf, self._cond_flat, self.density, self._z_lo, self._dz):
             a.flags.writeable = False
 
@@ -170,8 +182,34 @@ class EnvironmentMap:
     def radiance_rgb(self, d) -> np.ndarray:
         """(B, 3) float32 radiance arriving from world directions ``d`` (B, 3) (the direction the
         light comes from, i.e. a ray's direction when it escapes)."""
+        if kernels_enabled():
+            got = self._kernel_lookup(d, True, False)
+            if got is not None:
+                return got[0]
         u, v = direction_to_uv(self._map_dirs(d))
         return self._lookup(u, v)
+
+    def lookup(self, d) -> tuple[np.ndarray, np.ndarray]:
+        """(radiance_rgb(d), pdf(d)): both in one pass where the kernels run."""
+        if kernels_enabled():
+            got = self._kernel_lookup(d, True, True)
+            if got is not None:
+                return got
+        return self.radiance_rgb(d), self.pdf(d)
+
+    def _kernel_lookup(self, d, want_rgb: bool, want_pdf: bool):
+        """(rgb (B, 3) float32, pdf (B,) float64) of float32 directions ``d`` (B, 3) by
+        _directions_kernel (an array not asked for is empty); None for other input."""
+        d = np.asarray(d)
+        if d.dtype != np.float32 or d.ndim != 2 or d.shape[1] != 3:
+            return None
+        b = len(d)
+        m = d if self._identity else self._map_dirs(d)
+        rgb = np.empty((b if want_rgb else 0, 3), np.float32)
+        pdf = np.empty(b if want_pdf else 0)
+        _directions_kernel(m, self._rot32, self._identity, self.rgb.reshape(-1, 3), self.density,
+                           self.width, self.height, self.interpolation == "CLOSEST", rgb, pdf)
+        return rgb, pdf
 
     def _texel(self, u, v) -> tuple[np.ndarray, np.ndarray]:
         i = np.floor(np.asarray(u) * self.width).astype(np.int64) % self.width
@@ -180,6 +218,10 @@ class EnvironmentMap:
 
     def pdf(self, d) -> np.ndarray:
         """(B,) float64: the solid-angle density with which :meth:`sample` draws world direction d."""
+        if kernels_enabled():
+            got = self._kernel_lookup(d, False, True)
+            if got is not None:
+                return got[1]
         u, v = direction_to_uv(self._map_dirs(d))
         i, j = self._texel(u, v)
         return np.take(self.density, j * self.width + i)
@@ -193,6 +235,12 @@ class EnvironmentMap:
         u1 = np.asarray(u1, np.float64).ravel()
         u2 = np.asarray(u2, np.float64).ravel()
         h, w = self.height, self.width
+        if kernels_enabled() and len(u1) == len(u2):
+            b = len(u1)
+            m, pdf, rgb = np.empty((b, 3)), np.empty(b), np.empty((b, 3), np.float32)
+            _sample_kernel(u1, u2, self._row_cdf, self._cond_flat, self._z_lo, self._dz, self.density,
+                           self.rgb.reshape(-1, 3), w, h, self.interpolation == "CLOSEST", self.black, m, pdf, rgb)
+            return m @ self.rotation, pdf, rgb
         j = np.clip(np.searchsorted(self._row_cdf, u1, side="right") - 1, 0, h - 1)
         x = j + u2
         # work in texel order: the search over the H (W + 1) conditional CDF entries and the
@@ -240,27 +288,134 @@ def _cell_mean(a: np.ndarray) -> np.ndarray:
 
 
 @njit
-def _lookup_kernel(u, v, texels, wf, hf, w, h, closest, out):
-    """EnvironmentMap._lookup's NumPy lines per direction: u * W and v * H in u's precision
-    (``wf``, ``hf``), the blend weights in float32, the indices wrapped (Python's modulo, as
-    NumPy's); ``texels`` (H W, 3) float32."""
-    half = wf / (wf + wf)
+def _lookup_one(x, y, half, texels, w, h, closest, out, b):
+    """One direction of EnvironmentMap._lookup's NumPy lines: x = u * W and y = v * H in u's
+    precision (``half``: 0.5 in it), the blend weights in float32, the indices wrapped (Python's
+    modulo, as NumPy's); ``texels`` (H W, 3) float32; the texel into out[b]."""
     one = np.float32(1.0)
-    for b in range(u.shape[0]):
-        x = u[b] * wf
-        y = v[b] * hf
-        if closest:
-            i = np.int64(np.floor(x)) % w
-            j = np.int64(np.floor(y)) % h
-            for c in range(3):
-                out[b, c] = texels[j * w + i, c]
-            continue
-        x, y = x - half, y - half
-        fi0, fj0 = np.floor(x), np.floor(y)
-        fx, fy = np.float32(x - fi0), np.float32(y - fj0)
-        i0, j0 = np.int64(fi0) % w, np.int64(fj0) % h
-        i1, j1 = (i0 + 1) % w, (j0 + 1) % h
+    if closest:
+        i = np.int64(np.floor(x)) % w
+        j = np.int64(np.floor(y)) % h
         for c in range(3):
-            top = texels[j1 * w + i0, c] * (one - fx) + texels[j1 * w + i1, c] * fx
-            bottom = texels[j0 * w + i0, c] * (one - fx) + texels[j0 * w + i1, c] * fx
-            out[b, c] = bottom * (one - fy) + top * fy
+            out[b, c] = texels[j * w + i, c]
+        return
+    x, y = x - half, y - half
+    fi0, fj0 = np.floor(x), np.floor(y)
+    fx, fy = np.float32(x - fi0), np.float32(y - fj0)
+    i0, j0 = np.int64(fi0) % w, np.int64(fj0) % h
+    i1, j1 = (i0 + 1) % w, (j0 + 1) % h
+    for c in range(3):
+        top = texels[j1 * w + i0, c] * (one - fx) + texels[j1 * w + i1, c] * fx
+        bottom = texels[j0 * w + i0, c] * (one - fx) + texels[j0 * w + i1, c] * fx
+        out[b, c] = bottom * (one - fy) + top * fy
+
+
+@njit
+def _lookup_kernel(u, v, texels, wf, hf, w, h, closest, out):
+    """EnvironmentMap._lookup's NumPy lines per direction (``_lookup_one``): u * W and v * H in
+    u's precision (``wf``, ``hf``)."""
+    half = wf / (wf + wf)
+    for b in range(u.shape[0]):
+        _lookup_one(u[b] * wf, v[b] * hf, half, texels, w, h, closest, out, b)
+
+
+@njit
+def _uv_one(x, y, z):
+    """direction_to_uv's NumPy lines for one float32 direction (einsum's sum of squares in order,
+    the float32 arctan2 and arccos): (u, v) float32."""
+    one = np.float32(1.0)
+    ln = np.sqrt(x * x + y * y + z * z)
+    zc = z / (ln if ln > 0 else one)
+    zc = np.float32(-1.0) if zc < -1 else (one if zc > 1 else zc)
+    u = one / np.float32(2.0) - np.arctan2(y, x) / np.float32(_TWO_PI)
+    v = one - np.arccos(zc) / np.float32(np.pi)
+    return u, v
+
+
+@njit
+def _uv_kernel(m, u, v):
+    """direction_to_uv of float32 directions m (B, 3) into u, v (B,)."""
+    for b in range(m.shape[0]):
+        u[b], v[b] = _uv_one(m[b, 0], m[b, 1], m[b, 2])
+
+
+@njit
+def _directions_kernel(m, rot, rotate, texels, density, w, h, closest, rgb, pdf):
+    """radiance_rgb and pdf of float32 directions m (B, 3), in one pass: rotated by ``rot`` (R^T
+    as float32: x R00 + y R10 + z R20, as the float32 matrix product sums an identity's exact
+    products) when ``rotate``, else already in the map's frame; (u, v) as direction_to_uv; the
+    texel as _lookup (into ``rgb`` unless it is empty) and the density as pdf's _texel (into
+    ``pdf`` unless empty)."""
+    wf, hf = np.float32(w), np.float32(h)
+    want_rgb, want_pdf = rgb.shape[0] > 0, pdf.shape[0] > 0
+    for b in range(m.shape[0]):
+        x, y, z = m[b, 0], m[b, 1], m[b, 2]
+        if rotate:
+            x, y, z = (x * rot[0, 0] + y * rot[1, 0] + z * rot[2, 0], x * rot[0, 1] + y * rot[1, 1] + z * rot[2, 1],
+                       x * rot[0, 2] + y * rot[1, 2] + z * rot[2, 2])
+        u, v = _uv_one(x, y, z)
+        if want_rgb:
+            _lookup_one(u * wf, v * hf, np.float32(0.5), texels, w, h, closest, rgb, b)
+        if want_pdf:
+            i = np.int64(np.floor(u * wf)) % w
+            j = np.int64(np.floor(v * hf))
+            j = 0 if j < 0 else (h - 1 if j > h - 1 else j)
+            pdf[b] = density[j, i]
+
+
+@njit
+def _count_le(a, lo, hi, x):
+    """lo + the number of entries of the sorted a[lo:hi] at most x (np.searchsorted(..., 'right'))."""
+    while lo < hi:
+        mid = lo + ((hi - lo) >> 1)
+        if a[mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit
+def _clip(x, lo, hi):
+    """np.clip for one number (NaN stays NaN)."""
+    return lo if x < lo else (hi if x > hi else x)
+
+
+@njit
+def _sample_kernel(u1, u2, row_cdf, cond_flat, z_lo, dz, density, texels, w, h, closest, black, m, pdf, rgb):
+    """EnvironmentMap.sample's NumPy lines per number pair, in float64: the row by the marginal
+    CDF, the texel by the row's part [j (W + 1), j (W + 1) + W] of the stacked conditional CDF
+    (the entry the whole array's search finds: entries before the row are at most j <= x, after it
+    at least j + 1; x = j + u2 rounded up to j + 1 takes the row's last texel, as a search of
+    a sorted array would: the row's last steps may round above j + 1 before its end, set to
+    j + 1 exactly, and a binary search would stop there), the direction uniform in (phi, cos theta) within the texel; the texel
+    looked up (``_lookup_one``) unless the map is ``black``. m (B, 3) map-frame directions."""
+    wf, hf = np.float64(w), np.float64(h)
+    for b in range(u1.shape[0]):
+        a, c = u1[b], u2[b]
+        j = _clip(_count_le(row_cdf, 0, h + 1, a) - 1, 0, h - 1)
+        x = j + c
+        lo, hi = row_cdf[j], row_cdf[j + 1]
+        t1 = _clip((a - lo) / (hi - lo if hi > lo else 1.0), 0.0, 1.0)
+        base = j * (w + 1)
+        if x >= cond_flat[base + w]:
+            k = base + w - 1
+        else:
+            k = _clip(_count_le(cond_flat, base, base + w + 1, x) - 1, base, base + w - 1)
+        i = k - base
+        clo, chi = cond_flat[k], cond_flat[k + 1]
+        t2 = _clip((x - clo) / (chi - clo if chi > clo else 1.0), 0.0, 1.0)
+        u = (i + t2) / w
+        z = _clip(z_lo[j] + t1 * dz[j], -1.0, 1.0)
+        v = _clip(1.0 - np.arccos(z) / np.pi, j / h, (j + 1) / h)
+        phi = np.pi - _TWO_PI * u
+        q = 1.0 - z * z
+        s = np.sqrt(0.0 if q < 0.0 else q)
+        m[b, 0] = s * np.cos(phi)
+        m[b, 1] = s * np.sin(phi)
+        m[b, 2] = z
+        pdf[b] = density[j, i]
+        if black:
+            rgb[b, 0] = rgb[b, 1] = rgb[b, 2] = 0.0
+        else:
+            _lookup_one(u * wf, v * hf, 0.5, texels, w, h, closest, rgb, b)

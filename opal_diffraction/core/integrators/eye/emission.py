@@ -7,6 +7,13 @@ next-event stage's sampling of the same emitter by the power heuristic (Veach 19
 core/integrators/eye/next_event.py), which the path's last BSDF pdf (``PathState.pdf``) feeds.
 Lights are invisible to camera rays and transparent to paths, as Cycles' default ray visibility
 has them; a caustic path the light pass counted is left out (``not_covered``).
+
+Where the kernels run (core/util/jit.py) the world map seen by escaping rays takes three compiled
+passes instead of a chain of NumPy calls: the map's radiance and density per direction
+(``EnvironmentMap.lookup``), each ray's contribution (``_world_contrib_kernel``: the uplift of
+``illuminant_from_rgb``'s kernel, the power heuristic, the ray's weight, in the chain's
+operations and precisions) and the film deposit of all vertex counts at once
+(``TileOutput.add_by_vertices``): the same bits as the chain on the kernels.
 """
 
 from __future__ import annotations
@@ -17,6 +24,7 @@ from ...lights.sources import intersect_lights, light_pdf, sun_radiance
 from ...materials.surface import surface_emission
 from ...transport.path_state import Caustic
 from ...transport.walker import Hit, Rays
+from ...util.jit import kernels_enabled, njit
 from .factored_film import add_scaled_spectra
 from .next_event import power_heuristic
 
@@ -79,6 +87,11 @@ def escaped(c, out, rays: Rays, escapes: list | None) -> None:
     if not keep.all():
         rays = rays.take(keep)
         st = rays.state
+    if kernels_enabled() and c.prepared.environment is not None and len(rays):
+        contrib = _world_map_contrib(c, rays)
+        if contrib is not None:  # every vertex count in one deposit (the sums one world_seen per count forms)
+            out.add_by_vertices(rays, contrib)
+            return
     for nd in np.unique(st.nd):
         world_seen(c, out, rays.take(st.nd == nd), out.light_film(min(int(nd), 2)))
 
@@ -90,6 +103,10 @@ def world_seen(c, out, rays: Rays, film):
     env = prepared.environment
     if env is not None:  # the world map seen along the escaping rays (docs/physics.md section 7.9)
         if len(rays) == 0:
+            return
+        contrib = _world_map_contrib(c, rays) if kernels_enabled() else None
+        if contrib is not None:
+            out.accumulate(rays, contrib, film)
             return
         spectra = prepared.conv.illuminant_from_rgb(env.radiance_rgb(rays.d)).astype(np.float32)
         # a BSDF sample, weighted against the map's next-event estimation (power heuristic)
@@ -108,6 +125,75 @@ def world_seen(c, out, rays: Rays, film):
         return
     contrib = rays.weighted(np.broadcast_to(bg, (len(rays), c.n)) if rays.lam is None else bg[rays.lam])
     out.accumulate(rays, contrib, film)
+
+
+def _world_map_contrib(c, rays: Rays) -> np.ndarray | None:
+    """world_seen's contributions of the map along ``rays`` (B, n) (white) or (B,) (mono)
+    float32, by EnvironmentMap.lookup and _world_contrib_kernel; None (the NumPy chain then) for
+    weights that are not float32."""
+    prepared = c.prepared
+    b, basis_t = len(rays), prepared.conv.emission_basis
+    n, mono = basis_t.shape[1], rays.lam is not None
+    if rays.w is None:
+        if mono:
+            return None
+        w = _EMPTY_W
+    else:
+        w = rays.w.reshape(b, 1) if mono else rays.dense_w(n)
+        if w.dtype != np.float32 or w.shape != ((b, 1) if mono else (b, n)):
+            return None
+    rgb, p_env = prepared.environment.lookup(rays.d)
+    contrib = np.empty((b, 1) if mono else (b, n), np.float32)
+    _world_contrib_kernel(np.ascontiguousarray(rgb, np.float32), p_env, np.asarray(rays.state.pdf, np.float32),
+                          basis_t, w, rays.lam if mono else _NO_LAM, contrib)
+    return contrib[:, 0] if mono else contrib
+
+
+_EMPTY_W = np.ones((0, 0), np.float32)
+_NO_LAM = np.zeros(0, np.int64)
+
+
+@njit
+def _world_contrib_kernel(rgb, p_env, p_bsdf, basis_t, w, lam, out):
+    """Per ray: the map's radiance ``rgb`` (B, 3) uplifted to a spectrum as
+    SpectralConverter.illuminant_from_rgb's kernel does (the maximum times the [0, 1] shape's
+    basis combination, float64), rounded to float32, times power_heuristic(p_bsdf,
+    float32(p_env)) and the ray's weight ``w`` ((B, n), (B, 1) for mono rays, empty: unit
+    weights): out (B, n), or (B, 1) at the mono rays' wavelengths ``lam``."""
+    mono = lam.shape[0] > 0
+    weighted = w.shape[0] > 0
+    one = np.float32(1.0)
+    for b in range(rgb.shape[0]):
+        r, g, bl = np.float64(rgb[b, 0]), np.float64(rgb[b, 1]), np.float64(rgb[b, 2])
+        r, g, bl = (0.0 if r < 0.0 else r), (0.0 if g < 0.0 else g), (0.0 if bl < 0.0 else bl)
+        scale = r
+        if g > scale or g != g:
+            scale = g
+        if (bl > scale or bl != bl) and scale == scale:
+            scale = bl
+        if scale > 0.0:
+            r, g, bl = r / scale, g / scale, bl / scale
+        else:
+            r = g = bl = 0.0
+        r = 0.0 if r < 0.0 else (1.0 if r > 1.0 else r)
+        g = 0.0 if g < 0.0 else (1.0 if g > 1.0 else g)
+        bl = 0.0 if bl < 0.0 else (1.0 if bl > 1.0 else bl)
+        # the power heuristic (next_event.power_heuristic) in float32
+        pa, pb = p_bsdf[b], np.float32(p_env[b])
+        a2, b2 = pa * pa, pb * pb
+        mis = a2 / (a2 + b2) if a2 + b2 > 0 else one
+        if not pa > 0:
+            mis = one
+        if not np.isfinite(mis):
+            mis = one
+        if mono:
+            k = lam[b]
+            s = np.float32(scale * (r * basis_t[0, k] + g * basis_t[1, k] + bl * basis_t[2, k])) * mis
+            out[b, 0] = w[b, 0] * s
+            continue
+        for k in range(basis_t.shape[1]):
+            s = np.float32(scale * (r * basis_t[0, k] + g * basis_t[1, k] + bl * basis_t[2, k])) * mis
+            out[b, k] = w[b, k] * s if weighted else s
 
 
 def surface_emission_unit(c, out, rays: Rays, hit: Hit, emits: np.ndarray) -> bool:
