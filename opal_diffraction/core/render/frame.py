@@ -24,11 +24,12 @@ None otherwise (film.py). A light pass cancelled midway ends the render with a b
 
 The compile stage: before a process's first render on the compiled kernels (core/util/jit.py),
 ``compile_stage`` renders a built-in tiny scene (``warm_up_scene``: 4 x 4 pixels, 1 sample, a few
-thousand light paths; flat and smooth triangles, diffuse, rough metal, dispersive and rough
-glass, a point and an area light, an environment map) so numba compiles the kernels on those
+thousand light paths; flat and smooth triangles, diffuse, a mirror, a dispersive glass, a point
+and an area light, an environment map) so numba compiles the kernels on those
 paths (or loads them from its cache), and reports it as the progress stage "compiling kernels":
 the first render after an install shows that stage instead of standing at 0 %. It runs once per
-process (``jit.warm_up``); renders on the NumPy reference skip it. The render that paid for it
+process (``jit.warm_up``); renders on the NumPy reference skip it, and so do renders on a Dask
+cluster (its workers compile what they run). The render that paid for it
 has ``compile_s``, ``kernels_compiled`` and ``kernels_loaded`` in its stats.
 """
 
@@ -71,7 +72,8 @@ def render(
     """Render ``scene``; raises SceneError (a readable message) for unrenderable input.
 
     ``progress(fraction, message)`` is called after every tile (the fraction increases and ends
-    at 1 unless cancelled); ``should_cancel()`` is polled between tiles (and while waiting for
+    at 1 unless cancelled; the process's first render on the kernels first reports (0,
+    'compiling kernels'): ``compile_stage``); ``should_cancel()`` is polled between tiles (and while waiting for
     one) and stops the render early (the result holds the tiles added so far);
     ``on_round(result)`` receives the partial image after every round. ``region`` = (x0, y0, x1,
     y1) renders only those pixels of the camera's image (a border render; rows from the top); the
@@ -84,7 +86,9 @@ def render(
     ``spectral_film``: keep the spectral image (``RenderResult.spectral``, (H, W, n)); None: only
     when ``settings.spectral_exr`` is set. Otherwise the film is RGB only and ``spectral`` is None.
     """
-    compiled = compile_stage((settings or RenderSettings()).kernels, progress)  # before prepare's kernels run
+    # before prepare's kernels run; a cluster's workers compile their own (the stage is this process's)
+    with one_blas_thread():  # as the render itself (its progress callback may look)
+        compiled = compile_stage((settings or RenderSettings()).kernels, progress) if client is None else None
     t_start = time.perf_counter()  # the time limit counts from here (compile_s is in the stats)
     try:
         with kernel_mode((settings or RenderSettings()).kernels):  # prepare's spectra take the render's path
@@ -92,19 +96,23 @@ def render(
     except RenderCancelled:
         return _cancelled_before_start(scene, settings or RenderSettings(), region, spectral_film)
     executor = None if client is None else DaskExecutor(client, scene)
-    return _render_in_mode(prepared, None, progress, should_cancel, on_round, region, t_start, spectral_film,
-                           executor, time.perf_counter, compiled)
+    with one_blas_thread():  # the tile threads are the parallelism (core/util/blas_threads.py)
+        return _render_in_mode(prepared, None, progress, should_cancel, on_round, region, t_start, spectral_film,
+                               executor, time.perf_counter, compiled)
 
 
 def warm_up_scene() -> Scene:
-    """The compile stage's scene: 4 x 4 pixels seeing a diffuse floor (flat triangles), a rough
-    gold metal sphere and a rough glass sphere (smooth triangles), a dispersive flint prism, lit
-    by a point light, an area light and an environment map: the paths a render's kernels take."""
+    """The compile stage's scene: 4 x 4 pixels seeing a diffuse floor (flat triangles), a gold
+    mirror sphere and a diffuse sphere (smooth triangles) and a dispersive flint prism, lit by a
+    point light, an area light and an environment map: the paths a render's kernels take. No
+    rough (GGX) surface: the first rough material of a process builds the multiple-scattering
+    tables (materials/bsdf.py, seconds of NumPy), which a scene without one never needs, so the
+    GGX kernels compile (or load) in the first render that has one."""
     s = Scene(materials=Materials.from_list([
         {"kind": "DIFFUSE", "color": (0.6, 0.6, 0.6)},
-        {"kind": "MIRROR", "color": (0.9, 0.7, 0.3), "roughness": 0.4},
+        {"kind": "MIRROR", "color": (0.9, 0.7, 0.3)},
         {"kind": "DIELECTRIC", "ior": 1.72, "dispersion": "ABBE", "abbe": 29.0},
-        {"kind": "DIELECTRIC", "ior": 1.5, "roughness": 0.3},
+        {"kind": "DIFFUSE", "color": (0.2, 0.4, 0.8)},
     ]))
     s.add_mesh(*primitives.quad((0, 0, 0), (6, 0, 0), (0, 6, 0)), material=0)
     for centre, mat in (((-0.8, 0.3, 0.5), 1), ((0.8, 0.3, 0.5), 3)):
@@ -142,6 +150,7 @@ def _cancelled_before_start(scene: Scene, settings: RenderSettings, region, spec
     return film.result(plan, True, ["cancelled while preparing the scene"], {"rays": 0})
 
 
+@one_blas_thread()  # the tile threads are the parallelism (core/util/blas_threads.py)
 def render_prepared(
     prepared: PreparedScene,
     light: LightPassResult | None = None,
@@ -165,12 +174,12 @@ def render_prepared(
     (core/util/jit.py); the stats' ``kernels`` names which. The process's first render on the
     kernels starts with the compile stage (``compile_stage``).
     """
-    compiled = compile_stage(prepared.settings.kernels, progress)
+    local = executor is None or isinstance(executor, LocalExecutor)
+    compiled = compile_stage(prepared.settings.kernels, progress) if local else None
     return _render_in_mode(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
                            executor, clock, compiled)
 
 
-@one_blas_thread()  # the tile threads are the parallelism (core/util/blas_threads.py)
 def _render_in_mode(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
                     executor, clock, compiled) -> RenderResult:
     """render_prepared after its compile stage (``compiled``: that stage's stats, or None)."""
