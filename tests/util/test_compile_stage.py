@@ -44,7 +44,8 @@ def test_first_render_reports_the_compile_stage_first_and_later_ones_do_not(fres
     assert sum(m == jit.COMPILE_STAGE for _, m in messages) == 1
     assert calls == [1] and jit.warm_up_done()
     assert "compile_error" not in res.stats and res.stats["compile_s"] > 0
-    assert res.stats["kernels_compiled"] + res.stats["kernels_loaded"] >= 0
+    # how many it compiled or loaded depends on what this process ran before (the counts are deltas)
+    assert isinstance(res.stats["kernels_compiled"], int) and isinstance(res.stats["kernels_loaded"], int)
     messages.clear()
     again = frame.render(small_scene(), RenderSettings(samples=1, threads=1),
                          progress=lambda f, m: messages.append((f, m)))
