@@ -11,7 +11,9 @@ Three parts, each printing a Markdown table:
    the NumPy reference (``jit.kernel_mode('numpy')``), and Cycles on the CPU (denoising and
    adaptive sampling off, no time limit). Both engines get the same threads: every core (Blender's
    threads 'AUTO') or ``--threads N``. Each renderer first renders once untimed (imports, ours'
-   compile stage, Cycles' kernel loading); then per scene ``--rounds`` rounds, each rendering the
+   compile stage, Cycles' kernel loading), and once more per scene at 1 sample, untimed (what a
+   scene's first render pays once in a session: image loading, ours' GGX tables and the kernels
+   of paths the first scene did not take); then per scene ``--rounds`` rounds, each rendering the
    scene once with every renderer, the order rotated each round, so machine load falls on all of
    them alike. Per render: wall seconds (``time.perf_counter``), the process's CPU seconds
    (``time.process_time``: the threads of both engines run in this process) and their ratio, the
@@ -140,7 +142,10 @@ def speed(names, size, parity_size, spp, rounds, threads) -> list[str]:
         print("\n".join(lines), flush=True)
         for name in names:
             sz = size if name == README else parity_size
-            setup_scene(name, sz, spp, threads, work)
+            sc = setup_scene(name, sz, 1, threads, work)
+            for r in RENDERERS:  # untimed, 1 spp: what a scene's first render pays once (images, tables, kernels)
+                render_timed(r)
+            sc.cycles.samples = sc.opal.samples = spp
             times = {r: [] for r in RENDERERS}
             for k in range(rounds):
                 order = RENDERERS[k % len(RENDERERS):] + RENDERERS[:k % len(RENDERERS)]
