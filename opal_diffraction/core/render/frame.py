@@ -21,6 +21,16 @@ tile's earlier rounds, so the image is still the same for any thread count or cl
 sums RGB; it keeps the (H, W, n) spectral image only when it is asked for (``spectral_film``; by
 default when ``settings.spectral_exr`` names a spectral EXR), so ``RenderResult.spectral`` is
 None otherwise (film.py). A light pass cancelled midway ends the render with a black image.
+
+The compile stage: before a process's first render on the compiled kernels (core/util/jit.py),
+``compile_stage`` renders a built-in tiny scene (``warm_up_scene``: 4 x 4 pixels, 1 sample, a few
+thousand light paths; flat and smooth triangles, diffuse, a mirror, a dispersive glass, a point
+and an area light, an environment map) so numba compiles the kernels on those
+paths (or loads them from its cache), and reports it as the progress stage "compiling kernels":
+the first render after an install shows that stage instead of standing at 0 %. It runs once per
+process (``jit.warm_up``); renders on the NumPy reference skip it, and so do renders on a Dask
+cluster (its workers compile what they run). The render that paid for it
+has ``compile_s``, ``kernels_compiled`` and ``kernels_loaded`` in its stats.
 """
 
 from __future__ import annotations
@@ -28,23 +38,26 @@ from __future__ import annotations
 import time
 from typing import Callable
 
+import numpy as np
+
 from ..util.blas_threads import one_blas_thread
 from ..integrators.light.camera_splat import usable_splat
 from ..util.cancel import OutOfTime, RenderCancelled
 from .distributed import DaskExecutor
-from ..util.jit import kernel_mode
+from ..util.jit import kernel_mode, warm_up
 from .film import Film, RenderResult, keeps_spectral
 from ..integrators.light.light_pass import LightPassResult
 from .plan import RenderPlan, plan_render
 from .prepare import PreparedScene, prepare
 from .scheduler import Executor, LocalExecutor, RenderControl, run_eye_pass
-from ..scene.model import Scene
+from ..scene import primitives
+from ..scene.model import Camera, Lights, Materials, Scene
 from ..scene.settings import RenderSettings
 from ..spectral.spectrum import SpectralConverter
 from .tiles import LIGHT_PASS_SHARE, EyeWork, adaptive_of
 from .view_check import camera_sees_nothing
 
-__all__ = ["RenderResult", "LightPassResult", "render", "render_prepared"]
+__all__ = ["RenderResult", "LightPassResult", "render", "render_prepared", "compile_stage", "warm_up_scene"]
 
 
 def render(
@@ -60,7 +73,8 @@ def render(
     """Render ``scene``; raises SceneError (a readable message) for unrenderable input.
 
     ``progress(fraction, message)`` is called after every tile (the fraction increases and ends
-    at 1 unless cancelled); ``should_cancel()`` is polled between tiles (and while waiting for
+    at 1 unless cancelled; the process's first render on the kernels first reports (0,
+    'compiling kernels'): ``compile_stage``); ``should_cancel()`` is polled between tiles (and while waiting for
     one) and stops the render early (the result holds the tiles added so far);
     ``on_round(result)`` receives the partial image after every round. ``region`` = (x0, y0, x1,
     y1) renders only those pixels of the camera's image (a border render; rows from the top); the
@@ -73,7 +87,10 @@ def render(
     ``spectral_film``: keep the spectral image (``RenderResult.spectral``, (H, W, n)); None: only
     when ``settings.spectral_exr`` is set. Otherwise the film is RGB only and ``spectral`` is None.
     """
-    t_start = time.perf_counter()
+    # before prepare's kernels run; a cluster's workers compile their own (the stage is this process's)
+    with one_blas_thread():  # as the render itself (its progress callback may look)
+        compiled = compile_stage((settings or RenderSettings()).kernels, progress) if client is None else None
+    t_start = time.perf_counter()  # the time limit counts from here (compile_s is in the stats)
     limit = float((settings or RenderSettings()).time_limit or 0.0)
     try:
         with kernel_mode((settings or RenderSettings()).kernels):  # prepare's spectra take the render's path
@@ -85,8 +102,49 @@ def render(
     except RenderCancelled:
         return _cancelled_before_start(scene, settings or RenderSettings(), region, spectral_film)
     executor = None if client is None else DaskExecutor(client, scene)
-    return render_prepared(prepared, None, progress, should_cancel, on_round, region, started_at=t_start,
-                           spectral_film=spectral_film, executor=executor)
+    with one_blas_thread():  # the tile threads are the parallelism (core/util/blas_threads.py)
+        return _render_in_mode(prepared, None, progress, should_cancel, on_round, region, t_start, spectral_film,
+                               executor, time.perf_counter, compiled)
+
+
+def warm_up_scene() -> Scene:
+    """The compile stage's scene: 4 x 4 pixels seeing a diffuse floor (flat triangles), a gold
+    mirror sphere and a diffuse sphere (smooth triangles) and a dispersive flint prism, lit by a
+    point light, an area light and an environment map: the paths a render's kernels take. No
+    rough (GGX) surface: the first rough material of a process builds the multiple-scattering
+    tables (materials/bsdf.py, seconds of NumPy), which a scene without one never needs, so the
+    GGX kernels compile (or load) in the first render that has one."""
+    s = Scene(materials=Materials.from_list([
+        {"kind": "DIFFUSE", "color": (0.6, 0.6, 0.6)},
+        {"kind": "MIRROR", "color": (0.9, 0.7, 0.3)},
+        {"kind": "DIELECTRIC", "ior": 1.72, "dispersion": "ABBE", "abbe": 29.0},
+        {"kind": "DIFFUSE", "color": (0.2, 0.4, 0.8)},
+    ]))
+    s.add_mesh(*primitives.quad((0, 0, 0), (6, 0, 0), (0, 6, 0)), material=0)
+    for centre, mat in (((-0.8, 0.3, 0.5), 1), ((0.8, 0.3, 0.5), 3)):
+        v, t = primitives.uv_sphere(centre, 0.5, segments=12, rings=6)
+        s.add_mesh(v, t, material=mat, normals=(v - np.asarray(centre, np.float32)) / 0.5)
+    s.add_mesh(*primitives.prism((0, -0.6, 0.4), side=0.6, length=1.0, axis="X", rotation_deg=180.0), material=2)
+    s.lights = Lights.from_list([
+        {"kind": "POINT", "position": (1.0, -1.5, 3.0), "power": 300.0},
+        {"kind": "AREA_RECT", "position": (-1.0, 0.0, 2.5), "direction": (0, 0, -1), "power": 100.0},
+    ])
+    s.world_image = np.linspace(0.2, 1.0, 8 * 4 * 3, dtype=np.float32).reshape(4, 8, 3)
+    s.world_color = np.full(3, 0.3, np.float32)
+    s.camera = Camera.look_at((0.0, -4.0, 2.0), (0.0, 0.0, 0.5), lens=35.0, width=4, height=4)
+    return s
+
+
+def _warm_up_render() -> None:
+    render(warm_up_scene(), RenderSettings(samples=1, threads=1, light_paths=4096, seed=0))
+
+
+def compile_stage(mode: str, progress: Callable[[float, str], None] | None = None) -> dict | None:
+    """The compile stage of a render whose RenderSettings.kernels is ``mode``: once per process,
+    when it takes the kernels, ``progress(0, 'compiling kernels')`` and a render of
+    ``warm_up_scene`` (jit.warm_up); its stats ({'compile_s', 'kernels_compiled',
+    'kernels_loaded'}) or None when it did not run."""
+    return warm_up(_warm_up_render, progress, mode)
 
 
 def _cancelled_before_start(scene: Scene, settings: RenderSettings, region, spectral_film=None,
@@ -122,16 +180,27 @@ def render_prepared(
     run (core/render/scheduler.py; default: a LocalExecutor on ``prepared.threads``;
     distributed.DaskExecutor for a cluster). ``clock``: the scheduler's clock, in seconds. The
     passes run the compiled kernels or the NumPy reference as ``settings.kernels`` says
-    (core/util/jit.py); the stats' ``kernels`` names which.
+    (core/util/jit.py); the stats' ``kernels`` names which. The process's first render on the
+    kernels starts with the compile stage (``compile_stage``).
     """
+    local = executor is None or isinstance(executor, LocalExecutor)
+    compiled = compile_stage(prepared.settings.kernels, progress) if local else None
+    return _render_in_mode(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
+                           executor, clock, compiled)
+
+
+def _render_in_mode(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
+                    executor, clock, compiled) -> RenderResult:
+    """render_prepared after its compile stage (``compiled``: that stage's stats, or None)."""
     with kernel_mode(prepared.settings.kernels) as kernels:
         return _render_prepared(prepared, light, progress, should_cancel, on_round, region, started_at,
-                                spectral_film, executor, clock, kernels)
+                                spectral_film, executor, clock, kernels, compiled)
 
 
 def _render_prepared(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
-                     executor, clock, kernels: str) -> RenderResult:
-    """render_prepared's body, inside its kernel mode (``kernels``: the path taken, for the stats)."""
+                     executor, clock, kernels: str, compiled: dict | None = None) -> RenderResult:
+    """render_prepared's body, inside its kernel mode (``kernels``: the path taken, for the stats;
+    ``compiled``: the compile stage's stats when this render ran it)."""
     settings = prepared.settings
     control = RenderControl(should_cancel, progress, settings.time_limit, started_at, clock)
     plan = plan_render(prepared)
@@ -144,7 +213,7 @@ def _render_prepared(prepared, light, progress, should_cancel, on_round, region,
     (rx0, ry0, rx1, ry1), film = Film.for_region(prepared.scene.camera, region, prepared.conv, adaptive is not None,
                                                  spectral)
     stats = {"rays": 0, "prepare_s": prepared.prepare_s, "backend": prepared.accel.name,
-             "triangles": len(prepared.scene.triangles), "kernels": kernels}
+             "triangles": len(prepared.scene.triangles), "kernels": kernels, **(compiled or {})}
     executor = LocalExecutor() if executor is None else executor
     splat_images = None  # the light pass's camera splat over the region, once it ran
 

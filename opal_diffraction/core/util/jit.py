@@ -26,6 +26,15 @@ How:
   (the reference is never wrong, only slower). ``kernels_path(mode)`` names the path a render
   takes, for its stats line.
 
+The compile stage: numba compiles a kernel when it is first called (about a second each, a few
+seconds for all; loading one from the cache takes milliseconds). ``warm_up(run, progress)`` calls
+``run`` - core/render/frame.py's render of a built-in tiny scene that takes the kernels' paths -
+once per process, before its first render on the kernels, and tells ``progress`` first (the
+stage "compiling kernels"), so the first render after an install shows that stage instead of
+a render stuck at 0 %; renders that take the reference (kernels 'numpy', OPAL_KERNELS=numpy, no
+numba) skip it. ``compile_counts()`` says how many kernels were compiled and how many loaded
+from the cache (over every kernel ``njit`` made, ``kernels()``).
+
 Kernels use no ``fastmath``: without it LLVM neither reorders nor contracts (no FMA) floating-point
 operations, so a kernel doing the reference's operations in the reference's order and precision
 is bit-identical to it; each kernel's test (tests/util/test_kernels.py) says which ones are.
@@ -39,9 +48,10 @@ import os
 import sys
 import tempfile
 import threading
+import time
 
-__all__ = ["AVAILABLE", "UNAVAILABLE_REASON", "KERNEL_MODES", "KERNELS_ENV", "cache_dir", "njit", "kernel_mode",
-           "kernels_enabled", "kernels_path"]
+__all__ = ["AVAILABLE", "UNAVAILABLE_REASON", "KERNEL_MODES", "KERNELS_ENV", "COMPILE_STAGE", "cache_dir", "njit",
+           "kernel_mode", "kernels_enabled", "kernels_path", "kernels", "compile_counts", "warm_up", "warm_up_done"]
 
 #: RenderSettings.kernels: 'auto' (the compiled kernels where numba is available) or 'numpy' (the reference).
 KERNEL_MODES = ("auto", "numpy")
@@ -97,6 +107,7 @@ def _import_numba():
 
 
 _numba, UNAVAILABLE_REASON = _import_numba()
+_kernels: list = []  # every dispatcher njit made, in the order the modules defining them were imported
 #: numba imported: the compiled kernels can run.
 AVAILABLE = _numba is not None
 
@@ -108,7 +119,9 @@ def njit(fn=None, **options):
     def wrap(f):
         if _numba is None:
             return f
-        return _numba.njit(**dict(_OPTIONS, **options))(f)
+        dispatcher = _numba.njit(**dict(_OPTIONS, **options))(f)
+        _kernels.append(dispatcher)
+        return dispatcher
 
     return wrap(fn) if fn is not None else wrap
 
@@ -150,3 +163,63 @@ def kernels_enabled() -> bool:
     """Whether the compiled kernels run now (numba available, OPAL_KERNELS is not 'numpy' and no
     running render forces the reference). The functions with kernels call this to choose."""
     return AVAILABLE and _numpy_holds == 0 and not _env_forces_numpy()
+
+
+def kernels() -> list:
+    """Every kernel ``njit`` compiled-or-will-compile in this process (numba dispatchers; empty without numba)."""
+    return list(_kernels)
+
+
+def compile_counts() -> tuple[int, int]:
+    """(compiled, loaded): how many kernel signatures this process compiled and how many it
+    loaded from the on-disk cache so far (numba's per-dispatcher cache statistics)."""
+    compiled = loaded = 0
+    for d in _kernels:
+        stats = getattr(d, "stats", None)
+        if stats is not None:
+            compiled += len(stats.cache_misses)
+            loaded += len(stats.cache_hits)
+    return compiled, loaded
+
+
+#: The message of the compile stage, as the render's progress callback receives it.
+COMPILE_STAGE = "compiling kernels"
+_warm_lock = threading.RLock()  # re-entrant: the warm-up's own render calls warm_up again (a no-op)
+_warm = {"started": False, "finished": False}
+
+
+def warm_up_done() -> bool:
+    """Whether this process has run its warm-up."""
+    return _warm["finished"]
+
+
+def warm_up(run, progress=None, mode: str = "auto") -> dict | None:
+    """Run ``run()`` once per process, before the first render that takes the kernels (``mode``:
+    its RenderSettings.kernels), so the kernels it calls are compiled (or loaded from the cache)
+    now; ``progress(0.0, COMPILE_STAGE)`` is called first. Other threads wait for it to finish
+    (a render starting meanwhile then finds its kernels ready).
+
+    Returns None when nothing ran (the render takes the reference, or the warm-up already ran),
+    else {'compile_s': seconds, 'kernels_compiled': n, 'kernels_loaded': n} (for the render's
+    stats; with 'compile_error' when ``run`` raised: the render then goes on, and meets the same
+    error itself if it is the kernels')."""
+    if _warm["finished"] or kernels_path(mode) != "numba" or not kernels_enabled():
+        return None
+    with _warm_lock:  # another thread's warm-up: wait for it
+        if _warm["started"]:  # finished meanwhile, or this thread's own warm-up render
+            return None
+        _warm["started"] = True
+        if progress is not None:
+            progress(0.0, COMPILE_STAGE)
+        c0, l0 = compile_counts()
+        t0 = time.perf_counter()
+        out = {}
+        try:
+            run()
+        except Exception as e:  # never the warm-up's fault that the user's render fails
+            out["compile_error"] = f"{type(e).__name__}: {e}"
+        finally:
+            _warm["finished"] = True
+        c1, l1 = compile_counts()
+        out.update(compile_s=time.perf_counter() - t0, kernels_compiled=c1 - c0, kernels_loaded=l1 - l0)
+        return out
