@@ -1,0 +1,83 @@
+"""The specular walker's compiled kernels (core/transport/walker.py, wavelengths.py) against their
+NumPy reference: the same operations in the same order and precisions, so the same bits."""
+
+import numpy as np
+import pytest
+
+from opal_diffraction.core.render.prepare import prepare
+from opal_diffraction.core.scene import primitives
+from opal_diffraction.core.scene.model import Camera, Materials, Scene
+from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.transport import wavelengths
+from opal_diffraction.core.transport.walker import Rays, SpecularWalker
+from opal_diffraction.core.util.jit import AVAILABLE, kernel_mode
+
+pytestmark = pytest.mark.skipif(not AVAILABLE, reason="numba is not installed")
+
+
+def _glass(smooth_normals: bool, tint=(1, 1, 1), **settings):
+    """A prepared scene of one dispersive glass: a prism (flat) or an icosphere with vertex normals."""
+    s = Scene(materials=Materials.from_list([{"kind": "DIELECTRIC", "color": tint, "dispersion": "DIAMOND"}]))
+    if smooth_normals:
+        v, t = primitives.icosphere((0, 0, 0), 1.0, subdivisions=1)
+        s.add_mesh(v, t, material=0, normals=v / np.linalg.norm(v, axis=1, keepdims=True))
+    else:
+        s.add_mesh(*primitives.prism((0, 0, 0), side=2.0, length=4.0, axis="Y"), material=0)
+    s.camera = Camera()
+    return prepare(s, RenderSettings(**settings))
+
+
+def _hits(prepared, b=3000, seed=1, weighted=True):
+    """White rays from outside and from inside the glass and their hits (both sides, TIR inside)."""
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(b, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = np.where(np.arange(b)[:, None] % 2 == 0, -4.0 * d + rng.uniform(-0.3, 0.3, (b, 3)),
+                 rng.uniform(-0.2, 0.2, (b, 3)) + [0, 0, 0.3])
+    o, d = o.astype(np.float32), d.astype(np.float32)
+    h = prepared.accel.intersect(o, d)
+    k = np.flatnonzero(h.prim >= 0)
+    n = prepared.grid.n
+    w = rng.uniform(0, 1, (len(k), n)).astype(np.float32) if weighted else None
+    if weighted:
+        w[rng.random(len(k)) < 0.2, : n // 2] = 0  # rays whose spectrum is zero somewhere
+    rays = Rays(o[k], d[k], np.arange(len(k)), w, None, np.zeros(len(k), np.int32), rng.random(len(k)))
+    walker = SpecularWalker(prepared, rng)
+    with kernel_mode("numpy"):
+        hit = walker.hit_info(rays, h.t[k], h.prim[k], h.u[k], h.v[k])
+    return walker, rays, hit, rng.random(len(k))
+
+
+def _split(walker, rays, hit, u, mode):
+    walker._spawned = []
+    with kernel_mode(mode):
+        children, child_hits, white = wavelengths.split_at_glass(walker, rays, hit, None, u)
+    mono = walker._spawned
+    walker._spawned = []
+    return white, mono
+
+
+def _same_rays(a, b):
+    for f in ("o", "d", "pix", "w", "lam", "depth", "u_lam"):
+        x, y = getattr(a, f), getattr(b, f)
+        assert (x is None) == (y is None), f
+        if x is not None:
+            assert x.dtype == y.dtype, f
+            np.testing.assert_array_equal(x, y, err_msg=f)
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+@pytest.mark.parametrize("weighted", [False, True])
+@pytest.mark.parametrize("by_sensitivity", [False, True])
+def test_glass_split_kernel_is_bit_identical(smooth, weighted, by_sensitivity):
+    prepared = _glass(smooth, tint=(1, 0.8, 0.5) if weighted else (1, 1, 1), dispersion_importance=by_sensitivity)
+    walker, rays, hit, u = _hits(prepared, weighted=weighted)
+    assert hit.front.any() and (~hit.front).any()
+    assert wavelengths._fits_glass_kernel(rays, hit, walker.specular_normal(rays, hit), walker.tinted_weight(rays, hit),
+                                          prepared.materials.ior)  # the kernel runs
+    w_ref, m_ref = _split(walker, rays, hit, u, "numpy")
+    w_ker, m_ker = _split(walker, rays, hit, u, "auto")
+    _same_rays(w_ref, w_ker)
+    assert len(m_ref) == len(m_ker) == 1
+    _same_rays(m_ref[0], m_ker[0])
+    assert len(w_ker) > 50 and len(m_ker[0]) > 1000  # both branches taken
