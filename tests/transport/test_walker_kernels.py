@@ -81,3 +81,10 @@ def test_glass_split_kernel_is_bit_identical(smooth, weighted, by_sensitivity):
     assert len(m_ref) == len(m_ker) == 1
     _same_rays(m_ref[0], m_ker[0])
     assert len(w_ker) > 50 and len(m_ker[0]) > 1000  # both branches taken
+
+
+@pytest.mark.parametrize("n", [1, 3, 7, 8, 61, 128, 129, 200, 240, 300, 460, 700, 900])
+def test_pairwise_row_sum_is_numpys(n):
+    a = np.random.default_rng(n).random((4, n)) * 10.0 ** np.random.default_rng(n + 1).uniform(-8, 8, (4, n))
+    for row, s in zip(a, a.sum(axis=1)):
+        assert wavelengths._pairwise(row, 0, n) == s

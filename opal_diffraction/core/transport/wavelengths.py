@@ -223,7 +223,7 @@ def split_at_glass(walker, rays, hit, rng, u=None):
 def _fits_glass_kernel(rays, hit, ns, wt, ior) -> bool:
     """The arrays _glass_kernel is compiled for: float32 rows of 3 and (B, n) weights."""
     f32 = np.dtype(np.float32)
-    return (len(rays) > 0 and all(a.dtype == f32 and a.ndim == 2 for a in (rays.d, hit.p, hit.ng, ns))
+    return (len(rays) > 0 and ior.shape[1] <= 900 and all(a.dtype == f32 and a.ndim == 2 for a in (rays.d, hit.p, hit.ng, ns))
             and hit.eps.dtype == f32 and ior.dtype.kind == "f" and (wt is None or (wt.dtype == f32 and wt.ndim == 2)))
 
 
@@ -273,37 +273,64 @@ def _split_smooth_by_kernel(walker, rays, hit, ns, wt, u):
 
 
 @njit
-def _pairwise(a, lo, n):
-    """NumPy's pairwise sum of a[lo:lo + n] (its add loops' ``pairwise_sum``, as ``ndarray.sum``
-    along a contiguous row runs it: sequential from -0.0 below 8 terms, eight interleaved partial
-    sums up to 128, halves above)."""
+def _pairwise_block(a, lo, n):
+    """NumPy's pairwise sum (its add loops' ``pairwise_sum``, as ``ndarray.sum`` along a contiguous
+    row runs it) of a[lo:lo + n] for n <= 128: sequential from -0.0 below 8 terms, else eight
+    interleaved partial sums."""
     if n < 8:
         res = -0.0
         for i in range(lo, lo + n):
             res += a[i]
         return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - n % 8:
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit
+def _pairwise_240(a, lo, n):
+    """Up to 240 terms (both halves within a block): above 128 NumPy sums two halves, the first a
+    multiple of 8 (numba's cache cannot reload recursive functions, so the levels are spelled out)."""
     if n <= 128:
-        r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
-        r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
-        i = 8
-        while i < n - n % 8:
-            r0 += a[lo + i]
-            r1 += a[lo + i + 1]
-            r2 += a[lo + i + 2]
-            r3 += a[lo + i + 3]
-            r4 += a[lo + i + 4]
-            r5 += a[lo + i + 5]
-            r6 += a[lo + i + 6]
-            r7 += a[lo + i + 7]
-            i += 8
-        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-        while i < n:
-            res += a[lo + i]
-            i += 1
-        return res
+        return _pairwise_block(a, lo, n)
     half = n // 2
     half -= half % 8
-    return _pairwise(a, lo, half) + _pairwise(a, lo + half, n - half)
+    return _pairwise_block(a, lo, half) + _pairwise_block(a, lo + half, n - half)
+
+
+@njit
+def _pairwise_460(a, lo, n):
+    """Up to 460 terms (halves within _pairwise_240's bound)."""
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    half = n // 2
+    half -= half % 8
+    return _pairwise_240(a, lo, half) + _pairwise_240(a, lo + half, n - half)
+
+
+@njit
+def _pairwise(a, lo, n):
+    """NumPy's pairwise sum of a[lo:lo + n] for n <= 900 (_fits_glass_kernel keeps grids within it)."""
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    half = n // 2
+    half -= half % 8
+    return _pairwise_460(a, lo, half) + _pairwise_460(a, lo + half, n - half)
 
 
 @njit
