@@ -8,7 +8,7 @@ from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.scene.model import Camera, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
-from opal_diffraction.core.transport import wavelengths
+from opal_diffraction.core.transport import walker as walker_module, wavelengths
 from opal_diffraction.core.transport.walker import Rays, SpecularWalker
 from opal_diffraction.core.util.jit import AVAILABLE, kernel_mode
 
@@ -88,3 +88,43 @@ def test_pairwise_row_sum_is_numpys(n):
     a = np.random.default_rng(n).random((4, n)) * 10.0 ** np.random.default_rng(n + 1).uniform(-8, 8, (4, n))
     for row, s in zip(a, a.sum(axis=1)):
         assert wavelengths._pairwise(row, 0, n) == s
+
+
+def _same_hits(a, b):
+    for f in ("p", "ng", "ns", "cos_i", "front", "mat", "eps", "prim", "bu", "bv"):
+        x, y = getattr(a, f), getattr(b, f)
+        assert x.dtype == y.dtype, f
+        np.testing.assert_array_equal(x, y, err_msg=f)
+    assert (a.ns is a.ng) == (b.ns is b.ng)
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+def test_hit_info_kernel_is_bit_identical(smooth):
+    prepared = _glass(smooth)
+    walker, rays, _, _ = _hits(prepared)
+    h = prepared.accel.intersect(rays.o, rays.d)
+    args = (rays, h.t, h.prim, h.u, h.v)
+    assert (h.prim >= 0).all() and walker_module._fits_hit_kernel(rays, h.t, prepared)  # the kernel runs
+    with kernel_mode("numpy"):
+        ref = walker.hit_info(*args)
+    with kernel_mode("auto"):
+        ker = walker.hit_info(*args)
+    _same_hits(ref, ker)
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+@pytest.mark.parametrize("mono", [False, True])
+def test_dielectric_bounce_kernel_is_bit_identical(smooth, mono):
+    prepared = _glass(smooth, tint=(1, 0.8, 0.5))
+    walker, rays, hit, u = _hits(prepared)
+    if mono:
+        lam = np.random.default_rng(5).integers(0, prepared.grid.n, len(rays))
+        rays = Rays(rays.o, rays.d, rays.pix, rays.w[np.arange(len(rays)), lam], lam, rays.depth, rays.u_lam)
+    assert walker_module._fits_dielectric_kernel(rays, hit, walker.specular_normal(rays, hit), prepared.materials.ior)
+    out = {}
+    for mode in ("numpy", "auto"):
+        with kernel_mode(mode):
+            out[mode] = walker.dielectric_bounce(rays, hit, None, u)
+    _same_rays(out["numpy"][0], out["auto"][0])
+    np.testing.assert_array_equal(out["numpy"][1], out["auto"][1])
+    assert 0.05 < out["auto"][1].mean() < 0.95  # both reflections and refractions
