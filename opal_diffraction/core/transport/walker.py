@@ -164,6 +164,29 @@ class Rays:
         return None if self.state is None else self.state.rd
 
 
+def _concat_all(parts: list) -> Rays:
+    """Rays.concat of parts[0], parts[1], ... in order: one concatenation per field where they
+    are alike (spectral or mono weights, no basis, the same state fields), else pairwise."""
+    if len(parts) == 1:
+        return parts[0]
+    a = parts[0]
+    alike = all(r.basis is None and (r.w is None) == (a.w is None) and (r.lam is None) == (a.lam is None)
+                and (r.state is None) == (a.state is None) and type(r.state) is type(a.state)
+                and (r.state is None or (r.state.rd is None) == (a.state.rd is None)) for r in parts)
+    if not alike:
+        nxt = a
+        for r in parts[1:]:
+            nxt = Rays.concat(nxt, r)
+        return nxt
+    cat = lambda f: None if getattr(a, f) is None else np.concatenate([getattr(r, f) for r in parts])  # noqa: E731
+    state = None
+    if a.state is not None:
+        st = [r.state._arrays() for r in parts]
+        state = type(a.state)(*(None if x is None else np.concatenate([s[i] for s in st])
+                                for i, x in enumerate(st[0])))
+    return Rays(cat("o"), cat("d"), cat("pix"), cat("w"), cat("lam"), cat("depth"), cat("u_lam"), state)
+
+
 @dataclass
 class Hit:
     p: np.ndarray     # (B, 3) float32 hit points
@@ -427,10 +450,7 @@ class SpecularWalker:
         out = [r for r in out if len(r)]
         if not out:
             return rays.take(np.zeros(len(rays), bool)), children, child_hits
-        nxt = out[0]
-        for r in out[1:]:
-            nxt = Rays.concat(nxt, r)
-        return nxt, children, child_hits
+        return _concat_all(out), children, child_hits
 
     # ----------------------------------------------------------------- operations for subclasses and helpers
     def hit_info(self, rays: Rays, t, prim, bu, bv) -> Hit:
