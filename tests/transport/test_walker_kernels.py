@@ -128,3 +128,32 @@ def test_dielectric_bounce_kernel_is_bit_identical(smooth, mono):
     _same_rays(out["numpy"][0], out["auto"][0])
     np.testing.assert_array_equal(out["numpy"][1], out["auto"][1])
     assert 0.05 < out["auto"][1].mean() < 0.95  # both reflections and refractions
+
+
+def test_shading_normal_kernel_on_mixed_flat_smooth_and_bad_normals():
+    """Per-corner normals: smooth triangles, flat-shaded ones (one normal, some pointing inwards)
+    and corners that interpolate to zero: hit_info's kernel gives the reference's bits."""
+    v, t = primitives.icosphere((0, 0, 0), 1.0, subdivisions=2)
+    vn = v / np.linalg.norm(v, axis=1, keepdims=True)
+    cn = vn[t].astype(np.float64)  # (T, 3, 3)
+    face = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    face /= np.linalg.norm(face, axis=1, keepdims=True)
+    rng = np.random.default_rng(3)
+    kind = rng.integers(0, 4, len(t))
+    cn[kind == 1] = face[kind == 1, None, :]  # flat-shaded
+    cn[kind == 2] = -face[kind == 2, None, :]  # flat, pointing inwards
+    cn[kind == 3, 1] = -cn[kind == 3, 0]  # opposite corners: interpolates towards zero
+    cn[kind == 3, 2] = cn[kind == 3, 0]
+    s = Scene(materials=Materials.from_list([{"kind": "DIELECTRIC", "color": (1, 1, 1), "dispersion": "DIAMOND"}]))
+    s.add_mesh(v, t, material=0, normals=cn)
+    s.camera = Camera()
+    prepared = prepare(s, RenderSettings())
+    assert prepared.smooth_triangles.any() and not prepared.smooth_triangles.all()
+    assert prepared.corner_normals.dtype == np.float32  # the kernel runs
+    walker, rays, _, _ = _hits(prepared, b=20000)
+    h = prepared.accel.intersect(rays.o, rays.d)
+    with kernel_mode("numpy"):
+        ref = walker.hit_info(rays, h.t, h.prim, h.u, h.v)
+    with kernel_mode("auto"):
+        ker = walker.hit_info(rays, h.t, h.prim, h.u, h.v)
+    _same_hits(ref, ker)

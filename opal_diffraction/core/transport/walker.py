@@ -599,13 +599,44 @@ def _hit_info_by_kernel(prepared, rays: Rays, t, prim, bu, bv) -> Hit:
     mat, eps = np.empty(b, prepared.tri_material.dtype), np.empty(b, np.float32)
     _hit_kernel(rays.o, rays.d, t, prim, prepared.tri_normal, prepared.tri_material, prepared.tri_offset,
                 p, ng, cos_i, front, mat, eps)
-    if prepared.corner_normals is None:
+    cn = prepared.corner_normals
+    if cn is None:
         ns = ng
+    elif cn.dtype == _F32 and bu.dtype == bv.dtype == _F32:  # hit_shading_normals, then flipped with ng
+        ns = np.empty((b, 3), np.float32)
+        _shading_kernel(cn, prepared.smooth_triangles, prim, bu, bv, prepared.tri_normal, front, ns)
     else:  # on the triangle's side first, then flipped with ng: both face the incoming ray's side
-        ns = hit_shading_normals(prepared.corner_normals, prepared.smooth_triangles, prim, bu, bv,
-                                 np.take(prepared.tri_normal, prim, axis=0))
+        ns = hit_shading_normals(cn, prepared.smooth_triangles, prim, bu, bv, np.take(prepared.tri_normal, prim, axis=0))
         ns *= np.where(front, np.float32(1), np.float32(-1))[:, None]
     return Hit(p, ng, ns, cos_i, front, mat, eps, prim, bu, bv)
+
+
+@njit
+def _shading_kernel(cn, smooth, prim, bu, bv, tri_normal, front, ns):
+    """hit_shading_normals' float32 lines per hit (einsum's sequential sums over the three
+    corners and components), then the flip to the incoming ray's side."""
+    one = np.float32(1.0)
+    for i in range(prim.shape[0]):
+        j = prim[i]
+        g0, g1, g2 = tri_normal[j, 0], tri_normal[j, 1], tri_normal[j, 2]
+        if smooth[j]:  # shading_normals: interpolated, normalised, on ng's side
+            u, v = bu[i], bv[i]
+            w0 = one - u - v
+            n0 = (w0 * cn[j, 0, 0] + u * cn[j, 1, 0]) + v * cn[j, 2, 0]
+            n1 = (w0 * cn[j, 0, 1] + u * cn[j, 1, 1]) + v * cn[j, 2, 1]
+            n2 = (w0 * cn[j, 0, 2] + u * cn[j, 1, 2]) + v * cn[j, 2, 2]
+            l2 = (n0 * n0 + n1 * n1) + n2 * n2
+            sg = -one if (n0 * g0 + n1 * g1) + n2 * g2 < 0 else one
+            sc = sg / np.sqrt(max(l2, np.float32(1e-30)))
+            n0, n1, n2 = n0 * sc, n1 * sc, n2 * sc
+            if l2 <= np.float32(1e-12):  # interpolated to zero: ng
+                n0, n1, n2 = g0, g1, g2
+        else:  # a flat-shaded triangle: its corner normal on ng's side
+            n0, n1, n2 = cn[j, 0, 0], cn[j, 0, 1], cn[j, 0, 2]
+            sg = -one if (n0 * g0 + n1 * g1) + n2 * g2 < 0 else one
+            n0, n1, n2 = n0 * sg, n1 * sg, n2 * sg
+        f = one if front[i] else -one
+        ns[i, 0], ns[i, 1], ns[i, 2] = n0 * f, n1 * f, n2 * f
 
 
 @njit
