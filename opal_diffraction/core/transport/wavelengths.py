@@ -25,6 +25,11 @@ one-wavelength pick:
   drawn from p with weights w_k (1 - F_k) / ((1 - P) K p_k): the facets' white
   reflections of the lights keep their colour exact, only light that enters the glass is split.
 
+Smooth glass's white reflect / refract choice, the draw and the children's refraction run as one
+numba loop per batch when kernels are on (``_glass_kernel``, core/util/jit.py): per ray one
+Fresnel row, NumPy's pairwise row sums reproduced, no (B, n) temporaries; bit-identical to the
+NumPy lines, which stay the reference.
+
 The three choices are RenderSettings fields (core/scene/settings.py), passed down as arguments, so
 benchmarks/bench_dispersion.py can measure each against the others.
 """
