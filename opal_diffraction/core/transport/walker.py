@@ -609,7 +609,7 @@ def _hit_info_by_kernel(prepared, rays: Rays, t, prim, bu, bv) -> Hit:
     cn = prepared.corner_normals
     if cn is None:
         ns = ng
-    elif cn.dtype == _F32 and bu.dtype == bv.dtype == _F32:  # hit_shading_normals, then flipped with ng
+    elif cn.dtype == _F32 and all(isinstance(x, np.ndarray) and x.dtype == _F32 for x in (bu, bv)):  # hit_shading_normals, then flipped with ng
         ns = np.empty((b, 3), np.float32)
         _shading_kernel(cn, prepared.smooth_triangles, prim, bu, bv, prepared.tri_normal, front, ns)
     else:  # on the triangle's side first, then flipped with ng: both face the incoming ray's side
