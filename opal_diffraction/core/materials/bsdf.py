@@ -44,6 +44,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..spectral.optics import fresnel_dielectric
+from ..util.jit import kernels_enabled, njit
 from .ggx import ggx_d as _ggx_d, reflection_terms as _eval_reflection_common, smith_lambda as _lambda
 
 __all__ = [
@@ -392,11 +393,33 @@ def cosine_hemisphere(n, rng):
     row of ``rng`` (a Generator or the eye pass's pixel sampler)."""
     b = len(n)
     u1, u2 = rng.random(b, _F32), rng.random(b, _F32)
+    if kernels_enabled() and isinstance(n, np.ndarray) and n.dtype == _F32 and n.ndim == 2 and b:
+        wi, cos = np.empty((b, 3), _F32), np.empty(b, _F32)
+        _cosine_kernel(n, u1, u2, _F32(2 * np.pi), wi, cos)  # NumPy's own float32 sin / cos may differ by an ulp
+        return wi, cos
     r, phi = np.sqrt(u1), _F32(2 * np.pi) * u2
     tu, tv = tangent_frame(n)
     cos = np.sqrt(np.maximum(_F32(1) - u1, 0))
     wi = (r * np.cos(phi))[:, None] * tu + (r * np.sin(phi))[:, None] * tv + cos[:, None] * n
     return wi.astype(_F32), cos.astype(_F32)
+
+
+@njit
+def _cosine_kernel(n, u1, u2, two_pi, wi, cos_out):
+    """cosine_hemisphere's float32 lines per row (tangent_frame's basis inlined)."""
+    one, zero = np.float32(1.0), np.float32(0.0)
+    for i in range(n.shape[0]):
+        x, y, z = n[i, 0], n[i, 1], n[i, 2]
+        sg = one if z >= zero else -one
+        a = -one / (sg + z)
+        b = x * y * a
+        r, phi = np.sqrt(u1[i]), two_pi * u2[i]
+        c = np.sqrt(max(one - u1[i], zero))
+        p, q = r * np.cos(phi), r * np.sin(phi)
+        wi[i, 0] = (p * (one + sg * x * x * a) + q * b) + c * x
+        wi[i, 1] = (p * (sg * b) + q * (sg + y * y * a)) + c * y
+        wi[i, 2] = (p * (-sg * x) + q * -y) + c * z
+        cos_out[i] = c
 
 
 def _frame(ns):

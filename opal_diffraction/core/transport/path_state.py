@@ -66,7 +66,8 @@ class PathState:
 
     def take(self, idx: np.ndarray) -> "PathState":
         """The rows at indices ``idx``."""
-        return type(self)(*(None if v is None else v.take(idx, axis=0) for v in self._arrays()))
+        d = self.__dict__
+        return type(self)(*[None if d[k] is None else d[k].take(idx, axis=0) for k in _names(type(self))])
 
     def copy(self) -> "PathState":
         """A new state holding the same arrays (fields reassigned on it leave this one alone)."""
@@ -79,4 +80,17 @@ class PathState:
         return type(a)(*(None if x is None else np.concatenate([x, y]) for x, y in zip(a._arrays(), b._arrays())))
 
     def _arrays(self) -> tuple:
-        return tuple(getattr(self, f.name) for f in fields(self))
+        d = self.__dict__
+        return tuple(d[k] for k in _names(type(self)))
+
+
+_NAMES: dict = {}
+
+
+def _names(cls) -> tuple:
+    """The field names of a PathState class (a subclass adds its own), looked up once per class:
+    dataclasses.fields costs more than a take of a small array."""
+    names = _NAMES.get(cls)
+    if names is None:
+        names = _NAMES[cls] = tuple(f.name for f in fields(cls))
+    return names

@@ -40,6 +40,13 @@ path goes on (``survives``: bounce limit, Russian roulette). ``SpecularWalker``'
 methods under "hooks") and its public operations (``hit_info``, ``specular_normal``,
 ``tinted_weight``, ``split_white``, ``spawn``, ``rays_cast``) are the only extension point: code
 outside this module uses nothing else of it, so its internals may change freely.
+
+Compiled kernels (core/util/jit.py; the NumPy lines stay the reference): ``hit_info`` (points,
+facing normals, the shading normals' interpolation) and ``dielectric_bounce`` (Fresnel, the
+sampled mirror or Snell direction, the offset) run one numba loop per batch when kernels are
+on, doing the reference's float32 operations in its order (einsum's sequential dot products),
+so their results are bit-identical (tests/transport/test_walker_kernels.py). A step's
+continuing populations are joined with one concatenation per field.
 """
 
 from __future__ import annotations
@@ -53,6 +60,7 @@ from . import wavelengths
 from .path_state import PathState
 from ..materials.spectra import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
 from ..spectral.optics import fresnel_dielectric, reflect, refract
+from ..util.jit import kernels_enabled, njit
 
 __all__ = ["Rays", "Hit", "SpecularWalker", "shading_normals", "hit_shading_normals", "smooth_triangles", "light_spectrum_of", "valid_specular_normal", "MICROFACET", "GRATING"]
 
@@ -161,6 +169,29 @@ class Rays:
     def differentials(self) -> np.ndarray | None:
         """The rays' differentials (B, 5, 3) (core/sampling/footprint.py), or None where not carried."""
         return None if self.state is None else self.state.rd
+
+
+def _concat_all(parts: list) -> Rays:
+    """Rays.concat of parts[0], parts[1], ... in order: one concatenation per field where they
+    are alike (spectral or mono weights, no basis, the same state fields), else pairwise."""
+    if len(parts) == 1:
+        return parts[0]
+    a = parts[0]
+    alike = all(r.basis is None and (r.w is None) == (a.w is None) and (r.lam is None) == (a.lam is None)
+                and (r.state is None) == (a.state is None) and type(r.state) is type(a.state)
+                and (r.state is None or (r.state.rd is None) == (a.state.rd is None)) for r in parts)
+    if not alike:
+        nxt = a
+        for r in parts[1:]:
+            nxt = Rays.concat(nxt, r)
+        return nxt
+    cat = lambda f: None if getattr(a, f) is None else np.concatenate([getattr(r, f) for r in parts])  # noqa: E731
+    state = None
+    if a.state is not None:
+        st = [r.state._arrays() for r in parts]
+        state = type(a.state)(*(None if x is None else np.concatenate([s[i] for s in st])
+                                for i, x in enumerate(st[0])))
+    return Rays(cat("o"), cat("d"), cat("pix"), cat("w"), cat("lam"), cat("depth"), cat("u_lam"), state)
 
 
 @dataclass
@@ -426,16 +457,15 @@ class SpecularWalker:
         out = [r for r in out if len(r)]
         if not out:
             return rays.take(np.zeros(len(rays), bool)), children, child_hits
-        nxt = out[0]
-        for r in out[1:]:
-            nxt = Rays.concat(nxt, r)
-        return nxt, children, child_hits
+        return _concat_all(out), children, child_hits
 
     # ----------------------------------------------------------------- operations for subclasses and helpers
     def hit_info(self, rays: Rays, t, prim, bu, bv) -> Hit:
         """The hits (Hit) of ``rays`` at distances ``t`` on triangles ``prim`` with barycentrics
         (bu, bv): point, normals facing the ray, material, offset."""
         prepared = self.prepared
+        if kernels_enabled() and _fits_hit_kernel(rays, t, prepared):
+            return _hit_info_by_kernel(prepared, rays, t, prim, bu, bv)
         p = rays.o + t[:, None] * rays.d
         ng0 = np.take(prepared.tri_normal, prim, axis=0)  # row gathers: np.take is several times faster
         cos = -np.einsum("ij,ij->i", rays.d, ng0)
@@ -491,10 +521,17 @@ class SpecularWalker:
         mirror is chosen): one pass over (B, 3) for both branches."""
         prepared = self.prepared
         ior = prepared.materials.ior
+        ns = self.specular_normal(rays, hit)
+        if kernels_enabled() and _fits_dielectric_kernel(rays, hit, ns, ior):
+            d, o, transmitted = _dielectric_by_kernel(ior, rays, hit, ns, rng.random(len(rays)) if u is None else u)
+            out = rays.moved(o, d, self.tinted_weight(rays, hit))
+            if out.differentials is not None:  # ray differentials (core/sampling/footprint.py)
+                e = _eta(ior, rays, hit)
+                out.state.rd = footprint.refract_differentials(rays.differentials, rays.o, rays.d, hit.p, ns, d, e)
+            return out, transmitted
         # constant over the grid for white rays
         n = np.take(ior[:, 0], hit.mat) if rays.lam is None else ior[hit.mat, rays.lam]
         eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
-        ns = self.specular_normal(rays, hit)
         cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
         cos = np.asarray(cos_s, np.float32)
         fr, _ = fresnel_dielectric(np.abs(cos), np.where(hit.front, n, 1.0 / n).astype(np.float32))
@@ -545,3 +582,138 @@ class SpecularWalker:
                          lam.astype(np.int64), rays.depth[parent], rays.u_lam[parent],
                          None if rays.state is None else rays.state.take(parent))
         return children, hit.take(parent)
+
+
+# ---------------------------------------------------------------------------------- compiled kernels
+_F32 = np.dtype(np.float32)
+
+
+def _rows3(*arrays) -> bool:
+    return all(isinstance(a, np.ndarray) and a.dtype == _F32 and a.ndim == 2 and a.shape[1:] == (3,) for a in arrays)
+
+
+def _fits_hit_kernel(rays: Rays, t, prepared) -> bool:
+    """The arrays _hit_kernel is compiled for: float32 rays, distances and normals."""
+    return (len(rays) > 0 and _rows3(rays.o, rays.d, prepared.tri_normal) and isinstance(t, np.ndarray)
+            and t.dtype == _F32 and prepared.tri_offset.dtype == _F32)
+
+
+def _hit_info_by_kernel(prepared, rays: Rays, t, prim, bu, bv) -> Hit:
+    """hit_info's lines by _hit_kernel (the shading normals by hit_shading_normals)."""
+    b = len(rays)
+    p, ng = np.empty((b, 3), np.float32), np.empty((b, 3), np.float32)
+    cos_i, front = np.empty(b, np.float32), np.empty(b, np.bool_)
+    mat, eps = np.empty(b, prepared.tri_material.dtype), np.empty(b, np.float32)
+    _hit_kernel(rays.o, rays.d, t, prim, prepared.tri_normal, prepared.tri_material, prepared.tri_offset,
+                p, ng, cos_i, front, mat, eps)
+    cn = prepared.corner_normals
+    if cn is None:
+        ns = ng
+    elif cn.dtype == _F32 and all(isinstance(x, np.ndarray) and x.dtype == _F32 for x in (bu, bv)):  # hit_shading_normals, then flipped with ng
+        ns = np.empty((b, 3), np.float32)
+        _shading_kernel(cn, prepared.smooth_triangles, prim, bu, bv, prepared.tri_normal, front, ns)
+    else:  # on the triangle's side first, then flipped with ng: both face the incoming ray's side
+        ns = hit_shading_normals(cn, prepared.smooth_triangles, prim, bu, bv, np.take(prepared.tri_normal, prim, axis=0))
+        ns *= np.where(front, np.float32(1), np.float32(-1))[:, None]
+    return Hit(p, ng, ns, cos_i, front, mat, eps, prim, bu, bv)
+
+
+@njit
+def _shading_kernel(cn, smooth, prim, bu, bv, tri_normal, front, ns):
+    """hit_shading_normals' float32 lines per hit (einsum's sequential sums over the three
+    corners and components), then the flip to the incoming ray's side."""
+    one = np.float32(1.0)
+    for i in range(prim.shape[0]):
+        j = prim[i]
+        g0, g1, g2 = tri_normal[j, 0], tri_normal[j, 1], tri_normal[j, 2]
+        if smooth[j]:  # shading_normals: interpolated, normalised, on ng's side
+            u, v = bu[i], bv[i]
+            w0 = one - u - v
+            n0 = (w0 * cn[j, 0, 0] + u * cn[j, 1, 0]) + v * cn[j, 2, 0]
+            n1 = (w0 * cn[j, 0, 1] + u * cn[j, 1, 1]) + v * cn[j, 2, 1]
+            n2 = (w0 * cn[j, 0, 2] + u * cn[j, 1, 2]) + v * cn[j, 2, 2]
+            l2 = (n0 * n0 + n1 * n1) + n2 * n2
+            sg = -one if (n0 * g0 + n1 * g1) + n2 * g2 < 0 else one
+            sc = sg / np.sqrt(max(l2, np.float32(1e-30)))
+            n0, n1, n2 = n0 * sc, n1 * sc, n2 * sc
+            if l2 <= np.float32(1e-12):  # interpolated to zero: ng
+                n0, n1, n2 = g0, g1, g2
+        else:  # a flat-shaded triangle: its corner normal on ng's side
+            n0, n1, n2 = cn[j, 0, 0], cn[j, 0, 1], cn[j, 0, 2]
+            sg = -one if (n0 * g0 + n1 * g1) + n2 * g2 < 0 else one
+            n0, n1, n2 = n0 * sg, n1 * sg, n2 * sg
+        f = one if front[i] else -one
+        ns[i, 0], ns[i, 1], ns[i, 2] = n0 * f, n1 * f, n2 * f
+
+
+@njit
+def _hit_kernel(o, d, t, prim, tri_normal, tri_material, tri_offset, p, ng, cos_i, front, mat, eps):
+    """hit_info's NumPy lines per hit (float32, einsum's order of the dot product)."""
+    for i in range(prim.shape[0]):
+        j = prim[i]
+        for k in range(3):
+            p[i, k] = o[i, k] + t[i] * d[i, k]
+        c = -((d[i, 0] * tri_normal[j, 0] + d[i, 1] * tri_normal[j, 1]) + d[i, 2] * tri_normal[j, 2])
+        f = c > 0
+        s = np.float32(1.0) if f else np.float32(-1.0)
+        for k in range(3):
+            ng[i, k] = tri_normal[j, k] * s
+        cos_i[i], front[i], mat[i], eps[i] = abs(c), f, tri_material[j], tri_offset[j]
+
+
+def _fits_dielectric_kernel(rays: Rays, hit: Hit, ns, ior) -> bool:
+    """The arrays _dielectric_kernel is compiled for (float32 rays and hits, a float index table)."""
+    return (len(rays) > 0 and _rows3(rays.d, hit.p, hit.ng, ns) and hit.eps.dtype == _F32
+            and hit.cos_i.dtype == _F32 and ior.dtype.kind == "f")
+
+
+def _eta(ior, rays: Rays, hit: Hit) -> np.ndarray:
+    """(B,) float32 n_i / n_t of the rays (white ones: the grid's first wavelength)."""
+    n = np.take(ior[:, 0], hit.mat) if rays.lam is None else ior[hit.mat, rays.lam]
+    return np.where(hit.front, 1.0 / n, n).astype(np.float32)
+
+
+def _dielectric_by_kernel(ior, rays: Rays, hit: Hit, ns, u):
+    """dielectric_bounce's directions, origins and transmitted flags by _dielectric_kernel."""
+    b = len(rays)
+    d, o, transmitted = np.empty((b, 3), np.float32), np.empty((b, 3), np.float32), np.empty(b, np.bool_)
+    lam = np.zeros(b, np.int64) if rays.lam is None else rays.lam
+    cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
+    _dielectric_kernel(ior, ior.dtype.type(1.0), hit.mat, lam, hit.front, np.asarray(cos_s, np.float32),
+                       np.asarray(u, np.float64), rays.d, ns, hit.ng, hit.p, hit.eps, ns is hit.ng, d, o, transmitted)
+    return d, o, transmitted
+
+
+@njit
+def _dielectric_kernel(ior, one_n, mat, lam, front, cos_s, u, d, ns, ng, p, eps, flat, d_out, o_out, transmitted):
+    """dielectric_bounce's NumPy lines per ray: the index at the ray's wavelength (in the table's
+    precision), fresnel_dielectric in float32, the Fresnel-sampled mirror or Snell direction
+    a d + b n, the refraction about ng where one about ns stays on the incident side, the offset."""
+    one, two, zero, tiny = np.float32(1.0), np.float32(2.0), np.float32(0.0), np.float32(1e-30)
+    half = one / (one + one)
+    for i in range(mat.shape[0]):
+        nn = ior[mat[i], lam[i]]
+        inv = one_n / nn
+        e = np.float32(inv if front[i] else nn)  # n_i / n_t
+        fe = np.float32(nn if front[i] else inv)  # n_t / n_i, fresnel_dielectric's eta
+        c = cos_s[i]
+        ca = min(max(abs(c), zero), one)
+        sin2_t = (one - ca * ca) / (fe * fe)
+        ct = np.sqrt(max(one - sin2_t, zero))
+        r_par = (fe * ca - ct) / max(fe * ca + ct, tiny)
+        r_perp = (ca - fe * ct) / max(ca + fe * ct, tiny)
+        fr = one if sin2_t >= one else half * (r_par * r_par + r_perp * r_perp)
+        refl = u[i] < fr
+        cos_t = np.sqrt(max(zero, one - e * e * max(zero, one - c * c)))
+        a = one if refl else e
+        bb = two * c if refl else e * c - cos_t
+        for k in range(3):
+            d_out[i, k] = a * d[i, k] + bb * ns[i, k]
+        dn = (d_out[i, 0] * ng[i, 0] + d_out[i, 1] * ng[i, 1]) + d_out[i, 2] * ng[i, 2]
+        if not flat and not refl and dn >= 0:  # about ns onto the incident side: about ng instead
+            wavelengths._refract32(d[i], ng[i], e, d_out[i])
+            dn = (d_out[i, 0] * ng[i, 0] + d_out[i, 1] * ng[i, 1]) + d_out[i, 2] * ng[i, 2]
+        sd = one if dn > 0 else -one
+        for k in range(3):
+            o_out[i, k] = p[i, k] + (eps[i] * sd) * ng[i, k]
+        transmitted[i] = sd < 0

@@ -25,6 +25,11 @@ one-wavelength pick:
   drawn from p with weights w_k (1 - F_k) / ((1 - P) K p_k): the facets' white
   reflections of the lights keep their colour exact, only light that enters the glass is split.
 
+Smooth glass's white reflect / refract choice, the draw and the children's refraction run as one
+numba loop per batch when kernels are on (``_glass_kernel``, core/util/jit.py): per ray one
+Fresnel row, NumPy's pairwise row sums reproduced, no (B, n) temporaries; bit-identical to the
+NumPy lines, which stay the reference.
+
 The three choices are RenderSettings fields (core/scene/settings.py), passed down as arguments, so
 benchmarks/bench_dispersion.py can measure each against the others.
 """
@@ -34,6 +39,8 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+
+from ..util.jit import kernels_enabled, njit
 
 __all__ = ["DEFENSIVE", "sensitivity", "importance", "sample_indices", "rotated", "draw"]
 
@@ -159,13 +166,15 @@ def split_at_glass(walker, rays, hit, rng, u=None):
         return children, child_hits, None
     grid = prepared.grid
     b = len(rays)
+    ns = walker.specular_normal(rays, hit)
+    wt = walker.tinted_weight(rays, hit)  # (B, n) or None: the glass's tint applies to both branches
+    if kernels_enabled() and _fits_glass_kernel(rays, hit, ns, wt, prepared.materials.ior):
+        return children, child_hits, _split_smooth_by_kernel(walker, rays, hit, ns, wt, u)
     ior = prepared.materials.ior[hit.mat].astype(np.float64)  # (B, n)
     eta = np.where(hit.front[:, None], 1.0 / ior, ior)
-    ns = walker.specular_normal(rays, hit)
     cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
     fr, _ = fresnel_dielectric(np.abs(np.asarray(cos_s, np.float64))[:, None],
                                np.where(hit.front[:, None], ior, 1.0 / ior))  # (B, n)
-    wt = walker.tinted_weight(rays, hit)  # (B, n) or None: the glass's tint applies to both branches
     q = importance(grid, wt, b, settings.dispersion_importance)
     qs = q.sum(axis=1)
     p_refl = np.where(qs > 0, (q * fr).sum(axis=1) / np.where(qs > 0, qs, 1.0), 1.0)
@@ -214,6 +223,231 @@ def split_at_glass(walker, rays, hit, rng, u=None):
         if len(mono):
             walker.spawn(mono)
     return children, child_hits, white
+
+
+def _fits_glass_kernel(rays, hit, ns, wt, ior) -> bool:
+    """The arrays _glass_kernel is compiled for: float32 rows of 3 and (B, n) weights."""
+    f32 = np.dtype(np.float32)
+    return (len(rays) > 0 and ior.shape[1] <= 900 and all(a.dtype == f32 and a.ndim == 2 for a in (rays.d, hit.p, hit.ng, ns))
+            and hit.eps.dtype == f32 and ior.dtype.kind == "f" and (wt is None or (wt.dtype == f32 and wt.ndim == 2)))
+
+
+def _split_smooth_by_kernel(walker, rays, hit, ns, wt, u):
+    """split_at_glass's smooth-glass lines by _glass_kernel: (white reflected rays or None); the
+    refracted mono children go to ``walker.spawn``. The same operations in the same order and
+    precisions as the NumPy lines (NumPy's pairwise row sums included), so the same bits."""
+    from ..sampling import footprint
+
+    prepared = walker.prepared
+    s, n = prepared.settings, prepared.grid.n
+    b, k = len(rays), int(s.dispersion_branches)
+    flat = ns is hit.ng
+    cos_s = hit.cos_i if flat else -np.einsum("ij,ij->i", rays.d, ns)
+    sens = sensitivity(prepared.grid, white=wt is None) if s.dispersion_importance else np.ones(n)
+    refl, wr = np.empty(b, np.bool_), np.empty((b, n), np.float32)
+    rd, ro = np.empty((b, 3), np.float32), np.empty((b, 3), np.float32)
+    parent, lam = np.empty(b * k, np.int64), np.empty(b * k, np.int64)
+    w, e = np.empty(b * k, np.float32), np.empty(b * k, np.float32)
+    t_dir, o, side = np.empty((b * k, 3), np.float32), np.empty((b * k, 3), np.float32), np.empty(b * k, np.float32)
+    u = np.asarray(u, np.float64)
+    m = _glass_kernel(prepared.materials.ior, hit.mat, hit.front, np.asarray(cos_s, np.float32),
+                      wr if wt is None else wt, wt is not None, sens, bool(s.dispersion_importance) and DEFENSIVE > 0,
+                      DEFENSIVE, u, np.asarray(rays.u_lam, np.float64), k, rays.d, ns, hit.ng, hit.p, hit.eps,
+                      flat, refl, wr, rd, ro, parent, lam, w, e, t_dir, o, side)
+    white = None
+    if refl.any():
+        idx = np.flatnonzero(refl)
+        r = rays.take(idx)
+        white = r.moved(ro[idx], rd[idx], wr[idx])
+        if white.differentials is not None:
+            white.state.rd = footprint.reflect_differentials(r.differentials, r.o, r.d, hit.p[idx], ns[idx])
+        white = walker.after_delta(white, np.zeros(len(white), bool))
+    if m:
+        parent, t_dir, side = parent[:m], t_dir[:m], side[:m]
+        state = None if rays.state is None else rays.state.take(parent)
+        mono = type(rays)(o[:m], t_dir, rays.pix.take(parent), w[:m], lam[:m], rays.depth.take(parent) + 1,
+                          rays.u_lam.take(parent), state)
+        if mono.differentials is not None:
+            mono.state.rd = footprint.refract_differentials(state.rd, rays.o.take(parent, axis=0),
+                                                            rays.d.take(parent, axis=0), hit.p.take(parent, axis=0),
+                                                            ns.take(parent, axis=0), t_dir, e[:m])
+        mono = walker.after_delta(mono, side < 0)
+        if len(mono):
+            walker.spawn(mono)
+    return white
+
+
+@njit
+def _pairwise_block(a, lo, n):
+    """NumPy's pairwise sum (its add loops' ``pairwise_sum``, as ``ndarray.sum`` along a contiguous
+    row runs it) of a[lo:lo + n] for n <= 128: sequential from -0.0 below 8 terms, else eight
+    interleaved partial sums."""
+    if n < 8:
+        res = -0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - n % 8:
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit
+def _pairwise_240(a, lo, n):
+    """Up to 240 terms (both halves within a block): above 128 NumPy sums two halves, the first a
+    multiple of 8 (numba's cache cannot reload recursive functions, so the levels are spelled out)."""
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    half = n // 2
+    half -= half % 8
+    return _pairwise_block(a, lo, half) + _pairwise_block(a, lo + half, n - half)
+
+
+@njit
+def _pairwise_460(a, lo, n):
+    """Up to 460 terms (halves within _pairwise_240's bound)."""
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    half = n // 2
+    half -= half % 8
+    return _pairwise_240(a, lo, half) + _pairwise_240(a, lo + half, n - half)
+
+
+@njit
+def _pairwise(a, lo, n):
+    """NumPy's pairwise sum of a[lo:lo + n] for n <= 900 (_fits_glass_kernel keeps grids within it)."""
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    half = n // 2
+    half -= half % 8
+    return _pairwise_460(a, lo, half) + _pairwise_460(a, lo + half, n - half)
+
+
+@njit
+def _fresnel64(c, e):
+    """spectral.optics.fresnel_dielectric's lines for one float64 cosine and relative index."""
+    if c < 0.0:
+        c = 0.0
+    if c > 1.0:
+        c = 1.0
+    sin2_t = (1.0 - c * c) / (e * e)
+    t = 1.0 - sin2_t
+    if t < 0.0:
+        t = 0.0
+    cos_t = np.sqrt(t)
+    den_par = e * c + cos_t
+    if den_par < 1e-30:
+        den_par = 1e-30
+    den_perp = c + e * cos_t
+    if den_perp < 1e-30:
+        den_perp = 1e-30
+    r_par = (e * c - cos_t) / den_par
+    r_perp = (c - e * cos_t) / den_perp
+    return 1.0 if sin2_t >= 1.0 else 0.5 * (r_par * r_par + r_perp * r_perp)
+
+
+@njit
+def _refract32(d, n, e, out):
+    """spectral.optics.refract's float32 lines for one direction d (3,), normal n (3,), eta e, into out."""
+    one, two = np.float32(1.0), np.float32(2.0)
+    s = (d[0] * n[0] + d[1] * n[1]) + d[2] * n[2]
+    c = -s
+    sin2_t = e * e * max(np.float32(0.0), one - c * c)
+    if sin2_t > one:  # total internal reflection: the mirror direction
+        for j in range(3):
+            out[j] = d[j] - two * s * n[j]
+        return
+    cos_t = np.sqrt(max(np.float32(0.0), one - sin2_t))
+    g = e * c - cos_t
+    for j in range(3):
+        out[j] = e * d[j] + g * n[j]
+
+
+@njit
+def _glass_kernel(ior, mat, front, cos_s, wt, has_wt, sens, defended, defensive, u, u_lam, k, d, ns, ng, p, eps,
+                  flat, refl, wr, rd, ro, parent, lam, w, e_out, t_dir, o_out, side_out):
+    """split_at_glass's smooth-glass lines per ray: Fresnel per wavelength, the white reflect /
+    refract choice, the reflected ray (``refl``, ``wr``, ``rd``, ``ro``) or ``draw``'s K children
+    refracted at their wavelengths (``parent`` .. ``side_out``, compacted); returns their count."""
+    b, n = mat.shape[0], ior.shape[1]
+    fr, q, qf, pdf, cdf = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    two = np.float32(2.0)
+    m = 0
+    for i in range(b):
+        mi = mat[i]
+        c = abs(np.float64(cos_s[i]))
+        for kk in range(n):
+            nk = np.float64(ior[mi, kk])
+            fr[kk] = _fresnel64(c, nk if front[i] else 1.0 / nk)
+            q[kk] = (np.float64(wt[i, kk]) if has_wt else 1.0) * sens[kk]
+            qf[kk] = q[kk] * fr[kk]
+        qs = _pairwise(q, 0, n)
+        p_refl = _pairwise(qf, 0, n) / qs if qs > 0 else 1.0
+        refl[i] = u[i] < p_refl
+        if refl[i]:  # white reflection, weight w F / P
+            for kk in range(n):
+                v = np.float32(fr[kk] / p_refl)
+                wr[i, kk] = v * wt[i, kk] if has_wt else v
+            s = (d[i, 0] * ns[i, 0] + d[i, 1] * ns[i, 1]) + d[i, 2] * ns[i, 2]
+            for j in range(3):
+                rd[i, j] = d[i, j] - two * s * ns[i, j]
+                ro[i, j] = p[i, j] + eps[i] * ng[i, j]
+            continue
+        if not qs > 0:
+            continue
+        cnt = 0
+        for kk in range(n):
+            pdf[kk] = q[kk] / qs
+            if (wt[i, kk] if has_wt else 1.0) > 0:
+                cnt += 1
+        if defended:  # _defended's uniform share over the support
+            for kk in range(n):
+                sup = 1.0 if (wt[i, kk] if has_wt else 1.0) > 0 else 0.0
+                pdf[kk] = (1.0 - defensive) * pdf[kk] + defensive * sup / max(cnt, 1)
+        acc = 0.0
+        for kk in range(n):
+            acc = pdf[kk] if kk == 0 else acc + pdf[kk]
+            cdf[kk] = acc
+        for j in range(k):  # sample_indices at the rotated numbers
+            thr = np.fmod(np.float64(u_lam[i]) + j / k, 1.0) * cdf[n - 1]
+            li = 0
+            for kk in range(n):
+                if cdf[kk] < thr:
+                    li += 1
+            li = min(li, n - 1)
+            target = np.float64(wt[i, li]) if has_wt else 1.0
+            wv = target / (k * pdf[li]) * (1.0 - fr[li]) / (1.0 - p_refl)
+            if not wv > 0:  # cannot refract (total internal reflection): no child
+                continue
+            nk = np.float64(ior[mi, li])
+            e = np.float32(1.0 / nk if front[i] else nk)
+            _refract32(d[i], ns[i], e, t_dir[m])
+            if not flat:
+                dn = (t_dir[m, 0] * ng[i, 0] + t_dir[m, 1] * ng[i, 1]) + t_dir[m, 2] * ng[i, 2]
+                if dn >= 0:  # refracted about ns onto the incident side: about ng instead
+                    _refract32(d[i], ng[i], e, t_dir[m])
+            dn = (t_dir[m, 0] * ng[i, 0] + t_dir[m, 1] * ng[i, 1]) + t_dir[m, 2] * ng[i, 2]
+            sd = np.float32(1.0) if dn > 0 else np.float32(-1.0)
+            for jj in range(3):
+                o_out[m, jj] = p[i, jj] + (eps[i] * sd) * ng[i, jj]
+            parent[m], lam[m], w[m], e_out[m], side_out[m] = i, li, wv, e, sd
+            m += 1
+    return m
 
 
 #: SPLIT: the mono rays one batch of camera rays may become at most (each ray carries ~150 bytes
