@@ -13,7 +13,7 @@ How:
   ``kernels_enabled()`` is False, so only the reference ever runs (``AVAILABLE``,
   ``UNAVAILABLE_REASON``).
 - Compiled kernels are cached on disk in a user cache folder (``cache_dir()``: ``$NUMBA_CACHE_DIR``
-  if set, else the platform's user cache, ``.../opal_diffraction/numba-<options digest>``):
+  if set, else the platform's user cache, ``.../opal_diffraction/numba-<digest of options and sources>``):
   numba's default, a ``__pycache__`` beside the source, is read-only inside an installed Blender
   extension. NUMBA_CACHE_DIR is read when numba is imported, so it is set here before the import
   (and on numba's config when another add-on imported numba first). The first render after an
@@ -73,12 +73,31 @@ def _user_cache_root() -> str:
     return os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
 
 
+def _sources_digest() -> str:
+    """A digest of the compile options and of every source file of the core. numba's cache notices
+    a changed kernel's own file, but neither changed compile options nor a changed kernel in
+    another file that a cached kernel calls (it would load the stale machine code): a folder per
+    state of the sources makes every change compile afresh."""
+    h = hashlib.sha1(repr(sorted(_OPTIONS.items())).encode())
+    core = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    for folder, dirs, files in sorted(os.walk(core)):
+        dirs.sort()
+        for name in sorted(files):
+            if name.endswith(".py"):
+                try:
+                    with open(os.path.join(folder, name), "rb") as f:
+                        h.update(name.encode() + f.read())
+                except OSError:
+                    continue
+    return h.hexdigest()[:12]
+
+
 def cache_dir() -> str:
     """The writable folder the compiled kernels are cached in (created if missing): NUMBA_CACHE_DIR
-    when set, else ``<user cache>/opal_diffraction/numba-<options>``, else one in the temporary
-    folder. ``<options>`` is a digest of _OPTIONS: numba's cache notices a changed kernel source
-    file, not changed compile options, so other options get another folder."""
-    tag = "numba-" + hashlib.sha1(repr(sorted(_OPTIONS.items())).encode()).hexdigest()[:8]
+    when set, else ``<user cache>/opal_diffraction/numba-<digest>``, else one in the temporary
+    folder. ``<digest>``: of the compile options and the core's sources (``_sources_digest``), so
+    an update of the extension or an edit never loads another version's kernels."""
+    tag = "numba-" + _sources_digest()
     for folder in (os.environ.get("NUMBA_CACHE_DIR"), os.path.join(_user_cache_root(), "opal_diffraction", tag),
                    os.path.join(tempfile.gettempdir(), "opal_diffraction-" + tag)):
         if not folder:
