@@ -37,37 +37,74 @@ def add_row_sums(target: np.ndarray, rows: np.ndarray, values: np.ndarray) -> No
 
 
 @njit
-def _pairwise_sum(values, order, lo, n, k, res):
-    """NumPy's pairwise sum (``pairwise_sum`` of its add loops: sequential below 8 terms, eight
-    interleaved partial sums up to 128, halves above) of ``values[order[lo:lo + n], k]``;
-    ``res`` is the dtype's -0.0, NumPy's start."""
+def _pairwise_block(values, order, lo, n, k, res):
+    """NumPy's pairwise sum of ``values[order[lo:lo + n], k]`` for n <= 128 (``pairwise_sum`` of its
+    add loops: sequential below 8 terms, else eight interleaved partial sums); ``res`` is the
+    dtype's -0.0, NumPy's start."""
     if n < 8:
         for i in range(n):
             res += values[order[lo + i], k]
         return res
+    r0, r1, r2, r3 = values[order[lo], k], values[order[lo + 1], k], values[order[lo + 2], k], values[order[lo + 3], k]
+    r4, r5, r6, r7 = values[order[lo + 4], k], values[order[lo + 5], k], values[order[lo + 6], k], values[order[lo + 7], k]
+    i = 8
+    while i < n - n % 8:
+        r0 += values[order[lo + i], k]
+        r1 += values[order[lo + i + 1], k]
+        r2 += values[order[lo + i + 2], k]
+        r3 += values[order[lo + i + 3], k]
+        r4 += values[order[lo + i + 4], k]
+        r5 += values[order[lo + i + 5], k]
+        r6 += values[order[lo + i + 6], k]
+        r7 += values[order[lo + i + 7], k]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += values[order[lo + i], k]
+        i += 1
+    return res
+
+
+@njit
+def _pairwise_sum(values, order, lo, n, k, res):
+    """NumPy's pairwise sum of ``values[order[lo:lo + n], k]``: blocks of up to 128 terms
+    (_pairwise_block), above that the sum of the two halves (the first a multiple of 8 long).
+    The halving runs on an explicit stack, not by recursion: numba's on-disk cache cannot
+    always load a recursive kernel back (LLVM 'Symbol not found', or a crash)."""
     if n <= 128:
-        r0, r1, r2, r3 = values[order[lo], k], values[order[lo + 1], k], values[order[lo + 2], k], values[order[lo + 3], k]
-        r4, r5, r6, r7 = values[order[lo + 4], k], values[order[lo + 5], k], values[order[lo + 6], k], values[order[lo + 7], k]
-        i = 8
-        while i < n - n % 8:
-            r0 += values[order[lo + i], k]
-            r1 += values[order[lo + i + 1], k]
-            r2 += values[order[lo + i + 2], k]
-            r3 += values[order[lo + i + 3], k]
-            r4 += values[order[lo + i + 4], k]
-            r5 += values[order[lo + i + 5], k]
-            r6 += values[order[lo + i + 6], k]
-            r7 += values[order[lo + i + 7], k]
-            i += 8
-        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-        while i < n:
-            res += values[order[lo + i], k]
-            i += 1
-        return res
-    half = n // 2
-    half -= half % 8
-    return (_pairwise_sum(values, order, lo, half, k, res)
-            + _pairwise_sum(values, order, lo + half, n - half, k, res))
+        return _pairwise_block(values, order, lo, n, k, res)
+    # frames: start, count, stage (0: push left, 1: push right, 2: add), and the halves' sums
+    los, ns, stage = np.empty(64, np.int64), np.empty(64, np.int64), np.empty(64, np.int64)
+    left, right = np.empty(64, values.dtype), np.empty(64, values.dtype)
+    los[0], ns[0], stage[0] = lo, n, 0
+    sp = 1
+    v = res
+    while sp > 0:
+        t = sp - 1
+        c = ns[t]
+        done = False
+        if c <= 128:
+            v = _pairwise_block(values, order, los[t], c, k, res)
+            done = True
+        elif stage[t] < 2:
+            half = c // 2
+            half -= half % 8
+            los[sp] = los[t] if stage[t] == 0 else los[t] + half
+            ns[sp] = half if stage[t] == 0 else c - half
+            stage[sp] = 0
+            stage[t] += 1
+            sp += 1
+        else:
+            v = left[t] + right[t]
+            done = True
+        if done:
+            sp -= 1
+            if sp > 0:
+                if stage[sp - 1] == 1:
+                    left[sp - 1] = v
+                else:
+                    right[sp - 1] = v
+    return v
 
 
 @njit
