@@ -19,7 +19,9 @@ import numpy as np
 from ...lights.sources import sample_light_pdf
 from ...materials import bsdf
 from ...materials.surface import surface_reflectance
+from ...transport.elements import element_of
 from ...transport.walker import Hit, Rays, light_spectrum_of
+from ...util.jit import kernels_enabled, njit
 from .surface_interaction import bump
 
 __all__ = ["power_heuristic", "power_heuristic_f64", "light_samples", "visible", "next_events", "MicrofacetLobe",
@@ -288,8 +290,11 @@ def direct_light(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
 
 def caustic_light(c, out, rays: Rays, hit: Hit, rng):
     """Caustic radiance at diffuse hits: the illumination map's irradiance * albedo / pi
-    (looked up with a one-element jitter: a box filter over neighbouring elements)."""
+    (looked up with a one-element jitter: a box filter over neighbouring elements). Where the
+    kernels run, one pass (``_caustic_kernel``) looks up, weighs and adds to the film."""
     prepared = c.prepared
+    if kernels_enabled() and _caustic_fused(c, out, rays, hit, rng):
+        return
     lit = c.caustic_lit[hit.prim]
     if not lit.all():
         rays, hit = rays.take(lit), hit.take(lit)
@@ -300,3 +305,130 @@ def caustic_light(c, out, rays: Rays, hit: Hit, rng):
     radiance = irr * brdf
     contrib = rays.weighted(radiance) if rays.lam is None else rays.w * radiance[np.arange(len(rays)), rays.lam]
     out.accumulate(rays, contrib, out.caustics)
+
+
+# ----------------------------------------------------------------- the compiled kernels
+# The film adds below are TileOutput.accumulate's, row by row: white rays summed per run of a
+# pixel (rays in pixel order, stably sorted where they are not) and each run's sum added to the
+# film once, mono rays added one by one in their order: the same float32 sums in the same order.
+
+_NO_F32 = np.zeros(0, np.float32)
+_NO_F32_2 = np.zeros((0, 0), np.float32)
+
+
+def _ray_weights(rays: Rays):
+    """(mode, w (B, n), w (B,), basis row (n,)) of ``rays`` for the kernels: mode 0 unit weight,
+    1 grey coefficients over a one-row basis (or mono weights), 2 spectral weights; None when the
+    weights have another form (the NumPy lines run)."""
+    w = rays.w
+    if w is None:
+        return 0, _NO_F32_2, _NO_F32, _NO_F32
+    if w.dtype != np.float32:
+        return None
+    if rays.lam is not None:
+        return 1, _NO_F32_2, np.ascontiguousarray(w), _NO_F32
+    if rays.basis is not None:
+        if rays.basis.shape[0] != 1 or rays.basis.dtype != np.float32:
+            return None
+        return 1, _NO_F32_2, np.ascontiguousarray(w[:, 0]), np.ascontiguousarray(rays.basis[0])
+    return 2, np.ascontiguousarray(w), _NO_F32, _NO_F32
+
+
+def _pixel_order(rays: Rays) -> np.ndarray:
+    """The rows in the order TileOutput.accumulate sums them (pixel order, stable; mono: as given)."""
+    pix = rays.pix
+    if rays.lam is None and len(pix) > 1 and np.any(pix[1:] < pix[:-1]):
+        return np.argsort(pix, kind="stable")
+    return np.arange(len(pix))
+
+
+@njit
+def _weight_at(mode, w2, w1, basis, i, k):
+    """The ray weight of row i at wavelength k (see _ray_weights)."""
+    if mode == 0:
+        return np.float32(1.0)
+    if mode == 1:
+        return w1[i] * basis[k]
+    return w2[i, k]
+
+
+@njit
+def _flush(film, n, pix, acc):
+    base = pix * n
+    for k in range(n):
+        film[base + k] += acc[k]
+
+
+@njit
+def _caustic_kernel(film, n, pix, order, lam, mode, w2, w1, basis, lit_tri, k_tri, offset, element_area, flux,
+                    prim, bu, bv, front, r1, r2, albedo, arow):
+    """caustic_light per row (the rows of lit triangles, ``lit_tri``): the jittered element
+    (element_of, numbers r1, r2 in the lit rows' order), its irradiance flux / area, times the
+    base colour albedo[arow] * float32(1 / pi) and the ray weight, added to the film."""
+    b = len(prim)
+    rank = np.empty(b, np.int64)
+    m = 0
+    for i in range(b):
+        rank[i] = m
+        if lit_tri[prim[i]]:
+            m += 1
+    inv_pi = np.float32(1 / np.pi)
+    mono = lam.shape[0] > 0
+    acc = np.zeros(n, np.float32)
+    row = np.zeros(n, np.float32)
+    cur = -1
+    for t in range(b):
+        i = order[t]
+        if not lit_tri[prim[i]]:
+            continue
+        e, ok = element_of(k_tri, offset, prim[i], bu[i], bv[i], front[i], r1[rank[i]], r2[rank[i]], True)
+        area = np.float32(element_area[prim[i]])
+        a = arow[i]
+        if mono:
+            kk = lam[i]
+            irr = flux[e, kk] / area if ok else np.float32(0.0)
+            film[pix[i] * n + kk] += w1[i] * (irr * (albedo[a, kk] * inv_pi))
+            continue
+        for kk in range(n):
+            irr = flux[e, kk] / area if ok else np.float32(0.0)
+            row[kk] = _weight_at(mode, w2, w1, basis, i, kk) * (irr * (albedo[a, kk] * inv_pi))
+        if pix[i] != cur:
+            if cur >= 0:
+                _flush(film, n, cur, acc)
+            acc[:] = row
+            cur = pix[i]
+        else:
+            for kk in range(n):
+                acc[kk] += row[kk]
+    if cur >= 0:
+        _flush(film, n, cur, acc)
+
+
+def _caustic_fused(c, out, rays: Rays, hit: Hit, rng) -> bool:
+    """caustic_light by _caustic_kernel; False (nothing done) where its inputs have another form."""
+    weights = _ray_weights(rays)
+    cmap = c.caustic_map
+    if weights is None or cmap.flux.dtype != np.float32:
+        return False
+    prepared = c.prepared
+    lit = c.caustic_lit[hit.prim]
+    m = int(np.count_nonzero(lit))
+    if m == 0:
+        return True
+    r1, r2 = rng.random(m), rng.random(m)  # IlluminationMap.irradiance's numbers, in the same order
+    if prepared.textures.uses("color"):
+        sub = hit if m == len(lit) else hit.take(lit)
+        albedo = np.ascontiguousarray(surface_reflectance(prepared, sub), np.float32)
+        arow = np.cumsum(lit) - 1
+    else:
+        albedo = np.ascontiguousarray(prepared.materials.reflectance, np.float32)
+        arow = np.asarray(hit.mat, np.int64)
+    lam = np.zeros(0, np.int64) if rays.lam is None else np.asarray(rays.lam, np.int64)
+    mode, w2, w1, basis = weights
+    lay = cmap.layout
+    _caustic_kernel(out.caustics, out.n, np.asarray(rays.pix, np.int64), _pixel_order(rays), lam, mode, w2, w1,
+                    basis, c.caustic_lit, lay.k, lay.offset, lay.element_area, cmap.flux,
+                    np.asarray(hit.prim, np.int64), np.asarray(hit.bu, np.float64), np.asarray(hit.bv, np.float64),
+                    np.asarray(hit.front, np.bool_), np.asarray(r1, np.float64), np.asarray(r2, np.float64),
+                    albedo, arow)
+    return True
