@@ -234,6 +234,8 @@ def lambert_next_events(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
     the vertices' SLOT_LIGHT numbers."""
     direct_light(c, out, rays, hit, rng, film, albedo)
     if c.mesh_lights is not None or c.prepared.environment is not None:
+        if kernels_enabled() and _lambert_fused(c, out, rays, hit, rng, film, albedo):
+            return
         if albedo is None:
             albedo = surface_reflectance(c.prepared, hit, rays.lam)
         next_events(c, out, rays, hit, LambertLobe(c, rays, hit, albedo), rng, film, analytic=False)
@@ -322,7 +324,7 @@ def _ray_weights(rays: Rays):
     weights have another form (the NumPy lines run)."""
     w = rays.w
     if w is None:
-        return 0, _NO_F32_2, _NO_F32, _NO_F32
+        return (0, _NO_F32_2, _NO_F32, _NO_F32) if rays.lam is None else None
     if w.dtype != np.float32:
         return None
     if rays.lam is not None:
@@ -431,4 +433,166 @@ def _caustic_fused(c, out, rays: Rays, hit: Hit, rng) -> bool:
                     np.asarray(hit.prim, np.int64), np.asarray(hit.bu, np.float64), np.asarray(hit.bv, np.float64),
                     np.asarray(hit.front, np.bool_), np.asarray(r1, np.float64), np.asarray(r2, np.float64),
                     albedo, arow)
+    return True
+
+
+@njit
+def _lambert_weigh(wi, g, p_light, d, ns, ng, bump_v, p, eps, dist, pad, scale, live, o_out, t_out):
+    """LambertLobe.weigh and visible's shadow-ray setup per row: scale (B,) = g cos / pi times
+    the bump term (``bump_v``, empty: 1) and the power heuristic against cosine sampling; the rows
+    with scale > 0 into ``live`` with their shadow rays' origins and lengths. Returns their count."""
+    inv_pi = np.float32(1 / np.pi)
+    two = np.float32(2.0)
+    m = 0
+    for i in range(len(g)):
+        wo_up = d[i, 0] * ns[i, 0] + d[i, 1] * ns[i, 1] + d[i, 2] * ns[i, 2] < 0
+        cs = wi[i, 0] * ns[i, 0] + wi[i, 1] * ns[i, 1] + wi[i, 2] * ns[i, 2]
+        cg = wi[i, 0] * ng[i, 0] + wi[i, 1] * ng[i, 1] + wi[i, 2] * ng[i, 2]
+        pb = np.float32(cs * inv_pi) if (wo_up and cs > 0 and cg > 0) else np.float32(0.0)
+        s = g[i] * pb
+        if bump_v.shape[0] > 0:
+            s = s * bump_v[i]
+        a2, b2 = p_light[i] * p_light[i], pb * pb
+        w = a2 / (a2 + b2) if a2 + b2 > 0 else np.float32(1.0)
+        if not np.isfinite(w):
+            w = np.float32(1.0)
+        s = s * w
+        scale[i] = s
+        if s > 0:
+            live[m] = i
+            e = eps[i]
+            for k in range(3):
+                o_out[m, k] = p[i, k] + e * ng[i, k]
+            dd = dist[i]
+            t_out[m] = np.inf if np.isinf(dd) else np.float32((dd - two * e) - pad[i])
+            m += 1
+    return m
+
+
+@njit
+def _uplift_row(rgb, i, basis_t, k):
+    """Row i of spectral.spectrum's illuminant uplift (_uplift_kernel, as_light) at wavelength k,
+    as float32 (the light sample's spectrum)."""
+    r, g, bl = np.float64(rgb[i, 0]), np.float64(rgb[i, 1]), np.float64(rgb[i, 2])
+    r, g, bl = (0.0 if r < 0.0 else r), (0.0 if g < 0.0 else g), (0.0 if bl < 0.0 else bl)
+    scale = r
+    if g > scale or g != g:
+        scale = g
+    if (bl > scale or bl != bl) and scale == scale:
+        scale = bl
+    if scale > 0.0:
+        r, g, bl = r / scale, g / scale, bl / scale
+    else:
+        r = g = bl = 0.0
+    r = 0.0 if r < 0.0 else (1.0 if r > 1.0 else r)
+    g = 0.0 if g < 0.0 else (1.0 if g > 1.0 else g)
+    bl = 0.0 if bl < 0.0 else (1.0 if bl > 1.0 else bl)
+    return np.float32(scale * (r * basis_t[0, k] + g * basis_t[1, k] + bl * basis_t[2, k]))
+
+
+@njit
+def _lambert_add(film, n, pix, order, keep, lam, mode, w2, w1, basis, albedo, arow, acol_fixed, scale,
+                 rgb, basis_t, table, srow):
+    """LambertLobe.contribution and the film add for the rows ``keep``: the ray weight times
+    albedo[arow] * scale times the light sample's spectrum (rgb rows uplifted when ``rgb`` has
+    rows, else table[srow]), summed per pixel run as TileOutput.accumulate does."""
+    mono = lam.shape[0] > 0
+    uplift = rgb.shape[0] > 0
+    acc = np.zeros(n, np.float32)
+    row = np.zeros(n, np.float32)
+    cur = -1
+    for t in range(len(order)):
+        i = order[t]
+        if not keep[i]:
+            continue
+        a, sc = arow[i], scale[i]
+        if mono:
+            kk = lam[i]
+            sp = _uplift_row(rgb, i, basis_t, kk) if uplift else table[srow[i], kk]
+            film[pix[i] * n + kk] += ((w1[i] * albedo[a, 0 if acol_fixed else kk]) * sc) * sp
+            continue
+        for kk in range(n):
+            sp = _uplift_row(rgb, i, basis_t, kk) if uplift else table[srow[i], kk]
+            row[kk] = _weight_at(mode, w2, w1, basis, i, kk) * ((albedo[a, kk] * sc) * sp)
+        if pix[i] != cur:
+            if cur >= 0:
+                _flush(film, n, cur, acc)
+            acc[:] = row
+            cur = pix[i]
+        else:
+            for kk in range(n):
+                acc[kk] += row[kk]
+    if cur >= 0:
+        _flush(film, n, cur, acc)
+
+
+_NO_RGB = np.zeros((0, 3), np.float32)
+_NO_I64 = np.zeros(0, np.int64)
+
+
+def _lambert_fused(c, out, rays: Rays, hit: Hit, rng, film, albedo) -> bool:
+    """next_events with the LambertLobe for the emissive meshes and the world map (what
+    lambert_next_events does after direct_light) by _lambert_weigh and _lambert_add per light
+    sample, the shadow rays still one batched any-hit call; False (nothing done, no numbers
+    drawn) where the inputs have another form."""
+    prepared = c.prepared
+    weights = _ray_weights(rays)
+    f32 = np.float32
+    if (weights is None or film is None or hit.p.dtype != f32 or hit.ns.dtype != f32 or hit.ng.dtype != f32
+            or hit.eps.dtype != f32 or rays.d.dtype != f32
+            or (prepared.mesh_lights is not None and prepared.materials.emission.dtype != f32)):
+        return False
+    textured = prepared.textures.uses("color")
+    b = len(rays)
+    if albedo is None and not textured:
+        table = prepared.materials.reflectance
+        if table.dtype != f32:
+            return False
+        alb, arow, fixed = table, np.asarray(hit.mat, np.int64), False
+    else:
+        if albedo is None:
+            albedo = surface_reflectance(prepared, hit, rays.lam)
+        if albedo.dtype != f32:
+            return False
+        fixed = albedo.ndim == 1
+        alb, arow = (albedo[:, None] if fixed else albedo), np.arange(b)
+    # the samples, drawn in light_samples' order: meshes, then the world
+    samples = []
+    if prepared.mesh_lights is not None:
+        wi, dist, g, prim, pdf = prepared.mesh_lights.sample(hit.p, rng)
+        samples.append((wi, dist, g, pdf, 2 * prepared.tri_offset[prim], _NO_RGB,
+                        prepared.materials.emission, prepared.tri_material[prim]))
+    if prepared.environment is not None:
+        wi, pdf, rgb = prepared.environment.sample(rng.random(b), rng.random(b))
+        with np.errstate(divide="ignore"):
+            g = np.where(pdf > 0, 1.0 / pdf, 0.0)
+        samples.append((wi.astype(f32), np.full(b, np.inf, f32), g, pdf.astype(f32), np.zeros(b), rgb,
+                        _NO_F32_2, _NO_I64))
+    lam = _NO_I64 if rays.lam is None else np.asarray(rays.lam, np.int64)
+    mode, w2, w1, basis = weights
+    order = _pixel_order(rays)
+    pix = np.asarray(rays.pix, np.int64)
+    basis_t = prepared.conv.emission_basis
+    for wi, dist, g, pdf, pad, rgb, table, srow in samples:
+        bump_v = bump(prepared, c.normal_maps, hit, wi) if c.normal_maps else None
+        bump_v = _NO_F32 if bump_v is None or np.ndim(bump_v) == 0 else np.ascontiguousarray(bump_v, f32)
+        scale = np.empty(b, f32)
+        live = np.empty(b, np.int64)
+        o = np.empty((b, 3), f32)
+        tmax = np.empty(b, f32)
+        m = _lambert_weigh(np.ascontiguousarray(wi), np.ascontiguousarray(g, f32),
+                           np.ascontiguousarray(pdf, f32), rays.d, hit.ns, hit.ng, bump_v, hit.p, hit.eps,
+                           np.ascontiguousarray(dist, f32), np.ascontiguousarray(pad), scale, live, o, tmax)
+        if m == 0:
+            continue
+        live = live[:m]
+        occ = prepared.accel.occluded(o[:m], np.ascontiguousarray(wi[live], f32), tmax[:m])
+        out.shadow_rays += len(occ)
+        keep = np.zeros(b, bool)
+        keep[live[~occ]] = True
+        if not keep.any():
+            continue
+        rgb = np.ascontiguousarray(rgb) if len(rgb) else rgb
+        _lambert_add(film, out.n, pix, order, keep, lam, mode, w2, w1, basis, alb, arow, fixed, scale,
+                     rgb, basis_t, table, np.asarray(srow, np.int64))
     return True
