@@ -251,6 +251,8 @@ def direct_light(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
     nl, b = len(lights), len(rays)
     if nl == 0 or b == 0:
         return
+    if kernels_enabled() and _direct_fused(c, out, rays, hit, rng, film, albedo):
+        return
     # One sample per light per ray; all shadow rays in a single any-hit call.
     flat = not c.bent
     factors = np.zeros((b, nl), np.float32)
@@ -595,4 +597,142 @@ def _lambert_fused(c, out, rays: Rays, hit: Hit, rng, film, albedo) -> bool:
         rgb = np.ascontiguousarray(rgb) if len(rgb) else rgb
         _lambert_add(film, out.n, pix, order, keep, lam, mode, w2, w1, basis, alb, arow, fixed, scale,
                      rgb, basis_t, table, np.asarray(srow, np.int64))
+    return True
+
+
+@njit
+def _direct_weigh(li, wi, g, p_light, has_pdf, dist, ns, ng, flat, bump_v, p, eps, factors, o_out, d_out, t_out,
+                  idx_out, m):
+    """direct_light's factor of light ``li`` per row (g cos times the bump term and, ``has_pdf``,
+    the power heuristic against cosine sampling) into factors[:, li], and the shadow rays of the
+    rows with a factor > 0 appended at ``m``; returns the new count."""
+    inv_pi = np.float32(1 / np.pi)
+    two = np.float32(2.0)
+    nl = factors.shape[1]
+    for i in range(len(g)):
+        cs = wi[i, 0] * ns[i, 0] + wi[i, 1] * ns[i, 1] + wi[i, 2] * ns[i, 2]
+        ok = cs > 0 and (flat or wi[i, 0] * ng[i, 0] + wi[i, 1] * ng[i, 1] + wi[i, 2] * ng[i, 2] > 0)
+        f = np.float32(0.0)
+        if ok:
+            f = g[i] * cs
+            if bump_v.shape[0] > 0:
+                f = f * bump_v[i]
+        if has_pdf:
+            pb = (cs if cs > 0 else np.float32(0.0)) * inv_pi
+            a2, b2 = p_light[i] * p_light[i], pb * pb
+            w = a2 / (a2 + b2) if a2 + b2 > 0 else np.float32(1.0)
+            if not np.isfinite(w):
+                w = np.float32(1.0)
+            f = f * w
+        if f > 0:
+            factors[i, li] = f
+            e = eps[i]
+            for k in range(3):
+                o_out[m, k] = p[i, k] + e * ng[i, k]
+                d_out[m, k] = wi[i, k]
+            dd = dist[i]
+            t_out[m] = np.inf if np.isinf(dd) else dd - two * e
+            idx_out[m] = i * nl + li
+            m += 1
+    return m
+
+
+@njit
+def _direct_add(film, n, pix, order, lam, mode, w2, w1, basis, albedo, arow, acol_fixed, factors, spectrum):
+    """direct_light's contribution and film add per row: the ray weight times albedo[arow] *
+    float32(1 / pi) times the irradiance sum over lights of factors * spectrum, summed per pixel
+    run as TileOutput.accumulate does."""
+    inv_pi = np.float32(1 / np.pi)
+    nl = factors.shape[1]
+    mono = lam.shape[0] > 0
+    acc = np.zeros(n, np.float32)
+    row = np.zeros(n, np.float32)
+    cur = -1
+    for t in range(len(order)):
+        i = order[t]
+        a = arow[i]
+        if mono:
+            kk = lam[i]
+            irr = factors[i, 0] * spectrum[0, kk]
+            for li in range(1, nl):
+                irr += factors[i, li] * spectrum[li, kk]
+            film[pix[i] * n + kk] += w1[i] * ((albedo[a, 0 if acol_fixed else kk] * inv_pi) * irr)
+            continue
+        for kk in range(n):
+            irr = factors[i, 0] * spectrum[0, kk]
+            for li in range(1, nl):
+                irr += factors[i, li] * spectrum[li, kk]
+            row[kk] = _weight_at(mode, w2, w1, basis, i, kk) * ((albedo[a, kk] * inv_pi) * irr)
+        if pix[i] != cur:
+            if cur >= 0:
+                _flush(film, n, cur, acc)
+            acc[:] = row
+            cur = pix[i]
+        else:
+            for kk in range(n):
+                acc[kk] += row[kk]
+    if cur >= 0:
+        _flush(film, n, cur, acc)
+
+
+def _albedo_rows(prepared, rays: Rays, hit: Hit, albedo):
+    """(table, rows (B,), fixed column) with the hits' base colours table[rows] (at column lam,
+    or column 0 when ``fixed``) for the kernels, without forming them for untextured materials;
+    None where they are not float32."""
+    if albedo is None and not prepared.textures.uses("color"):
+        table = prepared.materials.reflectance
+        return (table, np.asarray(hit.mat, np.int64), False) if table.dtype == np.float32 else None
+    if albedo is None:
+        albedo = surface_reflectance(prepared, hit, rays.lam)
+    if albedo.dtype != np.float32:
+        return None
+    fixed = albedo.ndim == 1
+    return (albedo[:, None] if fixed else albedo), np.arange(len(rays)), fixed
+
+
+def _direct_fused(c, out, rays: Rays, hit: Hit, rng, film, albedo) -> bool:
+    """direct_light by _direct_weigh (per light) and _direct_add, the shadow rays in one any-hit
+    call and the factored film add where it applies; False (nothing done, no numbers drawn)
+    where the inputs have another form."""
+    prepared = c.prepared
+    lights = prepared.lights
+    weights = _ray_weights(rays)
+    f32 = np.float32
+    if (weights is None or hit.p.dtype != f32 or hit.ns.dtype != f32 or hit.ng.dtype != f32
+            or hit.eps.dtype != f32 or lights.spectrum.dtype != f32):
+        return False
+    nl, b = len(lights), len(rays)
+    samples = [sample_light_pdf(lights, li, hit.p, rng) for li in range(nl)]  # the numbers, in light order
+    factors = np.zeros((b, nl), f32)
+    o, d, tmax = np.empty((b * nl, 3), f32), np.empty((b * nl, 3), f32), np.empty(b * nl, f32)
+    idx = np.empty(b * nl, np.int64)
+    m = 0
+    for li, (wi, dist, g, p_light) in enumerate(samples):
+        wi = np.ascontiguousarray(wi, f32)
+        bump_v = bump(prepared, c.normal_maps, hit, wi)
+        bump_v = _NO_F32 if np.ndim(bump_v) == 0 else np.ascontiguousarray(bump_v, f32)
+        m = _direct_weigh(li, wi, np.ascontiguousarray(g, f32),
+                          _NO_F32 if p_light is None else np.ascontiguousarray(p_light, f32), p_light is not None,
+                          np.ascontiguousarray(dist, f32), hit.ns, hit.ng, not c.bent, bump_v, hit.p, hit.eps,
+                          factors, o, d, tmax, idx, m)
+    if m == 0:
+        return True
+    occ = prepared.accel.occluded(o[:m], d[:m], tmax[:m])
+    out.shadow_rays += len(occ)
+    factors.reshape(-1)[idx[:m][occ]] = 0.0
+    if (rays.lam is None and rays.w is None and not prepared.textures.uses("color")
+            and out.accumulate_factored(prepared, rays.pix, hit.mat, factors, film)):
+        return True
+    rows = _albedo_rows(prepared, rays, hit, albedo)
+    if rows is None:  # (not float32: the NumPy lines' product, after the kernels' factors)
+        brdf = (surface_reflectance(prepared, hit, rays.lam) if albedo is None else albedo) * f32(1 / np.pi)
+        irradiance = (factors @ lights.spectrum if rays.lam is None
+                      else np.sum(factors * lights.spectrum[:, rays.lam].T, axis=1))
+        out.accumulate(rays, rays.weighted(brdf * irradiance), film)
+        return True
+    alb, arow, fixed = rows
+    mode, w2, w1, basis = weights
+    lam = _NO_I64 if rays.lam is None else np.asarray(rays.lam, np.int64)
+    _direct_add(film, out.n, np.asarray(rays.pix, np.int64), _pixel_order(rays), lam, mode, w2, w1, basis,
+                alb, arow, fixed, factors, lights.spectrum)
     return True
