@@ -314,7 +314,9 @@ def caustic_light(c, out, rays: Rays, hit: Hit, rng):
 # ----------------------------------------------------------------- the compiled kernels
 # The film adds below are TileOutput.accumulate's, row by row: white rays summed per run of a
 # pixel (rays in pixel order, stably sorted where they are not) and each run's sum added to the
-# film once, mono rays added one by one in their order: the same float32 sums in the same order.
+# film once, mono rays added one by one in their order: the same float32 sums in the same order
+# (np.add.reduceat's sum of a run is its first row plus NumPy's pairwise sum of the others:
+# ``_pairwise``, ``_flush_run``).
 
 _NO_F32 = np.zeros(0, np.float32)
 _NO_F32_2 = np.zeros((0, 0), np.float32)
@@ -357,10 +359,62 @@ def _weight_at(mode, w2, w1, basis, i, k):
 
 
 @njit
-def _flush(film, n, pix, acc):
+def _pairwise(buf, start, count, k):
+    """NumPy's pairwise_sum of float32 buf[start:start + count, k] (numpy/_core/src/umath/
+    loops_utils.h: sequential below 8 terms, 8 partial sums up to 128, halves above)."""
+    if count < 8:
+        res = np.float32(0.0)
+        for i in range(count):
+            res += buf[start + i, k]
+        return res
+    if count <= 128:
+        r0, r1, r2, r3 = buf[start, k], buf[start + 1, k], buf[start + 2, k], buf[start + 3, k]
+        r4, r5, r6, r7 = buf[start + 4, k], buf[start + 5, k], buf[start + 6, k], buf[start + 7, k]
+        i = 8
+        end = count - count % 8
+        while i < end:
+            r0 += buf[start + i, k]
+            r1 += buf[start + i + 1, k]
+            r2 += buf[start + i + 2, k]
+            r3 += buf[start + i + 3, k]
+            r4 += buf[start + i + 4, k]
+            r5 += buf[start + i + 5, k]
+            r6 += buf[start + i + 6, k]
+            r7 += buf[start + i + 7, k]
+            i += 8
+        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+        while i < count:
+            res += buf[start + i, k]
+            i += 1
+        return res
+    half = count // 2
+    half -= half % 8
+    return _pairwise(buf, start, half, k) + _pairwise(buf, start + half, count - half, k)
+
+
+@njit
+def _flush_run(film, n, pix, buf, count):
+    """film[pix] += the sum of the run's rows buf[:count] as np.add.reduceat forms it."""
     base = pix * n
+    if count == 1:
+        for k in range(n):
+            film[base + k] += buf[0, k]
+        return
     for k in range(n):
-        film[base + k] += acc[k]
+        film[base + k] += buf[0, k] + _pairwise(buf, 1, count - 1, k)
+
+
+@njit
+def _max_run(pix, order):
+    """The longest run of one pixel in ``order`` (a bound on the run buffer's rows)."""
+    best, run, cur = 0, 0, -1
+    for t in range(len(order)):
+        p = pix[order[t]]
+        run = run + 1 if p == cur else 1
+        cur = p
+        if run > best:
+            best = run
+    return best
 
 
 @njit
@@ -378,9 +432,9 @@ def _caustic_kernel(film, n, pix, order, lam, mode, w2, w1, basis, lit_tri, k_tr
             m += 1
     inv_pi = np.float32(1 / np.pi)
     mono = lam.shape[0] > 0
-    acc = np.zeros(n, np.float32)
-    row = np.zeros(n, np.float32)
+    buf = np.empty((max(_max_run(pix, order), 1), n), np.float32)  # the rows of one pixel's run
     cur = -1
+    cnt = 0
     for t in range(b):
         i = order[t]
         if not lit_tri[prim[i]]:
@@ -393,19 +447,17 @@ def _caustic_kernel(film, n, pix, order, lam, mode, w2, w1, basis, lit_tri, k_tr
             irr = flux[e, kk] / area if ok else np.float32(0.0)
             film[pix[i] * n + kk] += w1[i] * (irr * (albedo[a, kk] * inv_pi))
             continue
+        if pix[i] != cur:
+            if cnt > 0:
+                _flush_run(film, n, cur, buf, cnt)
+            cur = pix[i]
+            cnt = 0
         for kk in range(n):
             irr = flux[e, kk] / area if ok else np.float32(0.0)
-            row[kk] = _weight_at(mode, w2, w1, basis, i, kk) * (irr * (albedo[a, kk] * inv_pi))
-        if pix[i] != cur:
-            if cur >= 0:
-                _flush(film, n, cur, acc)
-            acc[:] = row
-            cur = pix[i]
-        else:
-            for kk in range(n):
-                acc[kk] += row[kk]
-    if cur >= 0:
-        _flush(film, n, cur, acc)
+            buf[cnt, kk] = _weight_at(mode, w2, w1, basis, i, kk) * (irr * (albedo[a, kk] * inv_pi))
+        cnt += 1
+    if cnt > 0:
+        _flush_run(film, n, cur, buf, cnt)
 
 
 def _caustic_fused(c, out, rays: Rays, hit: Hit, rng) -> bool:
@@ -500,9 +552,9 @@ def _lambert_add(film, n, pix, order, keep, lam, mode, w2, w1, basis, albedo, ar
     rows, else table[srow]), summed per pixel run as TileOutput.accumulate does."""
     mono = lam.shape[0] > 0
     uplift = rgb.shape[0] > 0
-    acc = np.zeros(n, np.float32)
-    row = np.zeros(n, np.float32)
+    buf = np.empty((max(_max_run(pix, order), 1), n), np.float32)  # the rows of one pixel's run
     cur = -1
+    cnt = 0
     for t in range(len(order)):
         i = order[t]
         if not keep[i]:
@@ -513,19 +565,17 @@ def _lambert_add(film, n, pix, order, keep, lam, mode, w2, w1, basis, albedo, ar
             sp = _uplift_row(rgb, i, basis_t, kk) if uplift else table[srow[i], kk]
             film[pix[i] * n + kk] += ((w1[i] * albedo[a, 0 if acol_fixed else kk]) * sc) * sp
             continue
+        if pix[i] != cur:
+            if cnt > 0:
+                _flush_run(film, n, cur, buf, cnt)
+            cur = pix[i]
+            cnt = 0
         for kk in range(n):
             sp = _uplift_row(rgb, i, basis_t, kk) if uplift else table[srow[i], kk]
-            row[kk] = _weight_at(mode, w2, w1, basis, i, kk) * ((albedo[a, kk] * sc) * sp)
-        if pix[i] != cur:
-            if cur >= 0:
-                _flush(film, n, cur, acc)
-            acc[:] = row
-            cur = pix[i]
-        else:
-            for kk in range(n):
-                acc[kk] += row[kk]
-    if cur >= 0:
-        _flush(film, n, cur, acc)
+            buf[cnt, kk] = _weight_at(mode, w2, w1, basis, i, kk) * ((albedo[a, kk] * sc) * sp)
+        cnt += 1
+    if cnt > 0:
+        _flush_run(film, n, cur, buf, cnt)
 
 
 _NO_RGB = np.zeros((0, 3), np.float32)
@@ -645,9 +695,9 @@ def _direct_add(film, n, pix, order, lam, mode, w2, w1, basis, albedo, arow, aco
     inv_pi = np.float32(1 / np.pi)
     nl = factors.shape[1]
     mono = lam.shape[0] > 0
-    acc = np.zeros(n, np.float32)
-    row = np.zeros(n, np.float32)
+    buf = np.empty((max(_max_run(pix, order), 1), n), np.float32)  # the rows of one pixel's run
     cur = -1
+    cnt = 0
     for t in range(len(order)):
         i = order[t]
         a = arow[i]
@@ -658,21 +708,19 @@ def _direct_add(film, n, pix, order, lam, mode, w2, w1, basis, albedo, arow, aco
                 irr += factors[i, li] * spectrum[li, kk]
             film[pix[i] * n + kk] += w1[i] * ((albedo[a, 0 if acol_fixed else kk] * inv_pi) * irr)
             continue
+        if pix[i] != cur:
+            if cnt > 0:
+                _flush_run(film, n, cur, buf, cnt)
+            cur = pix[i]
+            cnt = 0
         for kk in range(n):
             irr = factors[i, 0] * spectrum[0, kk]
             for li in range(1, nl):
                 irr += factors[i, li] * spectrum[li, kk]
-            row[kk] = _weight_at(mode, w2, w1, basis, i, kk) * ((albedo[a, kk] * inv_pi) * irr)
-        if pix[i] != cur:
-            if cur >= 0:
-                _flush(film, n, cur, acc)
-            acc[:] = row
-            cur = pix[i]
-        else:
-            for kk in range(n):
-                acc[kk] += row[kk]
-    if cur >= 0:
-        _flush(film, n, cur, acc)
+            buf[cnt, kk] = _weight_at(mode, w2, w1, basis, i, kk) * ((albedo[a, kk] * inv_pi) * irr)
+        cnt += 1
+    if cnt > 0:
+        _flush_run(film, n, cur, buf, cnt)
 
 
 def _albedo_rows(prepared, rays: Rays, hit: Hit, albedo):
