@@ -524,9 +524,9 @@ def _lambert_weigh(wi, g, p_light, d, ns, ng, bump_v, p, eps, dist, pad, scale, 
 
 
 @njit
-def _uplift_row(rgb, i, basis_t, k):
-    """Row i of spectral.spectrum's illuminant uplift (_uplift_kernel, as_light) at wavelength k,
-    as float32 (the light sample's spectrum)."""
+def _uplift_shape(rgb, i):
+    """Row i of spectral.spectrum's illuminant uplift (_uplift_kernel, as_light): (scale, shape
+    r, g, b) in float64, the spectrum at wavelength k being _uplift_at(...)."""
     r, g, bl = np.float64(rgb[i, 0]), np.float64(rgb[i, 1]), np.float64(rgb[i, 2])
     r, g, bl = (0.0 if r < 0.0 else r), (0.0 if g < 0.0 else g), (0.0 if bl < 0.0 else bl)
     scale = r
@@ -541,6 +541,14 @@ def _uplift_row(rgb, i, basis_t, k):
     r = 0.0 if r < 0.0 else (1.0 if r > 1.0 else r)
     g = 0.0 if g < 0.0 else (1.0 if g > 1.0 else g)
     bl = 0.0 if bl < 0.0 else (1.0 if bl > 1.0 else bl)
+    return scale, r, g, bl
+
+
+@njit
+def _uplift_at(shape, basis_t, k):
+    """The uplifted spectrum of _uplift_shape's ``shape`` at wavelength k, as float32 (the
+    light sample's spectrum, _uplift_kernel's float64 value cast as light_samples casts it)."""
+    scale, r, g, bl = shape
     return np.float32(scale * (r * basis_t[0, k] + g * basis_t[1, k] + bl * basis_t[2, k]))
 
 
@@ -560,9 +568,10 @@ def _lambert_add(film, n, pix, order, keep, lam, mode, w2, w1, basis, albedo, ar
         if not keep[i]:
             continue
         a, sc = arow[i], scale[i]
+        shape = _uplift_shape(rgb, i) if uplift else (0.0, 0.0, 0.0, 0.0)
         if mono:
             kk = lam[i]
-            sp = _uplift_row(rgb, i, basis_t, kk) if uplift else table[srow[i], kk]
+            sp = _uplift_at(shape, basis_t, kk) if uplift else table[srow[i], kk]
             film[pix[i] * n + kk] += ((w1[i] * albedo[a, 0 if acol_fixed else kk]) * sc) * sp
             continue
         if pix[i] != cur:
@@ -571,7 +580,7 @@ def _lambert_add(film, n, pix, order, keep, lam, mode, w2, w1, basis, albedo, ar
             cur = pix[i]
             cnt = 0
         for kk in range(n):
-            sp = _uplift_row(rgb, i, basis_t, kk) if uplift else table[srow[i], kk]
+            sp = _uplift_at(shape, basis_t, kk) if uplift else table[srow[i], kk]
             buf[cnt, kk] = _weight_at(mode, w2, w1, basis, i, kk) * ((albedo[a, kk] * sc) * sp)
         cnt += 1
     if cnt > 0:
