@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opal_diffraction.core.integrators.eye import next_event
+from opal_diffraction.core.integrators.eye import next_event, next_event_kernels
 from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
@@ -181,12 +181,12 @@ def test_element_of_is_the_layouts_index():
 
 @pytest.mark.parametrize("length", [1, 2, 3, 7, 8, 9, 17, 128, 129, 300, 1000])
 def test_a_runs_film_add_is_reduceats_sum(length):
-    """_flush_run adds a pixel's rows as TileOutput.accumulate's np.add.reduceat does (its first
+    """flush_run adds a pixel's rows as TileOutput.accumulate's np.add.reduceat does (its first
     row plus NumPy's pairwise sum of the rest), to the bit."""
     rng = np.random.default_rng(length)
     rows = (rng.random((length, 5)) * rng.random((length, 1)) * 10).astype(np.float32)
     film = rng.random(3 * 5).astype(np.float32)
     expected = film.copy()
     expected.reshape(3, 5)[1] += np.add.reduceat(rows, [0], axis=0)[0]
-    next_event._flush_run(film, 5, 1, rows, length)
+    next_event_kernels.flush_run(film, 5, 1, rows, length)
     np.testing.assert_array_equal(film, expected)

@@ -10,6 +10,13 @@ opal's Bragg lobe (core/integrators/bragg_shading.py) differ only in the ``NextE
 pass. The Lambertian vertices' analytic lights take a factored fast path (``direct_light``:
 all shadow rays in one call, unit-weight rays summed per (material, light)). The caustic map's
 irradiance (the light pass's caustics, section 4.2) is looked up here too (``caustic_light``).
+
+Where the kernels run (core/util/jit.py), ``direct_light``, the Lambertian vertices' meshes and
+world map (``lambert_next_events``) and ``caustic_light`` take fused paths (``_direct_fused``,
+``_lambert_fused``, ``_caustic_fused``): light samples drawn as before, then per light sample
+one kernel for the weights and shadow-ray setup and one for the contribution and the film add
+(core/integrators/eye/next_event_kernels.py), the shadow rays still one batched any-hit call; the
+NumPy lines stay as the reference, and the fused paths fall back to them for inputs of other forms.
 """
 
 from __future__ import annotations
@@ -19,9 +26,10 @@ import numpy as np
 from ...lights.sources import sample_light_pdf
 from ...materials import bsdf
 from ...materials.surface import surface_reflectance
-from ...transport.elements import element_of
 from ...transport.walker import Hit, Rays, light_spectrum_of
-from ...util.jit import kernels_enabled, njit
+from ...util.jit import kernels_enabled
+from .next_event_kernels import (NO_F32, NO_F32_2, NO_I64, NO_RGB, caustic_kernel, direct_add, direct_weigh,
+                                 lambert_add, lambert_weigh, pixel_order, ray_weights)
 from .surface_interaction import bump
 
 __all__ = ["power_heuristic", "power_heuristic_f64", "light_samples", "visible", "next_events", "MicrofacetLobe",
@@ -295,7 +303,7 @@ def direct_light(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
 def caustic_light(c, out, rays: Rays, hit: Hit, rng):
     """Caustic radiance at diffuse hits: the illumination map's irradiance * albedo / pi
     (looked up with a one-element jitter: a box filter over neighbouring elements). Where the
-    kernels run, one pass (``_caustic_kernel``) looks up, weighs and adds to the film."""
+    kernels run, one pass (``caustic_kernel``) looks up, weighs and adds to the film."""
     prepared = c.prepared
     if kernels_enabled() and _caustic_fused(c, out, rays, hit, rng):
         return
@@ -311,158 +319,9 @@ def caustic_light(c, out, rays: Rays, hit: Hit, rng):
     out.accumulate(rays, contrib, out.caustics)
 
 
-# ----------------------------------------------------------------- the compiled kernels
-# The film adds below are TileOutput.accumulate's, row by row: white rays summed per run of a
-# pixel (rays in pixel order, stably sorted where they are not) and each run's sum added to the
-# film once, mono rays added one by one in their order: the same float32 sums in the same order
-# (np.add.reduceat's sum of a run is its first row plus NumPy's pairwise sum of the others:
-# ``_pairwise``, ``_flush_run``).
-
-_NO_F32 = np.zeros(0, np.float32)
-_NO_F32_2 = np.zeros((0, 0), np.float32)
-
-
-def _ray_weights(rays: Rays):
-    """(mode, w (B, n), w (B,), basis row (n,)) of ``rays`` for the kernels: mode 0 unit weight,
-    1 grey coefficients over a one-row basis (or mono weights), 2 spectral weights; None when the
-    weights have another form (the NumPy lines run)."""
-    w = rays.w
-    if w is None:
-        return (0, _NO_F32_2, _NO_F32, _NO_F32) if rays.lam is None else None
-    if w.dtype != np.float32:
-        return None
-    if rays.lam is not None:
-        return 1, _NO_F32_2, np.ascontiguousarray(w), _NO_F32
-    if rays.basis is not None:
-        if rays.basis.shape[0] != 1 or rays.basis.dtype != np.float32:
-            return None
-        return 1, _NO_F32_2, np.ascontiguousarray(w[:, 0]), np.ascontiguousarray(rays.basis[0])
-    return 2, np.ascontiguousarray(w), _NO_F32, _NO_F32
-
-
-def _pixel_order(rays: Rays) -> np.ndarray:
-    """The rows in the order TileOutput.accumulate sums them (pixel order, stable; mono: as given)."""
-    pix = rays.pix
-    if rays.lam is None and len(pix) > 1 and np.any(pix[1:] < pix[:-1]):
-        return np.argsort(pix, kind="stable")
-    return np.arange(len(pix))
-
-
-@njit
-def _weight_at(mode, w2, w1, basis, i, k):
-    """The ray weight of row i at wavelength k (see _ray_weights)."""
-    if mode == 0:
-        return np.float32(1.0)
-    if mode == 1:
-        return w1[i] * basis[k]
-    return w2[i, k]
-
-
-@njit
-def _pairwise(buf, start, count, k):
-    """NumPy's pairwise_sum of float32 buf[start:start + count, k] (numpy/_core/src/umath/
-    loops_utils.h: sequential below 8 terms, 8 partial sums up to 128, halves above)."""
-    if count < 8:
-        res = np.float32(0.0)
-        for i in range(count):
-            res += buf[start + i, k]
-        return res
-    if count <= 128:
-        r0, r1, r2, r3 = buf[start, k], buf[start + 1, k], buf[start + 2, k], buf[start + 3, k]
-        r4, r5, r6, r7 = buf[start + 4, k], buf[start + 5, k], buf[start + 6, k], buf[start + 7, k]
-        i = 8
-        end = count - count % 8
-        while i < end:
-            r0 += buf[start + i, k]
-            r1 += buf[start + i + 1, k]
-            r2 += buf[start + i + 2, k]
-            r3 += buf[start + i + 3, k]
-            r4 += buf[start + i + 4, k]
-            r5 += buf[start + i + 5, k]
-            r6 += buf[start + i + 6, k]
-            r7 += buf[start + i + 7, k]
-            i += 8
-        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-        while i < count:
-            res += buf[start + i, k]
-            i += 1
-        return res
-    half = count // 2
-    half -= half % 8
-    return _pairwise(buf, start, half, k) + _pairwise(buf, start + half, count - half, k)
-
-
-@njit
-def _flush_run(film, n, pix, buf, count):
-    """film[pix] += the sum of the run's rows buf[:count] as np.add.reduceat forms it."""
-    base = pix * n
-    if count == 1:
-        for k in range(n):
-            film[base + k] += buf[0, k]
-        return
-    for k in range(n):
-        film[base + k] += buf[0, k] + _pairwise(buf, 1, count - 1, k)
-
-
-@njit
-def _max_run(pix, order):
-    """The longest run of one pixel in ``order`` (a bound on the run buffer's rows)."""
-    best, run, cur = 0, 0, -1
-    for t in range(len(order)):
-        p = pix[order[t]]
-        run = run + 1 if p == cur else 1
-        cur = p
-        if run > best:
-            best = run
-    return best
-
-
-@njit
-def _caustic_kernel(film, n, pix, order, lam, mode, w2, w1, basis, lit_tri, k_tri, offset, element_area, flux,
-                    prim, bu, bv, front, r1, r2, albedo, arow):
-    """caustic_light per row (the rows of lit triangles, ``lit_tri``): the jittered element
-    (element_of, numbers r1, r2 in the lit rows' order), its irradiance flux / area, times the
-    base colour albedo[arow] * float32(1 / pi) and the ray weight, added to the film."""
-    b = len(prim)
-    rank = np.empty(b, np.int64)
-    m = 0
-    for i in range(b):
-        rank[i] = m
-        if lit_tri[prim[i]]:
-            m += 1
-    inv_pi = np.float32(1 / np.pi)
-    mono = lam.shape[0] > 0
-    buf = np.empty((max(_max_run(pix, order), 1), n), np.float32)  # the rows of one pixel's run
-    cur = -1
-    cnt = 0
-    for t in range(b):
-        i = order[t]
-        if not lit_tri[prim[i]]:
-            continue
-        e, ok = element_of(k_tri, offset, prim[i], bu[i], bv[i], front[i], r1[rank[i]], r2[rank[i]], True)
-        area = np.float32(element_area[prim[i]])
-        a = arow[i]
-        if mono:
-            kk = lam[i]
-            irr = flux[e, kk] / area if ok else np.float32(0.0)
-            film[pix[i] * n + kk] += w1[i] * (irr * (albedo[a, kk] * inv_pi))
-            continue
-        if pix[i] != cur:
-            if cnt > 0:
-                _flush_run(film, n, cur, buf, cnt)
-            cur = pix[i]
-            cnt = 0
-        for kk in range(n):
-            irr = flux[e, kk] / area if ok else np.float32(0.0)
-            buf[cnt, kk] = _weight_at(mode, w2, w1, basis, i, kk) * (irr * (albedo[a, kk] * inv_pi))
-        cnt += 1
-    if cnt > 0:
-        _flush_run(film, n, cur, buf, cnt)
-
-
 def _caustic_fused(c, out, rays: Rays, hit: Hit, rng) -> bool:
-    """caustic_light by _caustic_kernel; False (nothing done) where its inputs have another form."""
-    weights = _ray_weights(rays)
+    """caustic_light by caustic_kernel; False (nothing done) where its inputs have another form."""
+    weights = ray_weights(rays)
     cmap = c.caustic_map
     if weights is None or cmap.flux.dtype != np.float32:
         return False
@@ -482,7 +341,7 @@ def _caustic_fused(c, out, rays: Rays, hit: Hit, rng) -> bool:
     lam = np.zeros(0, np.int64) if rays.lam is None else np.asarray(rays.lam, np.int64)
     mode, w2, w1, basis = weights
     lay = cmap.layout
-    _caustic_kernel(out.caustics, out.n, np.asarray(rays.pix, np.int64), _pixel_order(rays), lam, mode, w2, w1,
+    caustic_kernel(out.caustics, out.n, np.asarray(rays.pix, np.int64), pixel_order(rays), lam, mode, w2, w1,
                     basis, c.caustic_lit, lay.k, lay.offset, lay.element_area, cmap.flux,
                     np.asarray(hit.prim, np.int64), np.asarray(hit.bu, np.float64), np.asarray(hit.bv, np.float64),
                     np.asarray(hit.front, np.bool_), np.asarray(r1, np.float64), np.asarray(r2, np.float64),
@@ -490,114 +349,13 @@ def _caustic_fused(c, out, rays: Rays, hit: Hit, rng) -> bool:
     return True
 
 
-@njit
-def _lambert_weigh(wi, g, p_light, d, ns, ng, bump_v, p, eps, dist, pad, scale, live, o_out, t_out):
-    """LambertLobe.weigh and visible's shadow-ray setup per row: scale (B,) = g cos / pi times
-    the bump term (``bump_v``, empty: 1) and the power heuristic against cosine sampling; the rows
-    with scale > 0 into ``live`` with their shadow rays' origins and lengths. Returns their count."""
-    inv_pi = np.float32(1 / np.pi)
-    two = np.float32(2.0)
-    m = 0
-    for i in range(len(g)):
-        wo_up = d[i, 0] * ns[i, 0] + d[i, 1] * ns[i, 1] + d[i, 2] * ns[i, 2] < 0
-        cs = wi[i, 0] * ns[i, 0] + wi[i, 1] * ns[i, 1] + wi[i, 2] * ns[i, 2]
-        cg = wi[i, 0] * ng[i, 0] + wi[i, 1] * ng[i, 1] + wi[i, 2] * ng[i, 2]
-        pb = np.float32(cs * inv_pi) if (wo_up and cs > 0 and cg > 0) else np.float32(0.0)
-        s = g[i] * pb
-        if bump_v.shape[0] > 0:
-            s = s * bump_v[i]
-        a2, b2 = p_light[i] * p_light[i], pb * pb
-        w = a2 / (a2 + b2) if a2 + b2 > 0 else np.float32(1.0)
-        if not np.isfinite(w):
-            w = np.float32(1.0)
-        s = s * w
-        scale[i] = s
-        if s > 0:
-            live[m] = i
-            e = eps[i]
-            for k in range(3):
-                o_out[m, k] = p[i, k] + e * ng[i, k]
-            dd = dist[i]
-            t_out[m] = np.inf if np.isinf(dd) else np.float32((dd - two * e) - pad[i])
-            m += 1
-    return m
-
-
-@njit
-def _uplift_shape(rgb, i):
-    """Row i of spectral.spectrum's illuminant uplift (_uplift_kernel, as_light): (scale, shape
-    r, g, b) in float64, the spectrum at wavelength k being _uplift_at(...)."""
-    r, g, bl = np.float64(rgb[i, 0]), np.float64(rgb[i, 1]), np.float64(rgb[i, 2])
-    r, g, bl = (0.0 if r < 0.0 else r), (0.0 if g < 0.0 else g), (0.0 if bl < 0.0 else bl)
-    scale = r
-    if g > scale or g != g:
-        scale = g
-    if (bl > scale or bl != bl) and scale == scale:
-        scale = bl
-    if scale > 0.0:
-        r, g, bl = r / scale, g / scale, bl / scale
-    else:
-        r = g = bl = 0.0
-    r = 0.0 if r < 0.0 else (1.0 if r > 1.0 else r)
-    g = 0.0 if g < 0.0 else (1.0 if g > 1.0 else g)
-    bl = 0.0 if bl < 0.0 else (1.0 if bl > 1.0 else bl)
-    return scale, r, g, bl
-
-
-@njit
-def _uplift_at(shape, basis_t, k):
-    """The uplifted spectrum of _uplift_shape's ``shape`` at wavelength k, as float32 (the
-    light sample's spectrum, _uplift_kernel's float64 value cast as light_samples casts it)."""
-    scale, r, g, bl = shape
-    return np.float32(scale * (r * basis_t[0, k] + g * basis_t[1, k] + bl * basis_t[2, k]))
-
-
-@njit
-def _lambert_add(film, n, pix, order, keep, lam, mode, w2, w1, basis, albedo, arow, acol_fixed, scale,
-                 rgb, basis_t, table, srow):
-    """LambertLobe.contribution and the film add for the rows ``keep``: the ray weight times
-    albedo[arow] * scale times the light sample's spectrum (rgb rows uplifted when ``rgb`` has
-    rows, else table[srow]), summed per pixel run as TileOutput.accumulate does."""
-    mono = lam.shape[0] > 0
-    uplift = rgb.shape[0] > 0
-    buf = np.empty((max(_max_run(pix, order), 1), n), np.float32)  # the rows of one pixel's run
-    cur = -1
-    cnt = 0
-    for t in range(len(order)):
-        i = order[t]
-        if not keep[i]:
-            continue
-        a, sc = arow[i], scale[i]
-        shape = _uplift_shape(rgb, i) if uplift else (0.0, 0.0, 0.0, 0.0)
-        if mono:
-            kk = lam[i]
-            sp = _uplift_at(shape, basis_t, kk) if uplift else table[srow[i], kk]
-            film[pix[i] * n + kk] += ((w1[i] * albedo[a, 0 if acol_fixed else kk]) * sc) * sp
-            continue
-        if pix[i] != cur:
-            if cnt > 0:
-                _flush_run(film, n, cur, buf, cnt)
-            cur = pix[i]
-            cnt = 0
-        for kk in range(n):
-            sp = _uplift_at(shape, basis_t, kk) if uplift else table[srow[i], kk]
-            buf[cnt, kk] = _weight_at(mode, w2, w1, basis, i, kk) * ((albedo[a, kk] * sc) * sp)
-        cnt += 1
-    if cnt > 0:
-        _flush_run(film, n, cur, buf, cnt)
-
-
-_NO_RGB = np.zeros((0, 3), np.float32)
-_NO_I64 = np.zeros(0, np.int64)
-
-
 def _lambert_fused(c, out, rays: Rays, hit: Hit, rng, film, albedo) -> bool:
     """next_events with the LambertLobe for the emissive meshes and the world map (what
-    lambert_next_events does after direct_light) by _lambert_weigh and _lambert_add per light
+    lambert_next_events does after direct_light) by lambert_weigh and lambert_add per light
     sample, the shadow rays still one batched any-hit call; False (nothing done, no numbers
     drawn) where the inputs have another form."""
     prepared = c.prepared
-    weights = _ray_weights(rays)
+    weights = ray_weights(rays)
     f32 = np.float32
     if (weights is None or film is None or hit.p.dtype != f32 or hit.ns.dtype != f32 or hit.ng.dtype != f32
             or hit.eps.dtype != f32 or rays.d.dtype != f32
@@ -621,27 +379,27 @@ def _lambert_fused(c, out, rays: Rays, hit: Hit, rng, film, albedo) -> bool:
     samples = []
     if prepared.mesh_lights is not None:
         wi, dist, g, prim, pdf = prepared.mesh_lights.sample(hit.p, rng)
-        samples.append((wi, dist, g, pdf, 2 * prepared.tri_offset[prim], _NO_RGB,
+        samples.append((wi, dist, g, pdf, 2 * prepared.tri_offset[prim], NO_RGB,
                         prepared.materials.emission, prepared.tri_material[prim]))
     if prepared.environment is not None:
         wi, pdf, rgb = prepared.environment.sample(rng.random(b), rng.random(b))
         with np.errstate(divide="ignore"):
             g = np.where(pdf > 0, 1.0 / pdf, 0.0)
         samples.append((wi.astype(f32), np.full(b, np.inf, f32), g, pdf.astype(f32), np.zeros(b), rgb,
-                        _NO_F32_2, _NO_I64))
-    lam = _NO_I64 if rays.lam is None else np.asarray(rays.lam, np.int64)
+                        NO_F32_2, NO_I64))
+    lam = NO_I64 if rays.lam is None else np.asarray(rays.lam, np.int64)
     mode, w2, w1, basis = weights
-    order = _pixel_order(rays)
+    order = pixel_order(rays)
     pix = np.asarray(rays.pix, np.int64)
     basis_t = prepared.conv.emission_basis
     for wi, dist, g, pdf, pad, rgb, table, srow in samples:
         bump_v = bump(prepared, c.normal_maps, hit, wi) if c.normal_maps else None
-        bump_v = _NO_F32 if bump_v is None or np.ndim(bump_v) == 0 else np.ascontiguousarray(bump_v, f32)
+        bump_v = NO_F32 if bump_v is None or np.ndim(bump_v) == 0 else np.ascontiguousarray(bump_v, f32)
         scale = np.empty(b, f32)
         live = np.empty(b, np.int64)
         o = np.empty((b, 3), f32)
         tmax = np.empty(b, f32)
-        m = _lambert_weigh(np.ascontiguousarray(wi), np.ascontiguousarray(g, f32),
+        m = lambert_weigh(np.ascontiguousarray(wi), np.ascontiguousarray(g, f32),
                            np.ascontiguousarray(pdf, f32), rays.d, hit.ns, hit.ng, bump_v, hit.p, hit.eps,
                            np.ascontiguousarray(dist, f32), np.ascontiguousarray(pad), scale, live, o, tmax)
         if m == 0:
@@ -654,82 +412,9 @@ def _lambert_fused(c, out, rays: Rays, hit: Hit, rng, film, albedo) -> bool:
         if not keep.any():
             continue
         rgb = np.ascontiguousarray(rgb) if len(rgb) else rgb
-        _lambert_add(film, out.n, pix, order, keep, lam, mode, w2, w1, basis, alb, arow, fixed, scale,
+        lambert_add(film, out.n, pix, order, keep, lam, mode, w2, w1, basis, alb, arow, fixed, scale,
                      rgb, basis_t, table, np.asarray(srow, np.int64))
     return True
-
-
-@njit
-def _direct_weigh(li, wi, g, p_light, has_pdf, dist, ns, ng, flat, bump_v, p, eps, factors, o_out, d_out, t_out,
-                  idx_out, m):
-    """direct_light's factor of light ``li`` per row (g cos times the bump term and, ``has_pdf``,
-    the power heuristic against cosine sampling) into factors[:, li], and the shadow rays of the
-    rows with a factor > 0 appended at ``m``; returns the new count."""
-    inv_pi = np.float32(1 / np.pi)
-    two = np.float32(2.0)
-    nl = factors.shape[1]
-    for i in range(len(g)):
-        cs = wi[i, 0] * ns[i, 0] + wi[i, 1] * ns[i, 1] + wi[i, 2] * ns[i, 2]
-        ok = cs > 0 and (flat or wi[i, 0] * ng[i, 0] + wi[i, 1] * ng[i, 1] + wi[i, 2] * ng[i, 2] > 0)
-        f = np.float32(0.0)
-        if ok:
-            f = g[i] * cs
-            if bump_v.shape[0] > 0:
-                f = f * bump_v[i]
-        if has_pdf:
-            pb = (cs if cs > 0 else np.float32(0.0)) * inv_pi
-            a2, b2 = p_light[i] * p_light[i], pb * pb
-            w = a2 / (a2 + b2) if a2 + b2 > 0 else np.float32(1.0)
-            if not np.isfinite(w):
-                w = np.float32(1.0)
-            f = f * w
-        if f > 0:
-            factors[i, li] = f
-            e = eps[i]
-            for k in range(3):
-                o_out[m, k] = p[i, k] + e * ng[i, k]
-                d_out[m, k] = wi[i, k]
-            dd = dist[i]
-            t_out[m] = np.inf if np.isinf(dd) else dd - two * e
-            idx_out[m] = i * nl + li
-            m += 1
-    return m
-
-
-@njit
-def _direct_add(film, n, pix, order, lam, mode, w2, w1, basis, albedo, arow, acol_fixed, factors, spectrum):
-    """direct_light's contribution and film add per row: the ray weight times albedo[arow] *
-    float32(1 / pi) times the irradiance sum over lights of factors * spectrum, summed per pixel
-    run as TileOutput.accumulate does."""
-    inv_pi = np.float32(1 / np.pi)
-    nl = factors.shape[1]
-    mono = lam.shape[0] > 0
-    buf = np.empty((max(_max_run(pix, order), 1), n), np.float32)  # the rows of one pixel's run
-    cur = -1
-    cnt = 0
-    for t in range(len(order)):
-        i = order[t]
-        a = arow[i]
-        if mono:
-            kk = lam[i]
-            irr = factors[i, 0] * spectrum[0, kk]
-            for li in range(1, nl):
-                irr += factors[i, li] * spectrum[li, kk]
-            film[pix[i] * n + kk] += w1[i] * ((albedo[a, 0 if acol_fixed else kk] * inv_pi) * irr)
-            continue
-        if pix[i] != cur:
-            if cnt > 0:
-                _flush_run(film, n, cur, buf, cnt)
-            cur = pix[i]
-            cnt = 0
-        for kk in range(n):
-            irr = factors[i, 0] * spectrum[0, kk]
-            for li in range(1, nl):
-                irr += factors[i, li] * spectrum[li, kk]
-            buf[cnt, kk] = _weight_at(mode, w2, w1, basis, i, kk) * ((albedo[a, kk] * inv_pi) * irr)
-        cnt += 1
-    if cnt > 0:
-        _flush_run(film, n, cur, buf, cnt)
 
 
 def _albedo_rows(prepared, rays: Rays, hit: Hit, albedo):
@@ -748,12 +433,12 @@ def _albedo_rows(prepared, rays: Rays, hit: Hit, albedo):
 
 
 def _direct_fused(c, out, rays: Rays, hit: Hit, rng, film, albedo) -> bool:
-    """direct_light by _direct_weigh (per light) and _direct_add, the shadow rays in one any-hit
+    """direct_light by direct_weigh (per light) and direct_add, the shadow rays in one any-hit
     call and the factored film add where it applies; False (nothing done, no numbers drawn)
     where the inputs have another form."""
     prepared = c.prepared
     lights = prepared.lights
-    weights = _ray_weights(rays)
+    weights = ray_weights(rays)
     f32 = np.float32
     if (weights is None or hit.p.dtype != f32 or hit.ns.dtype != f32 or hit.ng.dtype != f32
             or hit.eps.dtype != f32 or lights.spectrum.dtype != f32):
@@ -767,9 +452,10 @@ def _direct_fused(c, out, rays: Rays, hit: Hit, rng, film, albedo) -> bool:
     for li, (wi, dist, g, p_light) in enumerate(samples):
         wi = np.ascontiguousarray(wi, f32)
         bump_v = bump(prepared, c.normal_maps, hit, wi)
-        bump_v = _NO_F32 if np.ndim(bump_v) == 0 else np.ascontiguousarray(bump_v, f32)
-        m = _direct_weigh(li, wi, np.ascontiguousarray(g, f32),
-                          _NO_F32 if p_light is None else np.ascontiguousarray(p_light, f32), p_light is not None,
+        bump_v = NO_F32 if np.ndim(bump_v) == 0 else np.ascontiguousarray(bump_v, f32)
+        # g in its own dtype: a spot's cone mask makes it float64, and the NumPy lines multiply in that
+        m = direct_weigh(li, wi, np.ascontiguousarray(g),
+                          NO_F32 if p_light is None else np.ascontiguousarray(p_light, f32), p_light is not None,
                           np.ascontiguousarray(dist, f32), hit.ns, hit.ng, not c.bent, bump_v, hit.p, hit.eps,
                           factors, o, d, tmax, idx, m)
     if m == 0:
@@ -789,7 +475,7 @@ def _direct_fused(c, out, rays: Rays, hit: Hit, rng, film, albedo) -> bool:
         return True
     alb, arow, fixed = rows
     mode, w2, w1, basis = weights
-    lam = _NO_I64 if rays.lam is None else np.asarray(rays.lam, np.int64)
-    _direct_add(film, out.n, np.asarray(rays.pix, np.int64), _pixel_order(rays), lam, mode, w2, w1, basis,
+    lam = NO_I64 if rays.lam is None else np.asarray(rays.lam, np.int64)
+    direct_add(film, out.n, np.asarray(rays.pix, np.int64), pixel_order(rays), lam, mode, w2, w1, basis,
                 alb, arow, fixed, factors, lights.spectrum)
     return True
