@@ -47,12 +47,13 @@ MANY_LIGHTS = ONE_LIGHT + [
 
 def lit_room(lights, world: bool = True, pixels: int = 24) -> Scene:
     """A grey and a coloured floor, a coloured wall with an emitting strip, a dispersive glass
-    ball throwing a caustic, ``lights`` and (``world``) a small environment map."""
+    ball throwing a caustic, a rough gold ball, ``lights`` and (``world``) a small environment map."""
     mats = Materials.from_list([
         {"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)},
         {"kind": "DIFFUSE", "color": (0.8, 0.3, 0.2)},
         {"kind": "DIELECTRIC", "color": (1, 1, 1), "ior": 1.6, "dispersion": "ABBE", "abbe": 30.0},
         {"kind": "DIFFUSE", "color": (0.2, 0.2, 0.2), "emission": (3.0, 2.0, 1.0)},
+        {"kind": "MIRROR", "color": (1.0, 0.78, 0.34), "metallic": 1.0, "roughness": 0.4},
     ])
     s = Scene(materials=mats)
     s.add_mesh(*primitives.quad((-1.5, 0.0, 0.0), (3.0, 0.0, 0.0), (0.0, 4.0, 0.0)), material=0)
@@ -60,6 +61,7 @@ def lit_room(lights, world: bool = True, pixels: int = 24) -> Scene:
     s.add_mesh(*primitives.quad((0.0, 2.0, 1.0), (6.0, 0.0, 0.0), (0.0, 0.0, 2.0)), material=1)
     s.add_mesh(*primitives.quad((0.0, 1.9, 2.3), (2.0, 0.0, 0.0), (0.0, 0.0, 0.2)), material=3)
     s.add_mesh(*primitives.icosphere((0.0, 0.3, 0.6), 0.5, 2), material=2)
+    s.add_mesh(*primitives.icosphere((-1.0, 0.8, 0.4), 0.4, 2), material=4)  # a rough metal: MicrofacetLobe
     s.lights = Lights.from_list(lights)
     s.camera = Camera.look_at((0.0, -3.0, 2.0), (0.0, 0.5, 0.4), lens=30.0, width=pixels, height=pixels)
     if world:
@@ -75,7 +77,14 @@ def _settings(**kw):
     return RenderSettings(**base)
 
 
-FUSED = ("_direct_fused", "_lambert_fused", "_caustic_fused")
+FUSED = ("_direct_fused", "_lambert_fused", "_caustic_fused", "_LobeAdd")
+
+
+def _switch_off(m, name):
+    if name == "_LobeAdd":  # next_events' microfacet film add
+        m.setattr(next_event._LobeAdd, "of", classmethod(lambda cls, rays: None))
+    else:
+        m.setattr(next_event, name, lambda *a: False)
 
 
 def _render(scene, monkeypatch, on=FUSED, **kw) -> np.ndarray:
@@ -84,14 +93,15 @@ def _render(scene, monkeypatch, on=FUSED, **kw) -> np.ndarray:
     with monkeypatch.context() as m:
         for name in FUSED:
             if name not in on:
-                m.setattr(next_event, name, lambda *a: False)
+                _switch_off(m, name)
         return np.asarray(render(scene, _settings(**kw)).rgb, np.float64)
 
 
 def _used(monkeypatch, scene, name) -> int:
     """How often the routine ``name`` did the work (returned True) in a render."""
     calls = []
-    fn = getattr(next_event, name)
+    obj, attr = (next_event._LobeAdd, "add") if name == "_LobeAdd" else (next_event, name)
+    fn = getattr(obj, attr)
 
     def counted(*a):
         done = fn(*a)
@@ -99,7 +109,7 @@ def _used(monkeypatch, scene, name) -> int:
         return done
 
     with monkeypatch.context() as m:
-        m.setattr(next_event, name, counted)
+        m.setattr(obj, attr, counted)
         render(scene, _settings())
     return sum(calls)
 

@@ -29,7 +29,7 @@ from ...materials.surface import surface_reflectance
 from ...transport.walker import Hit, Rays, light_spectrum_of
 from ...util.jit import kernels_enabled
 from .next_event_kernels import (NO_F32, NO_F32_2, NO_I64, NO_RGB, caustic_kernel, direct_add, direct_weigh,
-                                 lambert_add, lambert_weigh, pixel_order, ray_weights)
+                                 lambert_add, lambert_weigh, lobe_add, pixel_order, ray_weights)
 from .surface_interaction import bump
 
 __all__ = ["power_heuristic", "power_heuristic_f64", "light_samples", "visible", "next_events", "MicrofacetLobe",
@@ -125,12 +125,15 @@ def next_events(c, out, rays: Rays, hit: Hit, lobe, rng, film=None, analytic: bo
     ``film``, or (None) to the film part of each path's vertex count + 1."""
     prepared = c.prepared
     nd = None if film is not None else rays.state.nd
+    fused = (kernels_enabled() and film is not None and isinstance(lobe, MicrofacetLobe)) and _LobeAdd.of(rays)
     for wi, dist, g, spectrum, p_light, pad in light_samples(prepared, hit, rng, analytic):
         value, scale, live = lobe.weigh(wi, g, p_light)
         if live.size == 0:
             continue
         live = visible(prepared, out, hit, wi, dist, pad, live, lobe.shadow_side(wi, live))
         if live.size == 0:
+            continue
+        if fused and fused.add(out, film, live, value, scale, spectrum):
             continue
         r = rays.take(live)
         spec = light_spectrum_of(spectrum, live, r)
@@ -142,6 +145,42 @@ def next_events(c, out, rays: Rays, hit: Hit, lobe, rng, film=None, analytic: bo
         for k in np.unique(k_nd):  # the path's vertex counts (0, 1, 2+)
             part = k_nd == k
             out.accumulate(r.take(part), contrib[part], out.light_film(min(int(k) + 1, 2)))
+
+
+class _LobeAdd:
+    """next_events' contribution and film add of a MicrofacetLobe's light samples by the
+    ``lobe_add`` kernel (no rays.take, no (B, n) contributions); ``of`` is None where the rays'
+    weights have another form, ``add`` False (nothing done) for a sample of another form."""
+
+    def __init__(self, rays: Rays, weights):
+        self.rays, self.weights = rays, weights
+        self.order = pixel_order(rays)
+        self.pix = np.asarray(rays.pix, np.int64)
+        self.lam = NO_I64 if rays.lam is None else np.asarray(rays.lam, np.int64)
+
+    @classmethod
+    def of(cls, rays: Rays):
+        weights = ray_weights(rays)
+        return None if weights is None else cls(rays, weights)
+
+    def add(self, out, film, live, value, scale, spectrum) -> bool:
+        b = len(self.pix)
+        if isinstance(spectrum, _RowsOf):
+            table, srow = spectrum.table, np.asarray(spectrum.rows, np.int64)
+        elif np.ndim(spectrum) == 1:
+            table, srow = np.asarray(spectrum)[None, :], np.zeros(b, np.int64)
+        else:
+            table, srow = spectrum, np.arange(b)
+        value = np.asarray(value)
+        if (table.dtype != np.float32 or value.dtype != np.float32 or np.asarray(scale).dtype != np.float32 or value.ndim != 2 or len(value) != b
+                or value.shape[1] not in (1, out.n) or np.shape(scale) != (b,)):
+            return False
+        keep = np.zeros(b, bool)
+        keep[live] = True
+        mode, w2, w1, basis = self.weights
+        lobe_add(film, out.n, self.pix, self.order, keep, self.lam, mode, w2, w1, basis, value,
+                 np.asarray(scale, np.float32), np.ascontiguousarray(table), srow)
+        return True
 
 
 class MicrofacetLobe:

@@ -19,7 +19,7 @@ from ...transport.walker import Rays
 from ...util.jit import njit
 
 __all__ = ["ray_weights", "pixel_order", "caustic_kernel", "lambert_weigh", "lambert_add", "direct_weigh",
-           "direct_add", "flush_run", "NO_F32", "NO_F32_2", "NO_RGB", "NO_I64"]
+           "direct_add", "lobe_add", "flush_run", "NO_F32", "NO_F32_2", "NO_RGB", "NO_I64"]
 
 
 # The film adds below are TileOutput.accumulate's, row by row: white rays summed per run of a
@@ -343,6 +343,37 @@ def direct_add(film, n, pix, order, lam, mode, w2, w1, basis, albedo, arow, acol
             for li in range(1, nl):
                 irr += factors[i, li] * spectrum[li, kk]
             buf[cnt, kk] = _weight_at(mode, w2, w1, basis, i, kk) * ((albedo[a, kk] * inv_pi) * irr)
+        cnt += 1
+    if cnt > 0:
+        flush_run(film, n, cur, buf, cnt)
+
+
+@njit
+def lobe_add(film, n, pix, order, keep, lam, mode, w2, w1, basis, value, scale, table, srow):
+    """next_events' contribution of a lobe (MicrofacetLobe.contribution) and the film add for the
+    rows ``keep``: the ray weight times value (f cos, (B, n) or (B, 1)) * scale times the light
+    sample's spectrum table[srow], summed per pixel run as TileOutput.accumulate does."""
+    mono = lam.shape[0] > 0
+    wide = value.shape[1] > 1
+    buf = np.empty((max(_max_run(pix, order), 1), n), np.float32)  # the rows of one pixel's run
+    cur = -1
+    cnt = 0
+    for t in range(len(order)):
+        i = order[t]
+        if not keep[i]:
+            continue
+        sc, s = scale[i], srow[i]
+        if mono:
+            kk = lam[i]
+            film[pix[i] * n + kk] += (w1[i] * (value[i, 0] * sc)) * table[s, kk]
+            continue
+        if pix[i] != cur:
+            if cnt > 0:
+                flush_run(film, n, cur, buf, cnt)
+            cur = pix[i]
+            cnt = 0
+        for kk in range(n):
+            buf[cnt, kk] = _weight_at(mode, w2, w1, basis, i, kk) * ((value[i, kk if wide else 0] * sc) * table[s, kk])
         cnt += 1
     if cnt > 0:
         flush_run(film, n, cur, buf, cnt)
