@@ -189,7 +189,7 @@ def test_element_of_is_the_layouts_index():
     np.testing.assert_array_equal([g[0] for g in got], idx)
 
 
-@pytest.mark.parametrize("length", [1, 2, 3, 7, 8, 9, 17, 128, 129, 300, 1000])
+@pytest.mark.parametrize("length", [1, 2, 3, 7, 8, 9, 17, 128, 129, 130, 300, 1000, 5000])
 def test_a_runs_film_add_is_reduceats_sum(length):
     """flush_run adds a pixel's rows as TileOutput.accumulate's np.add.reduceat does (its first
     row plus NumPy's pairwise sum of the rest), to the bit."""

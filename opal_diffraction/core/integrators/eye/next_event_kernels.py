@@ -71,37 +71,73 @@ def _weight_at(mode, w2, w1, basis, i, k):
 
 
 @njit
-def _pairwise(buf, start, count, k):
-    """NumPy's pairwise_sum of float32 buf[start:start + count, k] (numpy/_core/src/umath/
-    loops_utils.h: sequential below 8 terms, 8 partial sums up to 128, halves above)."""
+def _pw_block(buf, start, count, k):
+    """NumPy's pairwise_sum of float32 buf[start:start + count, k] for count <= 128
+    (numpy/_core/src/umath/loops_utils.h: sequential below 8 terms, else 8 partial sums)."""
     if count < 8:
         res = np.float32(0.0)
         for i in range(count):
             res += buf[start + i, k]
         return res
+    r0, r1, r2, r3 = buf[start, k], buf[start + 1, k], buf[start + 2, k], buf[start + 3, k]
+    r4, r5, r6, r7 = buf[start + 4, k], buf[start + 5, k], buf[start + 6, k], buf[start + 7, k]
+    i = 8
+    end = count - count % 8
+    while i < end:
+        r0 += buf[start + i, k]
+        r1 += buf[start + i + 1, k]
+        r2 += buf[start + i + 2, k]
+        r3 += buf[start + i + 3, k]
+        r4 += buf[start + i + 4, k]
+        r5 += buf[start + i + 5, k]
+        r6 += buf[start + i + 6, k]
+        r7 += buf[start + i + 7, k]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < count:
+        res += buf[start + i, k]
+        i += 1
+    return res
+
+
+@njit
+def _pairwise(buf, start, count, k):
+    """NumPy's pairwise_sum of float32 buf[start:start + count, k]: blocks of up to 128 terms
+    (_pw_block), above that the sum of the two halves (the first a multiple of 8 long), here
+    with an explicit stack (numba's on-disk cache cannot hold a recursive function)."""
     if count <= 128:
-        r0, r1, r2, r3 = buf[start, k], buf[start + 1, k], buf[start + 2, k], buf[start + 3, k]
-        r4, r5, r6, r7 = buf[start + 4, k], buf[start + 5, k], buf[start + 6, k], buf[start + 7, k]
-        i = 8
-        end = count - count % 8
-        while i < end:
-            r0 += buf[start + i, k]
-            r1 += buf[start + i + 1, k]
-            r2 += buf[start + i + 2, k]
-            r3 += buf[start + i + 3, k]
-            r4 += buf[start + i + 4, k]
-            r5 += buf[start + i + 5, k]
-            r6 += buf[start + i + 6, k]
-            r7 += buf[start + i + 7, k]
-            i += 8
-        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-        while i < count:
-            res += buf[start + i, k]
-            i += 1
-        return res
-    half = count // 2
-    half -= half % 8
-    return _pairwise(buf, start, half, k) + _pairwise(buf, start + half, count - half, k)
+        return _pw_block(buf, start, count, k)
+    ss, cc, stage = np.empty(64, np.int64), np.empty(64, np.int64), np.empty(64, np.int64)
+    left, right = np.empty(64, np.float32), np.empty(64, np.float32)
+    ss[0], cc[0], stage[0] = start, count, 0
+    sp = 1
+    v = np.float32(0.0)
+    while sp > 0:
+        t = sp - 1
+        c = cc[t]
+        done = False
+        if c <= 128:
+            v = _pw_block(buf, ss[t], c, k)
+            done = True
+        elif stage[t] < 2:  # push the left half (stage 0), then the right half (stage 1)
+            half = c // 2
+            half -= half % 8
+            ss[sp] = ss[t] if stage[t] == 0 else ss[t] + half
+            cc[sp] = half if stage[t] == 0 else c - half
+            stage[sp] = 0
+            stage[t] += 1
+            sp += 1
+        else:
+            v = left[t] + right[t]
+            done = True
+        if done:
+            sp -= 1
+            if sp > 0:
+                if stage[sp - 1] == 1:
+                    left[sp - 1] = v
+                else:
+                    right[sp - 1] = v
+    return v
 
 
 @njit
