@@ -45,19 +45,25 @@ MANY_LIGHTS = ONE_LIGHT + [
 ]
 
 
-def lit_room(lights, world: bool = True, pixels: int = 24) -> Scene:
-    """A grey and a coloured floor, a coloured wall with an emitting strip, a dispersive glass
+def lit_room(lights, world: bool = True, pixels: int = 24, textured: bool = False) -> Scene:
+    """A grey and a coloured floor (``textured``: a colour checker on it), a coloured wall with an emitting strip, a dispersive glass
     ball throwing a caustic, a rough gold ball, ``lights`` and (``world``) a small environment map."""
     mats = Materials.from_list([
         {"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)},
-        {"kind": "DIFFUSE", "color": (0.8, 0.3, 0.2)},
+        {"kind": "DIFFUSE", "color": (0.8, 0.3, 0.2), "color_texture": 0 if textured else -1},
         {"kind": "DIELECTRIC", "color": (1, 1, 1), "ior": 1.6, "dispersion": "ABBE", "abbe": 30.0},
         {"kind": "DIFFUSE", "color": (0.2, 0.2, 0.2), "emission": (3.0, 2.0, 1.0)},
         {"kind": "MIRROR", "color": (1.0, 0.78, 0.34), "metallic": 1.0, "roughness": 0.4},
     ])
     s = Scene(materials=mats)
     s.add_mesh(*primitives.quad((-1.5, 0.0, 0.0), (3.0, 0.0, 0.0), (0.0, 4.0, 0.0)), material=0)
-    s.add_mesh(*primitives.quad((1.5, 0.0, 0.0), (3.0, 0.0, 0.0), (0.0, 4.0, 0.0)), material=1)
+    v, t = primitives.quad((1.5, 0.0, 0.0), (3.0, 0.0, 0.0), (0.0, 4.0, 0.0))
+    s.add_mesh(v, t, 1, uvs=np.asarray(v)[:, :2] * 2.0 if textured else None)
+    if textured:
+        tex = np.zeros((4, 4, 3), np.float32)
+        tex[::2, ::2] = (0.9, 0.2, 0.1)
+        tex[1::2, 1::2] = (0.1, 0.5, 0.9)
+        s.add_texture(tex, "CLOSEST")
     s.add_mesh(*primitives.quad((0.0, 2.0, 1.0), (6.0, 0.0, 0.0), (0.0, 0.0, 2.0)), material=1)
     s.add_mesh(*primitives.quad((0.0, 1.9, 2.3), (2.0, 0.0, 0.0), (0.0, 0.0, 0.2)), material=3)
     s.add_mesh(*primitives.icosphere((0.0, 0.3, 0.6), 0.5, 2), material=2)
@@ -124,8 +130,9 @@ def test_each_fused_routine_gives_the_references_bits_with_one_light(monkeypatch
     np.testing.assert_array_equal(kernel, reference)
 
 
-def test_all_fused_routines_give_the_references_bits_without_a_world(monkeypatch):
-    scene = lit_room(ONE_LIGHT, world=False)
+@pytest.mark.parametrize("world,textured", [(False, False), (True, True)])
+def test_all_fused_routines_give_the_references_bits(monkeypatch, world, textured):
+    scene = lit_room(ONE_LIGHT, world=world, textured=textured)
     np.testing.assert_array_equal(_render(scene, monkeypatch), _render(scene, monkeypatch, on=()))
 
 

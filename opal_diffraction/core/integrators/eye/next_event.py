@@ -369,14 +369,16 @@ def _caustic_fused(c, out, rays: Rays, hit: Hit, rng) -> bool:
     m = int(np.count_nonzero(lit))
     if m == 0:
         return True
-    r1, r2 = rng.random(m), rng.random(m)  # IlluminationMap.irradiance's numbers, in the same order
     if prepared.textures.uses("color"):
         sub = hit if m == len(lit) else hit.take(lit)
-        albedo = np.ascontiguousarray(surface_reflectance(prepared, sub), np.float32)
+        albedo = surface_reflectance(prepared, sub)
         arow = np.cumsum(lit) - 1
     else:
-        albedo = np.ascontiguousarray(prepared.materials.reflectance, np.float32)
+        albedo = prepared.materials.reflectance
         arow = np.asarray(hit.mat, np.int64)
+    if albedo.dtype != np.float32:  # (the NumPy lines multiply in its precision)
+        return False
+    r1, r2 = rng.random(m), rng.random(m)  # IlluminationMap.irradiance's numbers, in the same order
     lam = np.zeros(0, np.int64) if rays.lam is None else np.asarray(rays.lam, np.int64)
     mode, w2, w1, basis = weights
     lay = cmap.layout
@@ -384,7 +386,7 @@ def _caustic_fused(c, out, rays: Rays, hit: Hit, rng) -> bool:
                     basis, c.caustic_lit, lay.k, lay.offset, lay.element_area, cmap.flux,
                     np.asarray(hit.prim, np.int64), np.asarray(hit.bu, np.float64), np.asarray(hit.bv, np.float64),
                     np.asarray(hit.front, np.bool_), np.asarray(r1, np.float64), np.asarray(r2, np.float64),
-                    albedo, arow)
+                    np.ascontiguousarray(albedo), arow)
     return True
 
 
