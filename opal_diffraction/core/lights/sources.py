@@ -27,6 +27,9 @@ uniformly in the solid angle it subtends (Urena et al. 2013, core/lights/rect_li
 area.h), a disk light by a uniform point on it. ``light_pdf`` is the solid-angle density of
 those samplers, ``intersect_lights`` and ``sun_radiance`` what a ray sees of the sized lights
 (mirrors, glass, the camera, MIS).
+
+Where the kernels run (core/util/jit.py), a point light of radius 0 is sampled in one compiled
+pass (``_point_kernel``: the NumPy lines' float32 steps in their order, the same bits).
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..util.enums import LightKind
+from ..util.jit import kernels_enabled, njit
 from . import rect_light
 from ..util.geometry import orthonormal_basis
 from ..scene.model import Lights
@@ -246,6 +250,10 @@ def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.G
         return wi, np.full(b, np.inf, f32), np.ones(b, f32)
     if k in (POINT, SPOT) and pl.radius[index] > 0:
         return _sample_sized_point(pl, index, p, rng)
+    if k == POINT and kernels_enabled() and p.dtype == f32 and p.ndim == 2:
+        wi, dist, g = np.empty((b, 3), f32), np.empty(b, f32), np.empty(b, f32)
+        _point_kernel(pl.position[index].astype(f32), p, wi, dist, g)
+        return wi, dist, g
     if k in (POINT, SPOT):
         target = pl.position[index].astype(f32)
     else:
@@ -268,6 +276,23 @@ def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.G
     cos_l = -(wi @ pl.direction[index].astype(f32))
     g = np.where(cos_l > 0, cos_l * f32(pl.area[index]) / d2, f32(0.0))
     return wi, dist, g
+
+
+@njit
+def _point_kernel(target, p, wi, dist, g):
+    """sample_light of a point light of radius 0 per row: the unit direction to ``target``
+    (float32), the distance and g = 1 / d^2."""
+    tiny = np.float32(1e-30)
+    one = np.float32(1.0)
+    for i in range(p.shape[0]):
+        x, y, z = target[0] - p[i, 0], target[1] - p[i, 1], target[2] - p[i, 2]
+        d2 = x * x + y * y + z * z
+        if not d2 >= tiny:  # np.maximum: NaN stays NaN
+            d2 = d2 if d2 != d2 else tiny
+        d = np.sqrt(d2)
+        wi[i, 0], wi[i, 1], wi[i, 2] = x / d, y / d, z / d
+        dist[i] = d
+        g[i] = one / d2
 
 
 def _sample_sized_point(pl, index, p, rng):

@@ -9,6 +9,10 @@ objects: the map is one (E, n) array of spectral flux that partial maps simply a
 
 A white deposit sums each element's rows in their order and adds the sum to the map once
 (core/util/row_sums.py: a compiled pass where the kernels run, the same bits as the NumPy lines).
+The eye pass's lookup (``irradiance``: jitter, element index, flux over area) is one compiled
+pass too where the kernels run (``_irradiance_kernel`` over ``element_of``, the same float64
+steps as the NumPy lines, so the same bits); the eye pass's caustic stage calls ``element_of``
+inside its own fused kernel.
 """
 
 from __future__ import annotations
@@ -18,9 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..util.geometry import triangle_areas
+from ..util.jit import kernels_enabled, njit
 from ..util.row_sums import add_row_sums
 
-__all__ = ["ElementLayout", "IlluminationMap", "MAX_SUBDIVISION"]
+__all__ = ["ElementLayout", "IlluminationMap", "MAX_SUBDIVISION", "element_of"]
 
 MAX_SUBDIVISION = 1024  # k per triangle at most
 
@@ -160,6 +165,16 @@ class IlluminationMap:
         terms (folded back into the triangle): over many eye samples that box-filters the map
         over neighbouring elements, so element edges do not show as triangles.
         """
+        if kernels_enabled():
+            b = len(np.asarray(prim))
+            out = np.empty((b, self.flux.shape[1]), np.float32)
+            r1 = rng.random(b) if rng is not None else np.zeros(0)
+            r2 = rng.random(b) if rng is not None else np.zeros(0)
+            lay = self.layout
+            _irradiance_kernel(lay.k, lay.offset, lay.element_area, self.flux, np.asarray(prim, np.int64),
+                               np.asarray(bu, np.float64), np.asarray(bv, np.float64), np.asarray(front, np.bool_),
+                               r1, r2, rng is not None, out)
+            return out
         if rng is not None:
             k = np.maximum(self.layout.k[np.asarray(prim)], 1).astype(np.float64)
             bu = np.asarray(bu, np.float64) + (rng.random(len(k)) * 2 - 1) / k
@@ -177,3 +192,48 @@ class IlluminationMap:
     def __iadd__(self, other: "IlluminationMap") -> "IlluminationMap":
         self.flux += other.flux
         return self
+
+
+@njit
+def element_of(k_tri, offset, prim, bu, bv, front, r1, r2, jitter):
+    """(element index, valid) of one hit: ``irradiance``'s jitter (numbers r1, r2 in [0, 1),
+    ``jitter``) and ``ElementLayout.index`` for one row, in the same float64 steps."""
+    kt = k_tri[prim]
+    if jitter:
+        kj = np.float64(kt if kt > 1 else 1)
+        bu = bu + (r1 * 2.0 - 1.0) / kj
+        bv = bv + (r2 * 2.0 - 1.0) / kj
+        bu, bv = abs(bu), abs(bv)
+        if bu + bv > 1.0:
+            bu, bv = 1.0 - bv, 1.0 - bu
+    if kt <= 0:
+        return np.int64(0), False
+    kf = np.float64(kt)
+    x = (0.0 if bu < 0.0 else (1.0 if bu > 1.0 else bu)) * kf
+    y = (0.0 if bv < 0.0 else (1.0 if bv > 1.0 else bv)) * kf
+    if x != x:  # NaN barycentrics (the NumPy lines index out of range there): the first cell
+        x = 0.0
+    if y != y:
+        y = 0.0
+    km1 = kt - 1
+    i = min(np.int64(x), km1)
+    lim = km1 - i
+    j = min(np.int64(y), lim if lim > 0 else np.int64(0))
+    upper = 1 if ((x - i) + (y - j) > 1.0) and (j < km1 - i) else 0
+    local = (2 * kt - i) * i + 2 * j + upper
+    return offset[prim] + 2 * local + (0 if front else 1), True
+
+
+@njit
+def _irradiance_kernel(k_tri, offset, element_area, flux, prim, bu, bv, front, r1, r2, jitter, out):
+    """IlluminationMap.irradiance per row: out[b] = flux[element] / float32(area), 0 off the map."""
+    n = flux.shape[1]
+    for b in range(len(prim)):
+        e, ok = element_of(k_tri, offset, prim[b], bu[b], bv[b], front[b],
+                           r1[b] if jitter else 0.0, r2[b] if jitter else 0.0, jitter)
+        if not ok:
+            out[b, :] = 0.0
+            continue
+        area = np.float32(element_area[prim[b]])
+        for kk in range(n):
+            out[b, kk] = flux[e, kk] / area

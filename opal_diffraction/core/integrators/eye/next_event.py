@@ -10,6 +10,13 @@ opal's Bragg lobe (core/integrators/bragg_shading.py) differ only in the ``NextE
 pass. The Lambertian vertices' analytic lights take a factored fast path (``direct_light``:
 all shadow rays in one call, unit-weight rays summed per (material, light)). The caustic map's
 irradiance (the light pass's caustics, section 4.2) is looked up here too (``caustic_light``).
+
+Where the kernels run (core/util/jit.py), ``direct_light``, the Lambertian vertices' meshes and
+world map (``lambert_next_events``) and ``caustic_light`` take fused paths (``_direct_fused``,
+``_lambert_fused``, ``_caustic_fused``): light samples drawn as before, then per light sample
+one kernel for the weights and shadow-ray setup and one for the contribution and the film add
+(core/integrators/eye/next_event_kernels.py), the shadow rays still one batched any-hit call; the
+NumPy lines stay as the reference, and the fused paths fall back to them for inputs of other forms.
 """
 
 from __future__ import annotations
@@ -20,6 +27,9 @@ from ...lights.sources import sample_light_pdf
 from ...materials import bsdf
 from ...materials.surface import surface_reflectance
 from ...transport.walker import Hit, Rays, light_spectrum_of
+from ...util.jit import kernels_enabled
+from .next_event_kernels import (NO_F32, NO_F32_2, NO_I64, NO_RGB, caustic_kernel, direct_add, direct_weigh,
+                                 lambert_add, lambert_weigh, lobe_add, pixel_order, ray_weights)
 from .surface_interaction import bump
 
 __all__ = ["power_heuristic", "power_heuristic_f64", "light_samples", "visible", "next_events", "MicrofacetLobe",
@@ -115,12 +125,15 @@ def next_events(c, out, rays: Rays, hit: Hit, lobe, rng, film=None, analytic: bo
     ``film``, or (None) to the film part of each path's vertex count + 1."""
     prepared = c.prepared
     nd = None if film is not None else rays.state.nd
+    fused = (kernels_enabled() and film is not None and isinstance(lobe, MicrofacetLobe)) and _LobeAdd.of(rays)
     for wi, dist, g, spectrum, p_light, pad in light_samples(prepared, hit, rng, analytic):
         value, scale, live = lobe.weigh(wi, g, p_light)
         if live.size == 0:
             continue
         live = visible(prepared, out, hit, wi, dist, pad, live, lobe.shadow_side(wi, live))
         if live.size == 0:
+            continue
+        if fused and fused.add(out, film, live, value, scale, spectrum):
             continue
         r = rays.take(live)
         spec = light_spectrum_of(spectrum, live, r)
@@ -132,6 +145,42 @@ def next_events(c, out, rays: Rays, hit: Hit, lobe, rng, film=None, analytic: bo
         for k in np.unique(k_nd):  # the path's vertex counts (0, 1, 2+)
             part = k_nd == k
             out.accumulate(r.take(part), contrib[part], out.light_film(min(int(k) + 1, 2)))
+
+
+class _LobeAdd:
+    """next_events' contribution and film add of a MicrofacetLobe's light samples by the
+    ``lobe_add`` kernel (no rays.take, no (B, n) contributions); ``of`` is None where the rays'
+    weights have another form, ``add`` False (nothing done) for a sample of another form."""
+
+    def __init__(self, rays: Rays, weights):
+        self.rays, self.weights = rays, weights
+        self.order = pixel_order(rays)
+        self.pix = np.asarray(rays.pix, np.int64)
+        self.lam = NO_I64 if rays.lam is None else np.asarray(rays.lam, np.int64)
+
+    @classmethod
+    def of(cls, rays: Rays):
+        weights = ray_weights(rays)
+        return None if weights is None else cls(rays, weights)
+
+    def add(self, out, film, live, value, scale, spectrum) -> bool:
+        b = len(self.pix)
+        if isinstance(spectrum, _RowsOf):
+            table, srow = spectrum.table, np.asarray(spectrum.rows, np.int64)
+        elif np.ndim(spectrum) == 1:
+            table, srow = np.asarray(spectrum)[None, :], np.zeros(b, np.int64)
+        else:
+            table, srow = spectrum, np.arange(b)
+        value = np.asarray(value)
+        if (table.dtype != np.float32 or value.dtype != np.float32 or np.asarray(scale).dtype != np.float32 or value.ndim != 2 or len(value) != b
+                or value.shape[1] not in (1, out.n) or np.shape(scale) != (b,)):
+            return False
+        keep = np.zeros(b, bool)
+        keep[live] = True
+        mode, w2, w1, basis = self.weights
+        lobe_add(film, out.n, self.pix, self.order, keep, self.lam, mode, w2, w1, basis, value,
+                 np.asarray(scale, np.float32), np.ascontiguousarray(table), srow)
+        return True
 
 
 class MicrofacetLobe:
@@ -232,6 +281,8 @@ def lambert_next_events(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
     the vertices' SLOT_LIGHT numbers."""
     direct_light(c, out, rays, hit, rng, film, albedo)
     if c.mesh_lights is not None or c.prepared.environment is not None:
+        if kernels_enabled() and _lambert_fused(c, out, rays, hit, rng, film, albedo):
+            return
         if albedo is None:
             albedo = surface_reflectance(c.prepared, hit, rays.lam)
         next_events(c, out, rays, hit, LambertLobe(c, rays, hit, albedo), rng, film, analytic=False)
@@ -246,6 +297,8 @@ def direct_light(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
     lights = prepared.lights
     nl, b = len(lights), len(rays)
     if nl == 0 or b == 0:
+        return
+    if kernels_enabled() and _direct_fused(c, out, rays, hit, rng, film, albedo):
         return
     # One sample per light per ray; all shadow rays in a single any-hit call.
     flat = not c.bent
@@ -288,8 +341,11 @@ def direct_light(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
 
 def caustic_light(c, out, rays: Rays, hit: Hit, rng):
     """Caustic radiance at diffuse hits: the illumination map's irradiance * albedo / pi
-    (looked up with a one-element jitter: a box filter over neighbouring elements)."""
+    (looked up with a one-element jitter: a box filter over neighbouring elements). Where the
+    kernels run, one pass (``caustic_kernel``) looks up, weighs and adds to the film."""
     prepared = c.prepared
+    if kernels_enabled() and _caustic_fused(c, out, rays, hit, rng):
+        return
     lit = c.caustic_lit[hit.prim]
     if not lit.all():
         rays, hit = rays.take(lit), hit.take(lit)
@@ -300,3 +356,167 @@ def caustic_light(c, out, rays: Rays, hit: Hit, rng):
     radiance = irr * brdf
     contrib = rays.weighted(radiance) if rays.lam is None else rays.w * radiance[np.arange(len(rays)), rays.lam]
     out.accumulate(rays, contrib, out.caustics)
+
+
+def _caustic_fused(c, out, rays: Rays, hit: Hit, rng) -> bool:
+    """caustic_light by caustic_kernel; False (nothing done) where its inputs have another form."""
+    weights = ray_weights(rays)
+    cmap = c.caustic_map
+    if weights is None or cmap.flux.dtype != np.float32:
+        return False
+    prepared = c.prepared
+    lit = c.caustic_lit[hit.prim]
+    m = int(np.count_nonzero(lit))
+    if m == 0:
+        return True
+    if prepared.textures.uses("color"):
+        sub = hit if m == len(lit) else hit.take(lit)
+        albedo = surface_reflectance(prepared, sub)
+        arow = np.cumsum(lit) - 1
+    else:
+        albedo = prepared.materials.reflectance
+        arow = np.asarray(hit.mat, np.int64)
+    if albedo.dtype != np.float32:  # (the NumPy lines multiply in its precision)
+        return False
+    r1, r2 = rng.random(m), rng.random(m)  # IlluminationMap.irradiance's numbers, in the same order
+    lam = np.zeros(0, np.int64) if rays.lam is None else np.asarray(rays.lam, np.int64)
+    mode, w2, w1, basis = weights
+    lay = cmap.layout
+    caustic_kernel(out.caustics, out.n, np.asarray(rays.pix, np.int64), pixel_order(rays), lam, mode, w2, w1,
+                    basis, c.caustic_lit, lay.k, lay.offset, lay.element_area, cmap.flux,
+                    np.asarray(hit.prim, np.int64), np.asarray(hit.bu, np.float64), np.asarray(hit.bv, np.float64),
+                    np.asarray(hit.front, np.bool_), np.asarray(r1, np.float64), np.asarray(r2, np.float64),
+                    np.ascontiguousarray(albedo), arow)
+    return True
+
+
+def _lambert_fused(c, out, rays: Rays, hit: Hit, rng, film, albedo) -> bool:
+    """next_events with the LambertLobe for the emissive meshes and the world map (what
+    lambert_next_events does after direct_light) by lambert_weigh and lambert_add per light
+    sample, the shadow rays still one batched any-hit call; False (nothing done, no numbers
+    drawn) where the inputs have another form."""
+    prepared = c.prepared
+    weights = ray_weights(rays)
+    f32 = np.float32
+    if (weights is None or film is None or hit.p.dtype != f32 or hit.ns.dtype != f32 or hit.ng.dtype != f32
+            or hit.eps.dtype != f32 or rays.d.dtype != f32
+            or (prepared.mesh_lights is not None and prepared.materials.emission.dtype != f32)):
+        return False
+    textured = prepared.textures.uses("color")
+    b = len(rays)
+    if albedo is None and not textured:
+        table = prepared.materials.reflectance
+        if table.dtype != f32:
+            return False
+        alb, arow, fixed = table, np.asarray(hit.mat, np.int64), False
+    else:
+        if albedo is None:
+            albedo = surface_reflectance(prepared, hit, rays.lam)
+        if albedo.dtype != f32:
+            return False
+        fixed = albedo.ndim == 1
+        alb, arow = (albedo[:, None] if fixed else albedo), np.arange(b)
+    # the samples, drawn in light_samples' order: meshes, then the world
+    samples = []
+    if prepared.mesh_lights is not None:
+        wi, dist, g, prim, pdf = prepared.mesh_lights.sample(hit.p, rng)
+        samples.append((wi, dist, g, pdf, 2 * prepared.tri_offset[prim], NO_RGB,
+                        prepared.materials.emission, prepared.tri_material[prim]))
+    if prepared.environment is not None:
+        wi, pdf, rgb = prepared.environment.sample(rng.random(b), rng.random(b))
+        with np.errstate(divide="ignore"):
+            g = np.where(pdf > 0, 1.0 / pdf, 0.0)
+        samples.append((wi.astype(f32), np.full(b, np.inf, f32), g, pdf.astype(f32), np.zeros(b), rgb,
+                        NO_F32_2, NO_I64))
+    lam = NO_I64 if rays.lam is None else np.asarray(rays.lam, np.int64)
+    mode, w2, w1, basis = weights
+    order = pixel_order(rays)
+    pix = np.asarray(rays.pix, np.int64)
+    basis_t = prepared.conv.emission_basis
+    for wi, dist, g, pdf, pad, rgb, table, srow in samples:
+        bump_v = bump(prepared, c.normal_maps, hit, wi) if c.normal_maps else None
+        bump_v = NO_F32 if bump_v is None or np.ndim(bump_v) == 0 else np.ascontiguousarray(bump_v, f32)
+        scale = np.empty(b, f32)
+        live = np.empty(b, np.int64)
+        o = np.empty((b, 3), f32)
+        tmax = np.empty(b, f32)
+        m = lambert_weigh(np.ascontiguousarray(wi), np.ascontiguousarray(g, f32),
+                           np.ascontiguousarray(pdf, f32), rays.d, hit.ns, hit.ng, bump_v, hit.p, hit.eps,
+                           np.ascontiguousarray(dist, f32), np.ascontiguousarray(pad), scale, live, o, tmax)
+        if m == 0:
+            continue
+        live = live[:m]
+        occ = prepared.accel.occluded(o[:m], np.ascontiguousarray(wi[live], f32), tmax[:m])
+        out.shadow_rays += len(occ)
+        keep = np.zeros(b, bool)
+        keep[live[~occ]] = True
+        if not keep.any():
+            continue
+        rgb = np.ascontiguousarray(rgb) if len(rgb) else rgb
+        lambert_add(film, out.n, pix, order, keep, lam, mode, w2, w1, basis, alb, arow, fixed, scale,
+                     rgb, basis_t, table, np.asarray(srow, np.int64))
+    return True
+
+
+def _albedo_rows(prepared, rays: Rays, hit: Hit, albedo):
+    """(table, rows (B,), fixed column) with the hits' base colours table[rows] (at column lam,
+    or column 0 when ``fixed``) for the kernels, without forming them for untextured materials;
+    None where they are not float32."""
+    if albedo is None and not prepared.textures.uses("color"):
+        table = prepared.materials.reflectance
+        return (table, np.asarray(hit.mat, np.int64), False) if table.dtype == np.float32 else None
+    if albedo is None:
+        albedo = surface_reflectance(prepared, hit, rays.lam)
+    if albedo.dtype != np.float32:
+        return None
+    fixed = albedo.ndim == 1
+    return (albedo[:, None] if fixed else albedo), np.arange(len(rays)), fixed
+
+
+def _direct_fused(c, out, rays: Rays, hit: Hit, rng, film, albedo) -> bool:
+    """direct_light by direct_weigh (per light) and direct_add, the shadow rays in one any-hit
+    call and the factored film add where it applies; False (nothing done, no numbers drawn)
+    where the inputs have another form."""
+    prepared = c.prepared
+    lights = prepared.lights
+    weights = ray_weights(rays)
+    f32 = np.float32
+    if (weights is None or hit.p.dtype != f32 or hit.ns.dtype != f32 or hit.ng.dtype != f32
+            or hit.eps.dtype != f32 or lights.spectrum.dtype != f32):
+        return False
+    nl, b = len(lights), len(rays)
+    samples = [sample_light_pdf(lights, li, hit.p, rng) for li in range(nl)]  # the numbers, in light order
+    factors = np.zeros((b, nl), f32)
+    o, d, tmax = np.empty((b * nl, 3), f32), np.empty((b * nl, 3), f32), np.empty(b * nl, f32)
+    idx = np.empty(b * nl, np.int64)
+    m = 0
+    for li, (wi, dist, g, p_light) in enumerate(samples):
+        wi = np.ascontiguousarray(wi, f32)
+        bump_v = bump(prepared, c.normal_maps, hit, wi)
+        bump_v = NO_F32 if np.ndim(bump_v) == 0 else np.ascontiguousarray(bump_v, f32)
+        # g in its own dtype: a spot's cone mask makes it float64, and the NumPy lines multiply in that
+        m = direct_weigh(li, wi, np.ascontiguousarray(g),
+                          NO_F32 if p_light is None else np.ascontiguousarray(p_light, f32), p_light is not None,
+                          np.ascontiguousarray(dist, f32), hit.ns, hit.ng, not c.bent, bump_v, hit.p, hit.eps,
+                          factors, o, d, tmax, idx, m)
+    if m == 0:
+        return True
+    occ = prepared.accel.occluded(o[:m], d[:m], tmax[:m])
+    out.shadow_rays += len(occ)
+    factors.reshape(-1)[idx[:m][occ]] = 0.0
+    if (rays.lam is None and rays.w is None and not prepared.textures.uses("color")
+            and out.accumulate_factored(prepared, rays.pix, hit.mat, factors, film)):
+        return True
+    rows = _albedo_rows(prepared, rays, hit, albedo)
+    if rows is None:  # (not float32: the NumPy lines' product, after the kernels' factors)
+        brdf = (surface_reflectance(prepared, hit, rays.lam) if albedo is None else albedo) * f32(1 / np.pi)
+        irradiance = (factors @ lights.spectrum if rays.lam is None
+                      else np.sum(factors * lights.spectrum[:, rays.lam].T, axis=1))
+        out.accumulate(rays, rays.weighted(brdf * irradiance), film)
+        return True
+    alb, arow, fixed = rows
+    mode, w2, w1, basis = weights
+    lam = NO_I64 if rays.lam is None else np.asarray(rays.lam, np.int64)
+    direct_add(film, out.n, np.asarray(rays.pix, np.int64), pixel_order(rays), lam, mode, w2, w1, basis,
+                alb, arow, fixed, factors, lights.spectrum)
+    return True
