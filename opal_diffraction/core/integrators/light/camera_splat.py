@@ -45,6 +45,7 @@ import numpy as np
 
 from ...materials.spectra import DIFFUSE
 from ...materials.surface import surface_reflectance
+from ...util.jit import kernels_enabled, njit
 
 __all__ = ["CameraConnection", "CameraSplat", "SplatBatch", "SplatLog", "view_key", "direct_materials",
            "blackman_harris_density", "filter_density", "usable_splat", "applies"]
@@ -202,6 +203,8 @@ class CameraConnection:
         filter density weights (B, K*K), zero outside the filter or the image."""
         fw = self.filter_width
         k = int(np.ceil(2 * fw)) + 1
+        if kernels_enabled():
+            return _footprint(self, np.ascontiguousarray(x, np.float64), np.ascontiguousarray(y, np.float64), k)
         off = np.arange(k)
         ix = np.floor(x - fw - 0.5).astype(np.int64)[:, None] + 1 + off  # pixel columns (B, K)
         iy = np.floor(y - fw - 0.5).astype(np.int64)[:, None] + 1 + off
@@ -251,6 +254,8 @@ class CameraConnection:
             v = r.w.astype(np.float64) * rho * g  # (K,) at wavelength r.lam
             if self.rgb_weights is not None:
                 c = v[:, None] * self.rgb_weights[r.lam]
+            elif kernels_enabled():  # one channel per landing: (wavelength, value), summed by _add_mono
+                c = MonoContributions(np.ascontiguousarray(r.lam, np.int64), v)
             else:
                 c = np.zeros((len(v), n))
                 c[np.arange(len(v)), r.lam] = v
@@ -277,6 +282,9 @@ class SplatBatch:
         c = self.connection.channels
         if not self._calls:
             return np.zeros(0, np.int64), np.zeros((0, c), np.float32)
+        if kernels_enabled():
+            return _finish(self._calls, self.connection.width * self.connection.height, c)
+        self._calls = [(p, q, v.dense(c) if isinstance(v, MonoContributions) else v) for p, q, v in self._calls]
         idx = np.concatenate([p.ravel() for p, _, _ in self._calls])
         w = np.concatenate([q.ravel() for _, q, _ in self._calls])
         contrib = np.concatenate([v for _, _, v in self._calls])
@@ -318,7 +326,10 @@ class CameraSplat:
         """Add a batch's ``SplatBatch.finish()`` (distinct pixels, so fancy-index += is exact)."""
         if len(pixels):
             flat = self.image.reshape(-1, self.image.shape[-1])
-            flat[pixels] += values
+            if kernels_enabled():
+                _add_rows_kernel(flat, np.ascontiguousarray(pixels, np.int64), np.ascontiguousarray(values, np.float32))
+            else:
+                flat[pixels] += values
 
     def __iadd__(self, other: "CameraSplat") -> "CameraSplat":
         self.image += other.image
@@ -338,3 +349,138 @@ class CameraSplat:
         if self.spectral:
             return conv.to_rgb(img), img
         return img, None
+
+
+# ------------------------------------------------------------------------------ kernels
+# The compiled twins (core/util/jit.py) of the footprint, the per-pixel sums of ``finish`` and the
+# film's ``add``: the reference's operations in its order and precision, so the same bits
+# (tests/integrators/light/test_light_kernels.py). ``finish`` adds each landing's weight x contribution
+# per channel in float64 in the order the landings came, which is np.bincount's order; a mono
+# landing's zero channels are skipped (adding 0.0 leaves a non-negative sum's bits unchanged).
+
+
+@dataclass(frozen=True)
+class MonoContributions:
+    """Contributions of mono landings to a spectral film, one channel each: the kernels' form of
+    the reference's (K, n) rows with one non-zero entry."""
+
+    lam: np.ndarray   # (K,) int64 wavelength index (the channel)
+    value: np.ndarray  # (K,) float64
+
+    def __len__(self) -> int:
+        return len(self.value)
+
+    def dense(self, channels: int) -> np.ndarray:
+        c = np.zeros((len(self.value), channels))
+        c[np.arange(len(self.value)), self.lam] = self.value
+        return c
+
+
+def _density_table(inv: np.ndarray) -> np.ndarray:
+    """filter_density's per-segment densities of the inverse-CDF table ``inv``."""
+    seg = np.diff(inv)
+    return np.where(seg > 0, 1.0 / ((len(inv) - 1) * np.where(seg > 0, seg, 1.0)), 0.0)
+
+
+@njit
+def _density_at(t, inv, dens):
+    """filter_density at one offset t (pixels)."""
+    if not (t >= inv[0] and t < inv[-1]):
+        return 0.0
+    i = np.searchsorted(inv, t, side="right") - 1
+    i = min(max(i, 0), len(dens) - 1)
+    return dens[i]
+
+
+@njit
+def _footprint_kernel(x, y, fw, k, width, height, inv, dens, idx, w):
+    for i in range(len(x)):  # loop over landings
+        bx = np.int64(np.floor(x[i] - fw - 0.5)) + 1
+        by = np.int64(np.floor(y[i] - fw - 0.5)) + 1
+        for a in range(k):
+            iy = by + a
+            wy = _density_at(y[i] - (iy + 0.5), inv, dens) * (1.0 if (iy >= 0 and iy < height) else 0.0)
+            cy = min(max(iy, 0), height - 1)
+            for b in range(k):
+                ix = bx + b
+                wx = _density_at(x[i] - (ix + 0.5), inv, dens) * (1.0 if (ix >= 0 and ix < width) else 0.0)
+                cx = min(max(ix, 0), width - 1)
+                idx[i, a * k + b] = cy * width + cx
+                w[i, a * k + b] = wy * wx
+
+
+def _footprint(conn: CameraConnection, x: np.ndarray, y: np.ndarray, k: int):
+    """CameraConnection.footprint on the kernel."""
+    inv = np.ascontiguousarray(conn.filt._inv, np.float64)
+    idx = np.empty((len(x), k * k), np.int64)
+    w = np.empty((len(x), k * k), np.float64)
+    _footprint_kernel(x, y, float(conn.filter_width), k, conn.width, conn.height, inv, _density_table(inv), idx, w)
+    return idx, w
+
+
+@njit
+def _mark_kernel(idx, w, slot):
+    """slot[pixel] = 1 where some landing's weight on it is positive."""
+    for i in range(idx.shape[0]):
+        for f in range(idx.shape[1]):
+            if w[i, f] > 0:
+                slot[idx[i, f]] = 1
+
+
+@njit
+def _number_kernel(slot):
+    """The marked pixels in increasing order (np.unique's), and slot[pixel] = its row among them."""
+    m = 0
+    for p in range(len(slot)):
+        if slot[p]:
+            m += 1
+    pixels = np.empty(m, np.int64)
+    m = 0
+    for p in range(len(slot)):
+        if slot[p]:
+            pixels[m] = p
+            slot[p] = m
+            m += 1
+    return pixels
+
+
+@njit
+def _add_dense_kernel(idx, w, c, slot, acc):
+    for i in range(idx.shape[0]):  # the landings in order: np.bincount's order per pixel
+        for f in range(idx.shape[1]):
+            wf = w[i, f]
+            if wf > 0:
+                row = slot[idx[i, f]]
+                for ch in range(c.shape[1]):
+                    acc[row, ch] += wf * c[i, ch]
+
+
+@njit
+def _add_mono_kernel(idx, w, lam, value, slot, acc):
+    for i in range(idx.shape[0]):
+        for f in range(idx.shape[1]):
+            wf = w[i, f]
+            if wf > 0:
+                acc[slot[idx[i, f]], lam[i]] += wf * value[i]
+
+
+def _finish(calls, pixels_total: int, channels: int):
+    """SplatBatch.finish on the kernels."""
+    slot = np.zeros(pixels_total, np.int64)
+    for p, q, _ in calls:
+        _mark_kernel(p, q, slot)
+    pixels = _number_kernel(slot)
+    acc = np.zeros((len(pixels), channels), np.float64)
+    for p, q, v in calls:
+        if isinstance(v, MonoContributions):
+            _add_mono_kernel(p, q, v.lam, v.value, slot, acc)
+        else:
+            _add_dense_kernel(p, q, np.ascontiguousarray(v, np.float64), slot, acc)
+    return pixels, acc.astype(np.float32)
+
+
+@njit
+def _add_rows_kernel(flat, pixels, values):
+    for i in range(len(pixels)):  # distinct pixels
+        for ch in range(flat.shape[1]):
+            flat[pixels[i], ch] += values[i, ch]
