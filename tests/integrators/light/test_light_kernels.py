@@ -18,6 +18,7 @@ from opal_diffraction.core.integrators.light.light_pass import run_light_pass
 from opal_diffraction.core.render.plan import plan_render
 from opal_diffraction.core.render.prepare import prepare
 from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.transport.walker import Hit, Rays
 from opal_diffraction.core.util import jit
 
 pytestmark = pytest.mark.skipif(not jit.AVAILABLE, reason=f"no JIT: {jit.UNAVAILABLE_REASON}")
@@ -130,6 +131,47 @@ def test_film_add_is_the_reference_bit_for_bit(connection):
 
     got, want = both(add)
     same_bits(got, want)
+
+
+def landings(prepared, rng, b, mono):
+    """Light-path landings on the scene's triangles facing the camera or not, white or mono."""
+    v, t = prepared.scene.vertices, prepared.scene.triangles
+    tri = rng.integers(0, len(t), b)
+    bu, bv = rng.uniform(0, 0.5, b), rng.uniform(0, 0.5, b)
+    p = ((1 - bu - bv)[:, None] * v[t[tri, 0]] + bu[:, None] * v[t[tri, 1]] + bv[:, None] * v[t[tri, 2]])
+    ng = prepared.tri_normal[tri] * np.where(rng.random(b) < 0.5, 1, -1).astype(np.float32)[:, None]
+    hit = Hit(p.astype(np.float32), ng, ng, np.ones(b, np.float32), np.ones(b, bool), prepared.tri_material[tri],
+              prepared.tri_offset[tri], tri.astype(np.int32), bu.astype(np.float32), bv.astype(np.float32))
+    n = prepared.grid.n
+    d = np.tile(np.float32([0, 0, -1]), (b, 1))
+    if mono:
+        rays = Rays(p.astype(np.float32), d, np.zeros(b, np.int64), rng.exponential(1, b).astype(np.float32),
+                    rng.integers(0, n, b), np.ones(b, np.int32), rng.random(b))
+    else:
+        rays = Rays(p.astype(np.float32), d, np.zeros(b, np.int64), rng.exponential(1, (b, n)).astype(np.float32),
+                    None, np.ones(b, np.int32), rng.random(b))
+    return rays, hit
+
+
+@pytest.mark.parametrize("mono", [False, True])
+@pytest.mark.parametrize("spectral", [True, False])
+def test_connect_kernels_agree_with_the_reference(mono, spectral):
+    """The camera connection's projection and shadow rays on the kernel: sums of three products
+    where the reference has BLAS / einsum (their order and FMA are the library's), and cos^3 as
+    two products where the reference calls pow: a few ulps (rtol 1e-12) on the weights and
+    contributions; the same landings kept and the same pixels."""
+    prepared = prism()
+    conn = CameraConnection.of(prepared)
+    if not spectral:
+        conn = CameraConnection(**dict(conn.__dict__, rgb_weights=prepared.conv.rgb_weights.astype(np.float64),
+                                       channels=3))
+    rays, hit = landings(prepared, np.random.default_rng(5 + mono), 4000, mono)
+    ((gi, gw, gc), gn), ((wi, ww, wc), wn) = both(conn.connect, prepared, rays, hit, prepared.grid.n)
+    assert gn == wn and gn > 100 and len(wc) > 100  # shadow rays cast, landings splatted
+    same_bits(gi, wi)
+    np.testing.assert_allclose(gw, ww, rtol=1e-12, atol=0)
+    gc = gc.dense(conn.channels) if isinstance(gc, MonoContributions) else gc
+    np.testing.assert_allclose(gc, wc, rtol=1e-12, atol=0)
 
 
 # ------------------------------------------------------------------------------ whole light passes

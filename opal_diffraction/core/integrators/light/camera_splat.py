@@ -143,6 +143,7 @@ class CameraConnection:
     materials: np.ndarray  # (M,) bool: direct_materials
     rgb_weights: np.ndarray | None  # (n, 3) spectrum -> RGB; None: the film keeps the spectrum
     channels: int
+    dens: np.ndarray | None = None  # filter_density's per-segment densities of filt's table (the kernels')
 
     @classmethod
     def of(cls, prepared) -> "CameraConnection":
@@ -161,10 +162,12 @@ class CameraConnection:
         # the spectrum when a spectral EXR is asked or when it fits the map's per-lane cap, so
         # RenderResult.spectral holds the splat too; else RGB (3 floats per pixel)
         spectral = bool(s.spectral_exr) or int(cam.width) * int(cam.height) * n <= SPECTRAL_CAP
+        filt = FilterSampler(s.filter_width)
         return cls(m[:3, 3].copy(), rot, cam.kind == "ORTHO", float(hx), float(hy), float(cam.shift_x * shift),
                    float(cam.shift_y * shift), int(cam.width), int(cam.height), float(s.filter_width),
-                   FilterSampler(s.filter_width), view_key(cam, s.filter_width), mats,
-                   None if spectral else prepared.conv.rgb_weights.astype(np.float64), n if spectral else 3)
+                   filt, view_key(cam, s.filter_width), mats,
+                   None if spectral else prepared.conv.rgb_weights.astype(np.float64), n if spectral else 3,
+                   None if filt._inv is None else _density_table(filt._inv))
 
     def empty(self) -> "CameraSplat":
         return CameraSplat(self.key, np.zeros((self.height, self.width, self.channels), np.float32),
@@ -226,18 +229,25 @@ class CameraConnection:
         if not sel.any():
             return None, 0
         r, h = rays.take(sel), hit.take(sel)
-        x, y, to_cam, dist, factor, ok = self.project(h.p)
-        ng = h.ng.astype(np.float64)
-        cos_y = np.einsum("ij,ij->i", to_cam, ng)  # ng faces the side the light arrived from
-        ok &= cos_y > 0
-        keep = np.flatnonzero(ok)
-        if keep.size == 0:
-            return None, 0
-        eps = h.eps[keep].astype(np.float64)
-        o = h.p[keep] + eps[:, None] * ng[keep]
-        tmax = np.maximum(dist[keep] - 2 * eps, 0.0)
-        occ = prepared.accel.occluded(o.astype(np.float32), np.ascontiguousarray(to_cam[keep], np.float32),
-                                      tmax.astype(np.float32))
+        if kernels_enabled():  # projection, facing test and shadow rays in one pass (_geometry_kernel)
+            x, y, to_cam, factor, cos_y, ok, o, tmax = _connect_geometry(self, h)
+            keep = np.flatnonzero(ok)
+            if keep.size == 0:
+                return None, 0
+            occ = prepared.accel.occluded(o[keep], to_cam[keep], tmax[keep])
+        else:
+            x, y, to_cam, dist, factor, ok = self.project(h.p)
+            ng = h.ng.astype(np.float64)
+            cos_y = np.einsum("ij,ij->i", to_cam, ng)  # ng faces the side the light arrived from
+            ok &= cos_y > 0
+            keep = np.flatnonzero(ok)
+            if keep.size == 0:
+                return None, 0
+            eps = h.eps[keep].astype(np.float64)
+            o = h.p[keep] + eps[:, None] * ng[keep]
+            tmax = np.maximum(dist[keep] - 2 * eps, 0.0)
+            occ = prepared.accel.occluded(o.astype(np.float32), np.ascontiguousarray(to_cam[keep], np.float32),
+                                          tmax.astype(np.float32))
         shadow_rays = len(keep)
         keep = keep[~occ]
         if keep.size == 0:
@@ -376,6 +386,59 @@ class MonoContributions:
         return c
 
 
+@njit
+def _geometry_kernel(p, ng, eps, eye, rot, ortho, hx, hy, sx, sy, width, height, fw, a_pix,
+                     x, y, to_cam, factor, cos_y, ok, o, tmax):
+    """CameraConnection.project, the facing test and the shadow rays' origins and lengths, per landing."""
+    for i in range(len(p)):  # loop over landings
+        v0, v1, v2 = np.float64(p[i, 0]) - eye[0], np.float64(p[i, 1]) - eye[1], np.float64(p[i, 2]) - eye[2]
+        l0 = v0 * rot[0, 0] + v1 * rot[1, 0] + v2 * rot[2, 0]  # camera coordinates
+        l1 = v0 * rot[0, 1] + v1 * rot[1, 1] + v2 * rot[2, 1]
+        depth = -(v0 * rot[0, 2] + v1 * rot[1, 2] + v2 * rot[2, 2])
+        front = depth > 0
+        if ortho:
+            px, py = l0, l1
+            t0, t1, t2 = rot[0, 2], rot[1, 2], rot[2, 2]
+            dist = depth
+            factor[i] = 1.0 / a_pix
+        else:
+            z = depth if front else 1.0
+            px, py = l0 / z, l1 / z
+            dist = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+            dd = max(dist, 1e-300)
+            t0, t1, t2 = -v0 / dd, -v1 / dd, -v2 / dd
+            cos_c = z / dd
+            factor[i] = 1.0 / (dd * dd * (cos_c * cos_c * cos_c) * a_pix)
+        xi = ((px - sx) / hx + 1.0) * (0.5 * width)
+        yi = (1.0 - (py - sy) / hy) * (0.5 * height)
+        x[i], y[i] = xi, yi
+        n0, n1, n2 = np.float64(ng[i, 0]), np.float64(ng[i, 1]), np.float64(ng[i, 2])
+        c = t0 * n0 + t1 * n1 + t2 * n2  # ng faces the side the light arrived from
+        cos_y[i] = c
+        ok[i] = front and xi > -fw and xi < width + fw and yi > -fw and yi < height + fw and c > 0
+        to_cam[i, 0], to_cam[i, 1], to_cam[i, 2] = t0, t1, t2
+        e = np.float64(eps[i])
+        o[i, 0] = np.float64(p[i, 0]) + e * n0
+        o[i, 1] = np.float64(p[i, 1]) + e * n1
+        o[i, 2] = np.float64(p[i, 2]) + e * n2
+        tmax[i] = max(dist - 2 * e, 0.0)
+
+
+def _connect_geometry(conn: CameraConnection, h):
+    """(x, y, to_cam (K, 3) float32, factor, cos_y, ok, shadow origins (K, 3) float32, lengths float32)
+    of hits ``h`` on the kernel: CameraConnection.project and the facing test of ``connect``."""
+    k = len(h.p)
+    x, y, factor, cos_y = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
+    to_cam, o = np.empty((k, 3), np.float32), np.empty((k, 3), np.float32)
+    tmax, ok = np.empty(k, np.float32), np.empty(k, np.bool_)
+    a_pix = (2 * conn.hx / conn.width) * (2 * conn.hy / conn.height)
+    _geometry_kernel(np.ascontiguousarray(h.p), np.ascontiguousarray(h.ng), np.ascontiguousarray(h.eps),
+                     conn.eye.astype(np.float64), np.ascontiguousarray(conn.rot, np.float64), bool(conn.ortho),
+                     conn.hx, conn.hy, conn.sx, conn.sy, conn.width, conn.height, conn.filter_width, a_pix,
+                     x, y, to_cam, factor, cos_y, ok, o, tmax)
+    return x, y, to_cam, factor, cos_y, ok, o, tmax
+
+
 def _density_table(inv: np.ndarray) -> np.ndarray:
     """filter_density's per-segment densities of the inverse-CDF table ``inv``."""
     seg = np.diff(inv)
@@ -412,9 +475,10 @@ def _footprint_kernel(x, y, fw, k, width, height, inv, dens, idx, w):
 def _footprint(conn: CameraConnection, x: np.ndarray, y: np.ndarray, k: int):
     """CameraConnection.footprint on the kernel."""
     inv = np.ascontiguousarray(conn.filt._inv, np.float64)
+    dens = _density_table(inv) if conn.dens is None else conn.dens
     idx = np.empty((len(x), k * k), np.int64)
     w = np.empty((len(x), k * k), np.float64)
-    _footprint_kernel(x, y, float(conn.filter_width), k, conn.width, conn.height, inv, _density_table(inv), idx, w)
+    _footprint_kernel(x, y, float(conn.filter_width), k, conn.width, conn.height, inv, dens, idx, w)
     return idx, w
 
 
