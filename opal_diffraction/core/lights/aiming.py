@@ -10,7 +10,8 @@ sum_c P_c [w in cone c] / Omega_c, so overlapping cones are accounted for (``sam
 ``sample_towards_casters``). Parallel light (a sun, the world) draws a point on the disk one
 object's sphere casts across its direction, with the matching mixture pdf per unit area
 (``caster_disk_points``; docs/physics.md sections 7.7, 7.9). core/lights/emission.py builds each
-light kind's path starts on these.
+light kind's path starts on these. The three samplers have compiled twins (core/util/jit.py, at
+the end), one path per iteration on the random numbers the reference draws, in its order.
 """
 
 from __future__ import annotations

@@ -35,6 +35,12 @@ film bit for bit. The film holds the spectrum when a spectral EXR is asked or wh
 floats fit the caustic map's per-lane cap (SPECTRAL_CAP: 32 M, e.g. 512 x 512 at 61
 wavelengths), else linear Rec.709 RGB (spectrum -> RGB at splat time; RenderResult.spectral
 then lacks the splat, its RGB, passes and EXR have it).
+
+The connection's geometry (projection, facing test, shadow rays), the footprint, a batch's per-pixel
+sums and the film's add have compiled twins (core/util/jit.py; the section "kernels" at the end),
+chosen inside the same functions; the sums and the footprint are the reference's bits, and with
+the kernels a mono landing on a spectral film carries one channel (``MonoContributions``), not a
+row of n with one non-zero entry.
 """
 
 from __future__ import annotations
@@ -48,7 +54,7 @@ from ...materials.surface import surface_reflectance
 from ...util.jit import kernels_enabled, njit
 
 __all__ = ["CameraConnection", "CameraSplat", "SplatBatch", "SplatLog", "view_key", "direct_materials",
-           "blackman_harris_density", "filter_density", "usable_splat", "applies"]
+           "blackman_harris_density", "filter_density", "usable_splat", "applies", "MonoContributions"]
 
 _BH = (0.35875, 0.48829, 0.14128, 0.01168)
 SPECTRAL_CAP = 32_000_000  # floats per lane: a spectral splat film up to this size (the caustic map's cap)
