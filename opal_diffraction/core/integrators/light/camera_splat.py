@@ -463,19 +463,22 @@ def _density_at(t, inv, dens):
 
 @njit
 def _footprint_kernel(x, y, fw, k, width, height, inv, dens, idx, w):
+    wx = np.empty(k)
+    cx = np.empty(k, np.int64)
     for i in range(len(x)):  # loop over landings
         bx = np.int64(np.floor(x[i] - fw - 0.5)) + 1
         by = np.int64(np.floor(y[i] - fw - 0.5)) + 1
+        for b in range(k):  # the columns' weights once per landing
+            ix = bx + b
+            wx[b] = _density_at(x[i] - (ix + 0.5), inv, dens) * (1.0 if (ix >= 0 and ix < width) else 0.0)
+            cx[b] = min(max(ix, 0), width - 1)
         for a in range(k):
             iy = by + a
             wy = _density_at(y[i] - (iy + 0.5), inv, dens) * (1.0 if (iy >= 0 and iy < height) else 0.0)
             cy = min(max(iy, 0), height - 1)
             for b in range(k):
-                ix = bx + b
-                wx = _density_at(x[i] - (ix + 0.5), inv, dens) * (1.0 if (ix >= 0 and ix < width) else 0.0)
-                cx = min(max(ix, 0), width - 1)
-                idx[i, a * k + b] = cy * width + cx
-                w[i, a * k + b] = wy * wx
+                idx[i, a * k + b] = cy * width + cx[b]
+                w[i, a * k + b] = wy * wx[b]
 
 
 def _footprint(conn: CameraConnection, x: np.ndarray, y: np.ndarray, k: int):
