@@ -201,7 +201,7 @@ def caster_disk_points(obj: CasterObjects, d: np.ndarray, rng) -> tuple[np.ndarr
 # with the random numbers the reference draws (drawn by the callers, in its order): the same
 # formulas in the same order, but sums of three products where the reference has BLAS matmuls
 # or einsum (whose order and FMA use are the library's), so they agree to a few ulps
-# (tests/lights/test_light_kernels.py).
+# (tests/lights/test_light_aiming_kernels.py).
 
 
 @njit

@@ -370,7 +370,7 @@ class CameraSplat:
 # ------------------------------------------------------------------------------ kernels
 # The compiled twins (core/util/jit.py) of the footprint, the per-pixel sums of ``finish`` and the
 # film's ``add``: the reference's operations in its order and precision, so the same bits
-# (tests/integrators/light/test_light_kernels.py). ``finish`` adds each landing's weight x contribution
+# (tests/integrators/light/test_light_pass_kernels.py). ``finish`` adds each landing's weight x contribution
 # per channel in float64 in the order the landings came, which is np.bincount's order; a mono
 # landing's zero channels are skipped (adding 0.0 leaves a non-negative sum's bits unchanged).
 
