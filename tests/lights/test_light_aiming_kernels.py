@@ -86,6 +86,21 @@ def test_cones_from_per_path_origins(c):
     close(got, want)
 
 
+@pytest.mark.parametrize("c", [1, 5, 40])
+def test_cones_per_path_given(c):
+    """sample_cones with per-path cones and weights other than the solid angles."""
+    obj = objects(c)
+
+    def sample(rng):
+        origin = np.random.default_rng(6).normal(size=(B, 3)) * 2
+        axis, cos_max, omega = caster_cones(origin, obj)
+        weights = omega * np.random.default_rng(8).random(omega.shape)
+        return sample_cones(origin, weights, axis, cos_max, omega, rng)
+
+    got, want = both(sample)
+    close(got, want)
+
+
 @pytest.mark.parametrize("c", [1, 2, 12])
 def test_disk_points(c):
     obj = objects(c)

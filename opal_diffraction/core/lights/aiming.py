@@ -124,6 +124,12 @@ def sample_cones(origin, weights, axis, cos_max, omega, rng, u=None):
             return d, np.full(b, prob0[0] / max(float(omega[0, 0]), 1e-300))
         inside = d @ axis[0].T >= cos_max[0] - 1e-12
         return d, inside @ (prob0 / np.maximum(omega[0], 1e-300))
+    if kernels_enabled():  # the compiled twin (below), as sample_towards_casters' kernel samples
+        d, pdf = np.empty((b, 3)), np.empty(b)
+        f64 = lambda x: np.ascontiguousarray(x, np.float64)  # noqa: E731
+        _cones_kernel(f64(weights), f64(axis), f64(cos_max), f64(omega), f64(uni[0][:, 0]), f64(uni[1]), f64(uni[2]),
+                      d, pdf)
+        return d, pdf
     prob = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-300)
     cdf = np.cumsum(prob, axis=1)
     pick = np.minimum((uni[0] > cdf).sum(axis=1), c - 1)
@@ -286,15 +292,35 @@ def _towards_casters_kernel(origin, centre, radius, u0, u1, u2, d, pdf):
             cos_max[m] = -1.0 if dist <= radius[m] else np.sqrt(1 - sin2)
             omega[m] = 2 * np.pi * (1 - cos_max[m])
             total += omega[m]
-        acc = 0.0
+        _sample_row(omega, total, axis, cos_max, omega, u0[i], u1[i], u2[i], cdf, po, d, pdf, i)
+
+
+@njit
+def _sample_row(weights, total, axis, cos_max, omega, u0, u1, u2, cdf, po, d, pdf, i):
+    """One path of sample_cones: object by weights (C,) (their sum ``total``), a direction in its cone."""
+    c = len(weights)
+    acc = 0.0
+    for m in range(c):
+        p = weights[m] / max(total, 1e-300)
+        acc += p
+        cdf[m] = acc
+        po[m] = p / max(omega[m], 1e-300)
+    k = _pick(cdf, u0, c)
+    _cone_direction(axis[k], cos_max[k], u1, u2, d, i)
+    pdf[i] = _mixture_pdf(axis, cos_max, po, d, i)
+
+
+@njit
+def _cones_kernel(weights, axis, cos_max, omega, u0, u1, u2, d, pdf):
+    """sample_cones with cones per path: weights, cos_max, omega (B, C), axis (B, C, 3)."""
+    c = weights.shape[1]
+    cdf = np.empty(c)
+    po = np.empty(c)
+    for i in range(len(u0)):  # loop over paths
+        total = 0.0
         for m in range(c):
-            p = omega[m] / max(total, 1e-300)
-            acc += p
-            cdf[m] = acc
-            po[m] = p / max(omega[m], 1e-300)
-        k = _pick(cdf, u0[i], c)
-        _cone_direction(axis[k], cos_max[k], u1[i], u2[i], d, i)
-        pdf[i] = _mixture_pdf(axis, cos_max, po, d, i)
+            total += weights[i, m]
+        _sample_row(weights[i], total, axis[i], cos_max[i], omega[i], u0[i], u1[i], u2[i], cdf, po, d, pdf, i)
 
 
 @njit
