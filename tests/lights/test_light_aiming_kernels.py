@@ -114,3 +114,31 @@ def test_empty_batches():
     got, want = both(lambda rng: caster_disk_points(obj, np.zeros((0, 3)), rng) +
                      sample_towards_casters(np.zeros((0, 3)), obj, rng))
     close(got, want)
+
+
+def test_mesh_emission_agrees_with_the_reference():
+    """emit_mesh on the kernels (the aiming kernels and the spectral weights' fused product) from a
+    glowing panel of two colours towards a glass box: the weights are the reference's products of a scalar that agrees as
+    the aiming kernels do (its pdf), and so do the origins and directions."""
+    from opal_diffraction.core.lights.emission import emit_mesh
+    from opal_diffraction.core.render.prepare import prepare
+    from opal_diffraction.core.scene import primitives
+    from opal_diffraction.core.scene.model import Camera, Materials, Scene
+    from opal_diffraction.core.scene.settings import RenderSettings
+
+    mats = Materials.from_list([{"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)},
+                                {"kind": "DIELECTRIC", "ior": 1.5, "color": (1, 1, 1)},
+                                {"kind": "DIFFUSE", "color": (0, 0, 0), "emission": (3.0, 2.0, 1.0)},
+                                {"kind": "DIFFUSE", "color": (0, 0, 0), "emission": (0.5, 1.0, 4.0)}])
+    s = Scene(materials=mats)
+    s.add_mesh(*primitives.quad((0, 0, 0), (4, 0, 0), (0, 4, 0)), material=0)
+    s.add_mesh(*primitives.box((0, 0, 0.6), (0.6, 0.6, 0.3)), material=1)
+    s.add_mesh(*primitives.quad((-0.3, 0, 2.0), (0.6, 0, 0), (0, 0.8, 0)), material=2)
+    s.add_mesh(*primitives.quad((0.3, 0, 2.0), (0.6, 0, 0), (0, 0.8, 0)), material=3)
+    s.camera = Camera.look_at((0, -3, 3), (0, 0, 0), width=16, height=16)
+    ctx = prepare(s, RenderSettings(wavelength_step=20.0, light_paths=1000))
+    got, want = both(lambda rng: emit_mesh(ctx, B, rng))
+    close(got[:2] + (got[-1],), want[:2] + (want[-1],), atol=1e-14)
+    assert got[2].dtype == want[2].dtype == np.float64
+    np.testing.assert_allclose(got[2], want[2], rtol=1e-12)  # the scalar's pdf: the aiming kernels' ulps
+    assert (want[2] > 0).any() and len(np.unique(want[2][:, 0] > want[2][:, -1])) == 2  # both colours
