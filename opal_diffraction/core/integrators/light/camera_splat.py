@@ -234,14 +234,20 @@ class CameraConnection:
         sel = self.materials[hit.mat]
         if not sel.any():
             return None, 0
-        r, h = rays.take(sel), hit.take(sel)
         if kernels_enabled():  # projection, facing test and shadow rays in one pass (_geometry_kernel)
-            x, y, to_cam, factor, cos_y, ok, o, tmax = _connect_geometry(self, h)
+            at = np.flatnonzero(sel)  # the rays and hits are taken once, at the landings splatted
+            x, y, to_cam, factor, cos_y, ok, o, tmax = _connect_geometry(self, hit.p[at], hit.ng[at], hit.eps[at])
             keep = np.flatnonzero(ok)
             if keep.size == 0:
                 return None, 0
             occ = prepared.accel.occluded(o[keep], to_cam[keep], tmax[keep])
+            shadow_rays = len(keep)
+            keep = keep[~occ]
+            if keep.size == 0:
+                return None, shadow_rays
+            r, h = rays.take(at[keep]), hit.take(at[keep])
         else:
+            r, h = rays.take(sel), hit.take(sel)
             x, y, to_cam, dist, factor, ok = self.project(h.p)
             ng = h.ng.astype(np.float64)
             cos_y = np.einsum("ij,ij->i", to_cam, ng)  # ng faces the side the light arrived from
@@ -254,11 +260,11 @@ class CameraConnection:
             tmax = np.maximum(dist[keep] - 2 * eps, 0.0)
             occ = prepared.accel.occluded(o.astype(np.float32), np.ascontiguousarray(to_cam[keep], np.float32),
                                           tmax.astype(np.float32))
-        shadow_rays = len(keep)
-        keep = keep[~occ]
-        if keep.size == 0:
-            return None, shadow_rays
-        r, h = r.take(keep), h.take(keep)
+            shadow_rays = len(keep)
+            keep = keep[~occ]
+            if keep.size == 0:
+                return None, shadow_rays
+            r, h = r.take(keep), h.take(keep)
         g = cos_y[keep] * factor[keep] / np.pi  # rho / pi and the camera's importance
         rho = surface_reflectance(prepared, h, r.lam)
         if r.lam is None:
@@ -430,15 +436,16 @@ def _geometry_kernel(p, ng, eps, eye, rot, ortho, hx, hy, sx, sy, width, height,
         tmax[i] = max(dist - 2 * e, 0.0)
 
 
-def _connect_geometry(conn: CameraConnection, h):
+def _connect_geometry(conn: CameraConnection, p, ng, eps):
     """(x, y, to_cam (K, 3) float32, factor, cos_y, ok, shadow origins (K, 3) float32, lengths float32)
-    of hits ``h`` on the kernel: CameraConnection.project and the facing test of ``connect``."""
-    k = len(h.p)
+    of hits at points p, geometric normals ng, offsets eps on the kernel: CameraConnection.project and
+    the facing test of ``connect``."""
+    k = len(p)
     x, y, factor, cos_y = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
     to_cam, o = np.empty((k, 3), np.float32), np.empty((k, 3), np.float32)
     tmax, ok = np.empty(k, np.float32), np.empty(k, np.bool_)
     a_pix = (2 * conn.hx / conn.width) * (2 * conn.hy / conn.height)
-    _geometry_kernel(np.ascontiguousarray(h.p), np.ascontiguousarray(h.ng), np.ascontiguousarray(h.eps),
+    _geometry_kernel(np.ascontiguousarray(p), np.ascontiguousarray(ng), np.ascontiguousarray(eps),
                      conn.eye.astype(np.float64), np.ascontiguousarray(conn.rot, np.float64), bool(conn.ortho),
                      conn.hx, conn.hy, conn.sx, conn.sy, conn.width, conn.height, conn.filter_width, a_pix,
                      x, y, to_cam, factor, cos_y, ok, o, tmax)
