@@ -113,6 +113,26 @@ def test_batch_sums_per_pixel_are_the_reference_bit_for_bit(connection, spectral
     assert len(want[0]) > 0 and np.all(np.diff(want[0]) > 0)
 
 
+def test_film_add_of_a_batch_is_the_reference_bit_for_bit(connection):
+    """CameraSplat.add_batch (the sums rounded and added in one pass) = add(*finish()) of the reference."""
+    calls = splat_calls(connection, np.random.default_rng(9), connection.channels, True)
+
+    def add(kernel):
+        film = connection.empty()
+        film.image[...] = np.float32(0.3)
+        for _ in range(2):
+            batch = SplatBatch(connection)
+            batch._calls = [(p, q, kv if kernel else dense) for p, q, kv, dense in calls]
+            film.add_batch(batch)
+        return film.image
+
+    got = add(True)
+    with jit.kernel_mode("numpy"):
+        want = add(False)
+    same_bits(got, want)
+    assert (want != np.float32(0.3)).any()
+
+
 def test_empty_batch(connection):
     (gp, gv), (wp, wv) = both(SplatBatch(connection).finish)
     same_bits(gp, wp)

@@ -353,6 +353,15 @@ class CameraSplat:
             else:
                 flat[pixels] += values
 
+    def add_batch(self, batch: "SplatBatch") -> None:
+        """``self.add(*batch.finish())``; on the kernels the batch's float64 sums are rounded and added
+        to the film in one pass (the same float32 additions, the same bits)."""
+        if not kernels_enabled() or not batch._calls:
+            self.add(*batch.finish())
+            return
+        pixels, acc = _sums(batch._calls, batch.connection.width * batch.connection.height, batch.connection.channels)
+        _add_rounded_rows_kernel(self.image.reshape(-1, self.image.shape[-1]), pixels, acc)
+
     def __iadd__(self, other: "CameraSplat") -> "CameraSplat":
         self.image += other.image
         return self
@@ -546,6 +555,12 @@ def _add_mono_kernel(idx, w, lam, value, slot, acc):
 
 def _finish(calls, pixels_total: int, channels: int):
     """SplatBatch.finish on the kernels."""
+    pixels, acc = _sums(calls, pixels_total, channels)
+    return pixels, acc.astype(np.float32)
+
+
+def _sums(calls, pixels_total: int, channels: int):
+    """(distinct pixels, their float64 sums (U, channels)) of a batch's splat calls."""
     slot = np.zeros(pixels_total, np.int64)
     for p, q, _ in calls:
         _mark_kernel(p, q, slot)
@@ -556,7 +571,7 @@ def _finish(calls, pixels_total: int, channels: int):
             _add_mono_kernel(p, q, v.lam, v.value, slot, acc)
         else:
             _add_dense_kernel(p, q, np.ascontiguousarray(v, np.float64), slot, acc)
-    return pixels, acc.astype(np.float32)
+    return pixels, acc
 
 
 @njit
@@ -564,3 +579,11 @@ def _add_rows_kernel(flat, pixels, values):
     for i in range(len(pixels)):  # distinct pixels
         for ch in range(flat.shape[1]):
             flat[pixels[i], ch] += values[i, ch]
+
+
+@njit
+def _add_rounded_rows_kernel(flat, pixels, acc):
+    """flat[pixels] += acc rounded to float32 (finish's astype, then add's float32 sums)."""
+    for i in range(len(pixels)):  # distinct pixels
+        for ch in range(flat.shape[1]):
+            flat[pixels[i], ch] += np.float32(acc[i, ch])
