@@ -25,6 +25,9 @@ spectrum; the map's R, G, B spectra) until a tint or dispersion needs spectra
 (transport.Rays.basis, docs/physics.md section 4.7). The emitters share the path budget in
 proportion to the power they send towards the casters (``light_budgets``, ``mesh_light_budget``,
 ``world_budget``).
+
+The samplers of core/lights/aiming.py have compiled twins (core/util/jit.py), and so has the
+emissive meshes' spectral weights (``_scaled_rows_kernel``), on the random numbers the reference draws.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import numpy as np
 
 from .aiming import CasterObjects, caster_cones, caster_disk_points, sample_cones, sample_towards_casters
 from .sources import AREA_DISK, AREA_RECT, POINT, SPOT, SUN, sample_cone, smoothstep, spot_mask
+from ..util.jit import kernels_enabled, njit
 
 __all__ = ["emit", "emit_light", "emit_mesh", "emit_world", "light_budgets", "mesh_light_budget",
            "world_luminance", "world_budget"]
@@ -145,10 +149,24 @@ def emit_mesh(prepared, b: int, rng):
     cos_s = np.einsum("ij,ij->i", d, n)
     scalar = np.where((pdf > 0) & (cos_s != 0), np.abs(cos_s) / np.maximum(pa * pdf, 1e-300), 0.0)
     tri = ml.tri[j]
-    emission = prepared.materials.emission[prepared.tri_material[tri]]
     eps = prepared.tri_offset[tri].astype(np.float64)
     origin = q + (np.sign(cos_s) * eps)[:, None] * n  # off the emitter, on the side the path leaves
+    mat = prepared.tri_material[tri]
+    if kernels_enabled():  # the (B, n) weights in one pass, without the gathered (B, n) spectra
+        out = np.empty((b, prepared.materials.emission.shape[1]))
+        _scaled_rows_kernel(np.ascontiguousarray(prepared.materials.emission), np.ascontiguousarray(mat, np.int64),
+                            np.ascontiguousarray(scalar, np.float64), out)
+        return origin, d, out
+    emission = prepared.materials.emission[mat]
     return origin, d, emission * scalar[:, None]
+
+
+@njit
+def _scaled_rows_kernel(table, rows, scale, out):
+    """out[i] = table[rows[i]] * scale[i] in float64 (emit_mesh's weights: NumPy's promotion, the same bits)."""
+    for i in range(len(rows)):  # loop over paths
+        for k in range(table.shape[1]):
+            out[i, k] = np.float64(table[rows[i], k]) * scale[i]
 
 
 def emit_world(prepared, b: int, rng):

@@ -35,6 +35,12 @@ film bit for bit. The film holds the spectrum when a spectral EXR is asked or wh
 floats fit the caustic map's per-lane cap (SPECTRAL_CAP: 32 M, e.g. 512 x 512 at 61
 wavelengths), else linear Rec.709 RGB (spectrum -> RGB at splat time; RenderResult.spectral
 then lacks the splat, its RGB, passes and EXR have it).
+
+The connection's geometry (projection, facing test, shadow rays), the footprint, a batch's per-pixel
+sums and the film's add have compiled twins (core/util/jit.py; the section "kernels" at the end),
+chosen inside the same functions; the sums and the footprint are the reference's bits, and with
+the kernels a mono landing on a spectral film carries one channel (``MonoContributions``), not a
+row of n with one non-zero entry.
 """
 
 from __future__ import annotations
@@ -45,9 +51,10 @@ import numpy as np
 
 from ...materials.spectra import DIFFUSE
 from ...materials.surface import surface_reflectance
+from ...util.jit import kernels_enabled, njit
 
 __all__ = ["CameraConnection", "CameraSplat", "SplatBatch", "SplatLog", "view_key", "direct_materials",
-           "blackman_harris_density", "filter_density", "usable_splat", "applies"]
+           "blackman_harris_density", "filter_density", "usable_splat", "applies", "MonoContributions"]
 
 _BH = (0.35875, 0.48829, 0.14128, 0.01168)
 SPECTRAL_CAP = 32_000_000  # floats per lane: a spectral splat film up to this size (the caustic map's cap)
@@ -142,6 +149,7 @@ class CameraConnection:
     materials: np.ndarray  # (M,) bool: direct_materials
     rgb_weights: np.ndarray | None  # (n, 3) spectrum -> RGB; None: the film keeps the spectrum
     channels: int
+    dens: np.ndarray | None = None  # filter_density's per-segment densities of filt's table (the kernels')
 
     @classmethod
     def of(cls, prepared) -> "CameraConnection":
@@ -160,10 +168,12 @@ class CameraConnection:
         # the spectrum when a spectral EXR is asked or when it fits the map's per-lane cap, so
         # RenderResult.spectral holds the splat too; else RGB (3 floats per pixel)
         spectral = bool(s.spectral_exr) or int(cam.width) * int(cam.height) * n <= SPECTRAL_CAP
+        filt = FilterSampler(s.filter_width)
         return cls(m[:3, 3].copy(), rot, cam.kind == "ORTHO", float(hx), float(hy), float(cam.shift_x * shift),
                    float(cam.shift_y * shift), int(cam.width), int(cam.height), float(s.filter_width),
-                   FilterSampler(s.filter_width), view_key(cam, s.filter_width), mats,
-                   None if spectral else prepared.conv.rgb_weights.astype(np.float64), n if spectral else 3)
+                   filt, view_key(cam, s.filter_width), mats,
+                   None if spectral else prepared.conv.rgb_weights.astype(np.float64), n if spectral else 3,
+                   None if filt._inv is None else _density_table(filt._inv))
 
     def empty(self) -> "CameraSplat":
         return CameraSplat(self.key, np.zeros((self.height, self.width, self.channels), np.float32),
@@ -202,6 +212,8 @@ class CameraConnection:
         filter density weights (B, K*K), zero outside the filter or the image."""
         fw = self.filter_width
         k = int(np.ceil(2 * fw)) + 1
+        if kernels_enabled():
+            return _footprint(self, np.ascontiguousarray(x, np.float64), np.ascontiguousarray(y, np.float64), k)
         off = np.arange(k)
         ix = np.floor(x - fw - 0.5).astype(np.int64)[:, None] + 1 + off  # pixel columns (B, K)
         iy = np.floor(y - fw - 0.5).astype(np.int64)[:, None] + 1 + off
@@ -222,24 +234,37 @@ class CameraConnection:
         sel = self.materials[hit.mat]
         if not sel.any():
             return None, 0
-        r, h = rays.take(sel), hit.take(sel)
-        x, y, to_cam, dist, factor, ok = self.project(h.p)
-        ng = h.ng.astype(np.float64)
-        cos_y = np.einsum("ij,ij->i", to_cam, ng)  # ng faces the side the light arrived from
-        ok &= cos_y > 0
-        keep = np.flatnonzero(ok)
-        if keep.size == 0:
-            return None, 0
-        eps = h.eps[keep].astype(np.float64)
-        o = h.p[keep] + eps[:, None] * ng[keep]
-        tmax = np.maximum(dist[keep] - 2 * eps, 0.0)
-        occ = prepared.accel.occluded(o.astype(np.float32), np.ascontiguousarray(to_cam[keep], np.float32),
-                                      tmax.astype(np.float32))
-        shadow_rays = len(keep)
-        keep = keep[~occ]
-        if keep.size == 0:
-            return None, shadow_rays
-        r, h = r.take(keep), h.take(keep)
+        if kernels_enabled():  # projection, facing test and shadow rays in one pass (_geometry_kernel)
+            at = np.flatnonzero(sel)  # the rays and hits are taken once, at the landings splatted
+            x, y, to_cam, factor, cos_y, ok, o, tmax = _connect_geometry(self, hit.p[at], hit.ng[at], hit.eps[at])
+            keep = np.flatnonzero(ok)
+            if keep.size == 0:
+                return None, 0
+            occ = prepared.accel.occluded(o[keep], to_cam[keep], tmax[keep])
+            shadow_rays = len(keep)
+            keep = keep[~occ]
+            if keep.size == 0:
+                return None, shadow_rays
+            r, h = rays.take(at[keep]), hit.take(at[keep])
+        else:
+            r, h = rays.take(sel), hit.take(sel)
+            x, y, to_cam, dist, factor, ok = self.project(h.p)
+            ng = h.ng.astype(np.float64)
+            cos_y = np.einsum("ij,ij->i", to_cam, ng)  # ng faces the side the light arrived from
+            ok &= cos_y > 0
+            keep = np.flatnonzero(ok)
+            if keep.size == 0:
+                return None, 0
+            eps = h.eps[keep].astype(np.float64)
+            o = h.p[keep] + eps[:, None] * ng[keep]
+            tmax = np.maximum(dist[keep] - 2 * eps, 0.0)
+            occ = prepared.accel.occluded(o.astype(np.float32), np.ascontiguousarray(to_cam[keep], np.float32),
+                                          tmax.astype(np.float32))
+            shadow_rays = len(keep)
+            keep = keep[~occ]
+            if keep.size == 0:
+                return None, shadow_rays
+            r, h = r.take(keep), h.take(keep)
         g = cos_y[keep] * factor[keep] / np.pi  # rho / pi and the camera's importance
         rho = surface_reflectance(prepared, h, r.lam)
         if r.lam is None:
@@ -251,6 +276,8 @@ class CameraConnection:
             v = r.w.astype(np.float64) * rho * g  # (K,) at wavelength r.lam
             if self.rgb_weights is not None:
                 c = v[:, None] * self.rgb_weights[r.lam]
+            elif kernels_enabled():  # one channel per landing: (wavelength, value), summed by _add_mono
+                c = MonoContributions(np.ascontiguousarray(r.lam, np.int64), v)
             else:
                 c = np.zeros((len(v), n))
                 c[np.arange(len(v)), r.lam] = v
@@ -277,6 +304,9 @@ class SplatBatch:
         c = self.connection.channels
         if not self._calls:
             return np.zeros(0, np.int64), np.zeros((0, c), np.float32)
+        if kernels_enabled():
+            return _finish(self._calls, self.connection.width * self.connection.height, c)
+        self._calls = [(p, q, v.dense(c) if isinstance(v, MonoContributions) else v) for p, q, v in self._calls]
         idx = np.concatenate([p.ravel() for p, _, _ in self._calls])
         w = np.concatenate([q.ravel() for _, q, _ in self._calls])
         contrib = np.concatenate([v for _, _, v in self._calls])
@@ -318,7 +348,19 @@ class CameraSplat:
         """Add a batch's ``SplatBatch.finish()`` (distinct pixels, so fancy-index += is exact)."""
         if len(pixels):
             flat = self.image.reshape(-1, self.image.shape[-1])
-            flat[pixels] += values
+            if kernels_enabled():
+                _add_rows_kernel(flat, np.ascontiguousarray(pixels, np.int64), np.ascontiguousarray(values, np.float32))
+            else:
+                flat[pixels] += values
+
+    def add_batch(self, batch: "SplatBatch") -> None:
+        """``self.add(*batch.finish())``; on the kernels the batch's float64 sums are rounded and added
+        to the film in one pass (the same float32 additions, the same bits)."""
+        if not kernels_enabled() or not batch._calls:
+            self.add(*batch.finish())
+            return
+        pixels, acc = _sums(batch._calls, batch.connection.width * batch.connection.height, batch.connection.channels)
+        _add_rounded_rows_kernel(self.image.reshape(-1, self.image.shape[-1]), pixels, acc)
 
     def __iadd__(self, other: "CameraSplat") -> "CameraSplat":
         self.image += other.image
@@ -338,3 +380,210 @@ class CameraSplat:
         if self.spectral:
             return conv.to_rgb(img), img
         return img, None
+
+
+# ------------------------------------------------------------------------------ kernels
+# The compiled twins (core/util/jit.py) of the footprint, the per-pixel sums of ``finish`` and the
+# film's ``add``: the reference's operations in its order and precision, so the same bits
+# (tests/integrators/light/test_light_pass_kernels.py). ``finish`` adds each landing's weight x contribution
+# per channel in float64 in the order the landings came, which is np.bincount's order; a mono
+# landing's zero channels are skipped (adding 0.0 leaves a non-negative sum's bits unchanged).
+
+
+@dataclass(frozen=True)
+class MonoContributions:
+    """Contributions of mono landings to a spectral film, one channel each: the kernels' form of
+    the reference's (K, n) rows with one non-zero entry."""
+
+    lam: np.ndarray   # (K,) int64 wavelength index (the channel)
+    value: np.ndarray  # (K,) float64
+
+    def __len__(self) -> int:
+        return len(self.value)
+
+    def dense(self, channels: int) -> np.ndarray:
+        c = np.zeros((len(self.value), channels))
+        c[np.arange(len(self.value)), self.lam] = self.value
+        return c
+
+
+@njit
+def _geometry_kernel(p, ng, eps, eye, rot, ortho, hx, hy, sx, sy, width, height, fw, a_pix,
+                     x, y, to_cam, factor, cos_y, ok, o, tmax):
+    """CameraConnection.project, the facing test and the shadow rays' origins and lengths, per landing."""
+    for i in range(len(p)):  # loop over landings
+        v0, v1, v2 = np.float64(p[i, 0]) - eye[0], np.float64(p[i, 1]) - eye[1], np.float64(p[i, 2]) - eye[2]
+        l0 = v0 * rot[0, 0] + v1 * rot[1, 0] + v2 * rot[2, 0]  # camera coordinates
+        l1 = v0 * rot[0, 1] + v1 * rot[1, 1] + v2 * rot[2, 1]
+        depth = -(v0 * rot[0, 2] + v1 * rot[1, 2] + v2 * rot[2, 2])
+        front = depth > 0
+        if ortho:
+            px, py = l0, l1
+            t0, t1, t2 = rot[0, 2], rot[1, 2], rot[2, 2]
+            dist = depth
+            factor[i] = 1.0 / a_pix
+        else:
+            z = depth if front else 1.0
+            px, py = l0 / z, l1 / z
+            dist = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+            dd = max(dist, 1e-300)
+            t0, t1, t2 = -v0 / dd, -v1 / dd, -v2 / dd
+            cos_c = z / dd
+            factor[i] = 1.0 / (dd * dd * (cos_c * cos_c * cos_c) * a_pix)
+        xi = ((px - sx) / hx + 1.0) * (0.5 * width)
+        yi = (1.0 - (py - sy) / hy) * (0.5 * height)
+        x[i], y[i] = xi, yi
+        n0, n1, n2 = np.float64(ng[i, 0]), np.float64(ng[i, 1]), np.float64(ng[i, 2])
+        c = t0 * n0 + t1 * n1 + t2 * n2  # ng faces the side the light arrived from
+        cos_y[i] = c
+        ok[i] = front and xi > -fw and xi < width + fw and yi > -fw and yi < height + fw and c > 0
+        to_cam[i, 0], to_cam[i, 1], to_cam[i, 2] = t0, t1, t2
+        e = np.float64(eps[i])
+        o[i, 0] = np.float64(p[i, 0]) + e * n0
+        o[i, 1] = np.float64(p[i, 1]) + e * n1
+        o[i, 2] = np.float64(p[i, 2]) + e * n2
+        tmax[i] = max(dist - 2 * e, 0.0)
+
+
+def _connect_geometry(conn: CameraConnection, p, ng, eps):
+    """(x, y, to_cam (K, 3) float32, factor, cos_y, ok, shadow origins (K, 3) float32, lengths float32)
+    of hits at points p, geometric normals ng, offsets eps on the kernel: CameraConnection.project and
+    the facing test of ``connect``."""
+    k = len(p)
+    x, y, factor, cos_y = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
+    to_cam, o = np.empty((k, 3), np.float32), np.empty((k, 3), np.float32)
+    tmax, ok = np.empty(k, np.float32), np.empty(k, np.bool_)
+    a_pix = (2 * conn.hx / conn.width) * (2 * conn.hy / conn.height)
+    _geometry_kernel(np.ascontiguousarray(p), np.ascontiguousarray(ng), np.ascontiguousarray(eps),
+                     conn.eye.astype(np.float64), np.ascontiguousarray(conn.rot, np.float64), bool(conn.ortho),
+                     conn.hx, conn.hy, conn.sx, conn.sy, conn.width, conn.height, conn.filter_width, a_pix,
+                     x, y, to_cam, factor, cos_y, ok, o, tmax)
+    return x, y, to_cam, factor, cos_y, ok, o, tmax
+
+
+def _density_table(inv: np.ndarray) -> np.ndarray:
+    """filter_density's per-segment densities of the inverse-CDF table ``inv``."""
+    seg = np.diff(inv)
+    return np.where(seg > 0, 1.0 / ((len(inv) - 1) * np.where(seg > 0, seg, 1.0)), 0.0)
+
+
+@njit
+def _density_at(t, inv, dens):
+    """filter_density at one offset t (pixels)."""
+    if not (t >= inv[0] and t < inv[-1]):
+        return 0.0
+    i = np.searchsorted(inv, t, side="right") - 1
+    i = min(max(i, 0), len(dens) - 1)
+    return dens[i]
+
+
+@njit
+def _footprint_kernel(x, y, fw, k, width, height, inv, dens, idx, w):
+    wx = np.empty(k)
+    cx = np.empty(k, np.int64)
+    for i in range(len(x)):  # loop over landings
+        bx = np.int64(np.floor(x[i] - fw - 0.5)) + 1
+        by = np.int64(np.floor(y[i] - fw - 0.5)) + 1
+        for b in range(k):  # the columns' weights once per landing
+            ix = bx + b
+            wx[b] = _density_at(x[i] - (ix + 0.5), inv, dens) * (1.0 if (ix >= 0 and ix < width) else 0.0)
+            cx[b] = min(max(ix, 0), width - 1)
+        for a in range(k):
+            iy = by + a
+            wy = _density_at(y[i] - (iy + 0.5), inv, dens) * (1.0 if (iy >= 0 and iy < height) else 0.0)
+            cy = min(max(iy, 0), height - 1)
+            for b in range(k):
+                idx[i, a * k + b] = cy * width + cx[b]
+                w[i, a * k + b] = wy * wx[b]
+
+
+def _footprint(conn: CameraConnection, x: np.ndarray, y: np.ndarray, k: int):
+    """CameraConnection.footprint on the kernel."""
+    inv = np.ascontiguousarray(conn.filt._inv, np.float64)
+    dens = _density_table(inv) if conn.dens is None else conn.dens
+    idx = np.empty((len(x), k * k), np.int64)
+    w = np.empty((len(x), k * k), np.float64)
+    _footprint_kernel(x, y, float(conn.filter_width), k, conn.width, conn.height, inv, dens, idx, w)
+    return idx, w
+
+
+@njit
+def _mark_kernel(idx, w, slot):
+    """slot[pixel] = 1 where some landing's weight on it is positive."""
+    for i in range(idx.shape[0]):
+        for f in range(idx.shape[1]):
+            if w[i, f] > 0:
+                slot[idx[i, f]] = 1
+
+
+@njit
+def _number_kernel(slot):
+    """The marked pixels in increasing order (np.unique's), and slot[pixel] = its row among them."""
+    m = 0
+    for p in range(len(slot)):
+        if slot[p]:
+            m += 1
+    pixels = np.empty(m, np.int64)
+    m = 0
+    for p in range(len(slot)):
+        if slot[p]:
+            pixels[m] = p
+            slot[p] = m
+            m += 1
+    return pixels
+
+
+@njit
+def _add_dense_kernel(idx, w, c, slot, acc):
+    for i in range(idx.shape[0]):  # the landings in order: np.bincount's order per pixel
+        for f in range(idx.shape[1]):
+            wf = w[i, f]
+            if wf > 0:
+                row = slot[idx[i, f]]
+                for ch in range(c.shape[1]):
+                    acc[row, ch] += wf * c[i, ch]
+
+
+@njit
+def _add_mono_kernel(idx, w, lam, value, slot, acc):
+    for i in range(idx.shape[0]):
+        for f in range(idx.shape[1]):
+            wf = w[i, f]
+            if wf > 0:
+                acc[slot[idx[i, f]], lam[i]] += wf * value[i]
+
+
+def _finish(calls, pixels_total: int, channels: int):
+    """SplatBatch.finish on the kernels."""
+    pixels, acc = _sums(calls, pixels_total, channels)
+    return pixels, acc.astype(np.float32)
+
+
+def _sums(calls, pixels_total: int, channels: int):
+    """(distinct pixels, their float64 sums (U, channels)) of a batch's splat calls."""
+    slot = np.zeros(pixels_total, np.int64)
+    for p, q, _ in calls:
+        _mark_kernel(p, q, slot)
+    pixels = _number_kernel(slot)
+    acc = np.zeros((len(pixels), channels), np.float64)
+    for p, q, v in calls:
+        if isinstance(v, MonoContributions):
+            _add_mono_kernel(p, q, v.lam, v.value, slot, acc)
+        else:
+            _add_dense_kernel(p, q, np.ascontiguousarray(v, np.float64), slot, acc)
+    return pixels, acc
+
+
+@njit
+def _add_rows_kernel(flat, pixels, values):
+    for i in range(len(pixels)):  # distinct pixels
+        for ch in range(flat.shape[1]):
+            flat[pixels[i], ch] += values[i, ch]
+
+
+@njit
+def _add_rounded_rows_kernel(flat, pixels, acc):
+    """flat[pixels] += acc rounded to float32 (finish's astype, then add's float32 sums)."""
+    for i in range(len(pixels)):  # distinct pixels
+        for ch in range(flat.shape[1]):
+            flat[pixels[i], ch] += np.float32(acc[i, ch])

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...transport import wavelengths
-from .camera_splat import CameraConnection, SplatBatch
+from .camera_splat import CameraConnection, CameraSplat, SplatBatch
 from . import splat_bounce
 from ...transport.elements import IlluminationMap
 from ...gratings.records import GratingRecords
@@ -190,7 +190,10 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
             tr.rays_cast += splat_bounce.trace_bounces(prepared, tr.bounces, tr.splat, bounce_rng)
             tr.bounces = splat_bounce.BounceLog(prepared)
         if tr.splat is not None:
-            splat.add(*tr.splat.finish())
+            if isinstance(splat, CameraSplat):  # a lane's film: the batch's sums added in one pass
+                splat.add_batch(tr.splat)
+            else:  # a SplatLog: the (pixels, values) a Dask worker sends back
+                splat.add(*tr.splat.finish())
             shadow += tr.splat.shadow_rays
             tr.splat = SplatBatch(connection)
     return {"paths": b, "deposits": tr.deposited, "rays": tr.rays_cast + shadow}
