@@ -200,7 +200,9 @@ def test_decoded_texels_match_cycles(colorspace, interpolation, extension, uvs, 
     top_down_scene()
     px = checker_pixels(seed=3)
     if colorspace == "float":
-        img = image("img", px * 1.7, colorspace="Linear Rec.709", float_buffer=True)
+        # HDR colour (over 1), alpha kept at 1: with the alpha scaled to 1.7 too, Blender 5.2's
+        # Cycles (bpy 5.2.3) rendered 1.700x the texels the exporter reads, 5.0's rendered them as read
+        img = image("img", px * np.float32([1.7, 1.7, 1.7, 1.0]), colorspace="Linear Rec.709", float_buffer=True)
     else:
         img = image("img", px, colorspace=colorspace, path=tmp_path / "img.png")
     mat = textured_material("emit", img, interpolation=interpolation, extension=extension)

@@ -10,6 +10,9 @@ from opal_diffraction.core.gratings.kernel import (
     multislit_mean, sinc2, sinc2_integral, sinc2_mean,
 )
 
+#: NumPy 2 renamed np.trapz to np.trapezoid (the same trapezoidal rule); NumPy 1.24-1.26 (Blender 4.2-5.0) has only trapz
+_trapezoid = getattr(np, "trapezoid", None) or np.trapz
+
 
 def phasor_sum(eta, n):
     """|sum_k exp(2 i k eta)|^2 / N^2: N slits, phase step 2 pi D u / lambda = 2 eta."""
@@ -76,7 +79,7 @@ def test_closed_form_integral_matches_quadrature(n):
         w = rng.choice([0.5 / n, 3.0 / n, 0.05, 1.0])
         x = np.linspace(e0, e0 + w, 400_001)
         f = multislit(x, n)
-        quad = np.trapz(f, x) / w
+        quad = _trapezoid(f, x) / w
         assert multislit_mean(e0, e0 + w, n) == pytest.approx(quad, abs=2e-5)
     # odd, with period-mean N
     assert multislit_integral(np.pi, n) == pytest.approx(n * np.pi, rel=1e-6)
@@ -106,7 +109,7 @@ def test_bin_averaged_kernel_matches_fine_quadrature(n):
     for k in range(0, len(edges) - 1, 3):
         lam = np.linspace(edges[k], edges[k + 1], 200_001 if n >= 1000 else 20_001)
         p = fraunhofer_pattern(u[:, None], v[:, None], lam[None, :], a, d, n, length)
-        ref = np.trapz(p, lam, axis=1) / (edges[k + 1] - edges[k])
+        ref = _trapezoid(p, lam, axis=1) / (edges[k + 1] - edges[k])
         np.testing.assert_allclose(got[:, k], ref, atol=1e-3)
 
 

@@ -14,6 +14,9 @@ from opal_diffraction.core.render.frame import render
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
 
+#: NumPy 2 renamed np.trapz to np.trapezoid (the same trapezoidal rule); NumPy 1.24-1.26 (Blender 4.2-5.0) has only trapz
+_trapezoid = getattr(np, "trapezoid", None) or np.trapz
+
 D, A, N, L_UM = 1600.0, 480.0, 100, 20.0
 INCIDENCE = np.radians(10.0)
 LIGHT_DIST = 1.0
@@ -65,7 +68,7 @@ def brute_force_row(ctx, bin_index):
     lo, hi = ctx.grid.bin_edges[bin_index], ctx.grid.bin_edges[bin_index + 1]
     lam = np.linspace(lo, hi, 4001)
     p = fraunhofer_pattern(u[:, None], v[:, None], lam[None, :], A, D, N, L_UM * 1e3)
-    mean = np.trapz(p / (lam * 1e-9) ** 2, lam, axis=1) / (hi - lo)
+    mean = _trapezoid(p / (lam * 1e-9) ** 2, lam, axis=1) / (hi - lo)
     # docs/physics.md section 3.2: no 1/cos(theta_o); the Harvey-Shack factor (on by default)
     # rescales the propagating orders to carry a / D, counted here order by order at the bin centre
     factor = (A * 1e-9) ** 2 * (L_UM * 1e-6) * N / (D * 1e-9)

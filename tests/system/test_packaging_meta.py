@@ -71,6 +71,8 @@ def test_bundled_pins_support_the_numpy_blender_ships(blender):
     """Every bundled distribution that depends on numpy accepts the numpy of each Blender from
     blender_version_min on (the venv's metadata is the pins', see the test above)."""
     numpy = tool.BLENDER_NUMPY[blender]
+    if tool.BLENDER_PYTHON[blender] != tool.current_python():
+        pytest.skip(f"Blender {blender} runs Python {tool.BLENDER_PYTHON[blender]}: its pins are checked in that venv")
     for name, _ in tool.BUNDLED:
         try:
             requires = md.requires(name) or []
@@ -79,6 +81,27 @@ def test_bundled_pins_support_the_numpy_blender_ships(blender):
         for r in map(Requirement, requires):
             if tool.canonical_name(r.name) == "numpy" and (r.marker is None or r.marker.evaluate({"extra": ""})):
                 assert r.specifier.contains(numpy), f"{name} {md.version(name)} needs {r}; Blender {blender} has numpy {numpy}"
+
+
+@pytest.mark.parametrize("python", tool.PYTHONS)
+def test_each_python_has_its_pins(python):
+    """requirements.txt's markers give each Python Blender runs one pin of every bundled wheel and of
+    bpy and numpy, and the bpy wheel of that Python; the Blender ranges of the Pythons meet."""
+    pins = tool.pinned_versions(python=python)
+    assert {"bpy", "numpy"} | {tool.canonical_name(n) for n, _ in tool.BUNDLED} <= set(pins)
+    assert [r.split("==")[0] for r, _ in tool.wheel_requirements(python=python)] == [n for n, _ in tool.BUNDLED]
+    bpy_series = ".".join(pins["bpy"].split(".")[:2])
+    low, high = tool.PYTHON_BLENDER[python]
+    assert Version(low) <= Version(bpy_series) and (high is None or Version(bpy_series) < Version(high))
+    assert [b for b, p in tool.BLENDER_PYTHON.items() if p == python], f"no Blender of BLENDER_NUMPY runs {python}"
+    ranges = sorted(tool.PYTHON_BLENDER.values(), key=lambda r: Version(r[0]))
+    assert all(a[1] == b[0] for a, b in zip(ranges, ranges[1:])) and ranges[-1][1] is None
+
+
+def test_pins_differ_by_python_only_where_they_must():
+    """One pin serves both Pythons unless it cannot (NumPy 1 vs 2, the bpy of each Blender, scipy)."""
+    a, b = (tool.pinned_versions(python=p) for p in tool.PYTHONS)
+    assert {n for n in a if a[n] != b.get(n)} == {"bpy", "numpy", "scipy"}
 
 
 def test_blender_numpy_covers_the_manifests_minimum():

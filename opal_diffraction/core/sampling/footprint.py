@@ -45,6 +45,9 @@ import numpy as np
 
 from .camera import camera_frame
 
+#: NumPy 2 renamed np.trapz to np.trapezoid (the same trapezoidal rule); NumPy 1.24-1.26 (Blender 4.2-5.0) has only trapz
+_trapezoid = getattr(np, "trapezoid", None) or np.trapz
+
 __all__ = ["filter_box_width", "camera_differentials", "zero_differentials", "transfer", "reflect_differentials",
            "refract_differentials", "grating_footprint"]
 
@@ -63,7 +66,7 @@ def filter_box_width(filter_width: float) -> float:
         return 1.0
     x = np.linspace(0.0, 1.0, 4097)
     f = _BH[0] - _BH[1] * np.cos(2 * np.pi * x) + _BH[2] * np.cos(4 * np.pi * x) - _BH[3] * np.cos(6 * np.pi * x)
-    var = np.trapz(f * (x - 0.5) ** 2, x) / np.trapz(f, x)
+    var = _trapezoid(f * (x - 0.5) ** 2, x) / _trapezoid(f, x)
     return float(np.sqrt(12 * var) * 2 * filter_width)
 
 

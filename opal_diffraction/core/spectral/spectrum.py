@@ -40,6 +40,9 @@ import numpy as np
 
 from ..util.jit import kernels_enabled, njit
 
+#: NumPy 2 renamed np.trapz to np.trapezoid (the same trapezoidal rule); NumPy 1.24-1.26 (Blender 4.2-5.0) has only trapz
+_trapezoid = getattr(np, "trapezoid", None) or np.trapz
+
 __all__ = ["WavelengthGrid", "SpectralConverter", "DEFAULT_GRID"]
 
 _OBSERVER = "CIE 1931 2 Degree Standard Observer"
@@ -107,7 +110,7 @@ def _bin_integrals(table_wl: np.ndarray, table_values: np.ndarray, edges: np.nda
         m = max(2, int(np.ceil((edges[i + 1] - edges[i]) / fine_step)) + 1)
         x = np.linspace(edges[i], edges[i + 1], m)
         cols = [np.interp(x, table_wl, table_values[:, k], left=0.0, right=0.0) for k in range(table_values.shape[1])]
-        out[i] = np.trapz(np.stack(cols, axis=1), x, axis=0)
+        out[i] = _trapezoid(np.stack(cols, axis=1), x, axis=0)
     return out
 
 

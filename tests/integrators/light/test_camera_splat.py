@@ -23,6 +23,9 @@ from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.render.plan import plan_render
 
+#: NumPy 2 renamed np.trapz to np.trapezoid (the same trapezoidal rule); NumPy 1.24-1.26 (Blender 4.2-5.0) has only trapz
+_trapezoid = getattr(np, "trapezoid", None) or np.trapz
+
 SUN_UP = np.array([-1.5, 0.0, 1.0]) / np.hypot(1.5, 1.0)  # travelling up to the mirror at z = 1
 CAM = dict(eye=(-2.0, -3.0, 3.0), target=(0.5, 0.0, 0.0))
 
@@ -71,9 +74,9 @@ def test_the_filter_density_is_what_the_eye_pass_samples():
     filt = FilterSampler(width)
     t = np.linspace(-width - 0.1, width + 0.1, 200001)
     f = filter_density(t, filt)
-    assert abs(np.trapz(f, t) - 1.0) < 1e-4
+    assert abs(_trapezoid(f, t) - 1.0) < 1e-4
     cells = np.linspace(-1.0, 1.0, 21)  # 0.1 px cells where the window is above 5 % of its peak
-    mass = lambda dens: np.array([np.trapz(dens(g), g) for g in (np.linspace(a, b, 4001)  # noqa: E731
+    mass = lambda dens: np.array([_trapezoid(dens(g), g) for g in (np.linspace(a, b, 4001)  # noqa: E731
                                                                   for a, b in zip(cells[:-1], cells[1:]))])
     np.testing.assert_allclose(mass(lambda g: filter_density(g, filt)), mass(lambda g: blackman_harris_density(g, width)),
                                rtol=0.01)
@@ -81,7 +84,7 @@ def test_the_filter_density_is_what_the_eye_pass_samples():
     x = filt.offsets(np.random.default_rng(1).random(n))
     edges = np.linspace(-width, width, 41)
     obs, _ = np.histogram(x, edges)
-    exp = np.array([n * np.trapz(filter_density(g, filt), g) for g in
+    exp = np.array([n * _trapezoid(filter_density(g, filt), g) for g in
                     (np.linspace(a, b, 2001) for a, b in zip(edges[:-1], edges[1:]))])
     p, info = pearson(obs, exp)
     assert p > 1e-3, info
