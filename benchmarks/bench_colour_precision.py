@@ -21,20 +21,16 @@ hot path is float32 on both paths). The numbers go in docs/benchmarks.md.
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
-import sys
 import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, "tests", "system"))
+from opal_diffraction._scripts import load_script
+from opal_diffraction.core.render.frame import render
+from opal_diffraction.core.util import jit
 
-import test_colour_precision as cp  # noqa: E402
-
-from opal_diffraction.core.render.frame import render  # noqa: E402
-from opal_diffraction.core.util import jit  # noqa: E402
+cp = load_script("tests/system/test_colour_precision.py")  # the scene, the reference, the noise
 
 
 def fmt(c) -> str:
