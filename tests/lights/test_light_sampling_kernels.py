@@ -134,3 +134,20 @@ def test_lights_met_kernels_are_its_numpy_lines(seed):
         np.testing.assert_array_equal(pdf[sel], sources.light_pdf(pl, int(li), o[rows[sel]], d[rows[sel]]))
     got = sources.lights_met(pl, o, d, tmax, np.zeros(len(o), bool))
     assert all(len(x) == 0 for x in got)
+
+
+@pytest.mark.parametrize("seed", [6, 7])
+def test_the_disk_light_kernel_is_sample_lights_numpy_lines(seed):
+    """A disk light (and a tilted, elliptic one) sampled from points around it, behind it and on it."""
+    pl = _sized(2)
+    rng = np.random.default_rng(seed)
+    p = rng.uniform(-2.5, 2.5, (4000, 3)).astype(np.float32)
+    p[:50] = (pl.position[1] + rng.uniform(-0.3, 0.3, (50, 1)) * pl.axis_u[1]).astype(np.float32)  # on its plane
+    for li in (0, 1) if seed == 6 else (1,):
+        if int(pl.kind[li]) != sources.AREA_DISK:
+            continue
+        got, ref = _both(lambda: sources.sample_light_pdf(pl, li, p, np.random.default_rng(seed)))
+        for a, b in zip(got, ref):
+            assert a.dtype == b.dtype == np.float32
+            np.testing.assert_array_equal(a, b)
+        assert (ref[2] > 0).mean() > 0.2 and (ref[2] == 0).mean() > 0.05  # in front and behind

@@ -29,7 +29,17 @@ those samplers, ``intersect_lights`` and ``sun_radiance`` what a ray sees of the
 (mirrors, glass, the camera, MIS).
 
 Where the kernels run (core/util/jit.py), a point light of radius 0 is sampled in one compiled
-pass (``_point_kernel``: the NumPy lines' float32 steps in their order, the same bits).
+pass (``_point_kernel``: the NumPy lines' float32 steps in their order, the same bits), a disk
+light after NumPy's float32 sin and cos (``_disk_kernel``), a rectangle light as
+core/lights/rect_light.py says. What a ray sees of the sized lights takes compiled passes too:
+``intersect_lights`` one (``_hit_kernel``: every light per ray, nearest first), ``light_pdf`` of
+an area light or a sized point / spot two (``_pdf_kernel``, after NumPy's arccos of a
+rectangle's angles), and ``lights_met`` - the eye pass's emission stage: the lights its segments
+pass and their pdfs for MIS - both at once, gathering only the rays that meet a light. They do
+the NumPy lines' float64 operations in their order (no fastmath): the same bits
+(tests/lights/test_light_sampling_kernels.py). The NumPy lines' dot products are written out
+(rect_light.dot3), as the kernels sum them: a BLAS matmul's (and float64 einsum's) order and FMA
+use are the library's and the CPU's.
 """
 
 from __future__ import annotations
@@ -264,6 +274,11 @@ def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.G
         # a disk: uniform on the ellipse (a polar mapping is fine for a uniform density)
         rad, phi = np.sqrt(r1), 2 * np.pi * r2
         a, c = 0.5 * pl.size_u[index] * rad * np.cos(phi), 0.5 * pl.size_v[index] * rad * np.sin(phi)
+        if kernels_enabled() and p.dtype == f32 and p.ndim == 2 and a.dtype == f32 and c.dtype == f32:
+            wi, dist, g = np.empty((b, 3), f32), np.empty(b, f32), np.empty(b, f32)
+            _disk_kernel(pl.position[index], pl.axis_u[index], pl.axis_v[index], pl.direction[index].astype(f32),
+                         f32(pl.area[index]), a, c, np.ascontiguousarray(p), wi, dist, g)
+            return wi, dist, g
         target = (pl.position[index] + a[:, None] * pl.axis_u[index] + c[:, None] * pl.axis_v[index]).astype(f32)
     to_light = target - p
     d2 = np.maximum(np.einsum("ij,ij->i", to_light, to_light), f32(1e-30))
@@ -274,9 +289,32 @@ def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.G
         if k == SPOT:
             g = g * spot_mask(pl, index, -wi)
         return wi, dist, g
-    cos_l = -(wi @ pl.direction[index].astype(f32))
+    cos_l = -dot3(wi, pl.direction[index].astype(f32))
     g = np.where(cos_l > 0, cos_l * f32(pl.area[index]) / d2, f32(0.0))
     return wi, dist, g
+
+
+@njit
+def _disk_kernel(pos, au, av, nrm, area, a, c, p, wi, dist, g):
+    """sample_light of a disk light per row from the point's coordinates (a, c) on its axes
+    (float32, by NumPy's sin and cos): the target in float64 rounded to float32, then the
+    direction, distance and g = cos_l A / d^2 in float32."""
+    tiny = np.float32(1e-30)
+    zero = np.float32(0.0)
+    for i in range(p.shape[0]):
+        ai, ci = np.float64(a[i]), np.float64(c[i])
+        x = np.float32(pos[0] + ai * au[0] + ci * av[0]) - p[i, 0]
+        y = np.float32(pos[1] + ai * au[1] + ci * av[1]) - p[i, 1]
+        z = np.float32(pos[2] + ai * au[2] + ci * av[2]) - p[i, 2]
+        d2 = x * x + y * y + z * z
+        if not d2 >= tiny:  # np.maximum: NaN stays NaN
+            d2 = d2 if d2 != d2 else tiny
+        d = np.sqrt(d2)
+        wx, wy, wz = x / d, y / d, z / d
+        wi[i, 0], wi[i, 1], wi[i, 2] = wx, wy, wz
+        dist[i] = d
+        cos_l = -(wx * nrm[0] + wy * nrm[1] + wz * nrm[2])
+        g[i] = cos_l * area / d2 if cos_l > 0 else zero
 
 
 @njit
