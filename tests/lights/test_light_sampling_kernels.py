@@ -151,3 +151,18 @@ def test_the_disk_light_kernel_is_sample_lights_numpy_lines(seed):
             assert a.dtype == b.dtype == np.float32
             np.testing.assert_array_equal(a, b)
         assert (ref[2] > 0).mean() > 0.2 and (ref[2] == 0).mean() > 0.05  # in front and behind
+
+
+@pytest.mark.parametrize("li", [2, 4])
+def test_the_sphere_light_kernel_is_sample_lights_numpy_lines(li):
+    """A sphere light (point, and spot with its cone mask) from points around it and inside it."""
+    pl = _sized(5)
+    rng = np.random.default_rng(li)
+    p = rng.uniform(-2.5, 2.5, (4000, 3)).astype(np.float32)
+    p[:40] = (pl.position[li] + rng.uniform(-0.1, 0.1, (40, 3))).astype(np.float32)  # inside the sphere
+    for rows in (p, p[40:]):  # with and without points inside
+        got, ref = _both(lambda: sources.sample_light_pdf(pl, li, rows, np.random.default_rng(li)))
+        for a, b in zip(got, ref):
+            assert a.dtype == b.dtype == np.float32
+            np.testing.assert_array_equal(a, b)
+        assert np.isfinite(ref[2]).all() and (ref[2] >= 0).all() and (ref[2] > 0).mean() > 0.2

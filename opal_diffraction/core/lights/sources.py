@@ -340,6 +340,15 @@ def _sample_sized_point(pl, index, p, rng):
     f32 = np.float32
     p = np.asarray(p, f32)
     r = float(pl.radius[index])
+    if pl.sphere[index] and kernels_enabled() and p.ndim == 2:
+        u1, u2 = rng.random(b, f32), rng.random(b, f32)  # sample_cone's numbers, in its order
+        phi = f32(2 * np.pi) * u2
+        spot = int(pl.kind[index]) == SPOT
+        wi, dist, g = np.empty((b, 3), f32), np.empty(b, f32), np.empty(b, f32)
+        _sphere_kernel(pl.position[index].astype(f32), r, np.ascontiguousarray(p), u1, np.cos(phi), np.sin(phi),
+                       spot, pl.direction[index].astype(f32), f32(pl.cos_half_spot[index]),
+                       f32(pl.spot_smooth[index]), wi, dist, g)
+        return wi, dist, g
     if pl.sphere[index]:
         axis, d, r, omc, inside = _sphere_geometry(pl, index, p)
         if inside.any():  # uniform over all directions there (pdf 1 / (4 pi)): omc = 2
@@ -348,7 +357,7 @@ def _sample_sized_point(pl, index, p, rng):
         else:
             wi = sample_cone(axis, omc, rng, b, f32)
             g = f32(2.0 / (r * r)) * omc  # (1 / (pi r^2)) / (1 / (2 pi omc))
-        cos_t = np.einsum("ij,ij->i", wi, axis)
+        cos_t = dot3(wi, axis)
         dist = _distance_to_sphere(d, cos_t, f32(r), inside)
         if int(pl.kind[index]) == SPOT:  # the cone mask along the ray, outside the sphere only (spot.h)
             g = np.where(inside, g, g * spot_mask(pl, index, -wi))
@@ -372,6 +381,58 @@ def _sample_sized_point(pl, index, p, rng):
     if int(pl.kind[index]) == SPOT:
         g = g * spot_mask(pl, index, -wi)
     return wi, t, g.astype(f32)
+
+
+@njit
+def _sphere_kernel(c, r, p, u1, cos_phi, sin_phi, spot, nrm, ch, sm, wi, dist, g):
+    """_sample_sized_point of a sphere light per row in float32: _sphere_geometry, sample_cone
+    (from its first numbers ``u1`` and NumPy's cos / sin of its angles), g, the distance to the
+    sphere and (``spot``) the cone mask outside it, as the NumPy lines do."""
+    f32 = np.float32
+    one, two, zero, tiny = f32(1.0), f32(2.0), f32(0.0), f32(1e-30)
+    r32 = f32(r)
+    g_in, g_out = f32(4.0 / (r * r)), f32(2.0 / (r * r))
+    smooth = sm > 0
+    for i in range(p.shape[0]):
+        tx, ty, tz = c[0] - p[i, 0], c[1] - p[i, 1], c[2] - p[i, 2]
+        d = np.sqrt(tx * tx + ty * ty + tz * tz)
+        inside = d <= r32
+        dm = d if (d >= tiny or d != d) else tiny
+        ax, ay, az = tx / dm, ty / dm, tz / dm
+        if inside:
+            omc = two
+        else:
+            s2 = r32 / dm
+            s2 = rect_light.np_clip(s2 * s2, zero, one)
+            omc = s2 / (one + np.sqrt(one - s2))
+        x = u1[i] * omc
+        cos_t = one - x
+        sin_t = x * (two - x)
+        sin_t = np.sqrt(sin_t if (sin_t >= zero or sin_t != sin_t) else zero)
+        cu, cv = sin_t * cos_phi[i], sin_t * sin_phi[i]
+        sign = one if az >= zero else -one  # _basis
+        a = -one / (sign + az)
+        bb = ax * ay * a
+        ux, uy, uz = one + sign * ax * ax * a, sign * bb, -sign * ax
+        vx, vy, vz = bb, sign + ay * ay * a, -ay
+        wx = cos_t * ax + cu * ux + cv * vx
+        wy = cos_t * ay + cu * uy + cv * vy
+        wz = cos_t * az + cu * uz + cv * vz
+        wi[i, 0], wi[i, 1], wi[i, 2] = wx, wy, wz
+        gg = g_in if inside else g_out * omc
+        ct = wx * ax + wy * ay + wz * az
+        disc = r32 * r32 - d * d * (one - ct * ct)  # _distance_to_sphere
+        disc = np.sqrt(disc if (disc >= zero or disc != disc) else zero)
+        t = d * ct + disc if inside else d * ct - disc
+        dist[i] = t if (t >= zero or t != t) else zero
+        if spot and not inside:  # spot_mask of -wi in float32
+            cos_axis = (-wx) * nrm[0] + (-wy) * nrm[1] + (-wz) * nrm[2]
+            cone = one if cos_axis > ch else zero
+            if smooth:
+                xx = rect_light.np_clip((cos_axis - ch) / sm, zero, one)
+                cone = cone * (xx * xx * (f32(3) - two * xx))
+            gg = gg * cone
+        g[i] = gg
 
 
 def sample_light_pdf(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.Generator):
