@@ -125,15 +125,21 @@ def sample(rect: RectFrame, o: np.ndarray, u: np.ndarray, v: np.ndarray):
 
 
 def _frame_of(pl, index: int) -> RectFrame:
-    return RectFrame(pl.position[index], pl.axis_u[index], pl.axis_v[index], pl.size_u[index], pl.size_v[index])
+    """The frame of rectangle light ``index``, made once per prepared lights (kept on them, for
+    the arrays it was made from: the prepared lights are not changed in place)."""
+    refs = (pl.position, pl.axis_u, pl.axis_v, pl.size_u, pl.size_v)
+    cache = getattr(pl, "__dict__", {}).setdefault("_rect_frames", {})
+    hit = cache.get(index)
+    if hit is not None and all(a is b for a, b in zip(hit[0], refs)):
+        return hit[1]
+    frame = RectFrame(pl.position[index], pl.axis_u[index], pl.axis_v[index], pl.size_u[index], pl.size_v[index])
+    cache[index] = (refs, frame)
+    return frame
 
 
 def _fits(p) -> bool:
     """Points the kernels take: (B, 3) float32 / float64."""
-    return isinstance(p, np.ndarray) and p.ndim == 2 and p.shape[1] == 3 and p.dtype in _FLOATS
-
-
-_FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
+    return isinstance(p, np.ndarray) and p.ndim == 2 and p.shape[1] == 3 and p.dtype.char in "fd"
 
 
 def sample_light_rect(pl, index: int, p: np.ndarray, r1: np.ndarray, r2: np.ndarray, with_pdf: bool = False):

@@ -653,7 +653,6 @@ def sun_radiance(pl: PreparedLights, d: np.ndarray) -> np.ndarray:
 # the same bits (tests/lights/test_light_sampling_kernels.py). A rectangle's solid angle needs
 # four arccos, which NumPy computes between the two passes (core/lights/rect_light.py says why).
 
-_FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
 # columns of the lights' float64 table (_tables)
 _P, _N, _U, _V, _SU, _SV, _AREA, _R, _SPH, _CH, _SM, _SM_ON, _CORNER, _EZ, _NCOL = (
     0, 3, 6, 9, 12, 13, 14, 15, 16, 17, 18, 19, 20, 23, 26)
@@ -664,12 +663,27 @@ _NO_COS = np.zeros((0, 4), np.float64)
 
 
 def _fits(a) -> bool:
-    return isinstance(a, np.ndarray) and a.ndim == 2 and a.shape[1] == 3 and a.dtype in _FLOATS
+    return isinstance(a, np.ndarray) and a.ndim == 2 and a.shape[1] == 3 and a.dtype.char in "fd"
+
+
+_TABLE_FIELDS = ("kind", "position", "direction", "axis_u", "axis_v", "size_u", "size_v", "area", "radius", "sphere",
+                 "cos_half_spot", "spot_smooth")
 
 
 def _tables(pl: PreparedLights):
     """(kind (L,) int64, (L, _NCOL) float64): the prepared lights' numbers for the kernels, with
-    each rectangle's frame (rect_light.RectFrame's corner and normal)."""
+    each rectangle's frame (rect_light.RectFrame's corner and normal); made once per prepared
+    lights (kept on them, for the arrays they were made from: they are not changed in place)."""
+    refs = tuple(getattr(pl, f) for f in _TABLE_FIELDS)
+    hit = pl.__dict__.get("_kernel_tables")
+    if hit is not None and all(a is b for a, b in zip(hit[0], refs)):
+        return hit[1]
+    out = _make_tables(pl)
+    pl.__dict__["_kernel_tables"] = (refs, out)
+    return out
+
+
+def _make_tables(pl: PreparedLights):
     n = len(pl)
     tab = np.zeros((n, _NCOL), np.float64)
     tab[:, _P:_P + 3] = pl.position
