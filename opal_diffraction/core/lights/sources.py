@@ -29,7 +29,17 @@ those samplers, ``intersect_lights`` and ``sun_radiance`` what a ray sees of the
 (mirrors, glass, the camera, MIS).
 
 Where the kernels run (core/util/jit.py), a point light of radius 0 is sampled in one compiled
-pass (``_point_kernel``: the NumPy lines' float32 steps in their order, the same bits).
+pass (``_point_kernel``: the NumPy lines' float32 steps in their order, the same bits), a disk
+light after NumPy's float32 sin and cos (``_disk_kernel``), a rectangle light as
+core/lights/rect_light.py says. What a ray sees of the sized lights takes compiled passes too:
+``intersect_lights`` one (``_hit_kernel``: every light per ray, nearest first), ``light_pdf`` of
+an area light or a sized point / spot two (``_pdf_kernel``, after NumPy's arccos of a
+rectangle's angles), and ``lights_met`` - the eye pass's emission stage: the lights its segments
+pass and their pdfs for MIS - both at once, gathering only the rays that meet a light. They do
+the NumPy lines' float64 operations in their order (no fastmath): the same bits
+(tests/lights/test_light_sampling_kernels.py). The NumPy lines' dot products are written out
+(rect_light.dot3), as the kernels sum them: a BLAS matmul's (and float64 einsum's) order and FMA
+use are the library's and the CPU's.
 """
 
 from __future__ import annotations
@@ -41,12 +51,13 @@ import numpy as np
 from ..util.enums import LightKind
 from ..util.jit import kernels_enabled, njit
 from . import rect_light
+from .rect_light import dot3
 from ..util.geometry import orthonormal_basis
 from ..scene.model import Lights
 from ..spectral.spectrum import SpectralConverter
 
 __all__ = ["PreparedLights", "prepare_lights", "sample_light", "sample_light_pdf", "light_pdf", "is_delta",
-           "intersect_lights", "sun_radiance", "smoothstep", "spot_mask", "sample_cone"]
+           "intersect_lights", "lights_met", "sun_radiance", "smoothstep", "spot_mask", "sample_cone"]
 
 POINT, SPOT, SUN, AREA_RECT, AREA_DISK = (int(k) for k in LightKind)
 
@@ -161,7 +172,7 @@ def smoothstep(x):
 def spot_mask(pl: PreparedLights, index: int, travel: np.ndarray) -> np.ndarray:
     """The spot cone mask for light travelling along ``travel`` (B, 3) unit (Cycles' spot.h:
     smoothstep((cos - cos_half) / blend band), 0 outside)."""
-    cos_axis = travel @ pl.direction[index].astype(travel.dtype)
+    cos_axis = dot3(travel, pl.direction[index].astype(travel.dtype))
     ch, sm = pl.cos_half_spot[index], pl.spot_smooth[index]
     cone = np.where(cos_axis > ch, 1.0, 0.0).astype(travel.dtype)
     if np.float32(sm) > 0:  # a blend band that is 0 in float32 is a hard edge
@@ -215,7 +226,7 @@ def _sphere_geometry(pl, index, p):
     c = pl.position[index].astype(dt)
     r = float(pl.radius[index])
     to_c = c - p
-    d = np.sqrt(np.einsum("ij,ij->i", to_c, to_c))
+    d = np.sqrt(dot3(to_c, to_c))
     inside = d <= r
     axis = to_c / np.maximum(d, dt(1e-30))[:, None]
     omc = np.where(inside, dt(2.0), _one_minus_cos_from_sin2((dt(r) / np.maximum(d, dt(1e-30))) ** 2)).astype(dt)
@@ -263,6 +274,11 @@ def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.G
         # a disk: uniform on the ellipse (a polar mapping is fine for a uniform density)
         rad, phi = np.sqrt(r1), 2 * np.pi * r2
         a, c = 0.5 * pl.size_u[index] * rad * np.cos(phi), 0.5 * pl.size_v[index] * rad * np.sin(phi)
+        if kernels_enabled() and p.dtype == f32 and p.ndim == 2 and a.dtype == f32 and c.dtype == f32:
+            wi, dist, g = np.empty((b, 3), f32), np.empty(b, f32), np.empty(b, f32)
+            _disk_kernel(pl.position[index], pl.axis_u[index], pl.axis_v[index], pl.direction[index].astype(f32),
+                         f32(pl.area[index]), a, c, np.ascontiguousarray(p), wi, dist, g)
+            return wi, dist, g
         target = (pl.position[index] + a[:, None] * pl.axis_u[index] + c[:, None] * pl.axis_v[index]).astype(f32)
     to_light = target - p
     d2 = np.maximum(np.einsum("ij,ij->i", to_light, to_light), f32(1e-30))
@@ -273,9 +289,32 @@ def sample_light(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.G
         if k == SPOT:
             g = g * spot_mask(pl, index, -wi)
         return wi, dist, g
-    cos_l = -(wi @ pl.direction[index].astype(f32))
+    cos_l = -dot3(wi, pl.direction[index].astype(f32))
     g = np.where(cos_l > 0, cos_l * f32(pl.area[index]) / d2, f32(0.0))
     return wi, dist, g
+
+
+@njit
+def _disk_kernel(pos, au, av, nrm, area, a, c, p, wi, dist, g):
+    """sample_light of a disk light per row from the point's coordinates (a, c) on its axes
+    (float32, by NumPy's sin and cos): the target in float64 rounded to float32, then the
+    direction, distance and g = cos_l A / d^2 in float32."""
+    tiny = np.float32(1e-30)
+    zero = np.float32(0.0)
+    for i in range(p.shape[0]):
+        ai, ci = np.float64(a[i]), np.float64(c[i])
+        x = np.float32(pos[0] + ai * au[0] + ci * av[0]) - p[i, 0]
+        y = np.float32(pos[1] + ai * au[1] + ci * av[1]) - p[i, 1]
+        z = np.float32(pos[2] + ai * au[2] + ci * av[2]) - p[i, 2]
+        d2 = x * x + y * y + z * z
+        if not d2 >= tiny:  # np.maximum: NaN stays NaN
+            d2 = d2 if d2 != d2 else tiny
+        d = np.sqrt(d2)
+        wx, wy, wz = x / d, y / d, z / d
+        wi[i, 0], wi[i, 1], wi[i, 2] = wx, wy, wz
+        dist[i] = d
+        cos_l = -(wx * nrm[0] + wy * nrm[1] + wz * nrm[2])
+        g[i] = cos_l * area / d2 if cos_l > 0 else zero
 
 
 @njit
@@ -301,6 +340,15 @@ def _sample_sized_point(pl, index, p, rng):
     f32 = np.float32
     p = np.asarray(p, f32)
     r = float(pl.radius[index])
+    if pl.sphere[index] and kernels_enabled() and p.ndim == 2:
+        u1, u2 = rng.random(b, f32), rng.random(b, f32)  # sample_cone's numbers, in its order
+        phi = f32(2 * np.pi) * u2
+        spot = int(pl.kind[index]) == SPOT
+        wi, dist, g = np.empty((b, 3), f32), np.empty(b, f32), np.empty(b, f32)
+        _sphere_kernel(pl.position[index].astype(f32), r, np.ascontiguousarray(p), u1, np.cos(phi), np.sin(phi),
+                       spot, pl.direction[index].astype(f32), f32(pl.cos_half_spot[index]),
+                       f32(pl.spot_smooth[index]), wi, dist, g)
+        return wi, dist, g
     if pl.sphere[index]:
         axis, d, r, omc, inside = _sphere_geometry(pl, index, p)
         if inside.any():  # uniform over all directions there (pdf 1 / (4 pi)): omc = 2
@@ -309,7 +357,7 @@ def _sample_sized_point(pl, index, p, rng):
         else:
             wi = sample_cone(axis, omc, rng, b, f32)
             g = f32(2.0 / (r * r)) * omc  # (1 / (pi r^2)) / (1 / (2 pi omc))
-        cos_t = np.einsum("ij,ij->i", wi, axis)
+        cos_t = dot3(wi, axis)
         dist = _distance_to_sphere(d, cos_t, f32(r), inside)
         if int(pl.kind[index]) == SPOT:  # the cone mask along the ray, outside the sphere only (spot.h)
             g = np.where(inside, g, g * spot_mask(pl, index, -wi))
@@ -335,12 +383,68 @@ def _sample_sized_point(pl, index, p, rng):
     return wi, t, g.astype(f32)
 
 
+@njit
+def _sphere_kernel(c, r, p, u1, cos_phi, sin_phi, spot, nrm, ch, sm, wi, dist, g):
+    """_sample_sized_point of a sphere light per row in float32: _sphere_geometry, sample_cone
+    (from its first numbers ``u1`` and NumPy's cos / sin of its angles), g, the distance to the
+    sphere and (``spot``) the cone mask outside it, as the NumPy lines do."""
+    f32 = np.float32
+    one, two, zero, tiny = f32(1.0), f32(2.0), f32(0.0), f32(1e-30)
+    r32 = f32(r)
+    g_in, g_out = f32(4.0 / (r * r)), f32(2.0 / (r * r))
+    smooth = sm > 0
+    for i in range(p.shape[0]):
+        tx, ty, tz = c[0] - p[i, 0], c[1] - p[i, 1], c[2] - p[i, 2]
+        d = np.sqrt(tx * tx + ty * ty + tz * tz)
+        inside = d <= r32
+        dm = d if (d >= tiny or d != d) else tiny
+        ax, ay, az = tx / dm, ty / dm, tz / dm
+        if inside:
+            omc = two
+        else:
+            s2 = r32 / dm
+            s2 = rect_light.np_clip(s2 * s2, zero, one)
+            omc = s2 / (one + np.sqrt(one - s2))
+        x = u1[i] * omc
+        cos_t = one - x
+        sin_t = x * (two - x)
+        sin_t = np.sqrt(sin_t if (sin_t >= zero or sin_t != sin_t) else zero)
+        cu, cv = sin_t * cos_phi[i], sin_t * sin_phi[i]
+        sign = one if az >= zero else -one  # _basis
+        a = -one / (sign + az)
+        bb = ax * ay * a
+        ux, uy, uz = one + sign * ax * ax * a, sign * bb, -sign * ax
+        vx, vy, vz = bb, sign + ay * ay * a, -ay
+        wx = cos_t * ax + cu * ux + cv * vx
+        wy = cos_t * ay + cu * uy + cv * vy
+        wz = cos_t * az + cu * uz + cv * vz
+        wi[i, 0], wi[i, 1], wi[i, 2] = wx, wy, wz
+        gg = g_in if inside else g_out * omc
+        ct = wx * ax + wy * ay + wz * az
+        disc = r32 * r32 - d * d * (one - ct * ct)  # _distance_to_sphere
+        disc = np.sqrt(disc if (disc >= zero or disc != disc) else zero)
+        t = d * ct + disc if inside else d * ct - disc
+        dist[i] = t if (t >= zero or t != t) else zero
+        if spot and not inside:  # spot_mask of -wi in float32
+            cos_axis = (-wx) * nrm[0] + (-wy) * nrm[1] + (-wz) * nrm[2]
+            cone = one if cos_axis > ch else zero
+            if smooth:
+                xx = rect_light.np_clip((cos_axis - ch) / sm, zero, one)
+                cone = cone * (xx * xx * (f32(3) - two * xx))
+            gg = gg * cone
+        g[i] = gg
+
+
 def sample_light_pdf(pl: PreparedLights, index: int, p: np.ndarray, rng: np.random.Generator):
     """``sample_light`` and the solid-angle pdf of each direction it drew (B,) float32 (None for
     a delta light), what ``light_pdf`` gives for it, from the sample's own g instead of a second
     intersection with the light: the sized lights' radiance is c times the spectrum with c = 1
     (area), 1 / (pi r^2) (spheres, facing disks) and 1 / (pi sin^2 h) (sun cones), and g = c /
     pdf (module docstring). A spot's cone mask is in its g, so its pdf is ``light_pdf``'s."""
+    if int(pl.kind[index]) == AREA_RECT and kernels_enabled():  # sample and pdf in one kernel pass
+        b = len(p)
+        r1, r2 = rng.random(b, np.float32), rng.random(b, np.float32)  # sample_light's numbers
+        return rect_light.sample_light_rect(pl, index, p, r1, r2, with_pdf=True)
     wi, dist, g = sample_light(pl, index, p, rng)
     if is_delta(pl, index):
         return wi, dist, g, None
@@ -366,6 +470,9 @@ def light_pdf(pl: PreparedLights, index: int, p: np.ndarray, wi: np.ndarray) -> 
     back of an area light (which emits nothing there)."""
     k = int(pl.kind[index])
     b = len(p)
+    if k != SUN and not is_delta(pl, index) and kernels_enabled() and _fits(p) and _fits(wi):
+        return _pdf_with_kernels(pl, np.full(b, index, np.int32), np.ascontiguousarray(p), np.ascontiguousarray(wi),
+                                 np.arange(b))
     p = np.asarray(p, np.float64)
     wi = np.asarray(wi, np.float64)
     if is_delta(pl, index):
@@ -378,7 +485,7 @@ def light_pdf(pl: PreparedLights, index: int, p: np.ndarray, wi: np.ndarray) -> 
         r = float(pl.radius[index])
         if pl.sphere[index]:
             axis, d, r, omc, inside = _sphere_geometry(pl, index, p)
-            in_cone = np.einsum("ij,ij->i", wi, axis) >= 1.0 - omc - _CONE_SLACK
+            in_cone = dot3(wi, axis) >= 1.0 - omc - _CONE_SLACK
             return np.where(inside, 1.0 / (4 * np.pi), np.where(in_cone, 1.0 / (2 * np.pi * omc), 0.0)).astype(
                 np.float32)
         to_p = p - pl.position[index]
@@ -387,7 +494,7 @@ def light_pdf(pl: PreparedLights, index: int, p: np.ndarray, wi: np.ndarray) -> 
         t, ok = _plane_hit(p, wi, pl.position[index], n, np.inf)
         q = p + t[:, None] * wi
         ok &= np.sum((q - pl.position[index]) ** 2, axis=1) <= r * r
-        cos_l = -np.einsum("ij,ij->i", wi, n)
+        cos_l = -dot3(wi, n)
         with np.errstate(divide="ignore", invalid="ignore"):
             pdf = t * t / (np.pi * r * r * cos_l)
         return np.where(ok & (cos_l > 0), pdf, 0.0).astype(np.float32)
@@ -402,10 +509,9 @@ def light_pdf(pl: PreparedLights, index: int, p: np.ndarray, wi: np.ndarray) -> 
 def _plane_hit(o, d, c, n, tmax):
     """Ray-plane distances t (B,) and whether 0 < t < tmax, for the plane through c with normal
     n ((3,) or (B, 3))."""
-    n = np.broadcast_to(n, o.shape)
-    denom = np.einsum("ij,ij->i", d, n)
+    denom = dot3(d, n)
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.einsum("ij,ij->i", c - o, n) / denom
+        t = dot3(c - o, n) / denom
     ok = np.isfinite(t) & (t > 0) & (t < tmax)
     return np.where(ok, t, np.inf), ok
 
@@ -413,10 +519,10 @@ def _plane_hit(o, d, c, n, tmax):
 def _area_hit(pl, index, o, d, tmax):
     """Front-side hits of area light ``index``: (t, hit, cos_l) with cos_l = -d . normal > 0."""
     nrm = pl.direction[index]
-    cos_l = -(d @ nrm)
+    cos_l = -dot3(d, nrm)
     t, ok = _plane_hit(o, d, pl.position[index], nrm, tmax)
     q = o + np.where(ok, t, 0.0)[:, None] * d - pl.position[index]
-    a, c = q @ pl.axis_u[index], q @ pl.axis_v[index]
+    a, c = dot3(q, pl.axis_u[index]), dot3(q, pl.axis_v[index])
     hu, hv = 0.5 * pl.size_u[index], 0.5 * pl.size_v[index]
     if int(pl.kind[index]) == AREA_RECT:
         inside = (np.abs(a) <= hu) & (np.abs(c) <= hv)
@@ -429,8 +535,8 @@ def _area_hit(pl, index, o, d, tmax):
 def _sphere_hit(o, d, c, r, tmax):
     """Nearest ray-sphere distance in (0, tmax): the near root from outside, the far root from inside."""
     oc = o - c
-    bq = np.einsum("ij,ij->i", d, oc)
-    cq = np.einsum("ij,ij->i", oc, oc) - r * r
+    bq = dot3(d, oc)
+    cq = dot3(oc, oc) - r * r
     disc = bq * bq - cq
     s = np.sqrt(np.maximum(disc, 0.0))
     t0, t1 = -bq - s, -bq + s
@@ -448,9 +554,16 @@ def intersect_lights(pl: PreparedLights, o: np.ndarray, d: np.ndarray, tmax: np.
     and spot lights with a radius (spheres, or disks facing the ray origin with soft falloff).
     Suns are at infinity: ``sun_radiance`` for rays that leave the scene.
     """
+    b = len(o)
+    if kernels_enabled() and _fits(o) and _fits(d):
+        idx, t, scale = np.empty(b, np.int32), np.empty(b, np.float32), np.empty(b, np.float32)
+        kind, tab = _tables(pl)
+        _hit_kernel(kind, tab, np.ascontiguousarray(o), np.ascontiguousarray(d),
+                    np.ascontiguousarray(np.broadcast_to(np.asarray(tmax, np.float64), (b,))), _ALL_ROWS, False,
+                    idx, t, scale, _NO_ROWS, _NO_COS)
+        return idx, t, scale
     o = np.asarray(o, np.float64)
     d = np.asarray(d, np.float64)
-    b = len(o)
     best_t = np.broadcast_to(np.asarray(tmax, np.float64), (b,)).copy()
     idx = np.full(b, -1, np.int32)
     scale = np.zeros(b, np.float64)
@@ -464,7 +577,7 @@ def intersect_lights(pl: PreparedLights, o: np.ndarray, d: np.ndarray, tmax: np.
             if pl.sphere[li]:
                 t, ok, inside = _sphere_hit(o, d, c, r, best_t)
                 if k == SPOT:  # one-sided towards the centre (spot.h), masked outside the sphere
-                    ok &= np.einsum("ij,ij->i", d, o - c) < 0
+                    ok &= dot3(d, o - c) < 0
                     s = np.where(inside, 1.0, spot_mask(pl, li, d))
                 else:
                     s = np.ones(b)
@@ -486,6 +599,40 @@ def intersect_lights(pl: PreparedLights, o: np.ndarray, d: np.ndarray, tmax: np.
     return idx, t_out, scale.astype(np.float32)
 
 
+def lights_met(pl: PreparedLights, o: np.ndarray, d: np.ndarray, tmax: np.ndarray, seen: np.ndarray):
+    """``intersect_lights`` of the rays ``seen`` (B,) bool of o, d (B, 3) before tmax (B,), and
+    ``light_pdf`` of the light each one meets along its direction (for MIS): (rows (M,) int64 of
+    the rays that meet a light, in order; their light index (M,) int32, scale (M,) float32 and
+    pdf (M,) float32)."""
+    rows = np.flatnonzero(seen)
+    if len(rows) == 0:
+        return rows, np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(0, np.float32)
+    if kernels_enabled() and _fits(o) and _fits(d) and np.ndim(tmax) == 1:
+        m_max = len(rows)
+        out_rows, idx = np.empty(m_max, np.int64), np.empty(m_max, np.int32)
+        scale, cosines = np.empty(m_max, np.float32), np.empty((m_max, 4), np.float64)
+        kind, tab = _tables(pl)
+        o, d = np.ascontiguousarray(o), np.ascontiguousarray(d)
+        m = _hit_kernel(kind, tab, o, d, np.ascontiguousarray(tmax), rows, True, idx, _NO_T, scale, out_rows,
+                        cosines)
+        out_rows, idx, scale = out_rows[:m], idx[:m], scale[:m]
+        if m == 0:
+            return out_rows, idx, scale, np.zeros(0, np.float32)
+        with np.errstate(invalid="ignore"):
+            g = np.arccos(cosines[:m], out=cosines[:m])  # NumPy's arccos (rect_light.angles)
+        pdf = np.empty(m, np.float32)
+        _pdf_kernel(kind, tab, o, d, out_rows, idx, g, pdf)
+        return out_rows, idx, scale, pdf
+    idx, _, scale = intersect_lights(pl, o[rows], d[rows], np.asarray(tmax)[rows])
+    met = idx >= 0
+    rows, idx, scale = rows[met], idx[met], scale[met]
+    pdf = np.zeros(len(rows), np.float32)
+    for li in np.unique(idx):  # the few lights met
+        sel = idx == li
+        pdf[sel] = light_pdf(pl, int(li), o[rows[sel]], d[rows[sel]])
+    return rows, idx, scale, pdf
+
+
 def sun_radiance(pl: PreparedLights, d: np.ndarray) -> np.ndarray:
     """(B, n) float32 radiance of the suns with an angle seen along escaping directions d (B, 3):
     S / (pi sin^2 h) times the spectrum's shape inside each sun's cone, zero outside."""
@@ -497,3 +644,245 @@ def sun_radiance(pl: PreparedLights, d: np.ndarray) -> np.ndarray:
         if inside.any():
             out[inside] += pl.spectrum[li] * np.float32(1.0 / (np.pi * omc * (2.0 - omc)))
     return out
+
+
+# ------------------------------------------------------------------------------ kernels
+# The compiled twins (core/util/jit.py) of intersect_lights (``_hit_kernel``: every light per
+# ray, nearest first, as the loop over lights above) and of light_pdf for the sized lights
+# (``_pdf_kernel``: per ray, the light given), in the NumPy lines' float64 operations and order:
+# the same bits (tests/lights/test_light_sampling_kernels.py). A rectangle's solid angle needs
+# four arccos, which NumPy computes between the two passes (core/lights/rect_light.py says why).
+
+# columns of the lights' float64 table (_tables)
+_P, _N, _U, _V, _SU, _SV, _AREA, _R, _SPH, _CH, _SM, _SM_ON, _CORNER, _EZ, _NCOL = (
+    0, 3, 6, 9, 12, 13, 14, 15, 16, 17, 18, 19, 20, 23, 26)
+_ALL_ROWS = np.zeros(0, np.int64)  # rows argument: every ray
+_NO_ROWS = np.zeros(0, np.int64)
+_NO_T = np.zeros(0, np.float32)
+_NO_COS = np.zeros((0, 4), np.float64)
+
+
+def _fits(a) -> bool:
+    return isinstance(a, np.ndarray) and a.ndim == 2 and a.shape[1] == 3 and a.dtype.char in "fd"
+
+
+_TABLE_FIELDS = ("kind", "position", "direction", "axis_u", "axis_v", "size_u", "size_v", "area", "radius", "sphere",
+                 "cos_half_spot", "spot_smooth")
+
+
+def _tables(pl: PreparedLights):
+    """(kind (L,) int64, (L, _NCOL) float64): the prepared lights' numbers for the kernels, with
+    each rectangle's frame (rect_light.RectFrame's corner and normal); made once per prepared
+    lights (kept on them, for the arrays they were made from: they are not changed in place)."""
+    refs = tuple(getattr(pl, f) for f in _TABLE_FIELDS)
+    hit = pl.__dict__.get("_kernel_tables")
+    if hit is not None and all(a is b for a, b in zip(hit[0], refs)):
+        return hit[1]
+    out = _make_tables(pl)
+    pl.__dict__["_kernel_tables"] = (refs, out)
+    return out
+
+
+def _make_tables(pl: PreparedLights):
+    n = len(pl)
+    tab = np.zeros((n, _NCOL), np.float64)
+    tab[:, _P:_P + 3] = pl.position
+    tab[:, _N:_N + 3] = pl.direction
+    tab[:, _U:_U + 3] = pl.axis_u
+    tab[:, _V:_V + 3] = pl.axis_v
+    tab[:, _SU], tab[:, _SV], tab[:, _AREA] = pl.size_u, pl.size_v, pl.area
+    tab[:, _R], tab[:, _SPH] = pl.radius, pl.sphere
+    tab[:, _CH], tab[:, _SM] = pl.cos_half_spot, pl.spot_smooth
+    tab[:, _SM_ON] = np.asarray(pl.spot_smooth, np.float32) > 0  # spot_mask's float32 test of the band
+    kind = np.asarray(pl.kind, np.int64)
+    for li in np.flatnonzero(kind == AREA_RECT):
+        rect = rect_light._frame_of(pl, int(li))
+        tab[li, _CORNER:_CORNER + 3] = rect.corner
+        tab[li, _EZ:_EZ + 3] = rect.ez
+    return kind, tab
+
+
+def _pdf_with_kernels(pl, li, p, wi, rows):
+    """light_pdf by the kernels for the rays ``rows`` of p, wi, each towards light li[j]."""
+    kind, tab = _tables(pl)
+    g = np.ones((len(rows), 4), np.float64)
+    _cosines_kernel(kind, tab, p, rows, li, g)
+    with np.errstate(invalid="ignore"):
+        np.arccos(g, out=g)
+    pdf = np.empty(len(rows), np.float32)
+    _pdf_kernel(kind, tab, p, wi, rows, li, g, pdf)
+    return pdf
+
+
+@njit
+def _plane_row(ox, oy, oz, dx, dy, dz, cx, cy, cz, nx, ny, nz, tmax):
+    """_plane_hit of one ray: (t, inf where missed; 0 < t < tmax)."""
+    denom = dx * nx + dy * ny + dz * nz
+    t = ((cx - ox) * nx + (cy - oy) * ny + (cz - oz) * nz) / denom
+    ok = np.isfinite(t) and t > 0 and t < tmax
+    return (t if ok else np.inf), ok
+
+
+@njit
+def _area_row(tab, li, rect, ox, oy, oz, dx, dy, dz, tmax):
+    """_area_hit of one ray: (t, hit, cos_l)."""
+    nx, ny, nz = tab[li, _N], tab[li, _N + 1], tab[li, _N + 2]
+    px, py, pz = tab[li, _P], tab[li, _P + 1], tab[li, _P + 2]
+    cos_l = -(dx * nx + dy * ny + dz * nz)
+    t, ok = _plane_row(ox, oy, oz, dx, dy, dz, px, py, pz, nx, ny, nz, tmax)
+    tt = t if ok else 0.0
+    qx, qy, qz = ox + tt * dx - px, oy + tt * dy - py, oz + tt * dz - pz
+    a = qx * tab[li, _U] + qy * tab[li, _U + 1] + qz * tab[li, _U + 2]
+    c = qx * tab[li, _V] + qy * tab[li, _V + 1] + qz * tab[li, _V + 2]
+    hu, hv = 0.5 * tab[li, _SU], 0.5 * tab[li, _SV]
+    if rect:
+        inside = abs(a) <= hu and abs(c) <= hv
+    else:
+        au, cv = a / hu, c / hv
+        inside = au * au + cv * cv <= 1.0
+    return t, ok and inside and cos_l > 0, cos_l
+
+
+@njit
+def _spot_row(tab, li, dx, dy, dz):
+    """spot_mask of one float64 direction of travel."""
+    cos_axis = dx * tab[li, _N] + dy * tab[li, _N + 1] + dz * tab[li, _N + 2]
+    ch = tab[li, _CH]
+    cone = 1.0 if cos_axis > ch else 0.0
+    if tab[li, _SM_ON] != 0.0:
+        x = rect_light.np_clip((cos_axis - ch) / tab[li, _SM], 0.0, 1.0)
+        cone = cone * (x * x * (3 - 2 * x))
+    return cone
+
+
+@njit
+def _hit_kernel(kind, tab, o, d, tmax, rows, compact, idx, t_out, scale, rows_out, cosines):
+    """intersect_lights per ray (``rows``: the rays to trace, empty: all): the nearest sized light
+    before tmax. Not ``compact``: idx, t_out, scale per ray; ``compact``: only the rays that meet
+    one, their row in rows_out, and for those meeting a rectangle the cosines of its interior
+    angles (rect_light.cosines_row) in ``cosines`` (1 otherwise); returns how many rays were written."""
+    n = rows.shape[0] if rows.shape[0] > 0 else o.shape[0]
+    m = 0
+    for j in range(n):
+        r = rows[j] if rows.shape[0] > 0 else j
+        ox, oy, oz = np.float64(o[r, 0]), np.float64(o[r, 1]), np.float64(o[r, 2])
+        dx, dy, dz = np.float64(d[r, 0]), np.float64(d[r, 1]), np.float64(d[r, 2])
+        best = np.float64(tmax[r])
+        best_i = -1
+        best_s = 0.0
+        for li in range(kind.shape[0]):  # the lights in order, as the NumPy loop
+            k = kind[li]
+            s = 1.0
+            if k == AREA_RECT or k == AREA_DISK:
+                t, ok, _ = _area_row(tab, li, k == AREA_RECT, ox, oy, oz, dx, dy, dz, best)
+            elif (k == POINT or k == SPOT) and tab[li, _R] > 0:
+                rad = tab[li, _R]
+                cx, cy, cz = tab[li, _P], tab[li, _P + 1], tab[li, _P + 2]
+                if tab[li, _SPH] != 0.0:  # _sphere_hit
+                    ocx, ocy, ocz = ox - cx, oy - cy, oz - cz
+                    bq = dx * ocx + dy * ocy + dz * ocz
+                    cq = ocx * ocx + ocy * ocy + ocz * ocz - rad * rad
+                    disc = bq * bq - cq
+                    sq = np.sqrt(rect_light.np_maximum(disc, 0.0))
+                    t0, t1 = -bq - sq, -bq + sq
+                    t = t0 if t0 > 0 else t1
+                    ok = disc >= 0 and t > 0 and t < best
+                    if not ok:
+                        t = np.inf
+                    if k == SPOT:  # one-sided towards the centre, masked outside the sphere
+                        ok = ok and bq < 0
+                        s = 1.0 if cq <= 0 else _spot_row(tab, li, dx, dy, dz)
+                else:  # a disk facing the ray origin
+                    nx, ny, nz = ox - cx, oy - cy, oz - cz
+                    nn = rect_light.np_maximum(np.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
+                    nx, ny, nz = nx / nn, ny / nn, nz / nn
+                    t, ok = _plane_row(ox, oy, oz, dx, dy, dz, cx, cy, cz, nx, ny, nz, best)
+                    tt = t if ok else 0.0
+                    qx, qy, qz = ox + tt * dx - cx, oy + tt * dy - cy, oz + tt * dz - cz
+                    ok = ok and qx * qx + qy * qy + qz * qz <= rad * rad
+                    if k == SPOT:
+                        s = _spot_row(tab, li, dx, dy, dz)
+                s = s / (np.pi * rad * rad)  # intensity -> radiance
+            else:
+                continue
+            if ok and t < best:
+                best, best_i, best_s = t, li, s
+        if not compact:
+            idx[j] = best_i
+            t_out[j] = np.float32(best) if best_i >= 0 else np.float32(np.inf)
+            scale[j] = np.float32(best_s)
+        elif best_i >= 0:
+            idx[m] = best_i
+            scale[m] = np.float32(best_s)
+            rows_out[m] = r
+            if kind[best_i] == AREA_RECT:
+                rect_light.cosines_row(tab[best_i, _CORNER:_CORNER + 3], tab[best_i, _U:_U + 3],
+                                       tab[best_i, _V:_V + 3], tab[best_i, _EZ:_EZ + 3], tab[best_i, _SU],
+                                       tab[best_i, _SV], ox, oy, oz, cosines, m)
+            else:
+                for q in range(4):
+                    cosines[m, q] = 1.0
+            m += 1
+    return m
+
+
+@njit
+def _cosines_kernel(kind, tab, p, rows, li, cosines):
+    """The rectangle lights' interior-angle cosines at p[rows[j]] for light li[j] (1 for others)."""
+    for j in range(rows.shape[0]):
+        lj = li[j]
+        if kind[lj] == AREA_RECT:
+            r = rows[j]
+            rect_light.cosines_row(tab[lj, _CORNER:_CORNER + 3], tab[lj, _U:_U + 3], tab[lj, _V:_V + 3],
+                                   tab[lj, _EZ:_EZ + 3], tab[lj, _SU], tab[lj, _SV], np.float64(p[r, 0]),
+                                   np.float64(p[r, 1]), np.float64(p[r, 2]), cosines, j)
+
+
+@njit
+def _pdf_kernel(kind, tab, p, wi, rows, li, g, pdf):
+    """light_pdf of the sized light li[j] for the ray rows[j] of p, wi (float32 out); ``g``: the
+    rectangles' interior angles there."""
+    inv_4pi = 1.0 / (4 * np.pi)
+    for j in range(rows.shape[0]):
+        r, lj = rows[j], li[j]
+        k = kind[lj]
+        px, py, pz = np.float64(p[r, 0]), np.float64(p[r, 1]), np.float64(p[r, 2])
+        dx, dy, dz = np.float64(wi[r, 0]), np.float64(wi[r, 1]), np.float64(wi[r, 2])
+        out = 0.0
+        if k == AREA_RECT or k == AREA_DISK:
+            t, ok, cos_l = _area_row(tab, lj, k == AREA_RECT, px, py, pz, dx, dy, dz, np.inf)
+            if ok:
+                area = tab[lj, _AREA]
+                if k == AREA_RECT:
+                    z0 = rect_light.frame_row(tab[lj, _CORNER:_CORNER + 3], tab[lj, _U:_U + 3], tab[lj, _V:_V + 3],
+                                              tab[lj, _EZ:_EZ + 3], tab[lj, _SU], tab[lj, _SV], px, py, pz)[4]
+                    s = rect_light.solid_angle_row(g[j, 0], g[j, 1], g[j, 2], g[j, 3], z0)[1]
+                    out = t * t / (area * cos_l) if s < rect_light.MIN_SOLID_ANGLE else 1.0 / s
+                else:
+                    out = t * t / (area * cos_l)
+        elif k == POINT or k == SPOT:
+            rad = tab[lj, _R]
+            cx, cy, cz = tab[lj, _P], tab[lj, _P + 1], tab[lj, _P + 2]
+            if tab[lj, _SPH] != 0.0:  # _sphere_geometry and the cone test
+                tx, ty, tz = cx - px, cy - py, cz - pz
+                dd = np.sqrt(tx * tx + ty * ty + tz * tz)
+                dm = rect_light.np_maximum(dd, 1e-30)
+                if dd <= rad:
+                    out = inv_4pi
+                else:
+                    s2 = rad / dm
+                    s2 = rect_light.np_clip(s2 * s2, 0.0, 1.0)
+                    omc = s2 / (1.0 + np.sqrt(1.0 - s2))
+                    if dx * (tx / dm) + dy * (ty / dm) + dz * (tz / dm) >= 1.0 - omc - _CONE_SLACK:
+                        out = 1.0 / (2 * np.pi * omc)
+            else:  # the disk facing p
+                tx, ty, tz = px - cx, py - cy, pz - cz
+                dd = rect_light.np_maximum(np.sqrt(tx * tx + ty * ty + tz * tz), 1e-300)
+                nx, ny, nz = tx / dd, ty / dd, tz / dd
+                t, ok = _plane_row(px, py, pz, dx, dy, dz, cx, cy, cz, nx, ny, nz, np.inf)
+                if ok:
+                    qx, qy, qz = px + t * dx - cx, py + t * dy - cy, pz + t * dz - cz
+                    cos_l = -(dx * nx + dy * ny + dz * nz)
+                    if qx * qx + qy * qy + qz * qz <= rad * rad and cos_l > 0:
+                        out = t * t / (np.pi * rad * rad * cos_l)
+        pdf[j] = np.float32(out)

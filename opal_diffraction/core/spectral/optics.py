@@ -56,8 +56,24 @@ DISPERSION_MODELS = codes(DispersionModel)
 
 
 def reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Mirror direction of travel ``d`` about the normal ``n`` (either side)."""
+    """Mirror direction of travel ``d`` about the normal ``n`` (either side). Rows (B, 3) of one
+    float dtype run the compiled kernel when kernels are on (``_reflect_kernel``: the same
+    operations in the same order and precision, the same bits)."""
+    if (kernels_enabled() and isinstance(d, np.ndarray) and isinstance(n, np.ndarray) and d.ndim == 2
+            and d.shape == n.shape and d.shape[1] == 3 and d.dtype == n.dtype and d.dtype.char in "fd"):
+        out = np.empty(d.shape, d.dtype)
+        _reflect_kernel(d, n, d.dtype.type(2.0), out)
+        return out
     return d - 2.0 * np.sum(d * n, axis=-1, keepdims=True) * n
+
+
+@njit
+def _reflect_kernel(d, n, two, out):
+    """reflect per row: d - (2 (d . n)) n, the dot product summed in order as np.sum does."""
+    for i in range(d.shape[0]):
+        t = two * (d[i, 0] * n[i, 0] + d[i, 1] * n[i, 1] + d[i, 2] * n[i, 2])
+        for k in range(3):
+            out[i, k] = d[i, k] - t * n[i, k]
 
 
 def refract(d: np.ndarray, n: np.ndarray, eta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -13,14 +13,16 @@ passes instead of a chain of NumPy calls: the map's radiance and density per dir
 (``EnvironmentMap.lookup``), each ray's contribution (``_world_contrib_kernel``: the uplift of
 ``illuminant_from_rgb``'s kernel, the power heuristic, the ray's weight, in the chain's
 operations and precisions) and the film deposit of all vertex counts at once
-(``TileOutput.add_by_vertices``): the same bits as the chain on the kernels.
+(``TileOutput.add_by_vertices``): the same bits as the chain on the kernels. The sized lights a
+segment passes and their pdfs come from one call (core/lights/sources.py's ``lights_met``: two
+compiled passes there), and only the rays that meet one are gathered.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ...lights.sources import intersect_lights, light_pdf, sun_radiance
+from ...lights.sources import light_pdf, lights_met, sun_radiance
 from ...materials.surface import surface_emission
 from ...transport.path_state import Caustic
 from ...transport.walker import Hit, Rays
@@ -46,17 +48,12 @@ def lights_passed(c, out, rays: Rays, t: np.ndarray) -> None:
     seen = not_covered(c, rays) & (rays.depth > 0)
     if not seen.any():
         return
-    r = rays.take(seen)
     lights = c.prepared.lights
-    idx, _, scale = intersect_lights(lights, r.o, r.d, t[seen])
-    met = idx >= 0
-    if not met.any():
+    # the lights met and their pdfs in one pass (lights_met), only the rays that meet one taken
+    rows, idx, scale, p_light = lights_met(lights, rays.o, rays.d, t, seen)
+    if len(rows) == 0:
         return
-    r, idx, scale = r.take(met), idx[met], scale[met]
-    p_light = np.zeros(len(r), np.float32)
-    for li in np.unique(idx):  # the few lights met
-        sel = idx == li
-        p_light[sel] = light_pdf(lights, int(li), r.o[sel], r.d[sel])
+    r = rays.take(rows)
     scale = scale * power_heuristic(r.state.pdf, p_light)
     spectrum = lights.spectrum
     radiance = scale[:, None] * spectrum[idx] if r.lam is None else scale * spectrum[idx, r.lam]
