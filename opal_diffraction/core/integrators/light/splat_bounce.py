@@ -95,8 +95,8 @@ class BounceLog:
     (walker.trace_batch), so the walk's random numbers, its map and its direct splats are
     those of a light pass without them."""
 
-    def __init__(self, prepared):
-        self.mask = receivers(prepared)
+    def __init__(self, prepared, mask: np.ndarray | None = None):
+        self.mask = receivers(prepared) if mask is None else mask  # ``receivers``, if the caller has it
         self.landings: list[tuple[Rays, Hit]] = []
 
     def add(self, prepared, rays: Rays, hit: Hit, rng=None) -> None:
