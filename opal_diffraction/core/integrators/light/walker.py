@@ -77,18 +77,21 @@ class LightWalker(SpecularWalker):
                         self.records.deposit(idx[valid], r.take(valid).dense_w(self.n), towards_source=src, at=at)
                     else:
                         self.records.deposit(idx[valid], r.w[valid], r.lam[valid], towards_source=src, at=at)
-        land = (kind == DIFFUSE) & (rays.depth >= 1)
-        if not land.any():
+        rows = np.flatnonzero((kind == DIFFUSE) & (rays.depth >= 1))
+        if not len(rows):
             return
-        r, h = rays.take(land), hit.take(land)
         if self.splat is not None:  # the same landings, seen by the camera (docs/physics.md section 4.9)
-            self.splat.connect(self.prepared, r, h, self.n)
+            self.splat.connect(self.prepared, rays, hit, self.n, rows)
             if self.bounces is not None:  # and one diffuse bounce on, to the camera (section 4.11)
-                self.bounces.add(self.prepared, r, h)
+                self.bounces.add(self.prepared, rays, hit, rows=rows)
         if isinstance(self.illum, IlluminationMap):  # a lane's map: index and deposit in one call
-            flux = r.w if r.lam is not None or r.basis is not None else r.dense_w(self.n)
-            self.deposited += self.illum.deposit_hits(h.prim, h.bu, h.bv, h.front, flux, r.lam, basis=r.basis)
+            take = lambda a: None if a is None else a.take(rows, axis=0)  # noqa: E731
+            flux = (take(rays.w) if rays.lam is not None or rays.basis is not None or rays.w is not None
+                    else np.ones((len(rows), self.n), np.float32))  # Rays.dense_w of the landings
+            self.deposited += self.illum.deposit_hits(take(hit.prim), take(hit.bu), take(hit.bv), take(hit.front),
+                                                      flux, take(rays.lam), basis=rays.basis)
             return
+        r, h = rays.take(rows), hit.take(rows)
         idx, valid = self.illum.layout.index(h.prim, h.bu, h.bv, h.front)
         if not valid.any():
             return
