@@ -152,6 +152,13 @@ class IlluminationMap:
                 return int(_deposit_mono_kernel(lay.k, lay.offset, np.asarray(prim, np.int64), np.asarray(bu),
                                                 np.asarray(bv), np.asarray(front, np.bool_), np.asarray(flux),
                                                 np.asarray(lam, np.int64), self.flux.reshape(-1), self.flux.shape[1]))
+            if basis is not None and len(basis) == 1 and np.ndim(flux) == 2 and np.shape(flux)[1] == 1:
+                # one spectrum times a scalar per landing: the per-element sum times the spectrum is one
+                # product per sample (the reference's (E, 1) @ (1, n)), so the kernel gives its bits
+                return int(_deposit_scaled_kernel(lay.k, lay.offset, np.asarray(prim, np.int64), np.asarray(bu),
+                                                  np.asarray(bv), np.asarray(front, np.bool_),
+                                                  np.ascontiguousarray(flux[:, 0]),
+                                                  np.asarray(basis[0], np.float64), self.flux))
             idx = np.empty(len(prim), np.int64)
             m = _index_kernel(lay.k, lay.offset, np.asarray(prim, np.int64), np.asarray(bu), np.asarray(bv),
                               np.asarray(front, np.bool_), idx)
@@ -309,4 +316,35 @@ def _deposit_mono_kernel(k_tri, offset, prim, bu, bv, front, w, lam, flat, n):
             s += vals[order[i]]
             i += 1
         flat[key] += np.float32(s)
+    return m
+
+
+@njit
+def _deposit_scaled_kernel(k_tri, offset, prim, bu, bv, front, coeff, spectrum, flux):
+    """deposit_hits of white landings whose flux is coeff * spectrum (one basis spectrum): per
+    element (``element_of``) the float64 sum of its landings' coefficients in their order
+    (np.bincount's), times the spectrum in float64, rounded to float32 and added to its row of
+    ``flux`` (E, n): ``_deposit_coefficients``' lines at k = 1. Returns the landings on the map."""
+    b = len(prim)
+    keys = np.empty(b, np.int64)
+    vals = np.empty(b, np.float64)
+    m = 0
+    for i in range(b):
+        e, ok = element_of(k_tri, offset, prim[i], bu[i], bv[i], front[i], 0.0, 0.0, False)
+        if ok:
+            keys[m] = e
+            vals[m] = np.float64(coeff[i])
+            m += 1
+    keys, vals = keys[:m], vals[:m]
+    order = np.argsort(keys, kind="mergesort")
+    n = flux.shape[1]
+    i = 0
+    while i < m:  # runs of one element, in input order
+        key = keys[order[i]]
+        s = 0.0
+        while i < m and keys[order[i]] == key:
+            s += vals[order[i]]
+            i += 1
+        for j in range(n):
+            flux[key, j] += np.float32(s * spectrum[j])
     return m

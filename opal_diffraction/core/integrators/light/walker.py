@@ -86,8 +86,8 @@ class LightWalker(SpecularWalker):
                 self.bounces.add(self.prepared, rays, hit, rows=rows)
         if isinstance(self.illum, IlluminationMap):  # a lane's map: index and deposit in one call
             take = lambda a: None if a is None else a.take(rows, axis=0)  # noqa: E731
-            flux = (take(rays.w) if rays.lam is not None or rays.basis is not None or rays.w is not None
-                    else np.ones((len(rows), self.n), np.float32))  # Rays.dense_w of the landings
+            # the mono weights, the coefficients over the basis, or Rays.dense_w of the landings
+            flux = take(rays.w) if rays.w is not None else np.ones((len(rows), self.n), np.float32)
             self.deposited += self.illum.deposit_hits(take(hit.prim), take(hit.bu), take(hit.bv), take(hit.front),
                                                       flux, take(rays.lam), basis=rays.basis)
             return
