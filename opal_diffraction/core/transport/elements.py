@@ -148,11 +148,13 @@ class IlluminationMap:
             return 0
         lay = self.layout
         if kernels_enabled():
-            if lam is not None and basis is None:  # index and (element, wavelength) sums in one pass
+            # the fused deposits only where ``deposit`` is this class's (a subclass that overrides it gets its calls)
+            fused = type(self).deposit is IlluminationMap.deposit
+            if fused and lam is not None and basis is None:  # index and (element, wavelength) sums in one pass
                 return int(_deposit_mono_kernel(lay.k, lay.offset, np.asarray(prim, np.int64), np.asarray(bu),
                                                 np.asarray(bv), np.asarray(front, np.bool_), np.asarray(flux),
                                                 np.asarray(lam, np.int64), self.flux.reshape(-1), self.flux.shape[1]))
-            if basis is not None and len(basis) == 1 and np.ndim(flux) == 2 and np.shape(flux)[1] == 1:
+            if fused and basis is not None and len(basis) == 1 and np.ndim(flux) == 2 and np.shape(flux)[1] == 1:
                 # one spectrum times a scalar per landing: the per-element sum times the spectrum is one
                 # product per sample (the reference's (E, 1) @ (1, n)), so the kernel gives its bits
                 return int(_deposit_scaled_kernel(lay.k, lay.offset, np.asarray(prim, np.int64), np.asarray(bu),
