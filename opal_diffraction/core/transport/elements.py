@@ -9,7 +9,11 @@ objects: the map is one (E, n) array of spectral flux that partial maps simply a
 
 A white deposit sums each element's rows in their order and adds the sum to the map once
 (core/util/row_sums.py: a compiled pass where the kernels run, the same bits as the NumPy lines).
-The eye pass's lookup (``irradiance``: jitter, element index, flux over area) is one compiled
+The light pass's landings go in through ``deposit_hits`` (the element of each hit, then
+``deposit``): on the kernels one compiled pass indexes them (``element_of``) and, for mono
+landings, sums each (element, wavelength)'s flux in float64 in the landings' order (np.bincount's)
+and adds it to the map: the same bits as the NumPy lines, with the GIL released (the lanes of the
+light pass run on threads). The eye pass's lookup (``irradiance``: jitter, element index, flux over area) is one compiled
 pass too where the kernels run (``_irradiance_kernel`` over ``element_of``, the same float64
 steps as the NumPy lines, so the same bits); the eye pass's caustic stage calls ``element_of``
 inside its own fused kernel.
@@ -135,6 +139,43 @@ class IlluminationMap:
             return
         add_row_sums(self.flux, elements, flux)
 
+    def deposit_hits(self, prim, bu, bv, front, flux, lam=None, basis=None) -> int:
+        """``deposit`` at the elements of hits on triangles ``prim`` at barycentrics (bu, bv) on
+        side ``front`` (ElementLayout.index), the hits off the map skipped: ``flux`` (B, n), (B,)
+        at wavelengths ``lam``, or (B, k) coefficients over ``basis``, one row per hit. Returns
+        the number of hits deposited."""
+        if len(prim) == 0:
+            return 0
+        lay = self.layout
+        if kernels_enabled():
+            # the fused deposits only where ``deposit`` is this class's (a subclass that overrides it gets its calls)
+            fused = type(self).deposit is IlluminationMap.deposit
+            if fused and lam is not None and basis is None:  # index and (element, wavelength) sums in one pass
+                return int(_deposit_mono_kernel(lay.k, lay.offset, np.asarray(prim, np.int64), np.asarray(bu),
+                                                np.asarray(bv), np.asarray(front, np.bool_), np.asarray(flux),
+                                                np.asarray(lam, np.int64), self.flux.reshape(-1), self.flux.shape[1]))
+            if fused and basis is not None and len(basis) == 1 and np.ndim(flux) == 2 and np.shape(flux)[1] == 1:
+                # one spectrum times a scalar per landing: the per-element sum times the spectrum is one
+                # product per sample (the reference's (E, 1) @ (1, n)), so the kernel gives its bits
+                return int(_deposit_scaled_kernel(lay.k, lay.offset, np.asarray(prim, np.int64), np.asarray(bu),
+                                                  np.asarray(bv), np.asarray(front, np.bool_),
+                                                  np.ascontiguousarray(flux[:, 0]),
+                                                  np.asarray(basis[0], np.float64), self.flux))
+            idx = np.empty(len(prim), np.int64)
+            m = _index_kernel(lay.k, lay.offset, np.asarray(prim, np.int64), np.asarray(bu), np.asarray(bv),
+                              np.asarray(front, np.bool_), idx)
+            if m == len(prim):
+                self.deposit(idx, flux, lam, basis=basis)
+            elif m:
+                keep = np.flatnonzero(idx >= 0)
+                self.deposit(idx[keep], np.take(flux, keep, axis=0), None if lam is None else lam[keep], basis=basis)
+            return int(m)
+        idx, valid = lay.index(prim, bu, bv, front)
+        if not valid.any():
+            return 0
+        self.deposit(idx[valid], flux[valid], None if lam is None else lam[valid], basis=basis)
+        return int(valid.sum())
+
     def lit_triangles(self) -> np.ndarray:
         """(T,) bool: the triangles with flux on any of their elements (a finished map's hits
         elsewhere need no lookup: they receive no caustic)."""
@@ -237,3 +278,75 @@ def _irradiance_kernel(k_tri, offset, element_area, flux, prim, bu, bv, front, r
         area = np.float32(element_area[prim[b]])
         for kk in range(n):
             out[b, kk] = flux[e, kk] / area
+
+
+@njit
+def _index_kernel(k_tri, offset, prim, bu, bv, front, idx):
+    """ElementLayout.index per hit (``element_of``): idx[b] = the element, or -1 off the map;
+    returns the number on the map."""
+    m = 0
+    for b in range(len(prim)):
+        e, ok = element_of(k_tri, offset, prim[b], bu[b], bv[b], front[b], 0.0, 0.0, False)
+        idx[b] = e if ok else -1
+        m += 1 if ok else 0
+    return m
+
+
+@njit
+def _deposit_mono_kernel(k_tri, offset, prim, bu, bv, front, w, lam, flat, n):
+    """deposit_hits of mono landings: the element of each hit (``element_of``), then per
+    (element, wavelength) key the float64 sum of its landings' flux in their order (a stable
+    sort keeps equal keys in input order: np.bincount's sums), rounded to float32 and added to
+    the map ``flat`` (E * n,); returns the number of landings on the map."""
+    b = len(prim)
+    keys = np.empty(b, np.int64)
+    vals = np.empty(b, np.float64)
+    m = 0
+    for i in range(b):
+        e, ok = element_of(k_tri, offset, prim[i], bu[i], bv[i], front[i], 0.0, 0.0, False)
+        if ok:
+            keys[m] = e * n + lam[i]
+            vals[m] = np.float64(w[i])
+            m += 1
+    keys, vals = keys[:m], vals[:m]
+    order = np.argsort(keys, kind="mergesort")
+    i = 0
+    while i < m:  # runs of one key, in input order
+        key = keys[order[i]]
+        s = 0.0
+        while i < m and keys[order[i]] == key:
+            s += vals[order[i]]
+            i += 1
+        flat[key] += np.float32(s)
+    return m
+
+
+@njit
+def _deposit_scaled_kernel(k_tri, offset, prim, bu, bv, front, coeff, spectrum, flux):
+    """deposit_hits of white landings whose flux is coeff * spectrum (one basis spectrum): per
+    element (``element_of``) the float64 sum of its landings' coefficients in their order
+    (np.bincount's), times the spectrum in float64, rounded to float32 and added to its row of
+    ``flux`` (E, n): ``_deposit_coefficients``' lines at k = 1. Returns the landings on the map."""
+    b = len(prim)
+    keys = np.empty(b, np.int64)
+    vals = np.empty(b, np.float64)
+    m = 0
+    for i in range(b):
+        e, ok = element_of(k_tri, offset, prim[i], bu[i], bv[i], front[i], 0.0, 0.0, False)
+        if ok:
+            keys[m] = e
+            vals[m] = np.float64(coeff[i])
+            m += 1
+    keys, vals = keys[:m], vals[:m]
+    order = np.argsort(keys, kind="mergesort")
+    n = flux.shape[1]
+    i = 0
+    while i < m:  # runs of one element, in input order
+        key = keys[order[i]]
+        s = 0.0
+        while i < m and keys[order[i]] == key:
+            s += vals[order[i]]
+            i += 1
+        for j in range(n):
+            flux[key, j] += np.float32(s * spectrum[j])
+    return m

@@ -224,28 +224,36 @@ class CameraConnection:
         w = wy[:, :, None] * wx[:, None, :]
         return idx.reshape(len(x), -1), w.reshape(len(x), -1)
 
-    def connect(self, prepared, rays, hit, n: int):
+    def connect(self, prepared, rays, hit, n: int, rows=None):
         """The splats of light-path landings (``rays``, ``hit``: transport.Rays / Hit at diffuse
-        hits after a specular bounce): shadow rays to the camera, the contribution of
-        docs/physics.md section 4.9, the filter footprint. Returns (flat pixel indices (M,),
-        values (M, channels) float64) and the number of shadow rays cast. Returns ((pixels (K, F),
-        filter weights (K, F), contributions (K, channels) float64) or None, shadow rays cast):
-        landing k adds weight[k, f] * contribution[k] to pixel pixels[k, f]."""
-        sel = self.materials[hit.mat]
+        hits after a specular bounce; ``rows``: the landings' indices into them, None: all):
+        shadow rays to the camera, the contribution of docs/physics.md section 4.9, the filter
+        footprint. Returns ((pixels (K, F), filter weights (K, F), contributions (K, channels)
+        float64) or None, shadow rays cast): landing k adds weight[k, f] * contribution[k] to
+        pixel pixels[k, f]."""
+        kernels = kernels_enabled()
+        if rows is not None and not kernels:
+            rays, hit, rows = rays.take(rows), hit.take(rows), None
+        sel = self.materials[hit.mat if rows is None else hit.mat.take(rows)]
         if not sel.any():
             return None, 0
-        if kernels_enabled():  # projection, facing test and shadow rays in one pass (_geometry_kernel)
-            at = np.flatnonzero(sel)  # the rays and hits are taken once, at the landings splatted
-            x, y, to_cam, factor, cos_y, ok, o, tmax = _connect_geometry(self, hit.p[at], hit.ng[at], hit.eps[at])
+        if kernels:  # projection, facing test and shadow rays in one pass (_geometry_kernel)
+            # the rays and hits are taken once, at the landings splatted
+            at = np.flatnonzero(sel) if rows is None else rows[sel]
+            if len(at) == len(hit.mat):
+                x, y, to_cam, factor, cos_y, ok, o, tmax = _connect_geometry(self, hit.p, hit.ng, hit.eps)
+            else:
+                x, y, to_cam, factor, cos_y, ok, o, tmax = _connect_geometry(
+                    self, hit.p.take(at, axis=0), hit.ng.take(at, axis=0), hit.eps.take(at))
             keep = np.flatnonzero(ok)
             if keep.size == 0:
                 return None, 0
-            occ = prepared.accel.occluded(o[keep], to_cam[keep], tmax[keep])
+            occ = prepared.accel.occluded(o.take(keep, axis=0), to_cam.take(keep, axis=0), tmax.take(keep))
             shadow_rays = len(keep)
             keep = keep[~occ]
             if keep.size == 0:
                 return None, shadow_rays
-            r, h = rays.take(at[keep]), hit.take(at[keep])
+            r, h = _Landings.of(rays, hit, at.take(keep))  # only what the contribution reads
         else:
             r, h = rays.take(sel), hit.take(sel)
             x, y, to_cam, dist, factor, ok = self.project(h.p)
@@ -276,13 +284,46 @@ class CameraConnection:
             v = r.w.astype(np.float64) * rho * g  # (K,) at wavelength r.lam
             if self.rgb_weights is not None:
                 c = v[:, None] * self.rgb_weights[r.lam]
-            elif kernels_enabled():  # one channel per landing: (wavelength, value), summed by _add_mono
+            elif kernels:  # one channel per landing: (wavelength, value), summed by _add_mono
                 c = MonoContributions(np.ascontiguousarray(r.lam, np.int64), v)
             else:
                 c = np.zeros((len(v), n))
                 c[np.arange(len(v)), r.lam] = v
-        idx, w = self.footprint(x[keep], y[keep])
+        if kernels:
+            k = int(np.ceil(2 * self.filter_width)) + 1
+            idx, w = _footprint(self, x.take(keep), y.take(keep), k)
+        else:
+            idx, w = self.footprint(x[keep], y[keep])
         return (idx, w, c), shadow_rays
+
+
+@dataclass(frozen=True)
+class _Landings:
+    """The fields of light-path landings (Rays and Hit rows) the splat's contribution reads:
+    the weights and wavelengths, and what surface_reflectance looks up (material, triangle,
+    barycentrics); gathered once, without the rest of the rays and hits."""
+
+    w: np.ndarray | None
+    lam: np.ndarray | None
+    basis: np.ndarray | None
+    mat: np.ndarray
+    prim: np.ndarray
+    bu: np.ndarray
+    bv: np.ndarray
+
+    @classmethod
+    def of(cls, rays, hit, rows: np.ndarray) -> tuple["_Landings", "_Landings"]:
+        take = lambda a: None if a is None else a.take(rows, axis=0)  # noqa: E731
+        out = cls(take(rays.w), take(rays.lam), rays.basis, take(hit.mat), take(hit.prim), take(hit.bu), take(hit.bv))
+        return out, out
+
+    def dense_w(self, n: int) -> np.ndarray:
+        """transport.Rays.dense_w of these landings."""
+        if self.w is None:
+            return np.ones((len(self.mat), n), np.float32)
+        if self.basis is not None:
+            return (self.w @ self.basis).astype(np.float32, copy=False)
+        return self.w
 
 
 class SplatBatch:
@@ -293,8 +334,9 @@ class SplatBatch:
         self._calls: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (pixels, weights, contributions)
         self.shadow_rays = 0
 
-    def connect(self, prepared, rays, hit, n: int) -> None:
-        out, cast = self.connection.connect(prepared, rays, hit, n)
+    def connect(self, prepared, rays, hit, n: int, rows=None) -> None:
+        """CameraConnection.connect of the landings ``rows`` of ``rays`` at ``hit`` (None: all), kept."""
+        out, cast = self.connection.connect(prepared, rays, hit, n, rows)
         self.shadow_rays += cast
         if out is not None and len(out[0]):
             self._calls.append(out)

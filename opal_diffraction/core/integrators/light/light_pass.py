@@ -247,7 +247,8 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
             if stop.is_set():
                 return
             done = trace_batch(prepared, work.batches[j], illum, records,
-                               splat=None if splats is None else splats[k], bounce=plan.splat_bounce)
+                               splat=None if splats is None else splats[k], bounce=plan.splat_bounce,
+                               connection=connection)
             for name, value in done.items():
                 counts[k][name] += value
 

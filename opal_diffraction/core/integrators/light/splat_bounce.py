@@ -95,16 +95,24 @@ class BounceLog:
     (walker.trace_batch), so the walk's random numbers, its map and its direct splats are
     those of a light pass without them."""
 
-    def __init__(self, prepared):
-        self.mask = receivers(prepared)
+    def __init__(self, prepared, mask: np.ndarray | None = None):
+        self.mask = receivers(prepared) if mask is None else mask  # ``receivers``, if the caller has it
         self.landings: list[tuple[Rays, Hit]] = []
 
-    def add(self, prepared, rays: Rays, hit: Hit, rng=None) -> None:
-        """Keep the landings (``rays`` at ``hit``, diffuse hits after a specular bounce) on
-        receiving hits."""
-        sel = receives(self.mask, hit)
-        if sel.any():
-            self.landings.append((rays.take(sel), hit.take(sel)))
+    def add(self, prepared, rays: Rays, hit: Hit, rng=None, rows=None) -> None:
+        """Keep the landings (``rays`` at ``hit``, diffuse hits after a specular bounce; ``rows``:
+        their indices into them, None: all) on receiving hits."""
+        if rows is None:
+            sel = receives(self.mask, hit)
+            if sel.any():
+                self.landings.append((rays.take(sel), hit.take(sel)))
+            return
+        at = rows[self.mask[hit.mat.take(rows)]]  # receives(), on the receiving materials' rows only
+        if len(at):
+            at = at[receives(self.mask, _Normals(hit.ns.take(at, axis=0), hit.ng.take(at, axis=0),
+                                                 hit.mat.take(at)))]
+        if len(at):
+            self.landings.append((rays.take(at), hit.take(at)))
 
     def rays(self, prepared, rng: np.random.Generator) -> tuple[list[Rays], list[Rays]]:
         """(white, mono) continued rays: a cosine-sampled direction about the normal on the side
@@ -124,6 +132,13 @@ class BounceLog:
         return white, mono
 
 
+class _Normals:
+    """The fields of hits ``receives`` reads."""
+
+    def __init__(self, ns, ng, mat):
+        self.ns, self.ng, self.mat = ns, ng, mat
+
+
 class _Continuation(SpecularWalker):
     """The continued light paths: through mirrors and glass, splatted where they land on a
     diffuse surface after a specular bounce (camera_splat.SplatBatch.connect), ended there."""
@@ -133,9 +148,9 @@ class _Continuation(SpecularWalker):
         self.batch = batch
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
-        land = (kind == DIFFUSE) & (rays.depth >= 1)
-        if land.any():
-            self.batch.connect(self.prepared, rays.take(land), hit.take(land), self.n)
+        rows = np.flatnonzero((kind == DIFFUSE) & (rays.depth >= 1))
+        if len(rows):
+            self.batch.connect(self.prepared, rays, hit, self.n, rows)
 
 
 def trace_bounces(prepared, log: BounceLog, batch, rng: np.random.Generator) -> int:

@@ -77,14 +77,21 @@ class LightWalker(SpecularWalker):
                         self.records.deposit(idx[valid], r.take(valid).dense_w(self.n), towards_source=src, at=at)
                     else:
                         self.records.deposit(idx[valid], r.w[valid], r.lam[valid], towards_source=src, at=at)
-        land = (kind == DIFFUSE) & (rays.depth >= 1)
-        if not land.any():
+        rows = np.flatnonzero((kind == DIFFUSE) & (rays.depth >= 1))
+        if not len(rows):
             return
-        r, h = rays.take(land), hit.take(land)
         if self.splat is not None:  # the same landings, seen by the camera (docs/physics.md section 4.9)
-            self.splat.connect(self.prepared, r, h, self.n)
+            self.splat.connect(self.prepared, rays, hit, self.n, rows)
             if self.bounces is not None:  # and one diffuse bounce on, to the camera (section 4.11)
-                self.bounces.add(self.prepared, r, h)
+                self.bounces.add(self.prepared, rays, hit, rows=rows)
+        if isinstance(self.illum, IlluminationMap):  # a lane's map: index and deposit in one call
+            take = lambda a: None if a is None else a.take(rows, axis=0)  # noqa: E731
+            # the mono weights, the coefficients over the basis, or Rays.dense_w of the landings
+            flux = take(rays.w) if rays.w is not None else np.ones((len(rows), self.n), np.float32)
+            self.deposited += self.illum.deposit_hits(take(hit.prim), take(hit.bu), take(hit.bv), take(hit.front),
+                                                      flux, take(rays.lam), basis=rays.basis)
+            return
+        r, h = rays.take(rows), hit.take(rows)
         idx, valid = self.illum.layout.index(h.prim, h.bu, h.bv, h.front)
         if not valid.any():
             return
@@ -149,14 +156,15 @@ class LightBatch:
 
 
 def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_PASS_STREAM, splat=None,
-                bounce: bool = False) -> dict:
+                bounce: bool = False, connection: CameraConnection | None = None) -> dict:
     """Trace one batch of light paths, depositing into ``illum`` and ``records`` (objects with a
     ``layout`` and IlluminationMap's ``deposit``: maps, or DepositLogs; ``records`` None
     without gratings). ``stream``: the random stream id (the records' pilot pass has its own).
     ``splat``: where the batch's camera splats go (an object with CameraSplat's ``add``: a
     lane's film or a camera_splat.SplatLog), or None: no camera connection (the plan's
     ``camera_splat`` off). ``bounce``: with a ``splat``, continue the landings by a diffuse
-    bounce (the plan's ``splat_bounce``). Returns its counts: paths, deposits, rays."""
+    bounce (the plan's ``splat_bounce``). ``connection``: ``CameraConnection.of(prepared)`` if the
+    caller has it (made once per pass, not per batch). Returns its counts: paths, deposits, rays."""
     seed = int(prepared.settings.seed)
     b = job.paths
     rng = np.random.default_rng(np.random.SeedSequence([seed, stream, job.light, job.batch]))
@@ -170,12 +178,16 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
     rays = Rays(o[live].astype(np.float32), d[live].astype(np.float32), np.zeros(m, np.int64),
                 w, None, np.zeros(m, np.int32), rng.random(m),
                 basis=None if basis is None else np.ascontiguousarray(basis, np.float32))
-    connection = CameraConnection.of(prepared) if splat is not None else None
+    if splat is None:
+        connection = None
+    elif connection is None:
+        connection = CameraConnection.of(prepared)
     batch = SplatBatch(connection) if connection is not None else None
     tr = LightWalker(prepared, rng, illum, records, batch)
     bounce_rng = None
     if batch is not None and bounce:
         tr.bounces = splat_bounce.BounceLog(prepared)
+        receivers = tr.bounces.mask  # once per batch, for every piece's log
         # the continued landings (core/integrators/light/splat_bounce.py) draw from a stream of their own, so the
         # map and the direct splats are those of the same seed without them
         bounce_rng = np.random.default_rng(np.random.SeedSequence([seed, stream, job.light, job.batch, 1]))
@@ -188,7 +200,7 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
         tr.walk(rays if chunks is None else rays.take(np.arange(c.start, c.stop)), tr.empty_mono())
         if tr.bounces is not None:  # the piece's landings, one diffuse bounce on
             tr.rays_cast += splat_bounce.trace_bounces(prepared, tr.bounces, tr.splat, bounce_rng)
-            tr.bounces = splat_bounce.BounceLog(prepared)
+            tr.bounces = splat_bounce.BounceLog(prepared, receivers)
         if tr.splat is not None:
             if isinstance(splat, CameraSplat):  # a lane's film: the batch's sums added in one pass
                 splat.add_batch(tr.splat)
