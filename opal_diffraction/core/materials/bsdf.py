@@ -1006,15 +1006,19 @@ def _mean_k(a):
 def _lobe_factor_k(code, b, base, edge, f82, has_f82, alpha, mu, e_tab, eavg_tab, out):
     """_lobe_factor of a CONDUCTOR or GLOSSY hit into out (k,)."""
     zero, one = np.float32(0.0), np.float32(1.0)
+    c21, c126 = np.float32(21.0), np.float32(126.0)
     e, ea = _e_ss_k(e_tab, eavg_tab, alpha, mu)
-    for j in range(out.shape[0]):
-        f0 = base[b, j]
-        if code == 1:  # CONDUCTOR: _f82_fss
-            bb = f82[b, j] if has_f82 else _f82_b_k(f0, edge[b, j])
-            fss = _clip_k(f0 + (one - f0) / np.float32(21.0) - bb / np.float32(126.0), zero, one)
-        else:
-            fss = _clip_k(f0, zero, one)
-        out[j] = _ms_k(e, ea, fss)
+    if code == 4:  # GLOSSY: F = its colour
+        for j in range(out.shape[0]):
+            out[j] = _ms_k(e, ea, _clip_k(base[b, j], zero, one))
+    elif has_f82:  # CONDUCTOR: _f82_fss
+        for j in range(out.shape[0]):
+            f0 = base[b, j]
+            out[j] = _ms_k(e, ea, _clip_k(f0 + (one - f0) / c21 - f82[b, j] / c126, zero, one))
+    else:
+        for j in range(out.shape[0]):
+            f0 = base[b, j]
+            out[j] = _ms_k(e, ea, _clip_k(f0 + (one - f0) / c21 - _f82_b_k(f0, edge[b, j]) / c126, zero, one))
 
 
 @njit
@@ -1098,20 +1102,22 @@ def _eval_row_k(b, code, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_ms,
         fc, pd, coh = reflection_1(alpha[b], ox, oy, oz, ix, iy, iz)
         if not has_ms:
             _lobe_factor_k(code, b, base, edge, f82, False, alpha[b], oz, e_tab, eavg_tab, s1)
-        s5, t1, t3 = zero, zero, zero
-        if code == 1:
-            s = _clip_k(one - coh, zero, one)
-            s2 = s * s
-            s5 = s2 * s2 * s
-            t1, t3 = one - s5, coh * s5 * s
-        for j in range(k):
-            f0 = base[b, j]
-            if code == 1:
-                bb = f82[b, j] if has_ms else _f82_b_k(f0, edge[b, j])
-                f = _clip_k(f0 * t1 + s5 - bb * t3, zero, one)
-            else:
-                f = f0
-            fcos[b, j] = f * (fc * (ms[b, j] if has_ms else s1[j]))
+        fac = ms[b] if has_ms else s1
+        if code == 4:
+            for j in range(k):
+                fcos[b, j] = base[b, j] * (fc * fac[j])
+            return pd
+        s = _clip_k(one - coh, zero, one)
+        s2 = s * s
+        s5 = s2 * s2 * s
+        t1, t3 = one - s5, coh * s5 * s
+        if has_ms:  # branch-free inner loops (vectorised)
+            for j in range(k):
+                fcos[b, j] = _clip_k(base[b, j] * t1 + s5 - f82[b, j] * t3, zero, one) * (fc * fac[j])
+        else:
+            for j in range(k):
+                f0 = base[b, j]
+                fcos[b, j] = _clip_k(f0 * t1 + s5 - _f82_b_k(f0, edge[b, j]) * t3, zero, one) * (fc * fac[j])
         return pd
     if code == 2:  # DIELECTRIC
         if not rough:
@@ -1273,20 +1279,22 @@ def _sample_row_k(b, code, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_m
             else:
                 for j in range(k):
                     s1[j] = one
-        sp, t1, t3 = zero, zero, zero
-        if code == 1:
+        fac = ms[b] if has_ms else s1
+        if code == 4:
+            for j in range(k):
+                weight[b, j] = base[b, j] * fac[j] * g
+        else:
             s = _clip_k(one - coh, zero, one)
             s2 = s * s
             sp = s2 * s2 * s
             t1, t3 = one - sp, coh * sp * s
-        for j in range(k):
-            f0 = base[b, j]
-            if code == 1:
-                bb = f82[b, j] if has_ms else _f82_b_k(f0, edge[b, j])
-                f = _clip_k(f0 * t1 + sp - bb * t3, zero, one)
+            if has_ms:
+                for j in range(k):
+                    weight[b, j] = _clip_k(base[b, j] * t1 + sp - f82[b, j] * t3, zero, one) * fac[j] * g
             else:
-                f = f0
-            weight[b, j] = f * (ms[b, j] if has_ms else s1[j]) * g
+                for j in range(k):
+                    f0 = base[b, j]
+                    weight[b, j] = _clip_k(f0 * t1 + sp - _f82_b_k(f0, edge[b, j]) * t3, zero, one) * fac[j] * g
         if rough:
             return rx, ry, rz, ggx_d_1(a2, hx, hy, hz) / ((one + lo) * four * oz), 2
         return rx, ry, rz, inf, 2 | 8
