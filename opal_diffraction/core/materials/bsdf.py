@@ -30,6 +30,14 @@ Methods (formulas in docs/physics.md section 14):
   here per wavelength rather than by the maximum channel), tabulated the same way.
 - Lambert: cosine-weighted sampling (Malley's method, concentric disk).
 
+Compiled kernels (core/util/jit.py; the NumPy lines stay the reference, chosen by
+kernels_enabled()): evaluate, sample, with_outgoing and params_from_materials' per-hit tint and
+edge rows each run as one pass over the hits (a loop over rows, an inner loop over wavelengths)
+for every lobe code, doing the reference's float32 operations in its order (float64 where NumPy
+promotes, pairwise sums where it sums): evaluate and with_outgoing give its bits; sample too,
+but for sine and cosine (libm's there, NumPy's own SIMD code here, an ulp apart at times).
+tests/materials/test_bsdf_kernels.py checks them.
+
 Conventions: wo points towards the previous path vertex (the camera side), wi is the sampled
 direction; ns is the unit shading normal and ng the geometric normal, both on wo's side. A
 reflection needs wi on wo's side of both, a transmission the far side of both; other pairs

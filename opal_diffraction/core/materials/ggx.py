@@ -11,7 +11,9 @@ the pdf D G1(wo) / (4 cos_o) = D / ((1 + Lambda(wo)) 4 cos_o).
 ``reflection_terms`` over float32 batches runs a compiled kernel where the kernels run
 (core/util/jit.py): the NumPy lines' float32 operations in their order (the half vector's norm
 summed x, y, z as np.linalg.norm does), one pass per hit instead of some twenty (B,) and (B, 3)
-temporaries; the same bits.
+temporaries; the same bits. ``ggx_d_1``, ``smith_lambda_1``, ``reflection_1`` and
+``sample_vndf_1`` (Heitz 2018's visible-normal sampling, bsdf._sample_vndf's lines) are the
+per-hit float32 pieces bsdf.py's kernels are built from.
 """
 
 from __future__ import annotations
