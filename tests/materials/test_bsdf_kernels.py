@@ -206,6 +206,22 @@ def test_params_from_materials_kernel_is_the_reference(mono):
         for f in ("lobe", "base", "edge", "alpha", "eta", "spec_f0", "spec_tint"):
             _same(getattr(p, f), getattr(r, f), f)
         assert set(np.unique(p.lobe)) >= {B.CONDUCTOR, B.DIELECTRIC, B.PLASTIC}
+    # one material and lobe per batch (the rows then broadcast from one): the same values, and
+    # evaluate / sample / with_outgoing on them the same bits as on the reference's own arrays
+    for m in range(len(pm.kind)):
+        one = np.full(400, m)
+        p = B.params_from_materials(pm, one, front[:400], lam if lam is None else lam[:400])
+        r = _reference(B.params_from_materials, pm, one, front[:400], lam if lam is None else lam[:400])
+        for f in ("lobe", "base", "edge", "alpha", "eta", "spec_f0", "spec_tint"):
+            _same(getattr(p, f), getattr(r, f), f)
+        _, wo, wi, ns, ng, u = hits(m, 400, 1, B.LAMBERT)
+        q, q_ref = B.with_outgoing(p, wo, ns), _reference(B.with_outgoing, r, wo, ns)
+        _same(q.ms if q.ms is not None else 0, q_ref.ms if q_ref.ms is not None else 0, "ms")
+        for a, b in zip(B.evaluate(q, wo, wi, ns, ng), _reference(B.evaluate, q_ref, wo, wi, ns, ng)):
+            _same(a, b, "evaluate")
+        a, b = B.sample(q, wo, ns, ng, u), _reference(B.sample, q_ref, wo, ns, ng, u)
+        _same(a[3], b[3], "flags")
+        np.testing.assert_allclose(a[1], b[1], rtol=1e-2, atol=1e-7)
 
 
 # ------------------------------------------------------------------------------------ a whole render

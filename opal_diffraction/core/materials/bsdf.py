@@ -779,9 +779,16 @@ def params_from_materials(materials, mat, front, lam=None, base=None, roughness=
             and m.ior.dtype == _F32 and k == (st.shape[1] if lam is None else 1)):
         # the tint and edge rows in one pass; the index's mean per material, then gathered
         # (the same pairwise sums as the reference's per hit)
-        edge, tint = np.empty((B, k), _F32), np.empty((B, k), _F32)
         lam_k = np.zeros(0, np.int64) if lam is None else np.asarray(lam, np.int64)
-        _gather_kernel(mat, lam_k, lobe, np.ascontiguousarray(st), edge, tint)
+        if lam is None and B > 1 and (mat == mat[0]).all() and (lobe == lobe[0]).all():
+            # one material and lobe (a single rough object's hits): the one row, broadcast (read-only
+            # views; take() copies them): no (B, k) arrays to fill and fault in
+            edge, tint = np.empty((1, k), _F32), np.empty((1, k), _F32)
+            _gather_kernel(mat[:1], lam_k, lobe[:1], np.ascontiguousarray(st), edge, tint)
+            edge, tint = np.broadcast_to(edge, (B, k)), np.broadcast_to(tint, (B, k))
+        else:
+            edge, tint = np.empty((B, k), _F32), np.empty((B, k), _F32)
+            _gather_kernel(mat, lam_k, lobe, np.ascontiguousarray(st), edge, tint)
         ior = m.ior.mean(axis=1)[mat] if lam is None else m.ior[mat, lam_k]
         eta = np.where(lobe == DIELECTRIC, np.where(front, ior, 1.0 / ior), 1.0)
         return SurfaceParams(lobe, np.ascontiguousarray(b, _F32), edge, alpha.astype(_F32), eta.astype(_F32),
@@ -1011,7 +1018,7 @@ def _mean_k(a):
 
 
 @njit
-def _lobe_factor_k(code, b, base, edge, f82, has_f82, alpha, mu, e_tab, eavg_tab, out):
+def _lobe_factor_k(code, b, base, er, f82, has_f82, alpha, mu, e_tab, eavg_tab, out):
     """_lobe_factor of a CONDUCTOR or GLOSSY hit into out (k,)."""
     zero, one = np.float32(0.0), np.float32(1.0)
     c21, c126 = np.float32(21.0), np.float32(126.0)
@@ -1026,11 +1033,11 @@ def _lobe_factor_k(code, b, base, edge, f82, has_f82, alpha, mu, e_tab, eavg_tab
     else:
         for j in range(out.shape[0]):
             f0 = base[b, j]
-            out[j] = _ms_k(e, ea, _clip_k(f0 + (one - f0) / c21 - _f82_b_k(f0, edge[b, j]) / c126, zero, one))
+            out[j] = _ms_k(e, ea, _clip_k(f0 + (one - f0) / c21 - _f82_b_k(f0, er[j]) / c126, zero, one))
 
 
 @njit
-def _plastic_terms_k(b, spec_f0, tint, alpha, mu, e_tab, eavg_tab, s_tab, f0t, fac, e_spec):
+def _plastic_terms_k(b, spec_f0, tr, alpha, mu, e_tab, eavg_tab, s_tab, f0t, fac, e_spec):
     """_plastic_terms of one hit: f0t, fac, e_spec into the (k,) rows; returns the layer's eta."""
     zero, one = np.float32(0.0), np.float32(1.0)
     sf = spec_f0[b]
@@ -1047,7 +1054,7 @@ def _plastic_terms_k(b, spec_f0, tint, alpha, mu, e_tab, eavg_tab, s_tab, f0t, f
     s_int = _lookup3_k(s_tab, np.sqrt(alpha), np.sqrt(_max_k(mu, zero)),
                        np.sqrt(np.sqrt(f0)) / np.float32(_Z_MAX_SPEC))
     for j in range(f0t.shape[0]):
-        ft = _clip_k(sf * tint[b, j], zero, one)
+        ft = _clip_k(sf * tr[j], zero, one)
         f0t[j] = ft
         fa = _ms64_k(e, ea, np.float64(ft) + np.float64(one - ft) * s_avg)
         fac[j] = fa
@@ -1092,7 +1099,7 @@ def _plastic_eval_k(b, base, alpha, spec_f0, eta_l, f0t, fac, e_spec, ps, ox, oy
 
 
 @njit
-def _eval_row_k(b, code, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_ms, ox, oy, oz, ix, iy, iz,
+def _eval_row_k(b, code, base, er, alpha, eta, spec_f0, tr, f82, ms, has_ms, ox, oy, oz, ix, iy, iz,
                 e_tab, eavg_tab, s_tab, g_out, g_in, fcos, s1, s2, s3, s4):
     """_eval_lobe for one valid hit (wo.z > 0, wi on a consistent side) into fcos[b]; returns the pdf."""
     zero, one = np.float32(0.0), np.float32(1.0)
@@ -1109,7 +1116,7 @@ def _eval_row_k(b, code, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_ms,
             return zero
         fc, pd, coh = reflection_1(alpha[b], ox, oy, oz, ix, iy, iz)
         if not has_ms:
-            _lobe_factor_k(code, b, base, edge, f82, False, alpha[b], oz, e_tab, eavg_tab, s1)
+            _lobe_factor_k(code, b, base, er, f82, False, alpha[b], oz, e_tab, eavg_tab, s1)
         fac = ms[b] if has_ms else s1
         if code == 4:
             for j in range(k):
@@ -1125,7 +1132,7 @@ def _eval_row_k(b, code, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_ms,
         else:
             for j in range(k):
                 f0 = base[b, j]
-                fcos[b, j] = _clip_k(f0 * t1 + s5 - _f82_b_k(f0, edge[b, j]) * t3, zero, one) * (fc * fac[j])
+                fcos[b, j] = _clip_k(f0 * t1 + s5 - _f82_b_k(f0, er[j]) * t3, zero, one) * (fc * fac[j])
         return pd
     if code == 2:  # DIELECTRIC
         if not rough:
@@ -1160,7 +1167,7 @@ def _eval_row_k(b, code, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_ms,
             fcos[b, j] = base[b, j] * v
         return t * d * coh * jac / (oz * (one + lo))
     # PLASTIC
-    eta_l = _plastic_terms_k(b, spec_f0, tint, alpha[b], oz, e_tab, eavg_tab, s_tab, s1, s2, s3)
+    eta_l = _plastic_terms_k(b, spec_f0, tr, alpha[b], oz, e_tab, eavg_tab, s_tab, s1, s2, s3)
     ps = _plastic_p_spec_k(b, base, s3, s4)
     return _plastic_eval_k(b, base, alpha, spec_f0, eta_l, s1, s2, s3, ps, ox, oy, oz, ix, iy, iz, fcos)
 
@@ -1195,22 +1202,24 @@ def _prepare_kernel(wo, ns, fu, fv, wl):
 
 
 @njit
-def _outgoing_kernel(code, base, edge, alpha, wl, e_tab, eavg_tab, f82, ms):
-    """with_outgoing's F82 b (CONDUCTOR) and multiscatter factor (1 on smooth hits) per hit."""
+def _outgoing_kernel(code, base, edge, se, alpha, wl, e_tab, eavg_tab, f82, ms):
+    """with_outgoing's F82 b (CONDUCTOR) and multiscatter factor (1 on smooth hits) per hit;
+    ``se``: edge's row step (0: one row for every hit)."""
     k = base.shape[1]
     for b in range(base.shape[0]):
+        er = edge[b * se]
         if code == 1:
             for j in range(k):
-                f82[b, j] = _f82_b_k(base[b, j], edge[b, j])
+                f82[b, j] = _f82_b_k(base[b, j], er[j])
         if alpha[b] >= np.float32(_MIN_ALPHA):
-            _lobe_factor_k(code, b, base, edge, f82, code == 1, alpha[b], wl[b, 2], e_tab, eavg_tab, ms[b])
+            _lobe_factor_k(code, b, base, er, f82, code == 1, alpha[b], wl[b, 2], e_tab, eavg_tab, ms[b])
         else:
             for j in range(k):
                 ms[b, j] = np.float32(1.0)
 
 
 @njit
-def _evaluate_kernel(lobe, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_ms, fu, fv, ns, wl, wi, ng,
+def _evaluate_kernel(lobe, base, edge, se, alpha, eta, spec_f0, tint, st, f82, ms, has_ms, fu, fv, ns, wl, wi, ng,
                      e_tab, eavg_tab, s_tab, g_out, g_in, fcos, pdf):
     """evaluate() per hit: wi into the frame, the side checks, the hit's lobe."""
     zero = np.float32(0.0)
@@ -1228,7 +1237,7 @@ def _evaluate_kernel(lobe, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_m
         consistent = side > zero if iz > zero else (side < zero and iz < zero)
         if not (wl[b, 2] > zero and consistent):
             continue
-        pdf[b] = _eval_row_k(b, lobe[b], base, edge, alpha, eta, spec_f0, tint, f82, ms, has_ms,
+        pdf[b] = _eval_row_k(b, lobe[b], base, edge[b * se], alpha, eta, spec_f0, tint[b * st], f82, ms, has_ms,
                              wl[b, 0], wl[b, 1], wl[b, 2], ix, iy, iz, e_tab, eavg_tab, s_tab, g_out, g_in,
                              fcos, s1, s2, s3, s4)
 
@@ -1251,7 +1260,7 @@ def _cosine_sample_k(u1, u2):
 
 
 @njit
-def _sample_row_k(b, code, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_ms, ox, oy, oz, u0, u1, u2,
+def _sample_row_k(b, code, base, er, alpha, eta, spec_f0, tr, f82, ms, has_ms, ox, oy, oz, u0, u1, u2,
                   e_tab, eavg_tab, s_tab, g_out, g_in, weight, s1, s2, s3, s4):
     """_sample_lobe for one hit with wo.z > 0: (wi_x, wi_y, wi_z, pdf, flags), weight[b] filled."""
     zero, one, four = np.float32(0.0), np.float32(1.0), np.float32(4.0)
@@ -1283,7 +1292,7 @@ def _sample_row_k(b, code, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_m
         g = (one + lo) / (one + lo + smith_lambda_1(a2, rx, ry, rz)) if rough else one
         if not has_ms:
             if rough:
-                _lobe_factor_k(code, b, base, edge, f82, False, al, oz, e_tab, eavg_tab, s1)
+                _lobe_factor_k(code, b, base, er, f82, False, al, oz, e_tab, eavg_tab, s1)
             else:
                 for j in range(k):
                     s1[j] = one
@@ -1302,7 +1311,7 @@ def _sample_row_k(b, code, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_m
             else:
                 for j in range(k):
                     f0 = base[b, j]
-                    weight[b, j] = _clip_k(f0 * t1 + sp - _f82_b_k(f0, edge[b, j]) * t3, zero, one) * fac[j] * g
+                    weight[b, j] = _clip_k(f0 * t1 + sp - _f82_b_k(f0, er[j]) * t3, zero, one) * fac[j] * g
         if rough:
             return rx, ry, rz, ggx_d_1(a2, hx, hy, hz) / ((one + lo) * four * oz), 2
         return rx, ry, rz, inf, 2 | 8
@@ -1338,7 +1347,7 @@ def _sample_row_k(b, code, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_m
         denom = cih + coh / e
         return wx, wy, wz, (one - f) * d_vis * abs(cih) / _max_k(denom * denom, np.float32(1e-30)), fl
     # PLASTIC: the specular layer with its albedo share, else the diffuse base
-    eta_l = _plastic_terms_k(b, spec_f0, tint, al, oz, e_tab, eavg_tab, s_tab, s1, s2, s3)
+    eta_l = _plastic_terms_k(b, spec_f0, tr, al, oz, e_tab, eavg_tab, s_tab, s1, s2, s3)
     ps = _plastic_p_spec_k(b, base, s3, s4)
     spec = u2 < ps
     if spec:
@@ -1364,7 +1373,7 @@ def _sample_row_k(b, code, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_m
 
 
 @njit
-def _sample_kernel(lobe, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_ms, fu, fv, ns, wl, ng, u,
+def _sample_kernel(lobe, base, edge, se, alpha, eta, spec_f0, tint, st, f82, ms, has_ms, fu, fv, ns, wl, ng, u,
                    e_tab, eavg_tab, s_tab, g_out, g_in, wi, weight, pdf, flags):
     """sample() per hit: the hit's lobe in the local frame, wi back to the world, the side check."""
     zero, one = np.float32(0.0), np.float32(1.0)
@@ -1373,7 +1382,8 @@ def _sample_kernel(lobe, base, edge, alpha, eta, spec_f0, tint, f82, ms, has_ms,
     for b in range(lobe.shape[0]):
         ox, oy, oz = wl[b, 0], wl[b, 1], wl[b, 2]
         if oz > zero:
-            x, y, z, pd, fl = _sample_row_k(b, lobe[b], base, edge, alpha, eta, spec_f0, tint, f82, ms, has_ms,
+            x, y, z, pd, fl = _sample_row_k(b, lobe[b], base, edge[b * se], alpha, eta, spec_f0, tint[b * st], f82,
+                                            ms, has_ms,
                                             ox, oy, oz, u[b, 0], u[b, 1], u[b, 2], e_tab, eavg_tab, s_tab,
                                             g_out, g_in, weight, s1, s2, s3, s4)
         else:
@@ -1431,6 +1441,14 @@ def _kernel_fits(p: SurfaceParams) -> bool:
     return p.wo_local is None or all(_is32(a, 2) and a.shape == (B, 3) for a in (p.frame_u, p.frame_v, p.wo_local))
 
 
+def _rows(a):
+    """(C-order array, row step) for the kernels: a (B, k) array broadcast from one row (stride 0,
+    as params_from_materials makes for a batch of one material and lobe) as that row (1, k), step 0."""
+    if a.shape[0] > 1 and a.strides[0] == 0:
+        return np.ascontiguousarray(a[:1]), 0
+    return np.ascontiguousarray(a), 1
+
+
 def _c3(a):
     return np.ascontiguousarray(a, _F32)
 
@@ -1452,12 +1470,14 @@ def _kernel_params(p):
     f82 = c(p.f82) if has_ms and p.f82 is not None else _EMPTY2
     ms = c(p.ms) if has_ms else _EMPTY2
     lobe = p.lobe if p.lobe.dtype == np.int32 else np.asarray(p.lobe, np.int32)
+    edge, se = _rows(p.edge)
+    tint, st = _rows(p.spec_tint)
     if (lobe == LAMBERT).all():  # Lambert alone never reads the tables (nor makes them)
         tabs = (np.zeros((2, 2), _F32), np.zeros(2, _F32), np.zeros((2, 2, 2), _F32),
                 np.zeros((2, 2, 2), _F32), np.zeros((2, 2, 2), _F32))
     else:
         tabs = _tables_f32()
-    return (c(lobe), c(p.base), c(p.edge), c(p.alpha), c(p.eta), c(p.spec_f0), c(p.spec_tint), f82, ms,
+    return (c(lobe), c(p.base), edge, se, c(p.alpha), c(p.eta), c(p.spec_f0), tint, st, f82, ms,
             has_ms), tabs
 
 
@@ -1472,7 +1492,7 @@ def _with_outgoing_kernel(params, wo, ns):
         b = np.empty(shape, _F32) if code == CONDUCTOR else _EMPTY2
         ms = np.empty(shape, _F32)
         c = np.ascontiguousarray
-        _outgoing_kernel(code, c(params.base), c(params.edge), c(params.alpha), wl, e_tab, eavg_tab, b, ms)
+        _outgoing_kernel(code, c(params.base), *_rows(params.edge), c(params.alpha), wl, e_tab, eavg_tab, b, ms)
         out.f82, out.ms = (b if code == CONDUCTOR else None), ms
     return out
 
