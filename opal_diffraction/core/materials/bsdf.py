@@ -30,6 +30,14 @@ Methods (formulas in docs/physics.md section 14):
   here per wavelength rather than by the maximum channel), tabulated the same way.
 - Lambert: cosine-weighted sampling (Malley's method, concentric disk).
 
+Compiled kernels (core/util/jit.py; the NumPy lines stay the reference, chosen by
+kernels_enabled()): evaluate, sample, with_outgoing and params_from_materials' per-hit tint and
+edge rows each run as one pass over the hits (a loop over rows, an inner loop over wavelengths)
+for every lobe code, doing the reference's float32 operations in its order (float64 where NumPy
+promotes, pairwise sums where it sums): evaluate and with_outgoing give its bits; sample too,
+but for sine and cosine (libm's there, NumPy's own SIMD code here, an ulp apart at times).
+tests/materials/test_bsdf_kernels.py checks them.
+
 Conventions: wo points towards the previous path vertex (the camera side), wi is the sampled
 direction; ns is the unit shading normal and ng the geometric normal, both on wo's side. A
 reflection needs wi on wo's side of both, a transmission the far side of both; other pairs
@@ -45,7 +53,8 @@ import numpy as np
 
 from ..spectral.optics import fresnel_dielectric
 from ..util.jit import kernels_enabled, njit
-from .ggx import ggx_d as _ggx_d, reflection_terms as _eval_reflection_common, smith_lambda as _lambda
+from .ggx import (ggx_d as _ggx_d, ggx_d_1, reflection_1, reflection_terms as _eval_reflection_common, sample_vndf_1,
+                  smith_lambda as _lambda, smith_lambda_1)
 
 __all__ = [
     "LAMBERT", "CONDUCTOR", "DIELECTRIC", "PLASTIC", "GLOSSY",
@@ -116,7 +125,8 @@ def fresnel_f82(cos, f0, b):
     """Conductor Fresnel: Schlick minus b cos (1 - cos)^6, clamped to [0, 1] (Cycles fresnel_f82).
     cos (B,), f0 and b (B, k)."""
     s = np.clip(1.0 - cos, 0.0, 1.0)
-    s5 = s ** 5
+    s2 = s * s
+    s5 = s2 * s2 * s  # not s ** 5: NumPy's float32 power is SVML's on AVX-512 machines, libm's elsewhere
     # f0 (1 - s5) + s5 - b cos s5 s: the per-hit factors first, three (B, k) operations then
     return np.clip(f0 * (1.0 - s5)[:, None] + s5[:, None] - b * (np.asarray(cos) * s5 * s)[:, None], 0.0, 1.0)
 
@@ -333,7 +343,7 @@ def _plastic_terms(p, mu):
     fss = f0t + (1.0 - f0t) * s_avg[:, None]
     fac = _ms_factor(p.alpha, mu, fss)
     e_ss, _ = _e_ss(p.alpha, mu)
-    s_int = _lookup3(_tables()[2], np.sqrt(p.alpha), np.sqrt(np.maximum(mu, 0.0)), f0 ** 0.25 / _Z_MAX_SPEC)
+    s_int = _lookup3(_tables()[2], np.sqrt(p.alpha), np.sqrt(np.maximum(mu, 0.0)), np.sqrt(np.sqrt(f0)) / _Z_MAX_SPEC)  # F0^(1/4), as sqrt(sqrt()): correctly rounded everywhere
     e_spec = np.clip(fac * (f0t * e_ss[:, None] + (1.0 - f0t) * s_int[:, None]), 0.0, 1.0)
     return f0t.astype(_F32), eta.astype(_F32), fac, e_spec.astype(_F32)
 
@@ -635,6 +645,8 @@ def with_outgoing(params: SurfaceParams, wo, ns) -> SurfaceParams:
     wo in it and, where every hit has one CONDUCTOR or GLOSSY lobe, F82's b and the multiscatter
     factor. ``evaluate`` and ``sample`` then skip them; they must be called with the same wo and
     ns (rows taken together with ``take``). The values are the ones they compute themselves."""
+    if _kernel_fits(params):
+        return _with_outgoing_kernel(params, wo, ns)
     wo, ns, fu, fv, wl = _prepare(params, wo, ns)
     out = replace(params, frame_u=fu, frame_v=fv, wo_local=wl)
     lobe = params.lobe
@@ -655,6 +667,8 @@ def sample(params: SurfaceParams, wo, ns, ng, u):
 
     Returns wi (B, 3) unit, weight (B, k) = f |cos(wi, ns)| / pdf, pdf (B,) solid-angle density
     (inf for SINGULAR events), flags (B,) (0: absorbed; weight and pdf are 0 then)."""
+    if _kernel_fits(params) and np.shape(u) == (len(params.lobe), 3):
+        return _sample_with_kernel(params, wo, ns, ng, u)
     wo, ns, fu, fv, wl = _prepare(params, wo, ns)
     ng = np.asarray(ng, _F32)
     u = np.asarray(u, _F32)
@@ -692,6 +706,8 @@ def evaluate(params: SurfaceParams, wo, wi, ns, ng):
     """f |cos(wi, ns)| (B, k) and the pdf sample() has for wi (B,), for next-event estimation
     and MIS. Delta (SINGULAR) parts evaluate to zero; so does a wi on the wrong side of ng or ns
     for its kind of event."""
+    if _kernel_fits(params):
+        return _evaluate_with_kernel(params, wo, wi, ns, ng)
     wo, ns, fu, fv, wl = _prepare(params, wo, ns)
     wi = np.asarray(wi, _F32)
     ng = np.asarray(ng, _F32)
@@ -755,16 +771,35 @@ def params_from_materials(materials, mat, front, lam=None, base=None, roughness=
     if m.glass_tint is not None:  # the glass layer's tint per refraction (docs/physics.md section 2.7)
         own = glass & ~m.color_textured[mat]  # a colour texture's hits keep the texture's tint
         b = np.where(own[:, None], spectral(m.glass_tint), b) if own.any() else b
-    edge = np.where(lobe[:, None] == CONDUCTOR, np.minimum(spectral(m.specular_tint), 1.0), 1.0)
-    tint = spectral(m.specular_tint)
+    k = b.shape[1]
     rough = m.roughness[mat] if roughness is None else np.asarray(roughness, _F32)
     alpha = np.clip(rough, 0.0, 1.0) ** 2
+    st = m.specular_tint
+    if (kernels_enabled() and isinstance(st, np.ndarray) and st.dtype == _F32 and st.ndim == 2
+            and m.ior.dtype == _F32 and k == (st.shape[1] if lam is None else 1)):
+        # the tint and edge rows in one pass; the index's mean per material, then gathered
+        # (the same pairwise sums as the reference's per hit)
+        lam_k = np.zeros(0, np.int64) if lam is None else np.asarray(lam, np.int64)
+        if lam is None and B > 1 and (mat == mat[0]).all() and (lobe == lobe[0]).all():
+            # one material and lobe (a single rough object's hits): the one row, broadcast (read-only
+            # views; take() copies them): no (B, k) arrays to fill and fault in
+            edge, tint = np.empty((1, k), _F32), np.empty((1, k), _F32)
+            _gather_kernel(mat[:1], lam_k, lobe[:1], np.ascontiguousarray(st), edge, tint)
+            edge, tint = np.broadcast_to(edge, (B, k)), np.broadcast_to(tint, (B, k))
+        else:
+            edge, tint = np.empty((B, k), _F32), np.empty((B, k), _F32)
+            _gather_kernel(mat, lam_k, lobe, np.ascontiguousarray(st), edge, tint)
+        ior = m.ior.mean(axis=1)[mat] if lam is None else m.ior[mat, lam_k]
+        eta = np.where(lobe == DIELECTRIC, np.where(front, ior, 1.0 / ior), 1.0)
+        return SurfaceParams(lobe, np.ascontiguousarray(b, _F32), edge, alpha.astype(_F32), eta.astype(_F32),
+                             spec_f0, tint)
+    edge = np.where(lobe[:, None] == CONDUCTOR, np.minimum(spectral(m.specular_tint), 1.0), 1.0)
+    tint = spectral(m.specular_tint)
     if lam is None:
         ior = m.ior[mat].mean(axis=1)
     else:
         ior = m.ior[mat, np.asarray(lam, np.int64)]
     eta = np.where(lobe == DIELECTRIC, np.where(front, ior, 1.0 / ior), 1.0)
-    k = b.shape[1]
     return SurfaceParams(lobe, np.ascontiguousarray(b, _F32), np.broadcast_to(edge, (B, k)).astype(_F32),
                          alpha.astype(_F32), eta.astype(_F32), spec_f0,
                          np.broadcast_to(tint, (B, k)).astype(_F32))
@@ -787,3 +822,697 @@ def microfacet_materials(materials, textures=None) -> np.ndarray:
     return (((kind == K_MIRROR) & (rough | (metallic < 1)))
             | ((kind == K_DIELECTRIC) & (rough | (transmission < 1) | (metallic > 0)))
             | ((kind == K_DIFFUSE) & ((np.asarray(m.spec_f0) > 0) | (metallic > 0) | (transmission > 0))))
+
+
+# ---------------------------------------------------------------------------------- kernels
+# evaluate / sample / with_outgoing / params_from_materials as one compiled pass over the hits
+# (core/util/jit.py): each row does the NumPy lines' float32 operations in their order (the
+# PLASTIC layer's average Fresnel and multiscatter factor in float64, as NumPy promotes them
+# there; np.sum / np.mean over the wavelengths summed pairwise, as NumPy does), so evaluate and
+# with_outgoing give the reference's bits. Sampling draws through sine and cosine, which are
+# libm's here and NumPy's own SIMD code in the reference (an ulp apart at times): sample's
+# directions then agree to a few ulps (tests/materials/test_bsdf_kernels.py says how close).
+_F82_F5 = _F32((6.0 / 7.0) ** 5)
+_F82_C = _F32(7.0 / ((6.0 / 7.0) ** 5 * (6.0 / 7.0)))
+
+
+@lru_cache(maxsize=None)
+def _tables_f32():
+    """The tables as the lookups read them (float32, C order): e_ss, e_avg, s_tab, glass_out, glass_in."""
+    return tuple(np.ascontiguousarray(t, _F32) for t in _tables())
+
+
+@njit
+def _max_k(x, lo):
+    """np.maximum(x, lo) for a constant lo: NaN propagates."""
+    return lo if x < lo else x
+
+
+@njit
+def _clip_k(x, lo, hi):
+    """np.clip(x, lo, hi): NaN propagates."""
+    if x < lo:
+        return lo
+    if x > hi:
+        return hi
+    return x
+
+
+@njit
+def _cell_k(x, n):
+    zero, one = np.float32(0.0), np.float32(1.0)
+    f = _clip_k(x, zero, one) * np.float32(n - 1)
+    if not f >= zero:  # NaN: the reference's index would be garbage too; stay inside the table
+        f = zero
+    i = int(f)
+    if i > n - 2:
+        i = n - 2
+    return i, f - np.float32(i)
+
+
+@njit
+def _lookup2_k(tab, x, y):
+    one = np.float32(1.0)
+    i, tx = _cell_k(x, tab.shape[0])
+    j, ty = _cell_k(y, tab.shape[1])
+    return (one - tx) * ((one - ty) * tab[i, j] + ty * tab[i, j + 1]) + tx * ((one - ty) * tab[i + 1, j]
+                                                                               + ty * tab[i + 1, j + 1])
+
+
+@njit
+def _lookup3_k(tab, x, y, z):
+    one = np.float32(1.0)
+    i, tx = _cell_k(x, tab.shape[0])
+    j, ty = _cell_k(y, tab.shape[1])
+    k, tz = _cell_k(z, tab.shape[2])
+    r0 = (one - tx) * ((one - ty) * tab[i, j, k] + ty * tab[i, j + 1, k]) + tx * ((one - ty) * tab[i + 1, j, k]
+                                                                                  + ty * tab[i + 1, j + 1, k])
+    k1 = k + 1
+    r1 = (one - tx) * ((one - ty) * tab[i, j, k1] + ty * tab[i, j + 1, k1]) + tx * ((one - ty) * tab[i + 1, j, k1]
+                                                                                    + ty * tab[i + 1, j + 1, k1])
+    return (one - tz) * r0 + tz * r1
+
+
+@njit
+def _e_ss_k(e_tab, eavg_tab, alpha, mu):
+    """_e_ss for one hit: (max(E(r, sqrt(mu)), 1e-3), E_avg(r))."""
+    one = np.float32(1.0)
+    r = np.sqrt(alpha)
+    e = _max_k(_lookup2_k(e_tab, r, np.sqrt(_max_k(mu, np.float32(0.0)))), np.float32(1e-3))
+    i, t = _cell_k(r, eavg_tab.shape[0])
+    return e, (one - t) * eavg_tab[i] + t * eavg_tab[i + 1]
+
+
+@njit
+def _ms_k(e, ea, fss):
+    """_ms_factor's last lines for one float32 fss."""
+    one = np.float32(1.0)
+    missing = (one - e) / e
+    return one + fss * ea / _max_k(one - fss * (one - ea), np.float32(1e-6)) * missing
+
+
+@njit
+def _ms64_k(e, ea, fss):
+    """The same for a float64 fss (PLASTIC's): NumPy computes it in float64, then rounds."""
+    one = np.float32(1.0)
+    missing = (one - e) / e
+    fms = fss * np.float64(ea) / _max_k(1.0 - fss * np.float64(one - ea), 1e-6)
+    return np.float32(1.0 + fms * np.float64(missing))
+
+
+@njit
+def _fresnel_k(cos_i, eta):
+    """spectral.optics.fresnel_dielectric for float32 scalars: (F, cos_t)."""
+    zero, one, half, tiny = np.float32(0.0), np.float32(1.0), np.float32(0.5), np.float32(1e-30)
+    c = _clip_k(cos_i, zero, one)
+    sin2_t = (one - c * c) / (eta * eta)
+    cos_t = np.sqrt(_max_k(one - sin2_t, zero))
+    r_par = (eta * c - cos_t) / _max_k(eta * c + cos_t, tiny)
+    r_perp = (c - eta * cos_t) / _max_k(c + eta * cos_t, tiny)
+    return (one if sin2_t >= one else half * (r_par * r_par + r_perp * r_perp)), cos_t
+
+
+@njit
+def _f82_b_k(f0, tint):
+    one = np.float32(1.0)
+    return (f0 + (one - f0) * _F82_F5) * _F82_C * (one - tint)
+
+
+@njit
+def _glass_factor_k(alpha, mu, eta, t_out, t_in):
+    one, zero = np.float32(1.0), np.float32(0.0)
+    ior = eta if eta >= one else one / _max_k(eta, np.float32(1e-6))
+    z = np.sqrt((ior - one) / (ior + one)) / np.float32(_Z_MAX_GLASS)
+    r = np.sqrt(alpha)
+    x = np.sqrt(_max_k(mu, zero))
+    e = _lookup3_k(t_out, r, x, z) if eta >= one else _lookup3_k(t_in, r, x, z)
+    return one / _max_k(e, np.float32(1e-3))
+
+
+@njit
+def _pairwise_block_k(a, lo, n):
+    """NumPy's pairwise float32 sum of a[lo:lo + n] for n <= 128 (numpy/core/src/umath/loops_utils.h.src)."""
+    if n < 8:
+        res = np.float32(0.0)
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - (n % 8):
+        j = lo + i
+        r0 += a[j]
+        r1 += a[j + 1]
+        r2 += a[j + 2]
+        r3 += a[j + 3]
+        r4 += a[j + 4]
+        r5 += a[j + 5]
+        r6 += a[j + 6]
+        r7 += a[j + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+# NumPy halves longer runs (at a multiple of 8) and adds the halves' sums. Three levels written
+# out instead of a recursion, which numba's on-disk cache does not reload safely (a segfault):
+# up to 968 wavelengths (_kernel_fits sends longer rows to the reference).
+_PAIRWISE_MAX = 968
+
+
+@njit
+def _pairwise_1(a, lo, n):
+    if n <= 128:
+        return _pairwise_block_k(a, lo, n)
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise_block_k(a, lo, n2) + _pairwise_block_k(a, lo + n2, n - n2)
+
+
+@njit
+def _pairwise_2(a, lo, n):
+    if n <= 128:
+        return _pairwise_block_k(a, lo, n)
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise_1(a, lo, n2) + _pairwise_1(a, lo + n2, n - n2)
+
+
+@njit
+def _pairwise_sum_k(a, lo, n):
+    if n <= 128:
+        return _pairwise_block_k(a, lo, n)
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise_2(a, lo, n2) + _pairwise_2(a, lo + n2, n - n2)
+
+
+@njit
+def _mean_k(a):
+    """np.mean of a float32 row: 0 + the pairwise sum, divided by the count in float32."""
+    return (np.float32(0.0) + _pairwise_sum_k(a, 0, a.shape[0])) / np.float32(a.shape[0])
+
+
+@njit
+def _lobe_factor_k(code, b, base, er, f82, has_f82, alpha, mu, e_tab, eavg_tab, out):
+    """_lobe_factor of a CONDUCTOR or GLOSSY hit into out (k,)."""
+    zero, one = np.float32(0.0), np.float32(1.0)
+    c21, c126 = np.float32(21.0), np.float32(126.0)
+    e, ea = _e_ss_k(e_tab, eavg_tab, alpha, mu)
+    if code == 4:  # GLOSSY: F = its colour
+        for j in range(out.shape[0]):
+            out[j] = _ms_k(e, ea, _clip_k(base[b, j], zero, one))
+    elif has_f82:  # CONDUCTOR: _f82_fss
+        for j in range(out.shape[0]):
+            f0 = base[b, j]
+            out[j] = _ms_k(e, ea, _clip_k(f0 + (one - f0) / c21 - f82[b, j] / c126, zero, one))
+    else:
+        for j in range(out.shape[0]):
+            f0 = base[b, j]
+            out[j] = _ms_k(e, ea, _clip_k(f0 + (one - f0) / c21 - _f82_b_k(f0, er[j]) / c126, zero, one))
+
+
+@njit
+def _plastic_terms_k(b, spec_f0, tr, alpha, mu, e_tab, eavg_tab, s_tab, f0t, fac, e_spec):
+    """_plastic_terms of one hit: f0t, fac, e_spec into the (k,) rows; returns the layer's eta."""
+    zero, one = np.float32(0.0), np.float32(1.0)
+    sf = spec_f0[b]
+    f0 = _clip_k(sf, zero, np.float32(0.99))
+    r = np.sqrt(_clip_k(f0, zero, np.float32(0.99)))
+    eta = (one + r) / (one - r)
+    e64 = np.float64(eta)
+    if e64 < 1.0:
+        fss_d = 0.997118 + e64 * (0.1014 - e64 * (0.965241 + e64 * 0.130607))
+    else:
+        fss_d = (e64 - 1.0) / (4.08567 + 1.00071 * e64)
+    s_avg = _clip_k((fss_d - np.float64(f0)) / np.float64(_max_k(one - f0, np.float32(1e-6))), 0.0, 1.0)
+    e, ea = _e_ss_k(e_tab, eavg_tab, alpha, mu)
+    s_int = _lookup3_k(s_tab, np.sqrt(alpha), np.sqrt(_max_k(mu, zero)),
+                       np.sqrt(np.sqrt(f0)) / np.float32(_Z_MAX_SPEC))
+    for j in range(f0t.shape[0]):
+        ft = _clip_k(sf * tr[j], zero, one)
+        f0t[j] = ft
+        fa = _ms64_k(e, ea, np.float64(ft) + np.float64(one - ft) * s_avg)
+        fac[j] = fa
+        e_spec[j] = _clip_k(fa * (ft * e + (one - ft) * s_int), zero, one)
+    return eta
+
+
+@njit
+def _plastic_p_spec_k(b, base, e_spec, tmp):
+    one = np.float32(1.0)
+    for j in range(tmp.shape[0]):
+        tmp[j] = base[b, j] * (one - e_spec[j])
+    es, ed = _mean_k(e_spec), _mean_k(tmp)
+    tot = es + ed
+    return es / tot if tot > np.float32(0.0) else one
+
+
+@njit
+def _plastic_s_k(cos, eta, spec_f0):
+    zero, one = np.float32(0.0), np.float32(1.0)
+    f0 = _clip_k(spec_f0, zero, np.float32(0.99))
+    fr, _ = _fresnel_k(cos, eta)
+    return _clip_k((fr - f0) / _max_k(one - f0, np.float32(1e-6)), zero, one)
+
+
+@njit
+def _plastic_eval_k(b, base, alpha, spec_f0, eta_l, f0t, fac, e_spec, ps, ox, oy, oz, ix, iy, iz, fcos):
+    """_eval_lobe's PLASTIC lines for one hit with its terms; returns the pdf."""
+    zero, one = np.float32(0.0), np.float32(1.0)
+    c = (iz if iz > zero else zero) * _INV_PI
+    for j in range(fcos.shape[1]):
+        fcos[b, j] = base[b, j] * (one - e_spec[j]) * c
+    pdf = (one - ps) * c
+    if iz > zero and alpha[b] >= np.float32(_MIN_ALPHA):
+        fc, pd, coh = reflection_1(alpha[b], ox, oy, oz, ix, iy, iz)
+        s = _plastic_s_k(coh, eta_l, spec_f0[b])
+        for j in range(fcos.shape[1]):
+            f = f0t[j] + (one - f0t[j]) * s
+            fcos[b, j] += f * fac[j] * fc
+        pdf += ps * pd
+    return pdf
+
+
+@njit
+def _eval_row_k(b, code, base, er, alpha, eta, spec_f0, tr, f82, ms, has_ms, ox, oy, oz, ix, iy, iz,
+                e_tab, eavg_tab, s_tab, g_out, g_in, fcos, s1, s2, s3, s4):
+    """_eval_lobe for one valid hit (wo.z > 0, wi on a consistent side) into fcos[b]; returns the pdf."""
+    zero, one = np.float32(0.0), np.float32(1.0)
+    k = fcos.shape[1]
+    up = iz > zero
+    if code == 0:  # LAMBERT
+        c = (iz if up else zero) * _INV_PI
+        for j in range(k):
+            fcos[b, j] = base[b, j] * c
+        return c
+    rough = alpha[b] >= np.float32(_MIN_ALPHA)
+    if code == 1 or code == 4:  # CONDUCTOR, GLOSSY
+        if not (up and rough):
+            return zero
+        fc, pd, coh = reflection_1(alpha[b], ox, oy, oz, ix, iy, iz)
+        if not has_ms:
+            _lobe_factor_k(code, b, base, er, f82, False, alpha[b], oz, e_tab, eavg_tab, s1)
+        fac = ms[b] if has_ms else s1
+        if code == 4:
+            for j in range(k):
+                fcos[b, j] = base[b, j] * (fc * fac[j])
+            return pd
+        s = _clip_k(one - coh, zero, one)
+        s2 = s * s
+        s5 = s2 * s2 * s
+        t1, t3 = one - s5, coh * s5 * s
+        if has_ms:  # branch-free inner loops (vectorised)
+            for j in range(k):
+                fcos[b, j] = _clip_k(base[b, j] * t1 + s5 - f82[b, j] * t3, zero, one) * (fc * fac[j])
+        else:
+            for j in range(k):
+                f0 = base[b, j]
+                fcos[b, j] = _clip_k(f0 * t1 + s5 - _f82_b_k(f0, er[j]) * t3, zero, one) * (fc * fac[j])
+        return pd
+    if code == 2:  # DIELECTRIC
+        if not rough:
+            return zero
+        e = eta[b]
+        if up:
+            fc, pd, coh = reflection_1(alpha[b], ox, oy, oz, ix, iy, iz)
+            f, _ = _fresnel_k(coh, e)
+            v = f * fc * _glass_factor_k(alpha[b], oz, e, g_out, g_in)
+            for j in range(k):
+                fcos[b, j] = base[b, j] * v
+            return f * pd
+        if not abs(e - one) >= np.float32(1e-4):
+            return zero
+        a2 = alpha[b] * alpha[b]
+        hx, hy, hz = e * ix + ox, e * iy + oy, e * iz + oz
+        n = _max_k(np.sqrt(((zero + hx * hx) + hy * hy) + hz * hz), np.float32(1e-30))
+        hx, hy, hz = hx / n, hy / n, hz / n
+        if hz < zero:
+            hx, hy, hz = -hx, -hy, -hz
+        coh = ((zero + ox * hx) + oy * hy) + oz * hz
+        cih = ((zero + ix * hx) + iy * hy) + iz * hz
+        f, _ = _fresnel_k(coh, e)
+        d = ggx_d_1(a2, hx, hy, hz)
+        lo, li = smith_lambda_1(a2, ox, oy, oz), smith_lambda_1(a2, ix, iy, iz)
+        denom = cih + coh / e
+        jac = abs(cih) / _max_k(denom * denom, np.float32(1e-30))
+        t = one - f if (coh > zero and cih < zero) else zero
+        val = t * d * coh * jac / (oz * e * e * (one + lo + li))
+        v = val * _glass_factor_k(alpha[b], oz, e, g_out, g_in)
+        for j in range(k):
+            fcos[b, j] = base[b, j] * v
+        return t * d * coh * jac / (oz * (one + lo))
+    # PLASTIC
+    eta_l = _plastic_terms_k(b, spec_f0, tr, alpha[b], oz, e_tab, eavg_tab, s_tab, s1, s2, s3)
+    ps = _plastic_p_spec_k(b, base, s3, s4)
+    return _plastic_eval_k(b, base, alpha, spec_f0, eta_l, s1, s2, s3, ps, ox, oy, oz, ix, iy, iz, fcos)
+
+
+@njit
+def _frame_k(nx, ny, nz):
+    """tangent_frame of one normal: (ux, uy, uz, vx, vy, vz)."""
+    one = np.float32(1.0)
+    sg = one if nz >= np.float32(0.0) else -one
+    a = -one / (sg + nz)
+    b = nx * ny * a
+    return one + sg * nx * nx * a, sg * b, -sg * nx, b, sg + ny * ny * a, -ny
+
+
+@njit
+def _dot3_k(a, b, c, x, y, z):
+    """np.sum(w * u, axis=1) of one row: 0 + the products in order."""
+    return ((np.float32(0.0) + a * x) + b * y) + c * z
+
+
+@njit
+def _prepare_kernel(wo, ns, fu, fv, wl):
+    """_prepare's frame and local wo per hit."""
+    for b in range(wo.shape[0]):
+        ux, uy, uz, vx, vy, vz = _frame_k(ns[b, 0], ns[b, 1], ns[b, 2])
+        fu[b, 0], fu[b, 1], fu[b, 2] = ux, uy, uz
+        fv[b, 0], fv[b, 1], fv[b, 2] = vx, vy, vz
+        x, y, z = wo[b, 0], wo[b, 1], wo[b, 2]
+        wl[b, 0] = _dot3_k(x, y, z, ux, uy, uz)
+        wl[b, 1] = _dot3_k(x, y, z, vx, vy, vz)
+        wl[b, 2] = _dot3_k(x, y, z, ns[b, 0], ns[b, 1], ns[b, 2])
+
+
+@njit
+def _outgoing_kernel(code, base, edge, se, alpha, wl, e_tab, eavg_tab, f82, ms):
+    """with_outgoing's F82 b (CONDUCTOR) and multiscatter factor (1 on smooth hits) per hit;
+    ``se``: edge's row step (0: one row for every hit)."""
+    k = base.shape[1]
+    for b in range(base.shape[0]):
+        er = edge[b * se]
+        if code == 1:
+            for j in range(k):
+                f82[b, j] = _f82_b_k(base[b, j], er[j])
+        if alpha[b] >= np.float32(_MIN_ALPHA):
+            _lobe_factor_k(code, b, base, er, f82, code == 1, alpha[b], wl[b, 2], e_tab, eavg_tab, ms[b])
+        else:
+            for j in range(k):
+                ms[b, j] = np.float32(1.0)
+
+
+@njit
+def _evaluate_kernel(lobe, base, edge, se, alpha, eta, spec_f0, tint, st, f82, ms, has_ms, fu, fv, ns, wl, wi, ng,
+                     e_tab, eavg_tab, s_tab, g_out, g_in, fcos, pdf):
+    """evaluate() per hit: wi into the frame, the side checks, the hit's lobe."""
+    zero = np.float32(0.0)
+    k = base.shape[1]
+    s1, s2, s3, s4 = np.empty(k, np.float32), np.empty(k, np.float32), np.empty(k, np.float32), np.empty(k, np.float32)
+    for b in range(lobe.shape[0]):
+        for j in range(k):
+            fcos[b, j] = zero
+        pdf[b] = zero
+        x, y, z = wi[b, 0], wi[b, 1], wi[b, 2]
+        ix = _dot3_k(x, y, z, fu[b, 0], fu[b, 1], fu[b, 2])
+        iy = _dot3_k(x, y, z, fv[b, 0], fv[b, 1], fv[b, 2])
+        iz = _dot3_k(x, y, z, ns[b, 0], ns[b, 1], ns[b, 2])
+        side = _dot3_k(x, y, z, ng[b, 0], ng[b, 1], ng[b, 2])
+        consistent = side > zero if iz > zero else (side < zero and iz < zero)
+        if not (wl[b, 2] > zero and consistent):
+            continue
+        pdf[b] = _eval_row_k(b, lobe[b], base, edge[b * se], alpha, eta, spec_f0, tint[b * st], f82, ms, has_ms,
+                             wl[b, 0], wl[b, 1], wl[b, 2], ix, iy, iz, e_tab, eavg_tab, s_tab, g_out, g_in,
+                             fcos, s1, s2, s3, s4)
+
+
+@njit
+def _cosine_sample_k(u1, u2):
+    """_cosine_sample for one pair of numbers (concentric disk, lifted)."""
+    zero, one, two = np.float32(0.0), np.float32(1.0), np.float32(2.0)
+    a, b = two * u1 - one, two * u2 - one
+    q = np.float32(np.pi / 4)
+    if abs(a) > abs(b):
+        r = a
+        phi = q * b / (one if a == zero else a)
+    else:
+        r = b
+        phi = np.float32(np.pi / 2) - q * a / (one if b == zero else b)
+    x, y = r * np.cos(phi), r * np.sin(phi)
+    w = one - x * x - y * y
+    return x, y, np.sqrt(zero if w < zero else w)
+
+
+@njit
+def _sample_row_k(b, code, base, er, alpha, eta, spec_f0, tr, f82, ms, has_ms, ox, oy, oz, u0, u1, u2,
+                  e_tab, eavg_tab, s_tab, g_out, g_in, weight, s1, s2, s3, s4):
+    """_sample_lobe for one hit with wo.z > 0: (wi_x, wi_y, wi_z, pdf, flags), weight[b] filled."""
+    zero, one, four = np.float32(0.0), np.float32(1.0), np.float32(4.0)
+    inf = np.float32(np.inf)
+    k = weight.shape[1]
+    for j in range(k):
+        weight[b, j] = zero
+    if code == 0:  # LAMBERT
+        wx, wy, wz = _cosine_sample_k(u0, u1)
+        if wz > zero:
+            for j in range(k):
+                weight[b, j] = base[b, j]
+            return wx, wy, wz, wz * _INV_PI, 1
+        return wx, wy, wz, zero, 0
+    al = alpha[b]
+    rough = al >= np.float32(_MIN_ALPHA)
+    if rough:
+        hx, hy, hz = sample_vndf_1(ox, oy, oz, al, u0, u1)
+    else:
+        hx, hy, hz = zero, zero, one
+    coh = _dot3_k(ox, oy, oz, hx, hy, hz)
+    a2 = al * al
+    lo = smith_lambda_1(a2, ox, oy, oz)
+    two_c = np.float32(2.0) * coh
+    rx, ry, rz = two_c * hx - ox, two_c * hy - oy, two_c * hz - oz
+    if code == 1 or code == 4:  # CONDUCTOR, GLOSSY: reflect about h
+        if not (rz > zero and coh > zero):
+            return rx, ry, rz, zero, 0
+        g = (one + lo) / (one + lo + smith_lambda_1(a2, rx, ry, rz)) if rough else one
+        if not has_ms:
+            if rough:
+                _lobe_factor_k(code, b, base, er, f82, False, al, oz, e_tab, eavg_tab, s1)
+            else:
+                for j in range(k):
+                    s1[j] = one
+        fac = ms[b] if has_ms else s1
+        if code == 4:
+            for j in range(k):
+                weight[b, j] = base[b, j] * fac[j] * g
+        else:
+            s = _clip_k(one - coh, zero, one)
+            s2 = s * s
+            sp = s2 * s2 * s
+            t1, t3 = one - sp, coh * sp * s
+            if has_ms:
+                for j in range(k):
+                    weight[b, j] = _clip_k(base[b, j] * t1 + sp - f82[b, j] * t3, zero, one) * fac[j] * g
+            else:
+                for j in range(k):
+                    f0 = base[b, j]
+                    weight[b, j] = _clip_k(f0 * t1 + sp - _f82_b_k(f0, er[j]) * t3, zero, one) * fac[j] * g
+        if rough:
+            return rx, ry, rz, ggx_d_1(a2, hx, hy, hz) / ((one + lo) * four * oz), 2
+        return rx, ry, rz, inf, 2 | 8
+    if code == 2:  # DIELECTRIC: reflect with probability F, else refract
+        e = eta[b]
+        unit = abs(e - one) < np.float32(1e-4)
+        f, cos_t = _fresnel_k(coh, e)
+        if unit:
+            f = zero
+        refl = u2 < f
+        if refl:
+            wx, wy, wz = rx, ry, rz
+        elif unit:
+            wx, wy, wz = -ox, -oy, -oz
+        else:
+            c = coh / e - cos_t
+            wx, wy, wz = -ox / e + c * hx, -oy / e + c * hy, -oz / e + c * hz
+        if not ((wz > zero if refl else wz < zero) and coh > zero):
+            return wx, wy, wz, zero, 0
+        g = (one + lo) / (one + lo + smith_lambda_1(a2, wx, wy, wz)) if rough else one
+        fac = _glass_factor_k(al, oz, e, g_out, g_in) if rough else one
+        scale = (one if refl else one / (e * e)) * g * fac
+        for j in range(k):
+            weight[b, j] = base[b, j] * scale
+        singular = (not rough) or (unit and not refl)
+        fl = (2 if refl else 4) | (8 if singular else 0)
+        if singular:
+            return wx, wy, wz, inf, fl
+        d_vis = ggx_d_1(a2, hx, hy, hz) * coh / (oz * (one + lo))
+        if refl:
+            return wx, wy, wz, f * d_vis / _max_k(four * coh, np.float32(1e-30)), fl
+        cih = _dot3_k(wx, wy, wz, hx, hy, hz)
+        denom = cih + coh / e
+        return wx, wy, wz, (one - f) * d_vis * abs(cih) / _max_k(denom * denom, np.float32(1e-30)), fl
+    # PLASTIC: the specular layer with its albedo share, else the diffuse base
+    eta_l = _plastic_terms_k(b, spec_f0, tr, al, oz, e_tab, eavg_tab, s_tab, s1, s2, s3)
+    ps = _plastic_p_spec_k(b, base, s3, s4)
+    spec = u2 < ps
+    if spec:
+        wx, wy, wz = rx, ry, rz
+    else:
+        wx, wy, wz = _cosine_sample_k(u0, u1)
+    ok = wz > zero and (coh > zero if spec else True)
+    if not ok:
+        return wx, wy, wz, zero, 0
+    if spec and not rough:  # a smooth coat: delta reflection, weight F / p_spec
+        s = _plastic_s_k(oz, eta_l, spec_f0[b])
+        for j in range(k):
+            weight[b, j] = (s1[j] + (one - s1[j]) * s) / ps
+        return wx, wy, wz, inf, 2 | 8
+    pd = _plastic_eval_k(b, base, alpha, spec_f0, eta_l, s1, s2, s3, ps, ox, oy, oz, wx, wy, wz, weight)
+    if not pd > zero:
+        for j in range(k):
+            weight[b, j] = zero
+        return wx, wy, wz, zero, 0
+    for j in range(k):
+        weight[b, j] = weight[b, j] / pd
+    return wx, wy, wz, pd, 2 if spec else 1
+
+
+@njit
+def _sample_kernel(lobe, base, edge, se, alpha, eta, spec_f0, tint, st, f82, ms, has_ms, fu, fv, ns, wl, ng, u,
+                   e_tab, eavg_tab, s_tab, g_out, g_in, wi, weight, pdf, flags):
+    """sample() per hit: the hit's lobe in the local frame, wi back to the world, the side check."""
+    zero, one = np.float32(0.0), np.float32(1.0)
+    k = base.shape[1]
+    s1, s2, s3, s4 = np.empty(k, np.float32), np.empty(k, np.float32), np.empty(k, np.float32), np.empty(k, np.float32)
+    for b in range(lobe.shape[0]):
+        ox, oy, oz = wl[b, 0], wl[b, 1], wl[b, 2]
+        if oz > zero:
+            x, y, z, pd, fl = _sample_row_k(b, lobe[b], base, edge[b * se], alpha, eta, spec_f0, tint[b * st], f82,
+                                            ms, has_ms,
+                                            ox, oy, oz, u[b, 0], u[b, 1], u[b, 2], e_tab, eavg_tab, s_tab,
+                                            g_out, g_in, weight, s1, s2, s3, s4)
+        else:
+            x, y, z, pd, fl = zero, zero, one, zero, 0
+            for j in range(k):
+                weight[b, j] = zero
+        wx = x * fu[b, 0] + y * fv[b, 0] + z * ns[b, 0]
+        wy = x * fu[b, 1] + y * fv[b, 1] + z * ns[b, 1]
+        wz = x * fu[b, 2] + y * fv[b, 2] + z * ns[b, 2]
+        n = _max_k(np.sqrt(((zero + wx * wx) + wy * wy) + wz * wz), np.float32(1e-30))
+        wx, wy, wz = wx / n, wy / n, wz / n
+        wi[b, 0], wi[b, 1], wi[b, 2] = wx, wy, wz
+        side = _dot3_k(wx, wy, wz, ng[b, 0], ng[b, 1], ng[b, 2])
+        if fl != 0 and ((side >= zero) if (fl & 4) != 0 else (side <= zero)):
+            pd, fl = zero, 0
+            for j in range(k):
+                weight[b, j] = zero
+        pdf[b], flags[b] = pd, fl
+
+
+@njit
+def _gather_kernel(mat, lam, lobe, spec_tint, edge, tint):
+    """params_from_materials' per-hit tint and F82 edge rows: specular_tint[mat] (or at lam), and
+    min(tint, 1) on CONDUCTOR hits, 1 elsewhere."""
+    one = np.float32(1.0)
+    k = tint.shape[1]
+    for b in range(mat.shape[0]):
+        for j in range(k):
+            t = spec_tint[mat[b], j] if lam.shape[0] == 0 else spec_tint[mat[b], lam[b]]
+            tint[b, j] = t
+            edge[b, j] = (one if t > one else t) if lobe[b] == 1 else one
+
+
+_EMPTY2 = np.zeros((0, 0), _F32)
+
+
+def _is32(a, ndim) -> bool:
+    return isinstance(a, np.ndarray) and a.dtype == _F32 and a.ndim == ndim
+
+
+def _kernel_fits(p: SurfaceParams) -> bool:
+    """The kernels take float32 parameters as params_from_materials makes them (anything else:
+    the reference, whose NumPy promotions they would not reproduce)."""
+    if not kernels_enabled() or not len(p.lobe) or p.base.ndim != 2 or p.base.shape[1] > _PAIRWISE_MAX:
+        return False
+    B = len(p.lobe)
+    if not (all(_is32(a, 2) and a.shape == p.base.shape for a in (p.base, p.edge, p.spec_tint))
+            and all(_is32(a, 1) and a.shape == (B,) for a in (p.alpha, p.eta, p.spec_f0))):
+        return False
+    if p.ms is not None and not (_is32(p.ms, 2) and p.ms.shape == p.base.shape
+                                 and (p.f82 is None or (_is32(p.f82, 2) and p.f82.shape == p.base.shape))):
+        return False
+    if p.ms is not None and p.f82 is None and (p.lobe == CONDUCTOR).any():
+        return False
+    return p.wo_local is None or all(_is32(a, 2) and a.shape == (B, 3) for a in (p.frame_u, p.frame_v, p.wo_local))
+
+
+def _rows(a):
+    """(C-order array, row step) for the kernels: a (B, k) array broadcast from one row (stride 0,
+    as params_from_materials makes for a batch of one material and lobe) as that row (1, k), step 0."""
+    if a.shape[0] > 1 and a.strides[0] == 0:
+        return np.ascontiguousarray(a[:1]), 0
+    return np.ascontiguousarray(a), 1
+
+
+def _c3(a):
+    return np.ascontiguousarray(a, _F32)
+
+
+def _prepare_with_kernel(p, wo, ns):
+    """_prepare by _prepare_kernel (the same bits)."""
+    wo, ns = _c3(wo), _c3(ns)
+    if p.wo_local is not None:
+        return wo, ns, _c3(p.frame_u), _c3(p.frame_v), _c3(p.wo_local)
+    fu, fv, wl = (np.empty((len(wo), 3), _F32) for _ in range(3))
+    _prepare_kernel(wo, ns, fu, fv, wl)
+    return wo, ns, fu, fv, wl
+
+
+def _kernel_params(p):
+    """The parameter arrays in the kernels' argument order (C order), and the tables."""
+    c = np.ascontiguousarray
+    has_ms = p.ms is not None
+    f82 = c(p.f82) if has_ms and p.f82 is not None else _EMPTY2
+    ms = c(p.ms) if has_ms else _EMPTY2
+    lobe = p.lobe if p.lobe.dtype == np.int32 else np.asarray(p.lobe, np.int32)
+    edge, se = _rows(p.edge)
+    tint, st = _rows(p.spec_tint)
+    if (lobe == LAMBERT).all():  # Lambert alone never reads the tables (nor makes them)
+        tabs = (np.zeros((2, 2), _F32), np.zeros(2, _F32), np.zeros((2, 2, 2), _F32),
+                np.zeros((2, 2, 2), _F32), np.zeros((2, 2, 2), _F32))
+    else:
+        tabs = _tables_f32()
+    return (c(lobe), c(p.base), edge, se, c(p.alpha), c(p.eta), c(p.spec_f0), tint, st, f82, ms,
+            has_ms), tabs
+
+
+def _with_outgoing_kernel(params, wo, ns):
+    wo, ns, fu, fv, wl = _prepare_with_kernel(params, wo, ns)
+    out = replace(params, frame_u=fu, frame_v=fv, wo_local=wl)
+    lobe = params.lobe
+    if lobe[0] in (CONDUCTOR, GLOSSY) and (lobe == lobe[0]).all():
+        code = int(lobe[0])
+        e_tab, eavg_tab = _tables_f32()[:2]
+        shape = params.base.shape
+        b = np.empty(shape, _F32) if code == CONDUCTOR else _EMPTY2
+        ms = np.empty(shape, _F32)
+        c = np.ascontiguousarray
+        _outgoing_kernel(code, c(params.base), *_rows(params.edge), c(params.alpha), wl, e_tab, eavg_tab, b, ms)
+        out.f82, out.ms = (b if code == CONDUCTOR else None), ms
+    return out
+
+
+def _evaluate_with_kernel(params, wo, wi, ns, ng):
+    wo, ns, fu, fv, wl = _prepare_with_kernel(params, wo, ns)
+    args, tabs = _kernel_params(params)
+    fcos = np.empty(params.base.shape, _F32)
+    pdf = np.empty(len(params.lobe), _F32)
+    _evaluate_kernel(*args, fu, fv, ns, wl, _c3(wi), _c3(ng), *tabs, fcos, pdf)
+    return fcos, pdf
+
+
+def _sample_with_kernel(params, wo, ns, ng, u):
+    wo, ns, fu, fv, wl = _prepare_with_kernel(params, wo, ns)
+    args, tabs = _kernel_params(params)
+    B = len(params.lobe)
+    wi = np.empty((B, 3), _F32)
+    weight = np.empty(params.base.shape, _F32)
+    pdf = np.empty(B, _F32)
+    flags = np.empty(B, np.int32)
+    _sample_kernel(*args, fu, fv, ns, wl, _c3(ng), _c3(u), *tabs, wi, weight, pdf, flags)
+    return wi, weight, pdf, flags
