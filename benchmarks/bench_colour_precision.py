@@ -141,16 +141,16 @@ def spectral_ops(dtype, b: int = 100_000, n: int = 61, reps: int = 5) -> float:
 
 def _per_texel_kernel():
     """A compiled lookup of per-texel spectra (the alternative to the code's per-ray uplift): per
-    direction its (u, v) (direction_to_uv, as EnvironmentMap's lookups), the bilinear weights as
-    its kernels compute them, the four texels' (n,) spectra blended, times the power heuristic
-    against the map's density."""
+    direction the map's (u, v) and bilinear weights as EnvironmentMap's kernels compute them, the
+    four texels' (n,) spectra blended, times the power heuristic against the map's density."""
+    from opal_diffraction.core.lights.environment import _uv_one
     from opal_diffraction.core.util.jit import njit
 
     @njit
-    def kernel(uu, vv, spectra, density, w, h, p_bsdf, out):
+    def kernel(m, spectra, density, w, h, p_bsdf, out):
         wf, hf, half, one = np.float32(w), np.float32(h), np.float32(0.5), np.float32(1.0)
-        for b in range(uu.shape[0]):
-            u, v = uu[b], vv[b]
+        for b in range(m.shape[0]):
+            u, v = _uv_one(m[b, 0], m[b, 1], m[b, 2])
             x, y = u * wf - half, v * hf - half
             fi0, fj0 = np.floor(x), np.floor(y)
             fx, fy = np.float32(x - fi0), np.float32(y - fj0)
@@ -176,7 +176,7 @@ def world_map_lookups(rays: int = 100_000, repeats: int = 7) -> None:
     if not jit.AVAILABLE:
         return
     from opal_diffraction.core.integrators.eye.emission import _EMPTY_W, _NO_LAM, _world_contrib_kernel
-    from opal_diffraction.core.lights.environment import EnvironmentMap, direction_to_uv
+    from opal_diffraction.core.lights.environment import EnvironmentMap
     from opal_diffraction.core.spectral.spectrum import SpectralConverter
 
     conv = SpectralConverter()
@@ -200,8 +200,7 @@ def world_map_lookups(rays: int = 100_000, repeats: int = 7) -> None:
             _world_contrib_kernel(rgb, p_env, p_bsdf, basis_t, _EMPTY_W, _NO_LAM, a_out)
 
         def texel():
-            u, v = direction_to_uv(d)
-            per_texel(u, v, spectra, env.density, w, h, p_bsdf, b_out)
+            per_texel(d, spectra, env.density, w, h, p_bsdf, b_out)
 
         code(), texel()  # compile / load
         ta, tb = [], []

@@ -30,15 +30,10 @@ the sphere uniformly (density 1 / 4 pi) and returns zero radiance.
 The texel lookup runs as a compiled kernel where the kernels run (core/util/jit.py): the NumPy
 lines' operations in their order and precisions, one pass per direction (four texel gathers and
 the bilinear blend) instead of a dozen (B, 3) temporaries; the same bits. So do the lookups of
-float32 directions (``radiance_rgb``, ``pdf``, ``lookup``: rotation and the normalised z in one
-pass, ``_uv_inputs_kernel``; then NumPy's own float32 arctan2 and arccos; then texel and density
-in one pass, ``_uv_texels_kernel``) and ``sample`` (``_sample_kernel``: per number a binary
+float32 directions (``radiance_rgb``, ``pdf``, ``lookup``: rotation, (u, v), texel and density
+in one pass, ``_directions_kernel``) and ``sample`` (``_sample_kernel``: per number a binary
 search of the marginal CDF and one of the chosen row's conditional CDF, which finds the entry
 NumPy's searchsorted of the whole stacked CDF finds, in the callers' order, with no sort).
-The angles of (u, v) are NumPy's in both paths: NumPy's float32 arctan2 and arccos are SVML's on
-AVX-512 machines and libm's elsewhere, and a compiled atan2f / acosf (libm's) differs from SVML's
-by an ulp in a third of the directions, so a kernel computing them would be the reference's bits
-on some machines only.
 """
 
 from __future__ import annotations
@@ -62,7 +57,9 @@ def direction_to_uv(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     float32 for float32 input, else float64."""
     m = np.asarray(m)
     if kernels_enabled() and m.dtype == np.float32 and m.ndim == 2 and m.shape[1] == 3:
-        return _uv_of_float32(m, _IDENTITY32, False)
+        u, v = np.empty(len(m), np.float32), np.empty(len(m), np.float32)
+        _uv_kernel(m, u, v)
+        return u, v
     if m.dtype != np.float32:
         m = m.astype(np.float64, copy=False)
     ln = np.sqrt(np.einsum("ij,ij->i", m, m))
@@ -202,7 +199,7 @@ class EnvironmentMap:
 
     def _kernel_lookup(self, d, want_rgb: bool, want_pdf: bool):
         """(rgb (B, 3) float32, pdf (B,) float64) of float32 directions ``d`` (B, 3) by
-        _uv_of_float32 and _uv_texels_kernel (an array not asked for is empty); None for other input."""
+        _directions_kernel (an array not asked for is empty); None for other input."""
         d = np.asarray(d)
         if d.dtype != np.float32 or d.ndim != 2 or d.shape[1] != 3:
             return None
@@ -210,9 +207,8 @@ class EnvironmentMap:
         m = d if self._identity else self._map_dirs(d)
         rgb = np.empty((b if want_rgb else 0, 3), np.float32)
         pdf = np.empty(b if want_pdf else 0)
-        u, v = _uv_of_float32(m, self._rot32, self._identity)
-        _uv_texels_kernel(u, v, self.rgb.reshape(-1, 3), self.density, self.width, self.height,
-                          self.interpolation == "CLOSEST", rgb, pdf)
+        _directions_kernel(m, self._rot32, self._identity, self.rgb.reshape(-1, 3), self.density,
+                           self.width, self.height, self.interpolation == "CLOSEST", rgb, pdf)
         return rgb, pdf
 
     def _texel(self, u, v) -> tuple[np.ndarray, np.ndarray]:
@@ -324,51 +320,45 @@ def _lookup_kernel(u, v, texels, wf, hf, w, h, closest, out):
 
 
 @njit
-def _uv_inputs_kernel(m, rot, rotate, x, y, zc):
-    """direction_to_uv's NumPy lines up to its angles, per float32 direction m (B, 3): rotated by
-    ``rot`` (R^T as float32: x R00 + y R10 + z R20) when ``rotate``, the x and y it takes the
-    arctan2 of, and z over the length (einsum's sum of squares in order) clipped to [-1, 1]."""
+def _uv_one(x, y, z):
+    """direction_to_uv's NumPy lines for one float32 direction (einsum's sum of squares in order,
+    the float32 arctan2 and arccos): (u, v) float32."""
     one = np.float32(1.0)
-    for b in range(m.shape[0]):
-        px, py, pz = m[b, 0], m[b, 1], m[b, 2]
-        if rotate:
-            px, py, pz = (px * rot[0, 0] + py * rot[1, 0] + pz * rot[2, 0],
-                          px * rot[0, 1] + py * rot[1, 1] + pz * rot[2, 1],
-                          px * rot[0, 2] + py * rot[1, 2] + pz * rot[2, 2])
-        ln = np.sqrt(px * px + py * py + pz * pz)
-        z = pz / (ln if ln > 0 else one)
-        x[b], y[b] = px, py
-        zc[b] = np.float32(-1.0) if z < -1 else (one if z > 1 else z)
-
-
-_IDENTITY32 = np.eye(3, dtype=np.float32)
-
-
-def _uv_of_float32(m, rot, rotate: bool):
-    """direction_to_uv of float32 directions m (B, 3) (rotated by ``rot`` when ``rotate``): the
-    compiled pass up to the angles, then NumPy's arctan2 and arccos, with the reference's float32
-    arithmetic around them (see the module docstring for why the angles stay NumPy's)."""
-    b = len(m)
-    x, y, zc = np.empty(b, np.float32), np.empty(b, np.float32), np.empty(b, np.float32)
-    _uv_inputs_kernel(m, rot, rotate, x, y, zc)
-    one = np.float32(1.0)
-    u = one / 2 - np.arctan2(y, x) / np.float32(_TWO_PI)
+    ln = np.sqrt(x * x + y * y + z * z)
+    zc = z / (ln if ln > 0 else one)
+    zc = np.float32(-1.0) if zc < -1 else (one if zc > 1 else zc)
+    u = one / np.float32(2.0) - np.arctan2(y, x) / np.float32(_TWO_PI)
     v = one - np.arccos(zc) / np.float32(np.pi)
     return u, v
 
 
 @njit
-def _uv_texels_kernel(u, v, texels, density, w, h, closest, rgb, pdf):
-    """At float32 (u, v) (B,): the texel as _lookup (into ``rgb`` unless it is empty) and the
-    density as pdf's _texel (into ``pdf`` unless empty), in one pass."""
+def _uv_kernel(m, u, v):
+    """direction_to_uv of float32 directions m (B, 3) into u, v (B,)."""
+    for b in range(m.shape[0]):
+        u[b], v[b] = _uv_one(m[b, 0], m[b, 1], m[b, 2])
+
+
+@njit
+def _directions_kernel(m, rot, rotate, texels, density, w, h, closest, rgb, pdf):
+    """radiance_rgb and pdf of float32 directions m (B, 3), in one pass: rotated by ``rot`` (R^T
+    as float32: x R00 + y R10 + z R20, as the float32 matrix product sums an identity's exact
+    products) when ``rotate``, else already in the map's frame; (u, v) as direction_to_uv; the
+    texel as _lookup (into ``rgb`` unless it is empty) and the density as pdf's _texel (into
+    ``pdf`` unless empty)."""
     wf, hf = np.float32(w), np.float32(h)
     want_rgb, want_pdf = rgb.shape[0] > 0, pdf.shape[0] > 0
-    for b in range(u.shape[0]):
+    for b in range(m.shape[0]):
+        x, y, z = m[b, 0], m[b, 1], m[b, 2]
+        if rotate:
+            x, y, z = (x * rot[0, 0] + y * rot[1, 0] + z * rot[2, 0], x * rot[0, 1] + y * rot[1, 1] + z * rot[2, 1],
+                       x * rot[0, 2] + y * rot[1, 2] + z * rot[2, 2])
+        u, v = _uv_one(x, y, z)
         if want_rgb:
-            _lookup_one(u[b] * wf, v[b] * hf, np.float32(0.5), texels, w, h, closest, rgb, b)
+            _lookup_one(u * wf, v * hf, np.float32(0.5), texels, w, h, closest, rgb, b)
         if want_pdf:
-            i = np.int64(np.floor(u[b] * wf)) % w
-            j = np.int64(np.floor(v[b] * hf))
+            i = np.int64(np.floor(u * wf)) % w
+            j = np.int64(np.floor(v * hf))
             j = 0 if j < 0 else (h - 1 if j > h - 1 else j)
             pdf[b] = density[j, i]
 
