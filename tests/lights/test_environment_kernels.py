@@ -1,11 +1,14 @@
 """The environment map's compiled kernels (core/lights/environment.py: direction lookups, the
-density, importance sampling) against the NumPy reference: the same bits."""
+density, importance sampling) against the NumPy reference: the same bits, except the float32
+angles of a direction's (u, v) (libm's in the kernels, NumPy's - SVML's on AVX-512 - in the
+reference: within 2 ulps; everything after them the same bits)."""
 
 import numpy as np
 import pytest
 
 from opal_diffraction.core.lights.environment import EnvironmentMap, direction_to_uv
 from opal_diffraction.core.util import jit
+from environment_checks import UV_ATOL, lookups_match
 
 pytestmark = pytest.mark.skipif(not jit.AVAILABLE, reason=jit.UNAVAILABLE_REASON or "numba missing")
 
@@ -23,6 +26,8 @@ def same_bits(a, b):
     a, b = np.asarray(a), np.asarray(b)
     assert a.dtype == b.dtype and a.shape == b.shape
     np.testing.assert_array_equal(a.view(np.uint8), b.view(np.uint8))  # signed zeros and NaNs too
+
+
 
 
 def _rotation(rng):
@@ -50,26 +55,25 @@ def _directions(rng, b):
 @pytest.mark.parametrize("size", [(1, 1), (2, 7), (33, 64)])
 @pytest.mark.parametrize("rotated", [False, True])
 @pytest.mark.parametrize("holes", [False, True])
-def test_lookups_and_density_are_the_reference_bit_for_bit(interpolation, size, rotated, holes):
+def test_lookups_and_density_are_the_reference_after_the_angles(interpolation, size, rotated, holes):
     rng = np.random.default_rng(size[0] * 7 + rotated + 2 * holes)
     env = EnvironmentMap(_map(rng, size, interpolation, holes), _rotation(rng) if rotated else None, interpolation)
     d = _directions(rng, 4000)
-    same_bits(*both(env.radiance_rgb, d))
-    same_bits(*both(env.pdf, d))
-    (rgb_ref, pdf_ref), (rgb, pdf) = both(env.lookup, d)
-    same_bits(rgb, rgb_ref)
-    same_bits(pdf, pdf_ref)
+    rgb, pdf = lookups_match(env, d)
     same_bits(*both(env.pdf, d[:0]))
     assert pdf.dtype == np.float64 and rgb.dtype == np.float32
 
 
-def test_direction_to_uv_is_the_reference_bit_for_bit():
+def test_direction_to_uv_is_the_reference_within_two_ulps():
     rng = np.random.default_rng(4)
     m = (rng.normal(size=(5000, 3)) * 10.0 ** rng.uniform(-3, 3, (5000, 1))).astype(np.float32)
     m[:8] = _directions(rng, 8)[:8]
     (u0, v0), (u1, v1) = both(direction_to_uv, m)
-    same_bits(u1, u0)
-    same_bits(v1, v0)
+    np.testing.assert_allclose(u1, u0, rtol=0, atol=UV_ATOL)
+    np.testing.assert_allclose(v1, v0, rtol=0, atol=UV_ATOL)
+    # the poles and the seam's directions, where the angles are exact
+    same_bits(u1[:8], u0[:8])
+    same_bits(v1[:8], v0[:8])
     assert u1.dtype == np.float32
 
 

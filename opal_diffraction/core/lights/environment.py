@@ -34,6 +34,10 @@ float32 directions (``radiance_rgb``, ``pdf``, ``lookup``: rotation, (u, v), tex
 in one pass, ``_directions_kernel``) and ``sample`` (``_sample_kernel``: per number a binary
 search of the marginal CDF and one of the chosen row's conditional CDF, which finds the entry
 NumPy's searchsorted of the whole stacked CDF finds, in the callers' order, with no sort).
+One exception to "the same bits": the float32 angles of a direction's (u, v) are libm's atan2f
+and acosf in the kernels and NumPy's in the reference, which on AVX-512 machines are SVML's
+(within 2 ulps of libm's, and even differing with an element's place in its array); everything
+after the angles is the reference's arithmetic (tests/lights/test_environment_kernels.py).
 """
 
 from __future__ import annotations
