@@ -58,6 +58,7 @@ import numpy as np
 from ..sampling import footprint
 from . import wavelengths
 from .path_state import PathState
+from .rows import RowView, subset
 from ..materials.spectra import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
 from ..spectral.optics import fresnel_dielectric, reflect, refract
 from ..util.jit import kernels_enabled, njit
@@ -83,12 +84,12 @@ def _indices(mask):
     return np.flatnonzero(mask)
 
 
-def _rows(a, idx):
-    return a.take(idx, axis=0)
+#: The fields of Rays gathered when first read (w at once: see Rays.take; state and basis are not rows).
+_RAY_ROWS = ("o", "d", "pix", "lam", "depth", "u_lam")
 
 
 @dataclass
-class Rays:
+class Rays(RowView):
     o: np.ndarray      # (B, 3) float32 origins
     d: np.ndarray      # (B, 3) float32 unit directions
     pix: np.ndarray    # (B,) int64 pixel index within the tile
@@ -104,25 +105,44 @@ class Rays:
     basis: np.ndarray | None = None
 
     def __len__(self):
-        return len(self.pix)
+        n = self.__dict__.get("_n")  # a subset's row count (its pix may not be gathered)
+        return len(self.pix) if n is None else n
 
     def take(self, mask) -> "Rays":
-        """The rays where ``mask`` (B,) bool is set, or at indices ``mask``."""
+        """The rays where ``mask`` (B,) bool is set, or at indices ``mask``: a subset whose fields
+        are gathered when first read (core/transport/rows.py), the weights at once (Russian
+        roulette scales a population's weights in place)."""
         idx = _indices(mask)
         if idx is None:
             return self
-        return Rays(_rows(self.o, idx), _rows(self.d, idx), _rows(self.pix, idx),
-                     None if self.w is None else _rows(self.w, idx), None if self.lam is None else _rows(self.lam, idx),
-                     _rows(self.depth, idx), _rows(self.u_lam, idx),
-                     None if self.state is None else self.state.take(idx), self.basis)
+        new = subset(self, idx, _RAY_ROWS)
+        nd = new.__dict__
+        w, st = self.w, self.state
+        nd["w"] = None if w is None else w.take(idx, axis=0)
+        nd["state"] = None if st is None else st.take(idx)
+        nd["basis"] = self.basis
+        nd["_n"] = len(idx)
+        return new
 
     def moved(self, o, d, w, depth=None) -> "Rays":
         """The same paths (pixels, wavelengths, path state) continuing from o along d with weight w
         (coefficients over the same basis if w has the basis's k columns, else spectral)."""
         basis = self.basis if self.basis is not None and w is not None and w.ndim == 2 and \
             w.shape[1] == len(self.basis) else None
-        return Rays(o, d, self.pix, w, self.lam, self.depth + 1 if depth is None else depth, self.u_lam,
-                     None if self.state is None else self.state.copy(), basis)
+        new = object.__new__(Rays)
+        nd, sd = new.__dict__, self.__dict__
+        pending = sd.get("_pending")
+        carried = {}
+        for k in ("pix", "lam", "u_lam"):  # shared with these rays, gathered once if still pending
+            if k in sd:
+                nd[k] = sd[k]
+            else:
+                carried[k] = pending[k]
+        nd["_pending"] = carried
+        st = self.state
+        nd.update(o=o, d=d, w=w, depth=self.depth + 1 if depth is None else depth,
+                  state=None if st is None else st.copy(), basis=basis, _n=len(self))
+        return new
 
     def weighted(self, x):
         """The ray weight times x (x itself for unit-weight camera rays)."""
@@ -195,7 +215,7 @@ def _concat_all(parts: list) -> Rays:
 
 
 @dataclass
-class Hit:
+class Hit(RowView):
     p: np.ndarray     # (B, 3) float32 hit points
     ng: np.ndarray    # (B, 3) float32 geometric normal facing the incoming ray
     ns: np.ndarray    # (B, 3) float32 unit shading normal, on ng's side of the surface (ng itself when flat)
@@ -210,13 +230,16 @@ class Hit:
     _FIELDS = ("p", "ng", "ns", "cos_i", "front", "mat", "eps", "prim", "bu", "bv")
 
     def take(self, mask) -> "Hit":
-        """The hits where ``mask`` (B,) bool is set, or at indices ``mask``."""
+        """The hits where ``mask`` (B,) bool is set, or at indices ``mask``: a subset whose fields
+        are gathered when first read (core/transport/rows.py)."""
         idx = _indices(mask)
         if idx is None:
             return self
-        out = {f: _rows(getattr(self, f), idx) for f in self._FIELDS if f != "ns"}
-        out["ns"] = out["ng"] if self.ns is self.ng else _rows(self.ns, idx)  # flat: one array for both
-        return Hit(**out)
+        new = subset(self, idx, self._FIELDS)
+        d = self.__dict__
+        if "ns" in d and d["ns"] is d.get("ng"):  # flat: one array for both, in the subset too
+            new.__dict__["_pending"]["ns"] = "ng"
+        return new
 
     @staticmethod
     def concat(a: "Hit", b: "Hit") -> "Hit":
