@@ -16,23 +16,24 @@ The light pass's rays carry none (``Rays.state`` None). A subclass with more arr
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from enum import IntEnum
 
 import numpy as np
 
-from .rows import RowView, pending_copy, subset
+from .rows import RowView, holds_none, join, pending_copy, subset
 
 __all__ = ["Caustic", "MAX_DIFFUSE_VERTICES", "PathState"]
 
 
-class Caustic(IntEnum):
-    """Where a path stands towards the light pass's caustic map (``PathState.caustic``, int8)."""
+class Caustic:
+    """Where a path stands towards the light pass's caustic map (``PathState.caustic``, int8):
+    the codes as int8 scalars (comparing an array with an IntEnum member costs NumPy several
+    times the comparison itself: its int subclass takes a slow conversion every time)."""
     #: no caustic receiver since the last emission-relevant vertex: the eye pass counts its light
-    NONE = 0
+    NONE = np.int8(0)
     #: the last diffuse vertex receives the light pass's caustics
-    RECEIVER = 1
+    RECEIVER = np.int8(1)
     #: ... and specular bounces followed it: a caustic path the light pass counted (left out here)
-    PATH = 2
+    PATH = np.int8(2)
 
 
 #: ``PathState.nd`` (int8) saturates here: the film parts only tell 0, 1 and 2+ apart.
@@ -82,9 +83,22 @@ class PathState(RowView):
 
     @staticmethod
     def concat(a: "PathState", b: "PathState") -> "PathState":
-        if (a.rd is None) != (b.rd is None):
+        return PathState.join([a, b])
+
+    @staticmethod
+    def join(parts: list) -> "PathState":
+        """The rows of ``parts`` (states of one class) one after another; a field every part
+        holds pending on one array stays pending (core/transport/rows.py)."""
+        cls = type(parts[0])
+        rd = holds_none(parts[0], "rd")
+        if any(type(p) is not cls or holds_none(p, "rd") != rd for p in parts):
             raise ValueError("cannot join ray populations that carry different state")
-        return type(a)(*(None if x is None else np.concatenate([x, y]) for x, y in zip(a._arrays(), b._arrays())))
+        lazy, eager, _ = _names(cls)
+        new = join(parts, lazy, object.__new__(cls))
+        for k in eager:
+            vals = [getattr(p, k) for p in parts]
+            setattr(new, k, None if vals[0] is None else np.concatenate(vals))
+        return new
 
     def _arrays(self) -> tuple:
         return tuple(getattr(self, k) for k in _names(type(self))[2])

@@ -9,7 +9,10 @@ subsets lazily: ``subset(obj, idx, names)`` is a new object of the same class wh
 ``names`` are *pending* - a source array and the row indices into it - until first read, when
 ``__getattr__`` gathers them with one ``ndarray.take`` and keeps the result as an ordinary
 attribute (later reads cost nothing extra). A subset of a subset composes the indices, so each
-field is gathered once, from the array where it last lived, however long the chain.
+field is gathered once, from the array where it last lived, however long the chain; ``join``
+(a step's continuing populations, one after another) keeps a field pending where every part
+has it pending on one array (the indices joined), so a field no stage changes or reads (a
+path's pixel, sampler ids, wavelength number) is not copied at all from step to step.
 
 The values are exactly those of an eager gather (a row gather is a copy, no arithmetic). The
 one rule it needs - already the walk's rule for its records - is that a stage that changes a
@@ -25,7 +28,11 @@ so a copy and its original gather a field once between them.
 
 from __future__ import annotations
 
-__all__ = ["RowView", "subset", "pending_copy"]
+import operator
+
+import numpy as np
+
+__all__ = ["RowView", "subset", "pending_copy", "join", "holds_none"]
 
 
 class RowView:
@@ -92,3 +99,44 @@ def pending_copy(obj):
     if pending is not None:
         nd["_pending"] = dict(pending)
     return new
+
+
+def join(parts, names, out):
+    """Fill ``out``'s instance dict with the fields ``names`` of ``parts`` (objects of one
+    class, alike: a field None in one is None in all) stacked one after another: a field every
+    part holds pending on the same source array stays pending (the parts' indices joined, one
+    gather when first read), any other is concatenated. Other attributes are the caller's."""
+    nd = out.__dict__
+    dicts = [p.__dict__ for p in parts]
+    pends = [d.get("_pending") or _NONE_PENDING for d in dicts]
+    pending = {}
+    last = joined = None
+    for k in names:
+        cells = [pe.get(k) for pe in pends]  # None where gathered or assigned
+        c0 = cells[0]
+        if c0 is not None and type(c0) is list and len(c0) == 2 and all(
+                c is not None and type(c) is list and len(c) == 2 and c[0] is c0[0] and k not in d
+                for c, d in zip(cells, dicts)):
+            idxs = [c[1] for c in cells]
+            if last is None or not all(map(_same, idxs, last)) or len(idxs) != len(last):
+                last, joined = idxs, np.concatenate(idxs)  # fields taken together share their indices
+            pending[k] = [c0[0], joined]
+            continue
+        vals = [getattr(p, k) for p in parts]
+        if vals[0] is None:
+            if any(v is not None for v in vals):
+                raise ValueError(f"cannot join records where {k!r} is None in some parts only")
+            nd[k] = None
+        else:
+            nd[k] = np.concatenate(vals)
+    nd["_pending"] = pending
+    return out
+
+
+_NONE_PENDING: dict = {}
+_same = operator.is_
+
+
+def holds_none(obj, name) -> bool:
+    """Whether field ``name`` of ``obj`` is None, without gathering it (None fields are never pending)."""
+    return obj.__dict__.get(name, 0) is None
