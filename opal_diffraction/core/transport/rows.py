@@ -66,6 +66,16 @@ def subset(obj, idx, names, out=None):
     nd = new.__dict__
     d = obj.__dict__
     src_pending = d.get("_pending")
+    if not src_pending:  # every field held (the usual parent: a population): its rows idx
+        pending = {}
+        for k in names:
+            v = d[k]
+            if v is None:
+                nd[k] = None
+            else:
+                pending[k] = [v, idx]
+        nd["_pending"] = pending
+        return new
     pending = {}
     last = composed = None
     for k in names:
