@@ -77,7 +77,7 @@ def subset(obj, idx, names, out=None):
         nd["_pending"] = pending
         return new
     pending = {}
-    last = composed = None
+    composed = {}  # id of a pending index array of obj -> its rows idx (fields taken together share one)
     for k in names:
         if k in d:  # a materialised (or reassigned) field: its rows idx
             v = d[k]
@@ -92,9 +92,10 @@ def subset(obj, idx, names, out=None):
         elif len(cell) == 1:
             pending[k] = [cell[0], idx]
         else:  # still pending in obj: the source's rows (obj's indices)[idx], composed once
-            if cell[1] is not last:
-                last, composed = cell[1], cell[1].take(idx)
-            pending[k] = [cell[0], composed]
+            c = composed.get(id(cell[1]))
+            if c is None:
+                c = composed[id(cell[1])] = cell[1].take(idx)
+            pending[k] = [cell[0], c]
     nd["_pending"] = pending
     return new
 
