@@ -63,6 +63,22 @@ def test_environment_variable_forces_the_reference(monkeypatch):
     assert not jit.kernels_enabled() and jit.kernels_path("auto") == "numpy"
 
 
+@needs_numba
+def test_a_render_reads_the_environment_variable_when_it_starts(monkeypatch):
+    """Inside kernel_mode (a render) kernels_enabled() does not read OPAL_KERNELS per call: a
+    block that starts with it set holds the reference, one that started without keeps the kernels."""
+    monkeypatch.setenv(jit.KERNELS_ENV, "numpy")
+    with jit.kernel_mode("auto") as path:
+        assert path == "numpy" and not jit.kernels_enabled()
+        monkeypatch.delenv(jit.KERNELS_ENV)
+        assert not jit.kernels_enabled()
+    assert jit.kernels_enabled()
+    with jit.kernel_mode("auto") as path:
+        monkeypatch.setenv(jit.KERNELS_ENV, "numpy")
+        assert path == "numba" and jit.kernels_enabled()
+    assert not jit.kernels_enabled()  # outside a render: read on every call
+
+
 def test_without_numba_the_reference_runs(monkeypatch):
     monkeypatch.setattr(jit, "AVAILABLE", False)
     assert not jit.kernels_enabled() and jit.kernels_path("auto") == "numpy"

@@ -8,28 +8,32 @@ sampler numbers, and its ray differentials (core/sampling/footprint.py). ``PathS
 them as structure-of-arrays, one row per ray, carried in ``Rays.state``: gathered by
 ``Rays.take``, joined by ``Rays.concat`` and inherited by ``Rays.moved`` (a shallow copy: a
 stage that changes a field assigns a new array to it, so the parent's rows stay as they were).
+A subset's fields are gathered when first read (core/transport/rows.py: most stages read a few).
 The light pass's rays carry none (``Rays.state`` None). A subclass with more array fields
 (benchmarks/sphere_noise.py tags paths by their first event) is carried the same way.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
-from enum import IntEnum
+from dataclasses import dataclass, fields
 
 import numpy as np
+
+from .rows import RowView, holds_none, join, pending_copy, subset
 
 __all__ = ["Caustic", "MAX_DIFFUSE_VERTICES", "PathState"]
 
 
-class Caustic(IntEnum):
-    """Where a path stands towards the light pass's caustic map (``PathState.caustic``, int8)."""
+class Caustic:
+    """Where a path stands towards the light pass's caustic map (``PathState.caustic``, int8):
+    the codes as int8 scalars (comparing an array with an IntEnum member costs NumPy several
+    times the comparison itself: its int subclass takes a slow conversion every time)."""
     #: no caustic receiver since the last emission-relevant vertex: the eye pass counts its light
-    NONE = 0
+    NONE = np.int8(0)
     #: the last diffuse vertex receives the light pass's caustics
-    RECEIVER = 1
+    RECEIVER = np.int8(1)
     #: ... and specular bounces followed it: a caustic path the light pass counted (left out here)
-    PATH = 2
+    PATH = np.int8(2)
 
 
 #: ``PathState.nd`` (int8) saturates here: the film parts only tell 0, 1 and 2+ apart.
@@ -37,7 +41,7 @@ MAX_DIFFUSE_VERTICES = 100
 
 
 @dataclass
-class PathState:
+class PathState(RowView):
     """Per-path arrays (B,) of the eye pass (rows match the rays that carry them)."""
     nd: np.ndarray            # int8 diffuse (non-specular) vertices so far, at most MAX_DIFFUSE_VERTICES
     diffuse: np.ndarray       # int16 diffuse bounces (Cycles' counts; their total is Rays.depth)
@@ -65,32 +69,55 @@ class PathState:
                    np.zeros((b, 5, 3), np.float32) if differentials else None)
 
     def take(self, idx: np.ndarray) -> "PathState":
-        """The rows at indices ``idx``."""
-        d = self.__dict__
-        return type(self)(*[None if d[k] is None else d[k].take(idx, axis=0) for k in _names(type(self))])
+        """The rows at indices ``idx`` (each field gathered when first read)."""
+        lazy, eager, _ = _names(type(self))
+        new = subset(self, idx, lazy)
+        for k in eager:  # fields with a class-level default (a subclass's): gathered now
+            v = getattr(self, k)
+            setattr(new, k, None if v is None else v.take(idx, axis=0))
+        return new
 
     def copy(self) -> "PathState":
         """A new state holding the same arrays (fields reassigned on it leave this one alone)."""
-        return replace(self)
+        return pending_copy(self)
 
     @staticmethod
     def concat(a: "PathState", b: "PathState") -> "PathState":
-        if (a.rd is None) != (b.rd is None):
+        return PathState.join([a, b])
+
+    @staticmethod
+    def join(parts: list) -> "PathState":
+        """The rows of ``parts`` (states of one class) one after another; a field every part
+        holds pending on one array stays pending (core/transport/rows.py)."""
+        cls = type(parts[0])
+        rd = holds_none(parts[0], "rd")
+        if any(type(p) is not cls or holds_none(p, "rd") != rd for p in parts):
             raise ValueError("cannot join ray populations that carry different state")
-        return type(a)(*(None if x is None else np.concatenate([x, y]) for x, y in zip(a._arrays(), b._arrays())))
+        lazy, eager, _ = _names(cls)
+        new = join(parts, lazy, object.__new__(cls))
+        for k in eager:
+            vals = [getattr(p, k) for p in parts]
+            setattr(new, k, None if vals[0] is None else np.concatenate(vals))
+        return new
 
     def _arrays(self) -> tuple:
-        d = self.__dict__
-        return tuple(d[k] for k in _names(type(self)))
+        return tuple(getattr(self, k) for k in _names(type(self))[2])
 
+
+# no class-level default: a subset's pending rd must reach RowView.__getattr__ (the dataclass's
+# __init__ keeps its default None)
+del PathState.rd
 
 _NAMES: dict = {}
 
 
 def _names(cls) -> tuple:
-    """The field names of a PathState class (a subclass adds its own), looked up once per class:
-    dataclasses.fields costs more than a take of a small array."""
+    """(fields a subset gathers when first read, fields it gathers at once (those with a
+    class-level default), all fields in order) of a PathState class (a subclass adds its own),
+    looked up once per class: dataclasses.fields costs more than a take of a small array."""
     names = _NAMES.get(cls)
     if names is None:
-        names = _NAMES[cls] = tuple(f.name for f in fields(cls))
+        every = tuple(f.name for f in fields(cls))
+        names = _NAMES[cls] = (tuple(k for k in every if not hasattr(cls, k)),
+                               tuple(k for k in every if hasattr(cls, k)), every)
     return names

@@ -58,6 +58,7 @@ import numpy as np
 from ..sampling import footprint
 from . import wavelengths
 from .path_state import PathState
+from .rows import RowView, holds_none, join, pending_copy, subset
 from ..materials.spectra import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
 from ..spectral.optics import fresnel_dielectric, reflect, refract
 from ..util.jit import kernels_enabled, njit
@@ -78,17 +79,16 @@ def _indices(mask):
     mask = np.asarray(mask)
     if mask.dtype != bool:
         return mask
-    if len(mask) and mask.all():
-        return None
-    return np.flatnonzero(mask)
+    idx = mask.nonzero()[0]  # (B,) masks only: np.flatnonzero's ravel costs more than the call
+    return None if len(idx) == len(mask) and len(idx) else idx
 
 
-def _rows(a, idx):
-    return a.take(idx, axis=0)
+#: The fields of Rays gathered when first read (w at once: see Rays.take; state and basis are not rows).
+_RAY_ROWS = ("o", "d", "pix", "lam", "depth", "u_lam")
 
 
 @dataclass
-class Rays:
+class Rays(RowView):
     o: np.ndarray      # (B, 3) float32 origins
     d: np.ndarray      # (B, 3) float32 unit directions
     pix: np.ndarray    # (B,) int64 pixel index within the tile
@@ -104,25 +104,44 @@ class Rays:
     basis: np.ndarray | None = None
 
     def __len__(self):
-        return len(self.pix)
+        n = self.__dict__.get("_n")  # a subset's row count (its pix may not be gathered)
+        return len(self.pix) if n is None else n
 
     def take(self, mask) -> "Rays":
-        """The rays where ``mask`` (B,) bool is set, or at indices ``mask``."""
+        """The rays where ``mask`` (B,) bool is set, or at indices ``mask``: a subset whose fields
+        are gathered when first read (core/transport/rows.py), the weights at once (Russian
+        roulette scales a population's weights in place)."""
         idx = _indices(mask)
         if idx is None:
             return self
-        return Rays(_rows(self.o, idx), _rows(self.d, idx), _rows(self.pix, idx),
-                     None if self.w is None else _rows(self.w, idx), None if self.lam is None else _rows(self.lam, idx),
-                     _rows(self.depth, idx), _rows(self.u_lam, idx),
-                     None if self.state is None else self.state.take(idx), self.basis)
+        new = subset(self, idx, _RAY_ROWS)
+        nd = new.__dict__
+        w, st = self.w, self.state
+        nd["w"] = None if w is None else w.take(idx, axis=0)
+        nd["state"] = None if st is None else st.take(idx)
+        nd["basis"] = self.basis
+        nd["_n"] = len(idx)
+        return new
 
     def moved(self, o, d, w, depth=None) -> "Rays":
         """The same paths (pixels, wavelengths, path state) continuing from o along d with weight w
         (coefficients over the same basis if w has the basis's k columns, else spectral)."""
         basis = self.basis if self.basis is not None and w is not None and w.ndim == 2 and \
             w.shape[1] == len(self.basis) else None
-        return Rays(o, d, self.pix, w, self.lam, self.depth + 1 if depth is None else depth, self.u_lam,
-                     None if self.state is None else self.state.copy(), basis)
+        new = object.__new__(Rays)
+        nd, sd = new.__dict__, self.__dict__
+        pending = sd.get("_pending")
+        carried = {}
+        for k in ("pix", "lam", "u_lam"):  # shared with these rays, gathered once if still pending
+            if k in sd:
+                nd[k] = sd[k]
+            else:
+                carried[k] = pending[k]
+        nd["_pending"] = carried
+        st = self.state
+        nd.update(o=o, d=d, w=w, depth=self.depth + 1 if depth is None else depth,
+                  state=None if st is None else st.copy(), basis=basis, _n=len(self))
+        return new
 
     def weighted(self, x):
         """The ray weight times x (x itself for unit-weight camera rays)."""
@@ -144,26 +163,27 @@ class Rays:
 
     @staticmethod
     def concat(a: "Rays", b: "Rays") -> "Rays":
+        basis = None
         if a.basis is not None or b.basis is not None:
-            if a.basis is not b.basis and not (a.basis is not None and b.basis is not None
-                                               and a.basis.shape == b.basis.shape
-                                               and np.array_equal(a.basis, b.basis)):
+            if a.basis is b.basis or (a.basis is not None and b.basis is not None and a.basis.shape == b.basis.shape
+                                      and np.array_equal(a.basis, b.basis)):
+                basis = a.basis  # coefficients over one basis: joined as they are
+            else:
                 a, b = a.dense(), b.dense()  # different bases: join as spectra
-            elif a.basis is not None:
-                basis = a.basis
-                joined = Rays.concat(replace(a, basis=None), replace(b, basis=None))
-                return replace(joined, basis=basis)
         if (a.w is None) != (b.w is None):  # one side has implicit unit weights: make them explicit
             n = (a.w if a.w is not None else b.w).shape[1]
-            a, b = replace(a, w=a.dense_w(n)), replace(b, w=b.dense_w(n))
-        state = None
-        if a.state is not None or b.state is not None:
-            if a.state is None or b.state is None:
-                raise ValueError("cannot join ray populations that carry different state")
-            state = PathState.concat(a.state, b.state)
-        return Rays(*(None if x is None else np.concatenate([x, y]) for x, y in
-                       zip((a.o, a.d, a.pix, a.w, a.lam, a.depth, a.u_lam),
-                           (b.o, b.d, b.pix, b.w, b.lam, b.depth, b.u_lam))), state)
+            a, b = a._with_w(a.dense_w(n)), b._with_w(b.dense_w(n))
+        if (a.state is None) != (b.state is None):
+            raise ValueError("cannot join ray populations that carry different state")
+        if holds_none(a, "lam") != holds_none(b, "lam"):
+            raise ValueError("cannot join white and mono rays")
+        return _join([a, b], basis)
+
+    def _with_w(self, w) -> "Rays":
+        """These rays (their pending fields too) with weights w."""
+        new = pending_copy(self)
+        new.w = w
+        return new
 
     @property
     def differentials(self) -> np.ndarray | None:
@@ -172,30 +192,40 @@ class Rays:
 
 
 def _concat_all(parts: list) -> Rays:
-    """Rays.concat of parts[0], parts[1], ... in order: one concatenation per field where they
-    are alike (spectral or mono weights, no basis, the same state fields), else pairwise."""
+    """Rays.concat of parts[0], parts[1], ... in order: joined at once where they are alike
+    (spectral or mono weights, no basis, the same state fields), else pairwise."""
     if len(parts) == 1:
         return parts[0]
-    a = parts[0]
-    alike = all(r.basis is None and (r.w is None) == (a.w is None) and (r.lam is None) == (a.lam is None)
-                and (r.state is None) == (a.state is None) and type(r.state) is type(a.state)
-                and (r.state is None or (r.state.rd is None) == (a.state.rd is None)) for r in parts)
-    if not alike:
-        nxt = a
+    key = _join_key(parts[0])
+    if key[0] or any(_join_key(r) != key for r in parts[1:]):
+        nxt = parts[0]
         for r in parts[1:]:
             nxt = Rays.concat(nxt, r)
         return nxt
-    cat = lambda f: None if getattr(a, f) is None else np.concatenate([getattr(r, f) for r in parts])  # noqa: E731
-    state = None
-    if a.state is not None:
-        st = [r.state._arrays() for r in parts]
-        state = type(a.state)(*(None if x is None else np.concatenate([s[i] for s in st])
-                                for i, x in enumerate(st[0])))
-    return Rays(cat("o"), cat("d"), cat("pix"), cat("w"), cat("lam"), cat("depth"), cat("u_lam"), state)
+    return _join(parts)
+
+
+def _join_key(r: Rays) -> tuple:
+    """What must match for rays to join field by field (read without gathering anything)."""
+    st = r.state
+    return (r.basis is not None, r.w is None, holds_none(r, "lam"), type(st), st is None or holds_none(st, "rd"))
+
+
+def _join(parts: list, basis=None) -> Rays:
+    """The rays of ``parts`` (alike: see _join_key) one after another, over ``basis``; fields
+    still pending on one array in every part stay pending (core/transport/rows.py)."""
+    a = parts[0]
+    new = join(parts, _RAY_ROWS, object.__new__(Rays))
+    nd = new.__dict__
+    nd["w"] = None if a.w is None else np.concatenate([r.w for r in parts])
+    nd["state"] = None if a.state is None else PathState.join([r.state for r in parts])
+    nd["basis"] = basis
+    nd["_n"] = sum(len(r) for r in parts)
+    return new
 
 
 @dataclass
-class Hit:
+class Hit(RowView):
     p: np.ndarray     # (B, 3) float32 hit points
     ng: np.ndarray    # (B, 3) float32 geometric normal facing the incoming ray
     ns: np.ndarray    # (B, 3) float32 unit shading normal, on ng's side of the surface (ng itself when flat)
@@ -210,13 +240,16 @@ class Hit:
     _FIELDS = ("p", "ng", "ns", "cos_i", "front", "mat", "eps", "prim", "bu", "bv")
 
     def take(self, mask) -> "Hit":
-        """The hits where ``mask`` (B,) bool is set, or at indices ``mask``."""
+        """The hits where ``mask`` (B,) bool is set, or at indices ``mask``: a subset whose fields
+        are gathered when first read (core/transport/rows.py)."""
         idx = _indices(mask)
         if idx is None:
             return self
-        out = {f: _rows(getattr(self, f), idx) for f in self._FIELDS if f != "ns"}
-        out["ns"] = out["ng"] if self.ns is self.ng else _rows(self.ns, idx)  # flat: one array for both
-        return Hit(**out)
+        new = subset(self, idx, self._FIELDS)
+        d = self.__dict__
+        if "ns" in d and d["ns"] is d.get("ng"):  # flat: one array for both, in the subset too
+            new.__dict__["_pending"]["ns"] = "ng"
+        return new
 
     @staticmethod
     def concat(a: "Hit", b: "Hit") -> "Hit":
@@ -401,11 +434,14 @@ class SpecularWalker:
             missed = h.prim < 0
             if self._hooks_segment:
                 self.on_segment(rays, np.where(missed, np.float32(np.inf), h.t))
-            if self._hooks_miss and missed.any():
+            keep = _indices(~missed)
+            if self._hooks_miss and keep is not None:
                 self.on_miss(rays.take(missed))
-            keep = ~missed
-            rays = rays.take(keep)
-            hit = self.hit_info(rays, h.t[keep], h.prim[keep], h.u[keep], h.v[keep])
+            if keep is None:
+                hit = self.hit_info(rays, h.t, h.prim, h.u, h.v)
+            else:
+                rays = rays.take(keep)
+                hit = self.hit_info(rays, h.t.take(keep), h.prim.take(keep), h.u.take(keep), h.v.take(keep))
         if pending is not None and pending[0] is not None and len(pending[0]):
             if hit is None:
                 rays, hit = pending
@@ -414,8 +450,8 @@ class SpecularWalker:
         if hit is None or len(rays) == 0:
             return rays.take(np.zeros(len(rays), bool)), None, None
 
-        kind = prepared.materials.kind[hit.mat]
-        micro = self.microfacet[hit.mat] if self.any_microfacet else None
+        kind = prepared.materials.kind.take(hit.mat)
+        micro = self.microfacet.take(hit.mat) if self.any_microfacet else None
         if micro is not None:  # rough mirrors and glass leave the delta code; diffuse bases keep their kind
             kind = np.where(micro & (kind != DIFFUSE_KIND), MICROFACET, kind)
         kind = self.classify(rays, hit, kind, rng)
@@ -425,23 +461,24 @@ class SpecularWalker:
         children = child_hits = None
         out = []
         mirror = (kind == MIRROR) & can_bounce
-        if mirror.any():
+        if np.count_nonzero(mirror):  # (counts cost a fifth of ndarray.any's call on small masks)
             r = self.mirror_bounce(rays.take(mirror), hit.take(mirror))
             out.append(self.after_delta(r, np.zeros(len(r), bool)))
         diel = (kind == DIELECTRIC) & can_bounce
         # white rays split at every dispersive glass, smooth or rough (mono children go on)
-        white_split = (diel | ((kind == MICROFACET) & can_bounce)) if rays.lam is None else diel
-        if white_split.any():
-            if rays.lam is None:
-                disp = white_split & prepared.materials.dispersive[hit.mat]
-                if disp.any():  # core/transport/wavelengths.py: smooth glass reflects white, refracts mono
+        is_white = holds_none(rays, "lam")
+        white_split = (diel | ((kind == MICROFACET) & can_bounce)) if is_white else diel
+        if np.count_nonzero(white_split):
+            if is_white:
+                disp = white_split & prepared.materials.dispersive.take(hit.mat)
+                if np.count_nonzero(disp):  # core/transport/wavelengths.py: smooth glass reflects white, refracts mono
                     rd = rays.take(disp).dense()
                     children, child_hits, white = wavelengths.split_at_glass(self, rd, hit.take(disp), rng,
                                                                              self.choice_numbers(rd, rng))
                     if white is not None and len(white):
                         out.append(white)
                 diel = diel & ~disp
-            if diel.any():
+            if np.count_nonzero(diel):
                 r = rays.take(diel)
                 r, transmitted = self.dielectric_bounce(r, hit.take(diel), rng, self.choice_numbers(r, rng))
                 out.append(self.after_delta(r, transmitted))
@@ -450,7 +487,7 @@ class SpecularWalker:
             if scattered.differentials is not None:
                 # a diffuse or rough bounce: no footprint any more (a point sample)
                 scattered.state.rd = footprint.zero_differentials(len(scattered))
-            if (scattered.lam is None) == (rays.lam is None):
+            if holds_none(scattered, "lam") == is_white:
                 out.append(scattered)
             else:  # a white population's mono rays: traced with the mono population
                 self.spawn(scattered)

@@ -163,25 +163,35 @@ def kernels_path(mode: str = "auto") -> str:
 @contextlib.contextmanager
 def kernel_mode(mode: str = "auto"):
     """Hold RenderSettings.kernels = ``mode`` for the block (one render); yields kernels_path(mode).
-    Blocks nest and overlap across threads: while one of them forces 'numpy', the reference runs."""
-    global _numpy_holds
+    Blocks nest and overlap across threads: while one of them forces 'numpy', the reference runs.
+    OPAL_KERNELS is read when a block starts: one that starts with it set to 'numpy' forces the
+    reference like mode 'numpy', and while blocks are open kernels_enabled() does not read it
+    again (it is called thousands of times per render)."""
+    global _numpy_holds, _open_blocks
     path = kernels_path(mode)
-    forced = mode != "auto"
-    if forced:
-        with _lock:
+    forced = path == "numpy"  # asked for, OPAL_KERNELS=numpy now, or no numba
+    with _lock:
+        _open_blocks += 1
+        if forced:
             _numpy_holds += 1
     try:
         yield path
     finally:
-        if forced:
-            with _lock:
+        with _lock:
+            _open_blocks -= 1
+            if forced:
                 _numpy_holds -= 1
+
+
+_open_blocks = 0  # kernel_mode blocks now open (renders running)
 
 
 def kernels_enabled() -> bool:
     """Whether the compiled kernels run now (numba available, OPAL_KERNELS is not 'numpy' and no
-    running render forces the reference). The functions with kernels call this to choose."""
-    return AVAILABLE and _numpy_holds == 0 and not _env_forces_numpy()
+    running render forces the reference). The functions with kernels call this to choose.
+    Outside any render (kernel_mode block) OPAL_KERNELS is read on every call; inside, the
+    blocks' holds say it (read when each began)."""
+    return AVAILABLE and _numpy_holds == 0 and (_open_blocks > 0 or not _env_forces_numpy())
 
 
 def kernels() -> list:

@@ -32,14 +32,15 @@ def russian_roulette(c, rays: Rays, rng) -> np.ndarray:
     """Specular bounces go on below the total limit and past Russian roulette (after three
     bounces, survival probability = the largest spectral throughput, at most 1, survivors
     reweighted by 1 / that, in place: unbiased; pbrt-v4's rule). Mono rays are not rouletted."""
-    ok = (rays.depth < c.limits[0]) & ~rays.state.final
-    if rays.lam is None and rays.w is not None:
-        deep = ok & (rays.depth >= 3)
-        if deep.any():
+    depth = rays.depth
+    ok = (depth < c.limits[0]) & ~rays.state.final
+    if rays.w is not None and rays.w.ndim == 2:  # white rays (mono ones: w (B,))
+        deep = ok & (depth >= 3)
+        if np.count_nonzero(deep):
             # a Fresnel-split child (core/integrators/eye/fresnel_split.py) is rouletted as its unsplit path
             q = np.minimum(rays.w.max(axis=1) / rays.state.split, np.float32(1.0))
             roulette = deep & (q < 1)
-            if roulette.any():
+            if np.count_nonzero(roulette):
                 alive = rng.random(len(rays), np.float32) < q
                 ok &= ~roulette | alive
                 kept = roulette & alive
@@ -68,9 +69,10 @@ def lambert_bounce(c, rays: Rays, hit: Hit, sel: np.ndarray, can_bounce: np.ndar
     no segment at all, one at its total limit its emission-only one."""
     # roulette applies to the bounce; a path that loses it takes no segment at all
     sel = sel & (can_bounce | (rays.depth >= c.limits[0]))
-    r, h = rays.take(sel), hit.take(sel)
-    if len(r) == 0:
+    k = sel.nonzero()[0]
+    if len(k) == 0:
         return None
+    r, h = rays.take(k), hit.take(k)
     albedo = None if shading is None else shading.albedo_at(sel)
     if albedo is None:
         albedo = c.greys.albedo(r, h.mat)
@@ -81,10 +83,12 @@ def lambert_bounce(c, rays: Rays, hit: Hit, sel: np.ndarray, can_bounce: np.ndar
     if grey and not c.greys.is_grey(r):  # spectral weights: the grey colour as a spectrum
         albedo, grey = albedo[:, None] * c.greys.basis, False
     lit = reflects(c.n, c.probe, albedo)
-    if not lit.all():  # a zero-weight path (a black surface) ends here
-        r, h, albedo = r.take(lit), h.take(lit), albedo[lit]
-        if len(r) == 0:
+    n_lit = np.count_nonzero(lit)  # (counts cost a fifth of ndarray.any's call on small masks)
+    if n_lit < len(lit):  # a zero-weight path (a black surface) ends here
+        if not n_lit:
             return None
+        k = lit.nonzero()[0]
+        r, h, albedo = r.take(k), h.take(k), albedo[k]
     wi, cos = bsdf.cosine_hemisphere(h.ns, numbers(r, SLOT_BOUNCE))
     if c.bent:  # about ns; a direction below the geometric surface ends the path
         up = np.einsum("ij,ij->i", wi, h.ng) > 0
@@ -105,7 +109,7 @@ def lambert_bounce(c, rays: Rays, hit: Hit, sel: np.ndarray, can_bounce: np.ndar
     s.nd = np.minimum(s.nd + 1, MAX_DIFFUSE_VERTICES).astype(np.int8)
     s.diffuse = s.diffuse + 1
     s.pdf = (cos * np.float32(1 / np.pi)).astype(np.float32)
-    s.caustic = np.full(b, Caustic.RECEIVER if c.caustic_map is not None else Caustic.NONE, np.int8)
+    s.caustic = np.full(b, Caustic.RECEIVER if c.caustic_map is not None else Caustic.NONE)
     s.seen = splat_bounce.mark_bounce(c.splat_bounce, r, h)
     s.final = (s.diffuse > c.limits[1]) | (out.depth > c.limits[0])
     return out

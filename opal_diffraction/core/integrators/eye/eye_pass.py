@@ -63,6 +63,7 @@ class EyePass:
         self.constants: EyeConstants = eye_constants(prepared, light, plan)  # once per render
         # camera rays carry ray differentials (core/sampling/footprint.py) only to integrate gratings
         self.wants_differentials = self.constants.footprints
+        self.any_emissive = bool(prepared.materials.emissive.any())  # else on_hit skips the emission stage
 
     def trace(self, origins, directions, pix, n_pixels: int, rng: np.random.Generator,
               u_lambda: np.ndarray | None = None, sampler_ids=None,
@@ -127,6 +128,7 @@ class _TileTrace(SpecularWalker):
         self.sampler_seed = sampler_seed
         self.out = TileOutput(n_pixels, self.n)
         self.escapes = [] if record_escapes else None  # dicts of the rays leaving the scene
+        self.any_emissive = eye.any_emissive
 
     def _new_state(self, b: int) -> PathState:
         """The path tracer's per-path state of ``b`` camera paths (core/transport/path_state.py),
@@ -180,11 +182,13 @@ class _TileTrace(SpecularWalker):
         c, out = self.c, self.out
         prepared = self.prepared
         st = rays.state
-        emits = prepared.materials.emissive[hit.mat]
-        if emits.any() and not emission.surface_emission_unit(c, out, rays, hit, emits):
-            emission.surface_emitted(c, out, rays.take(emits), hit.take(emits))
+        if self.any_emissive:
+            emits = prepared.materials.emissive.take(hit.mat)
+            if np.count_nonzero(emits) and not emission.surface_emission_unit(c, out, rays, hit, emits):
+                emission.surface_emitted(c, out, rays.take(emits), hit.take(emits))
         live = ~st.final  # a final segment only gathers emission
-        if not live.any():
+        n_live = np.count_nonzero(live)  # (counts cost a fifth of ndarray.any's call on small masks)
+        if not n_live:
             return None
         if c.normal_maps:  # bend the shading normal of diffuse hits (core/materials/surface.py); scatter reuses it
             bend = live & ((kind == DIFFUSE) | (kind == MICROFACET))
@@ -206,8 +210,9 @@ class _TileTrace(SpecularWalker):
                 self._shade_microfacet(rm, hm, params, rng)
             kind = np.where(micro, -1, kind)  # shaded: not Lambertian below
         full_live = live
-        if not live.all():
-            rays, hit, kind = rays.take(live), hit.take(live), kind[live]
+        if n_live < len(live):
+            idx = live.nonzero()[0]
+            rays, hit, kind = rays.take(idx), hit.take(idx), kind.take(idx)
             st = rays.state
         if prepared.gratings.any:
             on_grating = prepared.gratings.enabled[hit.mat]
@@ -223,8 +228,10 @@ class _TileTrace(SpecularWalker):
                 first = black & (st.nd == 0)
                 if first.any():
                     out.denoising_features(rays.take(first), hit.take(first), c.albedo_rgb)
-        if diffuse.any():
-            self._shade_lambert(rays, hit, diffuse, np.flatnonzero(full_live)[diffuse], shading, rng)
+        if np.count_nonzero(diffuse):
+            rows = diffuse.nonzero()[0]  # the diffuse hits' rows in on_hit's batch
+            self._shade_lambert(rays, hit, rows, rows if n_live == len(live) else full_live.nonzero()[0].take(rows),
+                                shading, rng)
         return shading
 
     def survives(self, rays: Rays, rng) -> np.ndarray:
@@ -321,9 +328,9 @@ class _TileTrace(SpecularWalker):
                 caustic_light(c, out, rays.take(base), hit.take(base), rng)
 
     def _shade_lambert(self, rays: Rays, hit: Hit, diffuse: np.ndarray, rows: np.ndarray, shading: HitShading, rng):
-        """The Lambertian hits ``diffuse`` (rows ``rows`` of on_hit's batch): denoising features,
-        the base colour once (kept in ``shading`` for the bounce), next events into Direct or
-        Indirect, and the caustic map where the light pass's splats do not already hold it."""
+        """The Lambertian hits at indices ``diffuse`` (rows ``rows`` of on_hit's batch): denoising
+        features, the base colour once (kept in ``shading`` for the bounce), next events into
+        Direct or Indirect, and the caustic map where the light pass's splats do not already hold it."""
         c, out = self.c, self.out
         prepared = self.prepared
         r, h = rays.take(diffuse), hit.take(diffuse)
@@ -331,7 +338,8 @@ class _TileTrace(SpecularWalker):
         if c.layers:
             r = grating_layering.scale_base(prepared, r, h)
         first = r.state.nd == 0
-        if first.any():
+        n_first = np.count_nonzero(first)  # (counts cost a fifth of ndarray.any's call on small masks)
+        if n_first:
             out.denoising_features(r.take(first), h.take(first), c.albedo_rgb)
         # the base colour once per hit: next events and the bounce (scatter) share it;
         # grey ones as one number per hit (core/integrators/eye/grey_paths.py; next events expand it)
@@ -339,31 +347,37 @@ class _TileTrace(SpecularWalker):
         albedo = surface_reflectance(prepared, h, r.lam) if grey is None else grey
         shading.diffuse = (rows, albedo)
         lit = reflects(c.n, c.probe, albedo)
-        if not lit.all():  # black (emission-only) surfaces reflect nothing: no next events
-            r, h, r_full, albedo, first = r.take(lit), h.take(lit), r_full.take(lit), albedo[lit], first[lit]
-            if len(r) == 0:
+        n_lit = np.count_nonzero(lit)
+        if n_lit < len(lit):  # black (emission-only) surfaces reflect nothing: no next events
+            if not n_lit:
                 return
+            k = lit.nonzero()[0]
+            r, h, r_full, albedo, first = r.take(k), h.take(k), r_full.take(k), albedo[k], first[k]
+            n_first = np.count_nonzero(first)
         if grey is not None:
             albedo = None  # the next events take the spectra where they need them
-        if first.all():
+        if n_first == len(first):
             lambert_next_events(c, out, r, h, self.numbers(r, SLOT_LIGHT), out.film, albedo)
         else:
-            if first.any():
-                rf = r.take(first)
-                lambert_next_events(c, out, rf, h.take(first), self.numbers(rf, SLOT_LIGHT), out.film,
-                                    None if albedo is None else albedo[first])
-            rn = r.take(~first)
-            lambert_next_events(c, out, rn, h.take(~first), self.numbers(rn, SLOT_LIGHT), out.indirect,
-                                None if albedo is None else albedo[~first])
+            if n_first:
+                k = first.nonzero()[0]
+                rf = r.take(k)
+                lambert_next_events(c, out, rf, h.take(k), self.numbers(rf, SLOT_LIGHT), out.film,
+                                    None if albedo is None else albedo[k])
+            k = (~first).nonzero()[0]
+            rn = r.take(k)
+            lambert_next_events(c, out, rn, h.take(k), self.numbers(rn, SLOT_LIGHT), out.indirect,
+                                None if albedo is None else albedo[k])
         if c.caustic_map is not None:
-            if c.scattering is not None and c.scattering[h.mat].any():
-                own = c.scattering[h.mat]  # the map holds the base's share there already
-                caustic_light(c, out, r_full.take(own), h.take(own), rng)
-                r, h = r.take(~own), h.take(~own)
+            if c.scattering is not None:
+                own = c.scattering.take(h.mat)
+                if np.count_nonzero(own):  # the map holds the base's share there already
+                    caustic_light(c, out, r_full.take(own), h.take(own), rng)
+                    r, h = r.take(~own), h.take(~own)
             if c.direct_splat is not None:  # camera -> diffuse: the light pass's splat has it (section 4.9)
-                seen = (r.depth == 0) & c.direct_splat[h.mat]
+                seen = (r.depth == 0) & c.direct_splat.take(h.mat)
                 if c.splat_bounce is not None:  # ... and one diffuse bounce on (section 4.11)
                     seen |= splat_bounce.covered(c.splat_bounce, r, h)
-                if seen.any():
+                if np.count_nonzero(seen):
                     r, h = r.take(~seen), h.take(~seen)
             caustic_light(c, out, r, h, rng)
