@@ -30,7 +30,12 @@ paths (or loads them from its cache), and reports it as the progress stage "comp
 the first render after an install shows that stage instead of standing at 0 %. It runs once per
 process (``jit.warm_up``); renders on the NumPy reference skip it, and so do renders on a Dask
 cluster (its workers compile what they run). The render that paid for it
-has ``compile_s``, ``kernels_compiled`` and ``kernels_loaded`` in its stats.
+has ``compile_s``, ``kernels_compiled`` and ``kernels_loaded`` in its stats. A render's cancel
+check is polled during the stage (it runs in a worker thread, util/cancel.run_cancellable): a
+cancel returns a black, zero-sample result within util/cancel.POLL_S, the warm-up stops at its
+next check and the next render runs the stage again; ``render_prepared``'s time limit (counted
+from ``started_at``, as the CLI's includes the preparation) counts the stage too, ``render``'s
+starts after it.
 """
 
 from __future__ import annotations
