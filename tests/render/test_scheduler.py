@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ast
 import os
+import threading
 import time
 from dataclasses import replace
 
@@ -307,6 +308,7 @@ def test_a_cancel_or_time_limit_acts_within_a_poll_while_a_slow_unit_runs(how):
     """Each ray cast takes 0.25 s, so a tile-round takes seconds: the render returns within about
     POLL_S of the cancel (or of the time limit) with no unit in, and the dropped unit stops at its
     next ray cast instead of running on."""
+    compile_stage("auto")  # done before: the stop must come in the eye pass
     prepared = _small_prepared(light_paths=0, time_limit=0.6 if how == "time" else 0.0)
     slow = SlowAccel(prepared.accel, 0.25)
     prepared = replace(prepared, accel=slow)
@@ -339,3 +341,30 @@ def test_stoppable_accel_raises_once_stopped_and_is_the_accelerator_otherwise():
         acc.intersect(o, d)
     with pytest.raises(RenderCancelled):
         acc.occluded(o, d, np.full(3, 1e9, np.float32))
+
+
+def test_a_cancel_in_a_slow_light_pass_batch_returns_at_once_and_callbacks_stay_on_the_calling_thread():
+    """Each ray cast takes 0.6 s, so one light-pass batch takes seconds: a cancel 0.4 s in returns
+    within a few polls (the lanes stop at their next batch in the background), and the cancel
+    check and the progress are only called from the calling thread."""
+    compile_stage("auto")  # done before: the cancel must come in the light pass
+    prepared = _small_prepared(light_paths=5000)
+    slow = SlowAccel(prepared.accel, 0.6)
+    prepared = replace(prepared, accel=slow)
+    me, threads, stages = threading.get_ident(), set(), []
+    t0 = time.perf_counter()
+
+    def should_cancel():
+        threads.add(threading.get_ident())
+        return time.perf_counter() - t0 > 0.4
+
+    def progress(f, m):
+        threads.add(threading.get_ident())
+        stages.append(m)
+
+    res = render_prepared(prepared, should_cancel=should_cancel, progress=progress)
+    took = time.perf_counter() - t0
+    assert took < 0.4 + 3 * POLL_S + 0.3, took
+    assert res.cancelled and res.samples == 0 and threads == {me}
+    assert slow.calls and min(slow.calls) < t0 + 0.4  # the light pass was casting rays when cancelled
+    assert not any(m.startswith("eye pass") for m in stages)

@@ -58,7 +58,7 @@ from typing import Callable, Protocol
 from ..integrators.eye.eye_pass import EyePass
 from ..integrators.light.light_pass import LightPassResult, run_light_pass
 from ..sampling.camera import FilterSampler
-from ..util.cancel import StoppableAccel
+from ..util.cancel import RenderCancelled, StoppableAccel, check
 from .tiles import EyeWork, is_half_a, trace_tile
 
 __all__ = ["RenderControl", "Executor", "LocalExecutor", "EyePassOutcome", "run_eye_pass", "eye_window",
@@ -95,6 +95,10 @@ class RenderControl:
     def out_of_time(self) -> bool:
         """Whether the time limit has passed."""
         return self.deadline is not None and self.clock() > self.deadline
+
+    def has_cancel_check(self) -> bool:
+        """Whether this render has a cancel check (``should_cancel``)."""
+        return self._should_cancel is not None
 
     def can_stop(self) -> bool:
         """Whether this render may stop early (it has a cancel check or a time limit), so its
@@ -271,6 +275,8 @@ class LocalExecutor:
         self._eye = self._filt = self._work = None
         self._pollable = False
         self._stop = threading.Event()  # set by cancel_pending: the running units give up
+        self._eye_args = None  # (prepared, light, plan) of the EyePass the first unit builds
+        self._eye_lock = threading.Lock()
 
     def __enter__(self):
         return self
@@ -278,9 +284,10 @@ class LocalExecutor:
     def __exit__(self, *exc):
         self.cancel_pending()
         if self._pool is not None:
-            self._pool.shutdown(wait=True)  # dropped units end at their next ray cast (cancel_pending)
+            # not waited for: a dropped unit ends at its next ray cast (cancel_pending), on its own
+            self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = None
-        self._eye = self._filt = self._work = None
+        self._eye = self._eye_args = self._filt = self._work = None
         return False
 
     def start(self, prepared, region, spectral: bool, control: RenderControl) -> bool:
@@ -289,21 +296,64 @@ class LocalExecutor:
         return True
 
     def light_pass(self, prepared, plan, control: RenderControl, progress) -> LightPassResult:
-        return run_light_pass(prepared, None, progress, control.cancelled, control.perf_deadline(), plan=plan)
+        """The light pass; with a cancel check it runs in a worker thread polled from here every
+        POLL_S, so a cancel returns at once (a cancelled, empty result) while its lanes stop at
+        their next batch in the background (a batch can take seconds on a big scene). The
+        worker gets plain flags, and the progress is passed on from this thread: the callbacks
+        are only ever called from the calling thread (Blender's must)."""
+        if not control.has_cancel_check():
+            return run_light_pass(prepared, None, progress, control.cancelled, control.perf_deadline(), plan=plan)
+        asked = threading.Event()
+        latest: list = []  # the worker's last progress report (list appends are atomic)
+        out: dict = {}
+
+        def work():
+            try:
+                out["value"] = run_light_pass(prepared, None, (lambda f, m: latest.append((f, m))) if progress else None,
+                                              asked.is_set, control.perf_deadline(), plan=plan)
+            except BaseException as e:  # handed to the calling thread
+                out["error"] = e
+
+        worker = threading.Thread(target=work, name="opal-light-pass", daemon=True)
+        worker.start()
+        while worker.is_alive():
+            worker.join(POLL_S)
+            if latest and progress is not None:
+                progress(*latest[-1])
+            if worker.is_alive() and control.cancelled():
+                asked.set()  # the lanes stop at their next batch; their result is dropped
+                return replace(LightPassResult.skipped(prepared), cancelled=True)
+        if latest and progress is not None:
+            progress(*latest[-1])
+        if "error" in out:
+            raise out["error"]
+        return out["value"]
 
     def start_eye(self, prepared, plan, light, work: EyeWork) -> None:
         on_pool = self.threads > 1 or self._pollable
         self._stop = threading.Event()
         if on_pool:  # units that stop at their next ray cast once dropped (the same rays and bits)
             prepared = replace(prepared, accel=StoppableAccel(prepared.accel, self._stop.is_set))
-        self._eye = EyePass(prepared, light, plan=plan)
+        # the EyePass (its per-render constants) is built by the first unit, so a render that
+        # stops before any (a time limit that ran out in the light pass) does not wait for it
+        self._eye, self._eye_args = None, (prepared, light, plan)
         self._filt = FilterSampler(prepared.settings.filter_width)
         self._work = work
         if on_pool and self._pool is None:
             self._pool = ThreadPoolExecutor(max_workers=self.threads)
 
+    def _eye_pass(self) -> EyePass:
+        with self._eye_lock:
+            if self._eye is None:
+                if self._eye_args is None:  # the executor was left meanwhile (a dropped unit)
+                    raise RenderCancelled()
+                prepared, light, plan = self._eye_args
+                self._eye = EyePass(prepared, light, plan=plan)
+            return self._eye
+
     def _trace(self, r_index: int, t_index: int, pixels):
-        return trace_tile(self._eye, self._filt, self._work, r_index, t_index, pixels)
+        check(self._stop.is_set)  # dropped before it started
+        return trace_tile(self._eye_pass(), self._filt, self._work, r_index, t_index, pixels)
 
     def submit(self, key: int, r_index: int, t_index: int, pixels) -> None:
         if self._pool is not None:
