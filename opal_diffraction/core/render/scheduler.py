@@ -32,7 +32,9 @@ The rules, the same for every executor:
 - **Latency.** Both act within about POLL_S of the moment, whatever a unit costs: the units in
   flight are dropped, not waited for, and ``cancel_pending`` makes the local executor's running
   units give up at their next ray-casting call (util/cancel.StoppableAccel), so none keeps a
-  core busy after the render returned. A unit is never cut into pieces whose sizes would follow
+  core busy for long after the render returned. The local light pass is polled the same way
+  (``LocalExecutor.light_pass``: a cancel returns at once, its lanes stop at their next batch in
+  the background; its time limit still waits for the batches in hand, whose deposits it keeps). A unit is never cut into pieces whose sizes would follow
   the machine's speed: its random numbers are one stream drawn in batch order (the caustic-map
   lookups, Russian roulette, gratings and dispersive splits draw from it, and batch-size
   dependent reductions round differently), so such slices would make the image depend on the
