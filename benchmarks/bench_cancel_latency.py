@@ -66,6 +66,31 @@ def prism_scene(width: int, height: int) -> Scene:
     return load_example("prism").build_scene(width, height)
 
 
+RESULT_S: list = []  # (start, seconds) of every Film.result call: the image made at the end
+
+
+def _timed_film_result():
+    """Time Film.result (the mean image and its passes, made once when a render stops: at full
+    HD it is a good part of the latency)."""
+    from opal_diffraction.core.render import film
+
+    real = film.Film.result
+
+    def timed(self, *a, **k):
+        t = time.perf_counter()
+        try:
+            return real(self, *a, **k)
+        finally:
+            RESULT_S.append((t, time.perf_counter() - t))
+
+    film.Film.result = timed
+
+
+def image_s(since: float) -> float:
+    """Seconds spent in Film.result since ``since`` (a perf_counter time)."""
+    return sum(d for t, d in RESULT_S if t >= since)
+
+
 class Watch:
     """A render's stage times (seconds from its start) from its progress and on_round callbacks,
     and a request that turns on once ``trigger(now, watch)`` is true."""
@@ -77,15 +102,16 @@ class Watch:
         self.rounds_done = 0
         self.asked: float | None = None
         self.stage_at_request = ""
+        self.prepared_from = False  # (no progress report tells when the compile stage ends)
 
     def now(self) -> float:
         return time.perf_counter() - self.t0
 
     def stage(self) -> str:
-        for name in ("later rounds", "first round", "light pass", "compile"):
+        for name in ("later rounds", "first round", "light pass"):
             if name in self.starts:
                 return name
-        return "preparation"
+        return "preparation" if "compile" not in self.starts or self.prepared_from else "compile"
 
     def progress(self, fraction, message):
         now = self.now()
@@ -121,7 +147,7 @@ def run(scene, settings, trigger=None, prepared=None):
 def triggers(t_prep: float) -> dict:
     """When to cancel in each stage, relative to the stage's start in that render; a render that
     left the stage before the moment is cancelled at once (the row names the stage it was in)."""
-    order = ("preparation", "compile", "light pass", "first round", "later rounds")
+    order = ("compile", "preparation", "light pass", "first round", "later rounds")
 
     def past(w, stage):
         return order.index(w.stage()) > order.index(stage)
@@ -137,7 +163,8 @@ def triggers(t_prep: float) -> dict:
 
 
 def bench(scene, settings, label: str) -> list[str]:
-    prepare(scene, settings)  # once for the one-time costs (imports, Embree's start), then timed
+    render(scene, replace(settings, samples=1, light_paths=1000))  # the compile stage and one-time costs first
+    prepare(scene, settings)
     t0 = time.perf_counter()
     prepare(scene, settings)
     t_prep = time.perf_counter() - t0
@@ -146,11 +173,12 @@ def bench(scene, settings, label: str) -> list[str]:
     for stage, trigger in triggers(t_prep).items():
         w, res, done = run(scene, settings, trigger)
         if w.asked is None:
-            rows.append(f"| {label} | {stage} | cancel | - | - | the render ended ({done:.1f} s) before the moment |")
+            rows.append(f"| {label} | {stage} | cancel | - | - | - | the render ended ({done:.1f} s) before the moment |")
             print(rows[-1], flush=True)
             continue
         lat = done - w.asked
-        rows.append(f"| {label} | {stage} | cancel | {w.asked:.1f} ({w.stage_at_request}) | {lat:.2f} | "
+        img = image_s(w.t0 + w.asked)
+        rows.append(f"| {label} | {stage} | cancel | {w.asked:.1f} ({w.stage_at_request}) | {lat:.2f} | {img:.2f} | "
                     f"{'cancelled' if res.cancelled else 'NOT cancelled'}, {res.samples} spp |")
         print(rows[-1], flush=True)
         # a time limit ending where this render was cancelled (the next render's stages may shift:
@@ -163,10 +191,10 @@ def bench(scene, settings, label: str) -> list[str]:
                 at_stage = name
         why = next((x for x in res.warnings if "time limit" in x), "no time-limit warning")
         if done < at:
-            rows.append(f"| {label} | {stage} | time limit {at:.1f} s | - | - | finished in {done:.1f} s |")
+            rows.append(f"| {label} | {stage} | time limit {at:.1f} s | - | - | - | finished in {done:.1f} s |")
         else:
             rows.append(f"| {label} | {stage} | time limit {at:.1f} s | {at:.1f} ({at_stage}) | {done - at:.2f} | "
-                        f"{why}; {res.samples} spp |")
+                        f"{image_s(w.t0 + at):.2f} | {why}; {res.samples} spp |")
         print(rows[-1], flush=True)
     return rows
 
@@ -194,7 +222,7 @@ def compile_child(how: str, seconds_in: float) -> None:
         w, res, done = run(scene, RenderSettings(samples=4, threads=2),
                            lambda now, w: "compile" in w.starts and now >= w.starts["compile"] + seconds_in)
         lat = done - (w.asked if w.asked is not None else done)
-        print(f"| cold cache | compile | cancel | {w.asked or 0:.1f} ({w.stage_at_request}) | {lat:.2f} | "
+        print(f"| cold cache | compile | cancel | {w.asked or 0:.1f} ({w.stage_at_request}) | {lat:.2f} | - | "
               f"{'cancelled' if res.cancelled else 'NOT cancelled'}: {'; '.join(res.warnings)} |")
         return
     prepared = prepare(scene, RenderSettings(samples=4, threads=2, time_limit=seconds_in))
@@ -202,7 +230,7 @@ def compile_child(how: str, seconds_in: float) -> None:
     res = render_prepared(prepared, started_at=t0)
     done = time.perf_counter() - t0
     print(f"| cold cache | compile | time limit {seconds_in:.1f} s | {seconds_in:.1f} (compile) | "
-          f"{done - seconds_in:.2f} | {'; '.join(res.warnings)} |")
+          f"{done - seconds_in:.2f} | - | {'; '.join(res.warnings)} |")
 
 
 def main(argv=None) -> int:
@@ -217,10 +245,12 @@ def main(argv=None) -> int:
     ap.add_argument("--compile-seconds", type=float, default=2.0)
     ap.add_argument("--compile-child", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    _timed_film_result()
     if args.compile_child:
         compile_child(args.compile_child[0], float(args.compile_child[1]))
         return 0
-    header = ["| scene | stage | how | at (s) (stage then) | latency (s) | result |", "|---|---|---|---|---|---|"]
+    header = ["| scene | stage | how | at (s) (stage then) | latency (s) | of which the image (s) | result |",
+              "|---|---|---|---|---|---|---|"]
     if args.compile:
         rows = compile_case(args.compile_seconds)
     else:
