@@ -162,7 +162,7 @@ def triggers(t_prep: float) -> dict:
     }
 
 
-def bench(scene, settings, label: str) -> list[str]:
+def bench(scene, settings, label: str, stages=None) -> list[str]:
     render(scene, replace(settings, samples=1, light_paths=1000))  # the compile stage and one-time costs first
     prepare(scene, settings)
     t0 = time.perf_counter()
@@ -171,6 +171,8 @@ def bench(scene, settings, label: str) -> list[str]:
     print(f"{label}: preparation alone {t_prep:.1f} s", flush=True)
     rows = []
     for stage, trigger in triggers(t_prep).items():
+        if stages and stage not in stages:
+            continue
         w, res, done = run(scene, settings, trigger)
         if w.asked is None:
             rows.append(f"| {label} | {stage} | cancel | - | - | - | the render ended ({done:.1f} s) before the moment |")
@@ -241,6 +243,7 @@ def main(argv=None) -> int:
     ap.add_argument("--samples", type=int, default=256)
     ap.add_argument("--light-paths", type=int, default=20_000_000)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--stages", nargs="+", default=None, help="only these stages (e.g. preparation 'light pass')")
     ap.add_argument("--compile", action="store_true", help="only the compile stage, cold")
     ap.add_argument("--compile-seconds", type=float, default=2.0)
     ap.add_argument("--compile-child", nargs=2, help=argparse.SUPPRESS)
@@ -265,7 +268,7 @@ def main(argv=None) -> int:
             label = f"prism {w}x{h}"
         print(f"{label}: scene built in {time.perf_counter() - t0:.1f} s", flush=True)
         settings = RenderSettings(samples=args.samples, light_paths=args.light_paths, threads=args.threads)
-        rows = bench(scene, settings, label)
+        rows = bench(scene, settings, label, args.stages)
     print("\n" + "\n".join(header + rows))
     return 0
 
