@@ -4,6 +4,8 @@ import os
 import subprocess
 import sys
 
+import time
+
 import numpy as np
 import pytest
 
@@ -170,7 +172,8 @@ def test_numpy_bvh_backend_renders_the_same_image_as_embree():
 
 def test_time_limit_is_honoured_inside_the_light_pass_and_inside_a_round():
     """A 1 s limit with 20 M light paths (about a minute of work) and one huge round: the render
-    stops within the limit's latency, says so, and its image is finite and lit."""
+    stops within the limit's latency (the limit is hard: it may end before every pixel has a
+    sample, and the per-pixel counts say so), says so, and its image is finite."""
     mats = Materials.from_list([{"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)},
                                 {"kind": "DIELECTRIC", "ior": 1.5, "color": (1, 1, 1)}])
     s = Scene(materials=mats)
@@ -179,13 +182,16 @@ def test_time_limit_is_honoured_inside_the_light_pass_and_inside_a_round():
     s.lights = Lights.from_list([{"kind": "POINT", "position": (0, 0, 4), "power": 500.0}])
     s.camera = Camera.look_at((0, -5, 3), (0, 0, 0), width=64, height=64)
     render(s, RenderSettings(samples=1, light_paths=1000))  # imports and kernels loaded: the limit counts preparing
+    t0 = time.perf_counter()
     res = render(s, RenderSettings(samples=4096, round_samples=4096, light_paths=20_000_000, time_limit=1.0,
                                    threads=2), spectral_film=True)
+    took = time.perf_counter() - t0
+    assert took < 1.0 + 1.5, took  # the limit, its latency (<= 1 s) and slack for a shared machine
     assert res.stats["light_paths"] < 20_000_000
     assert any("time limit reached during the light pass" in w for w in res.warnings)
     assert any("time limit reached after" in w for w in res.warnings)
-    assert 1 <= res.samples < 4096 and not res.cancelled
-    assert np.isfinite(res.spectral).all() and res.rgb.mean() > 0
+    assert res.samples < 4096 and not res.cancelled
+    assert np.isfinite(res.spectral).all() and (res.spectral >= 0).all()
 
 
 def test_cancel_while_preparing_returns_a_cancelled_black_image():

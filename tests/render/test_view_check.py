@@ -31,7 +31,8 @@ def test_a_camera_that_sees_the_scene_gives_no_warning():
     assert _warnings(_scene()) == []
 
 
-@pytest.mark.parametrize("change, named", [({"shift_x": 10.0}, "shift 10"),
+@pytest.mark.parametrize("change, named", [({"shift_x": 10.0}, "shift 10"), ({"shift_x": -10.0}, "shift -10 / 0"),
+                                           ({"shift_y": 10.0}, "shift 0 / 10"), ({"lens": 1.0}, "lens 1 mm"),
                                            ({"kind": "ORTHO", "ortho_scale": 1e6}, "orthographic scale 1e+06")])
 def test_a_camera_that_sees_nothing_is_named_with_its_settings(change, named):
     s = _scene()

@@ -30,7 +30,12 @@ paths (or loads them from its cache), and reports it as the progress stage "comp
 the first render after an install shows that stage instead of standing at 0 %. It runs once per
 process (``jit.warm_up``); renders on the NumPy reference skip it, and so do renders on a Dask
 cluster (its workers compile what they run). The render that paid for it
-has ``compile_s``, ``kernels_compiled`` and ``kernels_loaded`` in its stats.
+has ``compile_s``, ``kernels_compiled`` and ``kernels_loaded`` in its stats. A render's cancel
+check is polled during the stage (it runs in a worker thread, util/cancel.run_cancellable): a
+cancel returns a black, zero-sample result within util/cancel.POLL_S, the warm-up stops at its
+next check and the next render runs the stage again; ``render_prepared``'s time limit (counted
+from ``started_at``, as the CLI's includes the preparation) counts the stage too, ``render``'s
+starts after it.
 """
 
 from __future__ import annotations
@@ -88,8 +93,13 @@ def render(
     when ``settings.spectral_exr`` is set. Otherwise the film is RGB only and ``spectral`` is None.
     """
     # before prepare's kernels run; a cluster's workers compile their own (the stage is this process's)
-    with one_blas_thread():  # as the render itself (its progress callback may look)
-        compiled = compile_stage((settings or RenderSettings()).kernels, progress) if client is None else None
+    try:
+        with one_blas_thread():  # as the render itself (its progress callback may look)
+            compiled = (compile_stage((settings or RenderSettings()).kernels, progress, should_cancel)
+                        if client is None else None)
+    except RenderCancelled:
+        return _cancelled_before_start(scene, settings or RenderSettings(), region, spectral_film,
+                                       cancelled_in="while compiling the kernels")
     t_start = time.perf_counter()  # the time limit counts from here (compile_s is in the stats)
     limit = float((settings or RenderSettings()).time_limit or 0.0)
     try:
@@ -135,26 +145,32 @@ def warm_up_scene() -> Scene:
     return s
 
 
-def _warm_up_render() -> None:
-    render(warm_up_scene(), RenderSettings(samples=1, threads=1, light_paths=4096, seed=0))
+def _warm_up_render(stopped: Callable[[], bool] | None = None) -> None:
+    """The compile stage's render; ``stopped``: its cancel check (it stops between its stages,
+    units and ray casts, so between the kernels it compiles)."""
+    render(warm_up_scene(), RenderSettings(samples=1, threads=1, light_paths=4096, seed=0), should_cancel=stopped)
 
 
-def compile_stage(mode: str, progress: Callable[[float, str], None] | None = None) -> dict | None:
+def compile_stage(mode: str, progress: Callable[[float, str], None] | None = None,
+                  should_cancel: Callable[[], bool] | None = None) -> dict | None:
     """The compile stage of a render whose RenderSettings.kernels is ``mode``: once per process,
     when it takes the kernels, ``progress(0, 'compiling kernels')`` and a render of
     ``warm_up_scene`` (jit.warm_up); its stats ({'compile_s', 'kernels_compiled',
-    'kernels_loaded'}) or None when it did not run."""
-    return warm_up(_warm_up_render, progress, mode)
+    'kernels_loaded'}) or None when it did not run. ``should_cancel``: the render's cancel check,
+    polled while the stage runs (RenderCancelled within util/cancel.POLL_S; the stage then runs
+    again in the next render)."""
+    return warm_up(_warm_up_render, progress, mode, should_cancel)
 
 
 def _cancelled_before_start(scene: Scene, settings: RenderSettings, region, spectral_film=None,
-                            reason: str | None = None) -> RenderResult:
-    """The (black, zero-sample) result of a render stopped while it was being prepared: cancelled,
-    or out of time (``reason`` says so; the result is then not marked cancelled)."""
+                            reason: str | None = None, cancelled_in: str = "while preparing the scene") -> RenderResult:
+    """The (black, zero-sample) result of a render stopped before its first sample: cancelled
+    (``cancelled_in`` says when), or out of time (``reason`` says so; the result is then not
+    marked cancelled)."""
     cam = scene.camera
     x0, y0, x1, y1 = region if region is not None else (0, 0, int(cam.width), int(cam.height))
     film = Film(x1 - x0, y1 - y0, SpectralConverter(settings.grid()), spectral=keeps_spectral(settings, spectral_film))
-    why = reason or "cancelled while preparing the scene"
+    why = reason or f"cancelled {cancelled_in}"
     plan = RenderPlan(eye_pass=False, notes=(why,))
     return film.result(plan, reason is None, [why], {"rays": 0})
 
@@ -184,7 +200,20 @@ def render_prepared(
     kernels starts with the compile stage (``compile_stage``).
     """
     local = executor is None or isinstance(executor, LocalExecutor)
-    compiled = compile_stage(prepared.settings.kernels, progress) if local else None
+    limit = float(prepared.settings.time_limit or 0.0)
+    deadline = None if not limit else (time.perf_counter() if started_at is None or clock is not time.perf_counter
+                                       else float(started_at)) + limit
+    stop = None
+    if should_cancel is not None or deadline is not None:  # polled while compiling (the time limit counts it here)
+        def stop():
+            return (should_cancel is not None and should_cancel()) or (deadline is not None and time.perf_counter() > deadline)
+    try:
+        compiled = compile_stage(prepared.settings.kernels, progress, stop) if local else None
+    except RenderCancelled:
+        out_of_time = deadline is not None and time.perf_counter() > deadline and not (should_cancel and should_cancel())
+        return _cancelled_before_start(prepared.scene, prepared.settings, region, spectral_film,
+                                       f"time limit ({limit:g} s) reached while compiling the kernels: nothing rendered"
+                                       if out_of_time else None, cancelled_in="while compiling the kernels")
     return _render_in_mode(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
                            executor, clock, compiled)
 

@@ -7,7 +7,8 @@ their results enter the film, never on where or when they ran, so this module ke
 in one place and leaves the running to an **executor**:
 
 - ``LocalExecutor``: this process's threads (a pool of ``prepared.threads``), or with one
-  thread the calling thread itself, one unit at a time (simpler to profile and debug);
+  thread and nothing to poll (no cancel check, no time limit) the calling thread itself, one
+  unit at a time (simpler to profile and debug);
 - ``distributed.DaskExecutor``: the workers of a Dask cluster (core/render/distributed.py);
 - the rendered viewport's progressive previews (core/render/progressive.py) run the local one
   level after level, under one cancel check.
@@ -23,9 +24,21 @@ The rules, the same for every executor:
   skipped, and a round in which every tile was skipped ends the render: all pixels converged.
 - **Cancel** (``RenderControl.cancelled``) is polled after every unit added and every POLL_S
   seconds while waiting for one; it ends the render at once (the film keeps the units added).
-- **Time limit.** Checked between units on the control's clock: after a unit of round 1 or
-  later, and at the end of every round, so every pixel gets round 0's samples; a round stopped
-  midway keeps the tiles it added (their sample counts say so).
+- **Time limit.** Checked on the control's clock after every unit added, at the end of every
+  round and every POLL_S seconds while waiting for a unit, in any round: a round stopped midway
+  keeps the tiles it added (the per-pixel sample counts say so; a stop in round 0 leaves the
+  tiles not yet added without samples). With a time limit round 0 is one sample
+  (tiles.EyeWork.of), so the whole image has a sample soon.
+- **Latency.** Both act within about POLL_S of the moment, whatever a unit costs: the units in
+  flight are dropped, not waited for, and ``cancel_pending`` makes the local executor's running
+  units give up at their next ray-casting call (util/cancel.StoppableAccel), so none keeps a
+  core busy for long after the render returned. The local light pass is polled the same way
+  (``LocalExecutor.light_pass``: a cancel returns at once, its lanes stop at their next batch in
+  the background; its time limit still waits for the batches in hand, whose deposits it keeps). A unit is never cut into pieces whose sizes would follow
+  the machine's speed: its random numbers are one stream drawn in batch order (the caustic-map
+  lookups, Russian roulette, gratings and dispersive splits draw from it, and batch-size
+  dependent reductions round differently), so such slices would make the image depend on the
+  timing; dropping the unit keeps every image the same bits for a seed and its units.
 - **Progress** is reported after every unit added (``RenderControl.report``: increasing, the
   light pass's share first), and reaches 1 when the render ends without a cancel.
 - ``on_round(result)`` receives the image after every round that added something, unless the
@@ -38,14 +51,16 @@ tested with a fake clock and fake units of work (tests/render/test_scheduler.py)
 from __future__ import annotations
 
 import math
+import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, Protocol
 
 from ..integrators.eye.eye_pass import EyePass
 from ..integrators.light.light_pass import LightPassResult, run_light_pass
 from ..sampling.camera import FilterSampler
+from ..util.cancel import RenderCancelled, StoppableAccel, check
 from .tiles import EyeWork, is_half_a, trace_tile
 
 __all__ = ["RenderControl", "Executor", "LocalExecutor", "EyePassOutcome", "run_eye_pass", "eye_window",
@@ -82,6 +97,15 @@ class RenderControl:
     def out_of_time(self) -> bool:
         """Whether the time limit has passed."""
         return self.deadline is not None and self.clock() > self.deadline
+
+    def has_cancel_check(self) -> bool:
+        """Whether this render has a cancel check (``should_cancel``)."""
+        return self._should_cancel is not None
+
+    def can_stop(self) -> bool:
+        """Whether this render may stop early (it has a cancel check or a time limit), so its
+        units must run where the scheduler can poll while they do."""
+        return self._should_cancel is not None or self.deadline is not None
 
     def perf_deadline(self) -> float | None:
         """The deadline as a ``time.perf_counter()`` time, for the local light pass, whose lanes
@@ -206,8 +230,8 @@ def run_eye_pass(work: EyeWork, film, executor: Executor, control: RenderControl
                                    f"rays{executor.note()}")
                     if control.cancelled():
                         stop = "cancel"
-                    elif r_index > 0 and control.out_of_time():
-                        stop = "time"  # between units, once every pixel has round 0's samples
+                    elif t_index < n_tiles - 1 and control.out_of_time():
+                        stop = "time"  # (after a round's last tile: checked below, after on_round)
                 if stop or t_index < n_tiles - 1:
                     continue
                 # a round is complete
@@ -224,6 +248,9 @@ def run_eye_pass(work: EyeWork, film, executor: Executor, control: RenderControl
             if control.cancelled():
                 stop = "cancel"
                 break
+            if control.out_of_time():
+                stop = "time"  # the units in flight are dropped (their tiles keep what they had)
+                break
             for key, res in executor.finished(POLL_S):
                 results[key] = res
     finally:
@@ -235,7 +262,11 @@ def run_eye_pass(work: EyeWork, film, executor: Executor, control: RenderControl
 
 class LocalExecutor:
     """Units on this process's threads: a pool of ``threads`` (default ``prepared.threads``),
-    or with one thread the calling thread itself, one unit each time ``finished`` is called."""
+    or with one thread and a render that cannot stop early (RenderControl.can_stop) the calling
+    thread itself, one unit each time ``finished`` is called. A render that can stop traces on
+    the pool even with one thread, so the scheduler polls while a unit runs; its units cast rays
+    through util/cancel.StoppableAccel, so the ones running when ``cancel_pending`` is called
+    stop at their next ray cast."""
 
     def __init__(self, threads: int | None = None):
         self.requested = threads
@@ -244,6 +275,10 @@ class LocalExecutor:
         self._pool: ThreadPoolExecutor | None = None
         self._pending: dict = {}  # key -> future (a pool) or (r, t, pixels) (the calling thread)
         self._eye = self._filt = self._work = None
+        self._pollable = False
+        self._stop = threading.Event()  # set by cancel_pending: the running units give up
+        self._eye_args = None  # (prepared, light, plan) of the EyePass the first unit builds
+        self._eye_lock = threading.Lock()
 
     def __enter__(self):
         return self
@@ -251,27 +286,76 @@ class LocalExecutor:
     def __exit__(self, *exc):
         self.cancel_pending()
         if self._pool is not None:
-            self._pool.shutdown(wait=True)  # running units finish; their results are dropped
+            # not waited for: a dropped unit ends at its next ray cast (cancel_pending), on its own
+            self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = None
-        self._eye = self._filt = self._work = None
+        self._eye = self._eye_args = self._filt = self._work = None
         return False
 
     def start(self, prepared, region, spectral: bool, control: RenderControl) -> bool:
         self.threads = max(1, int(prepared.threads if self.requested is None else self.requested))
+        self._pollable = control.can_stop()
         return True
 
     def light_pass(self, prepared, plan, control: RenderControl, progress) -> LightPassResult:
-        return run_light_pass(prepared, None, progress, control.cancelled, control.perf_deadline(), plan=plan)
+        """The light pass; with a cancel check it runs in a worker thread polled from here every
+        POLL_S, so a cancel returns at once (a cancelled, empty result) while its lanes stop at
+        their next batch in the background (a batch can take seconds on a big scene). The
+        worker gets plain flags, and the progress is passed on from this thread: the callbacks
+        are only ever called from the calling thread (Blender's must)."""
+        if not control.has_cancel_check():
+            return run_light_pass(prepared, None, progress, control.cancelled, control.perf_deadline(), plan=plan)
+        asked = threading.Event()
+        latest: list = []  # the worker's last progress report (list appends are atomic)
+        out: dict = {}
+
+        def work():
+            try:
+                out["value"] = run_light_pass(prepared, None, (lambda f, m: latest.append((f, m))) if progress else None,
+                                              asked.is_set, control.perf_deadline(), plan=plan)
+            except BaseException as e:  # handed to the calling thread
+                out["error"] = e
+
+        worker = threading.Thread(target=work, name="opal-light-pass", daemon=True)
+        worker.start()
+        while worker.is_alive():
+            worker.join(POLL_S)
+            if latest and progress is not None:
+                progress(*latest[-1])
+            if worker.is_alive() and control.cancelled():
+                asked.set()  # the lanes stop at their next batch; their result is dropped
+                return replace(LightPassResult.skipped(prepared), cancelled=True)
+        if latest and progress is not None:
+            progress(*latest[-1])
+        if "error" in out:
+            raise out["error"]
+        return out["value"]
 
     def start_eye(self, prepared, plan, light, work: EyeWork) -> None:
-        self._eye = EyePass(prepared, light, plan=plan)
+        on_pool = self.threads > 1 or self._pollable
+        self._stop = threading.Event()
+        if on_pool:  # units that stop at their next ray cast once dropped (the same rays and bits)
+            prepared = replace(prepared, accel=StoppableAccel(prepared.accel, self._stop.is_set))
+        # the EyePass (its per-render constants) is built by the first unit, so a render that
+        # stops before any (a time limit that ran out in the light pass) does not wait for it
+        self._eye, self._eye_args = None, (prepared, light, plan)
         self._filt = FilterSampler(prepared.settings.filter_width)
         self._work = work
-        if self.threads > 1 and self._pool is None:
+        if on_pool and self._pool is None:
             self._pool = ThreadPoolExecutor(max_workers=self.threads)
 
+    def _eye_pass(self) -> EyePass:
+        with self._eye_lock:
+            if self._eye is None:
+                if self._eye_args is None:  # the executor was left meanwhile (a dropped unit)
+                    raise RenderCancelled()
+                prepared, light, plan = self._eye_args
+                self._eye = EyePass(prepared, light, plan=plan)
+            return self._eye
+
     def _trace(self, r_index: int, t_index: int, pixels):
-        return trace_tile(self._eye, self._filt, self._work, r_index, t_index, pixels)
+        check(self._stop.is_set)  # dropped before it started
+        return trace_tile(self._eye_pass(), self._filt, self._work, r_index, t_index, pixels)
 
     def submit(self, key: int, r_index: int, t_index: int, pixels) -> None:
         if self._pool is not None:
@@ -300,6 +384,8 @@ class LocalExecutor:
         for f in self._pending.values():
             if self._pool is not None:
                 f.cancel()
+        if self._pending and self._pool is not None:
+            self._stop.set()  # the running ones raise RenderCancelled at their next ray cast (dropped)
         self._pending.clear()
 
     def note(self) -> str:

@@ -28,7 +28,7 @@ __all__ = ["EYE_PASS_STREAM", "LIGHT_PASS_SHARE", "MAX_TILE_RAYS", "round_size",
 
 EYE_PASS_STREAM = 1  # stream ids keep the passes' random numbers independent
 LIGHT_PASS_SHARE = 0.25  # of the progress bar, when the light pass runs
-MAX_TILE_RAYS = 1 << 18  # camera rays of one tile in one round (bounds memory and time-limit latency)
+MAX_TILE_RAYS = 1 << 18  # camera rays of one tile in one round (bounds memory and the work a stop drops)
 #: The cap with a spectral EXR, whose (H, W, n) films leave less room for the rounds' rays: a
 #: 64 x 64 tile at 8 samples. Full HD at 61 wavelengths: peak RSS 2.08 GiB with rounds of 16
 #: samples, 1.82 GiB with 8 (docs/benchmarks.md, "Memory with rounds of 16 samples").
@@ -42,7 +42,8 @@ def tile_ray_cap(settings: RenderSettings) -> int:
 
 def round_size(settings: RenderSettings) -> int:
     """Samples per pixel per round: the setting, capped so one tile's round casts at most
-    tile_ray_cap camera rays (a round is the unit of memory and of time-limit checks)."""
+    tile_ray_cap camera rays (a round is the unit of memory, and of the work a cancel or time
+    limit drops: scheduler.py)."""
     tile_pixels = int(settings.tile_size) ** 2
     return max(1, min(int(settings.round_samples), tile_ray_cap(settings) // tile_pixels))
 
@@ -107,8 +108,8 @@ class EyeWork:
         spp, per_round = int(settings.samples), round_size(settings)
         adaptive = adaptive_of(settings)
         if adaptive is None and float(settings.time_limit) > 0 and spp > 1:
-            # a time limit stops between units once every pixel has a sample: a first round of one
-            # sample brings that moment (a whole image) 1/per_round of a round's time after the start
+            # a time limit may stop the render in any round (scheduler.py): a first round of one
+            # sample gives the whole image a sample 1/per_round of a round's time after the start
             rounds = (1,) + tuple(min(per_round, spp - 1 - s) for s in range(0, spp - 1, per_round))
         elif adaptive is None:
             rounds = tuple(min(per_round, spp - s) for s in range(0, spp, per_round))

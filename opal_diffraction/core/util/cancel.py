@@ -8,6 +8,12 @@ the GIL in its loops). After a cancel ``stopped()`` returns True: ``fn`` checks 
 stages and gives up early (raising RenderCancelled), so a cancelled worker does not keep the
 CPU busy for long; its result is dropped. Code that holds the GIL for long (a C extension's
 loop) delays the poll by as long; the Embree backend therefore builds its geometry in chunks.
+
+``StoppableAccel(accel, stopped)`` does the same for a render's ray casting: the eye pass's
+units run on an accelerator wrapped so that every ``intersect`` / ``occluded`` call first checks
+``stopped()``, so a unit that the scheduler dropped (cancel, time limit) gives up at its next
+ray-casting call (every bounce makes one) instead of tracing on in the background; the rays and
+their arithmetic are the accelerator's own, so the image is unchanged.
 """
 
 from __future__ import annotations
@@ -15,7 +21,7 @@ from __future__ import annotations
 import threading
 from typing import Callable, TypeVar
 
-__all__ = ["RenderCancelled", "OutOfTime", "run_cancellable", "check", "POLL_S"]
+__all__ = ["RenderCancelled", "OutOfTime", "run_cancellable", "check", "StoppableAccel", "POLL_S"]
 
 T = TypeVar("T")
 POLL_S = 0.05
@@ -60,3 +66,23 @@ def run_cancellable(fn: Callable[[Callable[[], bool]], T], should_cancel: Callab
     if "error" in out:
         raise out["error"]
     return out["value"]
+
+
+class StoppableAccel:
+    """``accel`` (accel.Accelerator) whose ray casts raise RenderCancelled once ``stopped()``
+    says so; everything else is ``accel``'s."""
+
+    def __init__(self, accel, stopped: Callable[[], bool]):
+        self._accel = accel
+        self._stopped = stopped
+
+    def intersect(self, origins, directions, tmax=None):
+        check(self._stopped)
+        return self._accel.intersect(origins, directions, tmax)
+
+    def occluded(self, origins, directions, tmax):
+        check(self._stopped)
+        return self._accel.occluded(origins, directions, tmax)
+
+    def __getattr__(self, name):  # name, triangles, ...: the wrapped accelerator's
+        return getattr(self._accel, name)

@@ -214,7 +214,7 @@ def compile_counts() -> tuple[int, int]:
 #: The message of the compile stage, as the render's progress callback receives it.
 COMPILE_STAGE = "compiling kernels"
 _warm_lock = threading.RLock()  # re-entrant: the warm-up's own render calls warm_up again (a no-op)
-_warm = {"started": False, "finished": False}
+_warm = {"started": False, "finished": False, "runner": None}  # runner: the warm-up's worker thread
 
 
 def warm_up_done() -> bool:
@@ -222,17 +222,26 @@ def warm_up_done() -> bool:
     return _warm["finished"]
 
 
-def warm_up(run, progress=None, mode: str = "auto") -> dict | None:
+def warm_up(run, progress=None, mode: str = "auto", should_cancel=None) -> dict | None:
     """Run ``run()`` once per process, before the first render that takes the kernels (``mode``:
     its RenderSettings.kernels), so the kernels it calls are compiled (or loaded from the cache)
     now; ``progress(0.0, COMPILE_STAGE)`` is called first. Other threads wait for it to finish
     (a render starting meanwhile then finds its kernels ready).
+
+    ``should_cancel()``: the render's cancel check. With one, ``run(stopped)`` runs in a worker
+    thread (util/cancel.run_cancellable) while this thread polls the check, so a cancel is
+    honoured within cancel.POLL_S even while numba compiles a kernel: RenderCancelled is raised
+    here, ``stopped()`` turns True and the warm-up render stops at its next check (the kernel
+    being compiled finishes first: numba cannot be interrupted); the stage is not marked done,
+    so the next render on the kernels runs it again.
 
     Returns None when nothing ran (the render takes the reference, or the warm-up already ran),
     else {'compile_s': seconds, 'kernels_compiled': n, 'kernels_loaded': n} (for the render's
     stats; with 'compile_error' when ``run`` raised: the render then goes on, and meets the same
     error itself if it is the kernels')."""
     if _warm["finished"] or kernels_path(mode) != "numba" or not kernels_enabled():
+        return None
+    if _warm.get("runner") == threading.get_ident():  # the warm-up render's own call (in its worker thread)
         return None
     with _warm_lock:  # another thread's warm-up: wait for it
         if _warm["started"]:  # finished meanwhile, or this thread's own warm-up render
@@ -243,12 +252,33 @@ def warm_up(run, progress=None, mode: str = "auto") -> dict | None:
         c0, l0 = compile_counts()
         t0 = time.perf_counter()
         out = {}
+        done = True
         try:
-            run()
-        except Exception as e:  # never the warm-up's fault that the user's render fails
-            out["compile_error"] = f"{type(e).__name__}: {e}"
+            if should_cancel is None:
+                run()
+            else:
+                from .cancel import run_cancellable
+
+                def in_worker(stopped):
+                    _warm["runner"] = threading.get_ident()
+                    try:
+                        return run(stopped)
+                    finally:
+                        _warm["runner"] = None
+
+                run_cancellable(in_worker, should_cancel)
+        except BaseException as e:
+            from .cancel import RenderCancelled
+
+            if isinstance(e, RenderCancelled):  # cancelled during the stage: the next render runs it
+                done = _warm["started"] = False
+                raise
+            if not isinstance(e, Exception):
+                raise
+            out["compile_error"] = f"{type(e).__name__}: {e}"  # never the warm-up's fault that the render fails
         finally:
-            _warm["finished"] = True
+            if done:
+                _warm["finished"] = True
         c1, l1 = compile_counts()
         out.update(compile_s=time.perf_counter() - t0, kernels_compiled=c1 - c0, kernels_loaded=l1 - l0)
         return out
