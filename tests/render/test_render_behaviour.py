@@ -236,3 +236,26 @@ def test_a_time_limited_render_takes_one_sample_first(spp, per_round, expected):
     assert limited.rounds == expected and sum(limited.rounds) == spp
     plain = EyeWork.of(prepare(s, RenderSettings(samples=spp, round_samples=per_round)))
     assert plain.rounds == tuple(min(per_round, spp - k) for k in range(0, spp, per_round))
+
+
+def test_a_time_limit_stops_a_long_preparation_stage_within_a_poll(monkeypatch):
+    """The deadline is enforced by the calling thread too, not only between preparation's stages:
+    a ray-caster build that takes 3 s (a stand-in for a 10 M-triangle Embree build) is left
+    after the 0.3 s limit within about one cancel.POLL_S, and the render says why."""
+    import time
+
+    from opal_diffraction.core.render import prepare as prepare_module
+
+    real_build = prepare_module.build_accelerator
+
+    def slow_build(*args, **kwargs):
+        time.sleep(3.0)
+        return real_build(*args, **kwargs)
+
+    monkeypatch.setattr(prepare_module, "build_accelerator", slow_build)
+    t0 = time.perf_counter()
+    res = render(_quad_scene(), RenderSettings(samples=4, time_limit=0.3))
+    took = time.perf_counter() - t0
+    assert res.samples == 0 and not res.rgb.any()
+    assert "time limit (0.3 s) reached while preparing the scene: nothing rendered" in res.warnings
+    assert took < 1.5, took

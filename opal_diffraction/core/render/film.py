@@ -248,6 +248,11 @@ def black_non_finite(rgb: np.ndarray, spectral, passes: dict) -> int:
     """The last finite check of a film's mean: the pixels where the image, a pass or the spectrum
     holds a NaN or an infinity are set to 0 in all of them (in place); returns how many (the
     caller warns with the count: never a silent success). Finite images are left untouched."""
+    arrays = [rgb, *passes.values()] + ([spectral] if spectral is not None else [])
+    # first one sum per array (a NaN or an infinity anywhere makes it non-finite; float32 values
+    # cannot overflow a float64 sum): the per-pixel test below only where one is not finite
+    if all(np.isfinite(np.add.reduce(a, axis=None, dtype=np.float64)) for a in arrays):
+        return 0
     bad = ~np.isfinite(rgb).all(axis=-1)
     for arr in passes.values():
         bad |= ~np.isfinite(arr).all(axis=-1)
@@ -255,6 +260,6 @@ def black_non_finite(rgb: np.ndarray, spectral, passes: dict) -> int:
         bad |= ~np.isfinite(spectral).all(axis=-1)
     count = int(bad.sum())
     if count:
-        for arr in [rgb, *passes.values()] + ([spectral] if spectral is not None else []):
+        for arr in arrays:
             arr[bad] = 0.0
     return count

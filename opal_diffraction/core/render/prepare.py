@@ -21,6 +21,7 @@ does when only the view moves (the light pass's result stays valid: same ``key``
 from __future__ import annotations
 
 import itertools
+import threading
 import time
 from dataclasses import dataclass, fields, is_dataclass, replace
 
@@ -216,16 +217,20 @@ def prepare(scene: Scene, settings: RenderSettings | None = None, conv: Spectral
     after validation (so bad input is still named) and while the ray caster builds; raises
     cancel.OutOfTime once passed.
     """
-    return run_cancellable(lambda stopped: _prepare(scene, settings, conv, reuse, _with_deadline(stopped, deadline)),
-                           should_cancel)
+    armed = threading.Event()  # set at the first check after validation: the deadline applies from there
+    return run_cancellable(lambda stopped: _prepare(scene, settings, conv, reuse, _with_deadline(stopped, deadline, armed)),
+                           should_cancel, deadline, armed)
 
 
-def _with_deadline(stopped, deadline: float | None):
-    """``stopped`` that also raises OutOfTime once ``deadline`` has passed."""
+def _with_deadline(stopped, deadline: float | None, armed: threading.Event):
+    """``stopped`` that also raises OutOfTime once ``deadline`` has passed, and sets ``armed``
+    when first called (after validation: from then on the calling thread enforces the deadline
+    too, within cancel.POLL_S, while a long stage such as the ray caster's build runs)."""
     if deadline is None:
         return stopped
 
     def check_both() -> bool:
+        armed.set()
         if stopped():
             return True
         if time.perf_counter() > deadline:

@@ -19,6 +19,7 @@ their arithmetic are the accelerator's own, so the image is unchanged.
 from __future__ import annotations
 
 import threading
+import time
 from typing import Callable, TypeVar
 
 __all__ = ["RenderCancelled", "OutOfTime", "run_cancellable", "check", "StoppableAccel", "POLL_S"]
@@ -41,11 +42,16 @@ def check(stopped: Callable[[], bool] | None) -> None:
         raise RenderCancelled()
 
 
-def run_cancellable(fn: Callable[[Callable[[], bool]], T], should_cancel: Callable[[], bool] | None) -> T:
-    """``fn(stopped)``, or RenderCancelled as soon as ``should_cancel()`` returns True."""
-    if should_cancel is None:
+def run_cancellable(fn: Callable[[Callable[[], bool]], T], should_cancel: Callable[[], bool] | None,
+                    deadline: float | None = None, deadline_armed: threading.Event | None = None) -> T:
+    """``fn(stopped)``, or RenderCancelled as soon as ``should_cancel()`` returns True, or
+    OutOfTime as soon as ``deadline`` (a time.perf_counter() time) has passed once
+    ``deadline_armed`` is set (None: from the start). ``fn`` runs in a worker and the calling
+    thread polls every POLL_S, so a long step inside ``fn`` (a ray caster's build) does not
+    delay either; ``stopped()`` turns True then, and ``fn`` stops at its next check."""
+    if should_cancel is None and deadline is None:
         return fn(lambda: False)
-    if should_cancel():
+    if should_cancel is not None and should_cancel():
         raise RenderCancelled()
     out: dict = {}
     stop = threading.Event()
@@ -60,9 +66,15 @@ def run_cancellable(fn: Callable[[Callable[[], bool]], T], should_cancel: Callab
     worker.start()
     while worker.is_alive():
         worker.join(POLL_S)
-        if worker.is_alive() and should_cancel():
+        if not worker.is_alive():
+            break
+        if should_cancel is not None and should_cancel():
             stop.set()
             raise RenderCancelled()
+        if deadline is not None and time.perf_counter() > deadline and (
+                deadline_armed is None or deadline_armed.is_set()):
+            stop.set()
+            raise OutOfTime()
     if "error" in out:
         raise out["error"]
     return out["value"]
