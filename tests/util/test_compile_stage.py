@@ -118,3 +118,36 @@ def test_the_warm_up_scene_takes_the_kernels_paths():
     res = frame.render(frame.warm_up_scene(), RenderSettings(samples=1, threads=1, light_paths=4096, seed=0))
     assert res.rgb.shape == (4, 4, 3) and np.isfinite(res.rgb).all() and res.rgb.mean() > 0
     assert res.stats["kernels"] == "numba" and res.stats.get("light_rays", 0) > 0
+
+
+@needs_numba
+def test_rough_surfaces_get_their_own_stage_once_and_only_scenes_with_them(fresh, monkeypatch):
+    """The GGX kernels' stage (frame.rough_warm_up_scene) runs before the first render whose scene
+    has a rough surface, once per process, reported as the compile stage; a scene without one
+    does not run it."""
+    monkeypatch.setattr(jit, "_stages", {})
+    calls = []
+    monkeypatch.setattr(frame, "_warm_up_render", lambda stopped=None: calls.append("core"))
+    monkeypatch.setattr(frame, "_rough_warm_up_render", lambda stopped=None: calls.append("rough"))
+    frame.render(small_scene(), RenderSettings(samples=1, threads=1))
+    assert calls == ["core"]
+    rough = small_scene()
+    rough.materials.roughness[:] = 0.4
+    rough.materials.metallic[:] = 1.0
+    messages = []
+    res = frame.render(rough, RenderSettings(samples=1, threads=1), progress=lambda f, m: messages.append(m))
+    assert calls == ["core", "rough"] and messages[0] == jit.COMPILE_STAGE and "compile_s" in res.stats
+    frame.render(rough, RenderSettings(samples=1, threads=1))
+    assert calls == ["core", "rough"]
+
+
+@needs_numba
+def test_the_rough_stage_scene_takes_every_lobe():
+    from opal_diffraction.core.materials import bsdf
+    from opal_diffraction.core.render.prepare import prepare
+
+    prepared = prepare(frame.rough_warm_up_scene(), RenderSettings(samples=1))
+    assert prepared.microfacet[1:].all()
+    m = prepared.materials
+    params = bsdf.params_from_materials(m, np.arange(len(m.kind)), np.ones(len(m.kind), bool))
+    assert {bsdf.CONDUCTOR, bsdf.PLASTIC, bsdf.DIELECTRIC, bsdf.GLOSSY} <= set(np.unique(params.lobe).tolist())

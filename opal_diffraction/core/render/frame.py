@@ -111,6 +111,14 @@ def render(
                                        f"time limit ({limit:g} s) reached while preparing the scene: nothing rendered")
     except RenderCancelled:
         return _cancelled_before_start(scene, settings or RenderSettings(), region, spectral_film)
+    if client is None and prepared.microfacet.any():  # the GGX kernels' own stage, once per process
+        try:
+            with one_blas_thread():
+                compiled = _add_stage_stats(compiled, compile_stage(prepared.settings.kernels, progress, should_cancel,
+                                                                    rough=True, core=False))
+        except RenderCancelled:
+            return _cancelled_before_start(scene, prepared.settings, region, spectral_film,
+                                           cancelled_in="while compiling the kernels")
     executor = None if client is None else DaskExecutor(client, scene)
     with one_blas_thread():  # the tile threads are the parallelism (core/util/blas_threads.py)
         return _render_in_mode(prepared, None, progress, should_cancel, on_round, region, t_start, spectral_film,
@@ -122,8 +130,9 @@ def warm_up_scene() -> Scene:
     mirror sphere and a diffuse sphere (smooth triangles) and a dispersive flint prism, lit by a
     point light, an area light and an environment map: the paths a render's kernels take. No
     rough (GGX) surface: the first rough material of a process builds the multiple-scattering
-    tables (materials/bsdf.py, seconds of NumPy), which a scene without one never needs, so the
-    GGX kernels compile (or load) in the first render that has one."""
+    tables (materials/bsdf.py, seconds of NumPy), which a scene without one never needs; the
+    GGX kernels compile (or load) in a stage of their own (``rough_warm_up_scene``) before the
+    first render that has one."""
     s = Scene(materials=Materials.from_list([
         {"kind": "DIFFUSE", "color": (0.6, 0.6, 0.6)},
         {"kind": "MIRROR", "color": (0.9, 0.7, 0.3)},
@@ -145,21 +154,76 @@ def warm_up_scene() -> Scene:
     return s
 
 
+def rough_warm_up_scene() -> Scene:
+    """The rough surfaces' compile stage's scene: 4 x 4 pixels seeing a rough gold conductor, a
+    Principled plastic (specular over a diffuse base), rough glass and a Glossy BSDF (GGX with a
+    constant Fresnel) on a diffuse floor, under a point light, an area light and a world map:
+    every lobe of materials/bsdf.py's kernels (evaluate, sample, with_outgoing, the parameters),
+    for white and mono rays."""
+    s = Scene(materials=Materials.from_list([
+        {"kind": "DIFFUSE", "color": (0.6, 0.6, 0.6)},
+        {"kind": "MIRROR", "color": (0.95, 0.7, 0.4), "roughness": 0.3, "metallic": 1.0,
+         "conductor_fresnel": "F82_TINT"},
+        {"kind": "DIFFUSE", "color": (0.8, 0.2, 0.2), "roughness": 0.5, "specular_ior_level": 0.5},
+        {"kind": "DIELECTRIC", "ior": 1.5, "roughness": 0.2, "dispersion": "ABBE", "abbe": 40.0},
+        {"kind": "MIRROR", "color": (0.9, 0.9, 0.9), "roughness": 0.4},
+    ]))
+    s.add_mesh(*primitives.quad((0, 0, 0), (6, 0, 0), (0, 6, 0)), material=0)
+    for k, centre in enumerate(((-1.2, 0.3, 0.5), (-0.4, 0.3, 0.5), (0.4, 0.3, 0.5), (1.2, 0.3, 0.5))):
+        v, t = primitives.uv_sphere(centre, 0.35, segments=10, rings=5)
+        s.add_mesh(v, t, material=k + 1, normals=(v - np.asarray(centre, np.float32)) / 0.35)
+    s.lights = Lights.from_list([
+        {"kind": "POINT", "position": (1.0, -1.5, 3.0), "power": 300.0},
+        {"kind": "AREA_RECT", "position": (-1.0, 0.0, 2.5), "direction": (0, 0, -1), "power": 100.0},
+    ])
+    s.world_image = np.linspace(0.2, 1.0, 8 * 4 * 3, dtype=np.float32).reshape(4, 8, 3)
+    s.world_color = np.full(3, 0.3, np.float32)
+    s.camera = Camera.look_at((0.0, -4.0, 2.0), (0.0, 0.3, 0.5), lens=35.0, width=4, height=4)
+    return s
+
+
 def _warm_up_render(stopped: Callable[[], bool] | None = None) -> None:
     """The compile stage's render; ``stopped``: its cancel check (it stops between its stages,
     units and ray casts, so between the kernels it compiles)."""
     render(warm_up_scene(), RenderSettings(samples=1, threads=1, light_paths=4096, seed=0), should_cancel=stopped)
 
 
+def _rough_warm_up_render(stopped: Callable[[], bool] | None = None) -> None:
+    """The rough surfaces' compile stage's render (as ``_warm_up_render``)."""
+    render(rough_warm_up_scene(), RenderSettings(samples=1, threads=1, light_paths=4096, seed=0),
+           should_cancel=stopped)
+
+
+#: jit.warm_up's name of the rough surfaces' stage.
+ROUGH_STAGE = "rough surfaces"
+
+
+def _add_stage_stats(a: dict | None, b: dict | None) -> dict | None:
+    """Two compile stages' stats as one (seconds and counts added)."""
+    if a is None or b is None:
+        return a if b is None else b
+    out = {**a, **b}
+    for k in ("compile_s", "kernels_compiled", "kernels_loaded"):
+        out[k] = a.get(k, 0) + b.get(k, 0)
+    return out
+
+
 def compile_stage(mode: str, progress: Callable[[float, str], None] | None = None,
-                  should_cancel: Callable[[], bool] | None = None) -> dict | None:
+                  should_cancel: Callable[[], bool] | None = None, rough: bool = False,
+                  core: bool = True) -> dict | None:
     """The compile stage of a render whose RenderSettings.kernels is ``mode``: once per process,
     when it takes the kernels, ``progress(0, 'compiling kernels')`` and a render of
     ``warm_up_scene`` (jit.warm_up); its stats ({'compile_s', 'kernels_compiled',
     'kernels_loaded'}) or None when it did not run. ``should_cancel``: the render's cancel check,
     polled while the stage runs (RenderCancelled within util/cancel.POLL_S; the stage then runs
-    again in the next render)."""
-    return warm_up(_warm_up_render, progress, mode, should_cancel)
+    again in the next render). ``rough``: the scene has rough (GGX) surfaces: then also, once per
+    process, the stage of ``rough_warm_up_scene`` (the GGX kernels: seconds of compiling after an
+    install, milliseconds from the cache, plus the multiple-scattering tables the render needs
+    anyway). ``core``: run the first stage (False: only the rough one)."""
+    out = warm_up(_warm_up_render, progress, mode, should_cancel) if core else None
+    if rough:
+        out = _add_stage_stats(out, warm_up(_rough_warm_up_render, progress, mode, should_cancel, stage=ROUGH_STAGE))
+    return out
 
 
 def _cancelled_before_start(scene: Scene, settings: RenderSettings, region, spectral_film=None,
@@ -208,7 +272,8 @@ def render_prepared(
         def stop():
             return (should_cancel is not None and should_cancel()) or (deadline is not None and time.perf_counter() > deadline)
     try:
-        compiled = compile_stage(prepared.settings.kernels, progress, stop) if local else None
+        compiled = compile_stage(prepared.settings.kernels, progress, stop,
+                                 rough=bool(prepared.microfacet.any())) if local else None
     except RenderCancelled:
         out_of_time = deadline is not None and time.perf_counter() > deadline and not (should_cancel and should_cancel())
         return _cancelled_before_start(prepared.scene, prepared.settings, region, spectral_film,

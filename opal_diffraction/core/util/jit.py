@@ -215,6 +215,8 @@ def compile_counts() -> tuple[int, int]:
 COMPILE_STAGE = "compiling kernels"
 _warm_lock = threading.RLock()  # re-entrant: the warm-up's own render calls warm_up again (a no-op)
 _warm = {"started": False, "finished": False, "runner": None}  # runner: the warm-up's worker thread
+#: Further warm-ups a render runs only when its scene needs them (``warm_up(stage=...)``), by name.
+_stages: dict[str, dict] = {}
 
 
 def warm_up_done() -> bool:
@@ -222,7 +224,7 @@ def warm_up_done() -> bool:
     return _warm["finished"]
 
 
-def warm_up(run, progress=None, mode: str = "auto", should_cancel=None) -> dict | None:
+def warm_up(run, progress=None, mode: str = "auto", should_cancel=None, stage: str | None = None) -> dict | None:
     """Run ``run()`` once per process, before the first render that takes the kernels (``mode``:
     its RenderSettings.kernels), so the kernels it calls are compiled (or loaded from the cache)
     now; ``progress(0.0, COMPILE_STAGE)`` is called first. Other threads wait for it to finish
@@ -238,7 +240,12 @@ def warm_up(run, progress=None, mode: str = "auto", should_cancel=None) -> dict 
     Returns None when nothing ran (the render takes the reference, or the warm-up already ran),
     else {'compile_s': seconds, 'kernels_compiled': n, 'kernels_loaded': n} (for the render's
     stats; with 'compile_error' when ``run`` raised: the render then goes on, and meets the same
-    error itself if it is the kernels')."""
+    error itself if it is the kernels').
+
+    ``stage``: a further warm-up of this name, once per process likewise, for kernels only some
+    scenes take (core/render/frame.py's rough surfaces); None: the process's first one."""
+    _warm = globals()["_warm"] if stage is None else _stages.setdefault(
+        stage, {"started": False, "finished": False, "runner": None})
     if _warm["finished"] or kernels_path(mode) != "numba" or not kernels_enabled():
         return None
     if _warm.get("runner") == threading.get_ident():  # the warm-up render's own call (in its worker thread)
