@@ -259,3 +259,15 @@ def test_a_time_limit_stops_a_long_preparation_stage_within_a_poll(monkeypatch):
     assert res.samples == 0 and not res.rgb.any()
     assert "time limit (0.3 s) reached while preparing the scene: nothing rendered" in res.warnings
     assert took < 1.5, took
+
+
+@pytest.mark.parametrize("field, value", [("time_limit", np.array([1.0, 2.0])), ("time_limit", "5"),
+                                          ("kernels", np.array(["auto", "numpy"]))])
+def test_settings_read_before_validation_are_named_when_bad(field, value):
+    """The time limit and the kernels' mode are read before preparation validates the settings
+    (the limit counts preparation; the compile stage runs first): a bad value there is still a
+    named SceneError (fuzz seed 28: an array time_limit raised numpy's ValueError)."""
+    settings = RenderSettings(samples=1)
+    object.__setattr__(settings, field, value)  # as the fuzz's mutations do (the dataclass is frozen)
+    with pytest.raises(SceneError):
+        render(_quad_scene(), settings)

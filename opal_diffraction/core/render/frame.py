@@ -40,6 +40,7 @@ starts after it.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Callable
 
@@ -101,7 +102,7 @@ def render(
         return _cancelled_before_start(scene, settings or RenderSettings(), region, spectral_film,
                                        cancelled_in="while compiling the kernels")
     t_start = time.perf_counter()  # the time limit counts from here (compile_s is in the stats)
-    limit = float((settings or RenderSettings()).time_limit or 0.0)
+    limit = _time_limit_before_validation(settings or RenderSettings())
     try:
         with kernel_mode((settings or RenderSettings()).kernels):  # prepare's spectra take the render's path
             prepared = prepare(scene, settings, should_cancel=should_cancel,
@@ -123,6 +124,17 @@ def render(
     with one_blas_thread():  # the tile threads are the parallelism (core/util/blas_threads.py)
         return _render_in_mode(prepared, None, progress, should_cancel, on_round, region, t_start, spectral_film,
                                executor, time.perf_counter, compiled)
+
+
+def _time_limit_before_validation(settings: RenderSettings) -> float:
+    """settings.time_limit as seconds (0: none) where the settings are not validated yet (the
+    render's time limit counts preparation): a value that is not one finite number counts as
+    none here, and preparation's validation then names it (SceneError) before anything runs."""
+    try:
+        limit = float(settings.time_limit or 0.0)
+    except (TypeError, ValueError):  # an array, a string, ...: validate() says what is wrong
+        return 0.0
+    return limit if math.isfinite(limit) and limit > 0 else 0.0
 
 
 def warm_up_scene() -> Scene:

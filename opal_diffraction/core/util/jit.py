@@ -157,7 +157,7 @@ def kernels_path(mode: str = "auto") -> str:
     """The path a render with RenderSettings.kernels = ``mode`` takes: 'numba' (the compiled
     kernels) or 'numpy' (the reference: asked for, OPAL_KERNELS=numpy, or numba unavailable).
     Anything but 'auto' takes the reference (RenderSettings.validate rejects unknown modes)."""
-    return "numba" if AVAILABLE and mode == "auto" and not _env_forces_numpy() else "numpy"
+    return "numba" if AVAILABLE and isinstance(mode, str) and mode == "auto" and not _env_forces_numpy() else "numpy"
 
 
 @contextlib.contextmanager
