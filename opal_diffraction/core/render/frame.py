@@ -166,31 +166,40 @@ def warm_up_scene() -> Scene:
     return s
 
 
-def rough_warm_up_scene() -> Scene:
-    """The rough surfaces' compile stage's scene: 4 x 4 pixels seeing a rough gold conductor, a
+#: The rough stage's materials (rough_warm_up_scene): every lobe of materials/bsdf.py.
+_ROUGH_MATERIALS = (
+    {"kind": "MIRROR", "color": (0.95, 0.7, 0.4), "roughness": 0.3, "metallic": 1.0, "conductor_fresnel": "F82_TINT"},
+    {"kind": "DIFFUSE", "color": (0.8, 0.2, 0.2), "roughness": 0.5, "specular_ior_level": 0.5},
+    {"kind": "DIELECTRIC", "ior": 1.5, "roughness": 0.2, "dispersion": "ABBE", "abbe": 40.0},
+    {"kind": "MIRROR", "color": (0.9, 0.9, 0.9), "roughness": 0.4},
+)
+
+
+def rough_warm_up_scene(only: int | None = None) -> Scene:
+    """The rough surfaces' compile stage's scene: 8 x 8 pixels seeing a rough gold conductor, a
     Principled plastic (specular over a diffuse base), rough glass and a Glossy BSDF (GGX with a
-    constant Fresnel) on a diffuse floor, under a point light, an area light and a world map:
-    every lobe of materials/bsdf.py's kernels (evaluate, sample, with_outgoing, the parameters),
-    for white and mono rays."""
-    s = Scene(materials=Materials.from_list([
-        {"kind": "DIFFUSE", "color": (0.6, 0.6, 0.6)},
-        {"kind": "MIRROR", "color": (0.95, 0.7, 0.4), "roughness": 0.3, "metallic": 1.0,
-         "conductor_fresnel": "F82_TINT"},
-        {"kind": "DIFFUSE", "color": (0.8, 0.2, 0.2), "roughness": 0.5, "specular_ior_level": 0.5},
-        {"kind": "DIELECTRIC", "ior": 1.5, "roughness": 0.2, "dispersion": "ABBE", "abbe": 40.0},
-        {"kind": "MIRROR", "color": (0.9, 0.9, 0.9), "roughness": 0.4},
-    ]))
+    constant Fresnel), spheres side by side on a diffuse floor (each about 2 pixels wide), under a
+    point light, an area light and a world map: every lobe of materials/bsdf.py's kernels
+    (evaluate, sample, with_outgoing, the parameters) for white and mono rays, in batches of
+    several materials. ``only``: just that one of ``_ROUGH_MATERIALS``, a sphere filling the view
+    (batches of one material: the parameters' broadcast rows, other array types)."""
+    mats = [{"kind": "DIFFUSE", "color": (0.6, 0.6, 0.6)}] + [dict(m) for m in _ROUGH_MATERIALS]
+    s = Scene(materials=Materials.from_list(mats))
     s.add_mesh(*primitives.quad((0, 0, 0), (6, 0, 0), (0, 6, 0)), material=0)
-    for k, centre in enumerate(((-1.2, 0.3, 0.5), (-0.4, 0.3, 0.5), (0.4, 0.3, 0.5), (1.2, 0.3, 0.5))):
-        v, t = primitives.uv_sphere(centre, 0.35, segments=10, rings=5)
-        s.add_mesh(v, t, material=k + 1, normals=(v - np.asarray(centre, np.float32)) / 0.35)
+    spheres = [((x, 0.0, 0.3), k + 1) for k, x in enumerate((-0.9, -0.3, 0.3, 0.9))]
+    if only is not None:
+        spheres = [((0.0, 0.0, 0.3), only + 1)]
+    for centre, mat in spheres:
+        v, t = primitives.uv_sphere(centre, 0.3, segments=10, rings=5)
+        s.add_mesh(v, t, material=mat, normals=(v - np.asarray(centre, np.float32)) / 0.3)
     s.lights = Lights.from_list([
         {"kind": "POINT", "position": (1.0, -1.5, 3.0), "power": 300.0},
         {"kind": "AREA_RECT", "position": (-1.0, 0.0, 2.5), "direction": (0, 0, -1), "power": 100.0},
     ])
     s.world_image = np.linspace(0.2, 1.0, 8 * 4 * 3, dtype=np.float32).reshape(4, 8, 3)
     s.world_color = np.full(3, 0.3, np.float32)
-    s.camera = Camera.look_at((0.0, -4.0, 2.0), (0.0, 0.3, 0.5), lens=35.0, width=4, height=4)
+    eye = (0.0, -2.5, 0.8) if only is None else (0.0, -0.9, 0.45)
+    s.camera = Camera.look_at(eye, (0.0, 0.0, 0.3), lens=35.0, width=8, height=8)
     return s
 
 
@@ -201,9 +210,11 @@ def _warm_up_render(stopped: Callable[[], bool] | None = None) -> None:
 
 
 def _rough_warm_up_render(stopped: Callable[[], bool] | None = None) -> None:
-    """The rough surfaces' compile stage's render (as ``_warm_up_render``)."""
-    render(rough_warm_up_scene(), RenderSettings(samples=1, threads=1, light_paths=4096, seed=0),
-           should_cancel=stopped)
+    """The rough surfaces' compile stage's renders (as ``_warm_up_render``): the scene of all
+    rough materials, then each alone."""
+    for only in (None, *range(len(_ROUGH_MATERIALS))):
+        render(rough_warm_up_scene(only), RenderSettings(samples=1, threads=1, light_paths=4096, seed=0),
+               should_cancel=stopped)
 
 
 #: jit.warm_up's name of the rough surfaces' stage.
