@@ -55,6 +55,7 @@ import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass, replace
+from types import MappingProxyType
 from typing import Callable, Protocol
 
 from ..integrators.eye.eye_pass import EyePass
@@ -324,7 +325,10 @@ class LocalExecutor:
                 progress(*latest[-1])
             if worker.is_alive() and control.cancelled():
                 asked.set()  # the lanes stop at their next batch; their result is dropped
-                return replace(LightPassResult.skipped(prepared), cancelled=True)
+                # cancelled, and none of its light paths used (stats as a cancelled run_light_pass's)
+                return replace(LightPassResult.skipped(prepared), cancelled=True,
+                               stats=MappingProxyType({"light_paths": 0, "light_deposits": 0, "light_rays": 0,
+                                                       "cancelled": True}))
         if latest and progress is not None:
             progress(*latest[-1])
         if "error" in out:
