@@ -240,9 +240,10 @@ def compile_stage(mode: str, progress: Callable[[float, str], None] | None = Non
     'kernels_loaded'}) or None when it did not run. ``should_cancel``: the render's cancel check,
     polled while the stage runs (RenderCancelled within util/cancel.POLL_S; the stage then runs
     again in the next render). ``rough``: the scene has rough (GGX) surfaces: then also, once per
-    process, the stage of ``rough_warm_up_scene`` (the GGX kernels: seconds of compiling after an
-    install, milliseconds from the cache, plus the multiple-scattering tables the render needs
-    anyway). ``core``: run the first stage (False: only the rough one)."""
+    process, the stage of ``rough_warm_up_scene`` (the GGX kernels: tens of seconds of compiling
+    after an install, about 3 s from the cache, most of it the multiple-scattering tables the
+    render needs anyway). ``core``: run the first stage (False: only the rough one). The rough
+    stage is polled for a cancel, not for the time limit (it runs once per process)."""
     out = warm_up(_warm_up_render, progress, mode, should_cancel) if core else None
     if rough:
         out = _add_stage_stats(out, warm_up(_rough_warm_up_render, progress, mode, should_cancel, stage=ROUGH_STAGE))
