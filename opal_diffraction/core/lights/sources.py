@@ -173,7 +173,9 @@ def spot_mask(pl: PreparedLights, index: int, travel: np.ndarray) -> np.ndarray:
     """The spot cone mask for light travelling along ``travel`` (B, 3) unit (Cycles' spot.h:
     smoothstep((cos - cos_half) / blend band), 0 outside)."""
     cos_axis = dot3(travel, pl.direction[index].astype(travel.dtype))
-    ch, sm = pl.cos_half_spot[index], pl.spot_smooth[index]
+    # the cone's numbers in travel's precision, as the kernels take them (NumPy 1.x's value-based
+    # casting did the same to these float64 scalars; NumPy 2 would compute in float64)
+    ch, sm = travel.dtype.type(pl.cos_half_spot[index]), pl.spot_smooth[index]
     cone = np.where(cos_axis > ch, 1.0, 0.0).astype(travel.dtype)
     if np.float32(sm) > 0:  # a blend band that is 0 in float32 is a hard edge
         cone = cone * smoothstep((cos_axis - ch) / travel.dtype.type(sm))
