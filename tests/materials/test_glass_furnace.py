@@ -46,6 +46,7 @@ def slab(top_rough: bool, sides_rough: bool, pixels: int = 24) -> Scene:
     return s
 
 
+@pytest.mark.slow  # four renders of ~20 s
 @pytest.mark.parametrize("top_rough,sides_rough", [(False, False), (True, True), (True, False), (False, True)])
 def test_a_closed_glass_slab_in_a_white_world_is_invisible(top_rough, sides_rough):
     settings = RenderSettings(samples=64, light_paths=0, threads=1, wavelength_step=20.0, seed=5, blue_noise=False,
