@@ -92,8 +92,8 @@ def test_a_field_is_gathered_only_when_read():
 
 
 def test_a_subset_keeps_the_rows_of_when_it_was_taken():
-    """Fields reassigned on the parent afterwards (the walk's rule for changing a field) and
-    weights scaled in place (Russian roulette) leave a subset as it was taken."""
+    """Fields reassigned on the parent afterwards (the walk's rule for changing a field, the
+    weights included) leave a subset as it was taken."""
     rng = np.random.default_rng(3)
     rays = _rays(rng, 40, mono=False)
     idx = np.array([1, 5, 7, 30])
@@ -101,7 +101,7 @@ def test_a_subset_keeps_the_rows_of_when_it_was_taken():
     sub = rays.take(idx)
     rays.state.pdf = np.zeros(40, np.float32)
     rays.d = np.zeros((40, 3), np.float32)
-    rays.w *= 2
+    rays.w = rays.w * 2
     np.testing.assert_array_equal(sub.w, want_w)
     np.testing.assert_array_equal(sub.state.pdf, want_pdf)
     np.testing.assert_array_equal(sub.d, want_d)
@@ -186,3 +186,24 @@ def test_a_path_state_subclass_carries_its_fields():
     assert type(j) is _Tagged and j.tag.tolist() == [2, 5] and j.pdf.tolist() == base.pdf[[2, 5]].tolist()
     untagged = _Tagged(*[getattr(base, k) for k in STATE_FIELDS])
     assert untagged.take(np.array([0])).tag is None
+
+
+def test_russian_roulette_reweights_into_a_new_array():
+    """The eye pass's roulette (integrators/eye/continuation.py) and the light pass's give the
+    survivors new weights without writing into the array a pending subset may still gather."""
+    from types import SimpleNamespace
+
+    from opal_diffraction.core.integrators.eye.continuation import russian_roulette
+
+    rng = np.random.default_rng(5)
+    rays = _rays(rng, 64, mono=False)
+    rays.w = (rays.w * np.float32(0.3)).astype(np.float32)  # throughput < 1: roulette applies
+    rays.depth = np.full(64, 5, np.int32)
+    rays.state.final = np.zeros(64, bool)
+    rays.state.split = np.ones(64, np.float32)
+    idx = np.arange(0, 64, 3)
+    before = rays.w[idx].copy()
+    sub = rays.take(idx)  # pending until read
+    ok = russian_roulette(SimpleNamespace(limits=(100, 100, 100, 100)), rays, np.random.default_rng(1))
+    assert 0 < ok.sum() < 64 and not np.array_equal(rays.w[idx], before)  # survivors were reweighted
+    np.testing.assert_array_equal(sub.w, before)

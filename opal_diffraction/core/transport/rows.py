@@ -17,8 +17,8 @@ path's pixel, sampler ids, wavelength number) is not copied at all from step to 
 The values are exactly those of an eager gather (a row gather is a copy, no arithmetic). The
 one rule it needs - already the walk's rule for its records - is that a stage that changes a
 field assigns a new array instead of writing into the old one (a pending subset reads its
-source when first read, not when taken); a field some stage does scale in place (``Rays.w``,
-Russian roulette) is gathered at once instead (not in ``names``).
+source when first read, not when taken). Russian roulette, which reweights survivors, assigns
+its weights as a new array for that reason, so ``Rays.w`` too is gathered only when read.
 
 A pending entry is a two-element list [source, indices], or the name of another field whose
 object it is (``Hit.ns`` of a flat hit is ``Hit.ng`` itself: callers test ``ns is ng``). A

@@ -83,8 +83,9 @@ def _indices(mask):
     return None if len(idx) == len(mask) and len(idx) else idx
 
 
-#: The fields of Rays gathered when first read (w at once: see Rays.take; state and basis are not rows).
-_RAY_ROWS = ("o", "d", "pix", "lam", "depth", "u_lam")
+#: The fields of Rays gathered when first read (state and basis are not rows). The weights too:
+#: the stages that scale them (Russian roulette) assign a new array (core/transport/rows.py's rule).
+_RAY_ROWS = ("o", "d", "pix", "w", "lam", "depth", "u_lam")
 
 
 @dataclass
@@ -109,15 +110,13 @@ class Rays(RowView):
 
     def take(self, mask) -> "Rays":
         """The rays where ``mask`` (B,) bool is set, or at indices ``mask``: a subset whose fields
-        are gathered when first read (core/transport/rows.py), the weights at once (Russian
-        roulette scales a population's weights in place)."""
+        are gathered when first read (core/transport/rows.py)."""
         idx = _indices(mask)
         if idx is None:
             return self
         new = subset(self, idx, _RAY_ROWS)
         nd = new.__dict__
-        w, st = self.w, self.state
-        nd["w"] = None if w is None else w.take(idx, axis=0)
+        st = self.state
         nd["state"] = None if st is None else st.take(idx)
         nd["basis"] = self.basis
         nd["_n"] = len(idx)
@@ -170,7 +169,7 @@ class Rays(RowView):
                 basis = a.basis  # coefficients over one basis: joined as they are
             else:
                 a, b = a.dense(), b.dense()  # different bases: join as spectra
-        if (a.w is None) != (b.w is None):  # one side has implicit unit weights: make them explicit
+        if holds_none(a, "w") != holds_none(b, "w"):  # one side has implicit unit weights: make them explicit
             n = (a.w if a.w is not None else b.w).shape[1]
             a, b = a._with_w(a.dense_w(n)), b._with_w(b.dense_w(n))
         if (a.state is None) != (b.state is None):
@@ -208,7 +207,7 @@ def _concat_all(parts: list) -> Rays:
 def _join_key(r: Rays) -> tuple:
     """What must match for rays to join field by field (read without gathering anything)."""
     st = r.state
-    return (r.basis is not None, r.w is None, holds_none(r, "lam"), type(st), st is None or holds_none(st, "rd"))
+    return (r.basis is not None, holds_none(r, "w"), holds_none(r, "lam"), type(st), st is None or holds_none(st, "rd"))
 
 
 def _join(parts: list, basis=None) -> Rays:
@@ -217,7 +216,6 @@ def _join(parts: list, basis=None) -> Rays:
     a = parts[0]
     new = join(parts, _RAY_ROWS, object.__new__(Rays))
     nd = new.__dict__
-    nd["w"] = None if a.w is None else np.concatenate([r.w for r in parts])
     nd["state"] = None if a.state is None else PathState.join([r.state for r in parts])
     nd["basis"] = basis
     nd["_n"] = sum(len(r) for r in parts)

@@ -31,7 +31,9 @@ __all__ = ["russian_roulette", "count_delta", "lambert_bounce", "microfacet_boun
 def russian_roulette(c, rays: Rays, rng) -> np.ndarray:
     """Specular bounces go on below the total limit and past Russian roulette (after three
     bounces, survival probability = the largest spectral throughput, at most 1, survivors
-    reweighted by 1 / that, in place: unbiased; pbrt-v4's rule). Mono rays are not rouletted."""
+    reweighted by 1 / that: unbiased; pbrt-v4's rule). Mono rays are not rouletted. The
+    reweighted weights are a new array (subsets taken earlier may still gather the old one:
+    core/transport/rows.py)."""
     depth = rays.depth
     ok = (depth < c.limits[0]) & ~rays.state.final
     if rays.w is not None and rays.w.ndim == 2:  # white rays (mono ones: w (B,))
@@ -44,7 +46,9 @@ def russian_roulette(c, rays: Rays, rng) -> np.ndarray:
                 alive = rng.random(len(rays), np.float32) < q
                 ok &= ~roulette | alive
                 kept = roulette & alive
-                rays.w[kept] /= q[kept, None]
+                w = rays.w.copy()
+                w[kept] /= q[kept, None]
+                rays.w = w
     return ok
 
 

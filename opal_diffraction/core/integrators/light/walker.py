@@ -135,7 +135,9 @@ class LightWalker(SpecularWalker):
             killed = deep & (rng.random(len(rays)) >= RR_SURVIVAL)
             ok &= ~killed
             if rays.w is not None:
-                rays.w[deep & ~killed] /= np.float32(RR_SURVIVAL)
+                w = rays.w.copy()  # a new array: subsets taken earlier may still gather the old one
+                w[deep & ~killed] /= np.float32(RR_SURVIVAL)
+                rays.w = w
         return ok
 
 
