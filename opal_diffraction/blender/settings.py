@@ -35,4 +35,5 @@ def render_settings(opal, scene, spectral_path: str = "") -> RenderSettings:
         adaptive_min_samples=int(opal.adaptive_min_samples), grating_footprint=bool(opal.grating_footprint),
         blue_noise=bool(opal.blue_noise),
         caustic_splat=bool(opal.caustic_splat),
+        film_transparent=bool(getattr(scene.render, "film_transparent", False)),
     )

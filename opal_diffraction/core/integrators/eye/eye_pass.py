@@ -67,7 +67,7 @@ class EyePass:
 
     def trace(self, origins, directions, pix, n_pixels: int, rng: np.random.Generator,
               u_lambda: np.ndarray | None = None, sampler_ids=None,
-              differentials: np.ndarray | None = None) -> TileResult:
+              differentials: np.ndarray | None = None, tmax: np.ndarray | None = None) -> TileResult:
         """Trace camera rays (one per sample) and return the per-pixel sum of their radiance.
 
         ``u_lambda`` (B,) in [0, 1): stratified numbers for the SAMPLE wavelength choice
@@ -75,7 +75,8 @@ class EyePass:
         seed): the path vertices' numbers come from core/sampling/sampler.py's Sobol-Burley points of
         those pixels and samples; None: pseudo-random (``rng``). ``differentials`` (B, 5, 3):
         the rays' differentials per pixel step (``footprint.camera_differentials``), used where
-        ``wants_differentials``; None: point samples.
+        ``wants_differentials``; None: point samples. ``tmax`` (B,): the camera rays' clip end
+        (core/sampling/camera.py camera_rays; None: unbounded).
         """
         if u_lambda is None:
             u_lambda = rng.random(len(pix))
@@ -84,12 +85,12 @@ class EyePass:
             return wavelengths.merge_tiles([self.trace(
                 origins[c], directions[c], pix[c], n_pixels, rng, u_lambda[c],
                 None if sampler_ids is None else (sampler_ids[0][c], sampler_ids[1][c], sampler_ids[2]),
-                None if differentials is None else differentials[c]) for c in chunks])
+                None if differentials is None else differentials[c], None if tmax is None else tmax[c]) for c in chunks])
         if sampler_ids is None:
             tr = _TileTrace(self, n_pixels, rng)
-            return tr.run(origins, directions, pix, u_lambda, differentials=differentials)
+            return tr.run(origins, directions, pix, u_lambda, differentials=differentials, tmax=tmax)
         tr = _TileTrace(self, n_pixels, rng, sampler_seed=int(sampler_ids[2]))
-        return tr.run(origins, directions, pix, u_lambda, ids=sampler_ids[:2], differentials=differentials)
+        return tr.run(origins, directions, pix, u_lambda, ids=sampler_ids[:2], differentials=differentials, tmax=tmax)
 
     def trace_escapes(self, origins, directions, rng: np.random.Generator, wavelength_index=None) -> dict:
         """Follow rays through the scene's specular surfaces and report the ones that leave it.
@@ -129,6 +130,8 @@ class _TileTrace(SpecularWalker):
         self.out = TileOutput(n_pixels, self.n)
         self.escapes = [] if record_escapes else None  # dicts of the rays leaving the scene
         self.any_emissive = eye.any_emissive
+        self.transparent = bool(getattr(eye.prepared.settings, "film_transparent", False))
+        self._camera_segment = False  # the next segment traced is the camera rays' (coverage: alpha)
 
     def _new_state(self, b: int) -> PathState:
         """The path tracer's per-path state of ``b`` camera paths (core/transport/path_state.py),
@@ -140,7 +143,8 @@ class _TileTrace(SpecularWalker):
         r.state = self._new_state(0)
         return r
 
-    def run(self, origins, directions, pix, u_lambda, wavelength_index=None, ids=None, differentials=None) -> TileResult:
+    def run(self, origins, directions, pix, u_lambda, wavelength_index=None, ids=None, differentials=None,
+            tmax=None) -> TileResult:
         b = len(pix)
         rays = Rays(origins, directions, pix.astype(np.int64), None, None,
                      np.zeros(b, np.int32), np.asarray(u_lambda, np.float64), self._new_state(b))
@@ -154,7 +158,8 @@ class _TileTrace(SpecularWalker):
             lam = np.broadcast_to(np.asarray(wavelength_index, np.int64), (b,)).copy()
             mono = Rays(rays.o, rays.d, rays.pix, np.ones(b, np.float32), lam, rays.depth, rays.u_lam, rays.state)
             rays = rays.take(np.zeros(b, bool))
-        self.walk(rays, mono)
+        self._camera_segment = True
+        self.walk(rays, mono, tmax)
         return self.out.result(self.rays_cast)
 
     def numbers(self, rays: Rays, slot: int):
@@ -170,9 +175,18 @@ class _TileTrace(SpecularWalker):
 
     # ----------------------------------------------------------------- the walker's hooks
     def on_segment(self, rays: Rays, t: np.ndarray) -> None:
+        if self._camera_segment:  # the camera rays: coverage, the film's alpha (Film > Transparent)
+            self._camera_segment = False
+            self.out.add_alpha(rays.pix, np.isfinite(t))
         emission.lights_passed(self.c, self.out, rays, t)
 
     def on_miss(self, rays: Rays) -> None:
+        if self.transparent:  # Film > Transparent: the world seen directly is alpha 0, black (Cycles)
+            through = rays.depth > 0
+            if not through.all():
+                rays = rays.take(through)
+                if not len(rays):
+                    return
         emission.escaped(self.c, self.out, rays, self.escapes)
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> HitShading | None:
