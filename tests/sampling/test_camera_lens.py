@@ -1,5 +1,5 @@
 """The camera's thin lens, clipping, panoramic mappings and film coverage (docs/physics.md
-section 15), each against a closed form or an independent computation:
+sections 6.7-6.12), each against a closed form or an independent computation:
 
 - the aperture sampler (disk, polygons with blades, rotation and ratio) by chi-square against
   the shape's area, cell by cell (the cells' areas by point-in-polygon on a fine sub-grid);

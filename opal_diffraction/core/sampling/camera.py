@@ -9,6 +9,14 @@ across tiles (Ernst et al. 2006, "Filter Importance Sampling"; Cycles does the s
 is a separable Blackman-Harris window with Cycles' convention: a filter width w spans +-w pixels
 (Cycles doubles the Blackman-Harris range "for consistency with Blender Internal"), so the
 default 1.5 px covers 3 px, and a frame edge darkens as it does in Cycles.
+
+The rays (``camera_rays``) are Cycles' (intern/cycles/kernel/camera/camera.h, projection.h;
+docs/physics.md sections 6.1 and 6.7-6.9): perspective, orthographic and panoramic cameras
+(equirectangular, fisheye equidistant and equisolid, in Cycles' panorama space), a thin lens
+for depth of field (the aperture a disk or Cycles' regular polygon of blades, turned and
+squeezed by the anamorphic ratio; every ray aimed at the pinhole ray's point on the plane of
+focus), and clip start / end (the near and far planes along the view axis; along the ray for
+panoramas).
 """
 
 from __future__ import annotations
@@ -140,7 +148,7 @@ def aperture_points(u: np.ndarray, v: np.ndarray, blades: int = 0, rotation: flo
     (intern/cycles/kernel/sample/mapping.h): u picks one of the polygon's isosceles wedges and,
     rescaled, the distance from the centre (sqrt for a uniform triangle), v the position across
     the wedge. The x coordinate is then divided by ``ratio`` (Cycles' inv_aperture_ratio, an
-    anamorphic bokeh). docs/physics.md section 15.2."""
+    anamorphic bokeh). docs/physics.md section 6.7."""
     u = np.asarray(u, np.float64)
     v = np.asarray(v, np.float64)
     if int(blades) < 3:
@@ -169,7 +177,7 @@ def panorama_directions(cam: Camera, u: np.ndarray, v: np.ndarray) -> tuple[np.n
     """Directions of a panoramic camera in Cycles' panorama space (x forward, y left, z up) for
     image coordinates (u, v) in [0, 1] (u to the right, v UP, Cycles' raster convention), and
     whether each is inside the projection (a fisheye's circle). The mappings are Cycles'
-    (intern/cycles/kernel/camera/projection.h, docs/physics.md section 15.3):
+    (intern/cycles/kernel/camera/projection.h, docs/physics.md section 6.9):
 
     - equirectangular: phi = (lon_min - lon_max) u - lon_min, theta = (lat_min - lat_max) v -
       lat_min + pi / 2, d = (sin theta cos phi, sin theta sin phi, cos theta);
@@ -241,7 +249,7 @@ def camera_rays(cam: Camera, x: np.ndarray, y: np.ndarray, lens_u: np.ndarray | 
 
     ``lens_u`` (B, 2) uniform numbers for the aperture point (None: the lens centre, the chief
     ray). Cycles' camera_sample_perspective / _orthographic / _panorama
-    (intern/cycles/kernel/camera/camera.h, docs/physics.md section 15): a thin lens aims every
+    (intern/cycles/kernel/camera/camera.h, docs/physics.md sections 6.7-6.9): a thin lens aims every
     ray at the point the pinhole ray meets the plane of focus; clip start moves the origin
     forward to the near plane (perspective: clip_start / cos of the pinhole ray off the view
     axis along the ray; panoramic: clip_start along it) and clip end bounds the ray there."""

@@ -79,7 +79,7 @@ def camera_differentials(cam, directions: np.ndarray, offsets=None, box_width: f
     A thin lens keeps its pinhole's differentials (as Cycles' camera_sample_perspective does: the
     footprint is the pixel's, not the blur's); a panoramic camera gets zeros with width 0 (point
     samples of the pattern)."""
-    if cam.kind == "PANO":  # no differentials for panoramas: point samples (docs/physics.md section 15.4)
+    if cam.kind == "PANO":  # no differentials for panoramas: point samples (docs/physics.md section 6.10)
         out = np.zeros((len(directions), 5, 3), np.float32)
         out[:, 4, 2] = 0.0
         return out

@@ -420,7 +420,7 @@ class Camera:
     shift_y: float = 0.0
     width: int = 640
     height: int = 480
-    # depth of field (thin lens, Cycles' conventions: docs/physics.md section 15): the aperture's
+    # depth of field (thin lens, Cycles' conventions: docs/physics.md sections 6.7-6.9): the aperture's
     # radius in metres (0: a pinhole), the distance in metres to the plane in focus (along the
     # view axis), the blade count (below 3: a round aperture), the blades' rotation (radians) and
     # the anamorphic ratio (the aperture's x is divided by it)

@@ -146,7 +146,7 @@ class RenderSettings:
     # caustic map like every other caustic
     caustic_splat: bool = True
     # Film > Transparent (Cycles): camera rays that meet no surface see nothing (black) and the
-    # result's alpha is each pixel's coverage (RenderResult.alpha; docs/physics.md section 15.5)
+    # result's alpha is each pixel's coverage (RenderResult.alpha; docs/physics.md section 6.11)
     film_transparent: bool = False
     # pixels share one low-discrepancy sequence in a blue-noise order, as Cycles' default
     # pattern (core/sampling/sampler.py, docs/physics.md section 6.6); False: each pixel its own sequence

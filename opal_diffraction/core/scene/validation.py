@@ -330,14 +330,14 @@ PANORAMA_TYPES = ("EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT", "FISHEYE_EQUISOLID")
 
 
 def _validate_lens(c: Camera) -> dict:
-    """The thin lens, clipping and panorama fields of a camera (docs/physics.md section 15), as
+    """The thin lens, clipping and panorama fields of a camera (docs/physics.md sections 6.7-6.9), as
     clean Python numbers; SceneError naming the first bad one."""
     out = {}
     for name in ("aperture_radius", "focus_distance", "aperture_rotation", "aperture_ratio", "clip_start",
                  "fisheye_fov", "fisheye_lens", "latitude_min", "latitude_max", "longitude_min", "longitude_max"):
         val = as_number(getattr(c, name), f"camera {name}")
-        if not np.isfinite(val):
-            raise SceneError(f"camera {name} must be a finite number, got {val}")
+        if not np.isfinite(val) or abs(val) > FLOAT32_MAX:
+            raise SceneError(f"camera {name} must be a finite number (within float32), got {number_text(val)}")
         out[name] = float(val)
     end = c.clip_end
     if isinstance(end, np.ndarray) and end.ndim == 0:
@@ -345,6 +345,8 @@ def _validate_lens(c: Camera) -> dict:
     # clip_end may be +inf (no far clipping, the core's default); any other value a finite number
     out["clip_end"] = np.inf if isinstance(end, (float, np.floating)) and end == np.inf else \
         float(as_number(end, "camera clip_end"))
+    if np.isfinite(out["clip_end"]) and out["clip_end"] > FLOAT32_MAX:
+        raise SceneError(f"camera clip_end {number_text(out['clip_end'])} m overflows float32 (max 3.4e38; inf: no far clip)")
     out["aperture_blades"] = int(as_number(c.aperture_blades, "camera aperture_blades", integer=True))
     if out["aperture_radius"] < 0 or out["aperture_radius"] > COORD_LIMIT:
         raise SceneError(f"camera aperture_radius {number_text(out['aperture_radius'])} m must be in [0, {COORD_LIMIT:g}]")

@@ -120,7 +120,7 @@ def applies(prepared) -> bool:
     if not s.caustic_splat or float(s.filter_width) <= 0:
         return False
     cam = prepared.scene.camera
-    if cam is None or cam.kind == "PANO" or has_lens(cam):  # a pinhole's connection only (docs/physics.md 15.4)
+    if cam is None or cam.kind == "PANO" or has_lens(cam):  # a pinhole's connection only (docs/physics.md section 6.10)
         return False
     return bool(direct_materials(prepared).any())
 
