@@ -280,3 +280,30 @@ def test_bad_lens_values_are_one_scene_error(field, value, words):
     s.camera = replace(s.camera, **kw)
     with pytest.raises(SceneError, match=words):
         validate_scene(s)
+
+
+def test_cli_transparent_writes_the_coverage_as_alpha(tmp_path):
+    import io
+    from contextlib import redirect_stderr
+
+    from opal_diffraction import cli
+    from opal_diffraction.core.render.output import read_exr
+    from opal_diffraction.core.scene.npz import save_scene
+
+    s, _ = _half_plane_scene(False)
+    s.camera.clip_start = 0.5  # a file with the new camera fields round-trips
+    path = tmp_path / "scene.npz"
+    save_scene(s, path)
+    out = tmp_path / "out.exr"
+    args = ["render", str(path), "-o", str(out), "--spp", "16", "--wavelength-step", "20", "--light-paths", "0",
+            "--no-preview", "-q"]
+    with redirect_stderr(io.StringIO()):
+        assert cli.main(args + ["--transparent"]) == 0
+    ch = read_exr(str(out))
+    np.testing.assert_array_equal(ch["A"][:, :14], 1.0)
+    np.testing.assert_array_equal(ch["A"][:, 19:], 0.0)
+    np.testing.assert_array_equal(ch["R"][:, 19:], 0.0)
+    with redirect_stderr(io.StringIO()):
+        assert cli.main(args) == 0
+    ch = read_exr(str(out))
+    assert "A" not in ch and ch["R"][:, 19:].mean() > 0.1  # an opaque film: the world, no alpha
