@@ -127,6 +127,11 @@ class OPAL_RENDER_PT_film(OpalButtonsPanel, Panel):
         layout.prop(context.scene.opal, "filter_width")
         # Film > Transparent (Blender's own setting, as Cycles' Film panel shows it): docs/physics.md section 6.11
         layout.prop(context.scene.render, "film_transparent", text="Transparent")
+        cycles = getattr(context.scene, "cycles", None)
+        if cycles is not None and hasattr(cycles, "film_transparent_glass"):  # Cycles' setting, read as Cycles reads it
+            sub = layout.column()
+            sub.active = context.scene.render.film_transparent
+            sub.prop(cycles, "film_transparent_glass", text="Transparent Glass")
 
 
 class OPAL_DATA_PT_panorama(OpalButtonsPanel, Panel):

@@ -108,6 +108,19 @@ def transparent():
     return sc
 
 
+def transparent_glass():
+    """``transparent`` with a smooth glass sphere (IOR 1.45) floating above the floor's far
+    corner, the world behind it, and Cycles' Transparent Glass on: the world seen through the
+    glass lowers alpha by the light that gets through (alpha about 0.1 in its middle, rising at
+    its rim where reflections are opaque). Its sun shadow falls off the floor (ours renders the
+    sun's caustic through the glass, which Cycles cannot find from a point-like sun)."""
+    sc = transparent()
+    ps._smooth_sphere("glass", 0.5, (-1.0, 0.9, 2.0), bs.material("glass", "GLASS", (1.0, 1.0, 1.0), IOR=1.45,
+                                                                  Roughness=0.0))
+    sc.cycles.film_transparent_glass = True
+    return sc
+
+
 def equirect():
     """An equirectangular panorama (full sphere, 64 x 32) from 1 m above a floor, with a cube
     ahead, a ball to the left, a tall box behind and a sun: every direction of Cycles' mapping
@@ -140,7 +153,7 @@ def fisheye():
     return sc
 
 
-SCENES = {"dof": dof, "bokeh": bokeh, "clip": clip, "transparent": transparent, "equirect": equirect, "fisheye": fisheye}
+SCENES = {"dof": dof, "bokeh": bokeh, "clip": clip, "transparent": transparent, "transparent_glass": transparent_glass, "equirect": equirect, "fisheye": fisheye}
 
 
 def build(name: str):

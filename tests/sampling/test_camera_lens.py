@@ -307,3 +307,44 @@ def test_cli_transparent_writes_the_coverage_as_alpha(tmp_path):
         assert cli.main(args) == 0
     ch = read_exr(str(out))
     assert "A" not in ch and ch["R"][:, 19:].mean() > 0.1  # an opaque film: the world, no alpha
+
+
+@pytest.mark.parametrize("dispersion", [None, "BK7"])
+def test_transparent_glass_alpha_is_one_minus_the_direct_transmission(dispersion):
+    """Film > Transparent with Transparent Glass (Cycles' PATH_RAY_TRANSPARENT_BACKGROUND): an
+    orthographic view straight through a smooth glass slab (n = 1.5) against the world. Only the
+    path refracted twice reaches the world transparent (a reflection inside makes a path opaque),
+    so alpha = 1 - (1 - R)^2 with R = ((n - 1) / (n + 1))^2 = 0.04 at normal incidence: 0.0784.
+    With dispersion (BK7, n ~ 1.517 at 550 nm) the mean over the grid of 1 - (1 - R(lambda))^2."""
+    mat = {"kind": "DIELECTRIC", "ior": 1.5}
+    if dispersion:
+        mat = {"kind": "DIELECTRIC", "ior": 1.5168, "dispersion": dispersion}
+    s = Scene(materials=Materials.from_list([mat]))
+    s.add_mesh(*primitives.box((0, 0, 0), (4.0, 4.0, 0.3)), material=0)
+    m = np.eye(4)
+    m[:3, 3] = (0.0, 0.0, 5.0)
+    s.camera = Camera(matrix=m, kind="ORTHO", ortho_scale=1.0, width=8, height=8)
+    s.world_color = np.array([0.5, 0.5, 0.5], np.float32)
+    settings = RenderSettings(samples=64, light_paths=0, wavelength_step=10.0, film_transparent=True,
+                              film_transparent_glass=True)
+    rr = render(s, settings)
+    n = np.array([1.5])
+    if dispersion:  # BK7's index at the render's wavelengths (Sellmeier, core/spectral/optics.py)
+        from opal_diffraction.core.spectral.optics import ior_spectrum
+        n = ior_spectrum(settings.grid().wavelengths, dispersion, 1.5168)
+    r = ((n - 1) / (n + 1)) ** 2
+    expected = float(np.mean(1 - (1 - r) ** 2))
+    # binomial-like noise of 64 x 64 samples of a two-valued estimate (0 or about 1): ~0.004
+    assert rr.alpha.mean() == pytest.approx(expected, abs=0.004)
+    assert (rr.alpha >= 0).all() and (rr.alpha <= 1).all()
+    # what reaches the camera through the glass is the world reflected inside (not transparent): small, >= 0
+    assert rr.rgb.min() >= 0 and rr.rgb.mean() < 0.5 * 0.1
+    # Transparent Glass off: the glass is opaque (coverage 1) and shows the world through it
+    rr2 = render(s, replace_settings(settings, film_transparent_glass=False))
+    np.testing.assert_array_equal(rr2.alpha, 1.0)
+    assert rr2.rgb.mean() > 0.4
+
+
+def replace_settings(settings, **kw):
+    from dataclasses import replace
+    return replace(settings, **kw)

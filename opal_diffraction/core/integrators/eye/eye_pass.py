@@ -25,6 +25,8 @@ what a hit's shading leaves for its bounce travels in a ``surface_interaction.Hi
 
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
+
 import numpy as np
 
 from ...transport import wavelengths
@@ -116,6 +118,14 @@ class EyePass:
                 "lam": cat("lam") if len(mono) == len(e) else None, "depth": cat("depth"), "ray": cat("ray")}
 
 
+@dataclass
+class GlassState(PathState):
+    """The path state with Cycles' PATH_RAY_TRANSPARENT_BACKGROUND (Film > Transparent with
+    Transparent Glass, docs/physics.md section 6.11): ``tbg`` (B,) bool, the path has met only
+    smooth refractions since the camera; the world it reaches is transparent."""
+    tbg: np.ndarray | None = None
+
+
 class _TileTrace(SpecularWalker):
     """One tile's trace: the walker's hooks over the stages, with the render's constants
     (``EyeConstants``), the tile's output (``TileOutput``) and its random numbers: the tile's
@@ -131,12 +141,16 @@ class _TileTrace(SpecularWalker):
         self.escapes = [] if record_escapes else None  # dicts of the rays leaving the scene
         self.any_emissive = eye.any_emissive
         self.transparent = bool(getattr(eye.prepared.settings, "film_transparent", False))
+        self.transparent_glass = self.transparent and bool(getattr(eye.prepared.settings, "film_transparent_glass", False))
         self._camera_segment = False  # the next segment traced is the camera rays' (coverage: alpha)
 
     def _new_state(self, b: int) -> PathState:
         """The path tracer's per-path state of ``b`` camera paths (core/transport/path_state.py),
         with ray differentials where the render carries them."""
-        return PathState.new(b, differentials=self.c.footprints)
+        st = PathState.new(b, differentials=self.c.footprints)
+        if not self.transparent_glass:
+            return st
+        return GlassState(**{f.name: getattr(st, f.name) for f in fields(PathState)}, tbg=np.ones(b, bool))
 
     def empty_mono(self) -> Rays:
         r = super().empty_mono()
@@ -183,6 +197,18 @@ class _TileTrace(SpecularWalker):
     def on_miss(self, rays: Rays) -> None:
         if self.transparent:  # Film > Transparent: the world seen directly is alpha 0, black (Cycles)
             through = rays.depth > 0
+            if self.transparent_glass:  # ... and through smooth glass: alpha lowered by the throughput
+                glass = through & rays.state.tbg
+                if glass.any():
+                    g = rays.take(glass)
+                    # the mean over the grid of the throughput (a mono ray's one bin: w / n)
+                    if g.lam is None:
+                        w = g.dense_w(self.n)
+                        tput = w.mean(axis=1) if w.ndim == 2 else w
+                    else:
+                        tput = g.w.astype(np.float64) / self.n
+                    self.out.lower_alpha(g.pix, tput)
+                    through &= ~glass
             if not through.all():
                 rays = rays.take(through)
                 if not len(rays):
@@ -252,6 +278,8 @@ class _TileTrace(SpecularWalker):
         return russian_roulette(self.c, rays, rng)
 
     def after_delta(self, rays: Rays, transmitted: np.ndarray) -> Rays:
+        if self.transparent_glass:  # a reflection ends the transparent background (Cycles' path_state_next)
+            rays.state.tbg = rays.state.tbg & transmitted
         return count_delta(self.c, rays, transmitted)
 
     def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng,
@@ -273,10 +301,12 @@ class _TileTrace(SpecularWalker):
             body = lambert_bounce(c, rays, hit, sel, can_bounce, shaded, self.numbers)
             if body is not None:
                 out = body if micro_out is None or not len(micro_out) else Rays.concat(body, micro_out)
-        if c.bragg is None:
-            return out
-        return c.bragg.continue_paths(c.limits, self.rng, rays, hit, can_bounce, out,
-                                      None if shaded is None else shaded.bragg)
+        if c.bragg is not None:
+            out = c.bragg.continue_paths(c.limits, self.rng, rays, hit, can_bounce, out,
+                                         None if shaded is None else shaded.bragg)
+        if self.transparent_glass and out is not None and len(out):  # a diffuse or rough bounce: opaque
+            out.state.tbg = np.zeros(len(out), bool)
+        return out
 
     def mirror_bounce(self, rays: Rays, hit: Hit) -> Rays:
         out = super().mirror_bounce(rays, hit)  # a grating's zeroth order, or the base's share (section 3.3)

@@ -66,6 +66,13 @@ class TileOutput:
         if len(pix):
             self.alpha += np.bincount(np.asarray(pix)[hit], minlength=self.n_pixels).astype(np.float32)
 
+    def lower_alpha(self, pix: np.ndarray, amount: np.ndarray) -> None:
+        """Transparent glass: paths at tile pixels ``pix`` that reached the world through smooth
+        refractions only take ``amount`` (B,) (their mean throughput) off the coverage."""
+        if len(pix):
+            self.alpha -= np.bincount(np.asarray(pix), weights=np.asarray(amount, np.float64),
+                                      minlength=self.n_pixels).astype(np.float32)
+
     def _new_film(self) -> np.ndarray:
         return np.zeros(self.n_pixels * self.n, np.float32)
 
