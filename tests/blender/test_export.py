@@ -377,6 +377,13 @@ def test_camera_export():
         _export()
 
 
+def test_motion_blur_is_named_not_silently_ignored():
+    sc = _basic_scene()
+    assert not [w for w in _export().warnings if "motion blur" in w]
+    sc.render.use_motion_blur = True
+    assert [w for w in _export().warnings if "motion blur is not rendered" in w]
+
+
 def test_camera_depth_of_field_export_follows_cycles():
     """Cycles' blender/camera.cpp: aperture radius lens / (2 f-number) (orthographic: 1 / (2 N) m),
     blades, rotation, ratio; the focus distance, or the distance to a Focus Object along the view

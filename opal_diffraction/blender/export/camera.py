@@ -6,7 +6,8 @@ orthographic cameras keep their lens, sensor size and fit, orthographic scale an
 panoramic ones their type (equirectangular, fisheye equidistant or equisolid) and its ranges;
 every camera its clip start / end and depth of field (aperture from the f-number, blades,
 rotation, ratio, focus distance or object), as Cycles reads them (intern/cycles/blender/camera.cpp).
-What the core cannot do is named: other panorama types (an error), non-square pixels (a warning).
+What the core cannot do is named: other panorama types (an error), non-square pixels and
+motion blur (warnings).
 """
 
 from __future__ import annotations
@@ -82,6 +83,8 @@ def camera_from_object(cam_ob, width: int, height: int, scene, warn) -> Camera:
     r = scene.render
     if abs(r.pixel_aspect_x - r.pixel_aspect_y) > 1e-6:
         warn("non-square pixel aspect is not supported: rendered with square pixels")
+    if getattr(r, "use_motion_blur", False):
+        warn("motion blur is not rendered: the frame is rendered at its own time, without blur")
     lens = {}
     dof = getattr(cam, "dof", None)
     if dof is not None and dof.use_dof:
