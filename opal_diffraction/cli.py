@@ -138,6 +138,8 @@ def _parser() -> argparse.ArgumentParser:
                    "integrating them over each pixel's footprint (docs/physics.md section 3.7)")
     r.add_argument("--no-caustic-splat", action="store_true", help="look caustics seen directly up in the "
                    "caustic map instead of splatting the light paths into the image (docs/physics.md section 4.9)")
+    r.add_argument("--transparent", action="store_true", help="Film > Transparent: the world seen directly is "
+                   "black and the EXR gets an alpha channel, each pixel's coverage (docs/physics.md section 6.11)")
     r.add_argument("--threads", type=int, default=0, help="0: all cores")
     r.add_argument("--backend", choices=["auto", "embree", "numpy"], default="auto")
     r.add_argument("--scheduler", default="", help="render on a Dask cluster, the same image: tcp://HOST:PORT of "
@@ -399,7 +401,7 @@ def _render(args, sig: _Signals, created: list) -> int:
             backend=args.backend, adaptive_threshold=args.adaptive_threshold,
             adaptive_min_samples=args.adaptive_min_samples, grating_footprint=not args.no_grating_footprint,
             blue_noise=not args.no_blue_noise,
-            caustic_splat=not args.no_caustic_splat,
+            caustic_splat=not args.no_caustic_splat, film_transparent=bool(args.transparent),
         )
         settings.validate()
         sig.phase = "prepare"
@@ -455,7 +457,7 @@ def _render(args, sig: _Signals, created: list) -> int:
     try:
         if paths["noisy"] and "Noisy Image" in result.passes:
             write_rgb_exr(paths["noisy"], result.passes["Noisy Image"])
-        write_rgb_exr(paths["exr"], result.rgb)
+        write_rgb_exr(paths["exr"], result.rgb, result.alpha if args.transparent else None)
         if paths["png"]:
             write_png(paths["png"], result.rgb, args.exposure)
         if paths["spectral"]:

@@ -254,7 +254,7 @@ class OpalRenderEngine(bpy.types.RenderEngine):
 
         def on_round(partial):
             state["round"] += 1
-            self._fill(result, partial, to_working)
+            self._fill(result, partial, to_working, settings.film_transparent)
             self.update_result(result)
 
         try:
@@ -276,7 +276,7 @@ class OpalRenderEngine(bpy.types.RenderEngine):
             else:  # the image stays noisy; the Noisy Image pass holds it all the same
                 denoise_warning = DENOISER_MISSING
                 rr = replace(rr, passes={**rr.passes, NOISY_PASS: rr.rgb})
-        self._fill(result, rr, to_working)
+        self._fill(result, rr, to_working, settings.film_transparent)
         self.end_result(result)
 
         core_warnings = list(rr.warnings) + ([denoise_warning] if denoise_warning else [])
@@ -313,15 +313,17 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         )
 
     @staticmethod
-    def _fill(result, rr, to_working) -> None:
-        """Copy a core RenderResult into Blender's result passes (bottom row first, float32)."""
+    def _fill(result, rr, to_working, transparent: bool = False) -> None:
+        """Copy a core RenderResult into Blender's result passes (bottom row first, float32);
+        ``transparent``: Film > Transparent, Combined's alpha is the result's coverage."""
         layer = result.layers[0]
         last_render["result_passes"] = [p.name for p in layer.passes]
         h, w = rr.rgb.shape[:2]
         rgb = rr.rgb if to_working is None else rr.rgb @ to_working.T.astype(np.float32)
         combined = np.empty((h, w, 4), np.float32)
         combined[..., :3] = rgb[::-1]
-        combined[..., 3] = 1.0
+        # Film > Transparent: alpha = coverage (the core left the world seen directly black, as Cycles)
+        combined[..., 3] = rr.alpha[::-1] if transparent and rr.alpha is not None else 1.0
         layer.passes["Combined"].rect.foreach_set(combined.ravel())
         for name in AOV_PASSES + (NOISY_PASS, SAMPLE_COUNT_PASS):
             try:

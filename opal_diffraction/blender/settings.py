@@ -35,4 +35,7 @@ def render_settings(opal, scene, spectral_path: str = "") -> RenderSettings:
         adaptive_min_samples=int(opal.adaptive_min_samples), grating_footprint=bool(opal.grating_footprint),
         blue_noise=bool(opal.blue_noise),
         caustic_splat=bool(opal.caustic_splat),
+        film_transparent=bool(getattr(scene.render, "film_transparent", False)),
+        # Cycles' own Transparent Glass setting (scene.cycles exists where the Cycles add-on is on)
+        film_transparent_glass=bool(getattr(getattr(scene, "cycles", None), "film_transparent_glass", False)),
     )

@@ -125,6 +125,44 @@ class OPAL_RENDER_PT_film(OpalButtonsPanel, Panel):
     def draw(self, context):
         layout = _split(self.layout)
         layout.prop(context.scene.opal, "filter_width")
+        # Film > Transparent (Blender's own setting, as Cycles' Film panel shows it): docs/physics.md section 6.11
+        layout.prop(context.scene.render, "film_transparent", text="Transparent")
+        cycles = getattr(context.scene, "cycles", None)
+        if cycles is not None and hasattr(cycles, "film_transparent_glass"):  # Cycles' setting, read as Cycles reads it
+            sub = layout.column()
+            sub.active = context.scene.render.film_transparent
+            sub.prop(cycles, "film_transparent_glass", text="Transparent Glass")
+
+
+class OPAL_DATA_PT_panorama(OpalButtonsPanel, Panel):
+    """A panoramic camera's type and its settings (Blender's Lens panel draws them for Cycles only)."""
+    bl_label = "Panorama"
+    bl_context = "data"
+
+    @classmethod
+    def poll(cls, context):
+        cam = getattr(context, "camera", None)
+        return cam is not None and cam.type == "PANO" and context.engine in cls.COMPAT_ENGINES
+
+    def draw(self, context):
+        layout = _split(self.layout)
+        cam = context.camera
+        col = layout.column()
+        col.prop(cam, "panorama_type")
+        if cam.panorama_type == "FISHEYE_EQUIDISTANT":
+            col.prop(cam, "fisheye_fov")
+        elif cam.panorama_type == "FISHEYE_EQUISOLID":
+            col.prop(cam, "fisheye_lens", text="Lens")
+            col.prop(cam, "fisheye_fov")
+        elif cam.panorama_type == "EQUIRECTANGULAR":
+            sub = col.column(align=True)
+            sub.prop(cam, "latitude_min", text="Latitude Min")
+            sub.prop(cam, "latitude_max", text="Max")
+            sub = col.column(align=True)
+            sub.prop(cam, "longitude_min", text="Longitude Min")
+            sub.prop(cam, "longitude_max", text="Max")
+        else:
+            col.label(text="Not rendered: use Equirectangular or a Fisheye (Equidistant, Equisolid)", icon="ERROR")
 
 
 class OPAL_RENDER_PT_output(OpalButtonsPanel, Panel):
@@ -311,6 +349,7 @@ classes = (
     OPAL_RENDER_PT_spectrum,
     OPAL_RENDER_PT_light_paths,
     OPAL_RENDER_PT_film,
+    OPAL_DATA_PT_panorama,
     OPAL_RENDER_PT_output,
     OPAL_RENDER_PT_performance,
     OPAL_MATERIAL_PT_surface,
@@ -334,6 +373,8 @@ _EXTRA = {
     "DATA_PT_EEVEE_light",  # type, colour, temperature, power, exposure, normalize, radius, shape, size
     "DATA_PT_spot",  # spot size and blend (a child of DATA_PT_EEVEE_light)
     "EEVEE_MATERIAL_PT_context_material",  # material slots
+    "DATA_PT_camera_dof",  # depth of field: focus object / bone / distance (docs/physics.md section 6.7)
+    "DATA_PT_camera_dof_aperture",  # f-stop, blades, rotation, ratio
 }
 
 _added: list = []

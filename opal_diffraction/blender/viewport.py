@@ -77,9 +77,11 @@ def viewport_camera(view_matrix, window_matrix, is_perspective: bool, width: int
                   shift_x=float(-p[0, 3] / 2.0), shift_y=float(-p[1, 3] * p[0, 0] / (2.0 * p[1, 1])), width=w, height=h)
 
 
-def prepare_pixels(rgb: np.ndarray, to_working: np.ndarray | None = None) -> np.ndarray:
+def prepare_pixels(rgb: np.ndarray, to_working: np.ndarray | None = None, alpha: np.ndarray | None = None) -> np.ndarray:
     """A float32 RGBA buffer (H * W * 4) for a texture: rows bottom first (OpenGL's origin),
-    colours in the blend file's working space, alpha 1, NaN and negative values cleared."""
+    colours in the blend file's working space, alpha 1 (or ``alpha`` (H, W): Film > Transparent's
+    coverage, drawn premultiplied over the viewport's background as Cycles' preview), NaN and
+    negative values cleared."""
     img = np.asarray(rgb, np.float32)
     h, w = img.shape[:2]
     if to_working is not None:
@@ -87,7 +89,7 @@ def prepare_pixels(rgb: np.ndarray, to_working: np.ndarray | None = None) -> np.
     out = np.empty((h, w, 4), np.float32)
     out[..., :3] = np.nan_to_num(img[::-1], nan=0.0, posinf=0.0, neginf=0.0)
     np.maximum(out[..., :3], 0.0, out=out[..., :3])
-    out[..., 3] = 1.0
+    out[..., 3] = 1.0 if alpha is None else np.clip(np.nan_to_num(np.asarray(alpha, np.float32)[::-1]), 0.0, 1.0)
     return out.ravel()
 
 
@@ -150,6 +152,7 @@ class ProgressiveRenderer:
             self.error, self.warnings, self.done = "", [], False
             self.started_at = time.perf_counter()
             self.first_image_s = None
+            self._transparent = bool(getattr(prepared.settings, "film_transparent", False))
         thread = threading.Thread(target=self._run, args=(gen, prepared, light, list(levels)),
                                   name=f"opal-viewport-{gen}", daemon=True)
         self._thread = thread
@@ -177,7 +180,7 @@ class ProgressiveRenderer:
     def _publish(self, gen: int, level: int, rr) -> None:
         if self._stale(gen) or rr.samples <= 0:
             return
-        pixels = prepare_pixels(rr.rgb, self.to_working)
+        pixels = prepare_pixels(rr.rgb, self.to_working, rr.alpha if getattr(self, "_transparent", False) else None)
         h, w = rr.rgb.shape[:2]
         with self._lock:
             if gen != self._generation:

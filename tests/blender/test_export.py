@@ -363,8 +363,54 @@ def test_camera_export():
     c = _export().scene.camera
     assert c.kind == "ORTHO" and c.ortho_scale == pytest.approx(7.0)
     cam.type = "PANO"
-    with pytest.raises(SceneError, match="panoramic cameras are not supported|pano cameras are not supported"):
+    cam.panorama_type = "FISHEYE_EQUISOLID"
+    cam.fisheye_lens, cam.fisheye_fov = 12.0, 3.0
+    c = _export().scene.camera
+    assert (c.kind, c.panorama_type) == ("PANO", "FISHEYE_EQUISOLID")
+    assert (c.fisheye_lens, c.fisheye_fov) == pytest.approx((12.0, 3.0))
+    cam.panorama_type = "EQUIRECTANGULAR"
+    cam.latitude_min, cam.longitude_max = -0.5, 1.0
+    c = _export().scene.camera
+    assert (c.latitude_min, c.longitude_max) == pytest.approx((-0.5, 1.0))
+    cam.panorama_type = "MIRRORBALL"
+    with pytest.raises(SceneError, match="mirrorball panorama is not supported"):
         _export()
+
+
+def test_motion_blur_is_named_not_silently_ignored():
+    sc = _basic_scene()
+    assert not [w for w in _export().warnings if "motion blur" in w]
+    sc.render.use_motion_blur = True
+    assert [w for w in _export().warnings if "motion blur is not rendered" in w]
+
+
+def test_camera_depth_of_field_export_follows_cycles():
+    """Cycles' blender/camera.cpp: aperture radius lens / (2 f-number) (orthographic: 1 / (2 N) m),
+    blades, rotation, ratio; the focus distance, or the distance to a Focus Object along the view
+    axis."""
+    sc = _basic_scene()
+    cam = sc.camera.data
+    cam.lens = 40.0
+    cam.dof.use_dof = True
+    cam.dof.aperture_fstop, cam.dof.aperture_blades = 2.0, 7
+    cam.dof.aperture_rotation, cam.dof.aperture_ratio = 0.25, 1.5
+    cam.dof.focus_distance = 3.5
+    c = _export().scene.camera
+    assert c.aperture_radius == pytest.approx(0.040 / 4.0)
+    assert (c.aperture_blades, c.aperture_rotation, c.aperture_ratio) == (7, pytest.approx(0.25), pytest.approx(1.5))
+    assert c.focus_distance == pytest.approx(3.5)
+    target = bpy.data.objects.new("focus", None)
+    sc.collection.objects.link(target)
+    m = np.array(sc.camera.matrix_world)
+    view = -m[:3, 2] / np.linalg.norm(m[:3, 2])
+    target.location = tuple(m[:3, 3] + 2.0 * view + np.cross(view, [0.0, 0.0, 1.0]) * 0.7)  # 2 m ahead, off-axis
+    cam.dof.focus_object = target
+    bpy.context.view_layer.update()
+    assert _export().scene.camera.focus_distance == pytest.approx(2.0, rel=1e-5)
+    cam.type = "ORTHO"
+    assert _export().scene.camera.aperture_radius == pytest.approx(1.0 / 4.0)
+    cam.dof.use_dof = False
+    assert _export().scene.camera.aperture_radius == 0.0
 
 
 def test_camera_orientation_matches_blender(tmp_path):

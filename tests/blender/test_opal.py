@@ -712,6 +712,10 @@ def test_prepare_pixels_flips_rows_adds_alpha_and_clears_nan():
     np.testing.assert_array_equal(px[0, 2], (0.0, 0.0, 0.0, 1.0))
     m = np.diag([2.0, 1.0, 0.5])
     np.testing.assert_allclose(viewport.prepare_pixels(rgb, m).reshape(2, 3, 4)[1, 0, :3], (2.0, 2.0, 1.5))
+    # Film > Transparent: the coverage as alpha, rows flipped like the colours, NaN cleared
+    alpha = np.array([[1.0, 0.25, 0.0], [0.5, np.nan, 2.0]], np.float32)
+    px = viewport.prepare_pixels(rgb, None, alpha).reshape(2, 3, 4)
+    np.testing.assert_array_equal(px[..., 3], [[0.5, 0.0, 1.0], [1.0, 0.25, 0.0]])
 
 
 def _tiny_core_scene(size=32):

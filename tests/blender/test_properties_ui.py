@@ -165,13 +165,15 @@ def test_panels_show_only_for_the_engine_and_draw_existing_properties():
     mat.opal.grating = True
     mat.opal["period"] = 0.0  # drawn as an alert (an older file's value: the field's minimum is above 0)
     world = bpy.data.worlds.new("w")
+    cam = bpy.data.cameras.new("pano")
+    cam.type, cam.panorama_type = "PANO", "FISHEYE_EQUISOLID"
     drawn = []
     for cls in ui.classes:
         if not issubclass(cls, bpy.types.Panel):
             continue
-        ctx = _context(ENGINE_ID, material=mat, world=world)
+        ctx = _context(ENGINE_ID, material=mat, world=world, camera=cam)
         assert cls.poll(ctx), cls.__name__
-        assert not cls.poll(_context("CYCLES", material=mat, world=world)), cls.__name__
+        assert not cls.poll(_context("CYCLES", material=mat, world=world, camera=cam)), cls.__name__
         log = []
         panel = types.SimpleNamespace(layout=_Layout(log))
         if hasattr(cls, "draw_header"):
@@ -210,9 +212,27 @@ def test_panels_take_the_wavelength_count_and_the_sellmeier_glasses_from_the_cor
         assert own_index == (ident in SELLMEIER_PRESETS), ident
 
 
+def test_panorama_panel_draws_the_type_and_its_settings():
+    """Blender's Lens panel draws a panorama's type for Cycles only: ours draws it, and each
+    type's settings (those core/sampling/camera.py reads)."""
+    bs.empty_scene()
+    cam = bpy.data.cameras.new("pano")
+    assert not ui.OPAL_DATA_PT_panorama.poll(_context(ENGINE_ID, camera=cam))  # a perspective camera
+    cam.type = "PANO"
+    for kind, expected in (("EQUIRECTANGULAR", {"latitude_min", "latitude_max", "longitude_min", "longitude_max"}),
+                           ("FISHEYE_EQUIDISTANT", {"fisheye_fov"}), ("FISHEYE_EQUISOLID", {"fisheye_lens", "fisheye_fov"})):
+        cam.panorama_type = kind
+        log = []
+        ui.OPAL_DATA_PT_panorama.draw(types.SimpleNamespace(layout=_Layout(log)), _context(ENGINE_ID, camera=cam))
+        assert {e[1] for e in log if e[0] == "prop"} == {"panorama_type"} | expected, kind
+    cam.panorama_type = "MIRRORBALL"
+    assert "Not rendered" in _labels(ui.OPAL_DATA_PT_panorama, _context(ENGINE_ID, camera=cam))
+
+
 def test_builtin_panels_enabled_and_cleaned_up():
     names = ["RENDER_PT_format", "RENDER_PT_output", "RENDER_PT_frame_range", "RENDER_PT_color_management",
-             "DATA_PT_camera", "DATA_PT_lens", "DATA_PT_EEVEE_light", "DATA_PT_spot",
+             "DATA_PT_camera", "DATA_PT_lens", "DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture",
+             "DATA_PT_EEVEE_light", "DATA_PT_spot",
              "EEVEE_MATERIAL_PT_context_material", "WORLD_PT_context_world"]
     for n in names:
         assert ENGINE_ID in getattr(bpy.types, n).COMPAT_ENGINES, n

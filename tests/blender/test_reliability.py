@@ -545,28 +545,14 @@ def test_nan_material_raises_scene_error_from_the_export():
         _export()
 
 
-@pytest.mark.parametrize("clip, hidden", [((0.1, 100.0), False), ((0.1, 5.0), True), ((6.5, 100.0), True)])
-def test_camera_clipping_that_would_hide_part_of_the_scene_is_named(clip, hidden):
-    """Clip start / end as Cycles applies them (depth planes): the floor spans depths ~3-10 m from
-    this camera, the cube ~6.5 m; a clip range that cuts into what the camera sees is a warning."""
+@pytest.mark.parametrize("clip", [(0.1, 100.0), (0.1, 5.0), (6.5, 100.0)])
+def test_camera_clipping_is_exported_and_rendered_without_a_warning(clip):
+    """Clip start / end are rendered as Cycles applies them (core/sampling/camera.py; the parity
+    test tests/blender/test_camera_parity.py compares the image): exported as they are, no
+    warning any more."""
     _scene()
     cam = bpy.context.scene.camera
     cam.data.clip_start, cam.data.clip_end = clip
-    warnings = [w for w in _export().warnings if "clip start" in w]
-    assert bool(warnings) == hidden, warnings
-    if hidden:
-        assert f"clip start {clip[0]:g} m / end {clip[1]:g} m" in warnings[0] and "shown unclipped" in warnings[0]
-
-
-def test_clipped_share_counts_depth_planes_inside_the_view():
-    """clipped_share by hand: points straight ahead at depths 1..10 m, two beside the view."""
-    from opal_diffraction.blender.export.camera import clipped_share
-    from opal_diffraction.core.scene.model import Camera
-
-    cam = Camera.look_at((0, 0, 0), (0, 1, 0), width=64, height=64)
-    ahead = np.array([[0.0, d, 0.0] for d in range(1, 11)])
-    beside = np.array([[50.0, 1.0, 0.0], [0.0, -3.0, 0.0]])  # far off-axis; behind the camera
-    v = np.concatenate([ahead, beside])
-    assert clipped_share(cam, v, 0.1, 100.0) == 0.0
-    assert clipped_share(cam, v, 2.5, 100.0) == pytest.approx(2 / 10)   # depths 1, 2
-    assert clipped_share(cam, v, 0.1, 7.5) == pytest.approx(3 / 10)     # depths 8, 9, 10
+    ex = _export()
+    assert (ex.scene.camera.clip_start, ex.scene.camera.clip_end) == pytest.approx(clip)
+    assert not [w for w in ex.warnings if "clip" in w], ex.warnings

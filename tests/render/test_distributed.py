@@ -55,6 +55,7 @@ def assert_identical(a, b):
     if a.spectral is not None:
         np.testing.assert_array_equal(a.spectral, b.spectral)
     np.testing.assert_array_equal(a.rgb, b.rgb)
+    np.testing.assert_array_equal(a.alpha, b.alpha)  # the coverage crosses the wire with the tiles
     assert a.passes.keys() == b.passes.keys()
     for k in a.passes:
         np.testing.assert_array_equal(a.passes[k], b.passes[k], err_msg=k)

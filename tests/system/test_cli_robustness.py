@@ -85,7 +85,7 @@ def malformed_files(folder) -> list[tuple[str, str, bool]]:
         rest = {k: v for k, v in base.items() if k != key}
         save(f"missing-{key}", rest, must_fail=key not in OPTIONAL)
         # wrong dtypes: strings, complex, booleans (a name column holds strings, a flag may be bool)
-        if key not in ("material_name", "camera_kind", "camera_sensor_fit"):
+        if key not in ("material_name", "camera_kind", "camera_sensor_fit", "camera_panorama_type"):
             save(f"str-{key}", {**base, key: a.astype(str)})
             save(f"complex-{key}", {**base, key: a.astype(complex)})
             if key != "material_grating":
@@ -97,7 +97,7 @@ def malformed_files(folder) -> list[tuple[str, str, bool]]:
         # fewer rows (or, for a scalar, an empty array)
         if a.ndim and len(a) > 1:
             save(f"rows-{key}", {**base, key: a[:-1]}, must_fail=key not in ("tri_tangent", "tri_period"))
-        elif a.ndim == 0 and key not in ("camera_kind", "camera_sensor_fit"):
+        elif a.ndim == 0 and key not in ("camera_kind", "camera_sensor_fit", "camera_panorama_type"):
             save(f"empty-{key}", {**base, key: np.zeros(0, a.dtype)})
         # a NaN in a float column
         if a.dtype.kind == "f":

@@ -52,7 +52,7 @@ import numpy as np
 
 from ...core.scene.model import Lights, Scene
 from ..mesh_io import GRATING_ATTRIBUTE, PERIOD_ATTRIBUTE
-from .camera import export_camera, render_region, render_size, warn_clipping
+from .camera import export_camera, render_region, render_size
 from .colour import rec709_to_working_space, working_space_to_rec709
 from .domains import flatten_domains, instance_domains
 from .lights import LightRows, export_lights
@@ -160,7 +160,6 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     skipped.report(warn)
     core_materials = materials.finish()
     cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn)
-    warn_clipping(camera if camera is not None else depsgraph.scene.camera, cam, vertices, warn)
     world = export_world_light(depsgraph, warn)
     core_scene = Scene(
         vertices=vertices, triangles=triangles, tri_material=tri_material,

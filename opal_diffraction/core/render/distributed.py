@@ -318,7 +318,7 @@ def tile_task(job: dict, light: dict | None, r_index: int, t_index: int, pixels=
     conv = frame.prepared.conv
     return {"rgb": conv.to_rgb(tile.film), "spectral": tile.film if job.get("spectral") else None,
             "parts": tile_parts_rgb(conv, tile), "rays": int(tile.rays), "albedo": tile.albedo,
-            "normal": tile.normal}
+            "normal": tile.normal, "alpha": tile.alpha}
 
 
 class _ModuleRef:
@@ -526,7 +526,7 @@ class DaskExecutor:
     def add(self, film, tile, samples: int, pixels, half_a: bool, result) -> int:
         x0, y0, x1, y1, _ = tile
         film.add_converted(x0, y0, x1, y1, result["rgb"], result["parts"], samples, result["albedo"],
-                           result["normal"], pixels, half_a, result["spectral"])
+                           result["normal"], pixels, half_a, result["spectral"], alpha=result.get("alpha"))
         return int(result["rays"])
 
     def cancel_pending(self) -> None:

@@ -88,6 +88,9 @@ class RenderResult:
     passes: dict = field(default_factory=dict)  # 'Direct', 'Indirect', 'Caustics', 'Diffraction',
     #                                             'Denoising Albedo', 'Denoising Normal': (H, W, 3)
     sample_counts: np.ndarray | None = None  # (H, W) float32 samples each pixel took (adaptive sampling varies them)
+    # (H, W) float32 coverage: the share of a pixel's samples whose camera ray hit a surface
+    # within the clip range (Film > Transparent's alpha; the world seen directly is 0)
+    alpha: np.ndarray | None = None
 
 
 def camera_space_rotation(camera) -> np.ndarray:
@@ -117,6 +120,7 @@ class Film:
         self.counts = np.zeros((height, width), np.float32)  # samples per pixel so far
         self.albedo = np.zeros((height, width, 3), np.float32)  # denoising feature sums
         self.normal = np.zeros((height, width, 3), np.float32)
+        self.alpha = np.zeros((height, width), np.float32)  # coverage sums (samples that hit a surface)
         self.to_camera = np.eye(3, dtype=np.float32) if to_camera is None else np.asarray(to_camera, np.float32)
         self.adaptive = bool(adaptive)
         if self.adaptive:
@@ -141,14 +145,15 @@ class Film:
         belong to adaptive sampling's half A)."""
         self.add_converted(x0, y0, x1, y1, self.conv.to_rgb(tile.film), tile_parts_rgb(self.conv, tile), samples,
                            tile.albedo, tile.normal, pixels, half_a,
-                           spectral=tile.film if self.spectral is not None else None)
+                           spectral=tile.film if self.spectral is not None else None, alpha=getattr(tile, "alpha", None))
 
     def add_converted(self, x0: int, y0: int, x1: int, y1: int, rgb: np.ndarray, parts_rgb: dict,
                       samples: int, albedo=None, normal=None, pixels=None, half_a: bool = False,
-                      spectral=None) -> None:
+                      spectral=None, alpha=None) -> None:
         """``add_tile`` for a tile already converted to RGB: ``rgb`` (P, 3) = ``conv.to_rgb`` of
         its spectral sums, its non-Direct parts as ``tile_parts_rgb``, and its (P, n) spectral
-        sums ``spectral`` (needed, and only read, when this film keeps a spectral image). A Dask
+        sums ``spectral`` (needed, and only read, when this film keeps a spectral image), ``alpha``
+        its (P,) coverage sums (TileResult.alpha; None: none hit). A Dask
         worker converts, so only RGB (and the spectral sums when asked) crosses the wire."""
         if self.spectral is not None and spectral is None:
             raise ValueError("this film keeps a spectral image: add_converted needs the tile's spectral sums")
@@ -170,6 +175,8 @@ class Film:
         for arr, feature in ((self.albedo, albedo), (self.normal, normal)):
             if feature is not None:
                 arr[where] += feature.reshape(*shape, 3)
+        if alpha is not None:
+            self.alpha[where] += np.asarray(alpha, np.float32).reshape(shape)
         self.counts[where] += samples
         if self.adaptive and half_a:
             self.rgb_a[where] += rgb.reshape(*shape, 3)
@@ -241,7 +248,8 @@ class Film:
                             f"{'are' if bad != 1 else 'is'} black in the image and every pass")
             stats["non_finite_pixels"] = bad
         return RenderResult(spectral, rgb, self.conv.grid.wavelengths.copy(), samples, cancelled, plan,
-                            warnings, stats, passes, self.counts.copy())
+                            warnings, stats, passes, self.counts.copy(),
+                            np.minimum(self.alpha * scale[..., 0], 1.0))
 
 
 def black_non_finite(rgb: np.ndarray, spectral, passes: dict) -> int:

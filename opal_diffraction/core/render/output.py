@@ -79,10 +79,14 @@ def _exr(path, channels: dict, extra_header: dict | None = None):
     _atomic_write(path, lambda tmp: OpenEXR.File(header, chans).write(tmp))
 
 
-def write_rgb_exr(path, rgb: np.ndarray) -> None:
-    """(H, W, 3) linear RGB, row 0 at the top, as float32 R, G, B channels."""
+def write_rgb_exr(path, rgb: np.ndarray, alpha: np.ndarray | None = None) -> None:
+    """(H, W, 3) linear RGB, row 0 at the top, as float32 R, G, B channels; with ``alpha``
+    (H, W) an A channel too (premultiplied RGB, as a transparent film renders it)."""
     rgb = np.asarray(rgb, np.float32)
-    _exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
+    chans = {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]}
+    if alpha is not None:
+        chans["A"] = np.ascontiguousarray(alpha, np.float32)
+    _exr(path, chans)
 
 
 def write_spectral_exr(path, spectral: np.ndarray | None, wavelengths_nm: np.ndarray, rgb: np.ndarray) -> None:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..sampling.camera import FilterSampler, generate_rays, pixel_samples
+from ..sampling.camera import FilterSampler, camera_rays, has_lens, lens_samples, pixel_samples
 from ..sampling.footprint import camera_differentials, filter_box_width
 from ..sampling.sampler import blue_noise_numbers
 from ..scene.settings import RenderSettings
@@ -147,10 +147,15 @@ def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: i
             ids, starts = np.zeros(len(xs), np.uint32), blocks + np.uint32(first)
     sx, sy, sl, pidx = pixel_samples(xs.astype(np.float64), ys.astype(np.float64), spp, rng, filt,
                                      qmc=(ids, starts, work.seed))
-    o, d = generate_rays(cam, sx, sy)
+    lens = lens_samples(len(xs), spp, rng, (ids, starts, work.seed)) if has_lens(cam) else None
+    # thin lens, clipping, panoramas (core/sampling/camera.py); tmax: clip end, None: unbounded
+    o, d, tmax, valid = camera_rays(cam, sx, sy, lens)
     rd = None
     if eye.wants_differentials:  # ray differentials for gratings (core/sampling/footprint.py)
         rd = camera_differentials(cam, d, (sx - xs[pidx] - 0.5, sy - ys[pidx] - 0.5), filter_box_width(filt.width))
-    return eye.trace(o, d, pidx, len(xs), rng, u_lambda=sl,
-                     sampler_ids=(ids[pidx], (starts[:, None] + np.arange(spp, dtype=np.uint32)).ravel(), work.seed),
-                     differentials=rd)
+    sids = (ids[pidx], (starts[:, None] + np.arange(spp, dtype=np.uint32)).ravel(), work.seed)
+    if valid is not None:  # a fisheye's samples outside its circle see nothing (count as black)
+        o, d, pidx, sl, tmax = o[valid], d[valid], pidx[valid], sl[valid], tmax[valid]
+        sids = (sids[0][valid], sids[1][valid], sids[2])
+        rd = None if rd is None else rd[valid]
+    return eye.trace(o, d, pidx, len(xs), rng, u_lambda=sl, sampler_ids=sids, differentials=rd, tmax=tmax)

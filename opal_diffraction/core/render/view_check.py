@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..sampling.camera import generate_rays
+from ..sampling.camera import camera_rays
 
 __all__ = ["GRID", "camera_sees_nothing"]
 
@@ -29,12 +29,16 @@ def camera_sees_nothing(prepared) -> str | None:
     x = (np.arange(nx) + 0.5) * (cam.width / nx)
     y = (np.arange(ny) + 0.5) * (cam.height / ny)
     xx, yy = np.meshgrid(x, y)
-    o, d = generate_rays(cam, xx.ravel(), yy.ravel())
+    o, d, tmax, valid = camera_rays(cam, xx.ravel(), yy.ravel())  # chief rays, within the clip range
     ok = np.isfinite(o).all(axis=1) & np.isfinite(d).all(axis=1)
-    if ok.any() and np.isfinite(prepared.accel.intersect(o[ok], d[ok]).t).any():
+    if valid is not None:
+        ok &= valid
+    if ok.any() and np.isfinite(prepared.accel.intersect(o[ok], d[ok], None if tmax is None else tmax[ok]).t).any():
         return None
     what = "only the world" if _world_lit(prepared) else "a black image"
-    if cam.kind == "ORTHO":
+    if cam.kind == "PANO":
+        settings = f"panorama {cam.panorama_type.lower()}, clip {cam.clip_start:g} - {cam.clip_end:g} m"
+    elif cam.kind == "ORTHO":
         settings = f"orthographic scale {cam.ortho_scale:g} m, shift {cam.shift_x:g} / {cam.shift_y:g}"
     else:
         settings = f"lens {cam.lens:g} mm, shift {cam.shift_x:g} / {cam.shift_y:g}"

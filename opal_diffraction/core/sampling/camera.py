@@ -9,6 +9,14 @@ across tiles (Ernst et al. 2006, "Filter Importance Sampling"; Cycles does the s
 is a separable Blackman-Harris window with Cycles' convention: a filter width w spans +-w pixels
 (Cycles doubles the Blackman-Harris range "for consistency with Blender Internal"), so the
 default 1.5 px covers 3 px, and a frame edge darkens as it does in Cycles.
+
+The rays (``camera_rays``) are Cycles' (intern/cycles/kernel/camera/camera.h, projection.h;
+docs/physics.md sections 6.1 and 6.7-6.9): perspective, orthographic and panoramic cameras
+(equirectangular, fisheye equidistant and equisolid, in Cycles' panorama space), a thin lens
+for depth of field (the aperture a disk or Cycles' regular polygon of blades, turned and
+squeezed by the anamorphic ratio; every ray aimed at the pinhole ray's point on the plane of
+focus), and clip start / end (the near and far planes along the view axis; along the ray for
+panoramas).
 """
 
 from __future__ import annotations
@@ -18,7 +26,8 @@ import numpy as np
 from ..scene.model import Camera
 from .sampler import sobol_owen_2d, sobol_owen_x
 
-__all__ = ["FilterSampler", "camera_frame", "pixel_samples", "generate_rays"]
+__all__ = ["FilterSampler", "camera_frame", "pixel_samples", "generate_rays", "camera_rays", "aperture_points",
+           "panorama_directions", "panorama_sensor", "has_lens", "clips", "lens_samples", "LENS_KEY"]
 
 
 class FilterSampler:
@@ -111,8 +120,231 @@ def pixel_samples(
     return x.ravel(), y.ravel(), ul.ravel(), idx
 
 
-def generate_rays(cam: Camera, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World-space ray origins and unit directions (float32) through image points (x, y)."""
+#: The aperture's numbers are Sobol-Burley pair 1 (whose x is the wavelength number) under its own
+#: scramble and shuffle keys (the seed xor this constant): independent of every pair a path uses,
+#: and stratified over a pixel's samples in 2-D, without moving the path vertices' pairs.
+LENS_KEY = 0x4C454E53  # "LENS"
+
+
+def lens_samples(p: int, spp: int, rng: np.random.Generator, qmc=None) -> np.ndarray:
+    """(p * spp, 2) uniform numbers for the aperture points of ``spp`` samples of ``p`` pixels,
+    in pixel_samples' order: the pixels' Sobol-Burley points with ``qmc`` = (pixel ids, first
+    sample numbers, seed) as pixel_samples takes it (pair 1 keyed by LENS_KEY), else ``rng``'s."""
+    if qmc is None:
+        return rng.random((p * spp, 2))
+    ids, first, seed = qmc
+    pix = np.repeat(np.asarray(ids), spp)
+    num = (np.broadcast_to(np.asarray(first, np.int64), (p,))[:, None] + np.arange(spp)[None, :]).ravel()
+    ux, uy = sobol_owen_2d(pix, num, 1, (int(seed) ^ LENS_KEY) & 0xFFFFFFFFFFFFFFFF)
+    return np.stack([np.asarray(ux, np.float64), np.asarray(uy, np.float64)], axis=1)
+
+
+def aperture_points(u: np.ndarray, v: np.ndarray, blades: int = 0, rotation: float = 0.0,
+                    ratio: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Points on the unit aperture (radius 1) from uniform (u, v) in [0, 1)^2, uniform in area:
+    a disk when ``blades`` < 3 (Shirley & Chiu's concentric map, which keeps the numbers'
+    stratification), else the regular polygon of ``blades`` corners on the unit circle at angles
+    ``rotation`` + (2k + 1) pi / blades, as Cycles' regular_polygon_sample
+    (intern/cycles/kernel/sample/mapping.h): u picks one of the polygon's isosceles wedges and,
+    rescaled, the distance from the centre (sqrt for a uniform triangle), v the position across
+    the wedge. The x coordinate is then divided by ``ratio`` (Cycles' inv_aperture_ratio, an
+    anamorphic bokeh). docs/physics.md section 6.7."""
+    u = np.asarray(u, np.float64)
+    v = np.asarray(v, np.float64)
+    if int(blades) < 3:
+        a, b = 2.0 * u - 1.0, 2.0 * v - 1.0
+        horiz = np.abs(a) > np.abs(b)
+        r = np.where(horiz, a, b)
+        safe_a = np.where(a == 0, 1.0, a)
+        safe_b = np.where(b == 0, 1.0, b)
+        phi = np.where(horiz, np.pi / 4 * (b / safe_a), np.pi / 2 - np.pi / 4 * (a / safe_b))
+        x, y = r * np.cos(phi), r * np.sin(phi)
+    else:
+        n = float(int(blades))
+        corner = np.floor(u * n)
+        t = np.sqrt(u * n - corner)  # the wedge's radial coordinate (uniform over the triangle)
+        s = v * t
+        w = 1.0 - t
+        half = np.pi / n
+        px, py = (w + s) * np.cos(half), (w - s) * np.sin(half)
+        rot = float(rotation) + corner * 2.0 * half
+        cr, sr = np.cos(rot), np.sin(rot)
+        x, y = cr * px - sr * py, sr * px + cr * py
+    return x / float(ratio), y
+
+
+def panorama_directions(cam: Camera, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Directions of a panoramic camera in Cycles' panorama space (x forward, y left, z up) for
+    image coordinates (u, v) in [0, 1] (u to the right, v UP, Cycles' raster convention), and
+    whether each is inside the projection (a fisheye's circle). The mappings are Cycles'
+    (intern/cycles/kernel/camera/projection.h, docs/physics.md section 6.9):
+
+    - equirectangular: phi = (lon_min - lon_max) u - lon_min, theta = (lat_min - lat_max) v -
+      lat_min + pi / 2, d = (sin theta cos phi, sin theta sin phi, cos theta);
+    - fisheye equidistant: (u', v') = 2 (u, v) - 1, r = |(u', v')| <= 1, theta = r fov / 2;
+    - fisheye equisolid: (u', v') = ((u - 1/2) sensor_w, (v - 1/2) sensor_h) mm, r <= 2 f sin(fov / 4),
+      theta = 2 asin(r / 2f); both d = (cos theta, -sin theta u'/r, sin theta v'/r)."""
+    u = np.asarray(u, np.float64)
+    v = np.asarray(v, np.float64)
+    kind = cam.panorama_type
+    if kind == "EQUIRECTANGULAR":
+        phi = (cam.longitude_min - cam.longitude_max) * u - cam.longitude_min
+        theta = (cam.latitude_min - cam.latitude_max) * v - cam.latitude_min + np.pi / 2
+        st = np.sin(theta)
+        d = np.stack([st * np.cos(phi), st * np.sin(phi), np.cos(theta)], axis=-1)
+        return d, np.ones(u.shape, bool)
+    if kind == "FISHEYE_EQUIDISTANT":
+        a, b = (u - 0.5) * 2.0, (v - 0.5) * 2.0
+        r = np.hypot(a, b)
+        valid = r <= 1.0
+        theta = r * float(cam.fisheye_fov) * 0.5
+    else:  # FISHEYE_EQUISOLID on Cycles' fitted sensor
+        sw, sh = panorama_sensor(cam)
+        a, b = (u - 0.5) * sw, (v - 0.5) * sh
+        r = np.hypot(a, b)
+        lens = float(cam.fisheye_lens)
+        valid = r <= 2.0 * lens * np.sin(float(cam.fisheye_fov) * 0.25)
+        theta = 2.0 * np.arcsin(np.clip(r / (2.0 * lens), 0.0, 1.0))
+    safe = np.where(r > 0, r, 1.0)
+    cphi = np.where(r > 0, a / safe, 1.0)
+    sphi = np.where(r > 0, b / safe, 0.0)
+    st = np.sin(theta)
+    d = np.stack([np.cos(theta), -cphi * st, sphi * st], axis=-1)
+    return d, valid
+
+
+def panorama_sensor(cam: Camera) -> tuple[float, float]:
+    """The sensor (width, height) in mm an equisolid fisheye spans, fitted as Cycles' blender_camera_sync
+    does: the fitted side takes the sensor size, the other follows the image's aspect."""
+    w, h = float(cam.width), float(cam.height)
+    fit = cam.sensor_fit
+    if fit == "AUTO":
+        horizontal, size = w > h, cam.sensor_width
+    elif fit == "HORIZONTAL":
+        horizontal, size = True, cam.sensor_width
+    else:
+        horizontal, size = False, cam.sensor_height
+    return (float(size), float(size) * h / w) if horizontal else (float(size) * w / h, float(size))
+
+
+#: Cycles' panorama space (x forward, y left, z up) -> Blender camera space (x right, y up, -z
+#: forward): intern/cycles/blender/camera.cpp blender_camera_matrix
+_PANO_TO_LOCAL = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]])
+
+
+def has_lens(cam: Camera) -> bool:
+    """Whether the camera has a thin lens (depth of field): a non-zero aperture radius."""
+    return float(getattr(cam, "aperture_radius", 0.0)) > 0.0
+
+
+def clips(cam: Camera) -> bool:
+    """Whether the camera clips (a clip start above 0 or a finite clip end)."""
+    return float(getattr(cam, "clip_start", 0.0)) > 0.0 or np.isfinite(float(getattr(cam, "clip_end", np.inf)))
+
+
+def camera_rays(cam: Camera, x: np.ndarray, y: np.ndarray, lens_u: np.ndarray | None = None):
+    """World-space camera rays through image points (x, y) (pixels, 0 at the left / top edge):
+    (origins (B, 3) float32, unit directions (B, 3) float32, tmax (B,) float32 or None for
+    unbounded rays, valid (B,) bool or None when every ray is valid (a fisheye's corners are not)).
+
+    ``lens_u`` (B, 2) uniform numbers for the aperture point (None: the lens centre, the chief
+    ray). Cycles' camera_sample_perspective / _orthographic / _panorama
+    (intern/cycles/kernel/camera/camera.h, docs/physics.md sections 6.7-6.9): a thin lens aims every
+    ray at the point the pinhole ray meets the plane of focus; clip start moves the origin
+    forward to the near plane (perspective: clip_start / cos of the pinhole ray off the view
+    axis along the ray; panoramic: clip_start along it) and clip end bounds the ray there."""
+    if cam.kind != "PANO" and not has_lens(cam) and not clips(cam):
+        o, d = _pinhole_rays(cam, x, y)
+        return o, d, None, None
+    x = np.asarray(x, np.float64)
+    y = np.asarray(y, np.float64)
+    m = np.asarray(cam.matrix, np.float64)
+    rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
+    eye = m[:3, 3]
+    b = len(x)
+    near = float(cam.clip_start)
+    far = float(cam.clip_end)
+    length = far - near if np.isfinite(far) else np.inf
+    valid = None
+    lens = None
+    if has_lens(cam):
+        if lens_u is None:
+            lens = np.zeros((b, 2))
+        else:
+            lu = np.asarray(lens_u, np.float64).reshape(b, 2)
+            lx, ly = aperture_points(lu[:, 0], lu[:, 1], cam.aperture_blades, cam.aperture_rotation, cam.aperture_ratio)
+            lens = np.stack([lx, ly], axis=1) * float(cam.aperture_radius)
+    focus = float(cam.focus_distance)
+    if cam.kind == "PANO":
+        u = x / int(cam.width) + float(cam.shift_x)
+        v = 1.0 - y / int(cam.height) + float(cam.shift_y)
+        dc, valid = panorama_directions(cam, u, v)
+        p = np.zeros((b, 3))
+        if lens is not None:  # Cycles: an aperture across the ray, aimed at its point at the focus distance
+            uu = np.array([1.0, 0.0, 0.0]) - dc[:, :1] * dc
+            uu /= np.maximum(np.linalg.norm(uu, axis=1, keepdims=True), 1e-12)
+            vv = np.cross(dc, uu)
+            p = uu * lens[:, :1] + vv * lens[:, 1:]
+            dc = dc * focus - p
+            dc /= np.linalg.norm(dc, axis=1, keepdims=True)
+        local_p, local_d = p @ _PANO_TO_LOCAL.T, dc @ _PANO_TO_LOCAL.T
+        start = np.full(b, near)
+        tmax = np.full(b, length)
+    else:
+        hx, hy = camera_frame(cam)
+        shift = _shift_extent(cam)
+        w, h = int(cam.width), int(cam.height)
+        px = (x * (2.0 / w) - 1.0) * hx + cam.shift_x * shift
+        py = (1.0 - y * (2.0 / h)) * hy + cam.shift_y * shift
+        if cam.kind == "ORTHO":
+            local_d = np.broadcast_to(np.array([0.0, 0.0, -1.0]), (b, 3)).copy()
+            local_p = np.stack([px, py, np.zeros(b)], axis=1)
+            if lens is not None:  # aimed at (0, 0, -focus) from the lens point, moved to the near plane
+                lp = np.stack([lens[:, 0], lens[:, 1], np.zeros(b)], axis=1)
+                local_d = np.array([0.0, 0.0, -focus]) - lp
+                local_d /= np.linalg.norm(local_d, axis=1, keepdims=True)
+                local_p = local_p + lp
+                start = near / -local_d[:, 2]
+            else:
+                start = np.full(b, near)
+            tmax = np.full(b, length)
+        else:
+            chief = np.stack([px, py, -np.ones(b)], axis=1)
+            cos_c = 1.0 / np.sqrt(px * px + py * py + 1.0)  # the pinhole ray's cosine off the view axis
+            local_p = np.zeros((b, 3))
+            local_d = chief * cos_c[:, None]
+            if lens is not None:  # aimed at the pinhole ray's point on the plane of focus
+                local_p = np.stack([lens[:, 0], lens[:, 1], np.zeros(b)], axis=1)
+                local_d = chief * focus - local_p
+                local_d /= np.linalg.norm(local_d, axis=1, keepdims=True)
+            start = near / cos_c
+            tmax = length / cos_c
+    d = local_d @ rot.T
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = local_p @ rot.T + eye + start[:, None] * d
+    if valid is not None and not valid.all():
+        d[~valid] = (0.0, 0.0, -1.0)  # traced nowhere (tmax 0): the caller drops them
+        tmax = np.where(valid, tmax, 0.0)
+    else:
+        valid = None
+    if valid is None and not np.isfinite(far):
+        tmax = None  # unbounded
+    else:
+        tmax = np.minimum(tmax, np.finfo(np.float32).max).astype(np.float32)
+    return np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32), tmax, valid
+
+
+def generate_rays(cam: Camera, x: np.ndarray, y: np.ndarray, lens_u: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """World-space ray origins and unit directions (float32) through image points (x, y)
+    (``camera_rays`` without the clip end and validity: for tools and tests; ``lens_u`` None:
+    the chief rays through the lens centre)."""
+    o, d, _, _ = camera_rays(cam, x, y, lens_u)
+    return o, d
+
+
+def _pinhole_rays(cam: Camera, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A pinhole perspective or orthographic camera's rays without clipping (float32 throughout)."""
     w, h = int(cam.width), int(cam.height)
     hx, hy = camera_frame(cam)
     shift = _shift_extent(cam)

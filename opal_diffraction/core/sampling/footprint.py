@@ -75,7 +75,14 @@ def camera_differentials(cam, directions: np.ndarray, offsets=None, box_width: f
     projection: the image-plane point moves by 2 hx / width per pixel in x and by -2 hy / height
     per pixel in y, at distance 1 for a perspective camera, in metres for an orthographic one),
     and in row 4 (ox, oy, box_width): the sample's offset from its pixel centre ``offsets``
-    (2, B) in pixels (None: 0) and the footprint's width in pixels (``filter_box_width``)."""
+    (2, B) in pixels (None: 0) and the footprint's width in pixels (``filter_box_width``).
+    A thin lens keeps its pinhole's differentials (as Cycles' camera_sample_perspective does: the
+    footprint is the pixel's, not the blur's); a panoramic camera gets zeros with width 0 (point
+    samples of the pattern)."""
+    if cam.kind == "PANO":  # no differentials for panoramas: point samples (docs/physics.md section 6.10)
+        out = np.zeros((len(directions), 5, 3), np.float32)
+        out[:, 4, 2] = 0.0
+        return out
     w, h = int(cam.width), int(cam.height)
     hx, hy = camera_frame(cam)
     m = np.asarray(cam.matrix, np.float64)

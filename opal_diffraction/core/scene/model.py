@@ -400,7 +400,7 @@ def _any_perpendicular(d) -> np.ndarray:
 
 @dataclass
 class Camera:
-    """A pinhole perspective or orthographic camera with Blender's conventions.
+    """A perspective, orthographic or panoramic camera with Blender's (Cycles') conventions.
 
     ``matrix``: 4x4 camera-to-world (local -Z is the view direction, +Y up). ``lens`` focal length
     and ``sensor_width`` / ``sensor_height`` in mm; ``sensor_fit`` 'AUTO' (the sensor width spans
@@ -420,6 +420,29 @@ class Camera:
     shift_y: float = 0.0
     width: int = 640
     height: int = 480
+    # depth of field (thin lens, Cycles' conventions: docs/physics.md sections 6.7-6.9): the aperture's
+    # radius in metres (0: a pinhole), the distance in metres to the plane in focus (along the
+    # view axis), the blade count (below 3: a round aperture), the blades' rotation (radians) and
+    # the anamorphic ratio (the aperture's x is divided by it)
+    aperture_radius: float = 0.0
+    focus_distance: float = 10.0
+    aperture_blades: int = 0
+    aperture_rotation: float = 0.0
+    aperture_ratio: float = 1.0
+    # clipping (Cycles: planes at these depths along the view axis; panoramic cameras: distances
+    # along the ray): nothing nearer than clip_start or farther than clip_end is seen
+    clip_start: float = 0.0
+    clip_end: float = float("inf")
+    # panoramic cameras (kind 'PANO'): 'EQUIRECTANGULAR' (latitude / longitude ranges, radians),
+    # 'FISHEYE_EQUIDISTANT' (fisheye_fov radians across the image's circle) or
+    # 'FISHEYE_EQUISOLID' (fisheye_lens in mm on the fitted sensor, fisheye_fov the circle's limit)
+    panorama_type: str = "EQUIRECTANGULAR"
+    fisheye_fov: float = float(np.pi)
+    fisheye_lens: float = 10.5
+    latitude_min: float = float(-np.pi / 2)
+    latitude_max: float = float(np.pi / 2)
+    longitude_min: float = float(-np.pi)
+    longitude_max: float = float(np.pi)
 
     @staticmethod
     def look_at(eye, target, up=(0.0, 0.0, 1.0), **kw) -> "Camera":

@@ -29,7 +29,8 @@ BACKENDS = ("auto", "embree", "numpy", "brute")
 #: Settings only the eye pass reads: changing them keeps a prepared scene and its light pass.
 EYE_ONLY_SETTINGS = frozenset({"samples", "round_samples", "tile_size", "filter_width", "time_limit", "spectral_exr",
                                "diffuse_bounces", "glossy_bounces", "transmission_bounces", "adaptive_threshold",
-                               "adaptive_min_samples", "grating_footprint", "blue_noise", "fresnel_split"})
+                               "adaptive_min_samples", "grating_footprint", "blue_noise", "fresnel_split",
+                               "film_transparent", "film_transparent_glass"})
 
 #: The wavelength grid holds 2 to 4001 samples (360-830 nm at 0.1175 nm at most); below 16 the
 #: colours are coarse (a warning, not an error).
@@ -60,7 +61,8 @@ _WORDS = {"samples": "samples", "light_paths": "light paths", "max_bounces": "ma
           "wavelength_step": "wavelength step", "time_limit": "time limit", "filter_width": "filter width",
           "adaptive_threshold": "adaptive threshold", "adaptive_min_samples": "adaptive min samples",
           "dispersion_branches": "dispersion branches"}
-_BOOL_FIELDS = ("grating_footprint", "caustic_splat", "blue_noise", "dispersion_importance",
+_BOOL_FIELDS = ("grating_footprint", "caustic_splat", "blue_noise", "film_transparent", "film_transparent_glass",
+                "dispersion_importance",
                 "dispersion_white_reflection", "fresnel_split", "splat_bounce")
 FILTER_WIDTH_MAX = 100.0  # pixels
 
@@ -144,6 +146,12 @@ class RenderSettings:
     # the image (core/integrators/light/camera_splat.py, docs/physics.md section 4.9); False: looked up in the
     # caustic map like every other caustic
     caustic_splat: bool = True
+    # Film > Transparent (Cycles): camera rays that meet no surface see nothing (black) and the
+    # result's alpha is each pixel's coverage (RenderResult.alpha; docs/physics.md section 6.11)
+    film_transparent: bool = False
+    # ... and Cycles' Transparent Glass: the world seen through smooth glass (only refractions
+    # since the camera) is transparent too, alpha lowered by the mean throughput (section 6.11)
+    film_transparent_glass: bool = False
     # pixels share one low-discrepancy sequence in a blue-noise order, as Cycles' default
     # pattern (core/sampling/sampler.py, docs/physics.md section 6.6); False: each pixel its own sequence
     blue_noise: bool = True

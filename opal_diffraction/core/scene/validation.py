@@ -282,10 +282,11 @@ def _validate_camera(c: Camera) -> Camera:
         raise SceneError("camera matrix: its scale is beyond the renderable limit")
     if abs(np.linalg.det(m[:3, :3])) < 1e-12:
         raise SceneError("camera matrix is singular (zero scale?)")
-    for name, allowed in (("kind", ("PERSP", "ORTHO")), ("sensor_fit", ("AUTO", "HORIZONTAL", "VERTICAL"))):
+    for name, allowed in (("kind", ("PERSP", "ORTHO", "PANO")), ("sensor_fit", ("AUTO", "HORIZONTAL", "VERTICAL")),
+                          ("panorama_type", PANORAMA_TYPES)):
         val = getattr(c, name)
         if not isinstance(val, str) or val not in allowed:
-            what = "camera type" if name == "kind" else "camera sensor fit"
+            what = {"kind": "camera type", "sensor_fit": "camera sensor fit"}.get(name, "camera panorama type")
             raise SceneError(f"{what} {val!r} is not supported ({' or '.join(allowed)})")
     w = as_number(c.width, "image width", integer=True)
     h = as_number(c.height, "image height", integer=True)
@@ -318,9 +319,58 @@ def _validate_camera(c: Camera) -> Camera:
     elif vals["ortho_scale"] > COORD_LIMIT:
         raise SceneError(f"camera ortho_scale {number_text(vals['ortho_scale'])} m is beyond the renderable limit "
                          f"{COORD_LIMIT:g} m")
+    lens = _validate_lens(c)
     same = (w == c.width and type(c.width) is int and h == c.height and type(c.height) is int
-            and type(c.kind) is str and type(c.sensor_fit) is str)
-    return c if same else replace(c, width=w, height=h, kind=str(c.kind), sensor_fit=str(c.sensor_fit))
+            and type(c.kind) is str and type(c.sensor_fit) is str
+            and all(type(getattr(c, k)) is type(v) and getattr(c, k) == v for k, v in lens.items()))
+    return c if same else replace(c, width=w, height=h, kind=str(c.kind), sensor_fit=str(c.sensor_fit), **lens)
+
+
+PANORAMA_TYPES = ("EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT", "FISHEYE_EQUISOLID")
+
+
+def _validate_lens(c: Camera) -> dict:
+    """The thin lens, clipping and panorama fields of a camera (docs/physics.md sections 6.7-6.9), as
+    clean Python numbers; SceneError naming the first bad one."""
+    out = {}
+    for name in ("aperture_radius", "focus_distance", "aperture_rotation", "aperture_ratio", "clip_start",
+                 "fisheye_fov", "fisheye_lens", "latitude_min", "latitude_max", "longitude_min", "longitude_max"):
+        val = as_number(getattr(c, name), f"camera {name}")
+        if not np.isfinite(val) or abs(val) > FLOAT32_MAX:
+            raise SceneError(f"camera {name} must be a finite number (within float32), got {number_text(val)}")
+        out[name] = float(val)
+    end = c.clip_end
+    if isinstance(end, np.ndarray) and end.ndim == 0:
+        end = end.item()
+    # clip_end may be +inf (no far clipping, the core's default); any other value a finite number
+    out["clip_end"] = np.inf if isinstance(end, (float, np.floating)) and end == np.inf else \
+        float(as_number(end, "camera clip_end"))
+    if np.isfinite(out["clip_end"]) and out["clip_end"] > FLOAT32_MAX:
+        raise SceneError(f"camera clip_end {number_text(out['clip_end'])} m overflows float32 (max 3.4e38; inf: no far clip)")
+    out["aperture_blades"] = int(as_number(c.aperture_blades, "camera aperture_blades", integer=True))
+    if out["aperture_radius"] < 0 or out["aperture_radius"] > COORD_LIMIT:
+        raise SceneError(f"camera aperture_radius {number_text(out['aperture_radius'])} m must be in [0, {COORD_LIMIT:g}]")
+    if out["aperture_radius"] > 0 and not 0 < out["focus_distance"] <= COORD_LIMIT:
+        raise SceneError(f"camera focus_distance {number_text(out['focus_distance'])} m must be > 0 (and at most "
+                         f"{COORD_LIMIT:g}) with depth of field")
+    if not 0 < out["aperture_ratio"] <= 1e6:
+        raise SceneError(f"camera aperture_ratio {number_text(out['aperture_ratio'])} must be > 0")
+    if not 0 <= out["aperture_blades"] <= 1024:
+        raise SceneError(f"camera aperture_blades {out['aperture_blades']} must be in [0, 1024]")
+    if out["clip_start"] < 0:
+        raise SceneError(f"camera clip_start {number_text(out['clip_start'])} m must be >= 0")
+    if not out["clip_end"] > out["clip_start"]:
+        raise SceneError(f"camera clip_end {number_text(out['clip_end'])} m must be beyond clip_start "
+                         f"{number_text(out['clip_start'])} m")
+    if c.kind == "PANO":
+        if not 0 < out["fisheye_fov"] <= 2 * np.pi:
+            raise SceneError(f"camera fisheye_fov {number_text(out['fisheye_fov'])} rad must be in (0, 2 pi]")
+        if not out["fisheye_lens"] > 0:
+            raise SceneError(f"camera fisheye_lens {number_text(out['fisheye_lens'])} mm must be > 0")
+        for lo, hi in (("latitude_min", "latitude_max"), ("longitude_min", "longitude_max")):
+            if not out[lo] < out[hi]:
+                raise SceneError(f"camera {lo} {number_text(out[lo])} must be below {hi} {number_text(out[hi])}")
+    return out
 
 
 def _clean_float(a: np.ndarray, canonical) -> np.ndarray:

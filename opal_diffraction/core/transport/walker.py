@@ -410,24 +410,28 @@ class SpecularWalker:
         return Rays(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32), np.zeros(0, np.int64),
                     np.zeros(0, np.float32), np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0))
 
-    def walk(self, rays: Rays, mono: Rays) -> None:
-        """Follow both populations until every path has ended."""
+    def walk(self, rays: Rays, mono: Rays, tmax: np.ndarray | None = None) -> None:
+        """Follow both populations until every path has ended. ``tmax`` (B,): how far the first
+        segment of ``rays`` (camera rays) may reach (a camera's clip end; None: unbounded)."""
         rng = self.rng
         self._spawned = []  # mono rays a white population's scatter made (grating orders)
+        first = tmax
         while len(rays) or len(mono):
-            rays, children, child_hits = self._step(rays, None, rng)
+            rays, children, child_hits = self._step(rays, None, rng, first)
+            first = None
             for r in self._spawned:  # spawn()
                 mono = Rays.concat(mono, r)
             self._spawned = []
             mono, _, _ = self._step(mono, (children, child_hits), rng)
 
     # ----------------------------------------------------------------- one bounce
-    def _step(self, rays: Rays, pending, rng):
-        """Advance a population by one interaction; returns (continuing rays, mono children, their hits)."""
+    def _step(self, rays: Rays, pending, rng, tmax=None):
+        """Advance a population by one interaction (``tmax``: its rays' reach, None: unbounded);
+        returns (continuing rays, mono children, their hits)."""
         prepared = self.prepared
         hit = None
         if len(rays):
-            h = prepared.accel.intersect(rays.o, rays.d)
+            h = prepared.accel.intersect(rays.o, rays.d) if tmax is None else prepared.accel.intersect(rays.o, rays.d, tmax)
             self.rays_cast += len(rays)
             missed = h.prim < 0
             if self._hooks_segment:

@@ -25,6 +25,8 @@ what a hit's shading leaves for its bounce travels in a ``surface_interaction.Hi
 
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
+
 import numpy as np
 
 from ...transport import wavelengths
@@ -67,7 +69,7 @@ class EyePass:
 
     def trace(self, origins, directions, pix, n_pixels: int, rng: np.random.Generator,
               u_lambda: np.ndarray | None = None, sampler_ids=None,
-              differentials: np.ndarray | None = None) -> TileResult:
+              differentials: np.ndarray | None = None, tmax: np.ndarray | None = None) -> TileResult:
         """Trace camera rays (one per sample) and return the per-pixel sum of their radiance.
 
         ``u_lambda`` (B,) in [0, 1): stratified numbers for the SAMPLE wavelength choice
@@ -75,7 +77,8 @@ class EyePass:
         seed): the path vertices' numbers come from core/sampling/sampler.py's Sobol-Burley points of
         those pixels and samples; None: pseudo-random (``rng``). ``differentials`` (B, 5, 3):
         the rays' differentials per pixel step (``footprint.camera_differentials``), used where
-        ``wants_differentials``; None: point samples.
+        ``wants_differentials``; None: point samples. ``tmax`` (B,): the camera rays' clip end
+        (core/sampling/camera.py camera_rays; None: unbounded).
         """
         if u_lambda is None:
             u_lambda = rng.random(len(pix))
@@ -84,12 +87,12 @@ class EyePass:
             return wavelengths.merge_tiles([self.trace(
                 origins[c], directions[c], pix[c], n_pixels, rng, u_lambda[c],
                 None if sampler_ids is None else (sampler_ids[0][c], sampler_ids[1][c], sampler_ids[2]),
-                None if differentials is None else differentials[c]) for c in chunks])
+                None if differentials is None else differentials[c], None if tmax is None else tmax[c]) for c in chunks])
         if sampler_ids is None:
             tr = _TileTrace(self, n_pixels, rng)
-            return tr.run(origins, directions, pix, u_lambda, differentials=differentials)
+            return tr.run(origins, directions, pix, u_lambda, differentials=differentials, tmax=tmax)
         tr = _TileTrace(self, n_pixels, rng, sampler_seed=int(sampler_ids[2]))
-        return tr.run(origins, directions, pix, u_lambda, ids=sampler_ids[:2], differentials=differentials)
+        return tr.run(origins, directions, pix, u_lambda, ids=sampler_ids[:2], differentials=differentials, tmax=tmax)
 
     def trace_escapes(self, origins, directions, rng: np.random.Generator, wavelength_index=None) -> dict:
         """Follow rays through the scene's specular surfaces and report the ones that leave it.
@@ -115,6 +118,14 @@ class EyePass:
                 "lam": cat("lam") if len(mono) == len(e) else None, "depth": cat("depth"), "ray": cat("ray")}
 
 
+@dataclass
+class GlassState(PathState):
+    """The path state with Cycles' PATH_RAY_TRANSPARENT_BACKGROUND (Film > Transparent with
+    Transparent Glass, docs/physics.md section 6.11): ``tbg`` (B,) bool, the path has met only
+    smooth refractions since the camera; the world it reaches is transparent."""
+    tbg: np.ndarray | None = None
+
+
 class _TileTrace(SpecularWalker):
     """One tile's trace: the walker's hooks over the stages, with the render's constants
     (``EyeConstants``), the tile's output (``TileOutput``) and its random numbers: the tile's
@@ -129,18 +140,25 @@ class _TileTrace(SpecularWalker):
         self.out = TileOutput(n_pixels, self.n)
         self.escapes = [] if record_escapes else None  # dicts of the rays leaving the scene
         self.any_emissive = eye.any_emissive
+        self.transparent = bool(getattr(eye.prepared.settings, "film_transparent", False))
+        self.transparent_glass = self.transparent and bool(getattr(eye.prepared.settings, "film_transparent_glass", False))
+        self._camera_segment = False  # the next segment traced is the camera rays' (coverage: alpha)
 
     def _new_state(self, b: int) -> PathState:
         """The path tracer's per-path state of ``b`` camera paths (core/transport/path_state.py),
         with ray differentials where the render carries them."""
-        return PathState.new(b, differentials=self.c.footprints)
+        st = PathState.new(b, differentials=self.c.footprints)
+        if not self.transparent_glass:
+            return st
+        return GlassState(**{f.name: getattr(st, f.name) for f in fields(PathState)}, tbg=np.ones(b, bool))
 
     def empty_mono(self) -> Rays:
         r = super().empty_mono()
         r.state = self._new_state(0)
         return r
 
-    def run(self, origins, directions, pix, u_lambda, wavelength_index=None, ids=None, differentials=None) -> TileResult:
+    def run(self, origins, directions, pix, u_lambda, wavelength_index=None, ids=None, differentials=None,
+            tmax=None) -> TileResult:
         b = len(pix)
         rays = Rays(origins, directions, pix.astype(np.int64), None, None,
                      np.zeros(b, np.int32), np.asarray(u_lambda, np.float64), self._new_state(b))
@@ -154,7 +172,8 @@ class _TileTrace(SpecularWalker):
             lam = np.broadcast_to(np.asarray(wavelength_index, np.int64), (b,)).copy()
             mono = Rays(rays.o, rays.d, rays.pix, np.ones(b, np.float32), lam, rays.depth, rays.u_lam, rays.state)
             rays = rays.take(np.zeros(b, bool))
-        self.walk(rays, mono)
+        self._camera_segment = True
+        self.walk(rays, mono, tmax)
         return self.out.result(self.rays_cast)
 
     def numbers(self, rays: Rays, slot: int):
@@ -170,9 +189,30 @@ class _TileTrace(SpecularWalker):
 
     # ----------------------------------------------------------------- the walker's hooks
     def on_segment(self, rays: Rays, t: np.ndarray) -> None:
+        if self._camera_segment:  # the camera rays: coverage, the film's alpha (Film > Transparent)
+            self._camera_segment = False
+            self.out.add_alpha(rays.pix, np.isfinite(t))
         emission.lights_passed(self.c, self.out, rays, t)
 
     def on_miss(self, rays: Rays) -> None:
+        if self.transparent:  # Film > Transparent: the world seen directly is alpha 0, black (Cycles)
+            through = rays.depth > 0
+            if self.transparent_glass:  # ... and through smooth glass: alpha lowered by the throughput
+                glass = through & rays.state.tbg
+                if glass.any():
+                    g = rays.take(glass)
+                    # the mean over the grid of the throughput (a mono ray's one bin: w / n)
+                    if g.lam is None:
+                        w = g.dense_w(self.n)
+                        tput = w.mean(axis=1) if w.ndim == 2 else w
+                    else:
+                        tput = g.w.astype(np.float64) / self.n
+                    self.out.lower_alpha(g.pix, tput)
+                    through &= ~glass
+            if not through.all():
+                rays = rays.take(through)
+                if not len(rays):
+                    return
         emission.escaped(self.c, self.out, rays, self.escapes)
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> HitShading | None:
@@ -238,6 +278,8 @@ class _TileTrace(SpecularWalker):
         return russian_roulette(self.c, rays, rng)
 
     def after_delta(self, rays: Rays, transmitted: np.ndarray) -> Rays:
+        if self.transparent_glass:  # a reflection ends the transparent background (Cycles' path_state_next)
+            rays.state.tbg = rays.state.tbg & transmitted
         return count_delta(self.c, rays, transmitted)
 
     def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng,
@@ -259,10 +301,12 @@ class _TileTrace(SpecularWalker):
             body = lambert_bounce(c, rays, hit, sel, can_bounce, shaded, self.numbers)
             if body is not None:
                 out = body if micro_out is None or not len(micro_out) else Rays.concat(body, micro_out)
-        if c.bragg is None:
-            return out
-        return c.bragg.continue_paths(c.limits, self.rng, rays, hit, can_bounce, out,
-                                      None if shaded is None else shaded.bragg)
+        if c.bragg is not None:
+            out = c.bragg.continue_paths(c.limits, self.rng, rays, hit, can_bounce, out,
+                                         None if shaded is None else shaded.bragg)
+        if self.transparent_glass and out is not None and len(out):  # a diffuse or rough bounce: opaque
+            out.state.tbg = np.zeros(len(out), bool)
+        return out
 
     def mirror_bounce(self, rays: Rays, hit: Hit) -> Rays:
         out = super().mirror_bounce(rays, hit)  # a grating's zeroth order, or the base's share (section 3.3)

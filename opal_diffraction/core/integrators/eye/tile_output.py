@@ -43,6 +43,8 @@ class TileResult:
     # (grey) throughput of the mirrors and glass before it, and its world-space shading normal
     albedo: np.ndarray | None = None
     normal: np.ndarray | None = None
+    # coverage: per pixel, the number of samples whose camera ray hit a surface (Film > Transparent's alpha)
+    alpha: np.ndarray | None = None
 
 
 class TileOutput:
@@ -57,6 +59,19 @@ class TileOutput:
         self.albedo = np.zeros((n_pixels, 3), np.float32)
         self.normal = np.zeros((n_pixels, 3), np.float32)
         self.shadow_rays = 0  # shadow rays the stages cast
+        self.alpha = np.zeros(n_pixels, np.float32)  # camera rays that hit a surface, per pixel
+
+    def add_alpha(self, pix: np.ndarray, hit: np.ndarray) -> None:
+        """Coverage of camera rays at tile pixels ``pix``: ``hit`` (B,) bool, a surface within the clip range."""
+        if len(pix):
+            self.alpha += np.bincount(np.asarray(pix)[hit], minlength=self.n_pixels).astype(np.float32)
+
+    def lower_alpha(self, pix: np.ndarray, amount: np.ndarray) -> None:
+        """Transparent glass: paths at tile pixels ``pix`` that reached the world through smooth
+        refractions only take ``amount`` (B,) (their mean throughput) off the coverage."""
+        if len(pix):
+            self.alpha -= np.bincount(np.asarray(pix), weights=np.asarray(amount, np.float64),
+                                      minlength=self.n_pixels).astype(np.float32)
 
     def _new_film(self) -> np.ndarray:
         return np.zeros(self.n_pixels * self.n, np.float32)
@@ -208,7 +223,7 @@ class TileOutput:
             total = total + part
         get = lambda k: self.parts[k].reshape(shape) if k in self.parts else None  # noqa: E731
         return TileResult(total.reshape(shape), get("background"), get("indirect"), get("diffraction"),
-                          get("caustics"), rays_cast + self.shadow_rays, self.albedo, self.normal)
+                          get("caustics"), rays_cast + self.shadow_rays, self.albedo, self.normal, self.alpha)
 
 
 _NO_PART = np.zeros(0, np.int64)

@@ -87,10 +87,11 @@ def filter_density(t: np.ndarray, sampler) -> np.ndarray:
 def view_key(camera, filter_width: float) -> tuple:
     """What a splat depends on in the view: the camera (pose, projection, image size) and the
     reconstruction filter. Two views with equal keys see the same splat."""
+    from dataclasses import fields
+
     m = tuple(float(x) for x in np.asarray(camera.matrix, np.float64).ravel())
-    return (m, str(camera.kind), float(camera.lens), float(camera.sensor_width), float(camera.sensor_height),
-            str(camera.sensor_fit), float(camera.ortho_scale), float(camera.shift_x), float(camera.shift_y),
-            int(camera.width), int(camera.height), float(filter_width))
+    rest = tuple((f.name, getattr(camera, f.name)) for f in fields(camera) if f.name != "matrix")
+    return (m,) + rest + (float(filter_width),)
 
 
 def direct_materials(prepared) -> np.ndarray:
@@ -111,9 +112,15 @@ def direct_materials(prepared) -> np.ndarray:
 def applies(prepared) -> bool:
     """Whether the light pass splats for ``prepared``'s view (render/plan.py's ``camera_splat``):
     the setting is on, the filter has a width (a zero width point-samples pixel centres, which a
-    splat cannot estimate) and some material takes the splat (``direct_materials``)."""
+    splat cannot estimate), the camera is a pinhole (perspective or orthographic, no depth of
+    field: the connection is to its one eye point) and some material takes the splat (``direct_materials``)."""
+    from ...sampling.camera import has_lens
+
     s = prepared.settings
     if not s.caustic_splat or float(s.filter_width) <= 0:
+        return False
+    cam = prepared.scene.camera
+    if cam is None or cam.kind == "PANO" or has_lens(cam):  # a pinhole's connection only (docs/physics.md section 6.10)
         return False
     return bool(direct_materials(prepared).any())
 
@@ -150,6 +157,8 @@ class CameraConnection:
     rgb_weights: np.ndarray | None  # (n, 3) spectrum -> RGB; None: the film keeps the spectrum
     channels: int
     dens: np.ndarray | None = None  # filter_density's per-segment densities of filt's table (the kernels')
+    near: float = 0.0      # the camera's clip start and end: depths along the view axis it sees
+    far: float = float("inf")
 
     @classmethod
     def of(cls, prepared) -> "CameraConnection":
@@ -173,7 +182,16 @@ class CameraConnection:
                    float(cam.shift_y * shift), int(cam.width), int(cam.height), float(s.filter_width),
                    filt, view_key(cam, s.filter_width), mats,
                    None if spectral else prepared.conv.rgb_weights.astype(np.float64), n if spectral else 3,
-                   None if filt._inv is None else _density_table(filt._inv))
+                   None if filt._inv is None else _density_table(filt._inv),
+                   float(getattr(cam, "clip_start", 0.0)), float(getattr(cam, "clip_end", np.inf)))
+
+    def in_clip(self, p: np.ndarray) -> np.ndarray | None:
+        """Whether points p (K, 3) lie between the clip planes (Cycles clips at depths along the
+        view axis, as camera.camera_rays); None when the camera does not clip."""
+        if self.near <= 0 and not np.isfinite(self.far):
+            return None
+        depth = -((np.asarray(p, np.float64) - self.eye) @ self.rot[:, 2])
+        return (depth >= self.near) & (depth <= self.far)
 
     def empty(self) -> "CameraSplat":
         return CameraSplat(self.key, np.zeros((self.height, self.width, self.channels), np.float32),
@@ -245,6 +263,9 @@ class CameraConnection:
             else:
                 x, y, to_cam, factor, cos_y, ok, o, tmax = _connect_geometry(
                     self, hit.p.take(at, axis=0), hit.ng.take(at, axis=0), hit.eps.take(at))
+            clip = self.in_clip(hit.p.take(at, axis=0))
+            if clip is not None:
+                ok &= clip
             keep = np.flatnonzero(ok)
             if keep.size == 0:
                 return None, 0
@@ -260,6 +281,9 @@ class CameraConnection:
             ng = h.ng.astype(np.float64)
             cos_y = np.einsum("ij,ij->i", to_cam, ng)  # ng faces the side the light arrived from
             ok &= cos_y > 0
+            clip = self.in_clip(h.p)
+            if clip is not None:
+                ok &= clip
             keep = np.flatnonzero(ok)
             if keep.size == 0:
                 return None, 0
