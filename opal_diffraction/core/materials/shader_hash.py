@@ -1,5 +1,5 @@
 """Cycles' hash functions, vectorised: Bob Jenkins' lookup3 ``final``/``mix`` on uint32 arrays and
-the float hashes built on them (docs/physics.md section 13.3).
+the float hashes built on them (docs/physics.md section 13.6).
 
 Ported from Blender's ``intern/cycles/util/hash.h`` (Apache-2.0; itself from
 http://burtleburtle.net/bob/c/lookup3.c): ``hash_uint``..``hash_uint4`` start from

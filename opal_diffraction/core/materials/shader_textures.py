@@ -1,6 +1,6 @@
 """Cycles' procedural textures, vectorised over a batch of points in float32: Perlin noise and its
 fractals (the Noise texture), Voronoi (F1, F2, smooth F1, distance to edge), Checker, Gradient
-and White Noise (docs/physics.md section 13.3).
+and White Noise (docs/physics.md section 13.6).
 
 The math is ported from Blender's ``intern/cycles/kernel/svm/`` (Apache-2.0): ``noise.h``
 (Perlin's improved noise with lookup3 hashes at the lattice corners, the OSL remapping scales,
@@ -24,16 +24,13 @@ import itertools
 
 import numpy as np
 
+from ..scene.shader_programs import GRADIENT_TYPES, NOISE_TYPES, VORONOI_FEATURES, VORONOI_METRICS
 from . import shader_hash as H
 
 __all__ = ["perlin", "snoise", "noise_texture", "voronoi_texture", "checker_texture", "gradient_texture",
            "white_noise_texture", "NOISE_TYPES", "VORONOI_FEATURES", "VORONOI_METRICS", "GRADIENT_TYPES"]
 
 F = np.float32
-NOISE_TYPES = ("MULTIFRACTAL", "FBM", "HYBRID_MULTIFRACTAL", "RIDGED_MULTIFRACTAL", "HETERO_TERRAIN")
-VORONOI_FEATURES = ("F1", "F2", "SMOOTH_F1", "DISTANCE_TO_EDGE")
-VORONOI_METRICS = ("EUCLIDEAN", "MANHATTAN", "CHEBYCHEV", "MINKOWSKI")
-GRADIENT_TYPES = ("LINEAR", "QUADRATIC", "EASING", "DIAGONAL", "SPHERICAL", "QUADRATIC_SPHERE", "RADIAL")
 _FLT_MAX = F(np.finfo(np.float32).max)
 
 
