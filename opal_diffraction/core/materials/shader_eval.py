@@ -8,7 +8,7 @@ the operations of core/scene/shader_programs.py as Cycles' SVM computes them
   ``mix_color`` (svm/color_util.h ``svm_mix`` blend modes), ``map_range`` (svm/map_range.h, float),
   ``clamp`` (MINMAX / RANGE), ``invert``, ``separate`` / ``combine`` (XYZ or RGB), ``mapping``
   (svm/mapping_util.h, Euler XYZ as ``euler_to_transform``), ``ramp`` (svm/ramp.h
-  ``rgb_ramp_lookup``: Cycles' table of 256 entries of Blender's own ColorRamp evaluation, read
+  ``rgb_ramp_lookup``: Cycles' table of 257 entries of Blender's own ColorRamp evaluation, read
   linearly or as a step, so every interpolation mode renders as in Cycles), the implicit
   conversions (svm/convert.h: colour -> float is the Rec.709 luminance, vector -> float the
   average, float -> colour grey);

@@ -29,8 +29,8 @@ __all__ = ["Op", "ShaderProgram", "ProgramBuilder", "program_problems", "OPS", "
 SLOTS = {"color": "v", "roughness": "f", "metallic": "f", "emission": "v"}
 #: Texture Coordinate outputs a program may read (per hit, interpolated from the triangle's corners).
 COORDINATES = ("generated", "object", "uv")
-#: Entries of a ColorRamp's table (Cycles' RAMP_TABLE_SIZE).
-RAMP_TABLE_SIZE = 256
+#: Entries of a ColorRamp's table (Cycles' RAMP_TABLE_SIZE: 257 in Blender 5.0, measured against its renders).
+RAMP_TABLE_SIZE = 257
 #: The Math node's operations (Blender's enum names; svm/math_util.h ``svm_math``).
 MATH_OPERATIONS = ("ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "POWER", "LOGARITHM", "SQRT",
                    "INVERSE_SQRT", "ABSOLUTE", "EXPONENT", "MINIMUM", "MAXIMUM", "LESS_THAN", "GREATER_THAN",
