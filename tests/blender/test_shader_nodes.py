@@ -237,12 +237,19 @@ def noise_floor_and_checker_cube():
     bpy.ops.mesh.primitive_cube_add(size=1.6, location=(0.3, 0.4, 0.8))
     bpy.context.object.data.materials.append(cube_mat)
     bs.light("SUN", (0, 0, 5), 3.0, rotation=(math.radians(35), math.radians(15), 0))
-    sc.world.color = (0.05, 0.05, 0.05)
+    world = bpy.data.worlds.new("world")
+    bg = world.node_tree.nodes["Background"]
+    bg.inputs["Color"].default_value = (0.05, 0.05, 0.05, 1.0)
+    sc.world = world
     sc.opal.filter_width = sc.cycles.filter_width = 1.5
     return sc
 
 
+@pytest.mark.slow
 def test_a_noise_floor_and_a_checker_cube_render_as_in_cycles(tmp_path):
+    """The issue's scene: a Principled floor whose Base Color is a Noise through a ColorRamp and
+    a Diffuse cube with a Checker, a sun and a dim world. Measured: mean ratio 1.0004, 4x4-box
+    relative RMSE 0.0045 (64 x 64, ours 64 samples, Cycles 128)."""
     noise_floor_and_checker_cube()
     ex = export_scene(bpy.context.evaluated_depsgraph_get())
     assert len(ex.scene.shader_programs) == 2, ex.warnings
