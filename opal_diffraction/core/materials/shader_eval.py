@@ -331,7 +331,7 @@ def _ramp(table, fac, constant):
     return np.where((t > 0)[:, None], (F(1) - t)[:, None] * a + t[:, None] * b, a).astype(F)
 
 
-def _run(op: Op, a: list, n: int, inputs: dict) -> tuple:
+def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset()) -> tuple:
     p = op.params
     name = op.name
     if name == "const":
@@ -400,10 +400,11 @@ def _run(op: Op, a: list, n: int, inputs: dict) -> tuple:
         return (np.repeat(a[0][:, None], 3, axis=1).astype(F),)
     if name == "noise":
         vec, w, scale, detail, rough, lac, offset, gain, dist = a
+        want_colour = op.out[1] in need  # the Color output costs two more fractal sums
         fac, col = T.noise_texture(vec, w, scale, detail, rough, lac, offset, gain, dist,
                                    dimensions=int(p.get("dimensions", 3)), kind=p["type"],
-                                   normalize=bool(p.get("normalize", True)))
-        return fac, col
+                                   normalize=bool(p.get("normalize", True)), color=want_colour)
+        return fac, (col if want_colour else np.zeros((n, 3), F))
     if name == "voronoi":
         vec, w, scale, detail, rough, lac, smooth, expo, rnd = a
         out = T.voronoi_texture(vec, w, scale, detail, rough, lac, smooth, expo, rnd,
@@ -428,9 +429,11 @@ def evaluate(program: ShaderProgram, slot: str, inputs: dict, n: int) -> np.ndar
     the slot depends on run. Non-finite results (a division's Inf, a power's NaN) are 0, as
     nothing downstream may see them."""
     regs: dict = {}
-    for i in program.needed(slot):
+    order = program.needed(slot)
+    need = frozenset([program.outputs[slot]]).union(*(program.ops[i].args for i in order))
+    for i in order:
         op = program.ops[i]
-        outs = _run(op, [regs[r] for r in op.args], n, inputs)
+        outs = _run(op, [regs[r] for r in op.args], n, inputs, need)
         for r, v in zip(op.out, outs):
             regs[r] = v
     out = np.asarray(regs[program.outputs[slot]], F)
