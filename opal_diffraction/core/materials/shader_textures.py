@@ -25,9 +25,11 @@ import itertools
 import numpy as np
 
 from ..scene.shader_programs import GRADIENT_TYPES, NOISE_TYPES, VORONOI_FEATURES, VORONOI_METRICS
+from ..util.jit import kernels_enabled
 from . import shader_hash as H
+from .shader_kernels import perlin2_kernel, perlin3_kernel
 
-__all__ = ["perlin", "snoise", "noise_texture", "voronoi_texture", "checker_texture", "gradient_texture",
+__all__ = ["perlin", "perlin_reference", "snoise", "noise_texture", "voronoi_texture", "checker_texture", "gradient_texture",
            "white_noise_texture", "NOISE_TYPES", "VORONOI_FEATURES", "VORONOI_METRICS", "GRADIENT_TYPES"]
 
 F = np.float32
@@ -104,7 +106,22 @@ _GRAD = {1: _grad1, 2: _grad2, 3: _grad3, 4: _grad4}
 
 
 def perlin(p: np.ndarray) -> np.ndarray:
-    """Cycles' ``perlin_1d`` .. ``perlin_4d`` at points p (..., d) float32, d = 1..4 (unscaled)."""
+    """Cycles' ``perlin_1d`` .. ``perlin_4d`` at points p (..., d) float32, d = 1..4 (unscaled).
+    2-D and 3-D run the compiled kernels of :mod:`.shader_kernels` when enabled (bit for bit
+    this reference)."""
+    p = _f32(p)
+    d = p.shape[-1]
+    if d in (2, 3) and p.size and kernels_enabled():
+        flat = p.reshape(-1, d)
+        out = np.empty(len(flat), np.float32)
+        cols = [np.ascontiguousarray(flat[:, i]) for i in range(d)]
+        (perlin2_kernel if d == 2 else perlin3_kernel)(*cols, out)
+        return out.reshape(p.shape[:-1])
+    return perlin_reference(p)
+
+
+def perlin_reference(p: np.ndarray) -> np.ndarray:
+    """The NumPy reference of :func:`perlin` (what the kernels are tested against)."""
     p = _f32(p)
     d = p.shape[-1]
     cells, fr = _floorfrac(p)
