@@ -188,6 +188,35 @@ def test_white_noise_and_invert_with_the_default_coordinates(tmp_path):
     compare(tmp_path)
 
 
+def test_an_image_behind_a_colour_ramp_is_sampled_per_hit(tmp_path):
+    """The issue's 'image behind a ColorRamp': an 8x8 sRGB image (Linear) on the plane's UV map,
+    its Color through a ColorRamp (the luminance as Fac) and a Mix with the image itself."""
+    from test_export_textures import checker_pixels, image
+
+    def build(nt, vec):
+        img = image("behind", checker_pixels(seed=7), path=tmp_path / "behind.png")
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image, tex.interpolation = img, "Linear"
+        r = nt.nodes.new("ShaderNodeValToRGB")
+        r.color_ramp.elements[0].color = (0.1, 0.0, 0.3, 1)
+        r.color_ramp.elements[1].color = (1.0, 0.8, 0.2, 1)
+        link(nt, tex.outputs["Color"], r.inputs["Fac"])
+        mix = nt.nodes.new("ShaderNodeMix")
+        mix.data_type = "RGBA"
+        mix.inputs["Factor"].default_value = 0.25
+        link(nt, r.outputs["Color"], mix.inputs[6])
+        link(nt, tex.outputs["Color"], mix.inputs[7])
+        return mix.outputs[2]
+
+    mat = emission_plane(build, coords=None)
+    ob = bpy.data.objects["plane"]
+    layer = ob.data.uv_layers.new(name="UVMap")
+    layer.uv.foreach_set("vector", np.asarray(((0, 0), (1, 0), (1, 1), (0, 1)), np.float32).ravel())
+    ex = compare(tmp_path, atol=2e-4)
+    assert len(ex.scene.textures) == 1 and ex.scene.shader_programs[0].images() == {0}
+    assert mat.name
+
+
 def test_unread_nodes_keep_one_warning_and_the_socket_value(tmp_path):
     def build(nt, vec):
         n = nt.nodes.new("ShaderNodeTexNoise")

@@ -18,7 +18,9 @@ is read. It reads:
   its first matching input through, as Blender's internal links do), a cycle refused with a
   warning naming the node.
 
-Anything else on the way (an image texture, Hue/Saturation, Curves, Attribute, a Texture
+Image Texture nodes inside the program (behind a ColorRamp, a Mix, ...) sample the scene's
+image per hit at their Vector (unlinked: the UV map), flat projection. Anything else on the way
+(Hue/Saturation, Curves, Attribute, a Texture
 Coordinate output other than the three above, a colour mode other than RGB) is named in one
 warning and replaced by the socket's own value, as before. Colours typed into sockets are the
 blend file's working space converted to linear Rec.709 (export/colour.py).
@@ -43,7 +45,7 @@ COMPILED_NODES = frozenset({
     "ShaderNodeMixRGB", "ShaderNodeMapRange", "ShaderNodeClamp", "ShaderNodeInvert", "ShaderNodeSeparateXYZ",
     "ShaderNodeCombineXYZ", "ShaderNodeSeparateColor", "ShaderNodeCombineColor", "ShaderNodeSeparateRGB",
     "ShaderNodeCombineRGB", "ShaderNodeMapping", "ShaderNodeValue", "ShaderNodeRGB", "ShaderNodeTexCoord",
-    "ShaderNodeUVMap", "ShaderNodeGroup", "NodeGroupInput"})
+    "ShaderNodeUVMap", "ShaderNodeGroup", "NodeGroupInput", "ShaderNodeTexImage"})
 
 _KIND = {"VALUE": "f", "INT": "f", "BOOLEAN": "f", "RGBA": "v", "VECTOR": "v"}
 _DIMS = {"1D": 1, "2D": 2, "3D": 3, "4D": 4}
@@ -281,6 +283,8 @@ class ShaderCompiler:
             col, alpha = b.op("ramp", [self._in(node, "Fac", path, "f")], table=table,
                               constant=ramp.interpolation == "CONSTANT")
             return col if oname == "Color" else alpha
+        if idn == "ShaderNodeTexImage":
+            return self._image(node, oname, path)
         # textures: the unlinked Vector is Generated
         vec = self._in(node, "Vector", path, "v", default_generated=True) if node.inputs.get("Vector") else None
         if idn == "ShaderNodeTexNoise":
@@ -309,6 +313,29 @@ class ShaderCompiler:
                             dimensions=_DIMS[node.noise_dimensions])
             return val if oname == "Value" else col
         raise self._fail(node, f"node '{node.name}' ({idn})")
+
+    def _image(self, node, oname: str, path: tuple) -> int:
+        """An Image Texture inside the program (e.g. behind a ColorRamp): the scene texture at its
+        Vector's (x, y) (unlinked: the UV map); flat projection only."""
+        b = self.builder
+        table = self.reader.textures
+        image = getattr(node, "image", None)
+        if table is None or image is None:
+            raise self._fail(node, f"image texture '{node.name}' without an image")
+        if getattr(node, "projection", "FLAT") != "FLAT":
+            raise self._fail(node, f"the {node.projection.lower()} projection of image texture '{node.name}'")
+        idx = table.index(image, getattr(node, "interpolation", "Linear"), getattr(node, "extension", "REPEAT"),
+                          self.reader.owner)
+        if idx is None:  # no pixels (warned by the table): Cycles' magenta
+            return b.const([1.0, 0.0, 1.0]) if oname == "Color" else b.const(1.0)
+        sock = node.inputs.get("Vector")
+        if sock is not None and self.reader.source(sock) is not None:
+            vec = self._socket(sock, path, "v")
+        else:
+            self.uv_maps.add("")
+            vec = b.op("coord", kind="uv")[0]
+        col, alpha = b.op("image", [vec], texture=int(idx))
+        return col if oname == "Color" else alpha
 
     def _ramp_colour(self, rgba) -> list:
         col = self.reader._to709(np.asarray(rgba[:3], np.float64))

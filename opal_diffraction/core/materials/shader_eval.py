@@ -13,7 +13,8 @@ the operations of core/scene/shader_programs.py as Cycles' SVM computes them
   conversions (svm/convert.h: colour -> float is the Rec.709 luminance, vector -> float the
   average, float -> colour grey);
 - the textures of :mod:`.shader_textures`: ``noise``, ``voronoi``, ``checker``, ``gradient``,
-  ``white_noise``.
+  ``white_noise``; ``image``: a scene image (core/materials/textures.py ``sample_texture``) at
+  the (x, y) of its vector, as Cycles reads an Image Texture's Vector.
 
 :func:`evaluate` runs only the ops a slot needs (``ShaderProgram.needed``); its inputs are the hits'
 texture coordinates ('generated', 'object', 'uv', each (B, 3) float32).
@@ -331,7 +332,7 @@ def _ramp(table, fac, constant):
     return np.where((t > 0)[:, None], (F(1) - t)[:, None] * a + t[:, None] * b, a).astype(F)
 
 
-def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset()) -> tuple:
+def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset(), images=None) -> tuple:
     p = op.params
     name = op.name
     if name == "const":
@@ -420,12 +421,18 @@ def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset()) -
     if name == "white_noise":
         vec, w = a
         return T.white_noise_texture(vec, w, int(p.get("dimensions", 3)))
+    if name == "image":  # an Image Texture inside the program: its (x, y) as the UV
+        if images is None:
+            return np.zeros((n, 3), F), np.zeros(n, F)
+        rgba = images(int(p["texture"]), np.ascontiguousarray(a[0][:, :2]))
+        return np.ascontiguousarray(rgba[:, :3]), np.ascontiguousarray(rgba[:, 3])
     raise ValueError(f"unknown shader op {name!r}")
 
 
-def evaluate(program: ShaderProgram, slot: str, inputs: dict, n: int) -> np.ndarray:
+def evaluate(program: ShaderProgram, slot: str, inputs: dict, n: int, images=None) -> np.ndarray:
     """The value of ``slot`` ('color' (n, 3), 'roughness' (n,), ...) for n hits, float32; inputs:
-    'generated' / 'object' / 'uv' (n, 3) float32 (a missing one reads (0, 0, 0)). Only the ops
+    'generated' / 'object' / 'uv' (n, 3) float32 (a missing one reads (0, 0, 0)); ``images``:
+    f(texture index, uv (n, 2)) -> (n, 4) RGBA, the scene's image lookup (None: black). Only the ops
     the slot depends on run. Non-finite results (a division's Inf, a power's NaN) are 0, as
     nothing downstream may see them."""
     regs: dict = {}
@@ -433,7 +440,7 @@ def evaluate(program: ShaderProgram, slot: str, inputs: dict, n: int) -> np.ndar
     need = frozenset([program.outputs[slot]]).union(*(program.ops[i].args for i in order))
     for i in order:
         op = program.ops[i]
-        outs = _run(op, [regs[r] for r in op.args], n, inputs, need)
+        outs = _run(op, [regs[r] for r in op.args], n, inputs, need, images)
         for r, v in zip(op.out, outs):
             regs[r] = v
     out = np.asarray(regs[program.outputs[slot]], F)

@@ -228,13 +228,19 @@ class PreparedTextures:
                         inputs[name] = np.concatenate([uv, np.zeros((len(sel), 1), np.float32)], axis=1)
                 elif corners is not None and len(corners):
                     inputs[name] = interpolate_corners(corners, prim[sel], bu[sel], bv[sel]).astype(np.float32)
-            value = evaluate(program, slot, inputs, len(sel))
+            value = evaluate(program, slot, inputs, len(sel), self._image)
             if value.ndim == 1:
                 out[sel] = value[:, None]
             else:
                 out[sel, :3] = value
                 out[sel, 3] = 1.0
         return out
+
+    def _image(self, k: int, uv: np.ndarray) -> np.ndarray:
+        """Scene texture ``k`` at ``uv`` (b, 2): a shader program's image op."""
+        if not 0 <= k < len(self.images):
+            return np.zeros((len(uv), 4), np.float32)
+        return sample_texture(self.images[k], uv, self.interpolation[k], self.extension[k], self.encoding[k])
 
     def _texture_lookup(self, slot: str, mat, prim, bu, bv):
         col = getattr(self, slot)

@@ -82,6 +82,10 @@ class ShaderProgram:
     def __hash__(self):
         return hash(self.to_json())
 
+    def images(self) -> frozenset:
+        """The scene textures (indices into Scene.textures) the program samples."""
+        return frozenset(int(op.params["texture"]) for op in self.ops if op.name == "image")
+
     def reads(self) -> frozenset:
         """The texture coordinates the program reads ('generated', 'object', 'uv')."""
         return frozenset(op.params.get("kind") for op in self.ops if op.name == "coord")
@@ -140,6 +144,7 @@ OPS = {
     "checker": (("v", "v", "v", "f"), ("f", "v")),
     "gradient": (("v",), ("f", "v")),
     "white_noise": (("v", "f"), ("f", "v")),
+    "image": (("v",), ("v", "f")),
 }
 
 _ENUMS = {
@@ -190,6 +195,8 @@ def program_problems(program: ShaderProgram) -> str | None:
             v = np.asarray(op.params.get("value", np.nan), np.float64)
             if v.shape not in ((), (3,)) or not np.isfinite(v).all():
                 return f"{where}: the value must be a finite number or three"
+        if op.name == "image" and (not isinstance(op.params.get("texture"), int) or op.params["texture"] < 0):
+            return f"{where}: texture must be a texture index"
         if op.name == "ramp":
             table = np.asarray(op.params.get("table", []), np.float64)
             if table.ndim != 2 or table.shape[1] != 4 or len(table) < 2 or not np.isfinite(table).all():

@@ -643,6 +643,11 @@ def _validate_programs(scene: Scene, materials: Materials, used: np.ndarray, cor
     if bad.any():
         i = int(np.argmax(bad))
         raise SceneError(f"{label(i)}: shader program {int(idx[i])} but the scene has {len(raw)} program(s)")
+    k = len(corners["textures"])
+    for i, prog in enumerate(raw):
+        if prog.images() and max(prog.images()) >= k:
+            raise SceneError(f"shader program {i}: it samples texture {max(prog.images())} but the scene has {k} "
+                             "texture(s)")
     have = {"generated": len(corners["corner_generated"]), "object": len(corners["corner_object"]),
             "uv": len(corners["corner_uvs"])}
     for m in np.flatnonzero(used & (idx >= 0)):
