@@ -160,3 +160,46 @@ def test_checker_and_gradients_match_cycles():
         got = render(gradient)
         _, want = T.gradient_texture(generated() * np.float32(1.3) - np.float32(0.5), kind)
         np.testing.assert_allclose(got, want, atol=1e-6, err_msg=kind)
+
+
+@pytest.mark.parametrize("kind,direction,profile,distortion", [
+    ("BANDS", "X", "SIN", 0.0), ("BANDS", "DIAGONAL", "SAW", 3.0), ("RINGS", "SPHERICAL", "TRI", 0.0),
+    ("RINGS", "Z", "SIN", 2.0)])
+def test_wave_matches_cycles(kind, direction, profile, distortion):
+    def build(nt, g):
+        n = nt.nodes.new("ShaderNodeTexWave")
+        n.wave_type, n.wave_profile = kind, profile
+        if kind == "BANDS":
+            n.bands_direction = direction
+        else:
+            n.rings_direction = direction
+        socket(n, "Distortion").default_value = distortion
+        socket(n, "Scale").default_value = 1.5
+        nt.links.new(g, socket(n, "Vector"))
+        return n.outputs["Color"]
+
+    got = render(build)
+    _, want = T.wave_texture(generated(), scale=1.5, distortion=distortion, kind=kind, bands_direction=direction,
+                             rings_direction=direction, profile=profile)
+    print(f"wave {kind} {direction} {profile}: max |difference| {np.abs(got - want).max():.2e}")
+    # SAW and TRI jump at their period: a pixel within float rounding of a jump may take either side
+    close = np.isclose(got, want, rtol=1e-4, atol=1e-4).all(axis=1)
+    assert close.mean() > 0.998, f"{(~close).sum()} pixels differ"
+
+
+@pytest.mark.parametrize("depth,distortion", [(0, 1.0), (2, 1.0), (5, 2.5), (10, 0.7)])
+def test_magic_matches_cycles(depth, distortion):
+    def build(nt, g):
+        n = nt.nodes.new("ShaderNodeTexMagic")
+        n.turbulence_depth = depth
+        socket(n, "Distortion").default_value = distortion
+        nt.links.new(g, socket(n, "Vector"))
+        return n.outputs["Color"]
+
+    got = render(build)
+    _, want = T.magic_texture(generated(), distortion=distortion, depth=depth)
+    print(f"magic {depth} {distortion}: max |difference| {np.abs(got - want).max():.2e}")
+    # each turbulence level takes sin / cos of the last times the distortion: float rounding (a sinf
+    # ulp) grows by up to the distortion per level, so the tolerance is 1e-5 distortion^depth
+    tol = max(1e-4, 1e-5 * distortion ** depth)
+    np.testing.assert_allclose(got, want, atol=tol)

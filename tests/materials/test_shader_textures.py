@@ -113,3 +113,29 @@ def test_white_noise_is_the_hash_of_the_coordinate_bits():
     np.testing.assert_array_equal(c[:, 2], H.hash_float4_to_float(P[:, 0], P[:, 1], P[:, 2], np.float32(2.0)))
     v1, _ = T.white_noise_texture(P, w=P[:, 0], dimensions=1)
     np.testing.assert_array_equal(v1, H.hash_float_to_float(P[:, 0]))
+
+
+def test_wave_profiles_closed_form():
+    v = RNG.uniform(-1, 1, (300, 3)).astype(np.float32)
+    p = (v.astype(np.float64) * 2.0 + 1e-6) * 0.999999
+    n_bands = p[:, 1] * 20 + 0.7
+    n_rings = np.linalg.norm(p, axis=1) * 20 + 0.7
+    for kind, n in (("BANDS", n_bands), ("RINGS", n_rings)):
+        for profile, want in (("SIN", 0.5 + 0.5 * np.sin(n - np.pi / 2)), ("SAW", np.mod(n / (2 * np.pi), 1)),
+                              ("TRI", np.abs(n / (2 * np.pi) - np.floor(n / (2 * np.pi) + 0.5)) * 2)):
+            fac, _ = T.wave_texture(v, scale=2.0, phase=0.7, kind=kind, bands_direction="Y",
+                                    rings_direction="SPHERICAL", profile=profile)
+            ok = np.abs(np.mod(n / (2 * np.pi) + 0.5, 1) - 0.5) > 1e-4 if profile != "SIN" else np.ones(len(n), bool)
+            np.testing.assert_allclose(fac[ok], want[ok], atol=2e-4, err_msg=f"{kind} {profile}")
+
+
+def test_magic_depth_zero_closed_form():
+    v = RNG.uniform(-2, 2, (300, 3)).astype(np.float32)
+    p = np.fmod(v.astype(np.float64), 2 * np.pi)
+    d, s = 0.8, 1.3
+    x = np.sin((p[:, 0] + p[:, 1] + p[:, 2]) * 5 * s) / (2 * d)
+    y = np.cos((-p[:, 0] + p[:, 1] - p[:, 2]) * 5 * s) / (2 * d)
+    z = -np.cos((-p[:, 0] - p[:, 1] + p[:, 2]) * 5 * s) / (2 * d)
+    fac, col = T.magic_texture(v, scale=s, distortion=d, depth=0)
+    np.testing.assert_allclose(col, np.stack([0.5 - x, 0.5 - y, 0.5 - z], 1), atol=2e-5)
+    np.testing.assert_allclose(fac, col.mean(axis=1), atol=1e-6)

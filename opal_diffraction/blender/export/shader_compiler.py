@@ -6,7 +6,8 @@ operations once (memoised per node output and group path) to one :class:`Program
 material, so the program lists the nodes in an order where every register is written before it
 is read. It reads:
 
-- textures: Noise, Voronoi (F1, F2, Smooth F1, Distance to Edge), Checker, Gradient, White Noise;
+- textures: Noise, Voronoi (F1, F2, Smooth F1, Distance to Edge), Checker, Gradient, White Noise,
+  Wave, Magic;
 - converters: ColorRamp (a 257-entry table of Blender's own ``ColorRamp.evaluate``, as Cycles
   bakes it), Math, Vector Math, Mix (float, vector, colour; and the legacy MixRGB), Map Range
   (float), Clamp, Invert, Separate / Combine XYZ and Color (RGB) (and the legacy RGB nodes),
@@ -45,7 +46,8 @@ COMPILED_NODES = frozenset({
     "ShaderNodeMixRGB", "ShaderNodeMapRange", "ShaderNodeClamp", "ShaderNodeInvert", "ShaderNodeSeparateXYZ",
     "ShaderNodeCombineXYZ", "ShaderNodeSeparateColor", "ShaderNodeCombineColor", "ShaderNodeSeparateRGB",
     "ShaderNodeCombineRGB", "ShaderNodeMapping", "ShaderNodeValue", "ShaderNodeRGB", "ShaderNodeTexCoord",
-    "ShaderNodeUVMap", "ShaderNodeGroup", "NodeGroupInput", "ShaderNodeTexImage"})
+    "ShaderNodeUVMap", "ShaderNodeGroup", "NodeGroupInput", "ShaderNodeTexImage", "ShaderNodeTexWave",
+    "ShaderNodeTexMagic"})
 
 _KIND = {"VALUE": "f", "INT": "f", "BOOLEAN": "f", "RGBA": "v", "VECTOR": "v"}
 _DIMS = {"1D": 1, "2D": 2, "3D": 3, "4D": 4}
@@ -312,6 +314,16 @@ class ShaderCompiler:
             val, col = b.op("white_noise", [vec, self._in(node, "W", path, "f")],
                             dimensions=_DIMS[node.noise_dimensions])
             return val if oname == "Value" else col
+        if idn == "ShaderNodeTexWave":
+            args = [vec] + [self._in(node, n, path, "f") for n in
+                            ("Scale", "Distortion", "Detail", "Detail Scale", "Detail Roughness", "Phase Offset")]
+            fac, col = b.op("wave", args, type=node.wave_type, bands_direction=node.bands_direction,
+                            rings_direction=node.rings_direction, profile=node.wave_profile)
+            return fac if oname == "Fac" else col
+        if idn == "ShaderNodeTexMagic":
+            col, fac = b.op("magic", [vec, self._in(node, "Scale", path, "f"), self._in(node, "Distortion", path, "f")],
+                            depth=int(node.turbulence_depth))
+            return fac if oname == "Fac" else col
         raise self._fail(node, f"node '{node.name}' ({idn})")
 
     def _image(self, node, oname: str, path: tuple) -> int:

@@ -13,7 +13,7 @@ the operations of core/scene/shader_programs.py as Cycles' SVM computes them
   conversions (svm/convert.h: colour -> float is the Rec.709 luminance, vector -> float the
   average, float -> colour grey);
 - the textures of :mod:`.shader_textures`: ``noise``, ``voronoi``, ``checker``, ``gradient``,
-  ``white_noise``; ``image``: a scene image (core/materials/textures.py ``sample_texture``) at
+  ``white_noise``, ``wave``, ``magic``; ``image``: a scene image (core/materials/textures.py ``sample_texture``) at
   the (x, y) of its vector, as Cycles reads an Image Texture's Vector.
 
 :func:`evaluate` runs only the ops a slot needs (``ShaderProgram.needed``); its inputs are the hits'
@@ -421,6 +421,14 @@ def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset(), i
     if name == "white_noise":
         vec, w = a
         return T.white_noise_texture(vec, w, int(p.get("dimensions", 3)))
+    if name == "wave":
+        vec, scale, dist, detail, dscale, drough, phase = a
+        return T.wave_texture(vec, scale, dist, detail, dscale, drough, phase, kind=p["type"],
+                              bands_direction=p["bands_direction"], rings_direction=p["rings_direction"],
+                              profile=p["profile"])
+    if name == "magic":
+        fac, col = T.magic_texture(a[0], a[1], a[2], int(p["depth"]))
+        return col, fac
     if name == "image":  # an Image Texture inside the program: its (x, y) as the UV
         if images is None:
             return np.zeros((n, 3), F), np.zeros(n, F)

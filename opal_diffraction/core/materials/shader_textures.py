@@ -29,7 +29,7 @@ from ..util.jit import kernels_enabled
 from . import shader_hash as H
 from .shader_kernels import perlin2_kernel, perlin3_kernel
 
-__all__ = ["perlin", "perlin_reference", "snoise", "noise_texture", "voronoi_texture", "checker_texture", "gradient_texture",
+__all__ = ["wave_texture", "magic_texture", "perlin", "perlin_reference", "snoise", "noise_texture", "voronoi_texture", "checker_texture", "gradient_texture",
            "white_noise_texture", "NOISE_TYPES", "VORONOI_FEATURES", "VORONOI_METRICS", "GRADIENT_TYPES"]
 
 F = np.float32
@@ -604,3 +604,88 @@ def white_noise_texture(vector, w=0.0, dimensions: int = 3):
     if dimensions == 3:
         return H.hash_float3_to_float(x, y, z), H.hash_float3_to_float3(x, y, z)
     return H.hash_float4_to_float(x, y, z, w), H.hash_float4_to_float3(x, y, z, w)
+
+
+# ------------------------------------------------------------------------------------ Wave, Magic
+_2PI = F(6.2831855)     # M_2PI_F
+_PI_2 = F(1.5707964)    # M_PI_2_F
+
+
+def wave_texture(vector, scale=5.0, distortion=0.0, detail=2.0, detail_scale=1.0, detail_roughness=0.5, phase=0.0,
+                 kind: str = "BANDS", bands_direction: str = "X", rings_direction: str = "X",
+                 profile: str = "SIN"):
+    """Cycles' Wave texture (svm/wave.h ``svm_wave``): (fac (B,), colour (B, 3) = fac grey)."""
+    p = _f32(vector).reshape(-1, 3)
+    b = len(p)
+
+    def col(x):
+        return np.broadcast_to(_f32(x), (b,))
+
+    p = p * col(scale)[:, None]
+    p = (p + F(0.000001)) * F(0.999999)
+    if kind == "BANDS":
+        if bands_direction == "DIAGONAL":
+            n = (p[:, 0] + p[:, 1] + p[:, 2]) * F(10)
+        else:
+            n = p[:, "XYZ".index(bands_direction)] * F(20)
+    else:
+        rp = p.copy()
+        if rings_direction != "SPHERICAL":
+            rp[:, "XYZ".index(rings_direction)] = 0
+        n = np.sqrt(rp[:, 0] * rp[:, 0] + rp[:, 1] * rp[:, 1] + rp[:, 2] * rp[:, 2]) * F(20)
+    n = (n + col(phase)).astype(F)
+    dist = col(distortion)
+    if np.any(dist != 0):
+        fbm = _fbm((p * col(detail_scale)[:, None]).astype(F), col(detail), col(detail_roughness), F(2.0), True)
+        n = np.where(dist != 0, n + dist * (fbm * F(2) - F(1)), n).astype(F)
+    if profile == "SIN":
+        f = F(0.5) + F(0.5) * np.sin(n - _PI_2)
+    elif profile == "SAW":
+        n = n / _2PI
+        f = n - np.floor(n)
+    else:
+        n = n / _2PI
+        f = np.abs(n - np.floor(n + F(0.5))) * F(2)
+    f = f.astype(F)
+    return f, np.repeat(f[:, None], 3, axis=1)
+
+
+def magic_texture(vector, scale=5.0, distortion=1.0, depth: int = 2):
+    """Cycles' Magic texture (svm/magic.h ``svm_magic``): (fac (B,) = the colour's average,
+    colour (B, 3))."""
+    p = _f32(vector).reshape(-1, 3)
+    b = len(p)
+    sc = np.broadcast_to(_f32(scale), (b,))
+    d = np.broadcast_to(_f32(distortion), (b,)).astype(F)
+    px, py, pz = (np.fmod(p[:, i], _2PI) for i in range(3))
+    x = np.sin((px + py + pz) * F(5) * sc)
+    y = np.cos((-px + py - pz) * F(5) * sc)
+    z = -np.cos((-px - py + pz) * F(5) * sc)
+    n = int(depth)
+    if n > 0:
+        x, y, z = x * d, y * d, z * d
+        y = -np.cos(x - y + z) * d
+        if n > 1:
+            x = np.cos(x - y - z) * d
+        if n > 2:
+            z = np.sin(-x - y - z) * d
+        if n > 3:
+            x = -np.cos(-x + y - z) * d
+        if n > 4:
+            y = -np.sin(-x + y + z) * d
+        if n > 5:
+            y = -np.cos(-x + y + z) * d
+        if n > 6:
+            x = np.cos(x + y + z) * d
+        if n > 7:
+            z = np.sin(x + y - z) * d
+        if n > 8:
+            x = -np.cos(-x - y + z) * d
+        if n > 9:
+            y = -np.sin(x - y + z) * d
+    dd = d * F(2)
+    nz = d != 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x, y, z = (np.where(nz, v / np.where(nz, dd, F(1)), v) for v in (x, y, z))
+    rgb = np.stack([F(0.5) - x, F(0.5) - y, F(0.5) - z], axis=1).astype(F)
+    return ((rgb[:, 0] + rgb[:, 1] + rgb[:, 2]) * F(1 / 3)).astype(F), rgb

@@ -145,6 +145,8 @@ OPS = {
     "gradient": (("v",), ("f", "v")),
     "white_noise": (("v", "f"), ("f", "v")),
     "image": (("v",), ("v", "f")),
+    "wave": (("v", "f", "f", "f", "f", "f", "f"), ("f", "v")),
+    "magic": (("v", "f", "f"), ("v", "f")),
 }
 
 _ENUMS = {
@@ -160,6 +162,10 @@ _ENUMS = {
     ("voronoi", "metric"): VORONOI_METRICS,
     ("gradient", "type"): GRADIENT_TYPES,
     ("to_float", "from"): ("color", "vector"),
+    ("wave", "type"): ("BANDS", "RINGS"),
+    ("wave", "bands_direction"): ("X", "Y", "Z", "DIAGONAL"),
+    ("wave", "rings_direction"): ("X", "Y", "Z", "SPHERICAL"),
+    ("wave", "profile"): ("SIN", "SAW", "TRI"),
 }
 _DIMENSIONS = {"noise": (1, 2, 3, 4), "voronoi": (1, 2, 3, 4), "white_noise": (1, 2, 3, 4)}
 
@@ -195,6 +201,8 @@ def program_problems(program: ShaderProgram) -> str | None:
             v = np.asarray(op.params.get("value", np.nan), np.float64)
             if v.shape not in ((), (3,)) or not np.isfinite(v).all():
                 return f"{where}: the value must be a finite number or three"
+        if op.name == "magic" and op.params.get("depth") not in range(11):
+            return f"{where}: depth must be 0 to 10"
         if op.name == "image" and (not isinstance(op.params.get("texture"), int) or op.params["texture"] < 0):
             return f"{where}: texture must be a texture index"
         if op.name == "ramp":
