@@ -203,3 +203,26 @@ def test_magic_matches_cycles(depth, distortion):
     # ulp) grows by up to the distortion per level, so the tolerance is 1e-5 distortion^depth
     tol = max(1e-4, 1e-5 * distortion ** depth)
     np.testing.assert_allclose(got, want, atol=tol)
+
+
+@pytest.mark.parametrize("offset,offset_frequency,squash,squash_frequency,smooth", [
+    (0.5, 2, 1.0, 2, 0.1), (0.3, 3, 0.6, 2, 0.0), (0.0, 1, 1.4, 3, 0.5)])
+def test_brick_matches_cycles(offset, offset_frequency, squash, squash_frequency, smooth):
+    def build(nt, g):
+        n = nt.nodes.new("ShaderNodeTexBrick")
+        n.offset, n.offset_frequency, n.squash, n.squash_frequency = offset, offset_frequency, squash, squash_frequency
+        socket(n, "Mortar Smooth").default_value = smooth
+        socket(n, "Bias").default_value = 0.1
+        socket(n, "Color1").default_value = (0.8, 0.2, 0.1, 1)
+        socket(n, "Color2").default_value = (0.3, 0.4, 0.2, 1)
+        nt.links.new(g, socket(n, "Vector"))
+        return n.outputs["Color"]
+
+    got = render(build)
+    _, want = T.brick_texture(generated(), (0.8, 0.2, 0.1), (0.3, 0.4, 0.2), (0.0, 0.0, 0.0), bias=0.1,
+                              mortar_smooth=smooth, offset_amount=offset, offset_frequency=offset_frequency,
+                              squash_amount=squash, squash_frequency=squash_frequency)
+    print(f"brick: max |difference| {np.abs(got - want).max():.2e}")
+    # a pixel within float rounding of a brick or mortar edge may take either side
+    close = np.isclose(got, want, atol=1e-5).all(axis=1)
+    assert close.mean() > 0.995, f"{(~close).sum()} pixels differ"

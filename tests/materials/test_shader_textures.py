@@ -139,3 +139,31 @@ def test_magic_depth_zero_closed_form():
     fac, col = T.magic_texture(v, scale=s, distortion=d, depth=0)
     np.testing.assert_allclose(col, np.stack([0.5 - x, 0.5 - y, 0.5 - z], 1), atol=2e-5)
     np.testing.assert_allclose(fac, col.mean(axis=1), atol=1e-6)
+
+
+def _brick_noise_int(n: int) -> float:
+    """svm/brick.h brick_noise on Python integers (uint32 wrap-around)."""
+    n = (n + 1013) & 0x7FFFFFFF
+    n = (n >> 13) ^ n
+    nn = (n * ((n * n * 60493 + 19990303) & 0xFFFFFFFF) + 1376312589) & 0x7FFFFFFF
+    return 0.5 * (nn / 1073741824.0)
+
+
+def test_brick_rows_offsets_and_tints_by_hand():
+    """Brick width 0.5, row height 0.25, every 2nd row offset by half a brick (scale 1): inside a
+    brick (away from the mortar) the colour is mix(c1, c2, clamp(noise(row << 16 | brick) + bias))."""
+    v = RNG.uniform(-2, 2, (2000, 3)).astype(np.float32)
+    fac, col = T.brick_texture(v, (1, 0, 0), (0, 0, 1), (0, 1, 0), scale=1.0, mortar_size=0.02, bias=0.1)
+    x, y = v[:, 0].astype(np.float64), v[:, 1].astype(np.float64)
+    row = np.floor(y / 0.25).astype(int)
+    off = np.where(row % 2 == 0, 0.25, 0.0)  # C's % is 0 for even rows, negative ones too
+    brick = np.floor((x + off) / 0.5).astype(int)
+    bx, by = x + off - 0.5 * brick, y - 0.25 * row
+    inside = np.minimum(np.minimum(bx, by), np.minimum(0.5 - bx, 0.25 - by)) > 0.021
+    tint = np.array([min(max(_brick_noise_int(((int(r) << 16) + (int(b) & 0xFFFF)) & 0xFFFFFFFF) + 0.1, 0), 1)
+                     for r, b in zip(row, brick)])
+    assert inside.sum() > 1000
+    np.testing.assert_array_equal(fac[inside], 0)
+    np.testing.assert_allclose(col[inside], np.stack([1 - tint, 0 * tint, tint], 1)[inside], atol=1e-6)
+    mortar = np.minimum(np.minimum(bx, by), np.minimum(0.5 - bx, 0.25 - by)) < 0.001
+    np.testing.assert_allclose(col[mortar], [[0, 1, 0]] * int(mortar.sum()), atol=1e-6)

@@ -7,7 +7,7 @@ material, so the program lists the nodes in an order where every register is wri
 is read. It reads:
 
 - textures: Noise, Voronoi (F1, F2, Smooth F1, Distance to Edge), Checker, Gradient, White Noise,
-  Wave, Magic;
+  Wave, Magic, Brick;
 - converters: ColorRamp (a 257-entry table of Blender's own ``ColorRamp.evaluate``, as Cycles
   bakes it), Math, Vector Math, Mix (float, vector, colour; and the legacy MixRGB), Map Range
   (float), Clamp, Invert, Separate / Combine XYZ and Color (RGB) (and the legacy RGB nodes),
@@ -47,7 +47,7 @@ COMPILED_NODES = frozenset({
     "ShaderNodeCombineXYZ", "ShaderNodeSeparateColor", "ShaderNodeCombineColor", "ShaderNodeSeparateRGB",
     "ShaderNodeCombineRGB", "ShaderNodeMapping", "ShaderNodeValue", "ShaderNodeRGB", "ShaderNodeTexCoord",
     "ShaderNodeUVMap", "ShaderNodeGroup", "NodeGroupInput", "ShaderNodeTexImage", "ShaderNodeTexWave",
-    "ShaderNodeTexMagic"})
+    "ShaderNodeTexMagic", "ShaderNodeTexBrick"})
 
 _KIND = {"VALUE": "f", "INT": "f", "BOOLEAN": "f", "RGBA": "v", "VECTOR": "v"}
 _DIMS = {"1D": 1, "2D": 2, "3D": 3, "4D": 4}
@@ -319,6 +319,13 @@ class ShaderCompiler:
                             ("Scale", "Distortion", "Detail", "Detail Scale", "Detail Roughness", "Phase Offset")]
             fac, col = b.op("wave", args, type=node.wave_type, bands_direction=node.bands_direction,
                             rings_direction=node.rings_direction, profile=node.wave_profile)
+            return fac if oname == "Fac" else col
+        if idn == "ShaderNodeTexBrick":
+            args = [vec] + [self._in(node, n, path, "v") for n in ("Color1", "Color2", "Mortar")] + [
+                self._in(node, n, path, "f") for n in ("Scale", "Mortar Size", "Mortar Smooth", "Bias", "Brick Width",
+                                                       "Row Height")]
+            fac, col = b.op("brick", args, offset=float(node.offset), offset_frequency=int(node.offset_frequency),
+                            squash=float(node.squash), squash_frequency=int(node.squash_frequency))
             return fac if oname == "Fac" else col
         if idn == "ShaderNodeTexMagic":
             col, fac = b.op("magic", [vec, self._in(node, "Scale", path, "f"), self._in(node, "Distortion", path, "f")],

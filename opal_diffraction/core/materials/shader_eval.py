@@ -13,7 +13,7 @@ the operations of core/scene/shader_programs.py as Cycles' SVM computes them
   conversions (svm/convert.h: colour -> float is the Rec.709 luminance, vector -> float the
   average, float -> colour grey);
 - the textures of :mod:`.shader_textures`: ``noise``, ``voronoi``, ``checker``, ``gradient``,
-  ``white_noise``, ``wave``, ``magic``; ``image``: a scene image (core/materials/textures.py ``sample_texture``) at
+  ``white_noise``, ``wave``, ``magic``, ``brick``; ``image``: a scene image (core/materials/textures.py ``sample_texture``) at
   the (x, y) of its vector, as Cycles reads an Image Texture's Vector.
 
 :func:`evaluate` runs only the ops a slot needs (``ShaderProgram.needed``); its inputs are the hits'
@@ -429,6 +429,11 @@ def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset(), i
     if name == "magic":
         fac, col = T.magic_texture(a[0], a[1], a[2], int(p["depth"]))
         return col, fac
+    if name == "brick":
+        vec, c1, c2, mortar, scale, msize, msmooth, bias, width, height = a
+        return T.brick_texture(vec, c1, c2, mortar, scale, msize, msmooth, bias, width, height,
+                               float(p.get("offset", 0.5)), int(p.get("offset_frequency", 2)),
+                               float(p.get("squash", 1.0)), int(p.get("squash_frequency", 2)))
     if name == "image":  # an Image Texture inside the program: its (x, y) as the UV
         if images is None:
             return np.zeros((n, 3), F), np.zeros(n, F)

@@ -29,7 +29,7 @@ from ..util.jit import kernels_enabled
 from . import shader_hash as H
 from .shader_kernels import perlin2_kernel, perlin3_kernel
 
-__all__ = ["wave_texture", "magic_texture", "perlin", "perlin_reference", "snoise", "noise_texture", "voronoi_texture", "checker_texture", "gradient_texture",
+__all__ = ["brick_texture", "wave_texture", "magic_texture", "perlin", "perlin_reference", "snoise", "noise_texture", "voronoi_texture", "checker_texture", "gradient_texture",
            "white_noise_texture", "NOISE_TYPES", "VORONOI_FEATURES", "VORONOI_METRICS", "GRADIENT_TYPES"]
 
 F = np.float32
@@ -689,3 +689,52 @@ def magic_texture(vector, scale=5.0, distortion=1.0, depth: int = 2):
         x, y, z = (np.where(nz, v / np.where(nz, dd, F(1)), v) for v in (x, y, z))
     rgb = np.stack([F(0.5) - x, F(0.5) - y, F(0.5) - z], axis=1).astype(F)
     return ((rgb[:, 0] + rgb[:, 1] + rgb[:, 2]) * F(1 / 3)).astype(F), rgb
+
+
+# ------------------------------------------------------------------------------------ Brick
+def _brick_noise(n):
+    """svm/brick.h ``brick_noise``: Cycles' fast integer noise of uint32 n, in [0, 1)."""
+    with np.errstate(over="ignore"):
+        n = (n.astype(np.uint32) + np.uint32(1013)) & np.uint32(0x7FFFFFFF)
+        n = (n >> np.uint32(13)) ^ n
+        nn = (n * (n * n * np.uint32(60493) + np.uint32(19990303)) + np.uint32(1376312589)) & np.uint32(0x7FFFFFFF)
+    return F(0.5) * (nn.astype(F) / F(1073741824.0))
+
+
+def brick_texture(vector, color1, color2, mortar, scale=5.0, mortar_size=0.02, mortar_smooth=0.1, bias=0.0,
+                  brick_width=0.5, row_height=0.25, offset_amount=0.5, offset_frequency: int = 2,
+                  squash_amount=1.0, squash_frequency: int = 2):
+    """Cycles' Brick texture (svm/brick.h ``svm_brick``): (fac (B,) = the mortar, colour (B, 3))."""
+    p = _f32(vector).reshape(-1, 3)
+    b = len(p)
+
+    def col(x):
+        return np.broadcast_to(_f32(x), (b,)).astype(F)
+
+    p = p * col(scale)[:, None]
+    msize, msmooth, bias, width, height = col(mortar_size), col(mortar_smooth), col(bias), col(brick_width), col(row_height)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rownum = np.floor(p[:, 1] / height).astype(np.int32)
+        offset = np.zeros(b, F)
+        if offset_frequency and squash_frequency:
+            width = np.where(np.fmod(rownum, squash_frequency) != 0, width, width * F(squash_amount)).astype(F)
+            offset = np.where(np.fmod(rownum, offset_frequency) != 0, F(0), width * F(offset_amount)).astype(F)
+        bricknum = np.floor((p[:, 0] + offset) / width).astype(np.int32)
+        x = (p[:, 0] + offset) - width * bricknum.astype(F)
+        y = p[:, 1] - height * rownum.astype(F)
+    with np.errstate(over="ignore"):
+        key = (rownum.astype(np.int64) << 16) + (bricknum.astype(np.int64) & 0xFFFF)
+    tint = np.clip(_brick_noise(key.astype(np.uint64).astype(np.uint32)) + bias, F(0), F(1))
+    min_dist = np.minimum(np.minimum(x, y), np.minimum(width - x, height - y))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (F(1) - min_dist / msize) / msmooth
+    with np.errstate(invalid="ignore", over="ignore"):  # t is inf / NaN only where msmooth is 0 (not used)
+        ff = t * t
+        smooth = np.where(t <= 0, F(0), np.where(t >= 1, F(1), F(3) * ff - F(2) * ff * t))
+    mortar_f = np.where(min_dist >= msize, F(0), np.where(msmooth == 0, F(1), smooth)).astype(F)
+    c1 = np.broadcast_to(_f32(color1), (b, 3))
+    c2 = np.broadcast_to(_f32(color2), (b, 3))
+    cm = np.broadcast_to(_f32(mortar), (b, 3))
+    tinted = np.where((mortar_f != 1)[:, None], (F(1) - tint)[:, None] * c1 + tint[:, None] * c2, c1)
+    rgb = tinted * (F(1) - mortar_f)[:, None] + cm * mortar_f[:, None]
+    return mortar_f, rgb.astype(F)
