@@ -42,3 +42,38 @@ def test_the_noise_texture_is_the_same_under_both_paths():
     with kernel_mode("auto"):
         ker = T.noise_texture(p, detail=3.5, distortion=0.4)
     assert np.array_equal(ref[0], ker[0]) and np.array_equal(ref[1], ker[1])
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("metric", ["EUCLIDEAN", "MANHATTAN", "CHEBYCHEV"])
+@pytest.mark.parametrize("feature", ["F1", "F2"])
+def test_voronoi_octave_kernel_equals_the_reference_bit_for_bit(d, metric, feature):
+    p = points(d, n=5000) / np.float32(7)
+    rnd = np.random.default_rng(1).uniform(0, 1, len(p)).astype(np.float32)
+    rnd[:50] = 0
+    with kernel_mode("auto"):
+        ker = T._voronoi_octave(p, feature, metric, rnd, None, None)
+    ref = T._voronoi_octave_reference(p, feature, metric, rnd, None, None)
+    for a, b in zip(ker, ref):
+        assert np.array_equal(np.asarray(a, np.float32).view(np.uint32), np.asarray(b, np.float32).view(np.uint32))
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_voronoi_edge_kernel_equals_the_reference_bit_for_bit(d):
+    p = points(d, n=5000) / np.float32(7)
+    rnd = np.random.default_rng(2).uniform(0, 1, len(p)).astype(np.float32)
+    with kernel_mode("auto"):
+        ker = T._distance_to_edge(p, rnd)
+    ref = T._distance_to_edge_reference(p, rnd)
+    assert np.array_equal(ker.view(np.uint32), ref.view(np.uint32))
+
+
+def test_the_voronoi_texture_is_the_same_under_both_paths():
+    p = np.random.default_rng(3).uniform(-3, 3, (3000, 3)).astype(np.float32)
+    for feature in ("F1", "F2", "DISTANCE_TO_EDGE"):
+        with kernel_mode("numpy"):
+            ref = T.voronoi_texture(p, detail=2.5, normalize=True, feature=feature)
+        with kernel_mode("auto"):
+            ker = T.voronoi_texture(p, detail=2.5, normalize=True, feature=feature)
+        for k in ref:
+            assert np.array_equal(ref[k], ker[k]), (feature, k)

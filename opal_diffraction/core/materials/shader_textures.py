@@ -27,7 +27,7 @@ import numpy as np
 from ..scene.shader_programs import GRADIENT_TYPES, NOISE_TYPES, VORONOI_FEATURES, VORONOI_METRICS
 from ..util.jit import kernels_enabled
 from . import shader_hash as H
-from .shader_kernels import perlin2_kernel, perlin3_kernel
+from .shader_kernels import perlin2_kernel, perlin3_kernel, voronoi_edge_kernel, voronoi_octave_kernel
 
 __all__ = ["brick_texture", "wave_texture", "magic_texture", "perlin", "perlin_reference", "snoise", "noise_texture", "voronoi_texture", "checker_texture", "gradient_texture",
            "white_noise_texture", "NOISE_TYPES", "VORONOI_FEATURES", "VORONOI_METRICS", "GRADIENT_TYPES"]
@@ -368,7 +368,23 @@ def _smoothstep(x):
     return np.where(x < 0, F(0), np.where(x >= 1, F(1), (F(3) - F(2) * t) * (t * t)))
 
 
+_KERNEL_METRICS = {"EUCLIDEAN": 0, "MANHATTAN": 1, "CHEBYCHEV": 2}
+
+
 def _voronoi_octave(coord, feature, metric, randomness, smoothness, exponent):
+    if (feature in ("F1", "F2") and metric in _KERNEL_METRICS and coord.shape[-1] in (2, 3) and len(coord)
+            and kernels_enabled()):
+        coord = np.ascontiguousarray(coord, np.float32)
+        dist = np.empty(len(coord), np.float32)
+        colour = np.empty((len(coord), 3), np.float32)
+        pos = np.zeros(coord.shape, np.float32)
+        voronoi_octave_kernel(coord, np.ascontiguousarray(randomness, np.float32), _KERNEL_METRICS[metric],
+                              feature == "F2", dist, colour, pos)
+        return dist, colour, pos
+    return _voronoi_octave_reference(coord, feature, metric, randomness, smoothness, exponent)
+
+
+def _voronoi_octave_reference(coord, feature, metric, randomness, smoothness, exponent):
     cell = np.floor(coord)
     local = coord - cell
     icell = cell.astype(np.int32)
@@ -418,6 +434,14 @@ def _voronoi_octave(coord, feature, metric, randomness, smoothness, exponent):
 
 
 def _distance_to_edge(coord, randomness):
+    if coord.shape[-1] in (2, 3) and len(coord) and kernels_enabled():
+        out = np.empty(len(coord), np.float32)
+        voronoi_edge_kernel(np.ascontiguousarray(coord, np.float32), np.ascontiguousarray(randomness, np.float32), out)
+        return out
+    return _distance_to_edge_reference(coord, randomness)
+
+
+def _distance_to_edge_reference(coord, randomness):
     cell = np.floor(coord)
     local = coord - cell
     icell = cell.astype(np.int32)
