@@ -1,7 +1,7 @@
 """Procedural textures (core/materials/shader_textures.py) against closed forms: Perlin noise
 vanishes at lattice points, Voronoi with randomness 0 is the unit-cube lattice (F1, F2 and the
 distance to the cell faces by hand), the Checker's parity, the Gradient's formulas, White Noise as
-the hash of the coordinates' bits. Against Cycles: tests/blender/test_shader_textures.py."""
+the hash of the coordinates' bits. Against Cycles: tests/blender/test_procedural_textures_cycles.py."""
 
 from __future__ import annotations
 

@@ -12,7 +12,7 @@ differs from the scalar one; the order here is theirs: ``fade`` is ``(t t)(t (t 
 with fused multiply-adds (AVX2 ``madd``, emulated exactly in float64 and rounded once), and the
 corner blends run x, then y, then z (4-D: w first, then x, y, z), each ``a + t (b - a)``. Hashes
 (:mod:`.shader_hash`) are bit for bit Cycles'; the noise values agree with Cycles to float32
-rounding (tests/blender/test_shader_textures.py measures it).
+rounding (tests/blender/test_procedural_textures_cycles.py measures it).
 
 Every function takes coordinates as float32 arrays (..., d) and per-point parameters as arrays
 broadcastable to the batch (a node input may be driven per hit).
