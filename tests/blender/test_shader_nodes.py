@@ -217,10 +217,41 @@ def test_an_image_behind_a_colour_ramp_is_sampled_per_hit(tmp_path):
     assert mat.name
 
 
+@pytest.mark.parametrize("hue,sat,val,fac", [(0.3, 1.4, 0.9, 0.8), (0.5, 0.0, 1.2, 1.0), (0.85, 2.0, 0.5, 0.4)])
+def test_colour_adjustments(hue, sat, val, fac, tmp_path):
+    """Noise colour -> Hue/Saturation/Value -> Bright/Contrast -> Gamma, and RGB to BW as the
+    factor of a Mix with the unadjusted colour."""
+    def build(nt, vec):
+        n = nt.nodes.new("ShaderNodeTexNoise")
+        link(nt, vec, n.inputs["Vector"])
+        hs = nt.nodes.new("ShaderNodeHueSaturation")
+        for k, v in (("Hue", hue), ("Saturation", sat), ("Value", val), ("Fac", fac)):
+            next(x for x in hs.inputs if x.identifier == k).default_value = v
+        link(nt, n.outputs["Color"], hs.inputs["Color"])
+        bc = nt.nodes.new("ShaderNodeBrightContrast")
+        next(x for x in bc.inputs if x.identifier == "Bright").default_value = 0.1
+        bc.inputs["Contrast"].default_value = 0.3
+        link(nt, hs.outputs[0], bc.inputs["Color"])
+        ga = nt.nodes.new("ShaderNodeGamma")
+        ga.inputs["Gamma"].default_value = 1.7
+        link(nt, bc.outputs[0], ga.inputs["Color"])
+        bw = nt.nodes.new("ShaderNodeRGBToBW")
+        link(nt, n.outputs["Color"], bw.inputs["Color"])
+        mix = nt.nodes.new("ShaderNodeMix")
+        mix.data_type = "RGBA"
+        link(nt, bw.outputs[0], mix.inputs["Factor"])
+        link(nt, ga.outputs[0], mix.inputs[6])
+        link(nt, n.outputs["Color"], mix.inputs[7])
+        return mix.outputs[2]
+
+    emission_plane(build)
+    compare(tmp_path, atol=1e-4)
+
+
 def test_unread_nodes_keep_one_warning_and_the_socket_value(tmp_path):
     def build(nt, vec):
         n = nt.nodes.new("ShaderNodeTexNoise")
-        hs = nt.nodes.new("ShaderNodeHueSaturation")
+        hs = nt.nodes.new("ShaderNodeRGBCurve")
         hs.name = "My Hue"
         link(nt, n.outputs["Color"], hs.inputs["Color"])
         mix = nt.nodes.new("ShaderNodeMix")

@@ -210,3 +210,19 @@ def test_json_round_trip_and_checks():
     for prog, words in bad:
         msg = program_problems(prog)
         assert msg is not None and words in msg, (msg, words)
+
+
+def test_hsv_conversions_match_colorsys():
+    import colorsys
+
+    from opal_diffraction.core.materials.shader_eval import _hsv_to_rgb, _rgb_to_hsv
+
+    rgb = RNG.uniform(0, 1.5, (500, 3)).astype(np.float32)
+    rgb[:5] = [[0, 0, 0], [1, 1, 1], [1, 0, 0], [0.2, 0.2, 0.9], [0.5, 0.5, 0.5]]
+    hsv = _rgb_to_hsv(rgb)
+    want = np.array([colorsys.rgb_to_hsv(*map(float, c)) for c in rgb])
+    np.testing.assert_allclose(hsv, want, atol=2e-6)
+    back = _hsv_to_rgb(hsv)
+    np.testing.assert_allclose(back, rgb, atol=4e-6)
+    np.testing.assert_allclose(_hsv_to_rgb(want.astype(np.float32)),
+                               np.array([colorsys.hsv_to_rgb(*c) for c in want]), atol=4e-6)

@@ -10,7 +10,8 @@ is read. It reads:
   Wave, Magic, Brick;
 - converters: ColorRamp (a 257-entry table of Blender's own ``ColorRamp.evaluate``, as Cycles
   bakes it), Math, Vector Math, Mix (float, vector, colour; and the legacy MixRGB), Map Range
-  (float), Clamp, Invert, Separate / Combine XYZ and Color (RGB) (and the legacy RGB nodes),
+  (float), Clamp, Invert, Gamma, Bright/Contrast, Hue/Saturation/Value, RGB to BW,
+  Separate / Combine XYZ and Color (RGB) (and the legacy RGB nodes),
   Mapping, Value, RGB;
 - inputs: Texture Coordinate (Generated, Object, UV), UV Map; a texture's unlinked Vector is
   Generated, as in Cycles;
@@ -47,7 +48,8 @@ COMPILED_NODES = frozenset({
     "ShaderNodeCombineXYZ", "ShaderNodeSeparateColor", "ShaderNodeCombineColor", "ShaderNodeSeparateRGB",
     "ShaderNodeCombineRGB", "ShaderNodeMapping", "ShaderNodeValue", "ShaderNodeRGB", "ShaderNodeTexCoord",
     "ShaderNodeUVMap", "ShaderNodeGroup", "NodeGroupInput", "ShaderNodeTexImage", "ShaderNodeTexWave",
-    "ShaderNodeTexMagic", "ShaderNodeTexBrick"})
+    "ShaderNodeTexMagic", "ShaderNodeTexBrick", "ShaderNodeGamma", "ShaderNodeBrightContrast",
+    "ShaderNodeHueSaturation", "ShaderNodeRGBToBW"})
 
 _KIND = {"VALUE": "f", "INT": "f", "BOOLEAN": "f", "RGBA": "v", "VECTOR": "v"}
 _DIMS = {"1D": 1, "2D": 2, "3D": 3, "4D": 4}
@@ -266,6 +268,16 @@ class ShaderCompiler:
         if idn == "ShaderNodeClamp":
             return b.op("clamp", [self._in(node, n, path, "f") for n in ("Value", "Min", "Max")],
                         type=node.clamp_type)[0]
+        if idn == "ShaderNodeGamma":
+            return b.op("gamma", [self._in(node, "Color", path, "v"), self._in(node, "Gamma", path, "f")])[0]
+        if idn == "ShaderNodeBrightContrast":
+            return b.op("bright_contrast", [self._in(node, "Color", path, "v"), self._in(node, "Bright", path, "f"),
+                                            self._in(node, "Contrast", path, "f")])[0]
+        if idn == "ShaderNodeHueSaturation":
+            return b.op("hue_saturation", [self._in(node, n, path, "f") for n in ("Hue", "Saturation", "Value", "Fac")]
+                        + [self._in(node, "Color", path, "v")])[0]
+        if idn == "ShaderNodeRGBToBW":
+            return b.op("to_float", [self._in(node, "Color", path, "v")], **{"from": "color"})[0]
         if idn == "ShaderNodeInvert":
             return b.op("invert", [self._in(node, "Fac", path, "f"), self._in(node, "Color", path, "v")])[0]
         if idn in ("ShaderNodeSeparateXYZ", "ShaderNodeSeparateColor", "ShaderNodeSeparateRGB"):

@@ -6,7 +6,8 @@ the operations of core/scene/shader_programs.py as Cycles' SVM computes them
 - ``math`` (the Math node: every operation of ``svm_math`` in math_util.h with its safe_ variants,
   and the Clamp option), ``vector_math`` (``svm_vector_math``), ``mix_float``, ``mix_vector``,
   ``mix_color`` (svm/color_util.h ``svm_mix`` blend modes), ``map_range`` (svm/map_range.h, float),
-  ``clamp`` (MINMAX / RANGE), ``invert``, ``separate`` / ``combine`` (XYZ or RGB), ``mapping``
+  ``clamp`` (MINMAX / RANGE), ``invert``, ``gamma`` (svm_math_gamma_color), ``bright_contrast``
+  (svm/brightness.h), ``hue_saturation`` (svm/hsv.h), ``separate`` / ``combine`` (XYZ or RGB), ``mapping``
   (svm/mapping_util.h, Euler XYZ as ``euler_to_transform``), ``ramp`` (svm/ramp.h
   ``rgb_ramp_lookup``: Cycles' table of 257 entries of Blender's own ColorRamp evaluation, read
   linearly or as a step, so every interpolation mode renders as in Cycles), the implicit
@@ -434,12 +435,62 @@ def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset(), i
         return T.brick_texture(vec, c1, c2, mortar, scale, msize, msmooth, bias, width, height,
                                float(p.get("offset", 0.5)), int(p.get("offset_frequency", 2)),
                                float(p.get("squash", 1.0)), int(p.get("squash_frequency", 2)))
+    if name == "gamma":  # svm/math_util.h svm_math_gamma_color: positive channels raised to gamma
+        col, g = a
+        g = g[:, None]
+        with np.errstate(all="ignore"):
+            out = np.where(col > 0, np.power(np.where(col > 0, col, F(1)), g), col)
+        return (np.where(g == 0, F(1), out).astype(F),)
+    if name == "bright_contrast":  # svm/brightness.h
+        col, bright, contrast = a
+        ca = (F(1) + contrast)[:, None]
+        cb = (bright - contrast * F(0.5))[:, None]
+        return (np.maximum(ca * col + cb, F(0)).astype(F),)
+    if name == "hue_saturation":  # svm/hsv.h with util/color.h rgb_to_hsv / hsv_to_rgb
+        hue, sat, val, fac, col = a
+        hsv = _rgb_to_hsv(col)
+        h = hsv[:, 0] + hue + F(0.5)
+        hsv = np.stack([h - np.floor(h), np.clip(hsv[:, 1] * sat, F(0), F(1)), hsv[:, 2] * val], axis=1)
+        out = fac[:, None] * _hsv_to_rgb(hsv) + (F(1) - fac)[:, None] * col
+        return (np.maximum(out, F(0)).astype(F),)
     if name == "image":  # an Image Texture inside the program: its (x, y) as the UV
         if images is None:
             return np.zeros((n, 3), F), np.zeros(n, F)
         rgba = images(int(p["texture"]), np.ascontiguousarray(a[0][:, :2]))
         return np.ascontiguousarray(rgba[:, :3]), np.ascontiguousarray(rgba[:, 3])
     raise ValueError(f"unknown shader op {name!r}")
+
+
+def _rgb_to_hsv(rgb):
+    """util/color.h ``rgb_to_hsv``, float32."""
+    r, g, b = rgb[:, 0], rgb[:, 1], rgb[:, 2]
+    cmax = np.maximum(r, np.maximum(g, b))
+    cmin = np.minimum(r, np.minimum(g, b))
+    delta = cmax - cmin
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(cmax != 0, delta / np.where(cmax != 0, cmax, F(1)), F(0))
+        dd = np.where(delta != 0, delta, F(1))
+        cr, cg, cb = (cmax - r) / dd, (cmax - g) / dd, (cmax - b) / dd
+    h = np.where(r == cmax, cb - cg, np.where(g == cmax, F(2) + cr - cb, F(4) + cg - cr)) / F(6)
+    h = np.where(h < 0, h + F(1), h)
+    h = np.where(s != 0, h, F(0))
+    return np.stack([h, s, cmax], axis=1).astype(F)
+
+
+def _hsv_to_rgb(hsv):
+    """util/color.h ``hsv_to_rgb``, float32."""
+    h, s, v = hsv[:, 0], hsv[:, 1], hsv[:, 2]
+    h = np.where(h == 1, F(0), h) * F(6)
+    i = np.floor(h)
+    f = h - i
+    p = v * (F(1) - s)
+    q = v * (F(1) - s * f)
+    t = v * (F(1) - s * (F(1) - f))
+    choices = [np.stack(c, axis=1) for c in ((v, t, p), (q, v, p), (p, v, t), (p, q, v), (t, p, v), (v, p, q))]
+    idx = np.clip(i, 0, 5).astype(np.int64)
+    rgb = np.choose(idx[:, None], choices)
+    rgb = np.where((i > 5)[:, None], choices[5], rgb)
+    return np.where((s != 0)[:, None], rgb, np.stack([v, v, v], axis=1)).astype(F)
 
 
 def evaluate(program: ShaderProgram, slot: str, inputs: dict, n: int, images=None) -> np.ndarray:

@@ -148,6 +148,9 @@ OPS = {
     "wave": (("v", "f", "f", "f", "f", "f", "f"), ("f", "v")),
     "magic": (("v", "f", "f"), ("v", "f")),
     "brick": (("v", "v", "v", "v", "f", "f", "f", "f", "f", "f"), ("f", "v")),
+    "gamma": (("v", "f"), ("v",)),
+    "bright_contrast": (("v", "f", "f"), ("v",)),
+    "hue_saturation": (("f", "f", "f", "f", "v"), ("v",)),
 }
 
 _ENUMS = {
