@@ -128,3 +128,24 @@ def test_evaluate_without_the_coordinates_reads_zero():
     out = evaluate(prog, "color", {}, 4)
     _, want = checker_texture(np.zeros((4, 3), np.float32), RED, BLUE, 2.0)
     np.testing.assert_array_equal(out, want)
+
+
+def test_a_scene_file_with_a_broken_program_is_one_scene_error(tmp_path):
+    s = program_plane()
+    save_scene(s, tmp_path / "s.npz")
+    with np.load(tmp_path / "s.npz") as z:
+        d = {k: z[k] for k in z.files}
+    for text, words in (('{"ops": [["noise", [0], [1, 2], {}]], "kinds": "vff"', "not a valid program"),
+                        ('[1, 2]', "not a valid program")):
+        d["shader_programs"] = np.array([text])
+        np.savez(tmp_path / "bad.npz", **d)
+        with pytest.raises(SceneError, match=words):
+            load_scene(tmp_path / "bad.npz")
+    # valid JSON, bad program: validation names the material and the op
+    prog = checker_noise_program()
+    bad = prog.to_json().replace('["checker", ', '["chequer", ', 1)
+    assert bad != prog.to_json()
+    d["shader_programs"] = np.array([bad])
+    np.savez(tmp_path / "bad.npz", **d)
+    with pytest.raises(SceneError, match="unknown operation"):
+        validate(load_scene(tmp_path / "bad.npz"))
