@@ -347,7 +347,9 @@ def test_uv_and_generated_on_one_material_warn_and_use_the_uv_map(tmp_path):
     np.testing.assert_allclose([s.corner_uvs.min(), s.corner_uvs.max()], [0.5, 0.6], atol=1e-6)  # the UV map's
 
 
-def test_a_procedural_texture_is_averaged_with_a_warning_naming_the_node(tmp_path):
+def test_a_procedural_texture_is_compiled_not_averaged(tmp_path):
+    """A Noise texture on Base Color becomes the material's shader program (docs/physics.md
+    section 13.6; tests/blender/test_shader_nodes.py), with no image texture and no warning."""
     top_down_scene(16)
     mat = bs.material("noisy", "PRINCIPLED")
     nt = mat.node_tree
@@ -356,8 +358,10 @@ def test_a_procedural_texture_is_averaged_with_a_warning_naming_the_node(tmp_pat
     nt.links.new(noise.outputs["Color"], nt.nodes["Principled BSDF"].inputs["Base Color"])
     uv_plane(mat)
     ex = export()
-    assert any("My Noise" in w for w in ex.warnings), ex.warnings
+    assert not any("My Noise" in w for w in ex.warnings), ex.warnings
     assert len(ex.scene.textures) == 0 and ex.scene.materials.color_texture[0] == -1
+    assert ex.scene.materials.shader_program[0] == 0 and ex.scene.shader_programs[0].reads() == {"generated"}
+    assert ex.scene.corner_generated.shape == (2, 3, 3)
 
 
 

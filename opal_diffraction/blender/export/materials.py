@@ -68,6 +68,9 @@ class MaterialTable:
         self.warn, self.to709 = warn, to709
         self.textures = TextureTable(warn)  # the images the rows' texture columns number
         self.corners: list[CornerSpec | None] = []  # per row: what its textures read from meshes
+        self.programs: list = []  # the shader programs the rows' shader_program column numbers
+        self.program_reads: list[frozenset] = []  # per row: the coordinates its program reads
+        self._compiler = None
 
     def lookup(self, material) -> int:
         key = "\0default" if material is None else material.name_full  # unique across linked libraries
@@ -76,6 +79,7 @@ class MaterialTable:
         row, grating = (dict(DEFAULT_MATERIAL), None) if material is None else self._convert(material)
         self.index[key] = len(self.rows)
         self.corners.append(row.pop("_corners", None))
+        self.program_reads.append(row.pop("_program_reads", frozenset()))
         self.rows.append(row)
         self.grating.append(grating)
         return self.index[key]
@@ -85,6 +89,8 @@ class MaterialTable:
         ('TANGENT', map) items (map '': the active render UV map)."""
         needs = set()
         for r in slots:
+            for kind in self.program_reads[r]:  # a shader program's coordinates
+                needs.add(("GENERATED" if kind == "generated" else "OBJECT", "") if kind != "uv" else ("UV", ""))
             spec = self.corners[r]
             if spec is None:
                 continue
@@ -120,6 +126,36 @@ class MaterialTable:
         tangent = refs["normal"].tangent_map if "normal" in refs else None
         cols["_corners"] = CornerSpec(first.coords, first.uv_map, tuple(first.matrix.reshape(-1).tolist()), tangent)
         return cols
+
+    def _program_columns(self, surf: Surface, owner: str, row: dict) -> dict:
+        """The row's shader_program column (and an emission program's strength) from
+        ``surf.programs``; keys '_program_reads' (taken off by :meth:`lookup`) and '_corners'
+        (a program reading UVs on a material without image textures: the UV map, unmapped)."""
+        compiler, self._compiler = self._compiler, None
+        progs = {k: v for k, v in surf.programs.items() if k in ("color", "roughness", "metallic", "emission")}
+        if surf.kind is None:
+            progs = {k: v for k, v in progs.items() if k == "emission"}
+        if not progs or compiler is None:
+            return {}
+        program = compiler.finish(progs)
+        out = {"shader_program": len(self.programs), "_program_reads": program.reads()}
+        self.programs.append(program)
+        if "emission" in progs:
+            strength = float(surf.programs.get("emission_strength", 1.0))
+            out["emission_strength"] = strength
+            if not any(row["emission"]):  # emissive however dark its average: the program decides per hit
+                out["emission"] = (1e-6 * strength,) * 3
+        if "uv" in program.reads():
+            maps = compiler.uv_maps - {""}
+            if len(maps) > 1:
+                self.warn(f"{owner}: its shader program reads several UV maps: all read '{sorted(maps)[0]}'")
+            uv_map = sorted(maps)[0] if maps else ""
+            if "_corners" not in row:
+                out["_corners"] = CornerSpec("UV", uv_map, tuple(np.eye(4).reshape(-1).tolist()), None)
+            elif row["_corners"].coords != "UV" or not np.allclose(row["_corners"].affine(), np.eye(4)):
+                self.warn(f"{owner}: its shader program reads UVs and its image textures other coordinates: the "
+                          "program reads those of the image textures")
+        return out
 
     def slots(self, ob) -> tuple[int, ...]:
         """Row of each of ``ob``'s material slots (the default surface for no slot or an empty one)."""
@@ -160,6 +196,7 @@ class MaterialTable:
             "glass_tint": surf.glass_tint,
         }
         row.update(self._texture_columns(surf, owner))
+        row.update(self._program_columns(surf, owner, row))
         opal = getattr(mat, "opal", None)
         uses_ior = kind == "DIELECTRIC" or row["transmission"] > 0 or row["specular_ior_level"] > 0
         if uses_ior:
@@ -214,6 +251,7 @@ class MaterialTable:
         sock = out.inputs.get("Surface")
         reader = NodeReader(owner, self.warn, self.to709, self.textures)
         surf = reader.surface(sock) if sock is not None else Surface(None, np.zeros(3))
+        self._compiler = reader.compiler  # the shader program's, read by _program_columns
         if reader.cycle is not None:
             self.warn(f"{owner}: its node tree has a cycle (through the link {reader.cycle}, drawn red in the node "
                       "editor): rendered as the default surface (grey diffuse)")

@@ -114,7 +114,8 @@ class MeshData:
     corner_normal: np.ndarray | None = None  # (T, 3, 3) float32 object-space shading normals, or None: all flat
     flat_tri: np.ndarray | None = None  # (T,) bool: triangles of flat faces (face normal), or None: none flat
     # textures (read_corners): ('UV', map) -> (T, 3, 2) float32, ('TANGENT', map) -> (T, 3, 4) float32
-    # object space, ('GENERATED', '') -> (T, 3, 3) float32 in [0, 1] over the texture space
+    # object space, ('GENERATED', '') -> (T, 3, 3) float32 in [0, 1] over the texture space,
+    # ('OBJECT', '') -> (T, 3, 3) float32 object-space positions (shader programs)
     corners: dict | None = None
     needs: frozenset = frozenset()
 
@@ -524,6 +525,8 @@ def read_corners(me, md: MeshData, needs: frozenset, warn=None) -> None:
             size = np.where(size != 0, size, 1.0)
             gen = (md.vertices - loc) / (2 * size) + 0.5
             out[(kind, name)] = gen[md.triangles].astype(np.float32)
+        elif kind == "OBJECT":  # a shader program's Object coordinates: the object-space position
+            out[(kind, name)] = md.vertices[md.triangles].astype(np.float32)
     for kind, name in sorted(needs):
         if kind == "TANGENT":
             out[(kind, name)] = _corner_tangents(me, name, loops, md, out, say)
@@ -626,3 +629,30 @@ def flatten_corners(groups: dict, meshes: SceneMeshes, corners: list, hidden: np
     corner_uvs = np.concatenate(uv_chunks) if uv_chunks else np.zeros((0, 3, 2), np.float32)
     corner_tan = np.concatenate(tan_chunks) if tan_chunks else np.zeros((0, 3, 4), np.float32)
     return corner_uvs, corner_tan
+
+
+def flatten_program_corners(groups: dict, meshes: SceneMeshes, reads: list, hidden: np.ndarray | None = None):
+    """The per-corner coordinates shader programs read (docs/physics.md section 13.6), in
+    :func:`flatten`'s triangle order: ``reads`` is the material table's per-row set of
+    coordinates ('generated', 'object'). Returns (corner_generated, corner_object), each
+    (T, 3, 3) float32, or (0, 3, 3) when no program reads it. Both are object space (Cycles'
+    Generated and Object coordinates do not move with the instance), with a mirrored instance's
+    corners 1 and 2 swapped as flatten swaps them."""
+    out = []
+    for name, kind in (("generated", "GENERATED"), ("object", "OBJECT")):
+        if not any(name in r for r in reads):
+            out.append(np.zeros((0, 3, 3), np.float32))
+            continue
+        chunks = []
+        for md, mats, tri_mat_local in instance_groups(groups, meshes, hidden):
+            nt, k = len(md.triangles), len(mats)
+            src = (md.corners or {}).get((kind, ""))
+            data = np.zeros((nt, 3, 3), np.float32) if src is None else np.asarray(src, np.float32)
+            data_k = np.broadcast_to(data, (k,) + data.shape)
+            mirrored = np.linalg.det(mats[:, :3, :3]) < 0
+            if mirrored.any():
+                data_k = data_k.copy()
+                data_k[mirrored] = data_k[mirrored][:, :, [0, 2, 1]]
+            chunks.append(data_k.reshape(k * nt, 3, 3))
+        out.append(np.concatenate(chunks) if chunks else np.zeros((0, 3, 3), np.float32))
+    return out[0], out[1]

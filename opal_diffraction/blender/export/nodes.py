@@ -7,7 +7,10 @@ transmission weights, IOR level, specular tint, the metal's Fresnel). Image Text
 BSDF's colour, roughness, metallic or emission colour and, through a tangent-space Normal Map
 node, on its normal are bound as textures sampled per hit (:class:`TextureRef`,
 ``Surface.textures``; docs/physics.md section 13) with their coordinates (the UV map, or
-Generated) and any Mapping node folded in. What the core cannot represent is approximated and
+Generated) and any Mapping node folded in. Procedural textures and converters on those inputs
+(Noise, Voronoi, Checker, ColorRamp, Math, Mix, node groups, ...) are compiled into the
+material's shader program (export/shader_compiler.py, ``Surface.programs``; docs/physics.md
+section 13.6), evaluated per hit. What the core cannot represent is approximated and
 named in the warnings: other textures and procedural nodes are averaged
 (:func:`images.image_mean`) or use the socket's own value, mixes of unlike surfaces keep the
 heavier, anisotropy is dropped, a Diffuse BSDF's (Oren-Nayar) roughness is Lambertian, a
@@ -89,6 +92,9 @@ class Surface:
     # Refraction BSDF: Cycles tints each refraction by Color) | 'PASS' (Principled: sqrt(Base Color)
     # per refraction, so one pass through a closed object gives Base Color)
     glass_tint: str = "REFRACTION"
+    # shader-program registers per slot ('color', 'roughness', 'metallic', 'emission'), compiled by
+    # the reader's ShaderCompiler (docs/physics.md section 13.6); empty: none
+    programs: dict = field(default_factory=dict)
 
     def layers(self) -> tuple[float, float]:
         """(metallic, transmission), from the kind where not given."""
@@ -258,6 +264,14 @@ class TextureBindings:
         if self.textures is None:
             return
         for sock_name, slot in TEXTURE_SOCKETS[node.bl_idname].items():
+            reg = self._programmed.get((node.name, sock_name))
+            if reg is not None and slot not in surf.programs and slot not in surf.textures:
+                surf.programs[slot] = reg
+                if slot == "emission":
+                    s = node.inputs.get("Emission Strength")
+                    s = node.inputs.get("Strength") if s is None else s
+                    surf.programs["emission_strength"] = self.strength(node, s.name, 1.0) if s is not None else 1.0
+                continue
             ref = self._bound.get((node.name, sock_name))
             if ref is not None and slot not in surf.textures:
                 if slot == "emission":
@@ -312,6 +326,10 @@ class NodeReader(TextureBindings):
         #: (None: every texture is averaged, as before).
         self.textures = textures
         self._bound: dict[tuple[str, str], TextureRef] = {}  # (node name, socket) -> binding
+        #: The material's shader-program compiler (export/shader_compiler.py), made when a
+        #: procedural node drives a BSDF input; None: nothing compiled.
+        self.compiler = None
+        self._programmed: dict[tuple[str, str], int] = {}  # (node name, socket) -> register
 
     # ---------------------------------------------------------------- sockets
     def source(self, socket):
@@ -368,6 +386,10 @@ class NodeReader(TextureBindings):
             col = self._bind_image(node, name, n, out)
             if col is not None:
                 return np.asarray(col[:3], np.float64)
+        if self._bindable(node, name):
+            mean = self._compile(node, name, "v")
+            if mean is not None:
+                return mean
         if n.bl_idname in ("ShaderNodeTexImage", "ShaderNodeTexEnvironment") and getattr(n, "image", None):
             mean = image_mean(n.image)
             if mean is not None:
@@ -376,6 +398,21 @@ class NodeReader(TextureBindings):
         self.warn(f"{self.owner}: '{name}' of '{node.name}' is driven by a '{n.name}' node, which is not "
                   f"supported: using the socket's own value")
         return self._to709(rgb(sock.default_value))
+
+    def _compile(self, node, name: str, kind: str):
+        """Compile what drives input ``name`` of ``node`` into the material's shader program
+        (export/shader_compiler.py); returns its average (what reads one value per material) or
+        None when it is not read (the caller warns as before)."""
+        from .shader_compiler import ShaderCompiler
+
+        if self.compiler is None:
+            self.compiler = ShaderCompiler(self)
+        reg = self.compiler.compile_input(node, name, kind)
+        if reg is None:
+            return None
+        self._programmed[(node.name, name)] = reg
+        mean = self.compiler.average(reg, "color" if kind == "v" else "roughness")
+        return np.asarray(mean, np.float64) if kind == "v" else float(mean)
 
     def _finite_color(self, col: np.ndarray, node, name: str) -> np.ndarray:
         col = np.asarray(col, np.float64)
@@ -408,6 +445,9 @@ class NodeReader(TextureBindings):
             value = self._bind_scalar(node, name, n, out)
             if value is not None:  # the average, for what reads one value per material
                 return value
+            mean = self._compile(node, name, "f")
+            if mean is not None:
+                return float(np.clip(mean, 0.0, 1.0)) if name in ("Roughness", "Metallic") else float(mean)
         self.warn(f"{self.owner}: '{name}' of '{node.name}' is driven by a '{n.name}' node, which is not "
                   f"supported: using the socket's own value")
         return float(sock.default_value)
@@ -598,6 +638,11 @@ class NodeReader(TextureBindings):
     def _combine(self, a: Surface, b: Surface, wa: float, wb: float, node) -> Surface:
         out = self._combine_surfaces(a, b, wa, wb, node)
         out.textures = self._combined_textures(a, b, wa, wb, node, out)
+        first, second = (a, b) if wa >= wb else (b, a)
+        for s in (first, second):  # the shader programs of the surface kept (the heavier first)
+            if s.programs and (s.kind == out.kind or out.kind is None or s.kind is None):
+                for slot, reg in s.programs.items():
+                    out.programs.setdefault(slot, reg)
         return out
 
     def _combine_surfaces(self, a: Surface, b: Surface, wa: float, wb: float, node) -> Surface:

@@ -95,4 +95,4 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
                              transmission=np.asarray(m.transmission, np.float32),
                              spec_f0=spec_f0.astype(np.float32), specular_tint=tint,
                              conductor_f82=np.asarray(m.conductor_fresnel) == int(ConductorFresnel.F82_TINT),
-                             glass_tint=glass_tint.astype(np.float32), color_textured=np.asarray(m.color_texture) >= 0)
+                             glass_tint=glass_tint.astype(np.float32), color_textured=(np.asarray(m.color_texture) >= 0) | (np.asarray(m.shader_program) >= 0))

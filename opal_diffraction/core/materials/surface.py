@@ -1,6 +1,7 @@
 """Surface parameters at hit points: base colour, roughness, metallic, emission and the shading
-normal, from the material table or, where a material binds an image texture, from the texture at
-the hit's UV (docs/physics.md section 13).
+normal, from the material table or, where a material binds an image texture or a shader program
+(docs/physics.md section 13.6), from the texture at the hit's UV or the program at the hit's
+coordinates (docs/physics.md section 13).
 
 The path tracer calls these on a batch of hits (a :class:`transport.Hit`: ``mat``, ``prim``,
 ``bu``, ``bv``, ``ng``, ``front``, and ``ns`` where the shading-normal code adds it). Most hits
@@ -76,6 +77,8 @@ def _scalar(prepared, hit, column: str, slot: str) -> np.ndarray:
         if rows.size:
             value = rgba[:, :3] @ LUMINANCE_709
             ch = getattr(tx, f"{slot}_channel")[hit.mat[rows]]
+            if tx.program_slots:  # a shader program's float output is its alpha
+                ch = np.where(tx.program_slots[slot][hit.mat[rows]] >= 0, 3, ch)
             one = ch >= 0  # a Separate Color node's channel, or the alpha
             if one.any():
                 value[one] = rgba[np.flatnonzero(one), ch[one]]

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..util.enums import TextureEncoding, TextureExtension, TextureInterpolation
 from ..util.geometry import interpolate_corners
+from .shader_eval import evaluate
 
 __all__ = [
     "LUMINANCE_709",
@@ -164,18 +165,86 @@ class PreparedTextures:
     corner_tangents: np.ndarray   # (T, 3, 4) float32 tangent + bitangent sign, or (0, 3, 4)
     reflectance_basis: np.ndarray  # (3, n) float32: rgb @ basis = reflectance_from_rgb(rgb), rgb in [0, 1]
     emission_basis: np.ndarray    # (3, n) float32: rgb @ basis = illuminant_from_rgb(rgb), rgb >= 0
+    # shader programs (docs/physics.md section 13.6): per slot, each material's program that feeds
+    # the slot (an index into ``programs``, -1: none); the coordinates they read per triangle corner
+    programs: tuple = ()
+    program_slots: dict = None    # slot -> (M,) int32
+    corner_generated: np.ndarray = None  # (T, 3, 3) float32 or (0, 3, 3)
+    corner_object: np.ndarray = None     # (T, 3, 3) float32 or (0, 3, 3)
+
+    def _program_column(self, slot: str):
+        return None if not self.program_slots else self.program_slots.get(slot)
+
+    def bound(self, slot: str) -> np.ndarray:
+        """(M,) bool: the materials whose ``slot`` varies per hit (a texture or a shader program)."""
+        out = np.asarray(getattr(self, slot)) >= 0
+        col = self._program_column(slot)
+        return out | (col >= 0) if col is not None else out
 
     def uses(self, slot: str) -> bool:
-        """Whether any material binds a texture in ``slot`` ('color', 'roughness', ...)."""
+        """Whether any material binds a texture or a shader program in ``slot`` ('color', 'roughness', ...)."""
         col = getattr(self, slot)
-        return bool(len(col)) and bool(col.max() >= 0)
+        if bool(len(col)) and bool(col.max() >= 0):
+            return True
+        prog = self._program_column(slot)
+        return prog is not None and bool(len(prog)) and bool(prog.max() >= 0)
 
     def lookup(self, slot: str, mat, prim, bu, bv):
-        """(rows, rgba): the hits (indices into the batch) whose material has a texture in
-        ``slot``, and that texture's (len(rows), 4) float32 value at their UVs. Only those rows
-        are touched (a gather of ``mat``, then work on the textured rows alone)."""
-        col = getattr(self, slot)
+        """(rows, rgba): the hits (indices into the batch) whose material has a texture or a
+        shader program in ``slot``, and its (len(rows), 4) float32 value there (a program's float
+        output is (v, v, v, v), its colour (r, g, b, 1)). Only those rows are touched (a gather
+        of ``mat``, then work on the bound rows alone)."""
         if not self.uses(slot):
+            return np.zeros(0, np.int64), np.zeros((0, 4), np.float32)
+        prog = self._program_column(slot)
+        if prog is None or prog.max() < 0:
+            return self._texture_lookup(slot, mat, prim, bu, bv)
+        pid = prog[mat]
+        prows = np.flatnonzero(pid >= 0)
+        trows, trgba = self._texture_lookup(slot, mat, prim, bu, bv)
+        if prows.size == 0:
+            return trows, trgba
+        keep = pid[trows] < 0  # a program wins over a texture in the same slot
+        trows, trgba = trows[keep], trgba[keep]
+        prgba = self._program_lookup(slot, pid[prows], prim[prows], bu[prows], bv[prows])
+        if trows.size == 0:
+            return prows, prgba
+        rows = np.concatenate([trows, prows])
+        order = np.argsort(rows, kind="stable")
+        return rows[order], np.concatenate([trgba, prgba])[order]
+
+    def _program_lookup(self, slot: str, pid, prim, bu, bv) -> np.ndarray:
+        """(b, 4) float32: each hit's program's ``slot`` output at its interpolated coordinates."""
+        out = np.empty((len(pid), 4), np.float32)
+        for k in np.unique(pid):  # a handful of programs in a batch
+            sel = np.flatnonzero(pid == k)
+            program = self.programs[k]
+            inputs = {}
+            for name in program.reads():
+                corners = {"generated": self.corner_generated, "object": self.corner_object}.get(name)
+                if name == "uv":
+                    if len(self.corner_uvs):
+                        uv = interpolate_corners(self.corner_uvs, prim[sel], bu[sel], bv[sel])
+                        inputs[name] = np.concatenate([uv, np.zeros((len(sel), 1), np.float32)], axis=1)
+                elif corners is not None and len(corners):
+                    inputs[name] = interpolate_corners(corners, prim[sel], bu[sel], bv[sel]).astype(np.float32)
+            value = evaluate(program, slot, inputs, len(sel), self._image)
+            if value.ndim == 1:
+                out[sel] = value[:, None]
+            else:
+                out[sel, :3] = value
+                out[sel, 3] = 1.0
+        return out
+
+    def _image(self, k: int, uv: np.ndarray) -> np.ndarray:
+        """Scene texture ``k`` at ``uv`` (b, 2): a shader program's image op."""
+        if not 0 <= k < len(self.images):
+            return np.zeros((len(uv), 4), np.float32)
+        return sample_texture(self.images[k], uv, self.interpolation[k], self.extension[k], self.encoding[k])
+
+    def _texture_lookup(self, slot: str, mat, prim, bu, bv):
+        col = getattr(self, slot)
+        if not (bool(len(col)) and bool(col.max() >= 0)):
             return np.zeros(0, np.int64), np.zeros((0, 4), np.float32)
         tid = col[mat]
         rows = np.flatnonzero(tid >= 0)
@@ -242,4 +311,22 @@ def prepare_textures(scene, conv) -> PreparedTextures:
         corner_tangents=_frozen(np.asarray(scene.corner_tangents, np.float32).reshape(-1, 3, 4)),
         reflectance_basis=_frozen(refl),
         emission_basis=_frozen(emis),
+        **_programs(scene, m),
     )
+
+
+def _programs(scene, m) -> dict:
+    """The shader-program fields of PreparedTextures: per slot the program of each material that
+    has that output (-1: none); a float slot reads the program's value as the alpha channel."""
+    programs = tuple(getattr(scene, "shader_programs", None) or ())
+    idx = np.asarray(getattr(m, "shader_program", np.full(len(m), -1)), np.int32).reshape(-1)
+    slots = {}
+    for slot in ("color", "roughness", "metallic", "emission"):
+        has = np.array([i >= 0 and slot in programs[i].outputs for i in idx], bool) if len(idx) else np.zeros(0, bool)
+        slots[slot] = _frozen(np.where(has, idx, -1).astype(np.int32))
+
+    def corners(name):
+        return _frozen(np.asarray(getattr(scene, name, np.zeros((0, 3, 3))), np.float32).reshape(-1, 3, 3))
+
+    return {"programs": programs, "program_slots": slots, "corner_generated": corners("corner_generated"),
+            "corner_object": corners("corner_object")}

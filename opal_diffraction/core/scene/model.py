@@ -90,6 +90,8 @@ MATERIAL_COLUMNS = {
     "emission_strength": (np.float32, (), 1.0, None),
     "roughness_channel": (np.int32, (), -1, None),
     "metallic_channel": (np.int32, (), -1, None),
+    # a compiled node tree (an index into Scene.shader_programs, -1: none; docs/physics.md section 13.6)
+    "shader_program": (np.int32, (), -1, None),
     # rough surfaces and Principled's layers (docs/physics.md section 14)
     "roughness": (np.float32, (), 0.0, None),
     "metallic": (np.float32, (), 0.0, None),
@@ -202,6 +204,7 @@ class Materials:
     emission_strength: np.ndarray = field(default_factory=lambda: _material_column_default("emission_strength", 0))
     roughness_channel: np.ndarray = field(default_factory=lambda: _material_column_default("roughness_channel", 0))
     metallic_channel: np.ndarray = field(default_factory=lambda: _material_column_default("metallic_channel", 0))
+    shader_program: np.ndarray = field(default_factory=lambda: _material_column_default("shader_program", 0))
     roughness: np.ndarray = field(default_factory=lambda: _material_column_default("roughness", 0))
     metallic: np.ndarray = field(default_factory=lambda: _material_column_default("metallic", 0))
     transmission: np.ndarray = field(default_factory=lambda: _material_column_default("transmission", 0))
@@ -486,6 +489,11 @@ class Scene:
     TEXTURE_INTERPOLATIONS / TEXTURE_EXTENSIONS / TEXTURE_ENCODINGS codes
     ``texture_interpolation``, ``texture_extension``, ``texture_encoding`` (K,) (empty: LINEAR,
     REPEAT, LINEAR for every texture). Materials bind them by index (``Materials.color_texture``...).
+    Shader programs (docs/physics.md section 13.6): ``shader_programs`` a list of
+    core/scene/shader_programs.ShaderProgram, bound by ``Materials.shader_program``; the texture
+    coordinates they read per triangle corner, ``corner_generated`` (T, 3, 3) (Generated: object
+    space over the mesh's texture space) and ``corner_object`` (T, 3, 3) (object space); empty
+    (0, 3, 3): none (a program reading them gets (0, 0, 0), with a validation warning).
     Opal volume domains (docs/physics.md section 5.4; empty: none), world space:
     ``domain_seeds`` (S, 3) m, ``domain_weight`` (S,) m (additive Voronoi weights),
     ``domain_axis`` (S, 3) unit (111) normals, ``domain_diameter`` (S,) nm, ``domain_group``
@@ -512,6 +520,9 @@ class Scene:
     texture_interpolation: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     texture_extension: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     texture_encoding: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    shader_programs: list = field(default_factory=list)
+    corner_generated: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3), np.float32))
+    corner_object: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3), np.float32))
     # opal volume domains (core/opal/volume.py; docs/physics.md section 5.4), world space; empty: none
     domain_seeds: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float64))
     domain_weight: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))

@@ -16,6 +16,7 @@ import numpy as np
 
 from .checks import SceneError, one_line
 from .model import LIGHT_COLUMNS, Camera, Lights, Materials, Scene
+from .shader_programs import ShaderProgram
 
 __all__ = ["FORMAT_VERSION", "save_scene", "load_scene"]
 
@@ -56,6 +57,12 @@ def save_scene(scene: Scene, path) -> None:
             d[f"texture_{i}"] = np.asarray(px, np.float32)
         for name in ("interpolation", "extension", "encoding"):
             d["texture_" + name] = np.asarray(getattr(scene, "texture_" + name), np.int32)
+    if len(scene.shader_programs):
+        # JSON text (no pickles): core/scene/shader_programs.ShaderProgram.to_json, one per program
+        d["shader_programs"] = np.array([p.to_json() for p in scene.shader_programs])
+    for name in ("corner_generated", "corner_object"):
+        if len(getattr(scene, name)):
+            d[name] = np.asarray(getattr(scene, name), np.float32)
     for f in fields(Materials):
         d["material_" + f.name] = getattr(scene.materials, f.name)
     for f in fields(Lights):
@@ -149,9 +156,21 @@ def load_scene(path) -> Scene:
 def _read_textures(read, names: set, shown) -> dict:
     """The texture fields of a scene file (none in files written before textures existed)."""
     out = {}
-    for name in ("corner_uvs", "corner_tangents"):
+    for name in ("corner_uvs", "corner_tangents", "corner_generated", "corner_object"):
         if name in names:
             out[name] = read(name)
+    if "shader_programs" in names:
+        text = read("shader_programs")
+        if text.ndim != 1 or text.dtype.kind != "U":
+            raise SceneError(f"{shown}: shader_programs must be a list of JSON texts, got {text.dtype} of shape "
+                             f"{text.shape}")
+        programs = []
+        for i, t in enumerate(text):
+            try:
+                programs.append(ShaderProgram.from_json(str(t)))
+            except (ValueError, TypeError, KeyError, IndexError) as e:
+                raise SceneError(f"{shown}: shader program {i} is not a valid program ({one_line(e)})") from None
+        out["shader_programs"] = programs
     if "texture_count" in names:
         count = read("texture_count")
         if count.shape != () or count.dtype.kind not in "iu" or not 0 <= int(count) <= 1_000_000:

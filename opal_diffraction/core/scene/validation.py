@@ -20,6 +20,7 @@ from .checks import (COHERENCE_MAX, COORD_LIMIT, DTYPE_WORDS, EMISSION_LIMIT, FL
                      MAX_PIXELS, MAX_SIDE, MIN_TRIANGLE_AREA, PERIOD_MAX, SHIFT_MAX, SLIT_COUNT_MAX, TEMPERATURE_MAX,
                      TEMPERATURE_MIN, SceneError, as_column, as_number, check_range, first_row, number_text, one_line,
                      within)
+from .shader_programs import program_problems
 from .model import (CONDUCTOR_FRESNELS, GLASS_TINTS, GRATING_DIRECTIONS, GRATING_TYPES, LATTICES, LIGHT_COLUMNS, LIGHT_KINDS,
                     MATERIAL_COLUMNS, MATERIAL_KINDS, TEXTURE_COLUMNS, TEXTURE_ENCODINGS, TEXTURE_EXTENSIONS,
                     TEXTURE_INTERPOLATIONS, Camera, Lights, Materials, Scene)
@@ -147,7 +148,7 @@ def _validate(scene: Scene) -> ValidatedScene:
             cn = cn[keep] if len(cn) else cn
             dom["tri_domain_group"] = dom["tri_domain_group"][keep] if len(dom["tri_domain_group"]) else \
                 dom["tri_domain_group"]
-            for name in ("corner_uvs", "corner_tangents"):  # per-corner data stays one row per triangle
+            for name in ("corner_uvs", "corner_tangents", "corner_generated", "corner_object"):  # one row per triangle
                 tex[name] = tex[name][keep] if len(tex[name]) else tex[name]
     if len(t) == 0:
         warns.append("the scene has no geometry: the image shows only the background")
@@ -494,6 +495,10 @@ def _validate_materials(m: Materials) -> Materials:
             i = int(np.argmax(bad))
             raise SceneError(f"{label(i)}: {name.replace('_', ' ')} {int(out[name][i])} is not a texture index "
                              f"(-1: none)")
+    bad = out["shader_program"].astype(np.int64) < -1
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"{label(i)}: shader program {int(out['shader_program'][i])} is not a program index (-1: none)")
     for name in ("roughness_channel", "metallic_channel"):
         ch = out[name].astype(np.int64)
         bad = (ch < -1) | (ch > 3)
@@ -637,7 +642,7 @@ def _validate_textures(scene: Scene, n_tri: int, materials: Materials, tri_mater
             raise SceneError(f"{what} must have one code per texture ({k}), got {len(col)}")
         _enum_check(col, table, lambda i: f"texture {i}", name)
         out[what] = col if col.dtype == np.int32 else col.astype(np.int32)
-    for name, width in (("corner_uvs", 2), ("corner_tangents", 4)):
+    for name, width in (("corner_uvs", 2), ("corner_tangents", 4), ("corner_generated", 3), ("corner_object", 3)):
         a = as_column(getattr(scene, name), name, (3, width), allow_empty=True)
         if len(a) not in (0, n_tri):
             raise SceneError(f"{name} must have one row of 3 corners per triangle ({n_tri}) or none, got {len(a)}")
@@ -664,7 +669,43 @@ def _validate_textures(scene: Scene, n_tri: int, materials: Materials, tri_mater
         if col == "normal_texture" and rows.size and not len(out["corner_tangents"]):
             warns.append(f"{label(int(rows[0]))} has a normal map but the scene has no tangents: the normal map is "
                          "ignored, as Cycles does without tangents")
+    out["shader_programs"] = _validate_programs(scene, materials, used, out, label, warns)
     return out
+
+
+def _validate_programs(scene: Scene, materials: Materials, used: np.ndarray, corners: dict, label,
+                       warns: list) -> list:
+    """The shader programs (docs/physics.md section 13.6): a list of ShaderProgram, each passing
+    ``program_problems``, bound by materials within the list; a used program reading
+    coordinates the scene lacks reads (0, 0, 0) (a warning)."""
+    raw = scene.shader_programs
+    raw = [] if raw is None else raw
+    if not isinstance(raw, (list, tuple)):
+        raise SceneError(f"the scene's shader programs must be a list, got {type(raw).__name__}")
+    idx = np.asarray(materials.shader_program).astype(np.int64)
+    for i, prog in enumerate(raw):
+        problem = program_problems(prog)
+        if problem is not None:
+            users = np.flatnonzero(idx == i)
+            who = label(int(users[0])) + ": its shader program" if users.size else f"shader program {i}"
+            raise SceneError(f"{who}{f' ({prog.name!r})' if getattr(prog, 'name', '') else ''}: {problem}")
+    bad = idx >= len(raw)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"{label(i)}: shader program {int(idx[i])} but the scene has {len(raw)} program(s)")
+    k = len(corners["textures"])
+    for i, prog in enumerate(raw):
+        if prog.images() and max(prog.images()) >= k:
+            raise SceneError(f"shader program {i}: it samples texture {max(prog.images())} but the scene has {k} "
+                             "texture(s)")
+    have = {"generated": len(corners["corner_generated"]), "object": len(corners["corner_object"]),
+            "uv": len(corners["corner_uvs"])}
+    for m in np.flatnonzero(used & (idx >= 0)):
+        missing = sorted(k for k in raw[idx[m]].reads() if not have[k])
+        if missing:
+            warns.append(f"{label(int(m))}: its shader program reads {', '.join(missing)} coordinates the scene does "
+                         "not have: they read (0, 0, 0)")
+    return list(raw)
 
 
 def _validate_lights(lt: Lights) -> Lights:

@@ -90,7 +90,7 @@ def eye_constants(prepared, light, plan) -> EyeConstants:
     bragg = BraggShading.for_prepared(prepared)
     refl = prepared.materials.reflectance
     black = ((prepared.materials.kind == DIFFUSE) & ~prepared.microfacet & ~prepared.gratings.enabled
-             & (prepared.textures.color < 0) & ((refl.max(axis=1) <= 0) if refl.size else True))
+             & ~prepared.textures.bound("color") & ((refl.max(axis=1) <= 0) if refl.size else True))
     if bragg is not None or not black.any():
         black = None
     layers = grating_layering.active(prepared)

@@ -33,7 +33,7 @@ class GreyPaths:
         refl = np.asarray(prepared.materials.reflectance, np.float32)
         n = prepared.grid.n
         tx = prepared.textures
-        colour_tex = (np.asarray(tx.color) >= 0) if tx.uses("color") else np.zeros(len(refl), bool)
+        colour_tex = tx.bound("color") if tx.uses("color") else np.zeros(len(refl), bool)
         # (M,) a Lambertian material whose base colour is the same at every wavelength (bit for bit)
         grey = (np.all(refl == refl[:, :1], axis=1) if refl.size else np.zeros(len(refl), bool))
         self.grey = grey & ~colour_tex & (np.asarray(prepared.materials.kind) == DIFFUSE)

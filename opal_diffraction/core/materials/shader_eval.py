@@ -1,0 +1,513 @@
+"""Shader programs evaluated per batch of hits in NumPy, float32 (docs/physics.md section 13.6):
+the operations of core/scene/shader_programs.py as Cycles' SVM computes them
+(``intern/cycles/kernel/svm/``, Apache-2.0, ported):
+
+- ``const`` (a float or a colour), ``coord`` (Texture Coordinate: Generated, Object, UV);
+- ``math`` (the Math node: every operation of ``svm_math`` in math_util.h with its safe_ variants,
+  and the Clamp option), ``vector_math`` (``svm_vector_math``), ``mix_float``, ``mix_vector``,
+  ``mix_color`` (svm/color_util.h ``svm_mix`` blend modes), ``map_range`` (svm/map_range.h, float),
+  ``clamp`` (MINMAX / RANGE), ``invert``, ``gamma`` (svm_math_gamma_color), ``bright_contrast``
+  (svm/brightness.h), ``hue_saturation`` (svm/hsv.h), ``separate`` / ``combine`` (XYZ or RGB), ``mapping``
+  (svm/mapping_util.h, Euler XYZ as ``euler_to_transform``), ``ramp`` (svm/ramp.h
+  ``rgb_ramp_lookup``: Cycles' table of 257 entries of Blender's own ColorRamp evaluation, read
+  linearly or as a step, so every interpolation mode renders as in Cycles), the implicit
+  conversions (svm/convert.h: colour -> float is the Rec.709 luminance, vector -> float the
+  average, float -> colour grey);
+- the textures of :mod:`.shader_textures`: ``noise``, ``voronoi``, ``checker``, ``gradient``,
+  ``white_noise``, ``wave``, ``magic``, ``brick``; ``image``: a scene image (core/materials/textures.py ``sample_texture``) at
+  the (x, y) of its vector, as Cycles reads an Image Texture's Vector.
+
+:func:`evaluate` runs only the ops a slot needs (``ShaderProgram.needed``); its inputs are the hits'
+texture coordinates ('generated', 'object', 'uv', each (B, 3) float32).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene.shader_programs import Op, ShaderProgram
+from . import shader_textures as T
+
+__all__ = ["evaluate", "MATH_FUNCTIONS", "VECTOR_MATH_FUNCTIONS", "MIX_FUNCTIONS"]
+
+F = np.float32
+_LUMA = np.array([0.2126729, 0.7151522, 0.0721750], np.float32)
+
+
+def _safe_divide(a, b):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(b != 0, a / np.where(b != 0, b, F(1)), F(0)).astype(F)
+
+
+def _safe_modulo(a, b):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(b != 0, np.fmod(a, np.where(b != 0, b, F(1))), F(0)).astype(F)
+
+
+def _floored_modulo(a, b):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bb = np.where(b != 0, b, F(1))
+        return np.where(b != 0, a - np.floor(a / bb) * bb, F(0)).astype(F)
+
+
+def _wrapf(v, hi, lo):
+    rng = hi - lo
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(rng != 0, rng, F(1))
+        return np.where(rng != 0, v - rng * np.floor((v - lo) / r), lo).astype(F)
+
+
+def _pingpong(a, b):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bb = np.where(b != 0, b, F(1))
+        x = (a - bb) / (bb * F(2))
+        return np.where(b != 0, np.abs((x - np.floor(x)) * bb * F(2) - bb), F(0)).astype(F)
+
+
+def _smoothmin(a, b, k):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        kk = np.where(k != 0, k, F(1))
+        h = np.maximum(kk - np.abs(a - b), F(0)) / kk
+        return np.where(k != 0, np.minimum(a, b) - h * h * h * kk * F(1 / 6), np.minimum(a, b)).astype(F)
+
+
+def _safe_pow(a, b):
+    bad = (a < 0) & (b != np.trunc(b))
+    with np.errstate(all="ignore"):
+        return np.where(bad, F(0), np.power(a, b)).astype(F)
+
+
+def _safe_log(a, b):
+    ok = (a > 0) & (b > 0)
+    with np.errstate(all="ignore"):
+        return _safe_divide(np.log(np.where(ok, a, F(1))), np.log(np.where(ok, b, F(2)))) * ok
+
+
+def _trig(fn):
+    def g(a, b, c):
+        with np.errstate(all="ignore"):
+            return fn(a)
+    return g
+
+
+MATH_FUNCTIONS = {
+    "ADD": lambda a, b, c: a + b,
+    "SUBTRACT": lambda a, b, c: a - b,
+    "MULTIPLY": lambda a, b, c: a * b,
+    "DIVIDE": lambda a, b, c: _safe_divide(a, b),
+    "MULTIPLY_ADD": lambda a, b, c: a * b + c,
+    "POWER": lambda a, b, c: _safe_pow(a, b),
+    "LOGARITHM": lambda a, b, c: _safe_log(a, b),
+    "SQRT": lambda a, b, c: np.sqrt(np.maximum(a, F(0))),
+    "INVERSE_SQRT": lambda a, b, c: _safe_divide(F(1), np.sqrt(np.maximum(a, F(0)))) * (a > 0),
+    "ABSOLUTE": lambda a, b, c: np.abs(a),
+    "EXPONENT": _trig(np.exp),
+    "MINIMUM": lambda a, b, c: np.fmin(a, b),
+    "MAXIMUM": lambda a, b, c: np.fmax(a, b),
+    "LESS_THAN": lambda a, b, c: (a < b).astype(F),
+    "GREATER_THAN": lambda a, b, c: (a > b).astype(F),
+    "SIGN": lambda a, b, c: np.sign(a),
+    "COMPARE": lambda a, b, c: ((a == b) | (np.abs(a - b) <= np.maximum(c, F(np.finfo(F).eps)))).astype(F),
+    "SMOOTH_MIN": lambda a, b, c: _smoothmin(a, b, c),
+    "SMOOTH_MAX": lambda a, b, c: -_smoothmin(-a, -b, c),
+    "ROUND": lambda a, b, c: np.floor(a + F(0.5)),
+    "FLOOR": lambda a, b, c: np.floor(a),
+    "CEIL": lambda a, b, c: np.ceil(a),
+    "TRUNC": lambda a, b, c: np.where(a >= 0, np.floor(a), np.ceil(a)),
+    "FRACT": lambda a, b, c: a - np.floor(a),
+    "MODULO": lambda a, b, c: _safe_modulo(a, b),
+    "FLOORED_MODULO": lambda a, b, c: _floored_modulo(a, b),
+    "WRAP": lambda a, b, c: _wrapf(a, b, c),
+    "SNAP": lambda a, b, c: np.floor(_safe_divide(a, b)) * b,
+    "PINGPONG": lambda a, b, c: _pingpong(a, b),
+    "SINE": _trig(np.sin),
+    "COSINE": _trig(np.cos),
+    "TANGENT": _trig(np.tan),
+    "ARCSINE": lambda a, b, c: np.arcsin(np.clip(a, F(-1), F(1))),
+    "ARCCOSINE": lambda a, b, c: np.arccos(np.clip(a, F(-1), F(1))),
+    "ARCTANGENT": _trig(np.arctan),
+    "ARCTAN2": lambda a, b, c: np.arctan2(a, b),
+    "SINH": _trig(np.sinh),
+    "COSH": _trig(np.cosh),
+    "TANH": _trig(np.tanh),
+    "RADIANS": lambda a, b, c: a * F(np.pi / 180),
+    "DEGREES": lambda a, b, c: a * F(180 / np.pi),
+}
+
+
+def _dot(a, b):
+    return (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]).astype(F)
+
+
+def _len(a):
+    return np.sqrt(_dot(a, a))
+
+
+def _safe_normalize(a):
+    n = _len(a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where((n != 0)[:, None], a / np.where(n != 0, n, F(1))[:, None], a).astype(F)
+
+
+def _vm(fn_vec=None, fn_val=None):
+    return fn_vec, fn_val
+
+
+def _project(a, b):
+    bb = _dot(b, b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where((bb != 0)[:, None], b * (_dot(a, b) / np.where(bb != 0, bb, F(1)))[:, None], F(0)).astype(F)
+
+
+def _reflect(a, b):
+    n = _safe_normalize(b)
+    return (a - F(2) * _dot(n, a)[:, None] * n).astype(F)
+
+
+def _refract(a, b, eta):
+    n = _safe_normalize(b)
+    d = _dot(n, a)
+    k = F(1) - eta * eta * (F(1) - d * d)
+    with np.errstate(invalid="ignore"):
+        r = eta[:, None] * a - (eta * d + np.sqrt(np.maximum(k, F(0))))[:, None] * n
+    return np.where((k < 0)[:, None], F(0), r).astype(F)
+
+
+def _faceforward(a, b, c):
+    return np.where((_dot(c, b) < 0)[:, None], a, -a).astype(F)
+
+
+#: Vector Math: name -> (function of (a, b, c, scale), the kind of its result).
+VECTOR_MATH_FUNCTIONS = {
+    "ADD": (lambda a, b, c, s: a + b, "v"),
+    "SUBTRACT": (lambda a, b, c, s: a - b, "v"),
+    "MULTIPLY": (lambda a, b, c, s: a * b, "v"),
+    "DIVIDE": (lambda a, b, c, s: _safe_divide(a, b), "v"),
+    "MULTIPLY_ADD": (lambda a, b, c, s: a * b + c, "v"),
+    "CROSS_PRODUCT": (lambda a, b, c, s: np.cross(a, b).astype(F), "v"),
+    "PROJECT": (lambda a, b, c, s: _project(a, b), "v"),
+    "REFLECT": (lambda a, b, c, s: _reflect(a, b), "v"),
+    "REFRACT": (lambda a, b, c, s: _refract(a, b, s), "v"),
+    "FACEFORWARD": (lambda a, b, c, s: _faceforward(a, b, c), "v"),
+    "DOT_PRODUCT": (lambda a, b, c, s: _dot(a, b), "f"),
+    "DISTANCE": (lambda a, b, c, s: _len(a - b), "f"),
+    "LENGTH": (lambda a, b, c, s: _len(a), "f"),
+    "SCALE": (lambda a, b, c, s: a * s[:, None], "v"),
+    "NORMALIZE": (lambda a, b, c, s: _safe_normalize(a), "v"),
+    "SNAP": (lambda a, b, c, s: np.floor(_safe_divide(a, b)) * b, "v"),
+    "FLOOR": (lambda a, b, c, s: np.floor(a), "v"),
+    "CEIL": (lambda a, b, c, s: np.ceil(a), "v"),
+    "MODULO": (lambda a, b, c, s: _safe_modulo(a, b), "v"),
+    "WRAP": (lambda a, b, c, s: _wrapf(a, b, c), "v"),
+    "FRACTION": (lambda a, b, c, s: a - np.floor(a), "v"),
+    "ABSOLUTE": (lambda a, b, c, s: np.abs(a), "v"),
+    "MINIMUM": (lambda a, b, c, s: np.fmin(a, b), "v"),
+    "MAXIMUM": (lambda a, b, c, s: np.fmax(a, b), "v"),
+    "SINE": (lambda a, b, c, s: np.sin(a), "v"),
+    "COSINE": (lambda a, b, c, s: np.cos(a), "v"),
+    "TANGENT": (lambda a, b, c, s: np.tan(a), "v"),
+}
+
+
+def _interp(a, b, t):
+    return a + t * (b - a)
+
+
+def _dodge(t, c1, c2):
+    tmp = F(1) - t * c2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = c1 / np.where(tmp > 0, tmp, F(1))
+    out = np.where(tmp <= 0, F(1), np.where(q > 1, F(1), q))
+    return np.where(c1 != 0, out, c1)
+
+
+def _burn(t, c1, c2):
+    tmp = (F(1) - t) + t * c2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = F(1) - (F(1) - c1) / np.where(tmp > 0, tmp, F(1))
+    return np.where(tmp <= 0, F(0), np.clip(q, F(0), F(1)))
+
+
+def _overlay(t, c1, c2):
+    tm = F(1) - t
+    lo = c1 * (tm + F(2) * t * c2)
+    hi = F(1) - (tm + F(2) * t * (F(1) - c2)) * (F(1) - c1)
+    return np.where(c1 < F(0.5), lo, hi)
+
+
+def _soft_light(t, c1, c2):
+    scr = F(1) - (F(1) - c2) * (F(1) - c1)
+    return (F(1) - t) * c1 + t * ((F(1) - c1) * c2 * c1 + c1 * scr)
+
+
+#: Mix (colour) blend modes of svm/color_util.h: name -> f(t (B, 1), c1, c2).
+MIX_FUNCTIONS = {
+    "MIX": lambda t, a, b: _interp(a, b, t),
+    "ADD": lambda t, a, b: _interp(a, a + b, t),
+    "MULTIPLY": lambda t, a, b: _interp(a, a * b, t),
+    "SUBTRACT": lambda t, a, b: _interp(a, a - b, t),
+    "SCREEN": lambda t, a, b: F(1) - ((F(1) - t) + t * (F(1) - b)) * (F(1) - a),
+    "DIVIDE": lambda t, a, b: np.where(b != 0, (F(1) - t) * a + t * _safe_divide(a, b), a),
+    "DIFFERENCE": lambda t, a, b: _interp(a, np.abs(a - b), t),
+    "EXCLUSION": lambda t, a, b: np.maximum(_interp(a, a + b - F(2) * a * b, t), F(0)),
+    "DARKEN": lambda t, a, b: _interp(a, np.minimum(a, b), t),
+    "LIGHTEN": lambda t, a, b: _interp(a, np.maximum(a, b), t),
+    "OVERLAY": _overlay,
+    "DODGE": _dodge,
+    "BURN": _burn,
+    "SOFT_LIGHT": _soft_light,
+    "LINEAR_LIGHT": lambda t, a, b: a + t * (F(2) * b - F(1)),
+}
+
+
+def _euler(rot):
+    """(B, 3, 3) rotation matrices of Euler XYZ angles (Cycles' ``euler_to_transform``)."""
+    cx, cy, cz = np.cos(rot[:, 0]), np.cos(rot[:, 1]), np.cos(rot[:, 2])
+    sx, sy, sz = np.sin(rot[:, 0]), np.sin(rot[:, 1]), np.sin(rot[:, 2])
+    m = np.empty((len(rot), 3, 3), F)
+    m[:, 0, 0], m[:, 0, 1], m[:, 0, 2] = cy * cz, sy * sx * cz - cx * sz, sy * cx * cz + sx * sz
+    m[:, 1, 0], m[:, 1, 1], m[:, 1, 2] = cy * sz, sy * sx * sz + cx * cz, sy * cx * sz - sx * cz
+    m[:, 2, 0], m[:, 2, 1], m[:, 2, 2] = -sy, cy * sx, cy * cx
+    return m
+
+
+def _rotate(m, v):
+    return (m[:, :, 0] * v[:, 0:1] + m[:, :, 1] * v[:, 1:2] + m[:, :, 2] * v[:, 2:3]).astype(F)
+
+
+def _rotate_t(m, v):
+    return (m[:, 0, :] * v[:, 0:1] + m[:, 1, :] * v[:, 1:2] + m[:, 2, :] * v[:, 2:3]).astype(F)
+
+
+def _mapping(kind, v, loc, rot, scale):
+    m = _euler(rot)
+    if kind == "POINT":
+        return _rotate(m, v * scale) + loc
+    if kind == "TEXTURE":
+        return _safe_divide(_rotate_t(m, v - loc), scale)
+    if kind == "VECTOR":
+        return _rotate(m, v * scale)
+    return _safe_normalize(_rotate(m, _safe_divide(v, scale)))
+
+
+def _smoothstep(e0, e1, x):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (x - e0) / (e1 - e0)
+    return np.where(x < e0, F(0), np.where(x >= e1, F(1), (F(3) - F(2) * t) * (t * t))).astype(F)
+
+
+def _smootherstep(e0, e1, x):
+    x = np.clip(_safe_divide(x - e0, e1 - e0), F(0), F(1))
+    return (x * x * x * (x * (x * F(6) - F(15)) + F(10))).astype(F)
+
+
+def _map_range(kind, value, fmin, fmax, tmin, tmax, steps, clamp):
+    same = fmax == fmin
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = np.where(same, F(1), fmax - fmin)
+        if kind == "STEPPED":
+            f = (value - fmin) / den
+            f = np.where(steps > 0, np.floor(f * (steps + F(1))) / np.where(steps > 0, steps, F(1)), F(0))
+        elif kind == "SMOOTHSTEP":
+            f = np.where(fmin > fmax, F(1) - _smoothstep(fmax, fmin, value), _smoothstep(fmin, fmax, value))
+        elif kind == "SMOOTHERSTEP":
+            f = np.where(fmin > fmax, F(1) - _smootherstep(fmax, fmin, value), _smootherstep(fmin, fmax, value))
+        else:
+            f = (value - fmin) / den
+    out = np.where(same, F(0), tmin + f * (tmax - tmin)).astype(F)
+    if clamp and kind in ("LINEAR", "STEPPED"):
+        out = np.clip(out, np.minimum(tmin, tmax), np.maximum(tmin, tmax))
+    return out.astype(F)
+
+
+def _ramp(table, fac, constant):
+    """svm/ramp.h ``rgb_ramp_lookup`` (no extrapolation): (B, 4)."""
+    n = len(table)
+    f = np.clip(np.nan_to_num(fac, nan=0.0), F(0), F(1)) * F(n - 1)
+    i = np.clip(f.astype(np.int32), 0, n - 1)
+    t = f - i.astype(F)
+    a = table[i]
+    if constant:
+        return a
+    b = table[np.minimum(i + 1, n - 1)]
+    return np.where((t > 0)[:, None], (F(1) - t)[:, None] * a + t[:, None] * b, a).astype(F)
+
+
+def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset(), images=None) -> tuple:
+    p = op.params
+    name = op.name
+    if name == "const":
+        v = np.asarray(p["value"], F)
+        return (np.broadcast_to(v, (n, 3) if v.ndim else (n,)),)
+    if name == "coord":
+        c = inputs.get(p["kind"])
+        return (np.zeros((n, 3), F) if c is None else np.asarray(c, F).reshape(n, 3),)
+    if name == "math":
+        with np.errstate(all="ignore"):
+            r = np.asarray(MATH_FUNCTIONS[p["operation"]](*a), F)
+        if p.get("clamp"):
+            r = np.clip(r, F(0), F(1))
+        return (np.broadcast_to(r, (n,)),)
+    if name == "vector_math":
+        fn, kind = VECTOR_MATH_FUNCTIONS[p["operation"]]
+        with np.errstate(all="ignore"):
+            r = np.asarray(fn(*a), F)
+        return (np.broadcast_to(r, (n, 3) if kind == "v" else (n,)),)
+    if name == "mix_float":
+        t, x, y = a
+        if p.get("clamp_factor", True):
+            t = np.clip(t, F(0), F(1))
+        return ((x * (F(1) - t) + y * t).astype(F),)
+    if name in ("mix_vector", "mix_vector_nonuniform"):
+        t, x, y = a
+        t = t if name == "mix_vector_nonuniform" else t[:, None]
+        if p.get("clamp_factor", True):
+            t = np.clip(t, F(0), F(1))
+        return ((x * (F(1) - t) + y * t).astype(F),)
+    if name == "mix_color":
+        t, x, y = a
+        if p.get("clamp_factor", True):
+            t = np.clip(t, F(0), F(1))
+        with np.errstate(all="ignore"):
+            r = np.asarray(MIX_FUNCTIONS[p["blend"]](t[:, None], x, y), F)
+        if p.get("clamp_result"):
+            r = np.clip(r, F(0), F(1))
+        return (np.broadcast_to(r, (n, 3)),)
+    if name == "map_range":
+        return (_map_range(p["interpolation"], *a, bool(p.get("clamp", True))),)
+    if name == "clamp":
+        v, lo, hi = a
+        if p["type"] == "RANGE":
+            lo, hi = np.where(lo > hi, hi, lo), np.where(lo > hi, lo, hi)
+        return (np.minimum(np.maximum(v, lo), hi).astype(F),)
+    if name == "invert":
+        fac, col = a
+        return ((fac[:, None] * (F(1) - col) + (F(1) - fac[:, None]) * col).astype(F),)
+    if name == "separate":
+        v = a[0]
+        return tuple(np.ascontiguousarray(v[:, i]) for i in range(3))
+    if name == "combine":
+        return (np.stack(a, axis=1).astype(F),)
+    if name == "mapping":
+        return (_mapping(p["type"], *a).astype(F),)
+    if name == "ramp":
+        rgba = _ramp(np.asarray(p["table"], F), a[0], bool(p.get("constant")))
+        return np.ascontiguousarray(rgba[:, :3]), np.ascontiguousarray(rgba[:, 3])
+    if name == "to_float":
+        v = a[0]
+        if p["from"] == "color":
+            return ((v @ _LUMA).astype(F),)
+        return (((v[:, 0] + v[:, 1] + v[:, 2]) * F(1 / 3)).astype(F),)
+    if name == "to_vector":
+        return (np.repeat(a[0][:, None], 3, axis=1).astype(F),)
+    if name == "noise":
+        vec, w, scale, detail, rough, lac, offset, gain, dist = a
+        want_colour = op.out[1] in need  # the Color output costs two more fractal sums
+        fac, col = T.noise_texture(vec, w, scale, detail, rough, lac, offset, gain, dist,
+                                   dimensions=int(p.get("dimensions", 3)), kind=p["type"],
+                                   normalize=bool(p.get("normalize", True)), color=want_colour)
+        return fac, (col if want_colour else np.zeros((n, 3), F))
+    if name == "voronoi":
+        vec, w, scale, detail, rough, lac, smooth, expo, rnd = a
+        out = T.voronoi_texture(vec, w, scale, detail, rough, lac, smooth, expo, rnd,
+                                dimensions=int(p.get("dimensions", 3)), feature=p["feature"], metric=p["metric"],
+                                normalize=bool(p.get("normalize", False)))
+        return out["Distance"], out["Color"], out["Position"], out["W"]
+    if name == "checker":
+        vec, c1, c2, scale = a
+        fac, col = T.checker_texture(vec, c1, c2, scale)
+        return fac, col
+    if name == "gradient":
+        return T.gradient_texture(a[0], p["type"])
+    if name == "white_noise":
+        vec, w = a
+        return T.white_noise_texture(vec, w, int(p.get("dimensions", 3)))
+    if name == "wave":
+        vec, scale, dist, detail, dscale, drough, phase = a
+        return T.wave_texture(vec, scale, dist, detail, dscale, drough, phase, kind=p["type"],
+                              bands_direction=p["bands_direction"], rings_direction=p["rings_direction"],
+                              profile=p["profile"])
+    if name == "magic":
+        fac, col = T.magic_texture(a[0], a[1], a[2], int(p["depth"]))
+        return col, fac
+    if name == "brick":
+        vec, c1, c2, mortar, scale, msize, msmooth, bias, width, height = a
+        return T.brick_texture(vec, c1, c2, mortar, scale, msize, msmooth, bias, width, height,
+                               float(p.get("offset", 0.5)), int(p.get("offset_frequency", 2)),
+                               float(p.get("squash", 1.0)), int(p.get("squash_frequency", 2)))
+    if name == "gamma":  # svm/math_util.h svm_math_gamma_color: positive channels raised to gamma
+        col, g = a
+        g = g[:, None]
+        with np.errstate(all="ignore"):
+            out = np.where(col > 0, np.power(np.where(col > 0, col, F(1)), g), col)
+        return (np.where(g == 0, F(1), out).astype(F),)
+    if name == "bright_contrast":  # svm/brightness.h
+        col, bright, contrast = a
+        ca = (F(1) + contrast)[:, None]
+        cb = (bright - contrast * F(0.5))[:, None]
+        return (np.maximum(ca * col + cb, F(0)).astype(F),)
+    if name == "hue_saturation":  # svm/hsv.h with util/color.h rgb_to_hsv / hsv_to_rgb
+        hue, sat, val, fac, col = a
+        hsv = _rgb_to_hsv(col)
+        h = hsv[:, 0] + hue + F(0.5)
+        hsv = np.stack([h - np.floor(h), np.clip(hsv[:, 1] * sat, F(0), F(1)), hsv[:, 2] * val], axis=1)
+        out = fac[:, None] * _hsv_to_rgb(hsv) + (F(1) - fac)[:, None] * col
+        return (np.maximum(out, F(0)).astype(F),)
+    if name == "image":  # an Image Texture inside the program: its (x, y) as the UV
+        if images is None:
+            return np.zeros((n, 3), F), np.zeros(n, F)
+        rgba = images(int(p["texture"]), np.ascontiguousarray(a[0][:, :2]))
+        return np.ascontiguousarray(rgba[:, :3]), np.ascontiguousarray(rgba[:, 3])
+    raise ValueError(f"unknown shader op {name!r}")
+
+
+def _rgb_to_hsv(rgb):
+    """util/color.h ``rgb_to_hsv``, float32."""
+    r, g, b = rgb[:, 0], rgb[:, 1], rgb[:, 2]
+    cmax = np.maximum(r, np.maximum(g, b))
+    cmin = np.minimum(r, np.minimum(g, b))
+    delta = cmax - cmin
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(cmax != 0, delta / np.where(cmax != 0, cmax, F(1)), F(0))
+        dd = np.where(delta != 0, delta, F(1))
+        cr, cg, cb = (cmax - r) / dd, (cmax - g) / dd, (cmax - b) / dd
+    h = np.where(r == cmax, cb - cg, np.where(g == cmax, F(2) + cr - cb, F(4) + cg - cr)) / F(6)
+    h = np.where(h < 0, h + F(1), h)
+    h = np.where(s != 0, h, F(0))
+    return np.stack([h, s, cmax], axis=1).astype(F)
+
+
+def _hsv_to_rgb(hsv):
+    """util/color.h ``hsv_to_rgb``, float32."""
+    h, s, v = hsv[:, 0], hsv[:, 1], hsv[:, 2]
+    h = np.where(h == 1, F(0), h) * F(6)
+    i = np.floor(h)
+    f = h - i
+    p = v * (F(1) - s)
+    q = v * (F(1) - s * f)
+    t = v * (F(1) - s * (F(1) - f))
+    choices = [np.stack(c, axis=1) for c in ((v, t, p), (q, v, p), (p, v, t), (p, q, v), (t, p, v), (v, p, q))]
+    idx = np.clip(i, 0, 5).astype(np.int64)
+    rgb = np.choose(idx[:, None], choices)
+    rgb = np.where((i > 5)[:, None], choices[5], rgb)
+    return np.where((s != 0)[:, None], rgb, np.stack([v, v, v], axis=1)).astype(F)
+
+
+def evaluate(program: ShaderProgram, slot: str, inputs: dict, n: int, images=None) -> np.ndarray:
+    """The value of ``slot`` ('color' (n, 3), 'roughness' (n,), ...) for n hits, float32; inputs:
+    'generated' / 'object' / 'uv' (n, 3) float32 (a missing one reads (0, 0, 0)); ``images``:
+    f(texture index, uv (n, 2)) -> (n, 4) RGBA, the scene's image lookup (None: black). Only the ops
+    the slot depends on run. Non-finite results (a division's Inf, a power's NaN) are 0, as
+    nothing downstream may see them."""
+    regs: dict = {}
+    order = program.needed(slot)
+    need = frozenset([program.outputs[slot]]).union(*(program.ops[i].args for i in order))
+    for i in order:
+        op = program.ops[i]
+        outs = _run(op, [regs[r] for r in op.args], n, inputs, need, images)
+        for r, v in zip(op.out, outs):
+            regs[r] = v
+    out = np.asarray(regs[program.outputs[slot]], F)
+    return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0).astype(F, copy=False)
+
+
