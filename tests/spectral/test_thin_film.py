@@ -1,15 +1,15 @@
 """Thin-film interference (core/spectral/thin_film.py) against an independent characteristic-matrix
-computation (Born & Wolf section 1.6; Macleod, *Thin-Film Optical Filters*, ch. 2), written here:
+computation (tests/thin_film_matrix.py: Born & Wolf section 1.6; Macleod ch. 2):
 reflectance per wavelength for 3 thicknesses x 3 angles over dielectric and metal substrates,
 R + T = 1 for lossless films from the matrix's transmittance, d = 0 gives the plain Fresnel."""
 
-import cmath
 import math
 
 import numpy as np
 import pytest
 
 from opal_diffraction.core.spectral.optics import fresnel_dielectric
+from thin_film_matrix import matrix_unpolarised
 from opal_diffraction.core.spectral.thin_film import (airy_reflectance, conductor_ior_from_f0_f82,
                                                       thin_film_conductor, thin_film_dielectric)
 
@@ -18,49 +18,12 @@ THICKNESSES = (80.0, 310.0, 1200.0)
 ANGLES_DEG = (0.0, 40.0, 75.0)
 
 
-def _matrix_rt(n0, layers, n_sub, theta0, wl, pol):
-    """(R, T) of a stack by characteristic matrices, one wavelength and polarisation, scalar complex
-    arithmetic in Macleod's convention (an absorbing index is n - ik: ``n_sub`` n + ik is conjugated), M_j = [[cos d_j, i sin d_j / y_j], [i y_j sin d_j, cos d_j]], d_j = 2 pi n_j d_j cos t_j / wl,
-    tilted admittances y = n cos t (s) or n / cos t (p); [B, C] = prod M_j [1, y_sub];
-    r = (y0 B - C) / (y0 B + C), T = 4 Re(y0) Re(y_sub) / |y0 B + C|^2."""
-    s = n0 * math.sin(theta0)
-
-    def cos_t(n):
-        c = cmath.sqrt(1 - (s / n) ** 2)
-        # the root for a wave going on (decaying) into the medium: Im(n cos t) <= 0 in this convention
-        if (n * c).imag > 0 or ((n * c).imag == 0 and (n * c).real < 0):
-            c = -c
-        return c
-
-    def adm(n):
-        c = cos_t(n)
-        return n * c if pol == "s" else n / c
-
-    n_sub = complex(n_sub).conjugate()
-    b, cc = 1.0 + 0j, adm(n_sub)
-    for n, d in reversed(layers):
-        delta = 2 * math.pi * n * d * cos_t(n) / wl
-        y = adm(n)
-        b, cc = (cmath.cos(delta) * b + 1j * cmath.sin(delta) / y * cc,
-                 1j * y * cmath.sin(delta) * b + cmath.cos(delta) * cc)
-    y0 = adm(n0)
-    r = (y0 * b - cc) / (y0 * b + cc)
-    t_power = 4 * y0.real * adm(n_sub).real / abs(y0 * b + cc) ** 2
-    return abs(r) ** 2, t_power
-
-
-def _matrix_unpolarised(n0, n_film, d, n_sub, theta0, wl):
-    rs, ts = _matrix_rt(n0, [(n_film, d)], n_sub, theta0, wl, "s")
-    rp, tp = _matrix_rt(n0, [(n_film, d)], n_sub, theta0, wl, "p")
-    return 0.5 * (rs + rp), 0.5 * (ts + tp)
-
-
 def _check_against_matrix(n0, n_film, n_sub_of_wl, code):
     for d in THICKNESSES:
         for a in ANGLES_DEG:
             th = math.radians(a)
             ours = code(math.cos(th), d, WAVELENGTHS)
-            ref = np.array([_matrix_unpolarised(n0, n_film, d, n_sub_of_wl(wl), th, wl)[0] for wl in WAVELENGTHS])
+            ref = np.array([matrix_unpolarised(n0, n_film, d, n_sub_of_wl(wl), th, wl)[0] for wl in WAVELENGTHS])
             np.testing.assert_allclose(ours, ref, rtol=0, atol=1e-10, err_msg=f"d={d} nm, angle={a}")
             # the film's interference must show: the spectrum is not flat
             assert np.ptp(ref) > 1e-3 or d < 100 or ref.min() > 1 - 1e-12  # (total internal reflection)
@@ -104,7 +67,7 @@ def test_lossless_energy_conservation():
             for a in (0.0, 30.0, 60.0):
                 th = math.radians(a)
                 for wl in (400.0, 555.0, 700.0):
-                    _, t = _matrix_unpolarised(n0, nf, d, ns, th, wl)
+                    _, t = matrix_unpolarised(n0, nf, d, ns, th, wl)
                     r = float(airy_reflectance(math.cos(th), n0, nf, ns, d, wl))
                     if n0 * math.sin(th) >= ns:  # total internal reflection: nothing goes through
                         assert r == pytest.approx(1.0, abs=1e-12)
