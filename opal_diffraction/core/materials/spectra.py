@@ -56,6 +56,7 @@ class PreparedMaterials:
     film: np.ndarray = None            # (M,) bool: a thin film over the surface (thickness above the cutoff)
     film_thickness: np.ndarray = None  # (M,) float64 the film's thickness (nm; 0 where none)
     film_ior: np.ndarray = None        # (M,) float64 the film's index
+    wavelengths: np.ndarray = None     # (n,) float64 the grid's wavelengths (nm), for the films' phases
 
 
 def glass_tint_spectra(color, glass_tint, conv: SpectralConverter) -> np.ndarray:
@@ -109,4 +110,5 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
                              conductor_f82=np.asarray(m.conductor_fresnel) == int(ConductorFresnel.F82_TINT),
                              glass_tint=glass_tint.astype(np.float32), color_textured=np.asarray(m.color_texture) >= 0,
                              film=film, film_thickness=np.where(film, film_d, 0.0),
-                             film_ior=np.asarray(m.thin_film_ior, np.float64))
+                             film_ior=np.asarray(m.thin_film_ior, np.float64),
+                             wavelengths=np.asarray(wl, np.float64))
