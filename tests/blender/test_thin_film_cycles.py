@@ -105,3 +105,18 @@ def test_thin_film_beside_cycles(kind, tmp_path):
         # the film colours the image (a plain Fresnel would give equal channels for white / black bases)
         if kind != "metal":
             assert np.ptp(mc) > 0.1 * mc.max()
+
+
+@pytest.mark.slow  # a subprocess that imports bpy and renders with both engines
+def test_thin_film_example_runs_headless(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    root = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..")
+    out = tmp_path / "thin_film.png"
+    res = subprocess.run([sys.executable, os.path.join(root, "examples", "thin_film.py"), "--spp", "2", "--cycles-spp", "4",
+                          "--resolution", "48", "27", "--out", str(out)], capture_output=True, text=True, timeout=900)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert out.exists() and "Traceback" not in res.stderr
+    assert res.stdout.count("ours") == 3  # one line per sphere, both renders' colours
