@@ -163,3 +163,11 @@ def test_filmed_glass_and_mirror_in_the_furnace_with_the_light_pass():
     t_stat = (means.mean() - expected) / max(err, 1e-5 * expected)
     print(f"light pass: {means.mean():.5f} +- {err:.5f} (expected {expected:.5f}, t {t_stat:+.2f})")
     assert abs(t_stat) < 9 and abs(means.mean() - expected) < 0.02 * expected  # t with 3 dof: P(|t| > 9) < 0.003
+
+
+def test_a_film_under_a_grating_is_warned_about():
+    scene = _plane_scene("MIRROR")
+    scene.materials.grating[0] = 1
+    scene.materials.name[0] = "filmed grating"
+    warnings = prepare(scene, _settings()).warnings
+    assert any("'filmed grating': its thin film is not rendered under its grating layer" in w for w in warnings)
