@@ -119,4 +119,4 @@ def test_thin_film_example_runs_headless(tmp_path):
                           "--resolution", "48", "27", "--out", str(out)], capture_output=True, text=True, timeout=900)
     assert res.returncode == 0, res.stdout + res.stderr
     assert out.exists() and "Traceback" not in res.stderr
-    assert res.stdout.count("ours") == 3  # one line per sphere, both renders' colours
+    assert res.stdout.count("  Cycles [") == 3  # one line per sphere, both renders' colours
