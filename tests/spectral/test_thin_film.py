@@ -103,3 +103,30 @@ def test_float32_in_float32_out_and_tir():
     assert f.dtype == np.float32 and ct.dtype == np.float32
     assert f[0] == 1.0 and ct[0] == 0.0  # past the critical angle of glass -> air
     assert np.all((f >= 0) & (f <= 1))
+
+
+def test_compiled_kernel_matches_the_numpy_reference():
+    """_airy_kernel (kernels on) against the NumPy lines (kernels off): random films over glass
+    from both sides (total internal reflection included), over metals, grazing and normal."""
+    from opal_diffraction.core.util.jit import AVAILABLE, kernel_mode
+
+    if not AVAILABLE:
+        pytest.skip("numba is not available: only the reference runs")
+    rng = np.random.default_rng(7)
+    m = 4000
+    cos = np.concatenate([rng.random(m - 4), [0.0, 1.0, 0.0, 1.0]])
+    n_i = rng.choice([1.0, 1.5, 2.4], m)
+    n_f = 1.0 + 1.5 * rng.random(m)
+    n_t = np.where(rng.random(m) < 0.5, 1.0 + rng.random(m), (0.2 + 3 * rng.random(m)) + 1j * 4 * rng.random(m))
+    d = np.where(rng.random(m) < 0.1, 0.0, 2000 * rng.random(m))
+    wl = 380 + 400 * rng.random(m)
+    with kernel_mode("numpy"):
+        ref = airy_reflectance(cos, n_i, n_f, n_t, d, wl)
+    with kernel_mode("auto"):
+        got = airy_reflectance(cos, n_i, n_f, n_t, d, wl)
+        grid = airy_reflectance(0.7, 1.0, 1.33, np.array([1.5, 1.6])[:, None], 300.0, np.array([400.0, 500.0, 600.0]))
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+    assert grid.shape == (2, 3)
+    with kernel_mode("numpy"):
+        np.testing.assert_allclose(grid, airy_reflectance(0.7, 1.0, 1.33, np.array([1.5, 1.6])[:, None], 300.0,
+                                                          np.array([400.0, 500.0, 600.0])), atol=1e-12)

@@ -53,31 +53,30 @@ def glass_fresnel(materials, wavelengths_nm, mat, front, cos, n, lam=None) -> np
     return np.asarray(f, np.float32)
 
 
-def conductor_reflectance(materials, wavelengths_nm, mat, cos, lam=None, f0=None, edge=None) -> np.ndarray:
+def conductor_reflectance(materials, wavelengths_nm, mat, cos, lam=None) -> np.ndarray:
     """The reflectance of the filmed mirror / metal ``mat`` (B,) at cosine ``cos`` (B,): (B, n) over
-    the grid with ``lam`` None, else (B,) at the rays' wavelengths; float32. ``f0`` / ``edge``: the
-    metal's F0 and F82 reflectance where they differ from the table's (a textured colour), in
-    the same shape."""
+    the grid with ``lam`` None, else (B,) at the rays' wavelengths; float32. F0 is the table's
+    colour (a smooth mirror's colour texture is its average there too), the edge its F82
+    reflectance (F82-tint metals) or F0."""
     from .bsdf import f82_b, fresnel_f82
 
     wl = np.asarray(wavelengths_nm, np.float64)
-    base = materials.reflectance[mat].astype(np.float64) if f0 is None else np.asarray(f0, np.float64)
-    if edge is None:
-        f82 = getattr(materials, "conductor_f82", None)
-        tint = materials.specular_tint[mat].astype(np.float64) if materials.specular_tint is not None else None
-        edge = base.copy()
-        if f82 is not None and tint is not None and f82[mat].any():
-            b = f82_b(base, tint)
-            g = fresnel_f82(np.full(len(mat), 1.0 / 7.0), base, b)
-            edge = np.where(f82[mat][:, None], g, base)
+    # the complex index per material row (a handful), then gathered per hit
+    rows, inv = np.unique(np.asarray(mat), return_inverse=True)
+    base = materials.reflectance[rows].astype(np.float64)
+    edge = base
+    f82 = getattr(materials, "conductor_f82", None)
+    if f82 is not None and materials.specular_tint is not None and f82[rows].any():
+        b = f82_b(base, np.minimum(materials.specular_tint[rows].astype(np.float64), 1.0))
+        edge = np.where(f82[rows][:, None], fresnel_f82(np.full(len(rows), 1.0 / 7.0), base, b), base)
+    n, k = conductor_ior_from_f0_f82(base, edge)
     if lam is not None:
-        rows = np.arange(len(mat))
-        base, edge, w = base[rows, lam], edge[rows, lam], wl[np.asarray(lam)]
+        lam = np.asarray(lam)
+        n, k, w = n[inv, lam], k[inv, lam], wl[lam]
         c = np.asarray(cos, np.float64)
         d, nf = materials.film_thickness[mat], materials.film_ior[mat]
     else:
-        w = wl[None, :]
+        n, k, w = n[inv], k[inv], wl[None, :]
         c = np.asarray(cos, np.float64)[:, None]
         d, nf = materials.film_thickness[mat][:, None], materials.film_ior[mat][:, None]
-    n, k = conductor_ior_from_f0_f82(base, edge)
     return np.asarray(thin_film_conductor(np.abs(c), n, k, nf, d, w), np.float32)

@@ -24,12 +24,20 @@ F0 as r and the F82 reflectance as g, as Cycles does for a thin film over a meta
 (``intern/cycles/kernel/closure/bsdf_microfacet.h``, microfacet_fresnel's F82_TINT branch).
 
 Everything is NumPy in float64 complex arithmetic, vectorised over broadcast arguments; the walker
-and the BSDFs call it only for rows with a film (their compiled kernels skip those batches).
+and the BSDFs call it only for rows with a film (their compiled kernels skip those batches). The
+Airy sum has a compiled twin (``_airy_kernel``, core/util/jit.py: one pass over the broadcast
+elements in complex128 scalars instead of NumPy's chain of (B, n) complex temporaries), chosen
+inside ``airy_reflectance`` when kernels are on; tests/spectral/test_thin_film.py compares them
+(the same operations, equal to within 1e-12: complex division and exp are not NumPy's bit for bit).
 """
 
 from __future__ import annotations
 
+import cmath
+
 import numpy as np
+
+from ..util.jit import kernels_enabled, njit
 
 __all__ = ["THIN_FILM_CUTOFF_NM", "airy_reflectance", "thin_film_dielectric", "conductor_ior_from_f0_f82",
            "thin_film_conductor"]
@@ -48,6 +56,8 @@ def airy_reflectance(cos_i, n_i, n_f, n_t, thickness_nm, wavelength_nm) -> np.nd
     thickness ``thickness_nm`` between an incident medium ``n_i`` (real) and a substrate ``n_t``
     (real, or complex n + i k for an absorbing one) at incident cosine ``cos_i`` (clipped to
     [0, 1]) and vacuum wavelength ``wavelength_nm``."""
+    if kernels_enabled():
+        return _airy_with_kernel(cos_i, n_i, n_f, n_t, thickness_nm, wavelength_nm)
     c = np.clip(np.asarray(cos_i, np.float64), 0.0, 1.0)
     n_i = np.asarray(n_i, np.float64)
     s2 = (n_i * n_i) * (1.0 - c * c)  # (n_i sin theta_i)^2, conserved across the layers
@@ -67,6 +77,60 @@ def airy_reflectance(cos_i, n_i, n_f, n_t, thickness_nm, wavelength_nm) -> np.nd
         r = (r1 + r2 * phase) / (1.0 + r1 * r2 * phase)
         r_sum = r_sum + 0.5 * (r.real * r.real + r.imag * r.imag)
     return np.clip(r_sum, 0.0, 1.0)
+
+
+def _airy_with_kernel(cos_i, n_i, n_f, n_t, thickness_nm, wavelength_nm) -> np.ndarray:
+    """airy_reflectance by _airy_kernel over the broadcast arguments, as read-only 2-D views
+    (a per-hit column and a per-wavelength row are not expanded: their strides are 0)."""
+    n_t = np.asarray(n_t, np.complex128)
+    args = [np.asarray(a, np.float64) for a in (cos_i, n_i, n_f, thickness_nm, wavelength_nm)] + [n_t.real, n_t.imag]
+    shape = np.broadcast_shapes(*(a.shape for a in args))
+    cols = shape[-1] if shape else 1
+    views = [np.broadcast_to(a, shape).reshape(-1, cols) for a in args]
+    out = np.empty(views[0].shape, np.float64)
+    _airy_kernel(*views, out)
+    return out.reshape(shape)
+
+
+@njit
+def _ratio_k(num, den):
+    return num / den if den != 0 else complex(-1.0, 0.0)
+
+
+@njit
+def _airy_kernel(cos_i, n_i, n_f, d, wl, nt_re, nt_im, out):
+    """airy_reflectance's lines per element in complex128 scalars (cmath's principal sqrt, as
+    NumPy's), the result clipped to [0, 1]."""
+    two_pi = 2.0 * np.pi
+    for row in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[row, j] = _airy_1(cos_i[row, j], n_i[row, j], n_f[row, j], d[row, j], wl[row, j], nt_re[row, j],
+                                  nt_im[row, j], two_pi)
+
+
+@njit
+def _airy_1(c, ni, n_f, d, wl, nt_re, nt_im, two_pi):
+    """One element of _airy_kernel."""
+    c = min(max(c, 0.0), 1.0)
+    s2 = (ni * ni) * (1.0 - c * c)
+    q_i = complex(ni * c, 0.0)
+    nf = complex(n_f, 0.0)
+    nt = complex(nt_re, nt_im)
+    e_f, e_t, e_i = nf * nf, nt * nt, complex(ni * ni, 0.0)
+    q_f = cmath.sqrt(e_f - s2)
+    q_t = cmath.sqrt(e_t - s2)
+    phase = cmath.exp(2j * (two_pi * d / wl) * q_f)
+    total = 0.0
+    for pol in range(2):
+        if pol == 0:
+            r1 = _ratio_k(q_i - q_f, q_i + q_f)
+            r2 = _ratio_k(q_f - q_t, q_f + q_t)
+        else:
+            r1 = _ratio_k(e_f * q_i - e_i * q_f, e_f * q_i + e_i * q_f)
+            r2 = _ratio_k(e_t * q_f - e_f * q_t, e_t * q_f + e_f * q_t)
+        r = (r1 + r2 * phase) / (1.0 + r1 * r2 * phase)
+        total += 0.5 * (r.real * r.real + r.imag * r.imag)
+    return min(max(total, 0.0), 1.0)
 
 
 def _ratio(num, den):
