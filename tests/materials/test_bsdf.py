@@ -7,10 +7,12 @@
 - weight == f cos / pdf for sampled directions, and the same pdf from both functions;
 - white furnace: the directional albedo (mean weight) is <= 1 for every lobe, 1 for a white
   conductor / Glossy with the multiscatter compensation, for a dielectric (reflection plus
-  eta^2 x transmission: the 1/eta^2 radiance factor undone) and for a white Principled base;
+  transmission: the lobe carries no 1/eta^2 radiance factor, docs/physics.md section 14.3) and
+  for a white Principled base;
   the analytic Fresnel reflectance as roughness -> 0;
 - reciprocity of the single-scattering lobes (the compensation factor divided out) and Walter's
-  generalized reciprocity for transmission, f(wo, wi) / n_o^2 = f(wi, wo) / n_i^2;
+  generalized reciprocity for transmission (Walter's for the radiance BTDF f eta^-2:
+  f(wo, wi) / n_i^2 = f(wi, wo) / n_o^2 for this lobe without the factor);
 - the MC albedo against an independent quadrature of evaluate()'s f cos over the sphere;
 - the material columns: validation, .npz round trip, defaults of older files, params_from_materials.
 """
@@ -146,10 +148,9 @@ def test_weight_is_f_cos_over_pdf(cfg):
 
 # ----------------------------------------------------------------------------- energy
 def _albedo(p, theta_o, seed=1):
-    """Mean weight and its standard error; transmitted weights times eta^2 (radiance factor undone)."""
+    """Mean weight and its standard error (transmission carries no 1/eta^2: the weights are energy)."""
     wo, ns, wi, w, pdf, fl = draw(p, theta_o, seed)
-    trans = (fl & B.TRANSMISSION) != 0
-    x = w[:, 0] * np.where(trans, p.eta * p.eta, 1.0)
+    x = w[:, 0].astype(np.float64)
     return x.mean(), x.std() / math.sqrt(len(x)), w, fl
 
 
@@ -199,8 +200,7 @@ def test_albedo_never_exceeds_one(r, theta_deg):
     }
     for name, p in cases.items():
         wo, ns, wi, w, pdf, fl = draw(p, th, seed=5)
-        trans = (fl & B.TRANSMISSION) != 0
-        x = w * np.where(trans, p.eta * p.eta, 1.0)[:, None]
+        x = w.astype(np.float64)
         a, se = x.mean(axis=0), x.std(axis=0) / math.sqrt(n)
         assert np.all(a <= 1.0 + Z * se + TABLE_TOL), f"{name}: albedo {a}"
 
@@ -264,9 +264,10 @@ def test_reflection_is_reciprocal(lobe, kw):
 
 
 def test_transmission_generalized_reciprocity():
-    """Walter et al. 2007 eq. 22 for the radiance BTDF: f(wo, wi) / n_o^2 = f(wi, wo) / n_i^2,
-    n_o the index on wo's side. Swapping the directions puts wi on the near side: eta -> 1/eta
-    and the normals flip."""
+    """Walter et al. 2007 eq. 22 for the radiance BTDF f_rad: f_rad(wo, wi) / n_o^2 = f_rad(wi,
+    wo) / n_i^2, n_o the index on wo's side. This lobe is f = f_rad eta^2 = f_rad (n_i / n_o)^2 (no
+    radiance factor, docs/physics.md section 14.3), so f(wo, wi) / n_i^2 = f(wi, wo) / n_o^2.
+    Swapping the directions puts wi on the near side: eta -> 1/eta and the normals flip."""
     n = 5000
     for r in (0.2, 0.6, 1.0):
         for n_o, n_i in ((1.0, 1.5), (1.5, 1.0), (1.33, 2.4)):
@@ -275,7 +276,7 @@ def test_transmission_generalized_reciprocity():
             back = _f(params(B.DIELECTRIC, n, r, eta=n_o / n_i), wi, wo, -frame(n))
             ok = fwd[:, 0] > 0
             assert ok.mean() > 0.1
-            a, b = fwd[ok] / n_o ** 2, back[ok] / n_i ** 2
+            a, b = fwd[ok] / n_i ** 2, back[ok] / n_o ** 2
             # float32: near total internal reflection 1 - F keeps few digits, so small values
             # get an absolute tolerance of 1e-3 of the median
             np.testing.assert_allclose(a, b, rtol=3e-3, atol=1e-3 * float(np.median(b)))
@@ -283,7 +284,7 @@ def test_transmission_generalized_reciprocity():
 
 
 # ----------------------------------------------------------------------------- independent quadrature
-def _quadrature_albedo(p1, wo1, n_theta=400, n_phi=200, undo_eta=True):
+def _quadrature_albedo(p1, wo1, n_theta=400, n_phi=200):
     """int f cos dw over the whole sphere of evaluate(), theta by Gauss-Legendre in four ranges
     (the reflected and refracted peaks resolved) and phi by the midpoint rule."""
     x, w = np.polynomial.legendre.leggauss(n_theta // 4)
@@ -297,9 +298,8 @@ def _quadrature_albedo(p1, wo1, n_theta=400, n_phi=200, undo_eta=True):
     rep = B.SurfaceParams(*(np.repeat(getattr(p1, f), m, axis=0) for f in
                             ("lobe", "base", "edge", "alpha", "eta", "spec_f0", "spec_tint")))
     fc, _ = B.evaluate(rep, np.repeat(wo1, m, 0), wi, frame(m), frame(m))
-    scale = np.where(T.ravel() > np.pi / 2, p1.eta[0] ** 2 if undo_eta else 1.0, 1.0)
     dA = (np.sin(T) * wt[:, None] * (2 * np.pi / n_phi)).ravel()
-    return float((fc[:, 0] * scale * dA).sum())
+    return float((fc[:, 0] * dA).sum())
 
 
 @pytest.mark.slow

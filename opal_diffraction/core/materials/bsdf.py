@@ -14,7 +14,10 @@ Methods (formulas in docs/physics.md section 14):
 - Rough dielectrics: reflection and refraction through microfacets (Walter, Marschner, Li &
   Torrance 2007, "Microfacet models for refraction through rough surfaces"; pbrt-v4
   DielectricBxDF) with the exact dielectric Fresnel at the microfacet, reflect / transmit chosen
-  with probability F, and radiance scaled by 1/eta^2 on transmission (camera paths carry radiance).
+  with probability F. Transmission carries no 1/eta^2 radiance factor, as the walker's smooth
+  glass carries none (transport/walker.py): camera and lights sit outside closed glass, where the
+  factors of entering and leaving cancel, so leaving it out at every interface keeps a closed
+  object of any mix of smooth and rough faces lossless (docs/physics.md section 14.3).
 - Multiple scattering: Cycles' "Multiscatter GGX" energy preservation
   (``bsdf_microfacet.h`` microfacet_ggx_preserve_energy; Turquin 2019, "Practical multiple
   scattering compensation for microfacet models", with the multi-bounce Fresnel of Kulla & Conty
@@ -555,7 +558,7 @@ def _eval_lobe(p, code, wo, wi, terms=None):
             denom2 = np.maximum(denom * denom, 1e-30)
             jac = np.abs(cih) / denom2
             t = np.where(ok, 1.0 - f, 0.0)
-            val = t * d * coh * jac / (o[:, 2] * eta * eta * (1.0 + lo + li))
+            val = t * d * coh * jac / (o[:, 2] * (1.0 + lo + li))  # no 1/eta^2: as the walker's smooth glass
             fcos[m] = q.base * (val * _glass_factor(q.alpha, mu_o[m], eta))[:, None]
             pdf[m] = t * d * coh * jac / (o[:, 2] * (1.0 + lo))
         return fcos, pdf
@@ -640,7 +643,7 @@ def _sample_lobe(p, code, wo, u):
         fac = np.ones(B, _F32)
         if len(r):
             fac[r] = _glass_factor(p.alpha[r], mu_o[r], eta[r])
-        scale = np.where(refl, 1.0, 1.0 / (eta * eta)) * g * fac
+        scale = g * fac  # transmission unscaled by 1/eta^2, as the walker's smooth glass (module docstring)
         weight = np.where(ok[:, None], p.base * scale[:, None], 0.0).astype(_F32)
         d_vis = _ggx_d(a2, h) * cos_oh / (mu_o * (1.0 + lo))
         cih = np.sum(wi * h, axis=1)
@@ -1224,7 +1227,7 @@ def _eval_row_k(b, code, base, er, alpha, eta, spec_f0, tr, f82, ms, has_ms, ox,
         denom = cih + coh / e
         jac = abs(cih) / _max_k(denom * denom, np.float32(1e-30))
         t = one - f if (coh > zero and cih < zero) else zero
-        val = t * d * coh * jac / (oz * e * e * (one + lo + li))
+        val = t * d * coh * jac / (oz * (one + lo + li))
         v = val * _glass_factor_k(alpha[b], oz, e, g_out, g_in)
         for j in range(k):
             fcos[b, j] = base[b, j] * v
@@ -1396,7 +1399,7 @@ def _sample_row_k(b, code, base, er, alpha, eta, spec_f0, tr, f82, ms, has_ms, o
             return wx, wy, wz, zero, 0
         g = (one + lo) / (one + lo + smith_lambda_1(a2, wx, wy, wz)) if rough else one
         fac = _glass_factor_k(al, oz, e, g_out, g_in) if rough else one
-        scale = (one if refl else one / (e * e)) * g * fac
+        scale = g * fac
         for j in range(k):
             weight[b, j] = base[b, j] * scale
         singular = (not rough) or (unit and not refl)

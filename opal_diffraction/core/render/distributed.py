@@ -63,9 +63,8 @@ from ..transport.elements import ElementLayout, IlluminationMap
 from ..integrators.eye.eye_pass import EyePass
 from ..gratings.records import GratingRecords
 from .film import tile_parts_rgb
-from ..integrators.light.camera_splat import CameraConnection, CameraSplat, SplatLog, view_key
-from ..integrators.light.light_pass import LANES, DepositLog, LightPassResult, LightWork, finish_light_pass
-from ..integrators.light.walker import trace_batch
+from ..integrators.light.camera_splat import CameraConnection, CameraSplat, view_key
+from ..integrators.light.light_pass import LaneAssembler, LightPassResult, LightWork, finish_light_pass, trace_logged
 from .plan import plan_render
 from .prepare import prepare
 from .scheduler import POLL_S
@@ -303,14 +302,7 @@ def _frame(job: dict) -> _Frame:
 def light_batch_task(job: dict, index: int) -> dict:
     """Trace batch ``index`` of the job's light pass; its deposits in order, and its counts."""
     frame = _frame(job)
-    work = frame.light_work
-    illum = DepositLog(work.layout)
-    records = DepositLog(work.record_layout) if work.record_layout is not None else None
-    splat = SplatLog() if frame.plan.camera_splat else None
-    counts = trace_batch(frame.prepared, work.batches[index], illum, records, splat=splat,
-                         bounce=frame.plan.splat_bounce)
-    return {"illum": illum.calls, "records": None if records is None else records.calls, "counts": counts,
-            "elements": work.layout.total, "splat": None if splat is None else splat.calls}
+    return trace_logged(frame.prepared, frame.light_work, index, frame.plan.splat_bounce, frame.plan.camera_splat)
 
 
 @one_blas_thread()
@@ -563,42 +555,21 @@ def _light_pass(client, job_f, prepared, plan, progress, control, uid, threads, 
     earlier ones waits), so a cancel right after a report keeps what it reported."""
     t0 = time.perf_counter()
     work = LightWork.of(prepared)
-    maps = [work.empty_maps(prepared.grid.n) for _ in range(LANES)]
-    counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
-    # the camera splat, added batch by batch in lane order
-    connection = CameraConnection.of(prepared) if plan.camera_splat else None
-    splats = [connection.empty() for _ in range(LANES)] if connection is not None else None
-    lanes = [work.lane(k) for k in range(LANES)]
-    position = [0] * LANES  # how many of its batches each lane has added
+    # the maps and the camera splat, added batch by batch in lane order
+    lanes = LaneAssembler(prepared, work, CameraConnection.of(prepared) if plan.camera_splat else None)
     finished = _Finished()
     pending = {j: finished.watch(client.submit(LIGHT_TASK, job_f, j, key=f"opal-light-{uid}-{j}", retries=RETRIES))
                for j in range(len(work.batches))}
-    ready: dict[int, dict] = {}  # finished batches a lane cannot add yet (an earlier one is missing)
     cancelled = timed_out = False
     received = reported = 0
     try:
         while True:
-            for k in range(LANES):  # add what each lane can, in its order
-                while position[k] < len(lanes[k]) and lanes[k][position[k]] in ready:
-                    out = ready.pop(lanes[k][position[k]])
-                    if out["elements"] != work.layout.total:
-                        raise ClusterError("a worker laid out the illumination map differently from the client")
-                    illum, records = maps[k]
-                    DepositLog.replay_calls(out["illum"], illum)
-                    if records is not None:
-                        DepositLog.replay_calls(out["records"], records)
-                    if splats is not None:
-                        for pixels, values in out["splat"] or ():
-                            splats[k].add(pixels, values)
-                    for name, value in out["counts"].items():
-                        counts[k][name] += value
-                    position[k] += 1
-            traced = sum(c["paths"] for c in counts)
+            traced = lanes.drain()  # add what each lane can, in its order
             if progress and traced > reported:  # the paths in the map, as a local light pass reports
                 reported = traced
                 progress(traced / max(work.total, 1), f"light pass: {traced / 1e6:.2f} M of "
                                                       f"{work.total / 1e6:.2f} M paths on {threads} worker thread(s)")
-            if all(position[k] == len(lanes[k]) for k in range(LANES)):
+            if lanes.complete():
                 break
             if control.cancelled():
                 cancelled = True
@@ -611,9 +582,11 @@ def _light_pass(client, job_f, prepared, plan, progress, control, uid, threads, 
             for j in done:
                 out = _result(pending.pop(j))
                 received += _nbytes(out)
-                ready[j] = out
+                if out["elements"] != work.layout.total:
+                    raise ClusterError("a worker laid out the illumination map differently from the client")
+                lanes.add(j, out)
     finally:
         _cancel(client, pending)
-    result = finish_light_pass(prepared, work, maps, counts, t0, timed_out, cancelled, splats)
+    result = finish_light_pass(prepared, work, lanes.maps, lanes.counts, t0, timed_out, cancelled, lanes.splats)
     stats = dict(result.stats, light_tasks=len(work.batches), received_light_bytes=received)
     return replace(result, stats=MappingProxyType(stats))

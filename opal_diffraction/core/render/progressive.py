@@ -5,9 +5,12 @@ at 1/8 of the view's resolution with one sample (the first image comes quickly),
 and the full resolution refined round after round up to the preview samples
 (``preview_levels``). Every level is a ``render_prepared`` of the same preparation seen at that
 size (``prepared.with_view``: the acceleration structure and the light pass stay valid), so the
-scheduler's rules hold for each (core/render/scheduler.py); the levels share one light pass, run
-here first when the plan asks for one and none is given, and one cancel check, polled between
-levels as between tiles. A preview has no time limit and keeps no spectral film.
+scheduler's rules hold for each (core/render/scheduler.py); the levels share one light pass and
+one cancel check, polled between levels as between tiles. When the plan asks for a light pass
+and none is given, the first level is drawn at once by the eye pass alone (no caustics: the
+plan of the same scene with no light paths), then the light pass runs and the levels go on with
+its caustics, so the first image does not wait the seconds a light pass takes. A preview has no
+time limit and keeps no spectral film.
 """
 
 from __future__ import annotations
@@ -68,7 +71,16 @@ def render_levels(prepared: PreparedScene, levels: list[tuple[int, int]], light:
     it finished (``should_cancel`` said so) or when there is no level."""
     control = RenderControl(should_cancel)
     plan = plan_render(prepared)
+    first = 0  # the first level still to render
     if light is None and plan.light_pass:
+        if levels:  # a first image at once, from the eye pass alone (no light paths: no caustics)
+            scale, _ = levels[0]
+            eye_only = replace(prepared, settings=replace(prepared.settings, light_paths=0))
+            quick = render_prepared(level_view(eye_only, scale, 1), None, should_cancel=control.cancelled,
+                                    on_round=None if on_round is None else (lambda r: on_round(0, r)))
+            if control.cancelled() or quick is None:
+                return None
+            first = 1 if levels[0][1] == 1 and len(levels) > 1 else 0  # that level is drawn unless it refines
         with LocalExecutor() as executor:
             executor.start(prepared, None, False, control)
             light = executor.light_pass(prepared, plan, control, None)
@@ -78,6 +90,8 @@ def render_levels(prepared: PreparedScene, levels: list[tuple[int, int]], light:
             on_light(light)
     result = None
     for li, (scale, spp) in enumerate(levels):
+        if li < first:
+            continue
         if control.cancelled():
             return None
         each_round = None if on_round is None else (lambda r, li=li: on_round(li, r))

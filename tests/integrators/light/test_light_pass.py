@@ -256,6 +256,47 @@ def test_light_pass_is_the_same_whatever_the_threads():
     np.testing.assert_array_equal(maps[0], maps[1])
 
 
+def _light_pass_outputs(scene, threads, **kw):
+    ctx, lp, illum, stats = light_map(scene, threads=threads, **kw)
+    rec = lp.grating_records
+    return (illum.flux, None if rec is None else rec.flux, None if lp.splat is None else lp.splat.image,
+            {k: stats[k] for k in ("light_paths", "light_deposits", "light_rays")})
+
+
+@pytest.mark.parametrize("threads", [3, 4])
+def test_more_threads_than_lanes_trace_batches_into_logs_with_the_same_bits(threads, monkeypatch):
+    """With more threads than LANES every thread traces whole batches into logs replayed in lane
+    order: the caustic map, the grating records and the camera splat are those of one thread, bit
+    for bit, and the logged route really ran on several threads."""
+    import threading
+    from grating_record_scenes import two_mirror_scene
+    from opal_diffraction.core.integrators.light import light_pass as lp_mod
+
+    seen = set()
+    traced = lp_mod.trace_logged
+
+    def spy(*a, **k):
+        seen.add(threading.get_ident())
+        return traced(*a, **k)
+
+    for scene, kw in ((load_example("prism").build_scene(64, 40), dict(light_paths=12 * 32768)),
+                      (two_mirror_scene(), dict(light_paths=8 * 32768, element_size=0.05))):
+        one = _light_pass_outputs(scene, 1, **kw)
+        monkeypatch.setattr(lp_mod, "trace_logged", spy)
+        many = _light_pass_outputs(scene, threads, **kw)
+        monkeypatch.setattr(lp_mod, "trace_logged", traced)
+        lit = 0
+        for a, b in zip(one[:3], many[:3]):
+            assert (a is None) == (b is None)
+            if a is not None:
+                lit += int(a.any())
+                np.testing.assert_array_equal(a, b)
+        assert lit >= 1  # the prism: its caustic map and splat; the mirrors: the grating records
+        assert one[3] == many[3]
+    assert one[1] is not None and one[1].any()  # the last scene's gratings hold records
+    assert len(seen) >= 2
+
+
 def test_a_too_fine_element_size_is_coarsened_with_a_warning():
     s = slab_scene()
     res = render(s, RenderSettings(samples=1, light_paths=10_000, element_size=1e-4))

@@ -17,9 +17,11 @@ pass is told in four places:
   stream (seed, light pass, emitter, batch), and batches add into the map, so the map does not
   depend on how the work is split. ``LightWork`` is that split: the elements sized for the path
   budget, the batches in order and the LANES fixed lanes they are dealt to; ``run_light_pass``
-  runs the lanes on threads and sums them into a ``LightPassResult``. On a Dask worker a batch
-  deposits into a ``DepositLog``, replayed into the lane's maps on the client in the same order,
-  so a distributed map equals this one bit for bit (core/render/distributed.py).
+  runs the lanes on threads and sums them into a ``LightPassResult``. With more threads than
+  lanes (and on a Dask worker) a batch deposits into a ``DepositLog`` instead, replayed into its
+  lane's maps in the lane's order (``LaneAssembler``), so the map is the same bit for bit
+  whatever the thread count or the machines (core/render/distributed.py): every core traces
+  batches, while the lanes stay fixed.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ from types import MappingProxyType
 import numpy as np
 
 from ...util.blas_threads import one_blas_thread
-from .camera_splat import CameraConnection, CameraSplat
+from .camera_splat import CameraConnection, CameraSplat, SplatLog
 from ...transport.elements import ElementLayout, IlluminationMap
 from ...gratings.records import PILOT_STREAM, GratingRecords, record_layout
 from ...util.geometry import triangle_areas
@@ -42,7 +44,7 @@ from .targets import LightTargets
 from .walker import BATCH_PATHS, LightBatch, trace_batch
 
 __all__ = ["LightPassResult", "element_layout", "run_light_pass", "LANES", "LightWork", "DepositLog",
-           "finish_light_pass"]
+           "LaneAssembler", "trace_logged", "finish_light_pass"]
 
 LANES = 2  # fixed partial maps (so the result does not depend on the thread count)
 POLL_S = 0.1  # seconds between progress, cancel and time-limit checks
@@ -177,6 +179,62 @@ class DepositLog:
                 target.deposit(elements, flux, lam, towards_source, at=at)
 
 
+def trace_logged(prepared, work: LightWork, j: int, bounce: bool, splat: bool,
+                 connection: CameraConnection | None = None) -> dict:
+    """Trace batch ``j`` of ``work`` into logs instead of maps: {'illum', 'records' (DepositLog
+    calls or None), 'splat' (SplatLog calls or None), 'counts', 'elements'}, what
+    ``LaneAssembler.add`` replays (a local worker thread's or a Dask task's result)."""
+    illum = DepositLog(work.layout)
+    records = DepositLog(work.record_layout) if work.record_layout is not None else None
+    splat_log = SplatLog() if splat else None
+    counts = trace_batch(prepared, work.batches[j], illum, records, splat=splat_log, bounce=bounce,
+                         connection=connection)
+    return {"illum": illum.calls, "records": None if records is None else records.calls, "counts": counts,
+            "elements": work.layout.total, "splat": None if splat_log is None else splat_log.calls}
+
+
+class LaneAssembler:
+    """The lanes' maps, counts and camera splats, filled from logged batches (``trace_logged``)
+    that may finish in any order: a batch is replayed once every earlier batch of its lane has
+    been, so each lane adds its batches in the order direct deposits would (bit for bit).
+    ``add`` keeps a finished batch; ``drain`` replays what can be replayed and returns the
+    paths now in the maps."""
+
+    def __init__(self, prepared, work: LightWork, connection: CameraConnection | None):
+        self.work = work
+        self.maps = [work.empty_maps(prepared.grid.n) for _ in range(LANES)]
+        self.counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
+        self.splats = [connection.empty() for _ in range(LANES)] if connection is not None else None
+        self.lanes = [work.lane(k) for k in range(LANES)]
+        self.position = [0] * LANES  # how many of its batches each lane has added
+        self.ready: dict[int, dict] = {}  # finished batches a lane cannot add yet (an earlier one is missing)
+
+    def add(self, j: int, out: dict) -> None:
+        if out["elements"] != self.work.layout.total:
+            raise ValueError("a batch was laid out differently from the light pass's map")
+        self.ready[j] = out
+
+    def drain(self) -> int:
+        for k in range(LANES):  # add what each lane can, in its order
+            lane = self.lanes[k]
+            while self.position[k] < len(lane) and lane[self.position[k]] in self.ready:
+                out = self.ready.pop(lane[self.position[k]])
+                illum, records = self.maps[k]
+                DepositLog.replay_calls(out["illum"], illum)
+                if records is not None:
+                    DepositLog.replay_calls(out["records"], records)
+                if self.splats is not None:
+                    for pixels, values in out["splat"] or ():
+                        self.splats[k].add(pixels, values)
+                for name, value in out["counts"].items():
+                    self.counts[k][name] += value
+                self.position[k] += 1
+        return sum(c["paths"] for c in self.counts)
+
+    def complete(self) -> bool:
+        return all(self.position[k] == len(self.lanes[k]) for k in range(LANES))
+
+
 def finish_light_pass(prepared, work: LightWork, maps, counts, t0: float, timed_out: bool = False,
                       cancelled: bool = False, splats=None) -> LightPassResult:
     """The LightPassResult of lanes' ``maps`` [(illum, records)], ``counts`` [dict] and camera
@@ -223,8 +281,10 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
     ``plan`` (render/plan.RenderPlan of ``prepared``: its ``camera_splat`` and ``splat_bounce``).
 
     The batches are dealt to LANES fixed lanes (LightWork: batch j to lane j % LANES), each with
-    its own maps, run on up to ``prepared.threads`` threads and summed in lane order at the end,
-    so the result does not depend on the number of threads. ``progress`` and ``should_cancel``
+    its own maps, and summed in lane order at the end, so the result does not depend on the
+    number of threads: with up to LANES threads each lane deposits directly, with more every
+    thread traces batches into logs that the calling thread replays in lane order
+    (``_run_logged``). ``progress`` and ``should_cancel``
     are called from the calling thread only (every POLL_S seconds at most; a lane stops at its
     next batch). ``deadline``: a ``time.perf_counter()`` time; the pass stops there and scales
     what it deposited by planned / traced paths (batches of all lights are interleaved, so an
@@ -233,6 +293,8 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
     t0 = time.perf_counter()
     work = LightWork.of(prepared, n_paths)
     total = work.total
+    if prepared.threads > LANES and len(work.batches) > LANES:
+        return _run_logged(prepared, work, plan, progress, should_cancel, deadline, t0)
     maps = [work.empty_maps(prepared.grid.n) for _ in range(LANES)]
     counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
     # the camera splat (core/integrators/light/camera_splat.py), or None: off
@@ -272,3 +334,44 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
         for f in futures:
             f.result()  # re-raise a worker's exception here
     return finish_light_pass(prepared, work, maps, counts, t0, timed_out, cancelled, splats)
+
+
+def _run_logged(prepared, work: LightWork, plan, progress, should_cancel, deadline, t0: float) -> LightPassResult:
+    """run_light_pass on ``prepared.threads`` > LANES threads: every thread traces whole batches
+    into logs (``trace_logged``), submitted in batch order with a bounded number in flight (the
+    logs of finished batches wait only for their lane's earlier ones), and the calling thread
+    replays them into the lanes in order (``LaneAssembler``): the maps of a direct run, bit for
+    bit. A cancel or the time limit stops submitting; each lane keeps the prefix it added, as a
+    direct lane stops at its next batch."""
+    connection = CameraConnection.of(prepared) if plan.camera_splat else None
+    lanes = LaneAssembler(prepared, work, connection)
+    threads = int(prepared.threads)
+    ahead = 2 * threads  # batches traced or waiting for their lane at once (bounds the logs' memory)
+    total = work.total
+    cancelled = timed_out = False
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        pending, submitted = {}, 0
+        try:
+            while True:
+                while submitted < len(work.batches) and len(pending) + len(lanes.ready) < ahead:
+                    pending[pool.submit(trace_logged, prepared, work, submitted, plan.splat_bounce,
+                                        connection is not None, connection)] = submitted
+                    submitted += 1
+                done_set, _ = wait(pending, timeout=POLL_S)
+                for f in done_set:
+                    lanes.add(pending.pop(f), f.result())  # re-raises a worker's exception here
+                traced = lanes.drain()
+                if progress:
+                    progress(traced / max(total, 1), f"light pass: {traced / 1e6:.2f} M of {total / 1e6:.2f} M paths")
+                if lanes.complete():
+                    break
+                if should_cancel and should_cancel():
+                    cancelled = True
+                    break
+                if deadline is not None and time.perf_counter() > deadline:
+                    timed_out = True
+                    break
+        finally:
+            for f in pending:
+                f.cancel()  # the batches not started; running ones finish and are dropped
+    return finish_light_pass(prepared, work, lanes.maps, lanes.counts, t0, timed_out, cancelled, lanes.splats)
