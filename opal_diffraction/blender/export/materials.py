@@ -194,6 +194,8 @@ class MaterialTable:
             "specular_tint": tuple(float(c) for c in np.clip(surf.specular_tint, 0.0, MAX_INTENSITY)),
             "conductor_fresnel": surf.conductor_fresnel,
             "glass_tint": surf.glass_tint,
+            "thin_film_thickness": float(surf.thin_film_thickness) if surf.kind is not None else 0.0,
+            "thin_film_ior": float(surf.thin_film_ior),
         }
         row.update(self._texture_columns(surf, owner))
         row.update(self._program_columns(surf, owner, row))

@@ -32,7 +32,7 @@ import bpy
 import numpy as np
 from mathutils import Euler
 
-from ...core.scene.checks import SceneError
+from ...core.scene.checks import IOR_MAX as MAX_IOR, SceneError
 from .colour import blackbody_rgb, in_rec709, rgb
 from .images import image_mean
 from .messages import Warnings
@@ -95,6 +95,9 @@ class Surface:
     # shader-program registers per slot ('color', 'roughness', 'metallic', 'emission'), compiled by
     # the reader's ShaderCompiler (docs/physics.md section 13.6); empty: none
     programs: dict = field(default_factory=dict)
+    # Principled's Thin Film (docs/physics.md section 2.8): thickness (nm; 0: none) and the film's IOR
+    thin_film_thickness: float = 0.0
+    thin_film_ior: float = 1.33
 
     def layers(self) -> tuple[float, float]:
         """(metallic, transmission), from the kind where not given."""
@@ -629,11 +632,31 @@ class NodeReader(TextureBindings):
         if node.inputs.get("Diffuse Roughness") is not None and self.value(node, "Diffuse Roughness", 0.0) > 0.0:
             self.warn(f"{self.owner}: the Principled BSDF's diffuse roughness (Oren-Nayar) is rendered Lambertian")
         self._microfacet_options(node, "Anisotropic")
+        film_d, film_n = self._thin_film(node)
         weights = {"MIRROR": metallic, "DIELECTRIC": (1.0 - metallic) * trans, "DIFFUSE": (1.0 - metallic) * (1.0 - trans)}
         kind = max(weights, key=weights.get)  # ties: metal, then glass
         return Surface(kind, base, ior, rough, emission, metallic=metallic, transmission=trans,
                        specular_ior_level=level, specular_tint=np.clip(tint, 0.0, None), conductor_fresnel="F82_TINT",
-                       glass_tint="PASS")
+                       glass_tint="PASS", thin_film_thickness=film_d, thin_film_ior=film_n)
+
+    def _thin_film(self, node) -> tuple[float, float]:
+        """Principled's Thin Film Thickness (nm) and Thin Film IOR (Blender 4.2+; 0 and 1.33 where
+        absent). A linked socket is read as its own value, with value()'s warning; a negative
+        thickness is 0 and an IOR below 1 is 1, as the core's table requires, with a warning."""
+        if node.inputs.get("Thin Film Thickness") is None:
+            return 0.0, 1.33
+        d = self.value(node, "Thin Film Thickness", 0.0)
+        if d <= 0.0:
+            return 0.0, 1.33
+        if d == float("inf"):
+            raise SceneError(f"{self.owner}: 'Thin Film Thickness' of '{node.name}' is infinite")
+        n = self.value(node, "Thin Film IOR", 1.33) if node.inputs.get("Thin Film IOR") is not None else 1.33
+        if not 1.0 <= n <= MAX_IOR:
+            clamped = min(max(n, 1.0), MAX_IOR)
+            self.warn(f"{self.owner}: thin film IOR {n:g} of '{node.name}' is outside 1-{MAX_IOR:g}: "
+                      f"rendered as {clamped:g}")
+            n = clamped
+        return float(d), float(n)
 
     def _combine(self, a: Surface, b: Surface, wa: float, wb: float, node) -> Surface:
         out = self._combine_surfaces(a, b, wa, wb, node)
@@ -663,7 +686,9 @@ class NodeReader(TextureBindings):
                            specular_ior_level=(1 - t) * a.specular_ior_level + t * b.specular_ior_level,
                            specular_tint=(1 - t) * a.specular_tint + t * b.specular_tint,
                            conductor_fresnel=(a if t < 0.5 else b).conductor_fresnel,
-                           glass_tint=(a if t < 0.5 else b).glass_tint)
+                           glass_tint=(a if t < 0.5 else b).glass_tint,
+                           thin_film_thickness=(a if t < 0.5 else b).thin_film_thickness,
+                           thin_film_ior=(a if t < 0.5 else b).thin_film_ior)
         keep = a if wa >= wb else b
         self.warn(f"{self.owner}: '{node.name}' mixes {a.kind.lower()} and {b.kind.lower()} surfaces: rendered as "
                   f"{keep.kind.lower()}")
@@ -673,7 +698,8 @@ class NodeReader(TextureBindings):
 def _copy(s: Surface, emission) -> Surface:
     return Surface(s.kind, s.color, s.ior, s.roughness, emission, metallic=s.metallic, transmission=s.transmission,
                    specular_ior_level=s.specular_ior_level, specular_tint=s.specular_tint,
-                   conductor_fresnel=s.conductor_fresnel, glass_tint=s.glass_tint)
+                   conductor_fresnel=s.conductor_fresnel, glass_tint=s.glass_tint,
+                   thin_film_thickness=s.thin_film_thickness, thin_film_ior=s.thin_film_ior)
 
 
 def _conductor_fresnel(cos: float, n: np.ndarray, k: np.ndarray) -> np.ndarray:

@@ -103,6 +103,11 @@ class SurfaceParams:
     wo_local: np.ndarray | None = None  # (B, 3) wo in that frame
     f82: np.ndarray | None = None       # (B, k) CONDUCTOR's F82 factor b (f82_b), every row a conductor
     ms: np.ndarray | None = None        # (B, k) the multiscatter factor, every row one CONDUCTOR or GLOSSY lobe
+    # a thin film over the lobe's Fresnel (docs/physics.md section 2.8; None: no hit has one):
+    film_d: np.ndarray | None = None    # (B,) float64 thickness (nm; 0: no film on that hit)
+    film_n: np.ndarray | None = None    # (B,) float64 the film's index
+    film_ni: np.ndarray | None = None   # (B,) float64 the incident medium's index (1, or a glass's from inside)
+    film_wl: np.ndarray | None = None   # (B, k) float64 the wavelengths (nm) of the spectral columns
 
     def __len__(self):
         return len(self.lobe)
@@ -357,6 +362,46 @@ def _plastic_fresnel(cos, f0t, eta, spec_f0):
     return f0t + (1.0 - f0t) * s
 
 
+def _film_fresnel(p, code, cos, f):
+    """``f`` (the lobe's Fresnel: (B, k), or (B,) for DIELECTRIC) with a thin film's Airy
+    reflectance on the hits that have one (docs/physics.md section 2.8): over the conductor of F0
+    ``base`` and F82 reflectance (Gulbrandsen's n, k) for CONDUCTOR / GLOSSY; over the glass of
+    index ratio ``eta`` for DIELECTRIC (at the ray's one wavelength; white rows keep the plain
+    Fresnel: dispersive splits make them mono first); over the specular layer's index for
+    PLASTIC, scaled towards its F0 * tint as Cycles scales an iridescent generalized Schlick."""
+    if p.film_d is None:
+        return f
+    m = np.flatnonzero(p.film_d > 0)
+    if not len(m):
+        return f
+    from ..spectral import thin_film
+    from ..spectral.thin_film import thin_film_conductor, conductor_ior_from_f0_f82
+
+    c = np.abs(np.asarray(cos, np.float64))[m]
+    d, nf, ni, wl = p.film_d[m, None], p.film_n[m, None], p.film_ni[m, None], p.film_wl[m]
+    f = np.array(f, _F32)
+    if code in (CONDUCTOR, GLOSSY):
+        base = p.base[m].astype(np.float64)
+        if code == CONDUCTOR:
+            g = fresnel_f82(np.full(len(m), 1.0 / 7.0), base, f82_b(base, p.edge[m].astype(np.float64)))
+        else:
+            g = base
+        n, k = conductor_ior_from_f0_f82(base, g)
+        f[m] = thin_film_conductor(c[:, None], n, k, nf, d, wl, ni)
+    elif code == DIELECTRIC:
+        if p.base.shape[1] != 1:
+            return f
+        eta = p.eta[m].astype(np.float64)
+        f[m] = thin_film.thin_film_dielectric(c, eta, nf[:, 0], d[:, 0], wl[:, 0], ni[:, 0])[0]
+    else:  # PLASTIC: the layer's index from its F0 (F0_real = F0), then Cycles' scaling towards F0 * tint
+        f0 = np.clip(p.spec_f0[m].astype(np.float64), 1e-6, 0.99)[:, None]
+        film = thin_film.thin_film_dielectric(c[:, None], _ior_from_f0(f0), nf, d, wl, ni)[0].astype(np.float64)
+        factor = p.spec_f0[m, None] * p.spec_tint[m].astype(np.float64) / f0
+        s = np.clip((film - 1.0) / (f0 - 1.0), 0.0, 1.0)  # inverse_lerp(1, F0_real, F)
+        f[m] = np.clip(film * (1.0 + (factor - 1.0) * s), 0.0, 1.0)
+    return f
+
+
 def energy_compensation(params: SurfaceParams, cos_o) -> np.ndarray:
     """(B, k) factor by which the multiple-scattering compensation scales each hit's
     single-scattering microfacet lobe for cos(wo, ns) = cos_o (1 for LAMBERT and for smooth
@@ -475,7 +520,7 @@ def _eval_lobe(p, code, wo, wi, terms=None):
     if code in (CONDUCTOR, GLOSSY) and p.ms is not None:  # wo's factors known: all rows, the rest zeroed
         ok = up & rough
         fc, pd, coh = _eval_reflection_common(p.alpha, wo, wi)
-        f = fresnel_f82(coh, p.base, p.f82) if code == CONDUCTOR else p.base
+        f = _film_fresnel(p, code, coh, fresnel_f82(coh, p.base, p.f82) if code == CONDUCTOR else p.base)
         return (np.where(ok[:, None], f * (fc[:, None] * p.ms), _F32(0.0)).astype(_F32, copy=False),
                 np.where(ok, pd, _F32(0.0)).astype(_F32, copy=False))
     if code in (CONDUCTOR, GLOSSY):
@@ -484,7 +529,7 @@ def _eval_lobe(p, code, wo, wi, terms=None):
             q = _sub(p, m)
             fc, pd, coh = _eval_reflection_common(q.alpha, wo[m], wi[m])
             b = f82_b(q.base, q.edge) if code == CONDUCTOR else None
-            f = fresnel_f82(coh, q.base, b) if code == CONDUCTOR else q.base
+            f = _film_fresnel(q, code, coh, fresnel_f82(coh, q.base, b) if code == CONDUCTOR else q.base)
             fcos[m] = f * (fc[:, None] * _lobe_factor(q, mu_o[m], code, b))
             pdf[m] = pd
         return fcos, pdf
@@ -493,7 +538,7 @@ def _eval_lobe(p, code, wo, wi, terms=None):
         if len(m):
             q = _sub(p, m)
             fc, pd, coh = _eval_reflection_common(q.alpha, wo[m], wi[m])
-            f, _ = fresnel_dielectric(coh, q.eta)
+            f = _film_fresnel(q, code, coh, fresnel_dielectric(coh, q.eta)[0])
             fcos[m] = q.base * (f * fc * _glass_factor(q.alpha, mu_o[m], q.eta))[:, None]
             pdf[m] = f * pd
         m = np.flatnonzero(~up & rough & (np.abs(p.eta - 1.0) >= 1e-4))
@@ -506,7 +551,7 @@ def _eval_lobe(p, code, wo, wi, terms=None):
             h = np.where(h[:, 2:3] < 0, -h, h)
             coh, cih = np.sum(o * h, 1), np.sum(i * h, 1)
             ok = (coh > 0) & (cih < 0)
-            f, _ = fresnel_dielectric(coh, eta)
+            f = _film_fresnel(q, code, coh, fresnel_dielectric(coh, eta)[0])
             d = _ggx_d(a2, h)
             lo, li = _lambda(a2, o), _lambda(a2, i)
             denom = cih + coh / eta
@@ -526,7 +571,7 @@ def _eval_lobe(p, code, wo, wi, terms=None):
     m = np.flatnonzero(up & rough)
     if len(m):
         fc, pd, coh = _eval_reflection_common(p.alpha[m], wo[m], wi[m])
-        f = _plastic_fresnel(coh, f0t[m], eta[m], p.spec_f0[m])
+        f = _film_fresnel(_sub(p, m), PLASTIC, coh, _plastic_fresnel(coh, f0t[m], eta[m], p.spec_f0[m]))
         fcos[m] += f * fac[m] * fc[:, None]
         pdf[m] += ps[m] * pd
     return fcos, pdf
@@ -570,7 +615,7 @@ def _sample_lobe(p, code, wo, u):
         wi = _reflect_local(wo, h, cos_oh)
         ok = (wi[:, 2] > 0) & (cos_oh > 0)
         b = p.f82 if p.ms is not None else f82_b(p.base, p.edge) if code == CONDUCTOR else None
-        f = fresnel_f82(cos_oh, p.base, b) if code == CONDUCTOR else p.base
+        f = _film_fresnel(p, code, cos_oh, fresnel_f82(cos_oh, p.base, b) if code == CONDUCTOR else p.base)
         g = np.where(rough, (1.0 + lo) / (1.0 + lo + _lambda(a2, wi)), 1.0)
         if p.ms is not None:
             fac = p.ms
@@ -588,7 +633,7 @@ def _sample_lobe(p, code, wo, u):
         eta = p.eta
         unit = np.abs(eta - 1.0) < 1e-4  # index-matched: a straight pass, a delta transmission
         f, cos_t = fresnel_dielectric(cos_oh, eta)
-        f = np.where(unit, 0.0, f)
+        f = np.where(unit, 0.0, _film_fresnel(p, code, cos_oh, f))
         refl = u[:, 2] < f
         wr = _reflect_local(wo, h, cos_oh)
         wt = np.where(unit[:, None], -wo, _refract_local(wo, h, cos_oh, cos_t, eta))
@@ -626,7 +671,8 @@ def _sample_lobe(p, code, wo, u):
     flags[good] = np.where(spec[good], GLOSSY_REFLECTION, DIFFUSE_REFLECTION)
     if delta.any():  # a smooth coat: delta reflection, weight F / p_spec
         dm = np.flatnonzero(delta)
-        f = _plastic_fresnel(mu_o[dm], f0t[dm], eta_l[dm], p.spec_f0[dm])
+        f = _film_fresnel(_sub(p, dm), PLASTIC, mu_o[dm],
+                          _plastic_fresnel(mu_o[dm], f0t[dm], eta_l[dm], p.spec_f0[dm]))
         weight[dm] = f / ps[dm, None]
         pdf[dm] = np.inf
         flags[dm] = GLOSSY_REFLECTION | SINGULAR
@@ -794,8 +840,8 @@ def params_from_materials(materials, mat, front, lam=None, base=None, roughness=
             _gather_kernel(mat, lam_k, lobe, np.ascontiguousarray(st), edge, tint)
         ior = m.ior.mean(axis=1)[mat] if lam is None else m.ior[mat, lam_k]
         eta = np.where(lobe == DIELECTRIC, np.where(front, ior, 1.0 / ior), 1.0)
-        return SurfaceParams(lobe, np.ascontiguousarray(b, _F32), edge, alpha.astype(_F32), eta.astype(_F32),
-                             spec_f0, tint)
+        return _with_film(SurfaceParams(lobe, np.ascontiguousarray(b, _F32), edge, alpha.astype(_F32),
+                                        eta.astype(_F32), spec_f0, tint), m, mat, front, lam, ior)
     edge = np.where(lobe[:, None] == CONDUCTOR, np.minimum(spectral(m.specular_tint), 1.0), 1.0)
     tint = spectral(m.specular_tint)
     if lam is None:
@@ -803,9 +849,26 @@ def params_from_materials(materials, mat, front, lam=None, base=None, roughness=
     else:
         ior = m.ior[mat, np.asarray(lam, np.int64)]
     eta = np.where(lobe == DIELECTRIC, np.where(front, ior, 1.0 / ior), 1.0)
-    return SurfaceParams(lobe, np.ascontiguousarray(b, _F32), np.broadcast_to(edge, (B, k)).astype(_F32),
-                         alpha.astype(_F32), eta.astype(_F32), spec_f0,
-                         np.broadcast_to(tint, (B, k)).astype(_F32))
+    return _with_film(SurfaceParams(lobe, np.ascontiguousarray(b, _F32), np.broadcast_to(edge, (B, k)).astype(_F32),
+                                    alpha.astype(_F32), eta.astype(_F32), spec_f0,
+                                    np.broadcast_to(tint, (B, k)).astype(_F32)), m, mat, front, lam, ior)
+
+
+def _with_film(p: SurfaceParams, m, mat, front, lam, ior) -> SurfaceParams:
+    """``p`` with the thin-film columns where a hit's material has a film (docs/physics.md
+    section 2.8): thickness, index, the incident medium's index (a glass layer hit from inside:
+    its own) and the wavelengths of the spectral columns."""
+    film = getattr(m, "film", None)
+    if film is None or getattr(m, "wavelengths", None) is None or not film[mat].any():
+        return p
+    wl = np.asarray(m.wavelengths, np.float64)
+    k = p.base.shape[1]
+    p.film_d = m.film_thickness[mat].astype(np.float64)
+    p.film_n = m.film_ior[mat].astype(np.float64)
+    p.film_ni = np.where((p.lobe == DIELECTRIC) & ~front, np.asarray(ior, np.float64), 1.0)
+    p.film_wl = np.broadcast_to(wl[None, :], (len(mat), k)).copy() if lam is None else \
+        wl[np.asarray(lam, np.int64)][:, None]
+    return p
 
 
 def microfacet_materials(materials, textures=None) -> np.ndarray:
@@ -1431,6 +1494,8 @@ def _kernel_fits(p: SurfaceParams) -> bool:
     """The kernels take float32 parameters as params_from_materials makes them (anything else:
     the reference, whose NumPy promotions they would not reproduce)."""
     if not kernels_enabled() or not len(p.lobe) or p.base.ndim != 2 or p.base.shape[1] > _PAIRWISE_MAX:
+        return False
+    if p.film_d is not None:  # thin films: the reference (core/materials/thin_film.py's Airy sum)
         return False
     B = len(p.lobe)
     if not (all(_is32(a, 2) and a.shape == p.base.shape for a in (p.base, p.edge, p.spec_tint))

@@ -12,6 +12,10 @@ Rough surfaces and Principled's layers (core/materials/bsdf.py, docs/physics.md 
 per-material roughness, the layer weights metallic and transmission, the specular layer's F0
 (spec_f0 = ((ior - 1) / (ior + 1))^2 x 2 x IOR level, Cycles' Principled v2), the specular /
 edge tint spectrum and whether a metal uses the F82-tint Fresnel (else its colour is constant).
+
+A thin film (docs/physics.md section 2.8, core/spectral/thin_film.py) marks its smooth glass
+dispersive (the reflectance varies over the grid) and is read by ``film_fresnel`` below: the
+Fresnel reflectance of glass and of mirrors / metals with the film's Airy interference.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..spectral.optics import DISPERSION_MODELS, ior_spectrum
+from ..spectral.thin_film import THIN_FILM_CUTOFF_NM
 from ..util.enums import ConductorFresnel, GlassTint, MaterialKind
 from ..scene.model import Materials
 from ..spectral.spectrum import SpectralConverter
@@ -48,6 +53,10 @@ class PreparedMaterials:
     conductor_f82: np.ndarray = None  # (M,) bool: the metal uses the F82-tint Fresnel (else constant colour)
     glass_tint: np.ndarray = None     # (M, n) float32 the glass layer's tint per refraction (glass_tint_spectra)
     color_textured: np.ndarray = None  # (M,) bool: a texture gives the colour per hit (its glass keeps that tint)
+    film: np.ndarray = None            # (M,) bool: a thin film over the surface (thickness above the cutoff)
+    film_thickness: np.ndarray = None  # (M,) float64 the film's thickness (nm; 0 where none)
+    film_ior: np.ndarray = None        # (M,) float64 the film's index
+    wavelengths: np.ndarray = None     # (n,) float64 the grid's wavelengths (nm), for the films' phases
 
 
 def glass_tint_spectra(color, glass_tint, conv: SpectralConverter) -> np.ndarray:
@@ -81,7 +90,11 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
     ior = np.ones((len(kind), len(wl)))
     for i in np.flatnonzero(kind == DIELECTRIC):  # one row per material, not per ray
         ior[i] = ior_spectrum(wl, _MODEL_NAMES[int(m.dispersion[i])], float(m.ior[i]), float(m.abbe[i]))
-    dispersive = (kind == DIELECTRIC) & (np.ptp(ior, axis=1) > 0) if len(kind) else np.zeros(0, bool)
+    film_d = np.asarray(m.thin_film_thickness, np.float64)
+    film = film_d > THIN_FILM_CUTOFF_NM
+    # a thin film makes smooth glass's Fresnel vary over the grid: white rays split there as at a
+    # dispersive index (reflect white with the film's spectrum, refract mono; docs/physics.md section 2.8)
+    dispersive = (kind == DIELECTRIC) & ((np.ptp(ior, axis=1) > 0) | film) if len(kind) else np.zeros(0, bool)
     emission = conv.illuminant_from_rgb(np.asarray(m.emission, np.float64).reshape(-1, 3)).astype(np.float32)
     refl32 = refl.astype(np.float32)
     clear = np.all(refl32 == 1.0, axis=1) if len(refl32) else np.zeros(0, bool)
@@ -95,4 +108,8 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
                              transmission=np.asarray(m.transmission, np.float32),
                              spec_f0=spec_f0.astype(np.float32), specular_tint=tint,
                              conductor_f82=np.asarray(m.conductor_fresnel) == int(ConductorFresnel.F82_TINT),
-                             glass_tint=glass_tint.astype(np.float32), color_textured=(np.asarray(m.color_texture) >= 0) | (np.asarray(m.shader_program) >= 0))
+                             glass_tint=glass_tint.astype(np.float32),
+                             color_textured=(np.asarray(m.color_texture) >= 0) | (np.asarray(m.shader_program) >= 0),
+                             film=film, film_thickness=np.where(film, film_d, 0.0),
+                             film_ior=np.asarray(m.thin_film_ior, np.float64),
+                             wavelengths=np.asarray(wl, np.float64))

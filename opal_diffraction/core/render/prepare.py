@@ -239,12 +239,23 @@ def _with_deadline(stopped, deadline: float | None, armed: threading.Event):
     return check_both
 
 
+def _film_warnings(m) -> list[str]:
+    """A thin film the transport leaves out (docs/physics.md section 2.8): under a grating layer
+    or an opal's Bragg lattice, whose own Fresnel terms stay the plain ones."""
+    from ..spectral.thin_film import THIN_FILM_CUTOFF_NM
+
+    film = np.asarray(m.thin_film_thickness, np.float64) > THIN_FILM_CUTOFF_NM
+    return [f"material '{m.name[i]}': its thin film is not rendered under its grating layer (plain Fresnel there)"
+            for i in np.flatnonzero(film & (np.asarray(m.grating) != 0))]
+
+
 def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
     t0 = time.perf_counter()
     settings = settings or RenderSettings()
     settings.validate()
     checked = validate(scene)
     scene, warnings = checked.scene, checked.warnings
+    warnings.extend(_film_warnings(scene.materials))
     cross, cross_norm = checked.triangle_cross, checked.triangle_cross_norm  # validation's products
     del checked  # cross and cross_norm are freed below, once the normals are made
     if settings.light_paths is None:  # automatic: sized to the image (settings.auto_light_paths)

@@ -107,6 +107,9 @@ MATERIAL_COLUMNS = {
     "void_ior": (np.float32, (), 1.0, None),
     "layers": (np.int32, (), 40, None),
     "mosaic_spread": (np.float32, (), 3.0, None),
+    # a thin film over the surface's Fresnel (Principled's Thin Film; docs/physics.md section 2.8)
+    "thin_film_thickness": (np.float32, (), 0.0, None),
+    "thin_film_ior": (np.float32, (), 1.33, None),
 }
 
 #: The material columns that name a texture.
@@ -170,6 +173,11 @@ class Materials:
     and void_ior (1-3), layers (ordered (111) periods, 1-10000) and mosaic_spread (degrees, 0-45:
     the spread of the plane normals about the domain's axis); the base kind is the body tone.
 
+    Thin film (docs/physics.md section 2.8; core/spectral/thin_film.py): thin_film_thickness d
+    (nm, >= 0; 0: none) and thin_film_ior (>= 1) of a film over the surface, whose Airy
+    interference replaces the Fresnel reflectance of smooth glass, mirrors and metals (and of the
+    rough lobes) at every wavelength; Principled BSDF's Thin Film Thickness and Thin Film IOR.
+
     Image textures (docs/physics.md section 13), each an index into ``Scene.textures`` or -1:
     color_texture replaces ``color`` per hit (which keeps the texture's average for what reads
     one colour per material), roughness_texture / metallic_texture replace those values (the
@@ -217,6 +225,8 @@ class Materials:
     void_ior: np.ndarray = field(default_factory=lambda: _material_column_default("void_ior", 0))
     layers: np.ndarray = field(default_factory=lambda: _material_column_default("layers", 0))
     mosaic_spread: np.ndarray = field(default_factory=lambda: _material_column_default("mosaic_spread", 0))
+    thin_film_thickness: np.ndarray = field(default_factory=lambda: _material_column_default("thin_film_thickness", 0))
+    thin_film_ior: np.ndarray = field(default_factory=lambda: _material_column_default("thin_film_ior", 0))
 
     def __len__(self):
         return _rows(self.kind)

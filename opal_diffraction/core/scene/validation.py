@@ -487,8 +487,18 @@ def _validate_materials(m: Materials) -> Materials:
     # every float column: finite and within float32
     for name in ("color", "emission", "ior", "abbe", "period", "slit_width", "coherence_length", "rotation",
                  "normal_strength", "emission_strength", "roughness", "metallic", "transmission",
-                 "specular_ior_level", "specular_tint", "sphere_diameter", "sphere_ior", "void_ior", "mosaic_spread"):
+                 "specular_ior_level", "specular_tint", "sphere_diameter", "sphere_ior", "void_ior", "mosaic_spread",
+                 "thin_film_thickness", "thin_film_ior"):
         check_range(f64[name], label, name.replace("_", " "), "")
+    film_d, film_n = f64["thin_film_thickness"], f64["thin_film_ior"]
+    bad = film_d < 0
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"{label(i)}: thin film thickness must be >= 0 nm, got {number_text(film_d[i])}")
+    bad = (film_d > 0) & ~((film_n >= 1.0) & (film_n <= IOR_MAX))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"{label(i)}: thin film IOR must be between 1 and {IOR_MAX:g}, got {number_text(film_n[i])}")
     for name in TEXTURE_COLUMNS:
         bad = out[name].astype(np.int64) < -1
         if bad.any():

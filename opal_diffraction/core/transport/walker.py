@@ -60,6 +60,7 @@ from . import wavelengths
 from .path_state import PathState
 from .rows import RowView, holds_none, join, pending_copy, subset
 from ..materials.spectra import DIELECTRIC, DIFFUSE as DIFFUSE_KIND, MIRROR
+from ..materials import thin_film
 from ..spectral.optics import fresnel_dielectric, reflect, refract
 from ..util.jit import kernels_enabled, njit
 
@@ -544,10 +545,36 @@ class SpecularWalker:
         ns = self.specular_normal(rays, hit)
         d = reflect(rays.d, ns)
         o = hit.p + hit.eps[:, None] * hit.ng
-        out = rays.moved(o.astype(np.float32), d.astype(np.float32), self.tinted_weight(rays, hit))
+        film = thin_film.film_rows(self.prepared.materials, hit.mat)
+        w = self.tinted_weight(rays, hit) if film is None else self._filmed_mirror_weight(rays, hit, ns, film)
+        out = rays.moved(o.astype(np.float32), d.astype(np.float32), w)
         if out.differentials is not None:  # ray differentials (core/sampling/footprint.py)
             out.state.rd = footprint.reflect_differentials(rays.differentials, rays.o, rays.d, hit.p, ns)
         return out
+
+    def _filmed_mirror_weight(self, rays: Rays, hit: Hit, ns, film):
+        """The weight after mirrors some of which (``film`` (B,) bool) carry a thin film: there the
+        tint is the film-over-conductor reflectance at the ray's angle and wavelengths
+        (core/materials/thin_film.py), elsewhere the tint (docs/physics.md section 2.8)."""
+        m = self.prepared.materials
+        table = np.array(self._per_ray(m.reflectance, hit.mat, rays.lam), np.float32)  # (B, n) or (B,)
+        idx = np.flatnonzero(film)
+        cos = np.abs(np.einsum("ij,ij->i", rays.d[idx], ns[idx]))
+        table[idx] = thin_film.conductor_reflectance(m, self.prepared.grid.wavelengths, hit.mat[idx], cos,
+                                                     None if rays.lam is None else rays.lam[idx])
+        return rays.weighted(table)
+
+    def _glass_fresnel(self, rays: Rays, hit: Hit, cos, n, fr):
+        """``fr`` (B,) with the thin film's reflectance where the glass has one (None: no film)."""
+        film = thin_film.film_rows(self.prepared.materials, hit.mat)
+        if film is None:
+            return fr
+        idx = np.flatnonzero(film)
+        lam = np.zeros(len(rays), np.int64) if rays.lam is None else rays.lam
+        fr = np.array(fr, np.float32)
+        fr[idx] = thin_film.glass_fresnel(self.prepared.materials, self.prepared.grid.wavelengths, hit.mat[idx],
+                                          hit.front[idx], np.asarray(cos)[idx], np.asarray(n)[idx], lam[idx])
+        return fr
 
     def dielectric_bounce(self, rays: Rays, hit: Hit, rng, u=None) -> tuple[Rays, np.ndarray]:
         """Fresnel-sampled reflection or refraction at smooth glass: (the rays going on, refracted
@@ -561,7 +588,8 @@ class SpecularWalker:
         prepared = self.prepared
         ior = prepared.materials.ior
         ns = self.specular_normal(rays, hit)
-        if kernels_enabled() and _fits_dielectric_kernel(rays, hit, ns, ior):
+        film = thin_film.film_rows(prepared.materials, hit.mat)
+        if kernels_enabled() and film is None and _fits_dielectric_kernel(rays, hit, ns, ior):
             d, o, transmitted = _dielectric_by_kernel(ior, rays, hit, ns, rng.random(len(rays)) if u is None else u)
             out = rays.moved(o, d, self.tinted_weight(rays, hit))
             if out.differentials is not None:  # ray differentials (core/sampling/footprint.py)
@@ -574,6 +602,8 @@ class SpecularWalker:
         cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
         cos = np.asarray(cos_s, np.float32)
         fr, _ = fresnel_dielectric(np.abs(cos), np.where(hit.front, n, 1.0 / n).astype(np.float32))
+        if film is not None:  # a thin film's interference (docs/physics.md section 2.8)
+            fr = self._glass_fresnel(rays, hit, cos, n, fr)
         refl = (rng.random(len(rays)) if u is None else u) < fr
         cos_t = np.sqrt(np.maximum(np.float32(0), 1 - eta * eta * np.maximum(np.float32(0), 1 - cos * cos)))
         a = np.where(refl, np.float32(1), eta)

@@ -25,6 +25,10 @@ one-wavelength pick:
   drawn from p with weights w_k (1 - F_k) / ((1 - P) K p_k): the facets' white
   reflections of the lights keep their colour exact, only light that enters the glass is split.
 
+A thin film on smooth glass (docs/physics.md section 2.8) makes F_k vary over the grid as a
+dispersive index does: such glass is marked dispersive, its F_k is the film's Airy reflectance
+(core/materials/thin_film.py), and its batches take the NumPy lines below.
+
 Smooth glass's white reflect / refract choice, the draw and the children's refraction run as one
 numba loop per batch when kernels are on (``_glass_kernel``, core/util/jit.py): per ray one
 Fresnel row, NumPy's pairwise row sums reproduced, no (B, n) temporaries; bit-identical to the
@@ -168,13 +172,21 @@ def split_at_glass(walker, rays, hit, rng, u=None):
     b = len(rays)
     ns = walker.specular_normal(rays, hit)
     wt = walker.tinted_weight(rays, hit)  # (B, n) or None: the glass's tint applies to both branches
-    if kernels_enabled() and _fits_glass_kernel(rays, hit, ns, wt, prepared.materials.ior):
+    from ..materials import thin_film
+
+    film = thin_film.film_rows(prepared.materials, hit.mat)
+    if kernels_enabled() and film is None and _fits_glass_kernel(rays, hit, ns, wt, prepared.materials.ior):
         return children, child_hits, _split_smooth_by_kernel(walker, rays, hit, ns, wt, u)
     ior = prepared.materials.ior[hit.mat].astype(np.float64)  # (B, n)
     eta = np.where(hit.front[:, None], 1.0 / ior, ior)
     cos_s = hit.cos_i if ns is hit.ng else -np.einsum("ij,ij->i", rays.d, ns)
     fr, _ = fresnel_dielectric(np.abs(np.asarray(cos_s, np.float64))[:, None],
                                np.where(hit.front[:, None], ior, 1.0 / ior))  # (B, n)
+    if film is not None:  # a thin film's interference at every wavelength (docs/physics.md section 2.8)
+        idx = np.flatnonzero(film)
+        fr = np.array(fr)
+        fr[idx] = thin_film.glass_fresnel(prepared.materials, grid.wavelengths, hit.mat[idx], hit.front[idx],
+                                          np.abs(np.asarray(cos_s, np.float64))[idx], ior[idx])
     q = importance(grid, wt, b, settings.dispersion_importance)
     qs = q.sum(axis=1)
     p_refl = np.where(qs > 0, (q * fr).sum(axis=1) / np.where(qs > 0, qs, 1.0), 1.0)

@@ -45,6 +45,7 @@ def split_first_dielectric(walker, rays: Rays, hit: Hit, rng, u, dielectric):
     ns = walker.specular_normal(rf, hf)
     cos = hf.cos_i if ns is hf.ng else -np.einsum("ij,ij->i", rf.d, ns)
     fr = np.asarray(fresnel_dielectric(np.abs(cos), eta)[0], np.float32)
+    fr = walker._glass_fresnel(rf, hf, np.abs(cos), n, fr)  # a thin film's (docs/physics.md section 2.8)
     # reflected children where F > 0, refracted ones where F < 1 (not under total internal reflection)
     refl, refr = np.flatnonzero(fr > 0), np.flatnonzero(fr < 1)
     pick = np.concatenate([refl, refr])
