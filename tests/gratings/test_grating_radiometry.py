@@ -363,6 +363,24 @@ def test_white_furnace_grating_on_white_mirror():
     assert diffraction.mean() > 0.1 * rest.mean()
 
 
+def test_transmission_grating_before_the_world_gives_its_order_sum():
+    """A transmission grating on a black base (air on both sides) in a uniform world: the camera
+    sees the world behind it through every order, the zeroth included: per pixel and bin
+    sum_m e_m K(w_src,m) over the orders that propagate to the far side, computed order by order
+    (the tangential map is the reflection's, so ``world_orders_reference`` holds); the base
+    adds nothing. Before, the world behind a transmission grating was not diffracted (black)."""
+    s = furnace_scene({"kind": "DIFFUSE", "color": (0, 0, 0)}, grating_type="TRANSMISSION", pixels=8)
+    st = RenderSettings(samples=64, threads=1, filter_width=0.0, blue_noise=False)  # independent pixels (the Z-test)
+    res = render(s, st, spectral_film=True)
+    ctx = prepare(s, st)
+    ratio = (res.spectral / ctx.world_spectrum[None, None, :]).reshape(-1, ctx.grid.n)
+    o, d = pixel_centre_rays(s.camera)
+    assert (d[:, 2] < 0).all()  # every pixel sees the grating
+    expected = world_orders_reference(d, ctx.grid.bin_edges)
+    assert_matches_in_the_mean(ratio, expected, "transmission")
+    assert expected.mean() > 0.4
+
+
 def test_white_furnace_transmission_grating_on_glass_is_unbiased():
     """Glass base under a transmission grating: the Fresnel reflection keeps its weight, the
     refraction is the zeroth transmitted order (weight (a/D)^2 K of the refracted direction).
