@@ -339,10 +339,10 @@ def harvey_shack_factor(alpha_i, beta_i, wavelength, ratio, d, n=None, bin_width
 
 #: nodes of the finite-N cumulative table per main-lobe half width pi / N (capped by _FINITE_NODES)
 _FINITE_PER_LOBE = 32
-_FINITE_NODES = 1 << 21
+_FINITE_NODES = 1 << 20  # three float64 arrays: 25 MB per cached table at most
 
 
-@lru_cache(maxsize=32)
+@lru_cache(maxsize=8)
 def _finite_tables(ratio: float, n: int, periods: int):
     """The cumulative power of the finite-N pattern along eta = pi D u / lambda, and its integral.
 
