@@ -13,7 +13,8 @@
   caustic map's flux centroid per wavelength and order sits at tan(asin(sin theta_i + m lambda/D))
   within one element, at normal and 45 degrees incidence; the flux of orders +-1 over order 0
   is sinc^2(pi a/D) (Z-test with the compound-Poisson variance of the deposits, and within 3 %);
-  the zeroth order's absolute flux is E A cos theta_i (a/D)^2 (Z-test). Rendered (spectral
+  the zeroth order's absolute flux is E A cos theta_i (a/D)^2 K (Z-test; K the Harvey-Shack factor,
+  counted here by brute force). Rendered (spectral
   image of an orthographic camera): the first order's centroid per wavelength within a pixel.
 - Layering: a reflection grating over a mirror and over a diffuse base throws E A cos theta (a/D)^2
   sinc^2(pi m a/D) on a wall (a = D: the mirror); over glass, Fresnel and the orders replacing
@@ -70,6 +71,18 @@ def expected_orders(w_i, n, t, s, lam, d, ratio, eta_i, eta_o):
             x = np.pi * m * ratio
             out[m] = ratio**2 * (1.0 if m == 0 else (np.sin(x) / x) ** 2)
     return out
+
+
+def harvey_shack_per_bin(edges, u_in, ratio, eta_o=1.0, sub=11):
+    """(K,) the Harvey-Shack factor K = (a/D) / sum_prop e averaged over each wavelength bin (the
+    light pass draws the wavelength uniformly inside it), the propagating orders counted here
+    by brute force with the sine condition |u_in + m lambda / D| < eta_o (normal along s)."""
+    edges = np.asarray(edges, np.float64)
+    lam = edges[:-1, None] + (edges[1:] - edges[:-1])[:, None] * (np.arange(sub) + 0.5)[None, :] / sub
+    m = np.arange(-400, 401)[None, None, :]
+    e = ratio**2 * np.sinc(m * ratio) ** 2
+    prop = np.abs(u_in + m * lam[:, :, None] / PERIOD) < eta_o
+    return (ratio / np.sum(np.where(prop, e, 0.0), axis=2)).mean(axis=1)
 
 
 @pytest.mark.parametrize("case", CASES, ids=IDS)
@@ -342,7 +355,7 @@ def test_order_flux_ratios(screen):
     """Flux of order +-1 over order 0, over the wavelength bins both reach in full: sinc^2(pi a/D)
     = 0.4053 (a = D/2), Z-test (compound-Poisson variance: sum of squared deposits) and within
     3 %; order +-2 carries nothing (sinc^2(pi) = 0); the zeroth order's absolute flux is
-    E A cos theta_i (a/D)^2 per wavelength sample (E the sun's spectrum)."""
+    E A cos theta_i (a/D)^2 K per wavelength sample (E the sun's spectrum, K Harvey-Shack's factor)."""
     th, (x, flux, lam, p) = screen
     grid = p.grid
     masks = _order_masks(th, x, lam, grid)
@@ -374,8 +387,8 @@ def test_order_flux_ratios(screen):
             x3 = order_x(th, 3 * np.sign(m), grid.wavelengths)
             own = sel & ~((x > np.nanmin(x3) - 0.02) & (x < np.nanmax(x3) + 0.02)) if np.isfinite(x3).any() else sel
             assert flux[own].sum() < 1e-3 * flux[sel0].sum(), (m, np.nanmin(x2))
-    # absolute zeroth order: flux per wavelength sample = E_k A cos theta (a/D)^2
-    e = p.lights.spectrum[0].astype(np.float64)
+    # absolute zeroth order: flux per wavelength sample = E_k A cos theta (a/D)^2 K_k (Harvey-Shack)
+    e = p.lights.spectrum[0].astype(np.float64) * harvey_shack_per_bin(grid.bin_edges, np.sin(np.radians(th)), 0.5)
     f0 = flux[sel0].sum()
     expect = e.sum() * APERTURE**2 * np.cos(np.radians(th)) * 0.25
     sigma = np.sqrt(np.sum(flux[sel0] ** 2))
@@ -427,6 +440,7 @@ def test_reflection_grating_on_a_wall(ratio, base):
     z = pos[:, 2]
     tint = p.materials.reflectance[0] if base == "MIRROR" else 1.0
     e_inc = p.lights.spectrum[0].astype(np.float64) * APERTURE**2 * np.cos(t) * tint
+    e_inc = e_inc * harvey_shack_per_bin(p.grid.bin_edges, np.sin(t), ratio)  # the orders carry a/D
 
     def z_of(m, lam_nm):
         u = np.sin(t) + m * np.asarray(lam_nm, np.float64) / PERIOD
@@ -496,9 +510,10 @@ def test_glass_base_orders_replace_the_refraction():
     assert p.materials.clear[[0, 1]].all() and p.materials.ior[0].min() == p.materials.ior[0].max() == 1.5
     x = pos[:, 0]
     on_screen = pos[:, 2] < SCREEN_Z
-    e_sun = p.lights.spectrum[0].astype(np.float64) * APERTURE**2
-    f0 = _fresnel(1.0, 1.0, 1.5)
     edges = p.grid.bin_edges
+    # the orders into the glass (|m lambda / D| < 1.5) carry a/D: Harvey-Shack
+    e_sun = p.lights.spectrum[0].astype(np.float64) * APERTURE**2 * harvey_shack_per_bin(edges, 0.0, 0.5, eta_o=1.5)
+    f0 = _fresnel(1.0, 1.0, 1.5)
     for m in (-1, 0, 1):
         lam_fine = edges[:-1, None] + (edges[1:] - edges[:-1])[:, None] * (np.arange(11) + 0.5)[None, :] / 11
         sin_g = m * lam_fine / (1.5 * PERIOD)
@@ -515,7 +530,7 @@ def test_split_dispersion_sampling_at_gratings():
     sinc^2(pi/2) (normal incidence; Z-tests)."""
     pos, flux, lam, p = scene_deposits(screen_scene(0.0), 20_000, dispersion_sampling="SPLIT")
     x = pos[:, 0]
-    e = p.lights.spectrum[0].astype(np.float64).sum() * APERTURE**2
+    e = np.sum(p.lights.spectrum[0].astype(np.float64) * harvey_shack_per_bin(p.grid.bin_edges, 0.0, 0.5)) * APERTURE**2
     # the 61 children of one path share its start: the number of paths that reach the grating
     # (sun paths start on the caster's bounding disk, docs/physics.md section 4.1) is binomial,
     # a noise common to all children that the sum of squared deposits does not hold

@@ -29,11 +29,19 @@ Numerics (docs/physics.md sections 3.6 and 3.8, "each has bitten someone"):
   sin^2(N x) (1/sin^2 x - 1/x^2) with sin^2 replaced by its mean 1/2; error O(1/N)).
 - sinc^2 integrates in closed form too: int_0^z sinc^2 = Si(2z) - sin^2(z)/z.
 
+Harvey-Shack renormalisation (docs/physics.md section 3.2): K = (a/D) / (the power the orders
+send into the propagating disk), from the infinite-N order sums (``propagating_power``) for the
+light pass's discrete orders, and from the finite-N pattern's own propagating integral
+(``finite_propagating_power``: a cumulative table in eta, exact in the N-slit factor) for the
+eye pass's radiance, so no wavelength bin near a Rayleigh anomaly sends more than a/D.
+
 All functions are vectorised and compute internally in float64 (cheap next to the ray casting,
 and what makes float32 inputs agree with float64 ones); results come back in float64.
 """
 
 from __future__ import annotations
+
+from functools import lru_cache
 
 import numpy as np
 from scipy.special import sici
@@ -51,6 +59,7 @@ __all__ = [
     "grating_radiance_factor",
     "propagating_power",
     "harvey_shack_factor",
+    "finite_propagating_power",
     "hexagonal_harvey_shack_factor",
     "box_mean_product",
     "fraunhofer_pattern_footprint",
@@ -301,7 +310,7 @@ def propagating_power(alpha_i, beta_i, wavelength, ratio, d) -> np.ndarray:
     return float(ratio) ** 2 * np.maximum(table[hi_i] - table[lo_i], 0.0)
 
 
-def harvey_shack_factor(alpha_i, beta_i, wavelength, ratio, d) -> np.ndarray:
+def harvey_shack_factor(alpha_i, beta_i, wavelength, ratio, d, n=None, bin_width=None) -> np.ndarray:
     """Harvey-Shack renormalisation of a LINES grating: K = (a/D) / propagating_power >= 1.
 
     Scalar theory in direction cosines puts (a/D)^2 sinc^2(pi m a/D) into order m, and by
@@ -311,8 +320,89 @@ def harvey_shack_factor(alpha_i, beta_i, wavelength, ratio, d) -> np.ndarray:
     delivers the whole a/D, which reproduces the Rayleigh (Wood) anomalies - the jumps in the
     efficiency of the remaining orders as one turns evanescent. Ratios between propagating orders
     are unchanged. docs/physics.md section 3.2.
+
+    ``n``: the slit count; the factor then renormalises the finite-N pattern the eye pass
+    evaluates (``finite_propagating_power``: the lobes' tails across the horizon), so that its
+    propagating integral is a/D exactly, also within a few lobe widths of a Rayleigh anomaly
+    where the infinite-N sum over- or under-corrects; ``bin_width``: and for the mean over the
+    wavelength bin around ``wavelength`` (the eye pass's bin-averaged pattern). None: the
+    infinite-N order sum at the point (the light pass's discrete orders).
     """
-    return float(ratio) / np.maximum(propagating_power(alpha_i, beta_i, wavelength, ratio, d), 1e-300)
+    if n is not None:
+        power = finite_propagating_power(alpha_i, beta_i, wavelength, ratio, d, n, bin_width)
+    else:
+        power = propagating_power(alpha_i, beta_i, wavelength, ratio, d)
+    return float(ratio) / np.maximum(power, 1e-300)
+
+
+# --- Harvey-Shack for the finite-N pattern (docs/physics.md section 3.2, "finite N") -----------------
+
+#: nodes of the finite-N cumulative table per main-lobe half width pi / N (capped by _FINITE_NODES)
+_FINITE_PER_LOBE = 32
+_FINITE_NODES = 1 << 20  # three float64 arrays: 25 MB per cached table at most
+
+
+@lru_cache(maxsize=8)
+def _finite_tables(ratio: float, n: int, periods: int):
+    """The cumulative power of the finite-N pattern along eta = pi D u / lambda, and its integral.
+
+    W(eta) = ratio^2 / (N pi) int_0^eta sinc^2(ratio x) (sin N x / sin x)^2 dx, tabulated on
+    nodes over |eta| <= periods * pi: between neighbouring nodes the slit envelope is taken at the
+    interval's centre and the N-slit factor integrated exactly (``multislit_integral``), so the
+    N-slit factor's lobes are never sampled, only integrated (a period carries
+    ratio^2 sinc^2(ratio m pi) as N -> infinity: the order efficiency e_m). V = int W deta by
+    the trapezoid rule (bin means in eta). Returns (eta nodes, W, V)."""
+    step = np.pi / (_FINITE_PER_LOBE * n)
+    count = int(min(2 * periods * np.pi / step, _FINITE_NODES)) // 2
+    eta = np.linspace(-periods * np.pi, periods * np.pi, 2 * count + 1)
+    c = multislit_integral(eta, n)
+    mid = 0.5 * (eta[1:] + eta[:-1])
+    w = np.concatenate([[0.0], np.cumsum(sinc2(ratio * mid) * np.diff(c))]) * (ratio * ratio / (n * np.pi))
+    w -= w[count]  # W(0) = 0: odd
+    v = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(eta))])
+    return eta, w, v
+
+
+def _finite_table_for(ratio: float, n: int, eta_max: float):
+    periods = 1 << max(0, int(np.ceil(np.log2(max(eta_max / np.pi + 1.0, 1.0)))))  # few distinct tables
+    return _finite_tables(float(ratio), int(n), periods)
+
+
+def finite_propagating_power(alpha_i, beta_i, wavelength, ratio, d, n, bin_width=None) -> np.ndarray:
+    """The share of the incident power the finite-N pattern of a LINES grating sends into the
+    propagating disk: ratio^2 / (N pi) int sinc^2(ratio eta) (sin N eta / sin eta)^2 d eta over
+    eta = pi D u / lambda with u in [alpha_i - r, alpha_i + r], r = sqrt(1 - beta_i^2) (the
+    exit direction cosine along t, u - alpha_i, inside the unit disk at the order's v; the
+    slit-length spread lambda / L in v is neglected as in ``propagating_power``). As N grows it
+    tends to ``propagating_power``; for small N the lobes of evanescent orders reach into the
+    disk and those of propagating ones out of it (docs/physics.md section 3.2).
+
+    ``bin_width``: the mean over wavelengths uniform in [wavelength - w/2, wavelength + w/2]
+    instead (each eta bound then runs linearly over its interval: the mean of W from V)."""
+    alpha, beta = _in_unit_disk(np.asarray(alpha_i, np.float64), np.asarray(beta_i, np.float64))
+    lam = np.asarray(wavelength, np.float64)
+    d = np.asarray(d, np.float64)
+    r = np.sqrt(np.maximum(1.0 - beta * beta, 0.0))
+    if bin_width is None:
+        lam_lo = lam_hi = lam
+    else:
+        half = 0.5 * np.asarray(bin_width, np.float64)
+        lam_lo, lam_hi = lam - half, lam + half
+    scale_hi, scale_lo = np.pi * d / lam_lo, np.pi * d / lam_hi  # eta per unit u at both ends
+    eta_max = float(np.max(2.0 * scale_hi)) if np.size(scale_hi) else 1.0
+    nodes, w, v = _finite_table_for(ratio, n, eta_max)
+
+    def mean_w(u):  # W's mean while eta = pi D u / lambda runs over the wavelengths
+        e0, e1 = u * scale_lo, u * scale_hi
+        width = e1 - e0
+        point = np.interp(0.5 * (e0 + e1), nodes, w)
+        if bin_width is None:
+            return point
+        narrow = np.abs(width) < 1e-9
+        mean = (np.interp(e1, nodes, v) - np.interp(e0, nodes, v)) / np.where(narrow, 1.0, width)
+        return np.where(narrow, point, mean)
+
+    return np.maximum(mean_w(alpha + r) - mean_w(alpha - r), 0.0)
 
 
 def hexagonal_harvey_shack_factor(alpha_i, beta_i, wavelength, ratio, d) -> np.ndarray:

@@ -21,9 +21,9 @@ The continuation of the zeroth order is a delta lobe where the real order is lam
 wide: the same energy, narrower. Approximations, named once in docs/physics.md section 3.3: the
 grating's strips reflect (or pass) with reflectance 1 whatever the base colour, so a tinted
 mirror tints only the zeroth order; the orders through a glass base are not reduced by its
-Fresnel reflection; the grating diffracts the scene's lights, the light pass's records and the
-world (reflection gratings, core/gratings/world.py), not other surfaces, which only the zeroth
-order (through the continuation) shows.
+Fresnel reflection; the grating diffracts the scene's lights, its emissive meshes, the light
+pass's records and the world (reflection gratings, core/gratings/world.py), not other surfaces,
+which only the zeroth order (through the continuation) shows.
 """
 
 from __future__ import annotations
@@ -72,9 +72,11 @@ def active(prepared) -> bool:
 
 
 def zeroth_order_efficiency(g: PreparedGratings, mat: int, w_i, t, s, period, wavelength,
-                            renormalise: bool = True) -> np.ndarray:
+                            renormalise: bool = True, bin_width=None) -> np.ndarray:
     """eta_0 = f^2 K: the fraction of the power from w_i (B, 3) the zeroth order carries, per
-    sample and wavelength (``wavelength`` (B, K) or (B, 1) nm; ``period`` (B,) nm)."""
+    sample and wavelength (``wavelength`` (B, K) or (B, 1) nm; ``period`` (B,) nm). LINES: K of
+    the finite-N pattern the diffraction evaluates (section 3.2), over the bins of width
+    ``bin_width`` around ``wavelength`` when given."""
     f = strip_fraction(g)[mat]
     eta = np.full(np.broadcast_shapes((len(w_i), 1), np.shape(wavelength)), f * f)
     if not renormalise:
@@ -86,7 +88,7 @@ def zeroth_order_efficiency(g: PreparedGratings, mat: int, w_i, t, s, period, wa
     ratio = g.slit_width[mat] / g.period[mat]
     if g.hexagonal[mat]:
         return eta * hexagonal_harvey_shack_factor(alpha, beta, wavelength, ratio, d)
-    return eta * harvey_shack_factor(alpha, beta, wavelength, ratio, d)
+    return eta * harvey_shack_factor(alpha, beta, wavelength, ratio, d, n=int(g.slit_count[mat]), bin_width=bin_width)
 
 
 def scale_base(prepared, rays, hit):
@@ -133,7 +135,8 @@ def continue_specular(prepared, out, hit, transmitted, renormalise: bool = True)
         over = prepared.tri_period[h.prim] if len(prepared.tri_period) else np.zeros(idx.size, np.float32)
         period = np.where(over > 0, over, g.period[m])
         # light reaching the viewer along the zeroth order comes from the continuation's direction
-        factor[idx] = zeroth_order_efficiency(g, int(m), out.d[idx], t, s, period, centres[None, :], renormalise)
+        factor[idx] = zeroth_order_efficiency(g, int(m), out.d[idx], t, s, period, centres[None, :], renormalise,
+                                              bin_width=np.diff(prepared.grid.bin_edges)[None, :])
     factor = factor.astype(np.float32)
     if out.lam is not None:
         return dataclasses.replace(out, w=(out.w * factor[np.arange(len(out)), out.lam]).astype(np.float32))

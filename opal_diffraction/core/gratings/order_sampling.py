@@ -19,7 +19,9 @@ orders with a real normal component propagate. The scalar Fraunhofer order effic
 
 and the sampler draws m among the propagating orders with probability e_m / sum_prop e, with
 weight sum_prop e: its expected power is the integrated power of section 3.2, with no 1/cos
-theta_o (the same normalisation as the eye pass's radiance). The slit-length factor
+theta_o. The light pass (``scatter_at_gratings``) multiplies it by the Harvey-Shack factor
+K = (a/D) / sum_prop e of the incident direction (``renormalise``), as the eye pass renormalises
+its radiance, so both passes deliver a/D (one order distribution, docs/physics.md section 3.10). The slit-length factor
 sinc^2(pi L v / lambda) (section 3.1) spreads each order along s by dv = x lambda / L with x
 drawn from sinc^2(pi x) (a tabulated inverse CDF over |x| <= SPREAD_LOBES, exact at the
 table's nodes; the tail beyond holds 1 / (pi^2 SPREAD_LOBES) = 0.04 % of the power and is left
@@ -91,12 +93,12 @@ def order_efficiencies(m, a_over_d) -> np.ndarray:
 class OrderSample:
     direction: np.ndarray    # (B, 3) float64 unit outgoing directions (zero where weight is 0)
     order: np.ndarray        # (B,) int64 sampled order m
-    weight: np.ndarray       # (B,) float64 sum of the propagating orders' efficiencies (0: nothing leaves)
+    weight: np.ndarray       # (B,) float64 sum of the propagating orders' efficiencies, times K with renormalise (0: nothing leaves)
     total: np.ndarray        # (B,) float64 the same sum before the spread's evanescent part is cut
 
 
 def sample_orders(w_i, n, t, s, period, slit_width, wavelength, transmission, rng, *, eta_i=1.0, eta_o=1.0,
-                  length=None, exclude_zeroth: bool = False) -> OrderSample:
+                  length=None, exclude_zeroth: bool = False, renormalise: bool = False) -> OrderSample:
     """Sample an outgoing order of a LINES grating for B incoming directions.
 
     ``w_i`` (B, 3): unit directions from the surface towards where the light came from; ``n``
@@ -108,6 +110,9 @@ def sample_orders(w_i, n, t, s, period, slit_width, wavelength, transmission, rn
     m is drawn with probability e_m / sum_prop e over the orders with (w_o . t)^2 + (w_o . s)^2 < 1
     at the unspread v; the weight is sum_prop e (docs/physics.md section 3.10). ``exclude_zeroth``:
     m = 0 is neither drawn nor summed (a base whose specular lobe carries it, section 3.3).
+    ``renormalise``: the weight times the Harvey-Shack factor of the incident direction,
+    K = (a/D) / sum_prop e (the zeroth order included whatever ``exclude_zeroth`` says), so
+    the orders carry a/D as in the eye pass (docs/physics.md sections 3.2, 3.10).
     """
     w_i = np.asarray(w_i, np.float64)
     b = len(w_i)
@@ -128,6 +133,7 @@ def sample_orders(w_i, n, t, s, period, slit_width, wavelength, transmission, rn
     count = np.where(r > 0, np.maximum(m_hi - m_lo + 1, 0), 0)
     order = np.zeros(b, np.int64)
     total = np.zeros(b)
+    with_zeroth = np.zeros(b)
     k_max = int(count.max()) if b else 0
     u_draw = rng.random(b)
     if k_max > 0:
@@ -136,6 +142,7 @@ def sample_orders(w_i, n, t, s, period, slit_width, wavelength, transmission, rn
             sl = slice(c0, c0 + rows)
             m = m_lo[sl, None] + np.arange(k_max)[None, :]
             e = np.where(np.arange(k_max)[None, :] < count[sl, None], order_efficiencies(m, ratio[sl, None]), 0.0)
+            with_zeroth[sl] = e.sum(axis=1)
             if exclude_zeroth:
                 e = np.where(m == 0, 0.0, e)
             cdf = np.cumsum(e, axis=1)
@@ -156,7 +163,10 @@ def sample_orders(w_i, n, t, s, period, slit_width, wavelength, transmission, rn
     nz = np.sqrt(np.maximum(nz2, 0.0)) * np.where(trans, -1.0, 1.0)
     direction = uo[:, None] * t + vo[:, None] * s + nz[:, None] * n
     direction = np.where(ok[:, None], direction, 0.0)
-    return OrderSample(direction, order, np.where(ok, total, 0.0), total)
+    weight = total
+    if renormalise:  # K = (a/D) / sum_prop e: the propagating orders carry a/D (section 3.2)
+        weight = total * ratio / np.where(with_zeroth > 0, with_zeroth, np.inf)
+    return OrderSample(direction, order, np.where(ok, weight, 0.0), total)
 
 
 def _slit_ratio(g, mat):
@@ -224,7 +234,7 @@ def scatter_at_gratings(prepared, rays, hit, rng, split_white):
     transmits = np.where(glass, ~reflected, trans_type)
     eta_o = np.where(transmits, eta_t, eta_i)
     smp = sample_orders(w_i, hit.ng, t, s, period, slit, lam_nm, transmits, rng, eta_i=eta_i, eta_o=eta_o,
-                        length=g.length[hit.mat])
+                        length=g.length[hit.mat], renormalise=True)
     factor = smp.weight / np.where(kind == DIFFUSE, _slit_ratio(g, hit.mat), 1.0)
     d = smp.direction
     plain = ~grating_acts  # the glass branch the grating does not act on: plain reflection / refraction

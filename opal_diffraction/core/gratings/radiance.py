@@ -164,7 +164,8 @@ def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, p
     ``mat``: the material (one grating's parameters per call); w_o, w_i, t, s, normal: (B, 3);
     ``period``: (B,) nm (a per-triangle override, else the material's); the slit width keeps the
     material's ratio a / D. ``edges_nm``: (K + 1,) bin edges. ``renormalise``: the Harvey-Shack
-    factor (per sample and bin, at the bin's centre wavelength for LINES). ``exclude_zeroth``:
+    factor (per sample and bin; LINES: of the finite-N pattern, its propagating integral averaged
+    over the bin, kernel.finite_propagating_power). ``exclude_zeroth``:
     leave the zeroth order out (None: as the material's layering says, ``g.zeroth_in_base``).
     ``footprint``: (du, dv), each (B,), the extent of each sample's pixel footprint in (u, v)
     (core/sampling/footprint.py), optionally with (su, sv), each (B,), the shift from the sample's (u, v)
@@ -195,9 +196,11 @@ def diffracted_radiance(g: PreparedGratings, mat: int, w_o, w_i, t, s, normal, p
                                           exclude_zeroth=exclude_zeroth) / NM**2
         factor = (a * NM) ** 2 * (length * NM) * n / (d * NM)
         if renormalise:
+            # K of the finite-N pattern averaged over each bin (kernel.finite_propagating_power), so
+            # the bin's propagating integral is a/D exactly, near Rayleigh anomalies too
             centre = 0.5 * (edges[1:] + edges[:-1])[None, :]
             factor = factor * harvey_shack_factor(np.sum(w_i * t, axis=1)[:, None], np.sum(w_i * s, axis=1)[:, None],
-                                                  centre, ratio, d)
+                                                  centre, ratio, d, n=n, bin_width=np.diff(edges)[None, :])
         return (factor * p).astype(np.float32)
     # hexagonal lattice: one stratified random wavelength per bin and sample
     t2 = 0.5 * t + (np.sqrt(3) / 2) * np.cross(normal, t)

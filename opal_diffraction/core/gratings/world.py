@@ -25,9 +25,14 @@ here (the continuation sees the world there already); over any other base every 
 zeroth included (the base keeps 1 - f of its response). Other lights are not counted twice: the
 eye pass's lights and the light pass's records are evaluated by ``diffracted_radiance`` and do
 not include the world, and the light pass's world paths reach gratings only through mirrors or
-glass. Not covered: transmission gratings (the world behind them needs the ray continued through
-the glass) and HEXAGONAL lattices; the diffracted image of other surfaces (only the world is
+glass. Not covered: transmission gratings over glass (the world behind them needs the ray
+continued through the glass) and HEXAGONAL lattices; the diffracted image of other surfaces (only the world is
 looked up, an occluded direction adds nothing).
+
+A transmission grating (over a base that is not glass: air on both sides) sees the world behind
+it the same way: the orders are sampled towards the far side (``sample_orders`` with
+``transmission``; the grating equation's tangential map is the same) and the shadow ray leaves
+from the far face (docs/physics.md section 3.11).
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ import numpy as np
 
 from .kernel import harvey_shack_factor
 from .order_sampling import sample_orders
+from ..materials.spectra import DIELECTRIC
 
 __all__ = ["diffracts_world", "world_through_grating", "WAVELENGTHS"]
 
@@ -51,12 +57,15 @@ _LAMBDA_ROTATION = 0.6180339887498949
 
 def diffracts_world(prepared) -> np.ndarray:
     """(M,) bool: the grating materials whose world light this module adds (LINES reflection
-    gratings), all False when the world is black."""
+    gratings, and LINES transmission gratings whose base is not glass: air on both sides), all
+    False when the world is black."""
     g = prepared.gratings
     world = prepared.environment is not None or bool(np.any(prepared.world_spectrum > 0))
     if not world or not g.any:
         return np.zeros(len(g.enabled), bool)
-    return np.asarray(g.enabled, bool) & ~np.asarray(g.hexagonal, bool) & ~np.asarray(g.transmission, bool)
+    glass = np.asarray(prepared.materials.kind) == DIELECTRIC
+    trans = np.asarray(g.transmission, bool)
+    return np.asarray(g.enabled, bool) & ~np.asarray(g.hexagonal, bool) & ~(trans & glass)
 
 
 def world_through_grating(prepared, rays, hit, mat: int, t, s, period, rng, renormalise: bool = True):
@@ -87,7 +96,8 @@ def world_through_grating(prepared, rays, hit, mat: int, t, s, period, rng, reno
     ratio = float(g.slit_width[mat] / g.period[mat])
     d = np.asarray(period, np.float64)
     zeroth = g.zeroth_in_base is not None and bool(g.zeroth_in_base[mat])
-    smp = sample_orders(-rays.d.astype(np.float64), hit.ng, t, s, d, d * ratio, lam_nm, False, rng,
+    trans = bool(g.transmission[mat])  # the world behind the grating: its orders leave the far side
+    smp = sample_orders(-rays.d.astype(np.float64), hit.ng, t, s, d, d * ratio, lam_nm, trans, rng,
                         length=g.length[mat], exclude_zeroth=zeroth)
     weight = smp.weight
     src = smp.direction
@@ -97,7 +107,8 @@ def world_through_grating(prepared, rays, hit, mat: int, t, s, period, rng, reno
     live = np.flatnonzero(weight > 0)
     if live.size == 0:
         return None
-    o = (hit.p[live] + hit.eps[live, None] * hit.ng[live]).astype(np.float32)
+    side = -1.0 if trans else 1.0
+    o = (hit.p[live] + (side * hit.eps[live])[:, None] * hit.ng[live]).astype(np.float32)
     dirs = np.ascontiguousarray(src[live], np.float32)
     occ = prepared.accel.occluded(o, dirs, np.full(live.size, np.inf, np.float32))
     casts = live.size

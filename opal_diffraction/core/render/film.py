@@ -23,6 +23,12 @@ the image, a pass or the spectrum is set to black in all of them, and the result
 how many (an overflow the grating or light arithmetic did not prevent is never a silent success;
 the CLI prints every warning, with ``-q`` too).
 
+Then ``into_gamut``: a pixel whose spectrum lies outside the Rec.709 gamut (a grating's
+spectral colours) has a negative linear-RGB channel; it is desaturated towards its own
+luminance until none is negative (luminance and hue kept), its passes with it, and the
+result's stats count such pixels (``out_of_gamut_pixels``; docs/physics.md section 10.2). The
+spectral image is not changed: it is never negative.
+
 Passes (AOVs for the compositor, (H, W, 3) linear Rec.709): Direct (light reaching diffuse
 surfaces by shadow rays, also seen through mirrors and glass), Caustics (the light pass),
 Diffraction (gratings). Combined = Direct + Caustics + Diffraction + emitted light seen (the
@@ -50,7 +56,7 @@ from .plan import RenderPlan
 from ..scene.checks import SceneError
 from ..spectral.spectrum import SpectralConverter
 
-__all__ = ["Film", "RenderResult", "black_non_finite", "tile_parts_rgb", "camera_space_rotation", "FEATURE_PASSES", "NO_SPECTRAL",
+__all__ = ["Film", "RenderResult", "black_non_finite", "into_gamut", "tile_parts_rgb", "camera_space_rotation", "FEATURE_PASSES", "NO_SPECTRAL",
            "keeps_spectral"]
 
 #: Cycles' names of the denoising feature passes (a compositor Denoise node links to them)
@@ -242,6 +248,9 @@ class Film:
         stats = dict(stats, **self.sample_stats())
         warnings = list(warnings)
         bad = black_non_finite(rgb, spectral, passes)
+        mapped = into_gamut(rgb, passes)
+        if mapped:
+            stats["out_of_gamut_pixels"] = mapped
         if bad:
             warnings.append(f"{bad} pixel{'s' if bad != 1 else ''} of {rgb.shape[0] * rgb.shape[1]} had a non-finite "
                             f"value (NaN or infinite radiance: an overflow from the scene's numbers) and "
@@ -250,6 +259,60 @@ class Film:
         return RenderResult(spectral, rgb, self.conv.grid.wavelengths.copy(), samples, cancelled, plan,
                             warnings, stats, passes, self.counts.copy(),
                             np.minimum(self.alpha * scale[..., 0], 1.0))
+
+
+#: Rec.709 luminance of linear RGB (the Y row of the RGB -> XYZ matrix)
+_LUMINANCE = np.array([0.2126729, 0.7151522, 0.0721750], np.float32)
+#: the radiance passes (the feature passes are not colours)
+_COLOUR_PASSES = ("Direct", "Indirect", "Caustics", "Diffraction")
+
+
+def _gamut_scale(px: np.ndarray) -> np.ndarray:
+    """(P,) the largest s in [0, 1] with Y + s (rgb - Y) >= 0 in every channel, for (P, 3)
+    float64 colours (1 where none is negative; 0 where Y <= 0)."""
+    y = px @ _LUMINANCE.astype(np.float64)
+    low = px.min(axis=1)
+    s = np.where(low >= 0, 1.0, np.clip(y / np.maximum(y - low, 1e-300), 0.0, 1.0))
+    return np.where((low < 0) & (y <= 0), 0.0, s)
+
+
+def _desaturate(arr: np.ndarray, mask: np.ndarray, s: np.ndarray) -> None:
+    """arr[mask] = Y + s (arr[mask] - Y), its own luminance Y, in place."""
+    px = arr[mask].astype(np.float64)
+    y = (px @ _LUMINANCE.astype(np.float64))[:, None]
+    arr[mask] = (y + s[:, None] * (px - y)).astype(arr.dtype)
+
+
+def into_gamut(rgb: np.ndarray, passes: dict) -> int:
+    """Pixels whose colour (or one of its parts) lies outside the Rec.709 gamut, desaturated into
+    it (in place); returns how many (docs/physics.md section 10.2).
+
+    Spectral radiance is never negative, but the narrow spectra of a grating's orders (a 5 nm
+    band is a spectral colour) lie outside any RGB gamut: their linear RGB has a negative
+    channel, which breaks compositing. Such a pixel moves towards its own luminance
+    Y (Rec.709 weights): rgb' = Y + s (rgb - Y), hue and luminance kept, saturation reduced.
+    The same affine map with the same s applies to each radiance pass and to the rest of the
+    image (the emission seen: rgb less the passes), so they still add up to the image exactly;
+    s is the largest value in [0, 1] that leaves no channel of any of them negative (the
+    minimum over them). A part with negative luminance cannot be mapped: it is black (only
+    rounding makes one)."""
+    names = [k for k in _COLOUR_PASSES if passes.get(k) is not None]
+    parts = [passes[k] for k in names]
+    rest = rgb - sum(parts) if parts else None
+    bad = rgb.min(axis=-1) < 0
+    for arr in parts + ([rest] if rest is not None else []):
+        bad |= arr.min(axis=-1) < 0
+    count = int(bad.sum())
+    if not count:
+        return 0
+    s = _gamut_scale(rgb[bad].astype(np.float64))
+    for arr in parts + [rest]:
+        s = np.minimum(s, _gamut_scale(arr[bad].astype(np.float64)))
+    for arr in [rgb] + parts:
+        _desaturate(arr, bad, s)
+    for arr in [rgb] + parts:  # rounding, and a part whose luminance is negative (s = 0 leaves Y < 0)
+        np.maximum(arr, 0.0, out=arr)
+    return count
 
 
 def black_non_finite(rgb: np.ndarray, spectral, passes: dict) -> int:

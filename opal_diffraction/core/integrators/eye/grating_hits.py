@@ -1,7 +1,9 @@
 """The gratings stage of the eye pass: light diffracted towards the viewer at a grating hit.
 
 At a hit on a grating layer (docs/physics.md sections 3.1-3.5, 3.11): every light's exact
-incident direction by shadow ray (so no noise from the light side) diffracted by
+incident direction by shadow ray (so no noise from the light side), and one point of the
+emissive meshes (core/lights/mesh_lights.py's power-proportional sample, as the next events
+draw it; section 3.13), diffracted by
 core/gratings/radiance.py's kernel into the viewer's direction, over the pixel's footprint where
 the rays carry differentials (core/sampling/footprint.py, section 3.7); the world seen through
 the grating's orders (core/gratings/world.py); and every directional lobe of the light pass's
@@ -44,8 +46,11 @@ def grating_light(c, out, rays: Rays, hit: Hit, rng):
                 sub, contrib, casts = seen
                 out.shadow_rays += casts
                 out.accumulate(sub, contrib, out.diffraction)
-        for li in range(len(lights)):  # loop over lights, not rays
-            wi, dist, gfac = sample_light(lights, li, h.p, rng)
+        samples = [(li, *sample_light(lights, li, h.p, rng), 0.0) for li in range(len(lights))]  # (a handful)
+        if prepared.mesh_lights is not None:  # the emissive meshes: one power-proportional point per hit
+            wi, dist, gfac, prim, _ = prepared.mesh_lights.sample(h.p, rng)
+            samples.append((prim, wi, dist, gfac, 2 * prepared.tri_offset[prim]))
+        for source, wi, dist, gfac, pad in samples:
             cos_l = np.einsum("ij,ij->i", wi, h.ng)
             valid = (cos_l < 0) if g.transmission[m] else (cos_l > 0)
             valid &= gfac > 0
@@ -55,7 +60,8 @@ def grating_light(c, out, rays: Rays, hit: Hit, rng):
             side = np.float32(-1.0 if g.transmission[m] else 1.0)
             eps = h.eps[idx]
             o = h.p[idx] + (side * eps)[:, None] * h.ng[idx]
-            tmax = np.where(np.isinf(dist[idx]), np.inf, dist[idx] - 2 * eps).astype(np.float32)
+            end = dist[idx] - 2 * eps - (pad if np.ndim(pad) == 0 else pad[idx])
+            tmax = np.where(np.isinf(dist[idx]), np.inf, end).astype(np.float32)
             occ = prepared.accel.occluded(o.astype(np.float32), np.ascontiguousarray(wi[idx], np.float32), tmax)
             out.shadow_rays += len(occ)
             idx = idx[~occ]
@@ -64,7 +70,11 @@ def grating_light(c, out, rays: Rays, hit: Hit, rng):
             rad = diffracted_radiance(g, m, w_o[idx], wi[idx], t[idx], s[idx], h.ng[idx], period[idx], edges, rng,
                                       footprint=_footprint(r, h, idx, t, s, wi, dist))
             e = (gfac[idx] * np.abs(cos_l[idx])).astype(np.float32)
-            spec = rad * e[:, None] * lights.spectrum[li][None, :]
+            if np.ndim(source) == 0:  # a light: its spectrum
+                emitted = lights.spectrum[source][None, :]
+            else:  # an emissive triangle's (both sides emit, as the eye pass's next events take them)
+                emitted = prepared.materials.emission[prepared.tri_material[source[idx]]]
+            spec = rad * e[:, None] * emitted
             sub = r.take(idx)
             contrib = sub.weighted(spec) if sub.lam is None else sub.w * spec[np.arange(len(idx)), sub.lam]
             out.accumulate(sub, contrib, out.diffraction)
