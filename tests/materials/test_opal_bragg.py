@@ -455,8 +455,13 @@ def flash_scene():
     return s
 
 
-def predicted_flash_rgb(prep, n=2_000_000, seed=0):
-    """Sum over the image's pixels of the floor's radiance from the flash alone, by Monte Carlo
+#: Rec.709 luminance weights (CIE Y of the linear Rec.709 primaries): the film's gamut map keeps a
+#: pixel's luminance, not its channel sum (core/render/film.py into_gamut), so the flash is compared in Y.
+Y709 = np.array([0.2126729, 0.7151522, 0.0721750])
+
+
+def predicted_flash_luminance(prep, n=2_000_000, seed=0):
+    """Sum over the image's pixels of the floor's luminance from the flash alone, by Monte Carlo
     from the light's side written here: uniform points on the panel, the point light's
     irradiance I cos / r^2 there (I = the prepared light's spectral intensity, docs/physics.md
     section 7.1), one lobe direction each (weight f cos / pdf), kept where it lands on the floor
@@ -475,33 +480,33 @@ def predicted_flash_rgb(prep, n=2_000_000, seed=0):
     seen = down & (x[:, 0] > -1.7) & (x[:, 0] < 0.7) & (np.abs(x[:, 1]) < 1.2)
     flux = ((-wl @ np.array([1.0, 0, 0])) / r2 * 0.24 / n * seen)[:, None] * weight
     radiance_sum = 0.8 / np.pi * flux.sum(0) / (2.4 / 24) ** 2 * prep.lights.spectrum[0]
-    return float(prep.conv.to_rgb(radiance_sum[None])[0].sum())
+    return float(prep.conv.to_rgb(radiance_sum[None])[0].astype(np.float64) @ Y709)
 
 
 @pytest.mark.slow
 def test_light_pass_flash_matches_the_light_side_prediction():
     """docs/physics.md section 5.8: the light pass scatters light paths off the BRAGG planes; the
     flash it deposits on the floor (the Caustics pass, summed over the image) against
-    predicted_flash_rgb, within 5 % (about 4 x the render-to-render scatter, 1.6 % measured over
+    predicted_flash_luminance (in luminance Y), within 5 % (about 4 x the render-to-render scatter, 1.6 % measured over
     four seeds at 300 000 paths). The eye pass leaves those paths out (no second count in Indirect beyond the flash's
     own second-order light, which the prediction does not hold)."""
     from opal_diffraction.core.render.prepare import prepare
     s = flash_scene()
     st = RenderSettings(samples=16, threads=1, light_paths=1_000_000, filter_width=0.0)
     lp = render(s, st)
-    got = float(lp.passes["Caustics"].sum())
-    expect = predicted_flash_rgb(prepare(s, st))
+    got = float((lp.passes["Caustics"].astype(np.float64) @ Y709).sum())
+    expect = predicted_flash_luminance(prepare(s, st))
     print(f"flash: light pass {got:.4g}, light-side prediction {expect:.4g}")
     assert abs(got / expect - 1) < 0.05, (got, expect)
 
 
-def pixel_centre_flash_rgb(prep, per_pixel=8_000, seed=0):
-    """(sum over pixels, its standard error) of the floor's radiance from the flash alone at the
+def pixel_centre_flash_luminance(prep, per_pixel=8_000, seed=0):
+    """(sum over pixels, its standard error) of the floor's luminance from the flash alone at the
     PIXEL CENTRES, which a render with filter width 0 samples, by numerical integration over the
     panel: L(x) = rho/pi int f(x -> p, p -> light) cos_light I / r_l^2 cos_floor cos_panel / r^2 dA,
     uniform points on the panel per pixel, the lobe's evaluate (reciprocal, and equal to its
     sampler's weights: the chi-square tests above). The flash peaks where the panel meets the floor,
-    so this sum differs from the area integral predicted_flash_rgb estimates by 3.6 %, which is
+    so this sum differs from the area integral predicted_flash_luminance estimates by 3.6 %, which is
     the 4-5 % the eye pass once seemed high by."""
     rng = np.random.default_rng(seed)
     cam = flash_scene().camera
@@ -522,7 +527,7 @@ def pixel_centre_flash_rgb(prep, per_pixel=8_000, seed=0):
         wx = dx / np.sqrt(rx2)[:, None]
         f_cos, _ = lb.evaluate(wx, dl / np.sqrt(rl2)[:, None], nrm, edges)  # f cos(light, n)
         geo = np.where((wx[:, 2] < 0) & (wx[:, 0] < 0), wx[:, 2] * wx[:, 0] / rx2 / rl2, 0.0) * 0.24
-        rgb = prep.conv.to_rgb((f_cos * (0.8 / np.pi * geo)[:, None] * spectrum).astype(np.float32)).sum(axis=1)
+        rgb = prep.conv.to_rgb((f_cos * (0.8 / np.pi * geo)[:, None] * spectrum).astype(np.float32)).astype(np.float64) @ Y709
         sums += rgb.mean()
         variances += rgb.var(ddof=1) / per_pixel
     return float(sums), float(np.sqrt(variances))
@@ -536,9 +541,10 @@ def test_eye_pass_flash_matches_a_pixel_centre_quadrature():
     quadrature. The light pass estimates the area integral instead (the test above)."""
     from opal_diffraction.core.render.prepare import prepare
     s = flash_scene()
-    eye = [float(render(s, RenderSettings(samples=64, threads=1, light_paths=0, filter_width=0.0, seed=k,
-                                          glossy_bounces=0)).passes["Indirect"].sum()) for k in range(8)]
+    eye = [float((render(s, RenderSettings(samples=64, threads=1, light_paths=0, filter_width=0.0, seed=k,
+                                           glossy_bounces=0)).passes["Indirect"].astype(np.float64) @ Y709).sum())
+           for k in range(8)]
     mean, se = np.mean(eye), np.std(eye, ddof=1) / np.sqrt(len(eye))
-    expect, se_q = pixel_centre_flash_rgb(prepare(s, RenderSettings(light_paths=0)))
+    expect, se_q = pixel_centre_flash_luminance(prepare(s, RenderSettings(light_paths=0)))
     print(f"flash: eye pass {mean:.4g} +- {se:.2g}, pixel-centre quadrature {expect:.4g} +- {se_q:.2g}")
     assert abs(mean - expect) < 4 * np.hypot(se, se_q) + 0.01 * expect, (mean, se, expect, se_q)

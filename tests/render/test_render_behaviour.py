@@ -89,11 +89,15 @@ def test_cli_renders_exr_png_and_spectral_exr(tmp_path):
     ch = read_exr(spec)
     assert spectral_channel_name(550.0) == "S0.550,000000nm" and "S0.550,000000nm" in ch
     assert len([k for k in ch if k.startswith("S0.")]) == 31
-    # the RGB stored with the spectra is the spectra's colour
+    # the RGB stored with the spectra is the spectra's colour, brought into the Rec.709 gamut where
+    # the prism's spectral fringes leave it (film.into_gamut: the luminance kept, no channel negative)
     from opal_diffraction.core.spectral.spectrum import SpectralConverter, WavelengthGrid
     conv = SpectralConverter(WavelengthGrid(400, 700, 10))
     cube = np.stack([ch[spectral_channel_name(w)] for w in conv.grid.wavelengths], axis=-1)
-    np.testing.assert_allclose(conv.to_rgb(cube)[..., 1], ch["G"], rtol=1e-4, atol=1e-6)
+    y709 = np.array([0.2126729, 0.7151522, 0.0721750])  # CIE Y of the linear Rec.709 primaries
+    stored = np.stack([ch["R"], ch["G"], ch["B"]], axis=-1).astype(np.float64)
+    np.testing.assert_allclose(stored @ y709, conv.to_rgb(cube).astype(np.float64) @ y709, rtol=1e-4, atol=1e-6)
+    assert stored.min() >= 0
     np.testing.assert_allclose(ch["G"], rgb["G"], rtol=1e-6)
     # same seed, same image
     again = tmp_path / "again.exr"
