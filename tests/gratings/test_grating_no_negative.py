@@ -86,3 +86,23 @@ def test_into_gamut_keeps_luminance_and_hue_and_the_pass_sum():
     np.testing.assert_allclose(c1, s[:, None] * c0, atol=1e-5)
     assert ((s >= -1e-6) & (s <= 1 + 1e-6)).all()
     assert np.allclose(np.minimum(rgb[pos].min(axis=1), passes["Diffraction"][pos].min(axis=1)), 0, atol=1e-5)
+
+
+def test_into_gamut_leaves_a_pixel_whose_rest_is_rounding_coloured():
+    """The rest of the image (rgb less its passes: the emission seen) is 0 up to float32 rounding
+    where nothing emissive is seen; a rest of -1e-9 must not grey its pixel (it did: s = 0 for a
+    part of luminance <= 0). A pass's own rounding negatives are set to 0, nothing else changes."""
+    rgb = np.array([[0.8, 0.3, 0.05], [0.2, 0.6, 0.1]], np.float32)
+    direct = rgb.copy()
+    direct[0, 1] += np.float32(2e-8)  # the rest rounds to -2e-8 in G
+    direct[1, 2] = np.float32(-1e-9)  # a rounding negative in the pass itself
+    passes = {"Direct": direct}
+    out = rgb.copy()
+    count = into_gamut(out, passes)
+    assert count == 0
+    np.testing.assert_array_equal(out, rgb)
+    assert passes["Direct"][1, 2] == 0 and passes["Direct"][0, 1] == direct[0, 1]
+    # while a real out-of-gamut part still maps its pixel
+    spectral = {"Diffraction": np.array([[0.5, -0.2, 0.1]], np.float32)}
+    img = spectral["Diffraction"] + np.float32(0.0)
+    assert into_gamut(img, spectral) == 1 and img.min() >= 0

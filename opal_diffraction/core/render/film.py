@@ -267,9 +267,11 @@ _LUMINANCE = np.array([0.2126729, 0.7151522, 0.0721750], np.float32)
 _COLOUR_PASSES = ("Direct", "Indirect", "Caustics", "Diffraction")
 
 
-def _gamut_scale(px: np.ndarray) -> np.ndarray:
+def _gamut_scale(px: np.ndarray, tol: np.ndarray) -> np.ndarray:
     """(P,) the largest s in [0, 1] with Y + s (rgb - Y) >= 0 in every channel, for (P, 3)
-    float64 colours (1 where none is negative; 0 where Y <= 0)."""
+    float64 colours, channels above -tol (P,) counted as 0 (1 where none is negative; 0 where
+    Y <= 0)."""
+    px = np.where((px < 0) & (px > -tol[:, None]), 0.0, px)
     y = px @ _LUMINANCE.astype(np.float64)
     low = px.min(axis=1)
     s = np.where(low >= 0, 1.0, np.clip(y / np.maximum(y - low, 1e-300), 0.0, 1.0))
@@ -283,10 +285,16 @@ def _desaturate(arr: np.ndarray, mask: np.ndarray, s: np.ndarray) -> None:
     arr[mask] = (y + s[:, None] * (px - y)).astype(arr.dtype)
 
 
-def _negative(arr: np.ndarray) -> np.ndarray:
-    """(..., ) bool: a channel of the (..., 3) colours is negative (three strided minima: a
+#: A channel counts as negative below -ROUNDING x the pixel's largest |channel|: the parts of an
+#: image (its passes, and the rest: the emission seen) are float32 sums whose difference from the
+#: image is rounding, and a rest of 0 that rounds to -1e-9 must not grey its whole pixel.
+ROUNDING = 1e-5
+
+
+def _negative(arr: np.ndarray, tol: np.ndarray) -> np.ndarray:
+    """(..., ) bool: a channel of the (..., 3) colours is below -tol (three strided minima: a
     reduction over the short last axis costs several times more)."""
-    return np.minimum(np.minimum(arr[..., 0], arr[..., 1]), arr[..., 2]) < 0
+    return np.minimum(np.minimum(arr[..., 0], arr[..., 1]), arr[..., 2]) < -tol
 
 
 def into_gamut(rgb: np.ndarray, passes: dict) -> int:
@@ -300,22 +308,24 @@ def into_gamut(rgb: np.ndarray, passes: dict) -> int:
     The same affine map with the same s applies to each radiance pass and to the rest of the
     image (the emission seen: rgb less the passes), so they still add up to the image exactly;
     s is the largest value in [0, 1] that leaves no channel of any of them negative (the
-    minimum over them). A part with negative luminance cannot be mapped: it is black (only
-    rounding makes one)."""
+    minimum over them). A part with negative luminance cannot be mapped: it is black. Channels
+    within ROUNDING of 0 are rounding, not colour: they are set to 0 and map nothing."""
     names = [k for k in _COLOUR_PASSES if passes.get(k) is not None]
     parts = [passes[k] for k in names]
-    rest = rgb - sum(parts) if parts else None
-    bad = _negative(rgb)
-    for arr in parts + ([rest] if rest is not None else []):
-        bad |= _negative(arr)
+    others = parts + ([rgb - sum(parts)] if parts else [])  # the passes and the rest of the image
+    a = np.abs(rgb)
+    tol = ROUNDING * np.maximum(np.maximum(a[..., 0], a[..., 1]), a[..., 2])
+    bad = _negative(rgb, tol)
+    for arr in others:
+        bad |= _negative(arr, tol)
     count = int(bad.sum())
-    if not count:
-        return 0
-    s = _gamut_scale(rgb[bad].astype(np.float64))
-    for arr in parts + [rest]:
-        s = np.minimum(s, _gamut_scale(arr[bad].astype(np.float64)))
-    for arr in [rgb] + parts:
-        _desaturate(arr, bad, s)
+    if count:
+        tb = tol[bad].astype(np.float64)
+        s = _gamut_scale(rgb[bad].astype(np.float64), tb)
+        for arr in others:
+            s = np.minimum(s, _gamut_scale(arr[bad].astype(np.float64), tb))
+        for arr in [rgb] + parts:
+            _desaturate(arr, bad, s)
     for arr in [rgb] + parts:  # rounding, and a part whose luminance is negative (s = 0 leaves Y < 0)
         np.maximum(arr, 0.0, out=arr)
     return count
