@@ -79,6 +79,8 @@ class Spec:
     lens: float = 50.0                       # mm, sensor width 36 mm, fit AUTO (square image)
     res: int = 256
     smooth: bool = False                     # the sphere shaded smooth: exact radial vertex normals
+    sphere_mesh: str = "ico"                 # "ico": the icosphere above; "uv32": a UV sphere, 32 segments x 16
+                                             # rings (Blender's default, 960 triangles; benchmarks/caustic_ball.py)
 
     @property
     def intensity(self) -> float:
@@ -92,6 +94,8 @@ class Spec:
         d = asdict(self)
         if not d["smooth"]:
             d.pop("smooth")  # the flat scene keeps the key its cached references were made under
+        if d["sphere_mesh"] == "ico":
+            d.pop("sphere_mesh")  # so does the icosphere
         return hashlib.sha1(json.dumps(d, sort_keys=True).encode()).hexdigest()[:10]
 
 
@@ -108,7 +112,8 @@ def meshes(spec: Spec, plane_only=False):
     h = spec.floor_size
     out = [("floor", *primitives.quad((0, 0, 0), (h, 0, 0), (0, h, 0)), FLOOR)]
     if not plane_only:
-        out.append(("sphere", *primitives.icosphere((0, 0, 1.0), 1.0, spec.sphere_subdivisions), SPHERE))
+        out.append(("sphere", *(primitives.uv_sphere((0, 0, 1.0), 1.0, 32, 16) if spec.sphere_mesh == "uv32" else
+                                primitives.icosphere((0, 0, 1.0), 1.0, spec.sphere_subdivisions)), SPHERE))
     return out
 
 
@@ -265,7 +270,20 @@ def run_mitsuba(spec: Spec, variant: str, integrator: str, spp: int, cache: str,
     return downsample(acc / passes), dt
 
 
+def _mitsuba_path():
+    """Mitsuba may live in its own venv (MITSUBA_SITE: its site-packages), appended to sys.path so
+    that the project's NumPy stays first."""
+    site = os.environ.get("MITSUBA_SITE")
+    if site and site not in sys.path:
+        sys.path.append(site)
+
+
+_mitsuba_path()
+
+
 def mitsuba_llvm_ok() -> bool:
+    if os.environ.get("MITSUBA_NO_LLVM"):  # e.g. only libLLVM 15 installed: its JIT aborts the process
+        return False
     try:
         import mitsuba as mi
 

@@ -36,6 +36,7 @@ import numpy as np
 from ...transport import wavelengths
 from .camera_splat import CameraConnection, CameraSplat, SplatBatch
 from . import splat_bounce
+from .adjoint_shading import adjoint_factor, dielectric_normal_used
 from ...transport.elements import IlluminationMap
 from ...gratings.records import GratingRecords
 from ...gratings.order_sampling import diffracting, scatter_at_gratings
@@ -54,6 +55,10 @@ RR_SURVIVAL = 0.8
 
 class LightWalker(SpecularWalker):
     """Light paths: deposit at diffuse surfaces after a specular bounce, Russian roulette."""
+
+    #: Veach's adjoint factor at smooth-shaded specular bounces (core/integrators/light/adjoint_shading.py,
+    #: docs/physics.md section 4.6); False only to measure what it changes (benchmarks/caustic_ball.py)
+    adjoint_shading = True
 
     def __init__(self, prepared, rng, illum: IlluminationMap, records: GratingRecords | None,
                  splat: SplatBatch | None = None):
@@ -100,6 +105,32 @@ class LightWalker(SpecularWalker):
             self.illum.deposit(idx[valid], r.dense_w(self.n)[valid] if r.basis is None else r.w[valid], basis=r.basis)
         else:
             self.illum.deposit(idx[valid], r.w[valid], r.lam[valid])
+
+    def mirror_bounce(self, rays: Rays, hit: Hit) -> Rays:
+        out = super().mirror_bounce(rays, hit)
+        if self.prepared.corner_normals is None or not self.adjoint_shading or out.w is None:
+            return out
+        # reflected about the specular normal: |w_l . n_s| = |w_n . n_s| cancel in the factor
+        return self._adjoint(out, rays, hit, self.specular_normal(rays, hit), None)
+
+    def dielectric_bounce(self, rays: Rays, hit: Hit, rng, u=None):
+        out, transmitted = super().dielectric_bounce(rays, hit, rng, u)
+        if self.prepared.corner_normals is None or not self.adjoint_shading or out.w is None:
+            return out, transmitted
+        ns = self.specular_normal(rays, hit)
+        ior = self.prepared.materials.ior
+        n = np.take(ior[:, 0], hit.mat) if rays.lam is None else ior[hit.mat, rays.lam]
+        eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
+        used = dielectric_normal_used(rays.d, out.d, hit.ng, ns, eta, transmitted)
+        return self._adjoint(out, rays, hit, ns, used), transmitted
+
+    @staticmethod
+    def _adjoint(out: Rays, rays: Rays, hit: Hit, ns, used) -> Rays:
+        """``out`` with its weights times the adjoint shading-normal factor (adjoint_shading.py)."""
+        f = adjoint_factor(rays.d, out.d, hit.ng, ns, used)
+        w = out.w * (f[:, None] if out.w.ndim == 2 else f)  # spectra, coefficients or mono weights
+        out.w = w.astype(np.float32, copy=False)
+        return out
 
     def classify(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> np.ndarray:
         """Paths a grating diffracts (core/gratings/order_sampling.py, docs/physics.md section 3.10) are
