@@ -15,7 +15,12 @@ Every row also gives the floor's error by region (caustic focus, shadow, lit flo
 ours, each pass's mean and its speckles (pixels above 0.05) inside the shadow: the path-type
 breakdown of docs/caustics.md (Direct / Indirect are the eye pass's, Caustics the light paths').
 
-    MITSUBA_SITE=/path/to/venv/lib/python3.11/site-packages python benchmarks/caustic_ball.py [--quick]
+    python benchmarks/caustic_ball.py [--quick] [--without-adjoint] [--configs 250000x12,...]
+
+Mitsuba (benchmarks/requirements.txt) may live in a venv of its own: put a folder holding only
+links to its ``mitsuba`` and ``drjit`` packages on PYTHONPATH, so the project's NumPy stays the
+one imported (docs/caustics.md, "issue 30"). ``MITSUBA_NO_LLVM=1`` where the installed libLLVM
+aborts Dr.Jit's LLVM variants (libLLVM 15): Mitsuba then runs ``scalar_rgb``.
 """
 
 from __future__ import annotations
@@ -28,9 +33,10 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import caustic_sphere as cs  # noqa: E402
-from opal_diffraction.core.integrators.light.walker import LightWalker  # noqa: E402
+from opal_diffraction import _scripts
+from opal_diffraction.core.integrators.light.walker import LightWalker
+
+cs = _scripts.load_script("benchmarks/caustic_sphere.py")
 
 ROOT = cs.ROOT
 

@@ -270,17 +270,6 @@ def run_mitsuba(spec: Spec, variant: str, integrator: str, spp: int, cache: str,
     return downsample(acc / passes), dt
 
 
-def _mitsuba_path():
-    """Mitsuba may live in its own venv (MITSUBA_SITE: its site-packages), appended to sys.path so
-    that the project's NumPy stays first."""
-    site = os.environ.get("MITSUBA_SITE")
-    if site and site not in sys.path:
-        sys.path.append(site)
-
-
-_mitsuba_path()
-
-
 def mitsuba_llvm_ok() -> bool:
     if os.environ.get("MITSUBA_NO_LLVM"):  # e.g. only libLLVM 15 installed: its JIT aborts the process
         return False

@@ -69,6 +69,7 @@ class LightWalker(SpecularWalker):
         self.bounces = None  # splat_bounce.BounceLog: the landings continued by a diffuse bounce, or None
         self.deposited = 0
         self.bragg = BraggShading.for_prepared(prepared)  # FCC opal lobes scatter light paths on
+        self._held_normal = None  # (rays, hit, specular normal) during a dielectric bounce
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> None:
         if self.records is not None:
@@ -107,17 +108,32 @@ class LightWalker(SpecularWalker):
             self.illum.deposit(idx[valid], r.w[valid], r.lam[valid])
 
     def mirror_bounce(self, rays: Rays, hit: Hit) -> Rays:
-        out = super().mirror_bounce(rays, hit)
-        if self.prepared.corner_normals is None or not self.adjoint_shading or out.w is None:
-            return out
+        if self.prepared.corner_normals is None or not self.adjoint_shading or rays.w is None:
+            return super().mirror_bounce(rays, hit)
+        ns = self.specular_normal(rays, hit)
+        self._held_normal = (rays, hit, ns)
+        try:
+            out = super().mirror_bounce(rays, hit)
+        finally:
+            self._held_normal = None
         # reflected about the specular normal: |w_l . n_s| = |w_n . n_s| cancel in the factor
-        return self._adjoint(out, rays, hit, self.specular_normal(rays, hit), None)
+        return self._adjoint(out, rays, hit, ns, None)
+
+    def specular_normal(self, rays: Rays, hit: Hit) -> np.ndarray:
+        held = self._held_normal  # the bounce's own, computed once for the bounce and its factor
+        if held is not None and held[0] is rays and held[1] is hit:
+            return held[2]
+        return super().specular_normal(rays, hit)
 
     def dielectric_bounce(self, rays: Rays, hit: Hit, rng, u=None):
-        out, transmitted = super().dielectric_bounce(rays, hit, rng, u)
-        if self.prepared.corner_normals is None or not self.adjoint_shading or out.w is None:
-            return out, transmitted
+        if self.prepared.corner_normals is None or not self.adjoint_shading or rays.w is None:
+            return super().dielectric_bounce(rays, hit, rng, u)
         ns = self.specular_normal(rays, hit)
+        self._held_normal = (rays, hit, ns)
+        try:
+            out, transmitted = super().dielectric_bounce(rays, hit, rng, u)
+        finally:
+            self._held_normal = None
         ior = self.prepared.materials.ior
         n = np.take(ior[:, 0], hit.mat) if rays.lam is None else ior[hit.mat, rays.lam]
         eta = np.where(hit.front, 1.0 / n, n).astype(np.float32)
