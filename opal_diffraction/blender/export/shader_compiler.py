@@ -7,7 +7,7 @@ material, so the program lists the nodes in an order where every register is wri
 is read. It reads:
 
 - textures: Noise, Voronoi (F1, F2, Smooth F1, Distance to Edge), Checker, Gradient, White Noise,
-  Wave, Magic, Brick;
+  Wave, Magic, Brick, Sky (single and multiple scattering; core/materials/sky_texture.py);
 - converters: ColorRamp (a 257-entry table of Blender's own ``ColorRamp.evaluate``, as Cycles
   bakes it), Math, Vector Math, Mix (float, vector, colour; and the legacy MixRGB), Map Range
   (float), Clamp, Invert, Gamma, Bright/Contrast, Hue/Saturation/Value, RGB to BW,
@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.materials.shader_eval import evaluate
+from ...core.materials.sky_texture import SKY_TYPES, sky_params
 from ...core.scene.checks import SceneError
 from ...core.scene.shader_programs import (MATH_OPERATIONS, MIX_BLEND_TYPES, RAMP_TABLE_SIZE, VECTOR_MATH_OPERATIONS,
                                            ProgramBuilder, ShaderProgram)
@@ -49,7 +50,7 @@ COMPILED_NODES = frozenset({
     "ShaderNodeCombineRGB", "ShaderNodeMapping", "ShaderNodeValue", "ShaderNodeRGB", "ShaderNodeTexCoord",
     "ShaderNodeUVMap", "ShaderNodeGroup", "NodeGroupInput", "ShaderNodeTexImage", "ShaderNodeTexWave",
     "ShaderNodeTexMagic", "ShaderNodeTexBrick", "ShaderNodeGamma", "ShaderNodeBrightContrast",
-    "ShaderNodeHueSaturation", "ShaderNodeRGBToBW"})
+    "ShaderNodeHueSaturation", "ShaderNodeRGBToBW", "ShaderNodeTexSky"})
 
 _KIND = {"VALUE": "f", "INT": "f", "BOOLEAN": "f", "RGBA": "v", "VECTOR": "v"}
 _DIMS = {"1D": 1, "2D": 2, "3D": 3, "4D": 4}
@@ -68,6 +69,8 @@ class ShaderCompiler:
         self._memo: dict = {}           # (group path, node name, output identifier) -> register
         self._visiting: set = set()
         self.uv_maps: set = set()       # UV maps the program reads ('' the active render map)
+        #: Sky Texture nodes (by name) whose sun disc is left out: the world exports it as a sun lamp.
+        self.sky_sun_lamps: frozenset = frozenset()
 
     # ------------------------------------------------------------------ entry
     def compile_input(self, node, name: str, kind: str):
@@ -339,6 +342,16 @@ class ShaderCompiler:
             fac, col = b.op("brick", args, offset=float(node.offset), offset_frequency=int(node.offset_frequency),
                             squash=float(node.squash), squash_frequency=int(node.squash_frequency))
             return fac if oname == "Fac" else col
+        if idn == "ShaderNodeTexSky":
+            if node.sky_type not in SKY_TYPES:
+                raise self._fail(node, f"the {node.sky_type.replace('_', ' ').title()} sky model of '{node.name}'")
+            sp = sky_params(node.sky_type, node.sun_disc, node.sun_size, node.sun_intensity, node.sun_elevation,
+                            node.sun_rotation, node.altitude, node.air_density, node.aerosol_density,
+                            node.ozone_density)
+            if not all(np.isfinite(float(v)) for v in sp):
+                raise SceneError(f"{self.reader.owner}: Sky Texture '{node.name}' has a NaN or infinite setting")
+            return b.op("sky", [vec], with_sun=node.name not in self.sky_sun_lamps,
+                        **{k: (bool(v) if isinstance(v, bool) else float(v)) for k, v in sp._asdict().items()})[0]
         if idn == "ShaderNodeTexMagic":
             col, fac = b.op("magic", [vec, self._in(node, "Scale", path, "f"), self._in(node, "Distortion", path, "f")],
                             depth=int(node.turbulence_depth))

@@ -23,14 +23,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...core.lights.environment import uv_to_direction
+from ...core.materials.shader_eval import evaluate
+from ...core.materials.sky_texture import SKY_TYPES, sky_params, sun_direction, sun_disc_radiance
 from ...core.scene.checks import SceneError
 from .colour import in_rec709, rgb, working_space_to_rec709
 from .images import read_image
 from .messages import Warnings
 from .nodes import MAX_INTENSITY, NodeReader, missing_output, node_tree, surface_socket
+from .shader_compiler import ShaderCompiler
 
 __all__ = ["WorldLight", "world_light", "world_color", "export_world", "export_world_light", "mapping_rotation",
-           "MISSING_IMAGE_RGB"]
+           "MISSING_IMAGE_RGB", "bake_program", "BAKE_HEIGHT", "BAKE_WIDTH"]
 
 #: What Cycles shows for an image texture without pixels (kernel/svm/image.h: IMAGE_TEXTURE_MISSING_RGBA).
 MISSING_IMAGE_RGB = (1.0, 0.0, 1.0)
@@ -44,6 +48,8 @@ class WorldLight:
     color: np.ndarray
     image: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3), np.float32))
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    #: Light-table rows (Lights.from_list dicts) the world adds: a Sky Texture's sun disc as a sun.
+    lights: list = field(default_factory=list)
 
 
 def world_color(world, warn, to709) -> np.ndarray:
@@ -80,9 +86,127 @@ def world_light(world, warn, to709) -> WorldLight:
                 return _environment(reader, node, env, owner, warn)
             warn(f"{owner}: Environment Texture '{env.name}' uses the mirror-ball projection, which is not "
                  "supported: rendered as the image's average colour")
+        elif _driven(reader, node):
+            baked = _baked(reader, node, owner, warn)
+            if baked is not None:
+                return baked
         return WorldLight(reader.emission(reader.color(node, "Color", (0.05, 0.05, 0.05)), reader.strength(node), node))
     warn(f"{owner}: world shader '{node.name}' is not supported: using the world colour as a uniform background")
     return WorldLight(_viewport_color(world, owner, to709))
+
+
+#: The baked map of a world node tree: rows (elevation) x columns (azimuth), 0.35 degree texels.
+BAKE_HEIGHT, BAKE_WIDTH = 512, 1024
+#: Rows evaluated at once while baking.
+_BAKE_CHUNK = 65536
+#: The sun disc's quadrature for the lamp's irradiance: rings x sectors, midpoints.
+_SUN_RINGS, _SUN_SECTORS = 48, 96
+
+
+def _driven(reader: NodeReader, shader) -> bool:
+    """Whether a node drives the Color or the Strength of the world's ``shader``."""
+    return any(shader.inputs.get(n) is not None and reader.source(shader.inputs[n]) is not None
+               for n in ("Color", "Strength"))
+
+
+def _lamp_sky(reader: NodeReader, shader):
+    """The Sky Texture node whose sun disc becomes a sun lamp, or None: the sky straight on the
+    shader's Color (its Vector the ray direction), the Strength a plain number, the disc on."""
+    src = reader.source(shader.inputs["Color"])
+    if src is None or src[0].bl_idname != "ShaderNodeTexSky" or getattr(src[0], "mute", False):
+        return None
+    sky = src[0]
+    if sky.sky_type not in SKY_TYPES or not sky.sun_disc or reader.source(shader.inputs["Strength"]) is not None:
+        return None
+    vec = reader.source(sky.inputs["Vector"])
+    if vec is not None and not (vec[0].bl_idname == "ShaderNodeTexCoord" and vec[1].name in ("Generated", "Object")
+                                and getattr(vec[0], "object", None) is None):
+        return None
+    return sky
+
+
+def _baked(reader: NodeReader, shader, owner: str, warn) -> WorldLight | None:
+    """The world's node graph (what drives the Background's Color and Strength) compiled to a
+    shader program and evaluated at the texel centres of an equirectangular map (the direction as
+    Generated and Object), Cycles' background of a node tree; a Sky Texture's sun disc becomes a
+    sun lamp where the sky lights the world alone. None when nothing in the graph is read."""
+    compiler = ShaderCompiler(reader)
+    reader.compiler = compiler
+    sky = _lamp_sky(reader, shader)
+    if sky is not None:
+        compiler.sky_sun_lamps = frozenset([sky.name])
+    b = compiler.builder
+    col = compiler.compile_input(shader, "Color", "v")
+    strength = compiler.compile_input(shader, "Strength", "f")
+    if col is None and strength is None:
+        return None  # the caller warns and uses the sockets' values
+    if col is None:
+        col = b.const([float(c) for c in reader.color(shader, "Color", (0.05, 0.05, 0.05))])
+    if strength is None:
+        strength = b.const(reader.strength(shader))
+    zero = b.const([0.0, 0.0, 0.0])
+    out = b.op("vector_math", [col, zero, zero, strength], operation="SCALE")[0]
+    program = compiler.finish({"emission": out})
+    if not any(program.ops[i].name == "coord" for i in program.needed("emission")):  # the same everywhere
+        one = np.zeros((1, 3), np.float32)
+        value = evaluate(program, "emission", {"generated": one, "object": one, "uv": one}, 1)[0]
+        return WorldLight(np.minimum(np.asarray(value, np.float64), MAX_INTENSITY))
+    image = bake_program(program)
+    if (image < 0).any():
+        warn(f"{owner}: its node tree gives negative radiance in some directions: rendered as 0")
+    image = np.maximum(image, 0.0)
+    if not np.isfinite(image).all() or image.max() > MAX_INTENSITY:
+        warn(f"{owner}: its node tree gives radiance above {MAX_INTENSITY:.0e}: clamped")
+        image = np.minimum(np.nan_to_num(image, nan=0.0, posinf=MAX_INTENSITY), MAX_INTENSITY)
+    lights = []
+    if sky is not None:
+        row = _sun_lamp(sky, reader.strength(shader))
+        if row is not None:
+            lights.append(row)
+    return WorldLight(np.ones(3), image.astype(np.float32), np.eye(3), lights)
+
+
+def bake_program(program) -> np.ndarray:
+    """(BAKE_HEIGHT, BAKE_WIDTH, 3) float32 linear Rec.709 radiance: the program's 'emission'
+    at each texel centre's direction (core/lights/environment.py convention, row 0 at the bottom)."""
+    h, w = BAKE_HEIGHT, BAKE_WIDTH
+    u = (np.arange(w) + 0.5) / w
+    v = (np.arange(h) + 0.5) / h
+    uu, vv = np.broadcast_arrays(u[None, :], v[:, None])
+    d = uv_to_direction(uu, vv).reshape(-1, 3).astype(np.float32)
+    out = np.empty((len(d), 3), np.float32)
+    for s in range(0, len(d), _BAKE_CHUNK):
+        chunk = d[s:s + _BAKE_CHUNK]
+        inputs = {"generated": chunk, "object": chunk, "uv": np.zeros_like(chunk)}
+        out[s:s + _BAKE_CHUNK] = evaluate(program, "emission", inputs, len(chunk))
+    return out.reshape(h, w, 3)
+
+
+def _sun_lamp(sky, strength: float) -> dict | None:
+    """A SUN light-table row for ``sky``'s disc: its direction and angular diameter, its
+    irradiance the disc's radiance (Cycles' kernel/svm/sky.h: limb darkening, the bottom-to-top
+    colour, hidden behind the earth) integrated over the disc by a midpoint quadrature in
+    (angle from the centre, azimuth about it), times the world's strength; None when dark."""
+    p = sky_params(sky.sky_type, sky.sun_disc, sky.sun_size, sky.sun_intensity, sky.sun_elevation,
+                   sky.sun_rotation, sky.altitude, sky.air_density, sky.aerosol_density, sky.ozone_density)
+    s = sun_direction(p)
+    e1 = np.cross(s, [0.0, 0.0, 1.0]) if abs(s[2]) < 0.999 else np.array([1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(s, e1)
+    half = p.sun_size / 2
+    da, dp = half / _SUN_RINGS, 2 * np.pi / _SUN_SECTORS
+    a = (np.arange(_SUN_RINGS) + 0.5) * da
+    psi = (np.arange(_SUN_SECTORS) + 0.5) * dp
+    a, psi = np.meshgrid(a, psi, indexing="ij")
+    d = (np.cos(a)[..., None] * s + np.sin(a)[..., None] * (np.cos(psi)[..., None] * e1
+                                                            + np.sin(psi)[..., None] * e2)).reshape(-1, 3)
+    weight = (np.sin(a) * da * dp).reshape(-1)
+    irradiance = (sun_disc_radiance(p, d) * weight[:, None]).sum(axis=0) * strength
+    peak = float(irradiance.max())
+    if not peak > 0 or not np.isfinite(peak):
+        return None
+    return {"kind": "SUN", "direction": tuple(-s), "power": min(peak, MAX_INTENSITY),
+            "color": tuple(irradiance / peak), "angle": p.sun_size}
 
 
 def _environment(reader: NodeReader, shader, env, owner: str, warn) -> WorldLight:
