@@ -350,6 +350,8 @@ class ShaderCompiler:
                             node.ozone_density)
             if not all(np.isfinite(float(v)) for v in sp):
                 raise SceneError(f"{self.reader.owner}: Sky Texture '{node.name}' has a NaN or infinite setting")
+            if vec is None:  # no Vector socket on the evaluated node: the direction, as unlinked
+                vec = b.op("coord", kind="generated")[0]
             return b.op("sky", [vec], with_sun=node.name not in self.sky_sun_lamps,
                         **{k: (bool(v) if isinstance(v, bool) else float(v)) for k, v in sp._asdict().items()})[0]
         if idn == "ShaderNodeTexMagic":

@@ -118,7 +118,8 @@ def _lamp_sky(reader: NodeReader, shader):
     sky = src[0]
     if sky.sky_type not in SKY_TYPES or not sky.sun_disc or reader.source(shader.inputs["Strength"]) is not None:
         return None
-    vec = reader.source(sky.inputs["Vector"])
+    sock = sky.inputs.get("Vector")
+    vec = reader.source(sock) if sock is not None else None
     if vec is not None and not (vec[0].bl_idname == "ShaderNodeTexCoord" and vec[1].name in ("Generated", "Object")
                                 and getattr(vec[0], "object", None) is None):
         return None
