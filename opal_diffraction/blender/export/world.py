@@ -25,7 +25,7 @@ import numpy as np
 
 from ...core.lights.environment import uv_to_direction
 from ...core.materials.shader_eval import evaluate
-from ...core.materials.sky_texture import SKY_TYPES, sky_params, sun_direction, sun_disc_radiance
+from ...core.materials.sky_texture import SKY_TYPES, sky_params, sun_direction, sun_irradiance
 from ...core.scene.checks import SceneError
 from .colour import in_rec709, rgb, working_space_to_rec709
 from .images import read_image
@@ -99,8 +99,6 @@ def world_light(world, warn, to709) -> WorldLight:
 BAKE_HEIGHT, BAKE_WIDTH = 512, 1024
 #: Rows evaluated at once while baking.
 _BAKE_CHUNK = 65536
-#: The sun disc's quadrature for the lamp's irradiance: rings x sectors, midpoints.
-_SUN_RINGS, _SUN_SECTORS = 48, 96
 
 
 def _driven(reader: NodeReader, shader) -> bool:
@@ -185,28 +183,15 @@ def bake_program(program) -> np.ndarray:
 
 def _sun_lamp(sky, strength: float) -> dict | None:
     """A SUN light-table row for ``sky``'s disc: its direction and angular diameter, its
-    irradiance the disc's radiance (Cycles' kernel/svm/sky.h: limb darkening, the bottom-to-top
-    colour, hidden behind the earth) integrated over the disc by a midpoint quadrature in
-    (angle from the centre, azimuth about it), times the world's strength; None when dark."""
+    irradiance the disc's radiance integrated over it (sky_texture.sun_irradiance) times the
+    world's strength; None when the disc is dark (below the horizon or behind the earth)."""
     p = sky_params(sky.sky_type, sky.sun_disc, sky.sun_size, sky.sun_intensity, sky.sun_elevation,
                    sky.sun_rotation, sky.altitude, sky.air_density, sky.aerosol_density, sky.ozone_density)
-    s = sun_direction(p)
-    e1 = np.cross(s, [0.0, 0.0, 1.0]) if abs(s[2]) < 0.999 else np.array([1.0, 0.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(s, e1)
-    half = p.sun_size / 2
-    da, dp = half / _SUN_RINGS, 2 * np.pi / _SUN_SECTORS
-    a = (np.arange(_SUN_RINGS) + 0.5) * da
-    psi = (np.arange(_SUN_SECTORS) + 0.5) * dp
-    a, psi = np.meshgrid(a, psi, indexing="ij")
-    d = (np.cos(a)[..., None] * s + np.sin(a)[..., None] * (np.cos(psi)[..., None] * e1
-                                                            + np.sin(psi)[..., None] * e2)).reshape(-1, 3)
-    weight = (np.sin(a) * da * dp).reshape(-1)
-    irradiance = (sun_disc_radiance(p, d) * weight[:, None]).sum(axis=0) * strength
+    irradiance = sun_irradiance(p) * strength
     peak = float(irradiance.max())
     if not peak > 0 or not np.isfinite(peak):
         return None
-    return {"kind": "SUN", "direction": tuple(-s), "power": min(peak, MAX_INTENSITY),
+    return {"kind": "SUN", "direction": tuple(-sun_direction(p)), "power": min(peak, MAX_INTENSITY),
             "color": tuple(irradiance / peak), "angle": p.sun_size}
 
 

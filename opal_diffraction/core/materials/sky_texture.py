@@ -30,7 +30,7 @@ import numpy as np
 
 __all__ = ["SKY_TYPES", "TABLE_WIDTH", "TABLE_HEIGHT", "XYZ_TO_REC709", "SkyParams", "sky_params",
            "sky_table", "sun_pixels", "earth_intersection_angle", "sky_radiance", "sun_direction",
-           "sun_disc_radiance"]
+           "sun_disc_radiance", "sun_irradiance"]
 
 #: The sky types read here (Blender 5.0 enum names).
 SKY_TYPES = ("SINGLE_SCATTERING", "MULTIPLE_SCATTERING")
@@ -443,6 +443,25 @@ def sun_disc_radiance(p: SkyParams, d: np.ndarray) -> np.ndarray:
     limb = 1 - 0.6 * (1 - np.sqrt(np.maximum(1 - (ang[inside] / half) ** 2, 0.0)))
     out[inside] = _xyz_to_rgb(xyz) * limb[:, None] * p.sun_intensity
     return out
+
+
+def sun_irradiance(p: SkyParams, rings: int = 48, sectors: int = 96) -> np.ndarray:
+    """(3,) linear Rec.709 irradiance of the sun disc on a surface facing it: the kernel's disc
+    radiance (:func:`sun_disc_radiance`: limb darkening, the bottom-to-top colour, hidden behind
+    the earth) integrated over the disc, a midpoint rule in the angle from the centre and the
+    azimuth about it, dω = sin α dα dψ. A sun lamp of this irradiance and the disc's angular
+    diameter stands for the disc (the caller's)."""
+    s = sun_direction(p)
+    e1 = np.cross(s, [0.0, 0.0, 1.0]) if abs(s[2]) < 0.999 else np.array([1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(s, e1)
+    half = p.sun_size / 2
+    da, dp = half / rings, _TWO_PI / sectors
+    a, psi = np.meshgrid((np.arange(rings) + 0.5) * da, (np.arange(sectors) + 0.5) * dp, indexing="ij")
+    d = (np.cos(a)[..., None] * s + np.sin(a)[..., None] * (np.cos(psi)[..., None] * e1
+                                                            + np.sin(psi)[..., None] * e2)).reshape(-1, 3)
+    weight = (np.sin(a) * da * dp).reshape(-1)
+    return (sun_disc_radiance(p, d) * weight[:, None]).sum(axis=0)
 
 
 def sky_radiance(p: SkyParams, d: np.ndarray, with_sun: bool = True) -> np.ndarray:
