@@ -163,3 +163,66 @@ def test_baked_sky_matches_cycles_background_direction_by_direction(sky_type, tm
               f"95th percentile {np.percentile(rel, 95):.4f}")
         assert np.median(rel) < 0.01
         assert np.all(np.abs(ratio - 1) < 0.03)
+
+
+def _world_with(build):
+    bs.empty_scene()
+    world = bpy.data.worlds.new("w")
+    bpy.context.scene.world = world
+    build(world.node_tree, world.node_tree.nodes["Background"])
+    return export_scene(bpy.context.evaluated_depsgraph_get())
+
+
+def test_unported_sky_models_warn_in_one_line_and_keep_the_colour():
+    def build(nt, bg):
+        bg.inputs["Color"].default_value = (0.2, 0.3, 0.4, 1.0)
+        nt.links.new(_sky(nt, "PREETHAM").outputs["Color"], bg.inputs["Color"])
+    ex = _world_with(build)
+    assert len(ex.warnings) == 1 and "Preetham" in ex.warnings[0] and "'w'" in ex.warnings[0], ex.warnings
+    assert ex.scene.world_image.size == 0 and len(ex.scene.lights) == 0
+    assert ex.scene.world_color == pytest.approx([0.2, 0.3, 0.4], rel=1e-5)
+
+
+def test_a_sky_behind_other_nodes_keeps_its_disc_in_the_map():
+    """The lamp stands for the disc only when the sky lights the world alone: through a Mix the
+    disc stays in the baked map (no light row), and the map is the mix of the sky and the colour."""
+    def build(nt, bg):
+        mix = nt.nodes.new("ShaderNodeMix")
+        mix.data_type = "RGBA"
+        mix.inputs["Factor"].default_value = 0.25
+        mix.inputs["B"].default_value = (1.0, 0.0, 0.0, 1.0)
+        nt.links.new(_sky(nt, "SINGLE_SCATTERING").outputs["Color"], mix.inputs["A"])
+        nt.links.new(mix.outputs["Result"], bg.inputs["Color"])
+    ex = _world_with(build)
+    assert not ex.warnings and len(ex.scene.lights) == 0
+    img = ex.scene.world_image
+    from opal_diffraction.core.lights.environment import uv_to_direction
+    from opal_diffraction.core.materials import sky_texture as S
+    from opal_diffraction.blender.export.world import BAKE_HEIGHT, BAKE_WIDTH
+    j, i = 400, 100  # a texel centre in the sky
+    d = uv_to_direction((i + 0.5) / BAKE_WIDTH, (j + 0.5) / BAKE_HEIGHT)
+    p = S.sky_params("SINGLE_SCATTERING", True, 0.009512, 1.0, math.radians(30), math.radians(40), 100.0, 1, 1, 1)
+    expected = 0.75 * S.sky_radiance(p, d[None, :])[0] + 0.25 * np.array([1.0, 0.0, 0.0])
+    assert img[j, i] == pytest.approx(expected, rel=1e-4)
+
+
+def test_a_procedural_strength_is_baked_and_a_constant_tree_stays_uniform():
+    def noisy(nt, bg):
+        noise = nt.nodes.new("ShaderNodeTexNoise")
+        nt.links.new(noise.outputs["Fac"], bg.inputs["Strength"])
+    ex = _world_with(noisy)
+    assert not ex.warnings and ex.scene.world_image.shape[:2] == (512, 1024)
+    assert ex.scene.world_image.std() > 0.1 * ex.scene.world_image.mean()  # noise of the direction
+
+    def constant(nt, bg):
+        rgb = nt.nodes.new("ShaderNodeRGB")
+        rgb.outputs[0].default_value = (0.5, 0.25, 0.125, 1.0)
+        ma = nt.nodes.new("ShaderNodeMath")
+        ma.inputs[0].default_value = 3.0
+        ma.inputs[1].default_value = 0.5
+        ma.operation = "MULTIPLY"
+        nt.links.new(rgb.outputs[0], bg.inputs["Color"])
+        nt.links.new(ma.outputs[0], bg.inputs["Strength"])
+    ex = _world_with(constant)
+    assert not ex.warnings and ex.scene.world_image.size == 0
+    assert ex.scene.world_color == pytest.approx(np.array([0.5, 0.25, 0.125]) * 1.5, rel=1e-5)
