@@ -1,5 +1,6 @@
-"""The Blender world -> the core's world light: a uniform colour, or an equirectangular map with
-its multiplier and rotation (linear Rec.709, Cycles' units).
+"""The Blender world -> the core's world light: a uniform colour, an equirectangular map with its
+multiplier and rotation, or any node tree baked into a map, a Sky Texture's sun disc as a sun
+lamp (linear Rec.709, Cycles' units).
 
 A Background or Emission shader whose Color is an Environment Texture node (equirectangular
 projection) exports that node's image (``images.read_image``: linear Rec.709, row 0 at the
@@ -15,6 +16,14 @@ warning naming the world and the node: a mirror-ball projection and other colour
 times the strength, as in Cycles (checked: Cycles 5.0 shows (1, 0, 1) for an Environment
 Texture with no image or a missing file). Without a node tree: the world's viewport colour. A
 NaN colour or strength is an error naming the world, a huge one is clamped with a warning.
+
+Any other node graph on the shader's Color or Strength (docs/physics.md section 7.12) is compiled
+by export/shader_compiler.py into a shader program (Color x Strength) and evaluated at the texel
+centres of a BAKE_WIDTH x BAKE_HEIGHT map with the ray direction as Generated and Object (Cycles'
+background coordinates); a graph that reads no coordinate is a uniform colour. A Sky Texture
+(core/materials/sky_texture.py) straight on the Color, with a plain Strength, is baked without
+its sun disc, and the disc becomes a SUN row of ``WorldLight.lights`` (its direction, angular
+diameter and integrated irradiance): what the scene's light table adds from the world.
 """
 
 from __future__ import annotations
