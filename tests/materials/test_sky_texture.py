@@ -133,3 +133,22 @@ def test_sky_op_in_a_program():
     v = bad.op("coord", kind="generated")[0]
     bad.outputs = {"emission": bad.op("sky", [v], with_sun=True, **dict(p._asdict(), altitude=float("nan")))[0]}
     assert "sky" in program_problems(bad.finish())
+
+
+def test_preetham_zenith_is_the_papers_zenith_luminance_and_chromaticity():
+    """Preetham, Shirley & Smits 1999 (appendix A.2): the Perez distributions are normalised so
+    that the zenith sees Y_z = (4.0453 T - 4.9710) tan chi - 0.2155 T + 2.4192 (kcd/m^2; Cycles
+    scales by 0.06), chi = (4/9 - T/120)(pi - 2 theta_s), and the zenith chromaticity x_z of the
+    paper's cubic in theta_s; the radiance turned back into XYZ must give them."""
+    t, theta_s = 3.0, 0.7
+    sun = [math.sin(theta_s) * 0.6, math.sin(theta_s) * 0.8, math.cos(theta_s)]
+    rgb = S.preetham_radiance(sun, t, np.array([[0.0, 0.0, 1.0]]))[0]
+    xyz = np.linalg.solve(S.XYZ_TO_REC709, rgb)
+    chi = (4 / 9 - t / 120) * (math.pi - 2 * theta_s)
+    y_z = ((4.0453 * t - 4.9710) * math.tan(chi) - 0.2155 * t + 2.4192) * 0.06
+    x_z = (np.array([t * t, t, 1]) @ np.array([[0.00166, -0.00375, 0.00209, 0],
+                                                [-0.02903, 0.06377, -0.03202, 0.00394],
+                                                [0.11693, -0.21196, 0.06052, 0.25886]])
+           @ np.array([theta_s ** 3, theta_s ** 2, theta_s, 1]))
+    assert xyz[1] == pytest.approx(y_z, rel=1e-9)
+    assert xyz[0] / xyz.sum() == pytest.approx(x_z, rel=1e-9)

@@ -343,6 +343,13 @@ class ShaderCompiler:
                             squash=float(node.squash), squash_frequency=int(node.squash_frequency))
             return fac if oname == "Fac" else col
         if idn == "ShaderNodeTexSky":
+            if vec is None:  # no Vector socket on the evaluated node: the direction, as unlinked
+                vec = b.op("coord", kind="generated")[0]
+            if node.sky_type == "PREETHAM":
+                sd = [float(c) for c in node.sun_direction]
+                if not all(np.isfinite(sd)) or not np.isfinite(float(node.turbidity)):
+                    raise SceneError(f"{self.reader.owner}: Sky Texture '{node.name}' has a NaN or infinite setting")
+                return b.op("sky_preetham", [vec], sun_direction=sd, turbidity=float(node.turbidity))[0]
             if node.sky_type not in SKY_TYPES:
                 raise self._fail(node, f"the {node.sky_type.replace('_', ' ').title()} sky model of '{node.name}'")
             sp = sky_params(node.sky_type, node.sun_disc, node.sun_size, node.sun_intensity, node.sun_elevation,
@@ -350,8 +357,6 @@ class ShaderCompiler:
                             node.ozone_density)
             if not all(np.isfinite(float(v)) for v in sp):
                 raise SceneError(f"{self.reader.owner}: Sky Texture '{node.name}' has a NaN or infinite setting")
-            if vec is None:  # no Vector socket on the evaluated node: the direction, as unlinked
-                vec = b.op("coord", kind="generated")[0]
             return b.op("sky", [vec], with_sun=node.name not in self.sky_sun_lamps,
                         **{k: (bool(v) if isinstance(v, bool) else float(v)) for k, v in sp._asdict().items()})[0]
         if idn == "ShaderNodeTexMagic":

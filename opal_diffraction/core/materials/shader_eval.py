@@ -16,7 +16,8 @@ the operations of core/scene/shader_programs.py as Cycles' SVM computes them
 - the textures of :mod:`.shader_textures`: ``noise``, ``voronoi``, ``checker``, ``gradient``,
   ``white_noise``, ``wave``, ``magic``, ``brick``; ``image``: a scene image (core/materials/textures.py ``sample_texture``) at
   the (x, y) of its vector, as Cycles reads an Image Texture's Vector; ``sky``: Blender's Sky
-  Texture (:mod:`.sky_texture`, single and multiple scattering) towards its vector.
+  Texture (:mod:`.sky_texture`, single and multiple scattering) towards its vector;
+  ``sky_preetham``: its Preetham type.
 
 :func:`evaluate` runs only the ops a slot needs (``ShaderProgram.needed``); its inputs are the hits'
 texture coordinates ('generated', 'object', 'uv', each (B, 3) float32).
@@ -28,7 +29,7 @@ import numpy as np
 
 from ..scene.shader_programs import Op, ShaderProgram
 from . import shader_textures as T
-from .sky_texture import SkyParams, sky_radiance
+from .sky_texture import SkyParams, preetham_radiance, sky_radiance
 
 __all__ = ["evaluate", "MATH_FUNCTIONS", "VECTOR_MATH_FUNCTIONS", "MIX_FUNCTIONS"]
 
@@ -463,6 +464,8 @@ def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset(), i
     if name == "sky":  # Blender's Sky Texture (sky_texture.py), its Vector the direction
         sp = SkyParams(*(p[k] for k in SkyParams._fields))
         return (sky_radiance(sp, a[0], with_sun=bool(p.get("with_sun", True))).astype(F),)
+    if name == "sky_preetham":
+        return (preetham_radiance(p["sun_direction"], float(p["turbidity"]), a[0]).astype(F),)
     raise ValueError(f"unknown shader op {name!r}")
 
 

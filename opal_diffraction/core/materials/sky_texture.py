@@ -18,7 +18,11 @@ uses float32: the tables agree to ~1e-6 relative, far below the renders' noise.
 
 The tables are XYZ; ``XYZ_TO_REC709`` turns them into linear Rec.709 as Cycles'
 ``xyz_to_rgb_clamped`` does for a Rec.709 working space, negative channels clamped to 0.
-Preetham and Hosek / Wilkie are not ported (the caller warns).
+Preetham (Preetham, Shirley & Smits 1999, "A Practical Analytic Model for Daylight": Perez
+distributions of x, y and Y with turbidity-linear coefficients, the zenith values of
+``sky_texture_precompute_preetham`` in Cycles' scene/shader_nodes.cpp and the kernel's
+``sky_radiance_preetham``) is ported too; Hosek / Wilkie (its fitted data tables) is not (the
+caller warns).
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ import numpy as np
 
 __all__ = ["SKY_TYPES", "TABLE_WIDTH", "TABLE_HEIGHT", "XYZ_TO_REC709", "SkyParams", "sky_params",
            "sky_table", "sun_pixels", "earth_intersection_angle", "sky_radiance", "sun_direction",
-           "sun_disc_radiance", "sun_irradiance"]
+           "sun_disc_radiance", "sun_irradiance", "preetham_radiance"]
 
 #: The sky types read here (Blender 5.0 enum names).
 SKY_TYPES = ("SINGLE_SCATTERING", "MULTIPLE_SCATTERING")
@@ -485,3 +489,54 @@ def sky_radiance(p: SkyParams, d: np.ndarray, with_sun: bool = True) -> np.ndarr
     if with_sun:
         rgb = rgb + sun_disc_radiance(p, d)
     return rgb
+
+
+# ------------------------------------------------------------------ Preetham
+def _perez(lam, theta, gamma):
+    """Perez's sky distribution (1 + A e^(B / cos theta)) (1 + C e^(D gamma) + E cos^2 gamma)."""
+    return (1 + lam[0] * np.exp(lam[1] / np.cos(theta))) * (1 + lam[2] * np.exp(lam[3] * gamma)
+                                                            + lam[4] * np.cos(gamma) ** 2)
+
+
+def _preetham_setup(sun_direction, turbidity):
+    """(sun theta, sun phi, zenith (Y, x, y) over Perez at the zenith, Perez coefficients (3, 5))."""
+    sx, sy, sz = (float(c) for c in sun_direction)
+    theta, phi = float(np.arccos(np.clip(sz, -1, 1))), float(np.arctan2(sx, sy))
+    t = float(turbidity)
+    t2, th2, th3 = t * t, theta * theta, theta ** 3
+    chi = (4.0 / 9.0 - t / 120.0) * (np.pi - 2 * theta)
+    zen_y = ((4.0453 * t - 4.9710) * np.tan(chi) - 0.2155 * t + 2.4192) * 0.06
+    zen_x = ((0.00166 * th3 - 0.00375 * th2 + 0.00209 * theta) * t2
+             + (-0.02903 * th3 + 0.06377 * th2 - 0.03202 * theta + 0.00394) * t
+             + (0.11693 * th3 - 0.21196 * th2 + 0.06052 * theta + 0.25886))
+    zen_yy = ((0.00275 * th3 - 0.00610 * th2 + 0.00317 * theta) * t2
+              + (-0.04214 * th3 + 0.08970 * th2 - 0.04153 * theta + 0.00516) * t
+              + (0.15346 * th3 - 0.26756 * th2 + 0.06670 * theta + 0.26688))
+    cfg = np.array([[0.1787 * t - 1.4630, -0.3554 * t + 0.4275, -0.0227 * t + 5.3251, 0.1206 * t - 2.5771,
+                     -0.0670 * t + 0.3703],
+                    [-0.0193 * t - 0.2592, -0.0665 * t + 0.0008, -0.0004 * t + 0.2125, -0.0641 * t - 0.8989,
+                     -0.0033 * t + 0.0452],
+                    [-0.0167 * t - 0.2608, -0.0950 * t + 0.0092, -0.0079 * t + 0.2102, -0.0441 * t - 1.6537,
+                     -0.0109 * t + 0.0529]])
+    zen = np.array([zen_y, zen_x, zen_yy]) / np.array([_perez(c, 0.0, theta) for c in cfg])
+    return theta, phi, zen, cfg
+
+
+def preetham_radiance(sun_direction, turbidity: float, d: np.ndarray) -> np.ndarray:
+    """(N, 3) linear Rec.709 radiance of the Preetham sky (no sun disc) towards directions d (N, 3):
+    Y, x, y from Perez's distribution of the view's zenith angle (clamped 0.001 rad above the
+    horizon) and its angle gamma to the sun, xyY -> XYZ -> Rec.709 clamped at 0."""
+    d = np.asarray(d, np.float64).reshape(-1, 3)
+    s_theta, s_phi, zen, cfg = _preetham_setup(sun_direction, turbidity)
+    theta = np.arccos(np.clip(d[:, 2], -1, 1))
+    phi = -np.arctan2(d[:, 1], d[:, 0]) + _PI_2
+    cos_psi = np.sin(theta) * np.sin(s_theta) * np.cos(s_phi - phi) + np.cos(theta) * np.cos(s_theta)
+    gamma = np.arccos(np.clip(cos_psi, -1, 1))
+    theta = np.minimum(theta, _PI_2 - 0.001)
+    big_y = zen[0] * _perez(cfg[0], theta, gamma)
+    x = zen[1] * _perez(cfg[1], theta, gamma)
+    y = zen[2] * _perez(cfg[2], theta, gamma)
+    safe_y = np.where(y != 0, y, 1.0)
+    xx = np.where(y != 0, x / safe_y * big_y, 0.0)
+    zz = np.where((y != 0) & (big_y != 0), (1 - x - y) / safe_y * big_y, 0.0)
+    return _xyz_to_rgb(np.stack([xx, big_y, zz], axis=1))

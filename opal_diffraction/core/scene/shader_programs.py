@@ -152,6 +152,7 @@ OPS = {
     "bright_contrast": (("v", "f", "f"), ("v",)),
     "hue_saturation": (("f", "f", "f", "f", "v"), ("v",)),
     "sky": (("v",), ("v",)),
+    "sky_preetham": (("v",), ("v",)),
 }
 #: The Sky Texture op's parameters (core/materials/sky_texture.py ``SkyParams``, plus ``with_sun``).
 SKY_PARAMS = ("multiple", "sun_disc", "sun_size", "sun_intensity", "elevation", "rotation", "altitude", "air",
@@ -218,6 +219,11 @@ def program_problems(program: ShaderProgram) -> str | None:
             if any(not isinstance(v, (bool, int, float)) or not np.isfinite(float(v)) for v in vals) \
                     or float(op.params["sun_size"]) <= 0 or float(op.params["altitude"]) < 0:
                 return f"{where}: the sky needs finite {', '.join(SKY_PARAMS)} (sun size > 0, altitude >= 0)"
+        if op.name == "sky_preetham":
+            sd = np.asarray(op.params.get("sun_direction", np.nan), np.float64)
+            t = np.asarray(op.params.get("turbidity", np.nan), np.float64)
+            if sd.shape != (3,) or t.shape != () or not np.isfinite(sd).all() or not np.isfinite(t):
+                return f"{where}: the Preetham sky needs a finite sun_direction (3) and turbidity"
         if op.name == "ramp":
             table = np.asarray(op.params.get("table", []), np.float64)
             if table.ndim != 2 or table.shape[1] != 4 or len(table) < 2 or not np.isfinite(table).all():
