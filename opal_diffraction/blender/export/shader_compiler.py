@@ -21,7 +21,9 @@ is read. It reads:
   warning naming the node.
 
 Image Texture nodes inside the program (behind a ColorRamp, a Mix, ...) sample the scene's
-image per hit at their Vector (unlinked: the UV map), flat projection. Anything else on the way
+image per hit at their Vector (unlinked: the UV map), flat projection; in a world's graph
+(``world``) an Environment Texture samples its image at the equirectangular (u, v) of its Vector
+(unlinked: the ray direction). Anything else on the way
 (Hue/Saturation, Curves, Attribute, a Texture
 Coordinate output other than the three above, a colour mode other than RGB) is named in one
 warning and replaced by the socket's own value, as before. Colours typed into sockets are the
@@ -50,7 +52,7 @@ COMPILED_NODES = frozenset({
     "ShaderNodeCombineRGB", "ShaderNodeMapping", "ShaderNodeValue", "ShaderNodeRGB", "ShaderNodeTexCoord",
     "ShaderNodeUVMap", "ShaderNodeGroup", "NodeGroupInput", "ShaderNodeTexImage", "ShaderNodeTexWave",
     "ShaderNodeTexMagic", "ShaderNodeTexBrick", "ShaderNodeGamma", "ShaderNodeBrightContrast",
-    "ShaderNodeHueSaturation", "ShaderNodeRGBToBW", "ShaderNodeTexSky"})
+    "ShaderNodeHueSaturation", "ShaderNodeRGBToBW", "ShaderNodeTexSky", "ShaderNodeTexEnvironment"})
 
 _KIND = {"VALUE": "f", "INT": "f", "BOOLEAN": "f", "RGBA": "v", "VECTOR": "v"}
 _DIMS = {"1D": 1, "2D": 2, "3D": 3, "4D": 4}
@@ -71,6 +73,8 @@ class ShaderCompiler:
         self.uv_maps: set = set()       # UV maps the program reads ('' the active render map)
         #: Sky Texture nodes (by name) whose sun disc is left out: the world exports it as a sun lamp.
         self.sky_sun_lamps: frozenset = frozenset()
+        #: Compiling a world's graph: Environment Textures are read (their Vector is the direction).
+        self.world = False
 
     # ------------------------------------------------------------------ entry
     def compile_input(self, node, name: str, kind: str):
@@ -302,6 +306,8 @@ class ShaderCompiler:
             return col if oname == "Color" else alpha
         if idn == "ShaderNodeTexImage":
             return self._image(node, oname, path)
+        if idn == "ShaderNodeTexEnvironment":
+            return self._environment(node, oname, path)
         # textures: the unlinked Vector is Generated
         vec = self._in(node, "Vector", path, "v", default_generated=True) if node.inputs.get("Vector") else None
         if idn == "ShaderNodeTexNoise":
@@ -386,6 +392,29 @@ class ShaderCompiler:
             self.uv_maps.add("")
             vec = b.op("coord", kind="uv")[0]
         col, alpha = b.op("image", [vec], texture=int(idx))
+        return col if oname == "Color" else alpha
+
+    def _environment(self, node, oname: str, path: tuple) -> int:
+        """An Environment Texture inside a world's graph: the scene texture at the equirectangular
+        (u, v) of its Vector (unlinked: the ray direction), Cycles' REPEAT lookup."""
+        b = self.builder
+        table = self.reader.textures
+        if not self.world or table is None:
+            raise self._fail(node, f"environment texture '{node.name}' outside a world")
+        if getattr(node, "projection", "EQUIRECTANGULAR") != "EQUIRECTANGULAR":
+            raise self._fail(node, f"the mirror-ball projection of environment texture '{node.name}'")
+        image = getattr(node, "image", None)
+        idx = None if image is None else table.index(image, getattr(node, "interpolation", "Linear"), "REPEAT",
+                                                     self.reader.owner)
+        if idx is None:  # no image or no pixels: Cycles' magenta
+            if image is None:
+                self.reader.warn(f"{self.reader.owner}: Environment Texture '{node.name}' has no image: magenta, "
+                                 "as in Cycles")
+            return b.const([1.0, 0.0, 1.0]) if oname == "Color" else b.const(1.0)
+        sock = node.inputs.get("Vector")
+        vec = self._socket(sock, path, "v", default_generated=True) if sock is not None else \
+            b.op("coord", kind="generated")[0]
+        col, alpha = b.op("image", [b.op("equirect", [vec])[0]], texture=int(idx))
         return col if oname == "Color" else alpha
 
     def _ramp_colour(self, rgba) -> list:

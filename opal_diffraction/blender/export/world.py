@@ -35,9 +35,11 @@ import numpy as np
 from ...core.lights.environment import uv_to_direction
 from ...core.materials.shader_eval import evaluate
 from ...core.materials.sky_texture import SKY_TYPES, sky_params, sun_direction, sun_irradiance
+from ...core.materials.textures import sample_texture
 from ...core.scene.checks import SceneError
+from ...core.scene.model import TEXTURE_EXTENSIONS, TEXTURE_INTERPOLATIONS
 from .colour import in_rec709, rgb, working_space_to_rec709
-from .images import read_image
+from .images import TextureTable, read_image
 from .messages import Warnings
 from .nodes import MAX_INTENSITY, NodeReader, missing_output, node_tree, surface_socket
 from .shader_compiler import ShaderCompiler
@@ -138,7 +140,9 @@ def _baked(reader: NodeReader, shader, owner: str, warn) -> WorldLight | None:
     shader program and evaluated at the texel centres of an equirectangular map (the direction as
     Generated and Object), Cycles' background of a node tree; a Sky Texture's sun disc becomes a
     sun lamp where the sky lights the world alone. None when nothing in the graph is read."""
+    reader.textures = TextureTable(warn)  # images inside the graph, read for the bake
     compiler = ShaderCompiler(reader)
+    compiler.world = True
     reader.compiler = compiler
     sky = _lamp_sky(reader, shader)
     if sky is not None:
@@ -159,7 +163,7 @@ def _baked(reader: NodeReader, shader, owner: str, warn) -> WorldLight | None:
         one = np.zeros((1, 3), np.float32)
         value = evaluate(program, "emission", {"generated": one, "object": one, "uv": one}, 1)[0]
         return WorldLight(np.minimum(np.asarray(value, np.float64), MAX_INTENSITY))
-    image = bake_program(program)
+    image = bake_program(program, reader.textures)
     if (image < 0).any():
         warn(f"{owner}: its node tree gives negative radiance in some directions: rendered as 0")
     image = np.maximum(image, 0.0)
@@ -174,9 +178,17 @@ def _baked(reader: NodeReader, shader, owner: str, warn) -> WorldLight | None:
     return WorldLight(np.ones(3), image.astype(np.float32), np.eye(3), lights)
 
 
-def bake_program(program) -> np.ndarray:
+def bake_program(program, textures: TextureTable | None = None) -> np.ndarray:
     """(BAKE_HEIGHT, BAKE_WIDTH, 3) float32 linear Rec.709 radiance: the program's 'emission'
-    at each texel centre's direction (core/lights/environment.py convention, row 0 at the bottom)."""
+    at each texel centre's direction (core/lights/environment.py convention, row 0 at the bottom);
+    ``textures``: the images its image ops read (core/materials/textures.py ``sample_texture``)."""
+    images = None
+    if textures is not None and len(textures):
+        interp = [TEXTURE_INTERPOLATIONS[x] for x in textures.interpolation]
+        ext = [TEXTURE_EXTENSIONS[x] for x in textures.extension]
+
+        def images(k, uv):
+            return sample_texture(textures.pixels[k], uv, interp[k], ext[k], textures.encoding[k])
     h, w = BAKE_HEIGHT, BAKE_WIDTH
     u = (np.arange(w) + 0.5) / w
     v = (np.arange(h) + 0.5) / h
@@ -186,7 +198,7 @@ def bake_program(program) -> np.ndarray:
     for s in range(0, len(d), _BAKE_CHUNK):
         chunk = d[s:s + _BAKE_CHUNK]
         inputs = {"generated": chunk, "object": chunk, "uv": np.zeros_like(chunk)}
-        out[s:s + _BAKE_CHUNK] = evaluate(program, "emission", inputs, len(chunk))
+        out[s:s + _BAKE_CHUNK] = evaluate(program, "emission", inputs, len(chunk), images)
     return out.reshape(h, w, 3)
 
 

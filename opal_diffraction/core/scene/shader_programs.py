@@ -153,6 +153,7 @@ OPS = {
     "hue_saturation": (("f", "f", "f", "f", "v"), ("v",)),
     "sky": (("v",), ("v",)),
     "sky_preetham": (("v",), ("v",)),
+    "equirect": (("v",), ("v",)),
 }
 #: The Sky Texture op's parameters (core/materials/sky_texture.py ``SkyParams``, plus ``with_sun``).
 SKY_PARAMS = ("multiple", "sun_disc", "sun_size", "sun_intensity", "elevation", "rotation", "altitude", "air",
