@@ -124,9 +124,13 @@ VIEWS = [(math.radians(90), 0, 0), (math.radians(90), 0, math.radians(140)), (ma
          (math.radians(20), 0, 0), (math.radians(120), 0, 1.0)]
 
 
+SUB = 4  # sub-pixel grid per axis for our side (Cycles' BOX filter averages over the whole pixel)
+
+
 def _background_views(tmp_path, build, samples=16):
-    """(Cycles' background, our baked map at the same pixel centres) per view of VIEWS: 48 x 32
-    BOX-filtered pixels of a camera at the origin, the world made by ``build(node_tree)``."""
+    """(Cycles' background, our baked map averaged over the same pixels) per view of VIEWS: 48 x
+    32 BOX-filtered pixels of a camera at the origin (ours: a SUB x SUB grid in each pixel), the
+    world made by ``build(node_tree)``."""
     bs.empty_scene()
     sc = bpy.context.scene
     world = bpy.data.worlds.new("w")
@@ -144,19 +148,23 @@ def _background_views(tmp_path, build, samples=16):
         bpy.context.view_layer.update()
         cycles = bs.render_to_array(str(tmp_path / f"cycles_{k}.exr"), "CYCLES", samples=samples)
         camera = export_camera(bpy.context.evaluated_depsgraph_get(), width=width, height=height)
-        ys, xs = np.meshgrid(np.arange(height) + 0.5, np.arange(width) + 0.5, indexing="ij")
-        _, d = generate_rays(camera, xs.ravel(), ys.ravel())
-        yield k, cycles, env.radiance_rgb(d).reshape(height, width, 3).astype(np.float64)
+        sub = (np.arange(SUB) + 0.5) / SUB
+        ys, xs = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
+        sy, sx = np.meshgrid(sub, sub, indexing="ij")
+        _, d = generate_rays(camera, (xs[..., None] + sx.ravel()).ravel(), (ys[..., None] + sy.ravel()).ravel())
+        ours = env.radiance_rgb(d).astype(np.float64).reshape(height, width, SUB * SUB, 3).mean(axis=2)
+        yield k, cycles, ours
 
 
 @pytest.mark.parametrize("sky_type", ["MULTIPLE_SCATTERING", "SINGLE_SCATTERING", "PREETHAM"])
 def test_baked_sky_matches_cycles_background_direction_by_direction(sky_type, tmp_path):
-    """Cycles' background (48 x 32 BOX-filtered pixels, 16 samples: the sky is smooth within a
-    pixel) against our baked map looked up at the pixel centres, for five views (horizon both
-    sides of the sun, zenith, nadir): the median pixel within 1 % and each view's mean within 3 %
-    (the map's 0.35 degree texels blur the horizon's steep rows, where the pixel's own
-    gradient is largest). Port errors (a flipped rotation, another XYZ matrix, the table's
-    elevation mapping) are tens of per cent."""
+    """Cycles' background (48 x 32 BOX-filtered pixels, 16 samples) against our baked map
+    averaged over the same pixels, for five views (horizon both sides of the sun, zenith,
+    nadir): the median pixel within 1 % and each view's mean within 1.5 % (measured 0.2 % and
+    0.7 %; the largest pixel errors are on the horizon rows, where the sky's table has a
+    square-root kink in elevation that 16 samples and our 0.35 degree texels each resolve only
+    so far). Port errors (a flipped rotation, another XYZ matrix, the
+    table's elevation mapping) are tens of per cent."""
     def build(nt):
         sky = _sky(nt, sky_type, sun_disc=False)
         sky.sun_direction = (0.5, -0.6, 0.62)
@@ -172,7 +180,7 @@ def test_baked_sky_matches_cycles_background_direction_by_direction(sky_type, tm
         print(f"{sky_type} view {k}: mean ratio {np.round(ratio, 4)}, median rel {np.median(rel):.4f}, "
               f"95th percentile {np.percentile(rel, 95):.4f}")
         assert np.median(rel) < 0.01
-        assert np.all(np.abs(ratio - 1) < 0.03)
+        assert np.all(np.abs(ratio - 1) < 0.015)
 
 
 def test_environment_texture_inside_a_graph_matches_cycles(tmp_path):
