@@ -437,11 +437,13 @@ def test_world_colour():
     bg = w.node_tree.nodes["Background"]
     bg.inputs["Color"].default_value = (0.1, 0.2, 0.3, 1.0)
     bg.inputs["Strength"].default_value = 2.0
-    np.testing.assert_allclose(_export().scene.world_color, (0.2, 0.4, 0.6), rtol=1e-6)
-    sky = w.node_tree.nodes.new("ShaderNodeTexSky")
+    before = _export()
+    np.testing.assert_allclose(before.scene.world_color, (0.2, 0.4, 0.6), rtol=1e-6)
+    sky = w.node_tree.nodes.new("ShaderNodeTexSky")  # baked into a map, its sun a lamp (test_world_nodes_cycles.py)
     w.node_tree.links.new(sky.outputs[0], bg.inputs["Color"])
     ex = _export()
-    assert any("world" in x for x in ex.warnings)
+    assert not ex.warnings and ex.scene.world_image.shape == (512, 1024, 3)
+    assert len(ex.scene.lights) == len(before.scene.lights) + 1
 
 
 def test_export_operator_writes_a_renderable_scene(tmp_path):

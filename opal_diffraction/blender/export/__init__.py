@@ -165,7 +165,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     world = export_world_light(depsgraph, warn)
     core_scene = Scene(
         vertices=vertices, triangles=triangles, tri_material=tri_material,
-        materials=core_materials, lights=Lights.from_list(lights.rows), camera=cam,
+        materials=core_materials, lights=Lights.from_list(lights.rows + world.lights), camera=cam,
         world_color=world.color, tri_tangent=tri_tangent, tri_period=tri_period, corner_normals=corner_normals,
         world_image=world.image, world_rotation=world.rotation,
         corner_uvs=corner_uvs, corner_tangents=corner_tangents, **materials.textures.scene_fields(), **domain_fields,
@@ -174,7 +174,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     meshes.done()
     stats = {
         "export_s": time.perf_counter() - t0, "objects": n_instances, "meshes": len(meshes),
-        "triangles": len(triangles), "vertices": len(vertices), "lights": len(lights.rows),
+        "triangles": len(triangles), "vertices": len(vertices), "lights": len(lights.rows) + len(world.lights),
         "materials": len(materials.rows), "textures": len(materials.textures),
     }
     return ExportResult(core_scene, warn.items, stats)

@@ -7,7 +7,7 @@ material, so the program lists the nodes in an order where every register is wri
 is read. It reads:
 
 - textures: Noise, Voronoi (F1, F2, Smooth F1, Distance to Edge), Checker, Gradient, White Noise,
-  Wave, Magic, Brick;
+  Wave, Magic, Brick, Sky (single and multiple scattering; core/materials/sky_texture.py);
 - converters: ColorRamp (a 257-entry table of Blender's own ``ColorRamp.evaluate``, as Cycles
   bakes it), Math, Vector Math, Mix (float, vector, colour; and the legacy MixRGB), Map Range
   (float), Clamp, Invert, Gamma, Bright/Contrast, Hue/Saturation/Value, RGB to BW,
@@ -21,7 +21,9 @@ is read. It reads:
   warning naming the node.
 
 Image Texture nodes inside the program (behind a ColorRamp, a Mix, ...) sample the scene's
-image per hit at their Vector (unlinked: the UV map), flat projection. Anything else on the way
+image per hit at their Vector (unlinked: the UV map), flat projection; in a world's graph
+(``world``) an Environment Texture samples its image at the equirectangular (u, v) of its Vector
+(unlinked: the ray direction). Anything else on the way
 (Hue/Saturation, Curves, Attribute, a Texture
 Coordinate output other than the three above, a colour mode other than RGB) is named in one
 warning and replaced by the socket's own value, as before. Colours typed into sockets are the
@@ -33,6 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.materials.shader_eval import evaluate
+from ...core.materials.sky_texture import SKY_TYPES, sky_params
 from ...core.scene.checks import SceneError
 from ...core.scene.shader_programs import (MATH_OPERATIONS, MIX_BLEND_TYPES, RAMP_TABLE_SIZE, VECTOR_MATH_OPERATIONS,
                                            ProgramBuilder, ShaderProgram)
@@ -49,7 +52,7 @@ COMPILED_NODES = frozenset({
     "ShaderNodeCombineRGB", "ShaderNodeMapping", "ShaderNodeValue", "ShaderNodeRGB", "ShaderNodeTexCoord",
     "ShaderNodeUVMap", "ShaderNodeGroup", "NodeGroupInput", "ShaderNodeTexImage", "ShaderNodeTexWave",
     "ShaderNodeTexMagic", "ShaderNodeTexBrick", "ShaderNodeGamma", "ShaderNodeBrightContrast",
-    "ShaderNodeHueSaturation", "ShaderNodeRGBToBW"})
+    "ShaderNodeHueSaturation", "ShaderNodeRGBToBW", "ShaderNodeTexSky", "ShaderNodeTexEnvironment"})
 
 _KIND = {"VALUE": "f", "INT": "f", "BOOLEAN": "f", "RGBA": "v", "VECTOR": "v"}
 _DIMS = {"1D": 1, "2D": 2, "3D": 3, "4D": 4}
@@ -68,6 +71,10 @@ class ShaderCompiler:
         self._memo: dict = {}           # (group path, node name, output identifier) -> register
         self._visiting: set = set()
         self.uv_maps: set = set()       # UV maps the program reads ('' the active render map)
+        #: Sky Texture nodes (by name) whose sun disc is left out: the world exports it as a sun lamp.
+        self.sky_sun_lamps: frozenset = frozenset()
+        #: Compiling a world's graph: Environment Textures are read (their Vector is the direction).
+        self.world = False
 
     # ------------------------------------------------------------------ entry
     def compile_input(self, node, name: str, kind: str):
@@ -299,6 +306,8 @@ class ShaderCompiler:
             return col if oname == "Color" else alpha
         if idn == "ShaderNodeTexImage":
             return self._image(node, oname, path)
+        if idn == "ShaderNodeTexEnvironment":
+            return self._environment(node, oname, path)
         # textures: the unlinked Vector is Generated
         vec = self._in(node, "Vector", path, "v", default_generated=True) if node.inputs.get("Vector") else None
         if idn == "ShaderNodeTexNoise":
@@ -339,6 +348,23 @@ class ShaderCompiler:
             fac, col = b.op("brick", args, offset=float(node.offset), offset_frequency=int(node.offset_frequency),
                             squash=float(node.squash), squash_frequency=int(node.squash_frequency))
             return fac if oname == "Fac" else col
+        if idn == "ShaderNodeTexSky":
+            if vec is None:  # no Vector socket on the evaluated node: the direction, as unlinked
+                vec = b.op("coord", kind="generated")[0]
+            if node.sky_type == "PREETHAM":
+                sd = [float(c) for c in node.sun_direction]
+                if not all(np.isfinite(sd)) or not np.isfinite(float(node.turbidity)):
+                    raise SceneError(f"{self.reader.owner}: Sky Texture '{node.name}' has a NaN or infinite setting")
+                return b.op("sky_preetham", [vec], sun_direction=sd, turbidity=float(node.turbidity))[0]
+            if node.sky_type not in SKY_TYPES:
+                raise self._fail(node, f"the {node.sky_type.replace('_', ' ').title()} sky model of '{node.name}'")
+            sp = sky_params(node.sky_type, node.sun_disc, node.sun_size, node.sun_intensity, node.sun_elevation,
+                            node.sun_rotation, node.altitude, node.air_density, node.aerosol_density,
+                            node.ozone_density)
+            if not all(np.isfinite(float(v)) for v in sp):
+                raise SceneError(f"{self.reader.owner}: Sky Texture '{node.name}' has a NaN or infinite setting")
+            return b.op("sky", [vec], with_sun=node.name not in self.sky_sun_lamps,
+                        **{k: (bool(v) if isinstance(v, bool) else float(v)) for k, v in sp._asdict().items()})[0]
         if idn == "ShaderNodeTexMagic":
             col, fac = b.op("magic", [vec, self._in(node, "Scale", path, "f"), self._in(node, "Distortion", path, "f")],
                             depth=int(node.turbulence_depth))
@@ -366,6 +392,29 @@ class ShaderCompiler:
             self.uv_maps.add("")
             vec = b.op("coord", kind="uv")[0]
         col, alpha = b.op("image", [vec], texture=int(idx))
+        return col if oname == "Color" else alpha
+
+    def _environment(self, node, oname: str, path: tuple) -> int:
+        """An Environment Texture inside a world's graph: the scene texture at the equirectangular
+        (u, v) of its Vector (unlinked: the ray direction), Cycles' REPEAT lookup."""
+        b = self.builder
+        table = self.reader.textures
+        if not self.world or table is None:
+            raise self._fail(node, f"environment texture '{node.name}' outside a world")
+        if getattr(node, "projection", "EQUIRECTANGULAR") != "EQUIRECTANGULAR":
+            raise self._fail(node, f"the mirror-ball projection of environment texture '{node.name}'")
+        image = getattr(node, "image", None)
+        idx = None if image is None else table.index(image, getattr(node, "interpolation", "Linear"), "REPEAT",
+                                                     self.reader.owner)
+        if idx is None:  # no image or no pixels: Cycles' magenta
+            if image is None:
+                self.reader.warn(f"{self.reader.owner}: Environment Texture '{node.name}' has no image: magenta, "
+                                 "as in Cycles")
+            return b.const([1.0, 0.0, 1.0]) if oname == "Color" else b.const(1.0)
+        sock = node.inputs.get("Vector")
+        vec = self._socket(sock, path, "v", default_generated=True) if sock is not None else \
+            b.op("coord", kind="generated")[0]
+        col, alpha = b.op("image", [b.op("equirect", [vec])[0]], texture=int(idx))
         return col if oname == "Color" else alpha
 
     def _ramp_colour(self, rgba) -> list:

@@ -1,5 +1,6 @@
-"""The Blender world -> the core's world light: a uniform colour, or an equirectangular map with
-its multiplier and rotation (linear Rec.709, Cycles' units).
+"""The Blender world -> the core's world light: a uniform colour, an equirectangular map with its
+multiplier and rotation, or any node tree baked into a map, a Sky Texture's sun disc as a sun
+lamp (linear Rec.709, Cycles' units).
 
 A Background or Emission shader whose Color is an Environment Texture node (equirectangular
 projection) exports that node's image (``images.read_image``: linear Rec.709, row 0 at the
@@ -15,6 +16,14 @@ warning naming the world and the node: a mirror-ball projection and other colour
 times the strength, as in Cycles (checked: Cycles 5.0 shows (1, 0, 1) for an Environment
 Texture with no image or a missing file). Without a node tree: the world's viewport colour. A
 NaN colour or strength is an error naming the world, a huge one is clamped with a warning.
+
+Any other node graph on the shader's Color or Strength (docs/physics.md section 7.12) is compiled
+by export/shader_compiler.py into a shader program (Color x Strength) and evaluated at the texel
+centres of a BAKE_WIDTH x BAKE_HEIGHT map with the ray direction as Generated and Object (Cycles'
+background coordinates); a graph that reads no coordinate is a uniform colour. A Sky Texture
+(core/materials/sky_texture.py) straight on the Color, with a plain Strength, is baked without
+its sun disc, and the disc becomes a SUN row of ``WorldLight.lights`` (its direction, angular
+diameter and integrated irradiance): what the scene's light table adds from the world.
 """
 
 from __future__ import annotations
@@ -23,14 +32,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...core.lights.environment import uv_to_direction
+from ...core.materials.shader_eval import evaluate
+from ...core.materials.sky_texture import SKY_TYPES, sky_params, sun_direction, sun_irradiance
+from ...core.materials.textures import sample_texture
 from ...core.scene.checks import SceneError
+from ...core.scene.model import TEXTURE_EXTENSIONS, TEXTURE_INTERPOLATIONS
 from .colour import in_rec709, rgb, working_space_to_rec709
-from .images import read_image
+from .images import TextureTable, read_image
 from .messages import Warnings
 from .nodes import MAX_INTENSITY, NodeReader, missing_output, node_tree, surface_socket
+from .shader_compiler import ShaderCompiler
 
 __all__ = ["WorldLight", "world_light", "world_color", "export_world", "export_world_light", "mapping_rotation",
-           "MISSING_IMAGE_RGB"]
+           "MISSING_IMAGE_RGB", "bake_program", "BAKE_HEIGHT", "BAKE_WIDTH"]
 
 #: What Cycles shows for an image texture without pixels (kernel/svm/image.h: IMAGE_TEXTURE_MISSING_RGBA).
 MISSING_IMAGE_RGB = (1.0, 0.0, 1.0)
@@ -44,6 +59,8 @@ class WorldLight:
     color: np.ndarray
     image: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3), np.float32))
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    #: Light-table rows (Lights.from_list dicts) the world adds: a Sky Texture's sun disc as a sun.
+    lights: list = field(default_factory=list)
 
 
 def world_color(world, warn, to709) -> np.ndarray:
@@ -80,9 +97,123 @@ def world_light(world, warn, to709) -> WorldLight:
                 return _environment(reader, node, env, owner, warn)
             warn(f"{owner}: Environment Texture '{env.name}' uses the mirror-ball projection, which is not "
                  "supported: rendered as the image's average colour")
+        elif _driven(reader, node):
+            baked = _baked(reader, node, owner, warn)
+            if baked is not None:
+                return baked
         return WorldLight(reader.emission(reader.color(node, "Color", (0.05, 0.05, 0.05)), reader.strength(node), node))
     warn(f"{owner}: world shader '{node.name}' is not supported: using the world colour as a uniform background")
     return WorldLight(_viewport_color(world, owner, to709))
+
+
+#: The baked map of a world node tree: rows (elevation) x columns (azimuth), 0.35 degree texels.
+BAKE_HEIGHT, BAKE_WIDTH = 512, 1024
+#: Rows evaluated at once while baking.
+_BAKE_CHUNK = 65536
+
+
+def _driven(reader: NodeReader, shader) -> bool:
+    """Whether a node drives the Color or the Strength of the world's ``shader``."""
+    return any(shader.inputs.get(n) is not None and reader.source(shader.inputs[n]) is not None
+               for n in ("Color", "Strength"))
+
+
+def _lamp_sky(reader: NodeReader, shader):
+    """The Sky Texture node whose sun disc becomes a sun lamp, or None: the sky straight on the
+    shader's Color (its Vector the ray direction), the Strength a plain number, the disc on."""
+    src = reader.source(shader.inputs["Color"])
+    if src is None or src[0].bl_idname != "ShaderNodeTexSky" or getattr(src[0], "mute", False):
+        return None
+    sky = src[0]
+    if sky.sky_type not in SKY_TYPES or not sky.sun_disc or reader.source(shader.inputs["Strength"]) is not None:
+        return None
+    sock = sky.inputs.get("Vector")
+    vec = reader.source(sock) if sock is not None else None
+    if vec is not None and not (vec[0].bl_idname == "ShaderNodeTexCoord" and vec[1].name in ("Generated", "Object")
+                                and getattr(vec[0], "object", None) is None):
+        return None
+    return sky
+
+
+def _baked(reader: NodeReader, shader, owner: str, warn) -> WorldLight | None:
+    """The world's node graph (what drives the Background's Color and Strength) compiled to a
+    shader program and evaluated at the texel centres of an equirectangular map (the direction as
+    Generated and Object), Cycles' background of a node tree; a Sky Texture's sun disc becomes a
+    sun lamp where the sky lights the world alone. None when nothing in the graph is read."""
+    reader.textures = TextureTable(warn)  # images inside the graph, read for the bake
+    compiler = ShaderCompiler(reader)
+    compiler.world = True
+    reader.compiler = compiler
+    sky = _lamp_sky(reader, shader)
+    if sky is not None:
+        compiler.sky_sun_lamps = frozenset([sky.name])
+    b = compiler.builder
+    col = compiler.compile_input(shader, "Color", "v")
+    strength = compiler.compile_input(shader, "Strength", "f")
+    if col is None and strength is None:
+        return None  # the caller warns and uses the sockets' values
+    if col is None:
+        col = b.const([float(c) for c in reader.color(shader, "Color", (0.05, 0.05, 0.05))])
+    if strength is None:
+        strength = b.const(reader.strength(shader))
+    zero = b.const([0.0, 0.0, 0.0])
+    out = b.op("vector_math", [col, zero, zero, strength], operation="SCALE")[0]
+    program = compiler.finish({"emission": out})
+    if not any(program.ops[i].name == "coord" for i in program.needed("emission")):  # the same everywhere
+        one = np.zeros((1, 3), np.float32)
+        value = evaluate(program, "emission", {"generated": one, "object": one, "uv": one}, 1)[0]
+        return WorldLight(np.minimum(np.asarray(value, np.float64), MAX_INTENSITY))
+    image = bake_program(program, reader.textures)
+    if (image < 0).any():
+        warn(f"{owner}: its node tree gives negative radiance in some directions: rendered as 0")
+    image = np.maximum(image, 0.0)
+    if not np.isfinite(image).all() or image.max() > MAX_INTENSITY:
+        warn(f"{owner}: its node tree gives radiance above {MAX_INTENSITY:.0e}: clamped")
+        image = np.minimum(np.nan_to_num(image, nan=0.0, posinf=MAX_INTENSITY), MAX_INTENSITY)
+    lights = []
+    if sky is not None:
+        row = _sun_lamp(sky, reader.strength(shader))
+        if row is not None:
+            lights.append(row)
+    return WorldLight(np.ones(3), image.astype(np.float32), np.eye(3), lights)
+
+
+def bake_program(program, textures: TextureTable | None = None) -> np.ndarray:
+    """(BAKE_HEIGHT, BAKE_WIDTH, 3) float32 linear Rec.709 radiance: the program's 'emission'
+    at each texel centre's direction (core/lights/environment.py convention, row 0 at the bottom);
+    ``textures``: the images its image ops read (core/materials/textures.py ``sample_texture``)."""
+    images = None
+    if textures is not None and len(textures):
+        interp = [TEXTURE_INTERPOLATIONS[x] for x in textures.interpolation]
+        ext = [TEXTURE_EXTENSIONS[x] for x in textures.extension]
+
+        def images(k, uv):
+            return sample_texture(textures.pixels[k], uv, interp[k], ext[k], textures.encoding[k])
+    h, w = BAKE_HEIGHT, BAKE_WIDTH
+    u = (np.arange(w) + 0.5) / w
+    v = (np.arange(h) + 0.5) / h
+    uu, vv = np.broadcast_arrays(u[None, :], v[:, None])
+    d = uv_to_direction(uu, vv).reshape(-1, 3).astype(np.float32)
+    out = np.empty((len(d), 3), np.float32)
+    for s in range(0, len(d), _BAKE_CHUNK):
+        chunk = d[s:s + _BAKE_CHUNK]
+        inputs = {"generated": chunk, "object": chunk, "uv": np.zeros_like(chunk)}
+        out[s:s + _BAKE_CHUNK] = evaluate(program, "emission", inputs, len(chunk), images)
+    return out.reshape(h, w, 3)
+
+
+def _sun_lamp(sky, strength: float) -> dict | None:
+    """A SUN light-table row for ``sky``'s disc: its direction and angular diameter, its
+    irradiance the disc's radiance integrated over it (sky_texture.sun_irradiance) times the
+    world's strength; None when the disc is dark (below the horizon or behind the earth)."""
+    p = sky_params(sky.sky_type, sky.sun_disc, sky.sun_size, sky.sun_intensity, sky.sun_elevation,
+                   sky.sun_rotation, sky.altitude, sky.air_density, sky.aerosol_density, sky.ozone_density)
+    irradiance = sun_irradiance(p) * strength
+    peak = float(irradiance.max())
+    if not peak > 0 or not np.isfinite(peak):
+        return None
+    return {"kind": "SUN", "direction": tuple(-sun_direction(p)), "power": min(peak, MAX_INTENSITY),
+            "color": tuple(irradiance / peak), "angle": p.sun_size}
 
 
 def _environment(reader: NodeReader, shader, env, owner: str, warn) -> WorldLight:

@@ -15,7 +15,10 @@ the operations of core/scene/shader_programs.py as Cycles' SVM computes them
   average, float -> colour grey);
 - the textures of :mod:`.shader_textures`: ``noise``, ``voronoi``, ``checker``, ``gradient``,
   ``white_noise``, ``wave``, ``magic``, ``brick``; ``image``: a scene image (core/materials/textures.py ``sample_texture``) at
-  the (x, y) of its vector, as Cycles reads an Image Texture's Vector.
+  the (x, y) of its vector, as Cycles reads an Image Texture's Vector; ``sky``: Blender's Sky
+  Texture (:mod:`.sky_texture`, single and multiple scattering) towards its vector;
+  ``sky_preetham``: its Preetham type; ``equirect``: an Environment Texture's equirectangular
+  (u, v) of a direction (then read by ``image``).
 
 :func:`evaluate` runs only the ops a slot needs (``ShaderProgram.needed``); its inputs are the hits'
 texture coordinates ('generated', 'object', 'uv', each (B, 3) float32).
@@ -27,6 +30,7 @@ import numpy as np
 
 from ..scene.shader_programs import Op, ShaderProgram
 from . import shader_textures as T
+from .sky_texture import SkyParams, preetham_radiance, sky_radiance
 
 __all__ = ["evaluate", "MATH_FUNCTIONS", "VECTOR_MATH_FUNCTIONS", "MIX_FUNCTIONS"]
 
@@ -458,6 +462,17 @@ def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset(), i
             return np.zeros((n, 3), F), np.zeros(n, F)
         rgba = images(int(p["texture"]), np.ascontiguousarray(a[0][:, :2]))
         return np.ascontiguousarray(rgba[:, :3]), np.ascontiguousarray(rgba[:, 3])
+    if name == "sky":  # Blender's Sky Texture (sky_texture.py), its Vector the direction
+        sp = SkyParams(*(p[k] for k in SkyParams._fields))
+        return (sky_radiance(sp, a[0], with_sun=bool(p.get("with_sun", True))).astype(F),)
+    if name == "equirect":  # an Environment Texture's (u, v, 0) of a direction (kernel/camera/projection.h)
+        v = a[0].astype(np.float64)
+        ln = np.sqrt(np.einsum("ij,ij->i", v, v))
+        z = np.clip(v[:, 2] / np.where(ln > 0, ln, 1.0), -1.0, 1.0)
+        u = 0.5 - np.arctan2(v[:, 1], v[:, 0]) / (2 * np.pi)
+        return (np.stack([u, 1.0 - np.arccos(z) / np.pi, np.zeros_like(u)], axis=1).astype(F),)
+    if name == "sky_preetham":
+        return (preetham_radiance(p["sun_direction"], float(p["turbidity"]), a[0]).astype(F),)
     raise ValueError(f"unknown shader op {name!r}")
 
 

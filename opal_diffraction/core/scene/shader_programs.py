@@ -23,7 +23,7 @@ import numpy as np
 
 __all__ = ["Op", "ShaderProgram", "ProgramBuilder", "program_problems", "OPS", "SLOTS", "COORDINATES",
            "MATH_OPERATIONS", "VECTOR_MATH_OPERATIONS", "MIX_BLEND_TYPES", "NOISE_TYPES", "VORONOI_FEATURES",
-           "VORONOI_METRICS", "GRADIENT_TYPES", "MAP_RANGE_TYPES", "MAPPING_TYPES", "RAMP_TABLE_SIZE"]
+           "VORONOI_METRICS", "GRADIENT_TYPES", "MAP_RANGE_TYPES", "MAPPING_TYPES", "RAMP_TABLE_SIZE", "SKY_PARAMS"]
 
 #: The material slots a program may feed, and the kind of register each reads.
 SLOTS = {"color": "v", "roughness": "f", "metallic": "f", "emission": "v"}
@@ -151,7 +151,13 @@ OPS = {
     "gamma": (("v", "f"), ("v",)),
     "bright_contrast": (("v", "f", "f"), ("v",)),
     "hue_saturation": (("f", "f", "f", "f", "v"), ("v",)),
+    "sky": (("v",), ("v",)),
+    "sky_preetham": (("v",), ("v",)),
+    "equirect": (("v",), ("v",)),
 }
+#: The Sky Texture op's parameters (core/materials/sky_texture.py ``SkyParams``, plus ``with_sun``).
+SKY_PARAMS = ("multiple", "sun_disc", "sun_size", "sun_intensity", "elevation", "rotation", "altitude", "air",
+              "aerosol", "ozone", "with_sun")
 
 _ENUMS = {
     ("coord", "kind"): COORDINATES,
@@ -209,6 +215,16 @@ def program_problems(program: ShaderProgram) -> str | None:
             return f"{where}: depth must be 0 to 10"
         if op.name == "image" and (not isinstance(op.params.get("texture"), int) or op.params["texture"] < 0):
             return f"{where}: texture must be a texture index"
+        if op.name == "sky":
+            vals = [op.params.get(k) for k in SKY_PARAMS]
+            if any(not isinstance(v, (bool, int, float)) or not np.isfinite(float(v)) for v in vals) \
+                    or float(op.params["sun_size"]) <= 0 or float(op.params["altitude"]) < 0:
+                return f"{where}: the sky needs finite {', '.join(SKY_PARAMS)} (sun size > 0, altitude >= 0)"
+        if op.name == "sky_preetham":
+            sd = np.asarray(op.params.get("sun_direction", np.nan), np.float64)
+            t = np.asarray(op.params.get("turbidity", np.nan), np.float64)
+            if sd.shape != (3,) or t.shape != () or not np.isfinite(sd).all() or not np.isfinite(t):
+                return f"{where}: the Preetham sky needs a finite sun_direction (3) and turbidity"
         if op.name == "ramp":
             table = np.asarray(op.params.get("table", []), np.float64)
             if table.ndim != 2 or table.shape[1] != 4 or len(table) < 2 or not np.isfinite(table).all():
