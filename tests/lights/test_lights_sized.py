@@ -358,3 +358,39 @@ def test_sized_lights_send_the_analytic_flux_through_a_glass_slab(case):
     print(f"{case}: flux {mean:.5g} +- {se:.2g}, analytic {expected:.5g}, t = {t:.2f}")
     assert abs(t) < 6.87  # two-sided probability 1e-3 at 5 degrees of freedom
     assert se / expected < 0.01
+
+
+def _sun_view(camera_visible: int):
+    """A camera looking straight at a sun of 20 degrees (strength 2, white) over a black world, no geometry."""
+    from opal_diffraction.core.render.frame import render
+    from opal_diffraction.core.scene.model import Camera
+    s = Scene()
+    s.lights = Lights.from_list([{"kind": "SUN", "direction": (0, 0, -1), "angle": math.radians(20), "power": 2.0,
+                                  "camera_visible": camera_visible}])
+    s.camera = Camera.look_at((0, 0, 0), (0, 0, 1), up=(0, 1, 0), width=24, height=24)
+    return render(validate(s).scene, RenderSettings(samples=4, wavelength_step=10.0)).rgb
+
+
+def test_camera_sees_the_disc_of_a_sun_marked_visible_to_it():
+    """Cycles' sun lamps are hidden from camera rays unless their object's Visibility > Camera is
+    on; a Sky Texture's sun (export/world.py) always is. Seen, the disc's radiance is
+    S / (pi sin^2 h) (h the half angle): a white sun's RGB that in every channel, 0 outside it."""
+    hidden, seen = _sun_view(0), _sun_view(1)
+    assert np.all(hidden == 0)
+    expect = 2.0 / (math.pi * math.sin(math.radians(10)) ** 2)
+    centre = seen[10:14, 10:14].reshape(-1, 3)
+    assert np.allclose(centre, expect, rtol=0.01), (centre.mean(0), expect)
+    assert np.all(seen[0] == 0) and np.all(seen[:, 0] == 0)  # the 50 degree view's corners are outside the disc
+    assert np.isfinite(seen).all() and (seen >= 0).all()
+
+
+def test_camera_visible_is_a_0_or_1_column_saved_with_the_scene(tmp_path):
+    from opal_diffraction.core.scene.model import Camera
+    s = Scene()
+    s.camera = Camera.look_at((0, 0, 0), (0, 0, 1), up=(0, 1, 0), width=4, height=4)
+    s.lights = Lights.from_list([{"kind": "SUN", "angle": 0.1, "camera_visible": 1}])
+    save_scene(validate(s).scene, tmp_path / "s.npz")
+    assert load_scene(tmp_path / "s.npz").lights.camera_visible.tolist() == [1]
+    s.lights = Lights.from_list([{"kind": "SUN", "angle": 0.1, "camera_visible": 2}])
+    with pytest.raises(SceneError, match="camera visible must be 0 or 1"):
+        validate(s)

@@ -145,6 +145,7 @@ def light_row(ob, m: np.ndarray, warn, to709) -> dict | None:
                 warn(f"light '{ob.name}': a non-uniformly scaled spot cone is rendered round")
     elif t == "SUN":
         row["kind"] = "SUN"
+        row["camera_visible"] = int(bool(getattr(ob, "visible_camera", False)))  # Cycles shows the disc then
         angle = min(max(_finite_size(ob, "angle", getattr(light, "angle", 0.0)), 0.0), math.pi)
         row["angle"] = angle
         if not normalize and angle > 0:  # Cycles: the sun's area pi sin^2(angle / 2)

@@ -213,7 +213,8 @@ def _sun_lamp(sky, strength: float) -> dict | None:
     if not peak > 0 or not np.isfinite(peak):
         return None
     return {"kind": "SUN", "direction": tuple(-sun_direction(p)), "power": min(peak, MAX_INTENSITY),
-            "color": tuple(irradiance / peak), "angle": p.sun_size}
+            "color": tuple(irradiance / peak), "angle": p.sun_size,
+            "camera_visible": 1}  # the disc is part of the sky Cycles' camera rays see
 
 
 def _environment(reader: NodeReader, shader, env, owner: str, warn) -> WorldLight:

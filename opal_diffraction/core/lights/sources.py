@@ -86,11 +86,12 @@ class PreparedLights:
     sphere: np.ndarray = None      # (L,) bool: a sized point / spot is a sphere (else a facing disk)
     sun_half: np.ndarray = None    # (L,) rad: half the sun's angular diameter, 0 for delta suns and other kinds
     sun_omc: np.ndarray = None     # (L,) 1 - cos(sun_half), computed without cancellation
+    camera_visible: np.ndarray = None  # (L,) bool: camera rays see this sun's disc (Lights.camera_visible)
 
     def __post_init__(self):
         n = len(self.kind)
         for name, dtype in (("radius", np.float64), ("sun_half", np.float64), ("sun_omc", np.float64),
-                            ("sphere", bool)):
+                            ("sphere", bool), ("camera_visible", bool)):
             if getattr(self, name) is None:
                 setattr(self, name, np.zeros(n, dtype))
 
@@ -160,6 +161,7 @@ def prepare_lights(lights: Lights, conv: SpectralConverter) -> PreparedLights:
         sphere=(radius > 0) & ~soft,
         sun_half=sun_half,
         sun_omc=np.where(sun_half > 0, sun_omc, 0.0),
+        camera_visible=(kind == SUN) & (np.asarray(getattr(lights, "camera_visible", np.zeros(n)), np.int64) != 0),
     )
 
 
@@ -635,12 +637,14 @@ def lights_met(pl: PreparedLights, o: np.ndarray, d: np.ndarray, tmax: np.ndarra
     return rows, idx, scale, pdf
 
 
-def sun_radiance(pl: PreparedLights, d: np.ndarray) -> np.ndarray:
+def sun_radiance(pl: PreparedLights, d: np.ndarray, camera: bool = False) -> np.ndarray:
     """(B, n) float32 radiance of the suns with an angle seen along escaping directions d (B, 3):
-    S / (pi sin^2 h) times the spectrum's shape inside each sun's cone, zero outside."""
+    S / (pi sin^2 h) times the spectrum's shape inside each sun's cone, zero outside;
+    ``camera``: only the suns camera rays see (``camera_visible``)."""
     d = np.asarray(d, np.float64)
     out = np.zeros((len(d), pl.spectrum.shape[1]), np.float32)
-    for li in np.flatnonzero((pl.kind == SUN) & (pl.sun_half > 0)):  # loop over suns
+    suns = (pl.kind == SUN) & (pl.sun_half > 0)
+    for li in np.flatnonzero(suns & pl.camera_visible if camera else suns):  # loop over suns
         omc = float(pl.sun_omc[li])
         inside = d @ (-pl.direction[li]) >= 1.0 - omc
         if inside.any():

@@ -318,6 +318,9 @@ class Lights:
     radius: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
     angle: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
     soft_falloff: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    # SUN: 1 where camera rays see its disc (Blender's object Visibility > Camera, off for lamps by
+    # default as in Cycles; on for the sun a Sky Texture's disc becomes: docs/physics.md 7.12)
+    camera_visible: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
 
     def __len__(self):
         return _rows(self.kind)
@@ -357,6 +360,7 @@ class Lights:
                 "radius": r.get("radius", 0.0),
                 "angle": r.get("angle", 0.0),
                 "soft_falloff": r.get("soft_falloff", 0),
+                "camera_visible": r.get("camera_visible", 0),
             }
             for name, v in vals.items():
                 cols[name].append(v)
@@ -373,7 +377,7 @@ LIGHT_COLUMNS = {
     "axis_u": ((3,), np.float64), "color": ((3,), np.float32), "power": ((), np.float64),
     "temperature": ((), np.float64), "spot_size": ((), np.float64), "spot_blend": ((), np.float64),
     "size_u": ((), np.float64), "size_v": ((), np.float64), "radius": ((), np.float64),
-    "angle": ((), np.float64), "soft_falloff": ((), np.int32),
+    "angle": ((), np.float64), "soft_falloff": ((), np.int32), "camera_visible": ((), np.int32),
 }
 
 

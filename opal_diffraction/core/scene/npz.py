@@ -27,7 +27,7 @@ _DOMAIN_FIELDS = ("domain_seeds", "domain_weight", "domain_axis", "domain_diamet
                   "tri_domain_group")
 
 #: Light columns added after format 1: a file without them loads with 0 (what it rendered then).
-_LIGHT_OPTIONAL = ("radius", "angle", "soft_falloff")
+_LIGHT_OPTIONAL = ("radius", "angle", "soft_falloff", "camera_visible")
 
 
 def save_scene(scene: Scene, path) -> None:

@@ -718,6 +718,10 @@ def _validate_programs(scene: Scene, materials: Materials, used: np.ndarray, cor
     return list(raw)
 
 
+#: The light table's 0/1 columns.
+_FLAG_COLUMNS = ("soft_falloff", "camera_visible")
+
+
 def _validate_lights(lt: Lights) -> Lights:
     kind = as_column(lt.kind, "light table column 'kind'", (), kind="int", allow_empty=True)
     n = len(kind)
@@ -726,7 +730,7 @@ def _validate_lights(lt: Lights) -> Lights:
     for name, (tail, _dtype) in LIGHT_COLUMNS.items():
         if name != "kind":
             out[name] = as_column(getattr(lt, name), f"light table column {name!r}", tail, rows=n, allow_empty=n == 0,
-                                **({"kind": "int"} if name == "soft_falloff" else {}))
+                                **({"kind": "int"} if name in _FLAG_COLUMNS else {}))
     if n == 0:
         return lt if all(out[k] is getattr(lt, k) for k in out) else Lights(**{
             k: v if v.dtype == LIGHT_COLUMNS[k][1] else v.astype(LIGHT_COLUMNS[k][1]) for k, v in out.items()})
@@ -735,7 +739,7 @@ def _validate_lights(lt: Lights) -> Lights:
         return f"light {i}"
 
     _enum_check(kind, LIGHT_KINDS, label, "kind")
-    f64 = {name: out[name].astype(np.float64) for name in out if name not in ("kind", "soft_falloff")}
+    f64 = {name: out[name].astype(np.float64) for name in out if name != "kind" and name not in _FLAG_COLUMNS}
     units = {"position": " m", "power": " W", "size_u": " m", "size_v": " m", "temperature": " K", "radius": " m",
              "angle": " rad"}
     for name in ("position", "direction", "axis_u", "color", "power", "temperature", "spot_size", "spot_blend",
@@ -778,11 +782,12 @@ def _validate_lights(lt: Lights) -> Lights:
     if bad.any():
         i = int(np.argmax(bad))
         raise SceneError(f"light {i}: sun angle {number_text(f64['angle'][i])} rad is outside 0-pi")
-    sf = out["soft_falloff"].astype(np.int64)
-    bad = (sf != 0) & (sf != 1)
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise SceneError(f"light {i}: soft falloff must be 0 or 1, got {int(sf[i])}")
+    for name in _FLAG_COLUMNS:
+        sf = out[name].astype(np.int64)
+        bad = (sf != 0) & (sf != 1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"light {i}: {name.replace('_', ' ')} must be 0 or 1, got {int(sf[i])}")
     su, sv = f64["size_u"], f64["size_v"]
     rect, disk = kind == LIGHT_KINDS["AREA_RECT"], kind == LIGHT_KINDS["AREA_DISK"]
     area_rows = rect | disk

@@ -65,13 +65,21 @@ def escaped(c, out, rays: Rays, escapes: list | None) -> None:
     them; ``escapes``: a list to record the paths that met only mirrors and glass (trace_escapes),
     or None."""
     if len(c.soft_suns):
+        lights = c.prepared.lights
         seen = not_covered(c, rays) & (rays.depth > 0)
         if seen.any():
             r = rays.take(seen)
-            lights = c.prepared.lights
             p_light = sum(light_pdf(lights, int(li), r.o, r.d) for li in c.soft_suns)
             rad = sun_radiance(lights, r.d) * power_heuristic(r.state.pdf, p_light)[:, None]
             out.add_by_vertices(r, r.weighted(rad) if r.lam is None else r.w * rad[np.arange(len(r)), r.lam])
+        # camera rays see the discs of suns marked visible to them (a Sky Texture's sun, a lamp
+        # with Visibility > Camera), with no light sample to share with: weight 1
+        if lights.camera_visible[c.soft_suns].any():
+            first = rays.depth == 0
+            if first.any():
+                r = rays.take(first)
+                rad = sun_radiance(lights, r.d, camera=True)
+                out.add_by_vertices(r, r.weighted(rad) if r.lam is None else r.w * rad[np.arange(len(r)), r.lam])
     st = rays.state
     if escapes is not None:
         first = st.nd == 0  # paths that met only mirrors and glass
