@@ -197,6 +197,14 @@ class MaterialTable:
             "thin_film_thickness": float(surf.thin_film_thickness) if surf.kind is not None else 0.0,
             "thin_film_ior": float(surf.thin_film_ior),
         }
+        if surf.kind is not None:  # a shader mix of unlike BSDFs (docs/physics.md section 14.8)
+            for name in ("metal_color", "glass_color"):
+                col = getattr(surf, name)
+                if col is not None:
+                    row[name] = tuple(float(c) for c in np.clip(col, 0.0, MAX_INTENSITY))
+            if surf.layer_fac != "CONSTANT":
+                row.update(layer_fac=surf.layer_fac, layer_fac_value=float(surf.layer_fac_value),
+                           layer_fac_from=int(surf.layer_fac_from), layer_fac_to=int(surf.layer_fac_to))
         row.update(self._texture_columns(surf, owner))
         row.update(self._program_columns(surf, owner, row))
         opal = getattr(mat, "opal", None)

@@ -782,7 +782,8 @@ def evaluate(params: SurfaceParams, wo, wi, ns, ng):
 
 
 # ---------------------------------------------------------------------------------- materials
-def params_from_materials(materials, mat, front, lam=None, base=None, roughness=None, u_layer=None) -> SurfaceParams:
+def params_from_materials(materials, mat, front, lam=None, base=None, roughness=None, u_layer=None,
+                          weights=None) -> SurfaceParams:
     """SurfaceParams of hits on materials (core/materials.PreparedMaterials) rows ``mat`` (B,).
 
     front (B,) bool: the hit is on the side the normal points to (entering a dielectric: eta =
@@ -793,13 +794,17 @@ def params_from_materials(materials, mat, front, lam=None, base=None, roughness=
     Principled's layers: with u_layer (B,) uniforms the layer is drawn per hit - the metal with
     probability metallic, else glass with probability transmission, else the dielectric base
     (PLASTIC, or LAMBERT without a specular layer) - which makes each hit's weight an unbiased
-    estimate of the weighted sum; without u_layer the heaviest layer is used.
+    estimate of the weighted sum; without u_layer the heaviest layer is used. Shader mixes of
+    unlike BSDFs are the same layers as a lobe mixture (docs/physics.md section 14.8): the metal
+    takes its own colour where the row has one (``metal_reflectance``), and ``weights``
+    (metallic (B,), transmission (B,)) replace the table's per hit (a Fresnel / Layer Weight
+    Fac: core/materials/mixtures.py ``per_hit_layers``).
     """
     m = materials
     mat = np.asarray(mat, np.int64)
     front = np.asarray(front, bool)
     B = len(mat)
-    metallic, transmission = m.metallic[mat], m.transmission[mat]
+    metallic, transmission = (m.metallic[mat], m.transmission[mat]) if weights is None else weights
     if u_layer is None:  # the heaviest layer (ties: metal, then glass)
         w_glass, w_base = (1.0 - metallic) * transmission, (1.0 - metallic) * (1.0 - transmission)
         metal = (metallic >= w_glass) & (metallic >= w_base)
@@ -820,6 +825,9 @@ def params_from_materials(materials, mat, front, lam=None, base=None, roughness=
     if m.glass_tint is not None:  # the glass layer's tint per refraction (docs/physics.md section 2.7)
         own = glass & ~m.color_textured[mat]  # a colour texture's hits keep the texture's tint
         b = np.where(own[:, None], spectral(m.glass_tint), b) if own.any() else b
+    if getattr(m, "metal_reflectance", None) is not None:  # a mix's metal layer of its own colour
+        own = metal & m.own_metal[mat]
+        b = np.where(own[:, None], spectral(m.metal_reflectance), b) if own.any() else b
     k = b.shape[1]
     rough = m.roughness[mat] if roughness is None else np.asarray(roughness, _F32)
     alpha = np.clip(rough, 0.0, 1.0) ** 2
@@ -885,7 +893,9 @@ def microfacet_materials(materials, textures=None) -> np.ndarray:
     if textures is not None and len(textures.roughness):
         rough = rough | (np.asarray(textures.roughness) >= 0)
     metallic, transmission = np.asarray(m.metallic), np.asarray(m.transmission)
-    return (((kind == K_MIRROR) & (rough | (metallic < 1)))
+    lf = getattr(m, "layer_fac", None)
+    per_hit = np.zeros(len(kind), bool) if lf is None else np.asarray(lf) != 0  # a Fresnel-mixed row
+    return (per_hit | ((kind == K_MIRROR) & (rough | (metallic < 1)))
             | ((kind == K_DIELECTRIC) & (rough | (transmission < 1) | (metallic > 0)))
             | ((kind == K_DIFFUSE) & ((np.asarray(m.spec_f0) > 0) | (metallic > 0) | (transmission > 0))))
 
