@@ -3,7 +3,9 @@
 Follows a node tree from its output node through reroutes, mix and add shaders, and evaluates
 the BSDF it finds to one of the core's surfaces (diffuse, mirror, dielectric) with a colour, an
 IOR, an emission and the rough-surface columns (core/materials/bsdf.py: roughness, Principled's metallic /
-transmission weights, IOR level, specular tint, the metal's Fresnel). Image Texture nodes on a
+transmission weights, IOR level, specular tint, the metal's Fresnel). Mix and Add Shaders of
+unlike BSDFs become lobe mixtures (docs/physics.md section 14.8): the layers' weights summed,
+each layer with its own colour, a Mix's Fac from a Fresnel or Layer Weight node read per hit. Image Texture nodes on a
 BSDF's colour, roughness, metallic or emission colour and, through a tangent-space Normal Map
 node, on its normal are bound as textures sampled per hit (:class:`TextureRef`,
 ``Surface.textures``; docs/physics.md section 13) with their coordinates (the UV map, or
@@ -12,8 +14,7 @@ Generated) and any Mapping node folded in. Procedural textures and converters on
 material's shader program (export/shader_compiler.py, ``Surface.programs``; docs/physics.md
 section 13.6), evaluated per hit. What the core cannot represent is approximated and
 named in the warnings: other textures and procedural nodes are averaged
-(:func:`images.image_mean`) or use the socket's own value, mixes of unlike surfaces keep the
-heavier, anisotropy is dropped, a Diffuse BSDF's (Oren-Nayar) roughness is Lambertian, a
+(:func:`images.image_mean`) or use the socket's own value, anisotropy is dropped, a Diffuse BSDF's (Oren-Nayar) roughness is Lambertian, a
 physical-conductor Metallic BSDF is fitted with the F82-tint model.
 
 Nothing a node tree holds can hang the export or reach the tracer as NaN or Inf: a node cycle
