@@ -34,7 +34,8 @@ OUT = os.environ.get("OPAL_MIXTURE_PNG")  # a folder: side-by-side PNGs of each 
 def _mix_material(name: str, fac: str):
     """Mix Shader(Diffuse (0.8, 0.25, 0.1), Glossy (0.9, 0.9, 0.9) roughness 0.25, Multiscatter
     GGX), its Fac 0.5 ('CONST'), a Fresnel node of IOR 1.5 ('FRESNEL') or a Layer Weight node's
-    Facing output of Blend 0.3 ('FACING') or its Fresnel output of Blend 0.5 ('LAYER_FRESNEL')."""
+    Facing output of Blend 0.3 ('FACING') or its Fresnel output of Blend 0.5 ('LAYER_FRESNEL'), or
+    a Checker texture's Fac (scale 4, on Generated coordinates: 'CHECKER')."""
     mat = bpy.data.materials.new(name)
     nt = mat.node_tree
     nt.nodes.clear()
@@ -51,6 +52,10 @@ def _mix_material(name: str, fac: str):
     nt.links.new(mix.outputs[0], out.inputs["Surface"])
     if fac == "CONST":
         mix.inputs["Fac"].default_value = 0.5
+    elif fac == "CHECKER":  # a texture per hit: the shader program's 'mix' output
+        node = nt.nodes.new("ShaderNodeTexChecker")
+        node.inputs["Scale"].default_value = 4.0
+        nt.links.new(node.outputs["Fac"], mix.inputs["Fac"])
     elif fac == "FRESNEL":
         node = nt.nodes.new("ShaderNodeFresnel")
         node.inputs["IOR"].default_value = 1.5
@@ -75,7 +80,7 @@ def build(fac: str):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("fac", ["CONST", "FRESNEL", "FACING", "LAYER_FRESNEL"])
+@pytest.mark.parametrize("fac", ["CONST", "FRESNEL", "FACING", "LAYER_FRESNEL", "CHECKER"])
 def test_mix_shader_matches_cycles(fac, tmp_path):
     build(fac)
     ref = cp.render_pair("CYCLES", REF_SPP, cp.REF_SEEDS, str(tmp_path))
@@ -100,7 +105,7 @@ def test_mix_exports_a_lobe_mixture():
     'rendered as' warning."""
     from opal_diffraction.blender.export import export_scene
 
-    for fac, code in (("CONST", 0), ("FRESNEL", 1), ("FACING", 3)):
+    for fac, code in (("CONST", 0), ("FRESNEL", 1), ("FACING", 3), ("CHECKER", 4)):
         build(fac)
         ex = export_scene(bpy.context.evaluated_depsgraph_get())
         m = ex.scene.materials
@@ -112,5 +117,9 @@ def test_mix_exports_a_lobe_mixture():
         assert m.conductor_fresnel[row] == 0  # the Glossy BSDF's constant Fresnel
         if code == 0:
             assert m.metallic[row] == pytest.approx(0.5)
+        elif code == 4:  # the checker's program, its 'mix' output read per hit; the table: its average
+            prog = ex.scene.shader_programs[int(m.shader_program[row])]
+            assert "mix" in prog.outputs
+            assert 0.3 < m.metallic[row] < 0.7
         else:
             assert (int(m.layer_fac_from[row]), int(m.layer_fac_to[row])) == (0, 1)

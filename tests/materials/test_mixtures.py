@@ -274,3 +274,17 @@ def test_columns_defaults_validation_round_trip(tmp_path):
             validate(Scene(materials=Materials.from_list([dict(name="x", **bad)]), camera=Camera()))
     with pytest.raises(SceneError, match="layer_fac"):
         Materials.from_list([{"layer_fac": "SCHLICK"}])
+
+
+def test_program_fac_per_hit():
+    """LayerFac.PROGRAM: the shader program's 'mix' output per hit (clamped to [0, 1]) weighs the
+    layer layer_fac_to; a hit without a value (NaN) keeps the table's mean."""
+    conv = SpectralConverter()
+    m = Materials.from_list([dict(name="masked", kind="DIFFUSE", color=(0.5, 0.5, 0.5), metal_color=(1, 1, 1),
+                                  metallic=0.5, roughness=0.3, layer_fac="PROGRAM", layer_fac_from=0,
+                                  layer_fac_to=1)])
+    pm = prepare_materials(m, conv)
+    fac = np.array([0.0, 0.25, 1.0, 1.5, -0.2, np.nan], np.float32)
+    metallic, transmission = per_hit_layers(pm, np.zeros(6, np.int64), np.ones(6), np.ones(6, bool), fac)
+    np.testing.assert_allclose(metallic, [0.0, 0.25, 1.0, 1.0, 0.0, 0.5])
+    assert (transmission == 0).all()

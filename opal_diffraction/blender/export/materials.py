@@ -132,7 +132,7 @@ class MaterialTable:
         ``surf.programs``; keys '_program_reads' (taken off by :meth:`lookup`) and '_corners'
         (a program reading UVs on a material without image textures: the UV map, unmapped)."""
         compiler, self._compiler = self._compiler, None
-        progs = {k: v for k, v in surf.programs.items() if k in ("color", "roughness", "metallic", "emission")}
+        progs = {k: v for k, v in surf.programs.items() if k in ("color", "roughness", "metallic", "emission", "mix")}
         if surf.kind is None:
             progs = {k: v for k, v in progs.items() if k == "emission"}
         if not progs or compiler is None:

@@ -564,8 +564,11 @@ class NodeReader(TextureBindings):
             return Surface(None, np.zeros(3), emission=self.emission(color, strength, node))
         if idn == "ShaderNodeMixShader":
             view = self._view_fac(node)
+            program = None if view is not None else self._program_fac(node)
             if view is not None:  # Fresnel / Layer Weight: per hit; the table keeps its hemispherical mean
                 f = _mean_fac(*view)
+            elif program is not None:  # a texture / converter chain: per hit; the table keeps its average
+                f = program[1]
             else:
                 f = min(max(self.value(node, "Fac", 0.5) if node.inputs.get("Fac") else 0.5, 0.0), 1.0)
             a = self._shader(self.source(node.inputs[1]), depth + 1)
@@ -573,6 +576,8 @@ class NodeReader(TextureBindings):
             out = self._combine(a, b, 1.0 - f, f, node)
             if view is not None:
                 self._per_hit_fac(out, a, b, view, node)
+            elif program is not None:
+                self._per_hit_fac(out, a, b, ("PROGRAM", f), node, program[0])
             return out
         if idn == "ShaderNodeAddShader":
             a = self._shader(self.source(node.inputs[0]), depth + 1)
@@ -608,18 +613,34 @@ class NodeReader(TextureBindings):
             return "FRESNEL", self.value(n, "IOR", 1.5)
         return ("LAYER_FACING" if out.name == "Facing" else "LAYER_FRESNEL"), self.value(n, "Blend", 0.5)
 
-    def _per_hit_fac(self, out: Surface, a: Surface, b: Surface, view, node) -> None:
+    def _program_fac(self, node) -> tuple[int, float] | None:
+        """(register, average) where a Mix Shader's Fac is driven by nodes the shader compiler reads
+        (a texture, a ColorRamp, Math ...: docs/physics.md sections 13.6 and 14.8), else None."""
+        sock = node.inputs.get("Fac")
+        src = self.source(sock) if sock is not None else None
+        if src is None or self.textures is None or src[0].bl_idname == "ShaderNodeValue":
+            return None
+        mean = self._compile(node, "Fac", "f")
+        if mean is None:
+            return None
+        return self._programmed[(node.name, "Fac")], float(np.clip(mean, 0.0, 1.0))
+
+    def _per_hit_fac(self, out: Surface, a: Surface, b: Surface, view, node, register: int | None = None) -> None:
         """Give ``out`` (a Mix of ``a`` and ``b``) its Fac per hit where a and b are one layer each
         and different layers; otherwise warn that the Fac's hemispherical mean is rendered."""
         la, lb = a.layer_weights(), b.layer_weights()
         one_a, one_b = la.max() == 1.0, lb.max() == 1.0
         ia, ib = int(np.argmax(la)), int(np.argmax(lb))
         if a.kind is None or b.kind is None or not (one_a and one_b) or ia == ib:
-            self.warn(f"{self.owner}: '{node.name}' takes its Fac from a {view[0].replace('_', ' ').lower()} "
-                      f"node, read per hit only between two single BSDFs of different kinds (diffuse, glossy, "
-                      f"glass): rendered with its hemispherical mean {_mean_fac(*view):.3g}")
+            what = "a texture or converter chain" if register is not None else \
+                f"a {view[0].replace('_', ' ').lower()} node"
+            mean = view[1] if register is not None else _mean_fac(*view)
+            self.warn(f"{self.owner}: '{node.name}' takes its Fac from {what}, read per hit only between two "
+                      f"single BSDFs of different kinds (diffuse, glossy, glass): rendered with its mean {mean:.3g}")
             return
         out.layer_fac, out.layer_fac_value, out.layer_fac_from, out.layer_fac_to = view[0], float(view[1]), ia, ib
+        if register is not None:
+            out.programs["mix"] = register
 
     def _roughness(self, node, default: float, name: str = "Roughness") -> float:
         """A roughness input clamped to [0, 1], as Cycles clamps it."""
@@ -729,7 +750,7 @@ class NodeReader(TextureBindings):
         for s in (first, second):  # the shader programs of the surface kept (the heavier first)
             if s.programs and _is_mixture(out):  # a lobe mixture: the base's colour, the others' roughness
                 for slot, reg in s.programs.items():
-                    if slot == "emission" or _mixture_slot(s, slot):
+                    if slot != "mix" and (slot == "emission" or _mixture_slot(s, slot)):
                         out.programs.setdefault(slot, reg)
                 continue
             if s.programs and (s.kind == out.kind or out.kind is None or s.kind is None):

@@ -23,7 +23,9 @@ on the view direction; this module evaluates them per hit as Cycles' SVM does
 
 with F(c, eta) = ½ A² (1 + B²), g = sqrt(eta² - 1 + c²), A = (g - c) / (g + c),
 B = (c (g + c) - 1) / (c (g - c) + 1) (1 where eta² - 1 + c² <= 0: total reflection), and cos
-the cosine between the view direction and the shading normal.
+the cosine between the view direction and the shading normal. A Fac from a texture or a
+converter chain is the material's shader program's 'mix' output at the hit (LayerFac.PROGRAM,
+core/materials/surface.py ``surface_mix_fac``), clamped to [0, 1] as the Mix Shader clamps it.
 """
 
 from __future__ import annotations
@@ -94,10 +96,11 @@ def layer_weights(fac, src, dst) -> tuple[np.ndarray, np.ndarray]:
     return w_metal.astype(_F32), np.clip(trans, 0.0, 1.0).astype(_F32)
 
 
-def per_hit_layers(materials, mat, cos, front):
+def per_hit_layers(materials, mat, cos, front, program_fac=None):
     """(metallic, transmission) (B,) per hit for the hits of materials (PreparedMaterials) rows
-    ``mat`` whose weights come from a Fresnel / Layer Weight node, the table's elsewhere; None
-    when no hit has such a material (the table's columns serve)."""
+    ``mat`` whose weights come from a Fresnel / Layer Weight node or from the shader program's
+    'mix' output (``program_fac`` (B,), read at those rows; None: the table's mean there), the
+    table's elsewhere; None when no hit has such a material (the table's columns serve)."""
     code = getattr(materials, "layer_fac", None)
     if code is None:
         return None
@@ -108,8 +111,14 @@ def per_hit_layers(materials, mat, cos, front):
         return None
     metallic = np.asarray(materials.metallic, _F32)[mat].copy()
     transmission = np.asarray(materials.transmission, _F32)[mat].copy()
-    rows = np.flatnonzero(live)
+    rows = np.flatnonzero(live & (c != LayerFac.PROGRAM))
     fac = layer_fac(c[rows], materials.layer_fac_value[mat[rows]], np.asarray(cos)[rows], np.asarray(front)[rows])
+    prog = np.flatnonzero(c == LayerFac.PROGRAM)
+    if len(prog) and program_fac is not None:
+        pf = np.asarray(program_fac, _F32)[prog]
+        ok = np.isfinite(pf)  # a hit the program did not reach keeps the table's mean
+        rows = np.concatenate([rows, prog[ok]])
+        fac = np.concatenate([fac, np.clip(pf[ok], _F32(0), _F32(1))])
     metallic[rows], transmission[rows] = layer_weights(fac, materials.layer_fac_from[mat[rows]],
                                                        materials.layer_fac_to[mat[rows]])
     return metallic, transmission

@@ -16,7 +16,7 @@ import numpy as np
 
 from ...materials import bsdf
 from ...materials.mixtures import per_hit_layers
-from ...materials.surface import shading_normal, surface_reflectance, surface_roughness
+from ...materials.surface import shading_normal, surface_mix_fac, surface_reflectance, surface_roughness
 from ...transport.walker import Hit, Rays, shading_normals
 
 __all__ = ["HitShading", "bend_normals", "bump", "bump_shadowing", "surface_params", "reflects"]
@@ -99,7 +99,7 @@ def surface_params(prepared, mixed_layers: np.ndarray, rays: Rays, hit: Hit, rng
     u_layer = rng.random(len(rays)) if mixed_layers[hit.mat].any() else None
     # a Fresnel / Layer Weight mix: its layer weights per hit from the view direction (section 14.8)
     weights = None if u_layer is None else per_hit_layers(
-        prepared.materials, hit.mat, np.einsum("ij,ij->i", -rays.d, hit.ns), hit.front)
+        prepared.materials, hit.mat, np.einsum("ij,ij->i", -rays.d, hit.ns), hit.front, surface_mix_fac(prepared, hit))
     params = bsdf.params_from_materials(prepared.materials, hit.mat, hit.front, rays.lam, base=base,
                                         roughness=surface_roughness(prepared, hit), u_layer=u_layer,
                                         weights=weights)
