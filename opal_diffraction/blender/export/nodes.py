@@ -590,9 +590,9 @@ class NodeReader(TextureBindings):
             if node.inputs.get(name) is not None and getattr(node.inputs[name], "type", "") == "RGBA":
                 col = self.color(node, name)
                 break
-        if idn == "ShaderNodeBsdfTransparent":
-            self.warn(f"{self.owner}: Transparent BSDF is not supported: rendered black")
-            return black
+        if idn == "ShaderNodeBsdfTransparent":  # straight through, tinted per crossing: glass of IOR 1
+            return Surface("DIELECTRIC", self.color(node, "Color", (1, 1, 1)), 1.0, 0.0, metallic=0.0,
+                           transmission=1.0, glass_tint="REFRACTION")
         self.warn(f"{self.owner}: shader node '{node.name}' ({idn}) is not supported: rendered as a diffuse "
                   f"surface{' of its colour' if col is not None else ''}")
         return Surface("DIFFUSE", col if col is not None else np.full(3, 0.8))
@@ -816,6 +816,9 @@ class NodeReader(TextureBindings):
         base_s = of(0) if w[0] > 0 else None
         glass_s = of(2) if w[2] > 0 else None
         metal_s = of(1) if w[1] > 0 else None
+        if glass_s is not None and base_s is not None and base_s.specular_ior_level > 0 and glass_s.ior != base_s.ior:
+            self.warn(f"{self.owner}: '{node.name}' mixes glass of IOR {glass_s.ior:g} with a specular layer of IOR "
+                      f"{base_s.ior:g}: both rendered with {glass_s.ior:g}")
         first = a if wa >= wb else b
         color = cols[0] if cols[0] is not None else cols[int(np.argmax(wn))]
         return Surface(kind, color, (glass_s or base_s or first).ior, roughness, emission,
