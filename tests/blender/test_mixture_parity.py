@@ -6,7 +6,8 @@ Cycles and by OPAL_DIFFRACTION from the same scene in one bpy session.
 The verdict is test_cycles_parity.py's (metrics: tools/cycles_parity.py): mean Rec.709 luminance
 within 5 % and the 8x8-box-filtered relative RMSE below 0.10, after asserting that the noise
 floor (from each engine's two half renders) is below 0.03 and the mean ratio's standard error
-below 0.01, so the verdict is about the renderer and not the dice. Before mixtures were read,
+below 0.01, so the verdict is about the renderer and not the dice. The same scene with the
+Diffuse BSDF alone at Roughness 1 checks Oren-Nayar (docs/physics.md section 14.9). Before mixtures were read,
 the Fac 0.5 sphere rendered as pure diffuse (all gloss lost) and a Fresnel Fac as 0.5.
 """
 
@@ -35,13 +36,18 @@ def _mix_material(name: str, fac: str):
     """Mix Shader(Diffuse (0.8, 0.25, 0.1), Glossy (0.9, 0.9, 0.9) roughness 0.25, Multiscatter
     GGX), its Fac 0.5 ('CONST'), a Fresnel node of IOR 1.5 ('FRESNEL') or a Layer Weight node's
     Facing output of Blend 0.3 ('FACING') or its Fresnel output of Blend 0.5 ('LAYER_FRESNEL'), or
-    a Checker texture's Fac (scale 4, on Generated coordinates: 'CHECKER')."""
+    a Checker texture's Fac (scale 4, on Generated coordinates: 'CHECKER'); 'OREN_NAYAR': the
+    Diffuse BSDF alone with Roughness 1."""
     mat = bpy.data.materials.new(name)
     nt = mat.node_tree
     nt.nodes.clear()
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
     diffuse.inputs["Color"].default_value = (0.8, 0.25, 0.1, 1.0)
+    if fac == "OREN_NAYAR":  # no mix: the Diffuse BSDF alone, Roughness 1 (docs/physics.md section 14.9)
+        diffuse.inputs["Roughness"].default_value = 1.0
+        nt.links.new(diffuse.outputs[0], out.inputs["Surface"])
+        return mat
     glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
     glossy.distribution = "MULTI_GGX"
     glossy.inputs["Color"].default_value = (0.9, 0.9, 0.9, 1.0)
@@ -80,7 +86,7 @@ def build(fac: str):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("fac", ["CONST", "FRESNEL", "FACING", "LAYER_FRESNEL", "CHECKER"])
+@pytest.mark.parametrize("fac", ["CONST", "FRESNEL", "FACING", "LAYER_FRESNEL", "CHECKER", "OREN_NAYAR"])
 def test_mix_shader_matches_cycles(fac, tmp_path):
     build(fac)
     ref = cp.render_pair("CYCLES", REF_SPP, cp.REF_SEEDS, str(tmp_path))

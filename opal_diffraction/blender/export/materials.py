@@ -196,6 +196,7 @@ class MaterialTable:
             "glass_tint": surf.glass_tint,
             "thin_film_thickness": float(surf.thin_film_thickness) if surf.kind is not None else 0.0,
             "thin_film_ior": float(surf.thin_film_ior),
+            "diffuse_roughness": float(np.clip(surf.diffuse_roughness, 0.0, 1.0)) if surf.kind is not None else 0.0,
         }
         if surf.kind is not None:  # a shader mix of unlike BSDFs (docs/physics.md section 14.8)
             for name in ("metal_color", "glass_color"):

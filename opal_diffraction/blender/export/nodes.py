@@ -14,7 +14,7 @@ Generated) and any Mapping node folded in. Procedural textures and converters on
 material's shader program (export/shader_compiler.py, ``Surface.programs``; docs/physics.md
 section 13.6), evaluated per hit. What the core cannot represent is approximated and
 named in the warnings: other textures and procedural nodes are averaged
-(:func:`images.image_mean`) or use the socket's own value, anisotropy is dropped, a Diffuse BSDF's (Oren-Nayar) roughness is Lambertian, a
+(:func:`images.image_mean`) or use the socket's own value, anisotropy is dropped, a
 physical-conductor Metallic BSDF is fitted with the F82-tint model.
 
 Nothing a node tree holds can hang the export or reach the tracer as NaN or Inf: a node cycle
@@ -108,6 +108,7 @@ class Surface:
     layer_fac_value: float = 0.5
     layer_fac_from: int = 0
     layer_fac_to: int = 1
+    diffuse_roughness: float = 0.0  # a Diffuse BSDF's Roughness: Oren-Nayar's sigma (0: Lambert)
 
     def layers(self) -> tuple[float, float]:
         """(metallic, transmission), from the kind where not given."""
@@ -542,10 +543,9 @@ class NodeReader(TextureBindings):
             return black
         if idn == "ShaderNodeBsdfPrincipled":
             return self._principled(node)
-        if idn == "ShaderNodeBsdfDiffuse":
-            if self.value(node, "Roughness", 0.0) > 0.0:
-                self.warn(f"{self.owner}: the roughness of '{node.name}' (Oren-Nayar) is rendered Lambertian")
-            return Surface("DIFFUSE", self.color(node, "Color"), metallic=0.0, transmission=0.0)
+        if idn == "ShaderNodeBsdfDiffuse":  # Roughness > 0: Oren-Nayar (docs/physics.md section 14.9)
+            return Surface("DIFFUSE", self.color(node, "Color"), metallic=0.0, transmission=0.0,
+                           diffuse_roughness=self._roughness(node, 0.0))
         if idn in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
             self._microfacet_options(node, "Anisotropy")
             return Surface("MIRROR", self.color(node, "Color"), roughness=self._roughness(node, 0.5),
@@ -778,7 +778,8 @@ class NodeReader(TextureBindings):
                            conductor_fresnel=(a if t < 0.5 else b).conductor_fresnel,
                            glass_tint=(a if t < 0.5 else b).glass_tint,
                            thin_film_thickness=(a if t < 0.5 else b).thin_film_thickness,
-                           thin_film_ior=(a if t < 0.5 else b).thin_film_ior)
+                           thin_film_ior=(a if t < 0.5 else b).thin_film_ior,
+                           diffuse_roughness=(1 - t) * a.diffuse_roughness + t * b.diffuse_roughness)
         return self._mixture(a, b, wa, wb, node, emission)
 
     def _mixture(self, a: Surface, b: Surface, wa: float, wb: float, node, emission) -> Surface:
@@ -828,7 +829,8 @@ class NodeReader(TextureBindings):
                        conductor_fresnel=metal_s.conductor_fresnel if metal_s is not None else "CONSTANT",
                        glass_tint=glass_s.glass_tint if glass_s is not None else "REFRACTION",
                        thin_film_thickness=first.thin_film_thickness, thin_film_ior=first.thin_film_ior,
-                       metal_color=cols[1], glass_color=cols[2])
+                       metal_color=cols[1], glass_color=cols[2],
+                       diffuse_roughness=base_s.diffuse_roughness if base_s is not None else 0.0)
 
 
 def _copy(s: Surface, emission) -> Surface:
@@ -837,7 +839,8 @@ def _copy(s: Surface, emission) -> Surface:
                    conductor_fresnel=s.conductor_fresnel, glass_tint=s.glass_tint,
                    thin_film_thickness=s.thin_film_thickness, thin_film_ior=s.thin_film_ior,
                    metal_color=s.metal_color, glass_color=s.glass_color, layer_fac=s.layer_fac,
-                   layer_fac_value=s.layer_fac_value, layer_fac_from=s.layer_fac_from, layer_fac_to=s.layer_fac_to)
+                   layer_fac_value=s.layer_fac_value, layer_fac_from=s.layer_fac_from, layer_fac_to=s.layer_fac_to,
+                   diffuse_roughness=s.diffuse_roughness)
 
 
 def _is_mixture(s: Surface) -> bool:

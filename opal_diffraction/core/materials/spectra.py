@@ -64,6 +64,7 @@ class PreparedMaterials:
     layer_fac_value: np.ndarray = None    # (M,) float32 the Fresnel node's IOR / the Layer Weight's Blend
     layer_fac_from: np.ndarray = None     # (M,) int the layer (0 base, 1 metal, 2 glass) weighted 1 - Fac
     layer_fac_to: np.ndarray = None       # (M,) int the layer weighted Fac
+    diffuse_roughness: np.ndarray = None  # (M,) float32 Oren-Nayar's sigma of a rough Diffuse BSDF (0: Lambert)
 
 
 def glass_tint_spectra(color, glass_tint, conv: SpectralConverter) -> np.ndarray:
@@ -130,4 +131,5 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
                              wavelengths=np.asarray(wl, np.float64),
                              metal_reflectance=metal_refl, own_metal=own_metal, layer_fac=layer_fac,
                              layer_fac_value=np.asarray(m.layer_fac_value, np.float32),
-                             layer_fac_from=lf_from, layer_fac_to=lf_to)
+                             layer_fac_from=lf_from, layer_fac_to=lf_to,
+                             diffuse_roughness=np.asarray(m.diffuse_roughness, np.float32))

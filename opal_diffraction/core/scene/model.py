@@ -112,6 +112,8 @@ MATERIAL_COLUMNS = {
     "layer_fac_value": (np.float32, (), 0.5, None),
     "layer_fac_from": (np.int32, (), 0, None),
     "layer_fac_to": (np.int32, (), 1, None),
+    # the Diffuse BSDF's Roughness: Oren-Nayar's sigma (docs/physics.md section 14.9; 0: Lambert)
+    "diffuse_roughness": (np.float32, (), 0.0, None),
     # the BRAGG (FCC opal) lattice (docs/physics.md section 5.7; core/materials/bragg_bsdf.py)
     "sphere_diameter": (np.float32, (), 250.0, None),
     "sphere_ior": (np.float32, (), 1.45, None),
@@ -182,7 +184,9 @@ class Materials:
     transmission; FRESNEL, LAYER_FRESNEL, LAYER_FACING give a two-layer mix its weights per hit
     from the view direction (Blender's Fresnel node of IOR layer_fac_value, the Layer Weight
     node's outputs of Blend layer_fac_value): layer layer_fac_to (0 base, 1 metal, 2 glass)
-    gets the Fac, layer_fac_from the rest.
+    gets the Fac, layer_fac_from the rest. diffuse_roughness in [0, 1]: a Diffuse BSDF's Roughness,
+    its base rendered Oren-Nayar (docs/physics.md section 14.9) where it is above 0 and the base has
+    no specular layer.
 
     Grating layer (docs/physics.md section 3), on top of the base kind: grating (0/1), grating_type
     (GRATING_TYPES), lattice (LATTICES), period D (nm), slit_width a (nm), slit_count N,
@@ -246,6 +250,7 @@ class Materials:
     layer_fac_value: np.ndarray = field(default_factory=lambda: _material_column_default("layer_fac_value", 0))
     layer_fac_from: np.ndarray = field(default_factory=lambda: _material_column_default("layer_fac_from", 0))
     layer_fac_to: np.ndarray = field(default_factory=lambda: _material_column_default("layer_fac_to", 0))
+    diffuse_roughness: np.ndarray = field(default_factory=lambda: _material_column_default("diffuse_roughness", 0))
     sphere_diameter: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_diameter", 0))
     sphere_ior: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_ior", 0))
     void_ior: np.ndarray = field(default_factory=lambda: _material_column_default("void_ior", 0))
