@@ -250,7 +250,14 @@ def test_unsupported_and_textured_nodes_fall_back_with_warnings():
     hot.node_tree.links.new(bb.outputs[0], hot.node_tree.nodes["Emission"].inputs["Color"])
 
     toon = bs.material("toon", "ShaderNodeBsdfToon", (0.1, 0.7, 0.1))
-    ex = _material_scene([mix, textured, noisy, hot, toon])
+    holdout = bpy.data.materials.new("holdout")
+    holdout.node_tree.nodes.clear()
+    h = holdout.node_tree.nodes.new("ShaderNodeHoldout")
+    holdout.node_tree.links.new(h.outputs[0], holdout.node_tree.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    ex = _material_scene([mix, textured, noisy, hot, toon, holdout])
+    # Holdout: black (Cycles' combined colour), its alpha 0 named in one warning line
+    np.testing.assert_array_equal(_row(ex, "holdout")["color"], 0.0)
+    assert sum("material 'holdout'" in w and "alpha" in w for w in ex.warnings) == 1
 
     # a Mix of unlike BSDFs is a lobe mixture (docs/physics.md section 14.8): the heavier layer's kind,
     # the Glossy's weight 0.3 as the metal layer, each with its own colour; nothing to warn

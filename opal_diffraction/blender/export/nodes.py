@@ -590,6 +590,9 @@ class NodeReader(TextureBindings):
             if node.inputs.get(name) is not None and getattr(node.inputs[name], "type", "") == "RGBA":
                 col = self.color(node, name)
                 break
+        if idn == "ShaderNodeHoldout":  # black, as Cycles' combined pass; its alpha 0 is not rendered
+            self.warn(f"{self.owner}: Holdout is rendered black and opaque (its alpha 0 is not rendered)")
+            return black
         if idn == "ShaderNodeBsdfTransparent":  # straight through, tinted per crossing: glass of IOR 1
             return Surface("DIELECTRIC", self.color(node, "Color", (1, 1, 1)), 1.0, 0.0, metallic=0.0,
                            transmission=1.0, glass_tint="REFRACTION")
