@@ -168,6 +168,7 @@ def test_mixture_evaluates_to_the_weighted_sum(row):
     assert want.max() > 0.01
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("row", [0, 1])
 def test_mixture_sampling_chi_square(row):
     """The directions sampled with a lobe drawn per hit follow sum_i w_i pdf_i (Pearson's test
@@ -218,6 +219,7 @@ def test_mixture_sampling_chi_square(row):
     assert 1.0 - upper == pytest.approx((~ok).mean(), abs=5 * math.sqrt(max(1 - upper, 1e-4) / n))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("row", [2, 3])
 @pytest.mark.parametrize("theta_deg", [0.0, 50.0, 80.0])
 def test_white_mixture_furnace(row, theta_deg):

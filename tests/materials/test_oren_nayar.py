@@ -100,6 +100,7 @@ def test_f_is_fujiis_formula(sigma, theta_o):
     np.testing.assert_allclose(pdf, np.cos(ti) / math.pi, rtol=1e-5, atol=1e-7)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("theta_o", [0.3, 1.2])
 def test_sampling_chi_square_and_weight(theta_o):
     n, sigma = 200_000, 0.8
@@ -124,6 +125,7 @@ def test_sampling_chi_square_and_weight(theta_o):
     np.testing.assert_allclose(fc / pe[:, None], w[ok][:5000], rtol=1e-5, atol=1e-7)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sigma", [0.2, 0.5, 1.0])
 @pytest.mark.parametrize("theta_deg", [0.0, 45.0, 80.0])
 def test_white_furnace(sigma, theta_deg):
