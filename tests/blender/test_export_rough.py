@@ -103,7 +103,7 @@ def test_rough_bsdf_nodes_export_their_columns():
 
     assert _cols(ex, "oren")["kind"] == K["DIFFUSE"]
     m = ex.scene.materials
-    assert m.diffuse_roughness[list(m.name).index("oren")] == pytest.approx(0.5)  # Oren-Nayar (physics.md 14.9)
+    assert m.diffuse_roughness[list(m.name).index("oren")] == pytest.approx(0.5)  # Oren-Nayar (docs/physics.md section 14.9)
     w = ex.warnings
     assert not any("smooth" in x or "perfect mirror" in x or "rendered as a diffuse surface" in x or "rounded" in x
                    for x in w), w
