@@ -25,7 +25,8 @@ def _row(exported, name):
     m = exported.scene.materials
     i = list(m.name).index(name)
     return {"kind": int(m.kind[i]), "color": np.asarray(m.color[i]), "ior": float(m.ior[i]),
-            "emission": np.asarray(m.emission[i]), "dispersion": int(m.dispersion[i]), "abbe": float(m.abbe[i])}
+            "emission": np.asarray(m.emission[i]), "dispersion": int(m.dispersion[i]), "abbe": float(m.abbe[i]),
+            "metallic": float(m.metallic[i]), "metal_color": np.asarray(m.metal_color[i])}
 
 
 def _basic_scene():
@@ -249,10 +250,23 @@ def test_unsupported_and_textured_nodes_fall_back_with_warnings():
     hot.node_tree.links.new(bb.outputs[0], hot.node_tree.nodes["Emission"].inputs["Color"])
 
     toon = bs.material("toon", "ShaderNodeBsdfToon", (0.1, 0.7, 0.1))
-    ex = _material_scene([mix, textured, noisy, hot, toon])
+    holdout = bpy.data.materials.new("holdout")
+    holdout.node_tree.nodes.clear()
+    h = holdout.node_tree.nodes.new("ShaderNodeHoldout")
+    holdout.node_tree.links.new(h.outputs[0], holdout.node_tree.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    ex = _material_scene([mix, textured, noisy, hot, toon, holdout])
+    # Holdout: black (Cycles' combined colour), its alpha 0 named in one warning line
+    np.testing.assert_array_equal(_row(ex, "holdout")["color"], 0.0)
+    assert sum("material 'holdout'" in w and "alpha" in w for w in ex.warnings) == 1
 
+    # a Mix of unlike BSDFs is a lobe mixture (docs/physics.md section 14.8): the heavier layer's kind,
+    # the Glossy's weight 0.3 as the metal layer, each with its own colour; nothing to warn
     assert _row(ex, "mix")["kind"] == MATERIAL_KINDS["DIFFUSE"]
-    assert any("material 'mix'" in w and "mixes" in w for w in ex.warnings)
+    assert _row(ex, "mix")["metallic"] == pytest.approx(0.3)
+    np.testing.assert_allclose(_row(ex, "mix")["color"], (0.8, 0.1, 0.1), rtol=1e-5)
+    np.testing.assert_allclose(_row(ex, "mix")["metal_color"], tuple(glossy.inputs["Color"].default_value)[:3],
+                               rtol=1e-5)
+    assert not any("material 'mix'" in w and "mixes" in w for w in ex.warnings)
     np.testing.assert_allclose(_row(ex, "textured")["color"], (0.25, 0.5, 0.75), rtol=1e-5)
     # the image texture is sampled per hit (tests/blender/test_export_textures.py): bound, not averaged
     m = ex.scene.materials

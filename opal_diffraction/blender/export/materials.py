@@ -132,7 +132,7 @@ class MaterialTable:
         ``surf.programs``; keys '_program_reads' (taken off by :meth:`lookup`) and '_corners'
         (a program reading UVs on a material without image textures: the UV map, unmapped)."""
         compiler, self._compiler = self._compiler, None
-        progs = {k: v for k, v in surf.programs.items() if k in ("color", "roughness", "metallic", "emission")}
+        progs = {k: v for k, v in surf.programs.items() if k in ("color", "roughness", "metallic", "emission", "mix")}
         if surf.kind is None:
             progs = {k: v for k, v in progs.items() if k == "emission"}
         if not progs or compiler is None:
@@ -196,7 +196,16 @@ class MaterialTable:
             "glass_tint": surf.glass_tint,
             "thin_film_thickness": float(surf.thin_film_thickness) if surf.kind is not None else 0.0,
             "thin_film_ior": float(surf.thin_film_ior),
+            "diffuse_roughness": float(np.clip(surf.diffuse_roughness, 0.0, 1.0)) if surf.kind is not None else 0.0,
         }
+        if surf.kind is not None:  # a shader mix of unlike BSDFs (docs/physics.md section 14.8)
+            for name in ("metal_color", "glass_color"):
+                col = getattr(surf, name)
+                if col is not None:
+                    row[name] = tuple(float(c) for c in np.clip(col, 0.0, MAX_INTENSITY))
+            if surf.layer_fac != "CONSTANT":
+                row.update(layer_fac=surf.layer_fac, layer_fac_value=float(surf.layer_fac_value),
+                           layer_fac_from=int(surf.layer_fac_from), layer_fac_to=int(surf.layer_fac_to))
         row.update(self._texture_columns(surf, owner))
         row.update(self._program_columns(surf, owner, row))
         opal = getattr(mat, "opal", None)

@@ -3,7 +3,9 @@
 Follows a node tree from its output node through reroutes, mix and add shaders, and evaluates
 the BSDF it finds to one of the core's surfaces (diffuse, mirror, dielectric) with a colour, an
 IOR, an emission and the rough-surface columns (core/materials/bsdf.py: roughness, Principled's metallic /
-transmission weights, IOR level, specular tint, the metal's Fresnel). Image Texture nodes on a
+transmission weights, IOR level, specular tint, the metal's Fresnel). Mix and Add Shaders of
+unlike BSDFs become lobe mixtures (docs/physics.md section 14.8): the layers' weights summed,
+each layer with its own colour, a Mix's Fac from a Fresnel or Layer Weight node read per hit. Image Texture nodes on a
 BSDF's colour, roughness, metallic or emission colour and, through a tangent-space Normal Map
 node, on its normal are bound as textures sampled per hit (:class:`TextureRef`,
 ``Surface.textures``; docs/physics.md section 13) with their coordinates (the UV map, or
@@ -12,8 +14,7 @@ Generated) and any Mapping node folded in. Procedural textures and converters on
 material's shader program (export/shader_compiler.py, ``Surface.programs``; docs/physics.md
 section 13.6), evaluated per hit. What the core cannot represent is approximated and
 named in the warnings: other textures and procedural nodes are averaged
-(:func:`images.image_mean`) or use the socket's own value, mixes of unlike surfaces keep the
-heavier, anisotropy is dropped, a Diffuse BSDF's (Oren-Nayar) roughness is Lambertian, a
+(:func:`images.image_mean`) or use the socket's own value, anisotropy is dropped, a
 physical-conductor Metallic BSDF is fitted with the F82-tint model.
 
 Nothing a node tree holds can hang the export or reach the tracer as NaN or Inf: a node cycle
@@ -98,12 +99,34 @@ class Surface:
     # Principled's Thin Film (docs/physics.md section 2.8): thickness (nm; 0: none) and the film's IOR
     thin_film_thickness: float = 0.0
     thin_film_ior: float = 1.33
+    # a shader mix of unlike BSDFs as a lobe mixture (docs/physics.md section 14.8): the metal and
+    # glass layers' own colours (None: ``color``), and a Fresnel / Layer Weight Fac per hit
+    # (LayerFac name; the layer ``layer_fac_to`` (0 base, 1 metal, 2 glass) weighs the Fac)
+    metal_color: np.ndarray | None = None
+    glass_color: np.ndarray | None = None
+    layer_fac: str = "CONSTANT"
+    layer_fac_value: float = 0.5
+    layer_fac_from: int = 0
+    layer_fac_to: int = 1
+    diffuse_roughness: float = 0.0  # a Diffuse BSDF's Roughness: Oren-Nayar's sigma (0: Lambert)
 
     def layers(self) -> tuple[float, float]:
         """(metallic, transmission), from the kind where not given."""
         m = self.metallic if self.metallic is not None else float(self.kind == "MIRROR")
         t = self.transmission if self.transmission is not None else float(self.kind == "DIELECTRIC")
         return m, t
+
+    def layer_weights(self) -> np.ndarray:
+        """(3,) the weights of the base, metal and glass layers (summing to 1; zeros: no BSDF)."""
+        if self.kind is None:
+            return np.zeros(3)
+        m, t = self.layers()
+        return np.array([(1.0 - m) * (1.0 - t), m, (1.0 - m) * t])
+
+    def layer_color(self, i: int) -> np.ndarray:
+        """The colour of layer ``i`` (0 base, 1 metal, 2 glass)."""
+        own = (None, self.metal_color, self.glass_color)[i]
+        return np.asarray(self.color if own is None else own, np.float64)
 
 
 
@@ -301,7 +324,13 @@ class TextureBindings:
         res = {}
         for slot in sorted(set(a.textures) | set(b.textures)):
             pick = first if slot in first.textures else second
-            if slot != "emission" and pick.kind != out.kind:
+            if _is_mixture(out) and slot != "emission":
+                if not _mixture_slot(pick, slot):
+                    self.warn(f"{self.owner}: '{node.name}' mixes unlike BSDFs: image texture "
+                              f"'{pick.textures[slot].node}' on the {slot} of its {pick.kind.lower()} BSDF is "
+                              "rendered as its average")
+                    continue
+            elif slot != "emission" and pick.kind != out.kind:
                 continue  # the surface not kept
             ref = pick.textures[slot]
             other = second if pick is first else first
@@ -514,10 +543,9 @@ class NodeReader(TextureBindings):
             return black
         if idn == "ShaderNodeBsdfPrincipled":
             return self._principled(node)
-        if idn == "ShaderNodeBsdfDiffuse":
-            if self.value(node, "Roughness", 0.0) > 0.0:
-                self.warn(f"{self.owner}: the roughness of '{node.name}' (Oren-Nayar) is rendered Lambertian")
-            return Surface("DIFFUSE", self.color(node, "Color"), metallic=0.0, transmission=0.0)
+        if idn == "ShaderNodeBsdfDiffuse":  # Roughness > 0: Oren-Nayar (docs/physics.md section 14.9)
+            return Surface("DIFFUSE", self.color(node, "Color"), metallic=0.0, transmission=0.0,
+                           diffuse_roughness=self._roughness(node, 0.0))
         if idn in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
             self._microfacet_options(node, "Anisotropy")
             return Surface("MIRROR", self.color(node, "Color"), roughness=self._roughness(node, 0.5),
@@ -535,10 +563,22 @@ class NodeReader(TextureBindings):
             color = self.color(node, "Color", (1, 1, 1))
             return Surface(None, np.zeros(3), emission=self.emission(color, strength, node))
         if idn == "ShaderNodeMixShader":
-            f = min(max(self.value(node, "Fac", 0.5) if node.inputs.get("Fac") else 0.5, 0.0), 1.0)
+            view = self._view_fac(node)
+            program = None if view is not None else self._program_fac(node)
+            if view is not None:  # Fresnel / Layer Weight: per hit; the table keeps its hemispherical mean
+                f = _mean_fac(*view)
+            elif program is not None:  # a texture / converter chain: per hit; the table keeps its average
+                f = program[1]
+            else:
+                f = min(max(self.value(node, "Fac", 0.5) if node.inputs.get("Fac") else 0.5, 0.0), 1.0)
             a = self._shader(self.source(node.inputs[1]), depth + 1)
             b = self._shader(self.source(node.inputs[2]), depth + 1)
-            return self._combine(a, b, 1.0 - f, f, node)
+            out = self._combine(a, b, 1.0 - f, f, node)
+            if view is not None:
+                self._per_hit_fac(out, a, b, view, node)
+            elif program is not None:
+                self._per_hit_fac(out, a, b, ("PROGRAM", f), node, program[0])
+            return out
         if idn == "ShaderNodeAddShader":
             a = self._shader(self.source(node.inputs[0]), depth + 1)
             b = self._shader(self.source(node.inputs[1]), depth + 1)
@@ -550,12 +590,60 @@ class NodeReader(TextureBindings):
             if node.inputs.get(name) is not None and getattr(node.inputs[name], "type", "") == "RGBA":
                 col = self.color(node, name)
                 break
-        if idn == "ShaderNodeBsdfTransparent":
-            self.warn(f"{self.owner}: Transparent BSDF is not supported: rendered black")
+        if idn == "ShaderNodeHoldout":  # black, as Cycles' combined pass; its alpha 0 is not rendered
+            self.warn(f"{self.owner}: Holdout is rendered black and opaque (its alpha 0 is not rendered)")
             return black
+        if idn == "ShaderNodeBsdfTransparent":  # straight through, tinted per crossing: glass of IOR 1
+            return Surface("DIELECTRIC", self.color(node, "Color", (1, 1, 1)), 1.0, 0.0, metallic=0.0,
+                           transmission=1.0, glass_tint="REFRACTION")
         self.warn(f"{self.owner}: shader node '{node.name}' ({idn}) is not supported: rendered as a diffuse "
                   f"surface{' of its colour' if col is not None else ''}")
         return Surface("DIFFUSE", col if col is not None else np.full(3, 0.8))
+
+    def _view_fac(self, node) -> tuple[str, float] | None:
+        """(LayerFac name, its IOR or Blend) where a Mix Shader's Fac is a Fresnel or Layer Weight
+        node's output (docs/physics.md section 14.8), else None."""
+        sock = node.inputs.get("Fac")
+        src = self.source(sock) if sock is not None else None
+        if src is None:
+            return None
+        n, out = src
+        if n.bl_idname not in ("ShaderNodeFresnel", "ShaderNodeLayerWeight"):
+            return None
+        if n.inputs.get("Normal") is not None and self.source(n.inputs["Normal"]) is not None:
+            self.warn(f"{self.owner}: the Normal input of '{n.name}' is not read: the shading normal is used")
+        if n.bl_idname == "ShaderNodeFresnel":
+            return "FRESNEL", self.value(n, "IOR", 1.5)
+        return ("LAYER_FACING" if out.name == "Facing" else "LAYER_FRESNEL"), self.value(n, "Blend", 0.5)
+
+    def _program_fac(self, node) -> tuple[int, float] | None:
+        """(register, average) where a Mix Shader's Fac is driven by nodes the shader compiler reads
+        (a texture, a ColorRamp, Math ...: docs/physics.md sections 13.6 and 14.8), else None."""
+        sock = node.inputs.get("Fac")
+        src = self.source(sock) if sock is not None else None
+        if src is None or self.textures is None or src[0].bl_idname == "ShaderNodeValue":
+            return None
+        mean = self._compile(node, "Fac", "f")
+        if mean is None:
+            return None
+        return self._programmed[(node.name, "Fac")], float(np.clip(mean, 0.0, 1.0))
+
+    def _per_hit_fac(self, out: Surface, a: Surface, b: Surface, view, node, register: int | None = None) -> None:
+        """Give ``out`` (a Mix of ``a`` and ``b``) its Fac per hit where a and b are one layer each
+        and different layers; otherwise warn that the Fac's hemispherical mean is rendered."""
+        la, lb = a.layer_weights(), b.layer_weights()
+        one_a, one_b = la.max() == 1.0, lb.max() == 1.0
+        ia, ib = int(np.argmax(la)), int(np.argmax(lb))
+        if a.kind is None or b.kind is None or not (one_a and one_b) or ia == ib:
+            what = "a texture or converter chain" if register is not None else \
+                f"a {view[0].replace('_', ' ').lower()} node"
+            mean = view[1] if register is not None else _mean_fac(*view)
+            self.warn(f"{self.owner}: '{node.name}' takes its Fac from {what}, read per hit only between two "
+                      f"single BSDFs of different kinds (diffuse, glossy, glass): rendered with its mean {mean:.3g}")
+            return
+        out.layer_fac, out.layer_fac_value, out.layer_fac_from, out.layer_fac_to = view[0], float(view[1]), ia, ib
+        if register is not None:
+            out.programs["mix"] = register
 
     def _roughness(self, node, default: float, name: str = "Roughness") -> float:
         """A roughness input clamped to [0, 1], as Cycles clamps it."""
@@ -663,6 +751,11 @@ class NodeReader(TextureBindings):
         out.textures = self._combined_textures(a, b, wa, wb, node, out)
         first, second = (a, b) if wa >= wb else (b, a)
         for s in (first, second):  # the shader programs of the surface kept (the heavier first)
+            if s.programs and _is_mixture(out):  # a lobe mixture: the base's colour, the others' roughness
+                for slot, reg in s.programs.items():
+                    if slot != "mix" and (slot == "emission" or _mixture_slot(s, slot)):
+                        out.programs.setdefault(slot, reg)
+                continue
             if s.programs and (s.kind == out.kind or out.kind is None or s.kind is None):
                 for slot, reg in s.programs.items():
                     out.programs.setdefault(slot, reg)
@@ -688,18 +781,93 @@ class NodeReader(TextureBindings):
                            conductor_fresnel=(a if t < 0.5 else b).conductor_fresnel,
                            glass_tint=(a if t < 0.5 else b).glass_tint,
                            thin_film_thickness=(a if t < 0.5 else b).thin_film_thickness,
-                           thin_film_ior=(a if t < 0.5 else b).thin_film_ior)
-        keep = a if wa >= wb else b
-        self.warn(f"{self.owner}: '{node.name}' mixes {a.kind.lower()} and {b.kind.lower()} surfaces: rendered as "
-                  f"{keep.kind.lower()}")
-        return _copy(keep, emission)
+                           thin_film_ior=(a if t < 0.5 else b).thin_film_ior,
+                           diffuse_roughness=(1 - t) * a.diffuse_roughness + t * b.diffuse_roughness)
+        return self._mixture(a, b, wa, wb, node, emission)
+
+    def _mixture(self, a: Surface, b: Surface, wa: float, wb: float, node, emission) -> Surface:
+        """A Mix / Add of unlike BSDFs as a lobe mixture (docs/physics.md section 14.8): the layer
+        weights (base, metal, glass) are wa a's + wb b's, each layer with its own colour (the
+        weighted mean of the surfaces that have it). An Add whose weights sum above 1 scales the
+        colours by the sum (exact for Diffuse, Glossy and glass colours; warned)."""
+        la, lb = wa * a.layer_weights(), wb * b.layer_weights()
+        w = la + lb
+        total = float(w.sum())
+        if total <= 0.0:
+            return Surface(None, np.zeros(3), emission=emission)
+        scale = max(total, 1.0)
+        wn = w / total
+        cols = []
+        for i in range(3):
+            cols.append(scale * (la[i] * a.layer_color(i) + lb[i] * b.layer_color(i)) / w[i] if w[i] > 0 else None)
+        if total > 1.0 + 1e-6:
+            self.warn(f"{self.owner}: '{node.name}' adds BSDFs of total weight {total:.3g}: rendered as their "
+                      f"mixture with colours times {total:.3g}")
+        kinds = ("DIFFUSE", "MIRROR", "DIELECTRIC")
+        kind = kinds[int(np.argmax(wn))]  # the heaviest layer (ties: base, metal, glass)
+        metallic = float(wn[1])
+        transmission = float(wn[2] / (1.0 - wn[1])) if wn[1] < 1.0 else 0.0
+
+        def of(i):  # the surface that gives layer i most weight
+            return a if la[i] >= lb[i] else b
+
+        glossy = [s for s, ws in ((a, la), (b, lb)) if ws[1] > 0 or ws[2] > 0 or (ws[0] > 0 and s.specular_ior_level > 0)]
+        rough = [s.roughness for s in glossy]
+        if len(rough) == 2 and abs(rough[0] - rough[1]) > 1e-6:
+            self.warn(f"{self.owner}: '{node.name}' mixes roughness {rough[0]:g} and {rough[1]:g}: rendered with "
+                      f"their mean {0.5 * (rough[0] + rough[1]):g}")
+        roughness = float(np.mean(rough)) if rough else max(a.roughness, b.roughness)
+        base_s = of(0) if w[0] > 0 else None
+        glass_s = of(2) if w[2] > 0 else None
+        metal_s = of(1) if w[1] > 0 else None
+        if glass_s is not None and base_s is not None and base_s.specular_ior_level > 0 and glass_s.ior != base_s.ior:
+            self.warn(f"{self.owner}: '{node.name}' mixes glass of IOR {glass_s.ior:g} with a specular layer of IOR "
+                      f"{base_s.ior:g}: both rendered with {glass_s.ior:g}")
+        first = a if wa >= wb else b
+        color = cols[0] if cols[0] is not None else cols[int(np.argmax(wn))]
+        return Surface(kind, color, (glass_s or base_s or first).ior, roughness, emission,
+                       metallic=metallic, transmission=transmission,
+                       specular_ior_level=base_s.specular_ior_level if base_s is not None else 0.0,
+                       specular_tint=(metal_s or base_s or first).specular_tint,
+                       conductor_fresnel=metal_s.conductor_fresnel if metal_s is not None else "CONSTANT",
+                       glass_tint=glass_s.glass_tint if glass_s is not None else "REFRACTION",
+                       thin_film_thickness=first.thin_film_thickness, thin_film_ior=first.thin_film_ior,
+                       metal_color=cols[1], glass_color=cols[2],
+                       diffuse_roughness=base_s.diffuse_roughness if base_s is not None else 0.0)
 
 
 def _copy(s: Surface, emission) -> Surface:
     return Surface(s.kind, s.color, s.ior, s.roughness, emission, metallic=s.metallic, transmission=s.transmission,
                    specular_ior_level=s.specular_ior_level, specular_tint=s.specular_tint,
                    conductor_fresnel=s.conductor_fresnel, glass_tint=s.glass_tint,
-                   thin_film_thickness=s.thin_film_thickness, thin_film_ior=s.thin_film_ior)
+                   thin_film_thickness=s.thin_film_thickness, thin_film_ior=s.thin_film_ior,
+                   metal_color=s.metal_color, glass_color=s.glass_color, layer_fac=s.layer_fac,
+                   layer_fac_value=s.layer_fac_value, layer_fac_from=s.layer_fac_from, layer_fac_to=s.layer_fac_to,
+                   diffuse_roughness=s.diffuse_roughness)
+
+
+def _is_mixture(s: Surface) -> bool:
+    """Whether ``s`` is a lobe mixture of unlike BSDFs (its layers have their own colours)."""
+    return s.kind is not None and (s.metal_color is not None or s.glass_color is not None)
+
+
+def _mixture_slot(s: Surface, slot: str) -> bool:
+    """Whether a texture / program on ``slot`` of the mixed surface ``s`` is read per hit in the
+    mixture: the colour is the base layer's (the metal's and glass's are their own constants),
+    roughness and metallic are shared by all its layers."""
+    return slot != "color" or s.layer_weights()[0] > 0
+
+
+def _mean_fac(code: str, value: float) -> float:
+    """The cosine-weighted hemispherical mean 2 int Fac(mu) mu dmu of a Fresnel / Layer Weight Fac
+    on a front face (the table's one weight for what reads one value per material)."""
+    from ...core.materials.mixtures import layer_fac
+    from ...core.util.enums import LayerFac
+
+    mu = (np.arange(512) + 0.5) / 512
+    f = layer_fac(np.full(512, int(LayerFac[code])), np.full(512, value, np.float32), mu.astype(np.float32),
+                  np.ones(512, bool))
+    return float(np.clip(2.0 * np.mean(f * mu), 0.0, 1.0))
 
 
 def _conductor_fresnel(cos: float, n: np.ndarray, k: np.ndarray) -> np.ndarray:

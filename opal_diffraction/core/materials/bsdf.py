@@ -32,6 +32,14 @@ Methods (formulas in docs/physics.md section 14):
   1 - E_spec(mu_o), the specular layer's directional albedo (Cycles ``closure_layering_weight``;
   here per wavelength rather than by the maximum channel), tabulated the same way.
 - Lambert: cosine-weighted sampling (Malley's method, concentric disk).
+- Oren-Nayar (the Diffuse BSDF's Roughness sigma > 0), as Cycles 4.3+ has it
+  (``intern/cycles/kernel/closure/bsdf_oren_nayar.h``): Fujii's improved Oren-Nayar ("A tiny
+  improvement of Oren-Nayar reflectance model", mimosa-pudica.net) with A = 1 / (pi + sigma
+  (pi/2 - 2/3)), B = sigma A, f = rho (A + B t), t = (wi.wo - mu_i mu_o) / max(mu_i, mu_o) where
+  positive, plus OpenPBR's energy-preserving multiple scattering rho E_ms (1 - E(mu_o)) (1 - E(mu_i)),
+  E(mu) = A pi + B G(mu), E_avg = A pi + (2 pi - 5.6) / 3 B, E_ms = rho^2 E_avg / (1 - E_avg) /
+  (pi (1 - rho (1 - E_avg))) per wavelength; sampled cosine-weighted (docs/physics.md section 14.9).
+  No compiled kernel: batches holding it take the NumPy lines.
 
 Compiled kernels (core/util/jit.py; the NumPy lines stay the reference, chosen by
 kernels_enabled()): evaluate, sample, with_outgoing and params_from_materials' per-hit tint and
@@ -60,7 +68,7 @@ from .ggx import (ggx_d as _ggx_d, ggx_d_1, reflection_1, reflection_terms as _e
                   smith_lambda as _lambda, smith_lambda_1)
 
 __all__ = [
-    "LAMBERT", "CONDUCTOR", "DIELECTRIC", "PLASTIC", "GLOSSY",
+    "LAMBERT", "CONDUCTOR", "DIELECTRIC", "PLASTIC", "GLOSSY", "OREN_NAYAR",
     "DIFFUSE_REFLECTION", "GLOSSY_REFLECTION", "TRANSMISSION", "SINGULAR",
     "MIN_ROUGHNESS", "SurfaceParams", "params_from_materials", "sample", "evaluate", "microfacet_materials",
     "energy_compensation", "fresnel_f82", "f82_b", "with_outgoing", "cosine_hemisphere",
@@ -68,6 +76,10 @@ __all__ = [
 
 #: Lobe codes per hit. GLOSSY is Blender's Glossy BSDF: GGX with a constant Fresnel (its colour).
 LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY = 0, 1, 2, 3, 4
+#: The Diffuse BSDF with Roughness > 0: Cycles' Oren-Nayar (Fujii's improved model with OpenPBR's
+#: energy-preserving multiple-scattering term; its ``alpha`` column holds the roughness sigma).
+OREN_NAYAR = 5
+_LOBES = (LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY, OREN_NAYAR)
 #: Flags of a sampled event (0: absorbed / invalid). SINGULAR marks a delta event (pdf = inf).
 DIFFUSE_REFLECTION, GLOSSY_REFLECTION, TRANSMISSION, SINGULAR = 1, 2, 4, 8
 
@@ -92,7 +104,7 @@ class SurfaceParams:
     lobe: np.ndarray       # (B,) int: LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY
     base: np.ndarray       # (B, k) albedo (LAMBERT, PLASTIC's diffuse), F0 (CONDUCTOR, GLOSSY), tint (DIELECTRIC)
     edge: np.ndarray       # (B, k) CONDUCTOR's F82 edge tint (Principled 'Specular Tint' on metals); ones otherwise
-    alpha: np.ndarray      # (B,) GGX alpha = roughness^2 (isotropic)
+    alpha: np.ndarray      # (B,) GGX alpha = roughness^2 (isotropic); OREN_NAYAR: the roughness sigma in [0, 1]
     eta: np.ndarray        # (B,) DIELECTRIC: n on the far side / n on wo's side; 1 otherwise
     spec_f0: np.ndarray    # (B,) PLASTIC: F0 of the specular layer (((ior-1)/(ior+1))^2 * 2 * IOR level); 0: none
     spec_tint: np.ndarray  # (B, k) PLASTIC: specular tint
@@ -516,6 +528,8 @@ def _eval_lobe(p, code, wo, wi, terms=None):
     if code == LAMBERT:
         c = np.where(up, wi[:, 2], 0.0) * _INV_PI
         return (p.base * c[:, None]).astype(_F32), c.astype(_F32)
+    if code == OREN_NAYAR:
+        return _oren_nayar(p, wo, wi)
     rough = p.alpha >= _MIN_ALPHA
     if code in (CONDUCTOR, GLOSSY) and p.ms is not None:  # wo's factors known: all rows, the rest zeroed
         ok = up & rough
@@ -577,6 +591,40 @@ def _eval_lobe(p, code, wo, wi, terms=None):
     return fcos, pdf
 
 
+def _oren_nayar_g(cos):
+    """Cycles' ``bsdf_oren_nayar_G``: G(mu) with E(mu) = A pi + B G(mu) the single-scattering
+    albedo (its Taylor expansion below mu = 1e-6)."""
+    cos = np.asarray(cos, _F32)
+    c = np.maximum(cos, _F32(1e-6))
+    s = np.sqrt(np.maximum(_F32(1) - c * c, _F32(0)))
+    th = np.arccos(np.clip(c, _F32(-1), _F32(1)))
+    two3 = _F32(2.0 / 3.0)
+    g = s * (th - two3 - s * c) + two3 * (s / c) * (_F32(1) - s * s * s)
+    return np.where(cos < _F32(1e-6), _F32(np.pi / 2 - 2.0 / 3.0) - cos, g).astype(_F32)
+
+
+def _oren_nayar(p, wo, wi):
+    """f cos (B, k) and pdf (B,) of OREN_NAYAR hits in the local frame (module docstring)."""
+    sigma = np.clip(p.alpha, _F32(0), _F32(1))
+    a = _F32(1) / (_F32(np.pi) + sigma * _F32(np.pi / 2 - 2.0 / 3.0))
+    b = sigma * a
+    nl = np.maximum(wi[:, 2], _F32(0))
+    nv = np.maximum(wo[:, 2], _F32(0))
+    t = np.sum(wi * wo, axis=1) - nl * nv
+    t = np.where(t > 0, t / (np.maximum(nl, nv) + _F32(1.1754944e-38)), t)
+    single = a + b * t
+    e_avg = a * _F32(np.pi) + _F32((2 * np.pi - 5.6) / 3.0) * b
+    rho = np.clip(p.base, _F32(0), _F32(1))
+    e_ms = _INV_PI * rho * rho * (e_avg / (_F32(1) - e_avg))[:, None] / (_F32(1) - rho * (_F32(1) - e_avg)[:, None])
+    e_v = a * _F32(np.pi) + b * _oren_nayar_g(nv)
+    e_l = a * _F32(np.pi) + b * _oren_nayar_g(nl)
+    multi = e_ms * ((_F32(1) - e_v) * (_F32(1) - e_l))[:, None]
+    f = p.base * (nl * single)[:, None] + p.base * nl[:, None] * multi
+    up = wi[:, 2] > 0
+    return (np.where(up[:, None], f, _F32(0)).astype(_F32),
+            np.where(up, wi[:, 2] * _INV_PI, _F32(0)).astype(_F32))
+
+
 def _plastic_p_spec(p, e_spec):
     """Probability of sampling the specular layer: its share of the estimated albedo (as Cycles'
     sample weights)."""
@@ -600,6 +648,14 @@ def _sample_lobe(p, code, wo, u):
         ok = wi[:, 2] > 0
         weight[ok] = p.base[ok]
         pdf[ok] = wi[ok, 2] * _INV_PI
+        flags[ok] = DIFFUSE_REFLECTION
+        return wi, weight, pdf, flags
+    if code == OREN_NAYAR:  # cosine-weighted, as Cycles samples it
+        wi = _cosine_sample(u[:, 0], u[:, 1]).astype(_F32)
+        fcos, pd = _oren_nayar(p, wo, wi)
+        ok = (wi[:, 2] > 0) & (pd > 0)
+        weight[ok] = fcos[ok] / pd[ok, None]
+        pdf[ok] = pd[ok]
         flags[ok] = DIFFUSE_REFLECTION
         return wi, weight, pdf, flags
     rough = p.alpha >= _MIN_ALPHA
@@ -728,7 +784,7 @@ def sample(params: SurfaceParams, wo, ns, ng, u):
     pdf = np.zeros(B, _F32)
     flags = np.zeros(B, np.int32)
     valid = wl[:, 2] > 0
-    for code in (LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY):  # a loop over the 5 lobes
+    for code in _LOBES:  # a loop over the 6 lobes
         mine = params.lobe == code
         idx = np.flatnonzero(mine & valid)
         if len(idx) and mine.all():  # one lobe everywhere: all rows, the invalid ones zeroed (no take)
@@ -767,7 +823,7 @@ def evaluate(params: SurfaceParams, wo, wi, ns, ng):
     side = np.sum(wi * ng, axis=1)
     consistent = np.where(il[:, 2] > 0, side > 0, (side < 0) & (il[:, 2] < 0))
     valid = (wl[:, 2] > 0) & consistent
-    for code in (LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY):
+    for code in _LOBES:
         mine = params.lobe == code
         idx = np.flatnonzero(mine & valid)
         if len(idx) and mine.all():  # one lobe everywhere: all rows, the invalid ones zeroed (no take)
@@ -782,7 +838,8 @@ def evaluate(params: SurfaceParams, wo, wi, ns, ng):
 
 
 # ---------------------------------------------------------------------------------- materials
-def params_from_materials(materials, mat, front, lam=None, base=None, roughness=None, u_layer=None) -> SurfaceParams:
+def params_from_materials(materials, mat, front, lam=None, base=None, roughness=None, u_layer=None,
+                          weights=None) -> SurfaceParams:
     """SurfaceParams of hits on materials (core/materials.PreparedMaterials) rows ``mat`` (B,).
 
     front (B,) bool: the hit is on the side the normal points to (entering a dielectric: eta =
@@ -793,13 +850,17 @@ def params_from_materials(materials, mat, front, lam=None, base=None, roughness=
     Principled's layers: with u_layer (B,) uniforms the layer is drawn per hit - the metal with
     probability metallic, else glass with probability transmission, else the dielectric base
     (PLASTIC, or LAMBERT without a specular layer) - which makes each hit's weight an unbiased
-    estimate of the weighted sum; without u_layer the heaviest layer is used.
+    estimate of the weighted sum; without u_layer the heaviest layer is used. Shader mixes of
+    unlike BSDFs are the same layers as a lobe mixture (docs/physics.md section 14.8): the metal
+    takes its own colour where the row has one (``metal_reflectance``), and ``weights``
+    (metallic (B,), transmission (B,)) replace the table's per hit (a Fresnel / Layer Weight
+    Fac: core/materials/mixtures.py ``per_hit_layers``).
     """
     m = materials
     mat = np.asarray(mat, np.int64)
     front = np.asarray(front, bool)
     B = len(mat)
-    metallic, transmission = m.metallic[mat], m.transmission[mat]
+    metallic, transmission = (m.metallic[mat], m.transmission[mat]) if weights is None else weights
     if u_layer is None:  # the heaviest layer (ties: metal, then glass)
         w_glass, w_base = (1.0 - metallic) * transmission, (1.0 - metallic) * (1.0 - transmission)
         metal = (metallic >= w_glass) & (metallic >= w_base)
@@ -810,8 +871,11 @@ def params_from_materials(materials, mat, front, lam=None, base=None, roughness=
         rest = (u_layer - metallic) / np.maximum(1.0 - metallic, 1e-12)
         glass = ~metal & (rest < transmission)
     spec_f0 = np.where(metal | glass, 0.0, m.spec_f0[mat]).astype(_F32)
+    dr = getattr(m, "diffuse_roughness", None)
+    on = np.zeros(B, bool) if dr is None else dr[mat] > 0  # a rough Diffuse BSDF: Oren-Nayar
     lobe = np.where(metal, np.where(m.conductor_f82[mat], CONDUCTOR, GLOSSY),
-                    np.where(glass, DIELECTRIC, np.where(spec_f0 > 0, PLASTIC, LAMBERT))).astype(np.int32)
+                    np.where(glass, DIELECTRIC, np.where(spec_f0 > 0, PLASTIC,
+                                                         np.where(on, OREN_NAYAR, LAMBERT)))).astype(np.int32)
 
     def spectral(table):
         return table[mat] if lam is None else table[mat, np.asarray(lam, np.int64)][:, None]
@@ -820,9 +884,14 @@ def params_from_materials(materials, mat, front, lam=None, base=None, roughness=
     if m.glass_tint is not None:  # the glass layer's tint per refraction (docs/physics.md section 2.7)
         own = glass & ~m.color_textured[mat]  # a colour texture's hits keep the texture's tint
         b = np.where(own[:, None], spectral(m.glass_tint), b) if own.any() else b
+    if getattr(m, "metal_reflectance", None) is not None:  # a mix's metal layer of its own colour
+        own = metal & m.own_metal[mat]
+        b = np.where(own[:, None], spectral(m.metal_reflectance), b) if own.any() else b
     k = b.shape[1]
     rough = m.roughness[mat] if roughness is None else np.asarray(roughness, _F32)
     alpha = np.clip(rough, 0.0, 1.0) ** 2
+    if (lobe == OREN_NAYAR).any():  # its alpha column holds sigma
+        alpha = np.where(lobe == OREN_NAYAR, np.clip(dr[mat], 0.0, 1.0), alpha)
     st = m.specular_tint
     if (kernels_enabled() and isinstance(st, np.ndarray) and st.dtype == _F32 and st.ndim == 2
             and m.ior.dtype == _F32 and k == (st.shape[1] if lam is None else 1)):
@@ -885,7 +954,12 @@ def microfacet_materials(materials, textures=None) -> np.ndarray:
     if textures is not None and len(textures.roughness):
         rough = rough | (np.asarray(textures.roughness) >= 0)
     metallic, transmission = np.asarray(m.metallic), np.asarray(m.transmission)
-    return (((kind == K_MIRROR) & (rough | (metallic < 1)))
+    lf = getattr(m, "layer_fac", None)
+    per_hit = np.zeros(len(kind), bool) if lf is None else np.asarray(lf) != 0  # a Fresnel-mixed row
+    dr = getattr(m, "diffuse_roughness", None)
+    if dr is not None:  # a rough Diffuse BSDF (Oren-Nayar)
+        per_hit = per_hit | ((kind == K_DIFFUSE) & (np.asarray(dr) > 0))
+    return (per_hit | ((kind == K_MIRROR) & (rough | (metallic < 1)))
             | ((kind == K_DIELECTRIC) & (rough | (transmission < 1) | (metallic > 0)))
             | ((kind == K_DIFFUSE) & ((np.asarray(m.spec_f0) > 0) | (metallic > 0) | (transmission > 0))))
 
@@ -1496,6 +1570,8 @@ def _kernel_fits(p: SurfaceParams) -> bool:
     if not kernels_enabled() or not len(p.lobe) or p.base.ndim != 2 or p.base.shape[1] > _PAIRWISE_MAX:
         return False
     if p.film_d is not None:  # thin films: the reference (core/materials/thin_film.py's Airy sum)
+        return False
+    if (p.lobe == OREN_NAYAR).any():  # Oren-Nayar has no compiled twin yet: the reference
         return False
     B = len(p.lobe)
     if not (all(_is32(a, 2) and a.shape == p.base.shape for a in (p.base, p.edge, p.spec_tint))

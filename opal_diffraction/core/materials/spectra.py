@@ -57,6 +57,14 @@ class PreparedMaterials:
     film_thickness: np.ndarray = None  # (M,) float64 the film's thickness (nm; 0 where none)
     film_ior: np.ndarray = None        # (M,) float64 the film's index
     wavelengths: np.ndarray = None     # (n,) float64 the grid's wavelengths (nm), for the films' phases
+    # shader mixes as lobe mixtures (docs/physics.md section 14.8; core/materials/mixtures.py)
+    metal_reflectance: np.ndarray = None  # (M, n) float32 the metal layer's own colour (None: no row has one)
+    own_metal: np.ndarray = None          # (M,) bool: the row's metal layer has its own colour
+    layer_fac: np.ndarray = None          # (M,) int LayerFac: where a two-layer mix's weights come from per hit
+    layer_fac_value: np.ndarray = None    # (M,) float32 the Fresnel node's IOR / the Layer Weight's Blend
+    layer_fac_from: np.ndarray = None     # (M,) int the layer (0 base, 1 metal, 2 glass) weighted 1 - Fac
+    layer_fac_to: np.ndarray = None       # (M,) int the layer weighted Fac
+    diffuse_roughness: np.ndarray = None  # (M,) float32 Oren-Nayar's sigma of a rough Diffuse BSDF (0: Lambert)
 
 
 def glass_tint_spectra(color, glass_tint, conv: SpectralConverter) -> np.ndarray:
@@ -79,11 +87,15 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
     refl = conv.reflectance_from_rgb(np.asarray(m.color, np.float64).reshape(-1, 3))
     transmission, metallic = np.asarray(m.transmission), np.asarray(m.metallic)
     # every row with a glass layer: its tint per refraction (the rough and layered BSDF's glass lobe)
-    layer = (transmission > 0) & (metallic < 1)
+    layer_fac = np.asarray(m.layer_fac, np.int32)
+    lf_from, lf_to = np.asarray(m.layer_fac_from, np.int32), np.asarray(m.layer_fac_to, np.int32)
+    per_hit = layer_fac != 0
+    layer = ((transmission > 0) & (metallic < 1)) | (per_hit & ((lf_from == 2) | (lf_to == 2)))
     glass_tint = refl.copy()
+    glass_rgb = np.asarray(m.glass_color, np.float64).reshape(-1, 3)
+    glass_rgb = np.where((glass_rgb >= 0).all(axis=1)[:, None], glass_rgb, np.asarray(m.color).reshape(-1, 3))
     if layer.any():
-        glass_tint[layer] = glass_tint_spectra(np.asarray(m.color).reshape(-1, 3)[layer], np.asarray(m.glass_tint)[layer],
-                                               conv)
+        glass_tint[layer] = glass_tint_spectra(glass_rgb[layer], np.asarray(m.glass_tint)[layer], conv)
     # pure glass (no metal or base layer sharing the row): the tint is the row's colour everywhere
     pure = (kind == DIELECTRIC) & (transmission >= 1) & (metallic <= 0)
     refl[pure] = glass_tint[pure]
@@ -101,6 +113,10 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
     n_d = np.asarray(m.ior, np.float64)
     spec_f0 = ((n_d - 1.0) / (n_d + 1.0)) ** 2 * 2.0 * np.asarray(m.specular_ior_level, np.float64)
     tint = conv.reflectance_from_rgb(np.asarray(m.specular_tint, np.float64).reshape(-1, 3)).astype(np.float32)
+    metal_rgb = np.asarray(m.metal_color, np.float64).reshape(-1, 3)
+    own_metal = (metal_rgb >= 0).all(axis=1)
+    metal_refl = conv.reflectance_from_rgb(np.where(own_metal[:, None], metal_rgb, 0.0)).astype(np.float32) \
+        if own_metal.any() else None
     return PreparedMaterials(kind, refl32, ior.astype(np.float32), dispersive,
                              emission, emission.any(axis=1), clear,
                              roughness=np.asarray(m.roughness, np.float32),
@@ -112,4 +128,8 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
                              color_textured=(np.asarray(m.color_texture) >= 0) | (np.asarray(m.shader_program) >= 0),
                              film=film, film_thickness=np.where(film, film_d, 0.0),
                              film_ior=np.asarray(m.thin_film_ior, np.float64),
-                             wavelengths=np.asarray(wl, np.float64))
+                             wavelengths=np.asarray(wl, np.float64),
+                             metal_reflectance=metal_refl, own_metal=own_metal, layer_fac=layer_fac,
+                             layer_fac_value=np.asarray(m.layer_fac_value, np.float32),
+                             layer_fac_from=lf_from, layer_fac_to=lf_to,
+                             diffuse_roughness=np.asarray(m.diffuse_roughness, np.float32))

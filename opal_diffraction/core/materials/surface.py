@@ -29,7 +29,8 @@ import numpy as np
 from ..util.geometry import interpolate_corners
 from .textures import LUMINANCE_709
 
-__all__ = ["surface_reflectance", "surface_roughness", "surface_metallic", "surface_emission", "shading_normal",
+__all__ = ["surface_reflectance", "surface_roughness", "surface_metallic", "surface_emission", "surface_mix_fac",
+           "shading_normal",
            "NORMAL_MIN_COS"]
 
 #: A mapped normal is kept at least this far (cosine) on the geometric normal's side.
@@ -96,6 +97,21 @@ def surface_metallic(prepared, hit) -> np.ndarray:
     """(B,) float32 in [0, 1]: the material's metallic value (0 where the table has none) or the
     metallic texture's luminance at the hit."""
     return _scalar(prepared, hit, "metallic", "metallic")
+
+
+def surface_mix_fac(prepared, hit) -> np.ndarray | None:
+    """(B,) float32: the shader program's 'mix' output (a Mix Shader's Fac from a texture or a
+    converter chain; docs/physics.md section 14.8) at the hits whose material has one, NaN at the
+    others; None when no hit has one."""
+    tx = prepared.textures
+    if not tx.uses("mix"):
+        return None
+    rows, rgba = tx.lookup("mix", hit.mat, hit.prim, hit.bu, hit.bv)
+    if not rows.size:
+        return None
+    out = np.full(len(hit.mat), np.nan, np.float32)
+    out[rows] = np.clip(rgba[:, 3], np.float32(0), np.float32(1))
+    return out
 
 
 def surface_emission(prepared, hit, lam=None) -> np.ndarray:

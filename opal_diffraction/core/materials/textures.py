@@ -171,6 +171,7 @@ class PreparedTextures:
     program_slots: dict = None    # slot -> (M,) int32
     corner_generated: np.ndarray = None  # (T, 3, 3) float32 or (0, 3, 3)
     corner_object: np.ndarray = None     # (T, 3, 3) float32 or (0, 3, 3)
+    mix: np.ndarray = None               # (M,) int32 -1: no image texture on a mix's Fac (programs only)
 
     def _program_column(self, slot: str):
         return None if not self.program_slots else self.program_slots.get(slot)
@@ -307,6 +308,7 @@ def prepare_textures(scene, conv) -> PreparedTextures:
         roughness_channel=_frozen(column("roughness_channel", np.int32, -1)),
         metallic_channel=_frozen(column("metallic_channel", np.int32, -1)),
         emission_strength=_frozen(column("emission_strength", np.float32, 1.0)),
+        mix=_frozen(np.full(len(m), -1, np.int32)),
         corner_uvs=_frozen(np.asarray(scene.corner_uvs, np.float32).reshape(-1, 3, 2)),
         corner_tangents=_frozen(np.asarray(scene.corner_tangents, np.float32).reshape(-1, 3, 4)),
         reflectance_basis=_frozen(refl),
@@ -321,7 +323,7 @@ def _programs(scene, m) -> dict:
     programs = tuple(getattr(scene, "shader_programs", None) or ())
     idx = np.asarray(getattr(m, "shader_program", np.full(len(m), -1)), np.int32).reshape(-1)
     slots = {}
-    for slot in ("color", "roughness", "metallic", "emission"):
+    for slot in ("color", "roughness", "metallic", "emission", "mix"):
         has = np.array([i >= 0 and slot in programs[i].outputs for i in idx], bool) if len(idx) else np.zeros(0, bool)
         slots[slot] = _frozen(np.where(has, idx, -1).astype(np.int32))
 

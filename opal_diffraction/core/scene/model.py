@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from ..util.geometry import triangle_normals, uv_tangents as uv_tangent_frames
-from ..util.enums import (ConductorFresnel, GlassTint, GratingDirection, GratingType, Lattice, LightKind, MaterialKind, TextureEncoding, TextureExtension, TextureInterpolation, codes)
+from ..util.enums import (ConductorFresnel, GlassTint, LayerFac, GratingDirection, GratingType, Lattice, LightKind, MaterialKind, TextureEncoding, TextureExtension, TextureInterpolation, codes)
 from ..spectral.optics import DISPERSION_MODELS
 from ..opal.volume import VolumeDomains
 from .checks import SceneError
@@ -33,6 +33,7 @@ __all__ = [
     "MATERIAL_KINDS",
     "CONDUCTOR_FRESNELS",
     "GLASS_TINTS",
+    "LAYER_FACS",
     "LIGHT_KINDS",
     "TEXTURE_INTERPOLATIONS",
     "TEXTURE_EXTENSIONS",
@@ -50,6 +51,7 @@ __all__ = [
 MATERIAL_KINDS = codes(MaterialKind)
 CONDUCTOR_FRESNELS = codes(ConductorFresnel)
 GLASS_TINTS = codes(GlassTint)
+LAYER_FACS = codes(LayerFac)
 LIGHT_KINDS = codes(LightKind)
 
 #: Image texture settings: name -> stable code (enums.py).
@@ -101,6 +103,17 @@ MATERIAL_COLUMNS = {
     "conductor_fresnel": (np.int32, (), "CONSTANT", CONDUCTOR_FRESNELS),
     # what a glass's colour is the colour of (docs/physics.md section 2.7)
     "glass_tint": (np.int32, (), "REFRACTION", GLASS_TINTS),
+    # a shader mix of unlike BSDFs as a lobe mixture (docs/physics.md section 14.8): the metal and
+    # glass layers' own colours (negative: ``color``) and the per-hit source of a two-layer mix's
+    # weights (layer codes 0 base, 1 metal, 2 glass; the weight of layer_fac_to is the Fac)
+    "metal_color": (np.float32, (3,), (-1.0, -1.0, -1.0), None),
+    "glass_color": (np.float32, (3,), (-1.0, -1.0, -1.0), None),
+    "layer_fac": (np.int32, (), "CONSTANT", LAYER_FACS),
+    "layer_fac_value": (np.float32, (), 0.5, None),
+    "layer_fac_from": (np.int32, (), 0, None),
+    "layer_fac_to": (np.int32, (), 1, None),
+    # the Diffuse BSDF's Roughness: Oren-Nayar's sigma (docs/physics.md section 14.9; 0: Lambert)
+    "diffuse_roughness": (np.float32, (), 0.0, None),
     # the BRAGG (FCC opal) lattice (docs/physics.md section 5.7; core/materials/bragg_bsdf.py)
     "sphere_diameter": (np.float32, (), 250.0, None),
     "sphere_ior": (np.float32, (), 1.45, None),
@@ -164,6 +177,17 @@ class Materials:
     refraction's, the default: Glass BSDF and older files) or PASS (one pass through a closed
     object, two refractions: Principled's Base Color).
 
+    Shader mixes of unlike BSDFs (docs/physics.md section 14.8) are these layers as a lobe
+    mixture: metal_color and glass_color (linear RGB; negative, the default: ``color``) are the
+    metal's F0 / Glossy colour and the glass's colour where they differ from the base's (a Mix
+    of a Diffuse and a Glossy BSDF). layer_fac (LAYER_FACS) CONSTANT keeps metallic /
+    transmission; FRESNEL, LAYER_FRESNEL, LAYER_FACING give a two-layer mix its weights per hit
+    from the view direction (Blender's Fresnel node of IOR layer_fac_value, the Layer Weight
+    node's outputs of Blend layer_fac_value): layer layer_fac_to (0 base, 1 metal, 2 glass)
+    gets the Fac, layer_fac_from the rest. diffuse_roughness in [0, 1]: a Diffuse BSDF's Roughness,
+    its base rendered Oren-Nayar (docs/physics.md section 14.9) where it is above 0 and the base has
+    no specular layer.
+
     Grating layer (docs/physics.md section 3), on top of the base kind: grating (0/1), grating_type
     (GRATING_TYPES), lattice (LATTICES), period D (nm), slit_width a (nm), slit_count N,
     coherence_length L (um, the slits' length), grating_direction (GRATING_DIRECTIONS: how the
@@ -220,6 +244,13 @@ class Materials:
     specular_tint: np.ndarray = field(default_factory=lambda: _material_column_default("specular_tint", 0))
     conductor_fresnel: np.ndarray = field(default_factory=lambda: _material_column_default("conductor_fresnel", 0))
     glass_tint: np.ndarray = field(default_factory=lambda: _material_column_default("glass_tint", 0))
+    metal_color: np.ndarray = field(default_factory=lambda: _material_column_default("metal_color", 0))
+    glass_color: np.ndarray = field(default_factory=lambda: _material_column_default("glass_color", 0))
+    layer_fac: np.ndarray = field(default_factory=lambda: _material_column_default("layer_fac", 0))
+    layer_fac_value: np.ndarray = field(default_factory=lambda: _material_column_default("layer_fac_value", 0))
+    layer_fac_from: np.ndarray = field(default_factory=lambda: _material_column_default("layer_fac_from", 0))
+    layer_fac_to: np.ndarray = field(default_factory=lambda: _material_column_default("layer_fac_to", 0))
+    diffuse_roughness: np.ndarray = field(default_factory=lambda: _material_column_default("diffuse_roughness", 0))
     sphere_diameter: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_diameter", 0))
     sphere_ior: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_ior", 0))
     void_ior: np.ndarray = field(default_factory=lambda: _material_column_default("void_ior", 0))

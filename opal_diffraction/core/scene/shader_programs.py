@@ -25,8 +25,9 @@ __all__ = ["Op", "ShaderProgram", "ProgramBuilder", "program_problems", "OPS", "
            "MATH_OPERATIONS", "VECTOR_MATH_OPERATIONS", "MIX_BLEND_TYPES", "NOISE_TYPES", "VORONOI_FEATURES",
            "VORONOI_METRICS", "GRADIENT_TYPES", "MAP_RANGE_TYPES", "MAPPING_TYPES", "RAMP_TABLE_SIZE", "SKY_PARAMS"]
 
-#: The material slots a program may feed, and the kind of register each reads.
-SLOTS = {"color": "v", "roughness": "f", "metallic": "f", "emission": "v"}
+#: The material slots a program may feed, and the kind of register each reads ('mix': a Mix Shader's
+#: Fac, the weight of a lobe mixture's second layer; docs/physics.md section 14.8).
+SLOTS = {"color": "v", "roughness": "f", "metallic": "f", "emission": "v", "mix": "f"}
 #: Texture Coordinate outputs a program may read (per hit, interpolated from the triangle's corners).
 COORDINATES = ("generated", "object", "uv")
 #: Entries of a ColorRamp's table (Cycles' RAMP_TABLE_SIZE: 257 in Blender 5.0, measured against its renders).

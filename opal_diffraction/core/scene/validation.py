@@ -21,7 +21,7 @@ from .checks import (COHERENCE_MAX, COORD_LIMIT, DTYPE_WORDS, EMISSION_LIMIT, FL
                      TEMPERATURE_MIN, SceneError, as_column, as_number, check_range, first_row, number_text, one_line,
                      within)
 from .shader_programs import program_problems
-from .model import (CONDUCTOR_FRESNELS, GLASS_TINTS, GRATING_DIRECTIONS, GRATING_TYPES, LATTICES, LIGHT_COLUMNS, LIGHT_KINDS,
+from .model import (CONDUCTOR_FRESNELS, GLASS_TINTS, LAYER_FACS, GRATING_DIRECTIONS, GRATING_TYPES, LATTICES, LIGHT_COLUMNS, LIGHT_KINDS,
                     MATERIAL_COLUMNS, MATERIAL_KINDS, TEXTURE_COLUMNS, TEXTURE_ENCODINGS, TEXTURE_EXTENSIONS,
                     TEXTURE_INTERPOLATIONS, Camera, Lights, Materials, Scene)
 
@@ -32,7 +32,7 @@ BRAGG_RANGES = {"sphere_diameter": (100.0, 500.0, " nm"), "sphere_ior": (1.0, 3.
                 "layers": (1, 10000, ""), "mosaic_spread": (0.0, 45.0, " degrees")}
 
 #: Unit-interval material columns (validated to [0, 1]).
-_UNIT_COLUMNS = ("roughness", "metallic", "transmission")
+_UNIT_COLUMNS = ("roughness", "metallic", "transmission", "diffuse_roughness")
 
 _OBSERVER_NM = (360.0, 830.0)  # the wavelengths any grid may hold (spectrum.py)
 
@@ -475,7 +475,8 @@ def _validate_materials(m: Materials) -> Materials:
     _enum_check(kind, MATERIAL_KINDS, label, "kind")
     _enum_check(out["dispersion"], DISPERSION_MODELS, label, "dispersion")
     for name, enum in (("grating_type", GRATING_TYPES), ("lattice", LATTICES), ("grating_direction", GRATING_DIRECTIONS),
-                       ("conductor_fresnel", CONDUCTOR_FRESNELS), ("glass_tint", GLASS_TINTS)):
+                       ("conductor_fresnel", CONDUCTOR_FRESNELS), ("glass_tint", GLASS_TINTS),
+                       ("layer_fac", LAYER_FACS)):
         _enum_check(out[name], enum, label, name.replace("_", " "))
     g = out["grating"].astype(np.int64)
     bad = (g != 0) & (g != 1)
@@ -488,8 +489,20 @@ def _validate_materials(m: Materials) -> Materials:
     for name in ("color", "emission", "ior", "abbe", "period", "slit_width", "coherence_length", "rotation",
                  "normal_strength", "emission_strength", "roughness", "metallic", "transmission",
                  "specular_ior_level", "specular_tint", "sphere_diameter", "sphere_ior", "void_ior", "mosaic_spread",
-                 "thin_film_thickness", "thin_film_ior"):
+                 "thin_film_thickness", "thin_film_ior", "metal_color", "glass_color", "layer_fac_value",
+                 "diffuse_roughness"):
         check_range(f64[name], label, name.replace("_", " "), "")
+    for name in ("layer_fac_from", "layer_fac_to"):
+        code = out[name].astype(np.int64)
+        bad = (code < 0) | (code > 2)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"{label(i)}: {name.replace('_', ' ')} {int(code[i])} is not a layer (0 base, 1 metal, "
+                             f"2 glass)")
+    bad = (out["layer_fac"] != LAYER_FACS["CONSTANT"]) & (out["layer_fac_from"] == out["layer_fac_to"])
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"{label(i)}: a per-hit layer mix needs two different layers")
     film_d, film_n = f64["thin_film_thickness"], f64["thin_film_ior"]
     bad = film_d < 0
     if bad.any():

@@ -14,6 +14,7 @@ __all__ = [
     "MaterialKind",
     "ConductorFresnel",
     "GlassTint",
+    "LayerFac",
     "LightKind",
     "DispersionModel",
     "GratingType",
@@ -41,6 +42,20 @@ class ConductorFresnel(IntEnum):
 
     CONSTANT = 0
     F82_TINT = 1
+
+
+class LayerFac(IntEnum):
+    """Where the weights of a two-layer shader mix come from per hit (docs/physics.md section
+    14.8): CONSTANT (the material's metallic / transmission), FRESNEL (Blender's Fresnel node of
+    IOR layer_fac_value), LAYER_FRESNEL / LAYER_FACING (the Layer Weight node's outputs of Blend
+    layer_fac_value), each a function of the view direction and the shading normal; PROGRAM (the
+    material's shader program's 'mix' output per hit: a texture or converter chain on the Fac)."""
+
+    CONSTANT = 0
+    FRESNEL = 1
+    LAYER_FRESNEL = 2
+    LAYER_FACING = 3
+    PROGRAM = 4
 
 
 class GlassTint(IntEnum):

@@ -103,7 +103,8 @@ def eye_constants(prepared, light, plan) -> EyeConstants:
         splat_bounce=(splat_bounce.receivers(prepared) if direct_splat is not None
                       and plan.splat_bounce else None),
         footprints=plan.ray_differentials,
-        mixed_layers=((mt > 0) & (mt < 1)) | ((tr > 0) & (tr < 1)),
+        mixed_layers=((mt > 0) & (mt < 1)) | ((tr > 0) & (tr < 1)) | (
+            np.asarray(prepared.materials.layer_fac) != 0 if prepared.materials.layer_fac is not None else False),
         probe=probe_wavelength(prepared),
         world_gratings=diffracts_world(prepared),
         limits=(s.max_bounces, s.diffuse_bounces, s.glossy_bounces, s.transmission_bounces),

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...materials import bsdf
-from ...materials.surface import shading_normal, surface_reflectance, surface_roughness
+from ...materials.mixtures import per_hit_layers
+from ...materials.surface import shading_normal, surface_mix_fac, surface_reflectance, surface_roughness
 from ...transport.walker import Hit, Rays, shading_normals
 
 __all__ = ["HitShading", "bend_normals", "bump", "bump_shadowing", "surface_params", "reflects"]
@@ -88,15 +89,20 @@ def bump_shadowing(ni: np.ndarray, ns: np.ndarray, wi: np.ndarray) -> np.ndarray
 
 def surface_params(prepared, mixed_layers: np.ndarray, rays: Rays, hit: Hit, rng) -> "bsdf.SurfaceParams":
     """core/materials/bsdf.py's parameters of these hits: base colour and roughness per hit (textures),
-    the side (entering or leaving glass), one Principled layer drawn per hit where the
+    the side (entering or leaving glass), one Principled layer (or lobe of a shader mix, its
+    weights per hit where a Fresnel / Layer Weight node gives them) drawn per hit where the
     material mixes layers (``mixed_layers`` (M,) bool; a pure metal, glass or base takes its
     one layer: no number)."""
     base = surface_reflectance(prepared, hit, rays.lam)
     if rays.lam is not None:
         base = base[:, None]
     u_layer = rng.random(len(rays)) if mixed_layers[hit.mat].any() else None
+    # a Fresnel / Layer Weight mix: its layer weights per hit from the view direction (section 14.8)
+    weights = None if u_layer is None else per_hit_layers(
+        prepared.materials, hit.mat, np.einsum("ij,ij->i", -rays.d, hit.ns), hit.front, surface_mix_fac(prepared, hit))
     params = bsdf.params_from_materials(prepared.materials, hit.mat, hit.front, rays.lam, base=base,
-                                        roughness=surface_roughness(prepared, hit), u_layer=u_layer)
+                                        roughness=surface_roughness(prepared, hit), u_layer=u_layer,
+                                        weights=weights)
     return bsdf.with_outgoing(params, -rays.d, hit.ns)  # the next events and the bounce share wo
 
 
