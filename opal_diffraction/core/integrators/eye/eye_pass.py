@@ -5,7 +5,8 @@ The source paper's eye pass (Kobayashi & Kawai; docs/physics.md section 4.2), gr
 tracer (section 4.5; pbrt-v4's PathIntegrator): at every diffuse (two-sided Lambertian) vertex,
 direct light by shadow rays plus the caustic irradiance of the light pass's illumination map,
 then a cosine-sampled bounce under Cycles' bounce limits and Russian roulette; at a grating, the
-diffraction of every light that reaches it (gratings.py); at an emitter and where a ray leaves
+diffraction of every light that reaches it (grating_hits.py) and, along one sampled order, the
+path continued to whatever it finds (``_GratingTrace``, docs/physics.md section 3.13); at an emitter and where a ray leaves
 the scene, the emitted radiance; at mirrors and glass the path goes on. Paths the light pass
 already counted (diffuse <- specular <- emitter) are left out. Every tile writes the films:
 Direct (one diffuse vertex), Indirect (more), Caustics, Diffraction and emitted light seen.
@@ -18,6 +19,7 @@ what a hit's shading leaves for its bounce travels in a ``surface_interaction.Hi
     on_hit (normal maps, BSDF parameters)    surface_interaction.py
     on_hit (lights, meshes, world; caustics) next_event.py        one next-event routine, MIS
     on_hit (gratings)                        grating_hits.py      diffracted light
+    (gratings: the order lobe)               _GratingTrace        the path continued along an order
     survives, after_delta, scatter           continuation.py      roulette, BSDF sampling, counts
     dielectric_bounce                        fresnel_split.py     both branches at the first glass
     every stage's film adds                  tile_output.py
@@ -146,6 +148,17 @@ class _TileTrace(SpecularWalker):
         self.transparent = bool(getattr(eye.prepared.settings, "film_transparent", False))
         self.transparent_glass = self.transparent and bool(getattr(eye.prepared.settings, "film_transparent_glass", False))
         self._camera_segment = False  # the next segment traced is the camera rays' (coverage: alpha)
+        self._lobe_rng = None  # the grating lobe's own stream (``lobe_rng``), made when first needed
+
+    @property
+    def lobe_rng(self) -> np.random.Generator:
+        """The random stream of the paths continued along grating orders: spawned from the tile's
+        stream's seed (drawing nothing from it), so they leave the tile's other numbers as they were."""
+        if self._lobe_rng is None:
+            seq = getattr(self.rng.bit_generator, "seed_seq", None)
+            self._lobe_rng = (np.random.default_rng(seq.spawn(1)[0]) if isinstance(seq, np.random.SeedSequence)
+                              else np.random.default_rng(self.rng.integers(1 << 62)))
+        return self._lobe_rng
 
     def _new_state(self, b: int) -> PathState:
         """The path tracer's per-path state of ``b`` camera paths (core/transport/path_state.py),
@@ -262,7 +275,9 @@ class _TileTrace(SpecularWalker):
             if c.scattering is not None:  # diffuse -> grating -> light: the light pass's caustic
                 on_grating &= ~(c.scattering[hit.mat] & (st.caustic == Caustic.RECEIVER))
             if on_grating.any():
-                grating_light(c, out, rays.take(on_grating), hit.take(on_grating), rng, follow=self._follow_grating)
+                rg = rays.take(on_grating)
+                grating_light(c, out, rg, hit.take(on_grating), rng, follow=self._follow_grating,
+                              events=self._grating_events(rg), lobe_rng=self.lobe_rng)
         diffuse = kind == DIFFUSE
         if c.black is not None:  # emission-only surfaces: the denoising features, then nothing
             black = diffuse & c.black[hit.mat]
@@ -331,6 +346,11 @@ class _TileTrace(SpecularWalker):
         if layers:
             out = grating_layering.continue_specular(self.prepared, out, hit, transmitted)
         return out, transmitted
+
+    def _grating_events(self, rays: Rays):
+        """(B,) bool: the grating hits of ``rays`` that diffract the lights, meshes and records
+        (None: all of them; ``_GratingTrace`` leaves some to the records)."""
+        return None
 
     def _follow_grating(self, rays: Rays, cont) -> None:
         """Trace the paths that leave grating hits of ``rays`` along sampled orders (``cont``:
@@ -486,12 +506,16 @@ class _GratingTrace(_TileTrace):
       of them is not added; the world it reaches is (the grating does not sample it);
     - after mirrors and glass only (``lobe`` 2), emitters and the world are the light pass's
       grating records' where the light pass ran (light -> mirrors / glass -> grating), else added;
+    - another grating met before any diffuse vertex (``lobe`` 1 or 2) diffracts the lights,
+      meshes and records only without a light pass: with one, light -> that grating -> ... ->
+      the first grating is in the first grating's records (made at every arrival after a
+      specular vertex, a diffraction included);
     - after a diffuse or rough vertex (``lobe`` 0) the path is any path: MIS and caustic rules
       as everywhere.
     """
 
     def __init__(self, parent: _TileTrace):
-        super().__init__(parent.eye, parent.out.n_pixels, parent.rng, sampler_seed=parent.sampler_seed)
+        super().__init__(parent.eye, parent.out.n_pixels, parent.lobe_rng, sampler_seed=parent.sampler_seed)
         self.transparent = self.transparent_glass = False  # a diffracted path: never the film's background
         self.records = self.c.record_map is not None
         self.emissive = self.any_emissive
@@ -510,6 +534,12 @@ class _GratingTrace(_TileTrace):
         """(B,) bool: the rays whose emitters this trace adds (the partition above)."""
         lobe = rays.state.lobe
         return (lobe == 0) if self.records else (lobe != 1)
+
+    def _grating_events(self, rays: Rays):
+        # light -> (mirrors, glass, gratings) -> this grating -> ... -> the first grating: with a
+        # light pass, the first grating's records hold it (they record every arrival after a
+        # specular vertex, a diffraction included)
+        return (rays.state.lobe == 0) if self.records else None
 
     def on_segment(self, rays: Rays, t: np.ndarray) -> None:
         keep = self._emits(rays)

@@ -27,11 +27,15 @@ from ...transport.walker import Hit, Rays
 __all__ = ["grating_light"]
 
 
-def grating_light(c, out, rays: Rays, hit: Hit, rng, follow=None):
+def grating_light(c, out, rays: Rays, hit: Hit, rng, follow=None, events=None, lobe_rng=None):
     """Light of every light diffracted by the grating layer towards the viewer (exact w_i by
     shadow ray, so no noise from the light side), into the Diffraction part of ``out``; and,
     with ``follow(rays, gratings.lobe.ContinuedPaths)``, the paths that go on along a sampled
-    order (LINES gratings: whatever they find arrives diffracted, section 3.13)."""
+    order (LINES gratings: whatever they find arrives diffracted, section 3.13). ``events`` (B,)
+    bool: the rays whose lights, meshes and records are diffracted here (None: all; a path
+    continued from another grating leaves them to the light pass's records, section 3.13).
+    ``lobe_rng``: the continuation's own random stream (None: ``rng``), so the paths it adds do
+    not shift the numbers of everything else."""
     prepared = c.prepared
     g, lights = prepared.gratings, prepared.lights
     edges = prepared.grid.bin_edges
@@ -39,13 +43,14 @@ def grating_light(c, out, rays: Rays, hit: Hit, rng, follow=None):
         sel = hit.mat == m
         r, h = rays.take(sel), hit.take(sel)
         b = len(r)
+        ev = None if events is None else np.asarray(events, bool)[sel]
         t, s = grating_frame(tangents_at(prepared.corner_grating_tangent, prepared.tri_grating_tangent, h.prim,
                                          h.bu, h.bv, h.ng), h.ng, np.full(b, g.cos_rot[m]), np.full(b, g.sin_rot[m]))
         over = prepared.tri_period[h.prim] if len(prepared.tri_period) else np.zeros(b, np.float32)
         period = np.where(over > 0, over, g.period[m])
         w_o = -r.d
         if follow is not None and c.lobe_gratings[m]:  # the grating as a lobe: the path goes on along an order
-            cont = continue_paths(prepared, r, h, int(m), t, s, period, rng)  # (docs/physics.md sections 3.11, 3.13)
+            cont = continue_paths(prepared, r, h, int(m), t, s, period, rng if lobe_rng is None else lobe_rng)  # (docs/physics.md sections 3.11, 3.13)
             if cont is not None:
                 follow(r, cont)
         samples = [(li, *sample_light(lights, li, h.p, rng), 0.0) for li in range(len(lights))]  # (a handful)
@@ -56,6 +61,8 @@ def grating_light(c, out, rays: Rays, hit: Hit, rng, follow=None):
             cos_l = np.einsum("ij,ij->i", wi, h.ng)
             valid = (cos_l < 0) if g.transmission[m] else (cos_l > 0)
             valid &= gfac > 0
+            if ev is not None:
+                valid &= ev
             idx = np.flatnonzero(valid)
             if idx.size == 0:
                 continue
@@ -87,6 +94,8 @@ def grating_light(c, out, rays: Rays, hit: Hit, rng, follow=None):
             hit_of, irr, src = c.record_map.lobes(h.prim, h.bu, h.bv, rng, at=h.p)
             cos_l = np.einsum("ij,ij->i", src, h.ng[hit_of])
             keep = (cos_l < 0) if g.transmission[m] else (cos_l > 0)
+            if ev is not None:
+                keep &= ev[hit_of]
             hit_of, irr, src = hit_of[keep], irr[keep], src[keep]
             chunk = c.record_map.max_pairs
             for c0 in range(0, len(hit_of), chunk):  # (hit, lobe) pairs in bounded chunks
