@@ -13,9 +13,10 @@ order by order here (``world_orders_reference`` of test_grating_radiometry.py, w
 panel's extent). L_panel is measured from our own render of the panel alone, seen from below
 (uniform: a Lambertian panel lit by a sun from below, or an emissive panel). The emissive one
 checks the partition of section 3.13 too: the segment leaving the grating does not add an
-emitter the grating's next events already sampled (twice the sum if it did); its only
-estimator there is the grating's next event of one mesh point, which is noisy for a panel this
-wide (the test's noise-derived Z-test holds, its mean is looser).
+emitter the grating's next events already sampled: the image is the same without the
+continued paths (which draw from their own random stream). Its only estimator there is the
+grating's next event of one mesh point, unbiased but heavy-tailed for a panel this wide (the
+Z-test over pixels holds; the mean is not held to 1 %).
 """
 
 import numpy as np
@@ -108,7 +109,7 @@ def measured_panel(panel: str) -> np.ndarray:
 
 
 @pytest.mark.parametrize("panel", ["lit", "emissive"])
-def test_grating_under_a_panel_gives_the_order_sum_of_its_radiance(panel):
+def test_grating_under_a_panel_gives_the_order_sum_of_its_radiance(panel, monkeypatch):
     l_panel = measured_panel(panel)
     s = panel_scene(panel)
     # no diffuse bounce: the panel's light that the grating sends back up to it (panel -> grating ->
@@ -132,8 +133,13 @@ def test_grating_under_a_panel_gives_the_order_sum_of_its_radiance(panel):
     if panel == "lit":  # the sun's next events at the panel: little noise
         assert abs(diff.mean()) < 0.01 * expected.mean()
     else:  # the emissive panel is the grating's next events' alone (one mesh point per hit, section
-        # 3.13): unbiased but heavy-tailed; counted twice it would be ~2x
-        assert ratio.mean() < 1.5 * expected.mean()
+        # 3.13): unbiased but heavy-tailed. The continued paths (their own random stream) add
+        # nothing to it: the same render without them is the same image
+        import opal_diffraction.core.integrators.eye.grating_hits as stage
+
+        monkeypatch.setattr(stage, "continue_paths", lambda *a, **k: None)
+        alone = render(s, st, spectral_film=True)
+        np.testing.assert_allclose(res.spectral, alone.spectral, rtol=1e-5, atol=1e-9)
     assert expected.mean() > 0.3  # the orders see the panel
     # all of it is the Diffraction pass (the base is black, the world black)
     y709 = np.array([0.2126729, 0.7151522, 0.0721750])
