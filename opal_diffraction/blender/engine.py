@@ -114,7 +114,8 @@ class OpalRenderEngine(bpy.types.RenderEngine):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self._viewport = None  # a ViewportSession once the engine draws a 3D view
-        self._persistent = PersistentData()  # what a final render keeps with Persistent Data on (persistent.py)
+        # what a final render keeps with Persistent Data on, per view layer (persistent.py)
+        self._persistent: dict[str, PersistentData] = {}
 
     def __del__(self):
         # the engine is freed (Rendered mode left, or a render finished): stop the preview thread
@@ -153,19 +154,29 @@ class OpalRenderEngine(bpy.types.RenderEngine):
 
     # ---------------------------------------------------------------- final render
     def update(self, data, depsgraph):
-        """Before each final render: note the depsgraph's updates (what changed since the frame
-        before, with Persistent Data on: the engine instance is kept between frames)."""
+        """Before each final render of a view layer: note the depsgraph's updates (what changed
+        since the frame before, with Persistent Data on: the engine instance is kept between
+        frames, and each view layer's depsgraph too)."""
         try:
             if depsgraph.scene.render.use_persistent_data:
-                self._persistent_data().note_updates(depsgraph.updates)
+                self._persistent_data(depsgraph.view_layer.name).note_updates(depsgraph.updates)
         except Exception:  # never fail here: the render then exports everything
             traceback.print_exc(file=sys.stderr)
-            self._persistent_data().updates = None
+            for pd in self._persistent_layers().values():
+                pd.updates = None
 
-    def _persistent_data(self) -> PersistentData:
-        pd = getattr(self, "_persistent", None)
+    def _persistent_layers(self) -> dict:
+        layers = getattr(self, "_persistent", None)
+        if layers is None:
+            layers = self._persistent = {}
+        return layers
+
+    def _persistent_data(self, layer: str) -> PersistentData:
+        """The kept state of one view layer (each has its own depsgraph, export and light pass)."""
+        layers = self._persistent_layers()
+        pd = layers.get(layer)
         if pd is None:
-            pd = self._persistent = PersistentData()
+            pd = layers[layer] = PersistentData()
         return pd
 
     # ---------------------------------------------------------------- passes
@@ -239,10 +250,11 @@ class OpalRenderEngine(bpy.types.RenderEngine):
 
         # Persistent Data (persistent.py): keep the export, the preparation and the light pass
         # between frames; off, or rendering on a cluster, keeps nothing
-        pd = self._persistent_data()
+        pd = self._persistent_data(depsgraph.view_layer.name)
         persistent = bool(scene.render.use_persistent_data) and not opal.scheduler.strip()
-        if not persistent:
-            pd.free()
+        if not persistent:  # every view layer's kept state is freed
+            for other in self._persistent_layers().values():
+                other.free()
         updates = pd.take_updates()
         cam_ob = self.camera_override if self.camera_override is not None else scene.camera
         cam_name = cam_ob.name_full if cam_ob is not None else ""

@@ -24,6 +24,7 @@ pass's result, and takes from them what nothing it depends on changed
   equal (a comparison of the exported arrays, not a guess from the updates);
 - **Persistent Data off**: nothing is kept; what an earlier frame kept is freed.
 
+Each view layer has its own depsgraph, so the engine keeps one ``PersistentData`` per view layer.
 ``PersistentData`` is plain Python (no bpy) so its decisions are testable without Blender; the
 engine feeds it ``depsgraph.updates`` (``note_updates``) and reads and stores its ``Kept``.
 """

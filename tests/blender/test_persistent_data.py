@@ -143,3 +143,38 @@ def test_camera_only_needs_seen_updates_and_equal_settings():
     assert pd.camera_only([], s, (64, 32, None, "camera"), "camera", "camera") is None  # resolution
     pd.free()
     assert pd.kept is None
+
+
+def test_each_view_layer_keeps_its_own_frame(monkeypatch):
+    """Two view layers, the second without the glass box: each has its own depsgraph and its own
+    kept frame, so each layer's frame 2 is its fresh render (not the other layer's kept scene)."""
+    from opal_diffraction.blender.engine import OpalRenderEngine
+
+    sc, _, box = _scene(splat=False)
+    coll = bpy.data.collections.new("glass")
+    sc.collection.children.link(coll)
+    sc.collection.objects.unlink(box)
+    coll.objects.link(box)
+    layer_b = sc.view_layers.new("without glass")
+    layer_b.layer_collection.children["glass"].exclude = True
+    sc.render.use_single_layer = False
+    per_layer = []  # (view layer, rgb, persistent) of every render call
+    original = OpalRenderEngine._render
+
+    def spy(self, depsgraph):
+        original(self, depsgraph)
+        per_layer.append((depsgraph.view_layer.name, last_render["rgb"].copy(), dict(last_render["persistent"])))
+
+    monkeypatch.setattr(OpalRenderEngine, "_render", spy)
+    _render(sc, 1, True)
+    _render(sc, 2, True)
+    frame2 = {name: (rgb, p) for name, rgb, p in per_layer[-2:]}
+    per_layer.clear()
+    _render(sc, 2, False)
+    fresh = {name: rgb for name, rgb, _ in per_layer}
+    assert set(frame2) == set(fresh) == {"ViewLayer", "without glass"}
+    for name in fresh:
+        np.testing.assert_array_equal(frame2[name][0], fresh[name], err_msg=name)
+    assert np.abs(fresh["ViewLayer"] - fresh["without glass"]).max() > 0.05  # the layers differ
+    assert frame2["ViewLayer"][1]["reused"], frame2["ViewLayer"][1]
+    assert frame2["without glass"][1]["reused"] and not frame2["without glass"][1]["light_pass_ran"]
