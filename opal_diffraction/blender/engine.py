@@ -20,6 +20,14 @@ them all; the console too in background mode); the stats line counts them and sh
 A cancelled render (Esc, Ctrl-C) ends with status 'CANCELLED' and a stats line that starts with
 "Cancelled".
 
+With Persistent Data on (``scene.render.use_persistent_data``) Blender keeps the engine between
+frames and calls ``update`` before each render: the engine notes the depsgraph's updates and
+keeps, per view layer, the exported scene, the preparation and the light pass (persistent.py);
+a frame whose only change is the camera exports the camera alone and renders the kept
+preparation through it, keeping the light pass unless the camera splat needs it again for the
+new view (core/render/frame.py ``reusable_light``); other changes re-export and prepare with
+the kept preparation as ``reuse``. The stats line ends with what was reused.
+
 The rendered viewport (``view_update`` / ``view_draw``) is viewport.ViewportSession: a
 progressive preview in a background thread, drawn through the ``gpu`` module.
 """
