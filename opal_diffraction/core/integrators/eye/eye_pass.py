@@ -43,7 +43,7 @@ from .constants import EyeConstants, eye_constants
 from .continuation import count_delta, lambert_bounce, microfacet_bounce, russian_roulette
 from .grating_hits import grating_light
 from .next_event import BraggLobeEvents, MicrofacetLobe, caustic_light, lambert_next_events, next_events
-from .surface_interaction import HitShading, bend_normals, reflects, surface_params
+from .surface_interaction import HitShading, bend_normals, reflects, surface_lobes
 from .tile_output import TileOutput, TileResult
 
 __all__ = ["EyePass", "TileResult"]
@@ -245,9 +245,9 @@ class _TileTrace(SpecularWalker):
                 rm, hm = rays.take(micro), hit.take(micro)
                 if c.layers:
                     rm = grating_layering.scale_base(prepared, rm, hm)
-                params = surface_params(prepared, c.mixed_layers, rm, hm, self.numbers(rm, SLOT_PARAMS))
-                shading.micro = (micro, params)  # for scatter(): the same lobe for light and bounce
-                self._shade_microfacet(rm, hm, params, rng)
+                params, mixture = surface_lobes(prepared, c.mixed_layers, rm, hm, self.numbers(rm, SLOT_PARAMS))
+                shading.micro = (micro, params, mixture)  # for scatter(): the same lobes for light and bounce
+                self._shade_microfacet(rm, hm, params, mixture, rng)
             kind = np.where(micro, -1, kind)  # shaded: not Lambertian below
         full_live = live
         if n_live < len(live):
@@ -290,8 +290,8 @@ class _TileTrace(SpecularWalker):
         c = self.c
         micro_out = None
         if shaded is not None and shaded.micro is not None:
-            micro, params = shaded.micro
-            micro_out = microfacet_bounce(c, rays, hit, micro, params, can_bounce, self.numbers)
+            micro, params, mixture = shaded.micro
+            micro_out = microfacet_bounce(c, rays, hit, micro, params, can_bounce, self.numbers, mixture)
             kind = np.where(micro, -1, kind)
         out = micro_out
         sel = (kind == DIFFUSE) & ~rays.state.final
@@ -352,8 +352,9 @@ class _TileTrace(SpecularWalker):
             next_events(c, self.out, rn, hn, BraggLobeEvents(c, rn, hn, lobe.take(k)), rng)
         return bragg.body_share(rays, r, h, sel, lobe)
 
-    def _shade_microfacet(self, rays: Rays, hit: Hit, params, rng):
-        """Next-event estimation at rough and layered surfaces: every light, the emissive meshes
+    def _shade_microfacet(self, rays: Rays, hit: Hit, params, mixture, rng):
+        """Next-event estimation at rough and layered surfaces (every lobe of a mixture: ``mixture``,
+        core/materials/mixtures.py): every light, the emissive meshes
         and the world map, each weighted against BSDF sampling by the power heuristic; and the
         caustic map on a diffuse base (its diffuse lobe, approximately: base colour / pi)."""
         c, out = self.c, self.out
@@ -363,8 +364,10 @@ class _TileTrace(SpecularWalker):
         for sel, direct in ((first, True), (~first, False)):
             if sel.any():
                 r, h = rays.take(sel), hit.take(sel)
-                p = params.take(np.flatnonzero(sel)) if not sel.all() else params
-                next_events(c, out, r, h, MicrofacetLobe(c, r, h, p), self.numbers(r, SLOT_LIGHT),
+                k = np.flatnonzero(sel)
+                p = params.take(k) if not sel.all() else params
+                mx = None if mixture is None else mixture.take(k)
+                next_events(c, out, r, h, MicrofacetLobe(c, r, h, p, mx), self.numbers(r, SLOT_LIGHT),
                             out.film if direct else out.indirect)
         if c.caustic_map is not None:
             base = self.prepared.materials.kind[hit.mat] == DIFFUSE
