@@ -143,6 +143,11 @@ class _TileTrace(SpecularWalker):
         self.transparent = bool(getattr(eye.prepared.settings, "film_transparent", False))
         self.transparent_glass = self.transparent and bool(getattr(eye.prepared.settings, "film_transparent_glass", False))
         self._camera_segment = False  # the next segment traced is the camera rays' (coverage: alpha)
+        # Film > Transparent: the materials' Holdout weights (None: no holdout), taken off the
+        # alpha of camera rays meeting them (Cycles' integrate_surface_holdout; docs/physics.md 14.8)
+        hold = getattr(eye.prepared.materials, "holdout", None)
+        self.holdout = hold if self.transparent and hold is not None and (hold > 0).any() else None
+        self._holdout_segment = False  # the hits on_hit shades next are the camera rays'
 
     def _new_state(self, b: int) -> PathState:
         """The path tracer's per-path state of ``b`` camera paths (core/transport/path_state.py),
@@ -192,6 +197,7 @@ class _TileTrace(SpecularWalker):
         if self._camera_segment:  # the camera rays: coverage, the film's alpha (Film > Transparent)
             self._camera_segment = False
             self.out.add_alpha(rays.pix, np.isfinite(t))
+            self._holdout_segment = self.holdout is not None
         emission.lights_passed(self.c, self.out, rays, t)
 
     def on_miss(self, rays: Rays) -> None:
@@ -222,6 +228,12 @@ class _TileTrace(SpecularWalker):
         c, out = self.c, self.out
         prepared = self.prepared
         st = rays.state
+        if self._holdout_segment:  # camera rays on a Holdout: its weight off the pixel's alpha
+            self._holdout_segment = False
+            h = self.holdout[hit.mat]
+            first = (h > 0) & (rays.depth == 0)
+            if first.any():
+                out.lower_alpha(rays.pix[first], h[first])
         if self.any_emissive:
             emits = prepared.materials.emissive.take(hit.mat)
             if np.count_nonzero(emits) and not emission.surface_emission_unit(c, out, rays, hit, emits):
