@@ -145,24 +145,22 @@ def microfacet_bounce(c, rays: Rays, hit: Hit, micro: np.ndarray, params, can_bo
     if not chooses:
         u = np.concatenate([u, np.zeros((len(r), 1), np.float32)], axis=1)
     wi, weight, pdf, flags = bsdf.sample(params, -r.d, h.ns, h.ng, u)
-    ok = flags != 0
-    if not ok.all():
-        r, h, wi, weight, pdf, flags = r.take(ok), h.take(ok), wi[ok], weight[ok], pdf[ok], flags[ok]
-        if mixture is not None:
-            params, mixture = params.take(np.flatnonzero(ok)), mixture.take(np.flatnonzero(ok))
-    if len(r) == 0:
-        return None
     if mixture is not None:  # the whole mixture at the sampled direction (not at delta events)
         f_mix, p_mix = mixture.evaluate(params, -r.d, wi, h.ns, h.ng)
         mixed = np.zeros(len(r), bool)
         mixed[mixture.rows] = True
-        mixed &= ((flags & bsdf.SINGULAR) == 0) & (p_mix > 0)
+        mixed &= (flags != 0) & ((flags & bsdf.SINGULAR) == 0) & (p_mix > 0)
         if mixed.any():
             w_mix = f_mix / np.where(mixed, p_mix, np.float32(1.0))[:, None]
             if w_mix.shape[1] != weight.shape[1]:
                 weight = np.broadcast_to(weight, w_mix.shape)
             weight = np.where(mixed[:, None], w_mix, weight).astype(np.float32)
             pdf = np.where(mixed, p_mix, pdf).astype(np.float32)
+    ok = flags != 0
+    if not ok.all():
+        r, h, wi, weight, pdf, flags = r.take(ok), h.take(ok), wi[ok], weight[ok], pdf[ok], flags[ok]
+    if len(r) == 0:
+        return None
     side = np.where(np.einsum("ij,ij->i", wi, h.ng) > 0, 1.0, -1.0).astype(np.float32)
     o = (h.p + (h.eps * side)[:, None] * h.ng).astype(np.float32)
     out = r.moved(o, wi, r.weighted(weight) if r.lam is None else r.w * weight[:, 0])
