@@ -47,7 +47,7 @@ from .constants import EyeConstants, eye_constants
 from .continuation import count_delta, lambert_bounce, microfacet_bounce, russian_roulette
 from .grating_hits import grating_light
 from .next_event import BraggLobeEvents, MicrofacetLobe, caustic_light, lambert_next_events, next_events
-from .surface_interaction import HitShading, bend_normals, reflects, surface_params
+from .surface_interaction import HitShading, bend_normals, reflects, surface_lobes
 from .tile_output import TileOutput, TileResult
 
 __all__ = ["EyePass", "TileResult"]
@@ -149,6 +149,11 @@ class _TileTrace(SpecularWalker):
         self.transparent_glass = self.transparent and bool(getattr(eye.prepared.settings, "film_transparent_glass", False))
         self._camera_segment = False  # the next segment traced is the camera rays' (coverage: alpha)
         self._lobe_rng = None  # the grating lobe's own stream (``lobe_rng``), made when first needed
+        # Film > Transparent: the materials' Holdout weights (None: no holdout), taken off the
+        # alpha of camera rays meeting them (Cycles' integrate_surface_holdout; docs/physics.md 14.8)
+        hold = getattr(eye.prepared.materials, "holdout", None)
+        self.holdout = hold if self.transparent and hold is not None and (hold > 0).any() else None
+        self._holdout_segment = False  # the hits on_hit shades next are the camera rays'
 
     @property
     def lobe_rng(self) -> np.random.Generator:
@@ -208,6 +213,7 @@ class _TileTrace(SpecularWalker):
         if self._camera_segment:  # the camera rays: coverage, the film's alpha (Film > Transparent)
             self._camera_segment = False
             self.out.add_alpha(rays.pix, np.isfinite(t))
+            self._holdout_segment = self.holdout is not None
         emission.lights_passed(self.c, self.out, rays, t)
 
     def on_miss(self, rays: Rays) -> None:
@@ -238,6 +244,12 @@ class _TileTrace(SpecularWalker):
         c, out = self.c, self.out
         prepared = self.prepared
         st = rays.state
+        if self._holdout_segment:  # camera rays on a Holdout: its weight off the pixel's alpha
+            self._holdout_segment = False
+            h = self.holdout[hit.mat]
+            first = (h > 0) & (rays.depth == 0)
+            if first.any():
+                out.lower_alpha(rays.pix[first], h[first])
         if self.any_emissive:
             emits = prepared.materials.emissive.take(hit.mat)
             if np.count_nonzero(emits) and not emission.surface_emission_unit(c, out, rays, hit, emits):
@@ -261,9 +273,9 @@ class _TileTrace(SpecularWalker):
                 rm, hm = rays.take(micro), hit.take(micro)
                 if c.layers:
                     rm = grating_layering.scale_base(prepared, rm, hm)
-                params = surface_params(prepared, c.mixed_layers, rm, hm, self.numbers(rm, SLOT_PARAMS))
-                shading.micro = (micro, params)  # for scatter(): the same lobe for light and bounce
-                self._shade_microfacet(rm, hm, params, rng)
+                params, mixture = surface_lobes(prepared, c.mixed_layers, rm, hm, self.numbers(rm, SLOT_PARAMS))
+                shading.micro = (micro, params, mixture)  # for scatter(): the same lobes for light and bounce
+                self._shade_microfacet(rm, hm, params, mixture, rng)
             kind = np.where(micro, -1, kind)  # shaded: not Lambertian below
         full_live = live
         if n_live < len(live):
@@ -308,8 +320,8 @@ class _TileTrace(SpecularWalker):
         c = self.c
         micro_out = None
         if shaded is not None and shaded.micro is not None:
-            micro, params = shaded.micro
-            micro_out = microfacet_bounce(c, rays, hit, micro, params, can_bounce, self.numbers)
+            micro, params, mixture = shaded.micro
+            micro_out = microfacet_bounce(c, rays, hit, micro, params, can_bounce, self.numbers, mixture)
             kind = np.where(micro, -1, kind)
         out = micro_out
         sel = (kind == DIFFUSE) & ~rays.state.final
@@ -413,8 +425,9 @@ class _TileTrace(SpecularWalker):
             next_events(c, self.out, rn, hn, BraggLobeEvents(c, rn, hn, lobe.take(k)), rng)
         return bragg.body_share(rays, r, h, sel, lobe)
 
-    def _shade_microfacet(self, rays: Rays, hit: Hit, params, rng):
-        """Next-event estimation at rough and layered surfaces: every light, the emissive meshes
+    def _shade_microfacet(self, rays: Rays, hit: Hit, params, mixture, rng):
+        """Next-event estimation at rough and layered surfaces (every lobe of a mixture: ``mixture``,
+        core/materials/mixtures.py): every light, the emissive meshes
         and the world map, each weighted against BSDF sampling by the power heuristic; and the
         caustic map on a diffuse base (its diffuse lobe, approximately: base colour / pi)."""
         c, out = self.c, self.out
@@ -424,8 +437,10 @@ class _TileTrace(SpecularWalker):
         for sel, direct in ((first, True), (~first, False)):
             if sel.any():
                 r, h = rays.take(sel), hit.take(sel)
-                p = params.take(np.flatnonzero(sel)) if not sel.all() else params
-                next_events(c, out, r, h, MicrofacetLobe(c, r, h, p), self.numbers(r, SLOT_LIGHT),
+                k = np.flatnonzero(sel)
+                p = params.take(k) if not sel.all() else params
+                mx = None if mixture is None else mixture.take(k)
+                next_events(c, out, r, h, MicrofacetLobe(c, r, h, p, mx), self.numbers(r, SLOT_LIGHT),
                             out.film if direct else out.indirect)
         if c.caustic_map is not None:
             base = self.prepared.materials.kind[hit.mat] == DIFFUSE
