@@ -221,6 +221,7 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         exported = export_scene(
             depsgraph, width=width, height=height, camera=self.camera_override,
             test_break=self._should_stop, progress=lambda msg: self._status(msg.capitalize()),
+            frame_set=self.frame_set,  # motion blur: the camera at sub-frames (export/camera.py)
         )
         warnings = [w for w in (opal.wavelength_warning(),) if w] + list(exported.warnings)
         last_render["export"] = dict(exported.stats)

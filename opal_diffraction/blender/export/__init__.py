@@ -97,7 +97,8 @@ class ExportResult:
 
 
 def export_scene(depsgraph, *, width: int | None = None, height: int | None = None, camera=None,
-                 test_break=None, progress=None, mesh_cache: MeshCache | None = None) -> ExportResult:
+                 test_break=None, progress=None, mesh_cache: MeshCache | None = None,
+                 frame_set=None) -> ExportResult:
     """Export the evaluated ``depsgraph`` to a core Scene.
 
     ``width``/``height`` default to the scene's resolution times its percentage; ``camera``
@@ -105,7 +106,9 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     instances (raise ExportCancelled when it returns True); ``progress(message)`` receives a
     status line now and then. ``mesh_cache``: a :class:`MeshCache` kept between exports of this
     depsgraph, so that only meshes it does not hold (or that :meth:`MeshCache.invalidate`
-    dropped) are read; None reads every mesh. Raises SceneError with a readable message for
+    dropped) are read; None reads every mesh. ``frame_set(frame, subframe)``: re-evaluates the
+    depsgraph at a sub-frame (a final render's RenderEngine.frame_set), for motion blur
+    (export/camera.py camera_motion); None: no motion blur. Raises SceneError with a readable message for
     input that cannot be rendered (NaN coordinates, a panoramic camera, ...).
     """
     t0 = time.perf_counter()
@@ -161,7 +164,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
 
     skipped.report(warn)
     core_materials = materials.finish()
-    cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn)
+    cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn, frame_set=frame_set)
     world = export_world_light(depsgraph, warn)
     core_scene = Scene(
         vertices=vertices, triangles=triangles, tri_material=tri_material,

@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..sampling.camera import FilterSampler, camera_rays, has_lens, lens_samples, pixel_samples
+from ..sampling.camera import (FilterSampler, camera_rays, has_lens, has_motion, lens_samples, pixel_samples,
+                               shutter_times, time_samples)
 from ..sampling.footprint import camera_differentials, filter_box_width
 from ..sampling.sampler import blue_noise_numbers
 from ..scene.settings import RenderSettings
@@ -148,8 +149,10 @@ def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: i
     sx, sy, sl, pidx = pixel_samples(xs.astype(np.float64), ys.astype(np.float64), spp, rng, filt,
                                      qmc=(ids, starts, work.seed))
     lens = lens_samples(len(xs), spp, rng, (ids, starts, work.seed)) if has_lens(cam) else None
-    # thin lens, clipping, panoramas (core/sampling/camera.py); tmax: clip end, None: unbounded
-    o, d, tmax, valid = camera_rays(cam, sx, sy, lens)
+    # a moving camera: each sample's time across the shutter (docs/physics.md section 6.11)
+    times = shutter_times(cam, time_samples(len(xs), spp, rng, (ids, starts, work.seed))) if has_motion(cam) else None
+    # thin lens, clipping, panoramas, motion (core/sampling/camera.py); tmax: clip end, None: unbounded
+    o, d, tmax, valid = camera_rays(cam, sx, sy, lens, times)
     rd = None
     if eye.wants_differentials:  # ray differentials for gratings (core/sampling/footprint.py)
         rd = camera_differentials(cam, d, (sx - xs[pidx] - 0.5, sy - ys[pidx] - 0.5), filter_box_width(filt.width))

@@ -491,6 +491,12 @@ class Camera:
     latitude_max: float = float(np.pi / 2)
     longitude_min: float = float(-np.pi)
     longitude_max: float = float(np.pi)
+    # motion blur (docs/physics.md section 6.11): the camera-to-world matrices (N, 4, 4) at N >= 2
+    # evenly spaced times across the shutter, first to last (empty: no camera motion, ``matrix``
+    # throughout), and the shutter curve as an inverse CDF over [0, 1] (a ray's uniform number ->
+    # its time in the shutter, 0 first, 1 last; empty: a flat curve, time = the number)
+    motion: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
+    shutter_table: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @staticmethod
     def look_at(eye, target, up=(0.0, 0.0, 1.0), **kw) -> "Camera":

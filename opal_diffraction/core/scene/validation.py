@@ -321,6 +321,7 @@ def _validate_camera(c: Camera) -> Camera:
         raise SceneError(f"camera ortho_scale {number_text(vals['ortho_scale'])} m is beyond the renderable limit "
                          f"{COORD_LIMIT:g} m")
     lens = _validate_lens(c)
+    _validate_motion(c)
     same = (w == c.width and type(c.width) is int and h == c.height and type(c.height) is int
             and type(c.kind) is str and type(c.sensor_fit) is str
             and all(type(getattr(c, k)) is type(v) and getattr(c, k) == v for k, v in lens.items()))
@@ -328,6 +329,24 @@ def _validate_camera(c: Camera) -> Camera:
 
 
 PANORAMA_TYPES = ("EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT", "FISHEYE_EQUISOLID")
+
+
+def _validate_motion(c: Camera) -> None:
+    """The camera's motion blur (docs/physics.md section 6.11): no steps or at least two finite,
+    invertible 4x4 matrices; the shutter table empty or finite, non-decreasing, within [0, 1]."""
+    m = np.asarray(getattr(c, "motion", np.zeros((0, 4, 4))))
+    if m.size:
+        if m.ndim != 3 or m.shape[1:] != (4, 4) or m.shape[0] < 2 or m.shape[0] > 1024:
+            raise SceneError(f"camera motion must be 2 to 1024 4x4 matrices, got shape {m.shape}")
+        if not np.isfinite(m).all():
+            raise SceneError("camera motion: a step's matrix is NaN or infinite")
+        if (np.abs(np.linalg.det(m[:, :3, :3].astype(np.float64))) < 1e-12).any():
+            raise SceneError("camera motion: a step's matrix is singular (zero scale?)")
+    t = np.asarray(getattr(c, "shutter_table", np.zeros(0)), np.float64)
+    if t.size:
+        if t.ndim != 1 or t.size < 2 or not np.isfinite(t).all() or (t < 0).any() or (t > 1).any() \
+                or (np.diff(t) < 0).any():
+            raise SceneError("camera shutter_table must be a non-decreasing list of at least 2 times in [0, 1]")
 
 
 def _validate_lens(c: Camera) -> dict:
