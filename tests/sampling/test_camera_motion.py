@@ -1,4 +1,4 @@
-"""Camera motion blur (docs/physics.md section 6.11), each against an independent computation:
+"""Camera motion blur (docs/physics.md section 6.13), each against an independent computation:
 
 - the interpolated camera against SciPy's Slerp (rotation) and a linear position, between the
   right two steps as Cycles' transform_motion_array_interpolate, and exactly the steps at their times;
@@ -129,6 +129,10 @@ def test_motion_validated_saved_and_keyed(tmp_path):
     bad[1, 0, 3] = np.nan
     with pytest.raises(SceneError, match="NaN"):
         _validate_motion(Camera(motion=bad))
+    with pytest.raises(SceneError, match="real numbers"):
+        _validate_motion(Camera(motion=m.astype(str)))
+    with pytest.raises(SceneError, match="real numbers"):
+        _validate_motion(Camera(motion=m.astype(complex)))
     with pytest.raises(SceneError, match="shutter_table"):
         _validate_motion(Camera(motion=m, shutter_table=np.array([0.5, 0.2, 1.0])))
     cam = Camera(matrix=m[1], motion=m, shutter_table=shutter_table(np.linspace(0, 1, 8)), width=8, height=8)

@@ -57,7 +57,9 @@ def scene_arrays(s: Scene) -> dict:
     for f in fields(Lights):
         d["light_" + f.name] = getattr(s.lights, f.name)
     for f in fields(Camera):
-        d["camera_" + f.name] = np.asarray(getattr(s.camera, f.name))
+        val = np.asarray(getattr(s.camera, f.name))
+        if val.size or f.name not in ("motion", "shutter_table"):  # a still camera's are not written
+            d["camera_" + f.name] = val
     return d
 
 
@@ -65,7 +67,7 @@ REQUIRED = {"format_version", "vertices", "triangles", "tri_material", "world_co
 # missing these falls back to a default (an older file): a clean render, not an error
 OPTIONAL = {"tri_tangent", "tri_period"} | {"material_" + f.name for f in fields(Materials) if f.name != "kind"} | {
     "camera_" + f.name for f in fields(Camera) if f.name != "matrix"} | {
-    "light_radius", "light_angle", "light_soft_falloff"}  # light columns newer than format 1
+    "light_radius", "light_angle", "light_soft_falloff", "light_camera_visible"}  # light columns newer than format 1
 
 
 def malformed_files(folder) -> list[tuple[str, str, bool]]:

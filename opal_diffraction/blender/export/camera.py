@@ -6,7 +6,7 @@ orthographic cameras keep their lens, sensor size and fit, orthographic scale an
 panoramic ones their type (equirectangular, fisheye equidistant or equisolid) and its ranges;
 every camera its clip start / end and depth of field (aperture from the f-number, blades,
 rotation, ratio, focus distance or object), as Cycles reads them (intern/cycles/blender/camera.cpp).
-Motion blur (Render > Motion Blur, docs/physics.md section 6.11) as Cycles syncs it
+Motion blur (Render > Motion Blur, docs/physics.md section 6.13) as Cycles syncs it
 (intern/cycles/blender/sync.cpp sync_motion, object.cpp object_motion_steps): the camera's matrix
 at 2^(motion steps) + 1 evenly spaced times across the shutter (frames, placed by Position: start,
 centre or end on the frame), read by re-evaluating the render's depsgraph at each sub-frame

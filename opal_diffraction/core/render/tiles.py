@@ -149,7 +149,7 @@ def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: i
     sx, sy, sl, pidx = pixel_samples(xs.astype(np.float64), ys.astype(np.float64), spp, rng, filt,
                                      qmc=(ids, starts, work.seed))
     lens = lens_samples(len(xs), spp, rng, (ids, starts, work.seed)) if has_lens(cam) else None
-    # a moving camera: each sample's time across the shutter (docs/physics.md section 6.11)
+    # a moving camera: each sample's time across the shutter (docs/physics.md section 6.13)
     times = shutter_times(cam, time_samples(len(xs), spp, rng, (ids, starts, work.seed))) if has_motion(cam) else None
     # thin lens, clipping, panoramas, motion (core/sampling/camera.py); tmax: clip end, None: unbounded
     o, d, tmax, valid = camera_rays(cam, sx, sy, lens, times)

@@ -18,7 +18,7 @@ squeezed by the anamorphic ratio; every ray aimed at the pinhole ray's point on 
 focus), and clip start / end (the near and far planes along the view axis; along the ray for
 panoramas).
 
-Motion blur (docs/physics.md section 6.11): a moving camera holds its matrices at N evenly spaced
+Motion blur (docs/physics.md section 6.13): a moving camera holds its matrices at N evenly spaced
 times across the shutter; each camera ray takes a time in [0, 1] (``time_samples``: its own
 stratified Sobol-Burley dimension, mapped through the shutter curve's inverse CDF) and the
 camera interpolated as Cycles' transform_motion_array_interpolate (intern/cycles/util/transform.h):
@@ -454,7 +454,7 @@ def camera_rays(cam: Camera, x: np.ndarray, y: np.ndarray, lens_u: np.ndarray | 
                 local_d /= np.linalg.norm(local_d, axis=1, keepdims=True)
             start = near / cos_c
             tmax = length / cos_c
-    if moving:  # each ray's own camera frame (docs/physics.md section 6.11)
+    if moving:  # each ray's own camera frame (docs/physics.md section 6.13)
         rot, eye = motion_frames(cam, np.asarray(time, np.float64).reshape(b))
         d = np.einsum("bij,bj->bi", rot, local_d)
         d /= np.linalg.norm(d, axis=1, keepdims=True)

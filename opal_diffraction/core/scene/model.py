@@ -491,7 +491,7 @@ class Camera:
     latitude_max: float = float(np.pi / 2)
     longitude_min: float = float(-np.pi)
     longitude_max: float = float(np.pi)
-    # motion blur (docs/physics.md section 6.11): the camera-to-world matrices (N, 4, 4) at N >= 2
+    # motion blur (docs/physics.md section 6.13): the camera-to-world matrices (N, 4, 4) at N >= 2
     # evenly spaced times across the shutter, first to last (empty: no camera motion, ``matrix``
     # throughout), and the shutter curve as an inverse CDF over [0, 1] (a ray's uniform number ->
     # its time in the shutter, 0 first, 1 last; empty: a flat curve, time = the number)

@@ -69,7 +69,10 @@ def save_scene(scene: Scene, path) -> None:
         d["light_" + f.name] = getattr(scene.lights, f.name)
     if scene.camera is not None:
         for f in fields(Camera):
-            d["camera_" + f.name] = np.asarray(getattr(scene.camera, f.name))
+            val = np.asarray(getattr(scene.camera, f.name))
+            if f.name in ("motion", "shutter_table") and val.size == 0:
+                continue  # a still camera, a flat shutter: nothing to save (the defaults on load)
+            d["camera_" + f.name] = val
     np.savez_compressed(path, **d)
 
 

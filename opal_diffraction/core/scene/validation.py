@@ -332,9 +332,14 @@ PANORAMA_TYPES = ("EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT", "FISHEYE_EQUISOLID")
 
 
 def _validate_motion(c: Camera) -> None:
-    """The camera's motion blur (docs/physics.md section 6.11): no steps or at least two finite,
+    """The camera's motion blur (docs/physics.md section 6.13): no steps or at least two finite,
     invertible 4x4 matrices; the shutter table empty or finite, non-decreasing, within [0, 1]."""
     m = np.asarray(getattr(c, "motion", np.zeros((0, 4, 4))))
+    t = np.asarray(getattr(c, "shutter_table", np.zeros(0)))
+    for name, a in (("motion", m), ("shutter_table", t)):
+        if a.size and a.dtype.kind not in "iuf":
+            raise SceneError(f"camera {name} must hold real numbers, got {a.dtype}")
+    m = m.astype(np.float64)
     if m.size:
         if m.ndim != 3 or m.shape[1:] != (4, 4) or m.shape[0] < 2 or m.shape[0] > 1024:
             raise SceneError(f"camera motion must be 2 to 1024 4x4 matrices, got shape {m.shape}")
@@ -342,7 +347,7 @@ def _validate_motion(c: Camera) -> None:
             raise SceneError("camera motion: a step's matrix is NaN or infinite")
         if (np.abs(np.linalg.det(m[:, :3, :3].astype(np.float64))) < 1e-12).any():
             raise SceneError("camera motion: a step's matrix is singular (zero scale?)")
-    t = np.asarray(getattr(c, "shutter_table", np.zeros(0)), np.float64)
+    t = t.astype(np.float64)
     if t.size:
         if t.ndim != 1 or t.size < 2 or not np.isfinite(t).all() or (t < 0).any() or (t > 1).any() \
                 or (np.diff(t) < 0).any():

@@ -129,7 +129,7 @@ def applies(prepared) -> bool:
     cam = prepared.scene.camera
     if cam is None or cam.kind == "PANO" or has_lens(cam):  # a pinhole's connection only (docs/physics.md section 6.10)
         return False
-    if has_motion(cam):  # a moving camera has no one eye point: the eye pass looks the caustics up (section 6.11)
+    if has_motion(cam):  # a moving camera has no one eye point: the eye pass looks the caustics up (section 6.13)
         return False
     return bool(direct_materials(prepared).any())
 
