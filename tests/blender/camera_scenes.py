@@ -191,15 +191,15 @@ def motion_camera():
 
 
 def motion_cube():
-    """A cube flying 1.2 m across the view during the shutter (keyed linearly from frame 0 to
+    """A 1.4 m cube flying 1.6 m across the view during the shutter (keyed linearly from frame 0 to
     2, shutter 1 frame starting on frame 1) over the floor, a still ball beside it, under a
     sun: the cube and its shadow smear, the ball stays sharp."""
     sc = ps._scene()
     _sun_and_world(sc)
     bs.plane("floor", half=8.0, mat=bs.material("floor", "DIFFUSE", (0.5, 0.5, 0.5)))
-    cube = ps._cube("cube", 0.8, (0.0, 0.0, 0.6), bs.material("cube", "DIFFUSE", (0.8, 0.8, 0.8)))
+    cube = ps._cube("cube", 1.4, (0.0, 0.6, 0.7), bs.material("cube", "DIFFUSE", (0.8, 0.8, 0.8)))
     _sphere("ball", 0.45, (-0.9, -0.9, 0.45), (0.8, 0.5, 0.2))
-    _linear_keys(cube, "location", [(-1.2, 0.3, 0.6), (1.2, 0.3, 0.6)])
+    _linear_keys(cube, "location", [(-1.6, 0.6, 0.7), (1.6, 0.6, 0.7)])
     ps.look_at((2.5, -4.5, 2.6), (0.0, 0.2, 0.4))
     _motion_blur(sc, position="START")
     return sc

@@ -53,6 +53,7 @@ import numpy as np
 from ...core.scene.model import Lights, Scene
 from ..mesh_io import GRATING_ATTRIBUTE, PERIOD_ATTRIBUTE
 from .camera import export_camera, render_region, render_size
+from .motion import instance_id, object_motion
 from .colour import rec709_to_working_space, working_space_to_rec709
 from .domains import flatten_domains, instance_domains
 from .lights import LightRows, export_lights
@@ -124,6 +125,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     lights = LightRows(warn, to709)
     skipped = Skipped()
     n_instances = 0
+    kept: list = []  # (group key, instance id) in export order: object motion reads them again
 
     for i, inst in enumerate(depsgraph.object_instances):
         if i % POLL_EVERY == 0:
@@ -150,6 +152,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
         if md is None or len(md.triangles) == 0:
             continue
         groups[(mkey, slots)].append(np.array(inst.matrix_world, np.float64))
+        kept.append(((mkey, slots), instance_id(inst)))
         domains[(mkey, slots)].append(instance_domains(ob))
         n_instances += 1
 
@@ -163,8 +166,12 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     domain_fields = flatten_domains(groups, domains, meshes, materials.hidden_rows())
 
     skipped.report(warn)
+    # object motion blur: the vertices in the shutter's time bins (export/motion.py)
+    motion_vertices = object_motion(depsgraph, frame_set, kept, groups, meshes, materials.grating,
+                                    materials.hidden_rows(), warn)
     core_materials = materials.finish()
-    cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn, frame_set=frame_set)
+    cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn, frame_set=frame_set,
+                        objects_checked=frame_set is not None)
     world = export_world_light(depsgraph, warn)
     core_scene = Scene(
         vertices=vertices, triangles=triangles, tri_material=tri_material,
@@ -173,6 +180,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
         world_image=world.image, world_rotation=world.rotation,
         corner_uvs=corner_uvs, corner_tangents=corner_tangents, **materials.textures.scene_fields(), **domain_fields,
         shader_programs=list(materials.programs), corner_generated=corner_generated, corner_object=corner_object,
+        **({} if motion_vertices is None else {"motion_vertices": motion_vertices}),
     )
     meshes.done()
     stats = {

@@ -95,7 +95,7 @@ def _moving_objects(depsgraph, camera_name: str) -> dict:
     return out
 
 
-def camera_motion(depsgraph, cam_ob, frame_set, warn) -> dict:
+def camera_motion(depsgraph, cam_ob, frame_set, warn, objects_checked: bool = False) -> dict:
     """``cam_ob``: the camera object (original). Camera fields for motion blur (``motion``, ``shutter_table``), {} without: Render > Motion
     Blur off, a zero shutter, the camera's own Motion Blur off (Object > Motion Blur, as Cycles),
     or no ``frame_set(frame, subframe)`` to re-evaluate the depsgraph with (outside final renders:
@@ -126,7 +126,7 @@ def camera_motion(depsgraph, cam_ob, frame_set, warn) -> dict:
             objects.append(_moving_objects(depsgraph, name))
     finally:
         frame_set(frame, sub)
-    moving = sorted(k for k in objects[0] if any(k in o and not np.allclose(o[k], objects[0][k], atol=1e-7)
+    moving = [] if objects_checked else sorted(k for k in objects[0] if any(k in o and not np.allclose(o[k], objects[0][k], atol=1e-7)
                                                  for o in objects[1:]))
     if moving:
         shown = ", ".join(f"'{k}'" for k in moving[:3]) + (f" and {len(moving) - 3} more" if len(moving) > 3 else "")
@@ -138,7 +138,7 @@ def camera_motion(depsgraph, cam_ob, frame_set, warn) -> dict:
     if use and not np.allclose(m, m[0], atol=1e-9) and np.isfinite(m).all():
         out["motion"] = m
     curve = getattr(r, "motion_blur_shutter_curve", None)
-    if out and curve is not None:
+    if curve is not None:  # the shutter's curve times objects' motion too, the camera's or not
         try:
             curve.initialize()
             w = [curve.evaluate(curve.curves[0], float(x)) for x in np.linspace(0.0, 1.0, SHUTTER_TABLE_SIZE)]
@@ -197,12 +197,13 @@ def camera_from_object(cam_ob, width: int, height: int, scene, warn, motion: dic
 
 
 def export_camera(depsgraph, *, width: int | None = None, height: int | None = None, camera=None,
-                  warn: Warnings | None = None, frame_set=None) -> Camera | None:
+                  warn: Warnings | None = None, frame_set=None, objects_checked: bool = False) -> Camera | None:
     """The core camera alone, as :func:`export_scene` makes it: ``camera`` (an object) or the
     scene's, for ``width`` x ``height`` (default :func:`render_size`); None without a camera.
     ``warn``: collects the warnings (default: dropped). ``frame_set(frame, subframe)``: re-evaluates
     ``depsgraph`` at a sub-frame (a final render's RenderEngine.frame_set) for motion blur; None:
-    no motion blur (a warning when it is on)."""
+    no motion blur (a warning when it is on). ``objects_checked``: the objects' motion is exported
+    (export/motion.py), so moving objects are not warned about here."""
     scene = depsgraph.scene
     if width is None or height is None:
         width, height = render_size(scene)
@@ -211,6 +212,6 @@ def export_camera(depsgraph, *, width: int | None = None, height: int | None = N
         return None
     original = cam_ob.original if cam_ob.is_evaluated else cam_ob
     warn = warn if warn is not None else Warnings()
-    motion = camera_motion(depsgraph, original, frame_set, warn)
+    motion = camera_motion(depsgraph, original, frame_set, warn, objects_checked)
     cam_eval = original.evaluated_get(depsgraph)  # (again: frame_set re-evaluates) at the frame's time
     return camera_from_object(cam_eval, width, height, scene, warn, motion)

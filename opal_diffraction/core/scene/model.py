@@ -574,6 +574,10 @@ class Scene:
     shader_programs: list = field(default_factory=list)
     corner_generated: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3), np.float32))
     corner_object: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3), np.float32))
+    # object motion blur (docs/physics.md section 6.13): the vertices (K, V, 3) at the centres of K
+    # equal time bins of the shutter (bin k: shutter times [k / K, (k + 1) / K)); a camera ray of
+    # time t sees bin floor(t K)'s geometry; empty (0, 0, 3): the geometry does not move
+    motion_vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3), np.float32))
     # opal volume domains (core/opal/volume.py; docs/physics.md section 5.4), world space; empty: none
     domain_seeds: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float64))
     domain_weight: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))

@@ -157,7 +157,8 @@ def _validate(scene: Scene) -> ValidatedScene:
     world_lit = bool(np.any(np.asarray(wc) > 0)) and (world_image.size == 0 or bool(np.any(world_image > 0)))
     if len(lights) == 0 and not world_lit and not emitting:
         warns.append("the scene has no lights: only the background is lit")
-    clean = replace(scene, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
+    mv = _validate_motion_vertices(scene, len(v))
+    clean = replace(scene, motion_vertices=mv, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
                     materials=materials, lights=lights, camera=camera, world_color=wc, corner_normals=cn,
                     world_image=world_image, world_rotation=world_rotation, **tex, **dom)
     # prepare's normals are these products normalised
@@ -329,6 +330,27 @@ def _validate_camera(c: Camera) -> Camera:
 
 
 PANORAMA_TYPES = ("EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT", "FISHEYE_EQUISOLID")
+
+
+#: time bins of object motion a scene may hold
+MAX_MOTION_BINS = 64
+
+
+def _validate_motion_vertices(scene, n_vertices: int) -> np.ndarray:
+    """The object-motion vertices (K, V, 3) float32 (docs/physics.md section 6.13): empty, or 2 to
+    MAX_MOTION_BINS bins of as many finite vertices as the scene has."""
+    mv = np.asarray(getattr(scene, "motion_vertices", np.zeros((0, 0, 3))))
+    if mv.size == 0:
+        return np.zeros((0, 0, 3), np.float32)
+    if mv.dtype.kind not in "iuf":
+        raise SceneError(f"motion_vertices must hold real numbers, got {mv.dtype}")
+    if mv.ndim != 3 or mv.shape[1:] != (n_vertices, 3) or not 2 <= mv.shape[0] <= MAX_MOTION_BINS:
+        raise SceneError(f"motion_vertices must be (2 to {MAX_MOTION_BINS} bins, {n_vertices} vertices, 3), "
+                         f"got shape {mv.shape}")
+    mv = mv.astype(np.float32)
+    if not np.isfinite(mv).all():
+        raise SceneError("motion_vertices: a vertex is NaN or infinite (or beyond float32)")
+    return mv
 
 
 def _validate_motion(c: Camera) -> None:
