@@ -34,7 +34,8 @@ One module per concept, as in BlendLuxCore's ``export`` package:
     meshes     meshes, tangents, periods, instances -> arrays; the MeshCache
     lights     the light table (export_lights)
     world      the world: a colour, or an environment map with its rotation (export_world_light)
-    camera     render size, border region, the camera (export_camera)
+    camera     render size, border region, the camera (export_camera), its motion over the shutter
+    motion     objects' motion: the vertices in the shutter's time bins (object_motion)
     messages   the warnings, once each
 
 :func:`export_scene` here puts them together. A rendered viewport passes a persistent
@@ -168,7 +169,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     skipped.report(warn)
     # object motion blur: the vertices in the shutter's time bins (export/motion.py)
     motion_vertices = object_motion(depsgraph, frame_set, kept, groups, meshes, materials.grating,
-                                    materials.hidden_rows(), warn)
+                                    materials.hidden_rows(), warn, n_triangles=len(triangles))
     core_materials = materials.finish()
     cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn, frame_set=frame_set,
                         objects_checked=frame_set is not None)

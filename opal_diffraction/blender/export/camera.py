@@ -11,8 +11,8 @@ Motion blur (Render > Motion Blur, docs/physics.md section 6.13) as Cycles syncs
 at 2^(motion steps) + 1 evenly spaced times across the shutter (frames, placed by Position: start,
 centre or end on the frame), read by re-evaluating the render's depsgraph at each sub-frame
 (RenderEngine.frame_set, then back to the frame), and the Shutter Curve as an inverse CDF.
-What the core cannot do is named: other panorama types (an error), non-square pixels, motion
-blur outside final renders, object motion, a rolling shutter (warnings).
+Objects' motion: export/motion.py. What the core cannot do is named: other panorama types (an
+error), non-square pixels, motion blur outside final renders, a rolling shutter (warnings).
 """
 
 from __future__ import annotations

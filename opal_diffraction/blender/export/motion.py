@@ -19,11 +19,19 @@ from .camera import motion_times
 from .messages import Warnings
 from .meshes import flatten
 
-__all__ = ["MOTION_BINS", "instance_id", "object_motion"]
+__all__ = ["MOTION_BINS", "MOTION_TRIANGLE_BUDGET", "motion_bin_count", "instance_id", "object_motion"]
 
 #: time bins of the shutter for object motion: the geometry of a bin is its centre's, so an
 #: object moving d during the shutter is at most d / (2 K) from where it should be
 MOTION_BINS = 16
+#: triangles all the bins may hold together (each bin has its own ray caster): a scene of more
+#: than a million triangles gets fewer bins (at least 2), so memory stays within ~16 such casters
+MOTION_TRIANGLE_BUDGET = 16_000_000
+
+
+def motion_bin_count(n_triangles: int) -> int:
+    """The time bins for a scene of ``n_triangles``: MOTION_BINS, fewer past the triangle budget."""
+    return int(min(MOTION_BINS, max(2, MOTION_TRIANGLE_BUDGET // max(int(n_triangles), 1))))
 
 
 def instance_id(inst) -> tuple:
@@ -33,8 +41,10 @@ def instance_id(inst) -> tuple:
     return inst.object.name, parent, tuple(inst.persistent_id) if getattr(inst, "is_instance", False) else ()
 
 
-def object_motion(depsgraph, frame_set, kept: list, groups: dict, meshes, grating, hidden, warn) -> np.ndarray | None:
-    """(MOTION_BINS, V, 3) float32 vertices, bin k's at the shutter's time (k + 1/2) / K, in the
+def object_motion(depsgraph, frame_set, kept: list, groups: dict, meshes, grating, hidden, warn,
+                  n_triangles: int = 0) -> np.ndarray | None:
+    """(K, V, 3) float32 vertices (K = :func:`motion_bin_count` of ``n_triangles``), bin k's at the
+    shutter's time (k + 1/2) / K, in the
     order ``flatten(groups, ...)`` gave the frame's; None when motion blur is off, the shutter is
     zero, there is no ``frame_set`` (not a final render) or nothing moves. ``kept``: (group key,
     :func:`instance_id`) of each exported instance in the frame's order."""
@@ -50,9 +60,10 @@ def object_motion(depsgraph, frame_set, kept: list, groups: dict, meshes, gratin
     frame, sub = int(scene.frame_current), float(getattr(scene, "frame_subframe", 0.0))
     quiet = Warnings()
     out = []
+    n_bins = motion_bin_count(n_triangles)
     try:
-        for k in range(MOTION_BINS):
-            t = s0 + (k + 0.5) / MOTION_BINS * (s1 - s0)
+        for k in range(n_bins):
+            t = s0 + (k + 0.5) / n_bins * (s1 - s0)
             f = int(np.floor(t))
             frame_set(f, t - f)
             mats = defaultdict(list)

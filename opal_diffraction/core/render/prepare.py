@@ -11,7 +11,8 @@ holds the acceleration structure, the spectra of materials, lights and world on 
 grid, per-triangle normals, offsets and grating frames, the shading normals per corner (None for
 a flat scene), and the light pass's targets (which
 objects bend light, which receive it, how much light each lamp sends their way), so the plan
-can decide without running anything.
+can decide without running anything. With object motion blur, a ray caster and triangle frames
+per time bin of the shutter (``motion_bins``, docs/physics.md section 6.13).
 
 The camera and the eye-only settings (samples, rounds, tiles, filter, time limit) do not change
 any of that: ``with_view`` swaps them and keeps the rest, which is what the rendered viewport

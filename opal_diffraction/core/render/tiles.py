@@ -8,7 +8,9 @@ is the same whatever runs them: threads or Dask workers (the executors of schedu
 runs one unit. With adaptive sampling (core/render/adaptive.py) a unit may trace only some of its
 tile's pixels: which ones follows from the film after the tile's earlier rounds, so it is the
 same wherever the units run; the even rounds are the "A" half of the error estimate
-(``is_half_a``).
+(``is_half_a``). With motion blur each camera sample takes a time across the shutter, and with
+object motion (``PreparedScene.motion_bins``) each path is traced in its time bin's geometry
+(docs/physics.md section 6.13).
 """
 
 from __future__ import annotations
