@@ -20,6 +20,14 @@ them all; the console too in background mode); the stats line counts them and sh
 A cancelled render (Esc, Ctrl-C) ends with status 'CANCELLED' and a stats line that starts with
 "Cancelled".
 
+With Persistent Data on (``scene.render.use_persistent_data``) Blender keeps the engine between
+frames and calls ``update`` before each render: the engine notes the depsgraph's updates and
+keeps, per view layer, the exported scene, the preparation and the light pass (persistent.py);
+a frame whose only change is the camera exports the camera alone and renders the kept
+preparation through it, keeping the light pass unless the camera splat needs it again for the
+new view (core/render/frame.py ``reusable_light``); other changes re-export and prepare with
+the kept preparation as ``reuse``. The stats line ends with what was reused.
+
 The rendered viewport (``view_update`` / ``view_draw``) is viewport.ViewportSession: a
 progressive preview in a background thread, drawn through the ``gpu`` module.
 """
@@ -40,11 +48,13 @@ import numpy as np
 from ..core.render import denoise as _denoise
 from ..core.render.distributed import connect
 from ..core.render.output import write_spectral_exr
-from ..core.render.frame import render as core_render
+from ..core.render.frame import render as core_render, render_prepared, reusable_light
 from ..core.scene.checks import SceneError
 from ..core.scene.npz import save_scene
 from ..core.scene.validation import validate
-from .export import ExportCancelled, export_scene, rec709_to_working_space, render_region
+from .export import (ExportCancelled, ExportResult, Warnings, export_camera, export_scene, rec709_to_working_space,
+                     render_region)
+from .persistent import Kept, PersistentData, settings_key
 from .settings import render_settings
 from . import viewport
 from .viewport import ViewportSession
@@ -112,6 +122,8 @@ class OpalRenderEngine(bpy.types.RenderEngine):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self._viewport = None  # a ViewportSession once the engine draws a 3D view
+        # what a final render keeps with Persistent Data on, per view layer (persistent.py)
+        self._persistent: dict[str, PersistentData] = {}
 
     def __del__(self):
         # the engine is freed (Rendered mode left, or a render finished): stop the preview thread
@@ -147,6 +159,33 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         except Exception as e:
             traceback.print_exc(file=sys.stderr)
             self.update_stats("", f"Error: internal error ({type(e).__name__}: {e})")
+
+    # ---------------------------------------------------------------- final render
+    def update(self, data, depsgraph):
+        """Before each final render of a view layer: note the depsgraph's updates (what changed
+        since the frame before, with Persistent Data on: the engine instance is kept between
+        frames, and each view layer's depsgraph too)."""
+        try:
+            if depsgraph.scene.render.use_persistent_data:
+                self._persistent_data(depsgraph.view_layer.name).note_updates(depsgraph.updates)
+        except Exception:  # never fail here: the render then exports everything
+            traceback.print_exc(file=sys.stderr)
+            for pd in self._persistent_layers().values():
+                pd.updates = None
+
+    def _persistent_layers(self) -> dict:
+        layers = getattr(self, "_persistent", None)
+        if layers is None:
+            layers = self._persistent = {}
+        return layers
+
+    def _persistent_data(self, layer: str) -> PersistentData:
+        """The kept state of one view layer (each has its own depsgraph, export and light pass)."""
+        layers = self._persistent_layers()
+        pd = layers.get(layer)
+        if pd is None:
+            pd = layers[layer] = PersistentData()
+        return pd
 
     # ---------------------------------------------------------------- passes
     def update_render_passes(self, scene=None, renderlayer=None):
@@ -217,12 +256,48 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         settings = render_settings(opal, scene, spectral_path)
         settings.validate()  # bad settings fail before the export, with a clear message
 
-        self._status("Exporting scene")
-        exported = export_scene(
-            depsgraph, width=width, height=height, camera=self.camera_override,
-            test_break=self._should_stop, progress=lambda msg: self._status(msg.capitalize()),
-            frame_set=self.frame_set,  # motion blur: the camera at sub-frames (export/camera.py)
-        )
+        # Persistent Data (persistent.py): keep the export, the preparation and the light pass
+        # between frames; off, or rendering on a cluster, keeps nothing
+        pd = self._persistent_data(depsgraph.view_layer.name)
+        persistent = bool(scene.render.use_persistent_data) and not opal.scheduler.strip()
+        if not persistent:  # every view layer's kept state is freed
+            for other in self._persistent_layers().values():
+                other.free()
+        updates = pd.take_updates()
+        cam_ob = self.camera_override if self.camera_override is not None else scene.camera
+        cam_name = cam_ob.name_full if cam_ob is not None else ""
+        cam_data = cam_ob.data.name_full if cam_ob is not None and cam_ob.data is not None else ""
+        frame_setup = (width, height, render_region(scene, width, height), cam_name)
+        kept = pd.camera_only(updates, settings, frame_setup, cam_name, cam_data) if persistent else None
+        reused = []  # what this frame took from the one before, for the stats line
+        if kept is not None:  # only the camera changed: export it alone
+            self._status("Exporting camera (persistent data)")
+            t_cam = time.perf_counter()
+            cam_warn = Warnings()
+            camera = export_camera(depsgraph, width=width, height=height, camera=self.camera_override, warn=cam_warn,
+                                   frame_set=self.frame_set, objects_checked=True)
+            old = kept.exported
+            exported = ExportResult(
+                replace(old.scene, camera=camera),
+                [w for w in old.warnings if w not in kept.camera_warnings] + cam_warn.items,
+                dict(old.stats, export_s=time.perf_counter() - t_cam))
+            camera_warnings = tuple(cam_warn.items)
+            reused.append("export")
+        else:
+            self._status("Exporting scene")
+            if persistent:
+                pd.invalidate_meshes(updates)
+            exported = export_scene(
+                depsgraph, width=width, height=height, camera=self.camera_override,
+                test_break=self._should_stop, progress=lambda msg: self._status(msg.capitalize()),
+                mesh_cache=pd.mesh_cache if persistent else None,
+                frame_set=self.frame_set,  # motion blur: the camera and objects at sub-frames (export/)
+            )
+            cam_warn = Warnings()
+            if persistent:  # which of its warnings the camera made (a camera-only frame replaces them)
+                export_camera(depsgraph, width=width, height=height, camera=self.camera_override, warn=cam_warn,
+                              frame_set=self.frame_set, objects_checked=True)
+            camera_warnings = tuple(cam_warn.items)
         warnings = [w for w in (opal.wavelength_warning(),) if w] + list(exported.warnings)
         last_render["export"] = dict(exported.stats)
         if npz_path:
@@ -258,11 +333,33 @@ class OpalRenderEngine(bpy.types.RenderEngine):
             self._fill(result, partial, to_working, settings.film_transparent)
             self.update_result(result)
 
+        previous = pd.kept
+        keep = {"prepared": None, "light": None, "ran": False}
         try:
-            with connect(opal.scheduler) if opal.scheduler.strip() else nullcontext() as client:
-                rr = core_render(exported.scene, settings, progress=progress, should_cancel=self._should_stop,
-                                 on_round=on_round, region=region, client=client)
+            if kept is not None:  # the kept preparation through the new camera: nothing rebuilt
+                prepared = kept.prepared.with_view(camera, spectral_exr=settings.spectral_exr)
+                light = reusable_light(prepared, kept.light)
+                keep.update(prepared=prepared, light=light)
+                reused.append("preparation")
+                rr = render_prepared(prepared, light, progress=progress, should_cancel=self._should_stop,
+                                     on_round=on_round, region=region,
+                                     on_light=lambda lp: keep.update(light=lp, ran=True))
+            else:
+                with connect(opal.scheduler) if opal.scheduler.strip() else nullcontext() as client:
+                    rr = core_render(exported.scene, settings, progress=progress, should_cancel=self._should_stop,
+                                     on_round=on_round, region=region, client=client,
+                                     reuse=previous.prepared if persistent and previous is not None else None,
+                                     light=previous.light if persistent and previous is not None else None,
+                                     on_prepared=(lambda p: keep.update(prepared=p)) if persistent else None,
+                                     on_light=(lambda lp: keep.update(light=lp, ran=True)) if persistent else None)
+                prepared = keep["prepared"]
+                if persistent and previous is not None and prepared is not None:
+                    if prepared.accel is previous.prepared.accel:
+                        reused.append("ray caster")
+                    if not keep["ran"]:  # the core reused the kept light pass, or the plan has none
+                        keep["light"] = reusable_light(prepared, previous.light)
         except BaseException:
+            pd.kept = None  # a failed or interrupted frame keeps nothing
             self.end_result(result, cancel=True)
             raise
         denoise_warning = ""
@@ -280,6 +377,17 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         self._fill(result, rr, to_working, settings.film_transparent)
         self.end_result(result)
 
+        light_ran = bool(keep["ran"]) if persistent else "light_pass_s" in rr.stats
+        if persistent and not light_ran and keep["light"] is not None and previous is not None \
+                and keep["light"] is previous.light and "light_pass_s" in rr.stats:
+            reused.append("light pass")
+        if persistent and keep["prepared"] is not None and not rr.cancelled:
+            pd.kept = Kept(settings_key(settings), frame_setup, exported, camera_warnings, keep["prepared"],
+                           keep["light"])
+        else:
+            pd.kept = None
+        pd.renders += 1
+
         core_warnings = list(rr.warnings) + ([denoise_warning] if denoise_warning else [])
         message = ""
         if rr.cancelled:  # the core says where it stopped: the render's message, not a warning
@@ -289,6 +397,8 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         warnings += core_warnings
         stats = dict(rr.stats, **{"export_" + k: v for k, v in exported.stats.items()})
         stats["total_s"] = time.perf_counter() - t0
+        if "preparation" in reused:  # the kept preparation was seen through the new camera: none this frame
+            stats["prepare_s"] = 0.0
         if spectral_path and rr.samples > 0:
             try:
                 write_spectral_exr(spectral_path, rr.spectral, rr.wavelengths, rr.rgb)
@@ -301,6 +411,8 @@ class OpalRenderEngine(bpy.types.RenderEngine):
         summary = (f"{rr.samples} samples | {stats.get('rays', 0) / 1e6:.1f} M rays | "
                    f"{exported.stats['triangles']} triangles | {stats['total_s']:.1f} s | "
                    f"{stats.get('kernels', 'numpy')} kernels")
+        if persistent:  # Persistent Data: what this frame took from the one before
+            summary += " | persistent data: " + ("reused " + ", ".join(reused) if reused else "nothing reused")
         if rr.cancelled:
             summary = "Cancelled | " + summary
         summary += warning_summary(warnings)
@@ -311,6 +423,8 @@ class OpalRenderEngine(bpy.types.RenderEngine):
             sample_counts=rr.sample_counts,
             spectral_exr=stats.get("spectral_exr", ""), partial_updates=state["round"],
             plan_gratings=bool(getattr(rr.plan, "gratings", False)),
+            persistent={"on": persistent, "reused": tuple(reused), "exported_geometry": "export" not in reused,
+                        "light_pass_ran": light_ran, "renders": pd.renders, "kept": pd.kept is not None},
         )
 
     @staticmethod

@@ -224,6 +224,8 @@ class OPAL_RENDER_PT_performance(OpalButtonsPanel, Panel):
         layout.prop(opal, "backend")
         layout.prop(opal, "tile_size")
         layout.prop(opal, "scheduler")
+        # Final Render > Persistent Data, as Cycles': keep the scene between frames (persistent.py)
+        layout.prop(rd, "use_persistent_data", text="Persistent Data")
 
 
 # ============================================================================ material tab

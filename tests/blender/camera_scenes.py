@@ -121,6 +121,29 @@ def transparent_glass():
     return sc
 
 
+def holdout():
+    """``transparent`` with the cube a Holdout (a hole: alpha 0, black, where it is seen; it still
+    shadows the floor) and the ball a Mix(Holdout, Diffuse, 0.5) (alpha 0.5, half its colour)."""
+    sc = transparent()
+    cube = bpy.data.materials.new("holdout")
+    nt = cube.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(nt.nodes.new("ShaderNodeHoldout").outputs[0], out.inputs["Surface"])
+    bpy.data.objects["cube"].data.materials.clear()
+    bpy.data.objects["cube"].data.materials.append(cube)
+    ball = bpy.data.objects["ball"].active_material
+    nt = ball.node_tree
+    out = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    diffuse = out.inputs["Surface"].links[0].from_node
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    mix.inputs["Fac"].default_value = 0.5
+    nt.links.new(nt.nodes.new("ShaderNodeHoldout").outputs[0], mix.inputs[1])
+    nt.links.new(diffuse.outputs[0], mix.inputs[2])
+    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+    return sc
+
+
 def equirect():
     """An equirectangular panorama (full sphere, 64 x 32) from 1 m above a floor, with a cube
     ahead, a ball to the left, a tall box behind and a sun: every direction of Cycles' mapping
@@ -205,7 +228,7 @@ def motion_cube():
     return sc
 
 
-SCENES = {"dof": dof, "bokeh": bokeh, "clip": clip, "transparent": transparent, "transparent_glass": transparent_glass, "equirect": equirect, "fisheye": fisheye}
+SCENES = {"dof": dof, "bokeh": bokeh, "clip": clip, "transparent": transparent, "transparent_glass": transparent_glass, "holdout": holdout, "equirect": equirect, "fisheye": fisheye}
 #: motion blur (tests/blender/test_motion_parity.py)
 MOTION_SCENES = {"motion_camera": motion_camera, "motion_cube": motion_cube}
 

@@ -1,7 +1,7 @@
 """Cameras and film against Cycles (the [camera-world] issue's "Must show", issue 29): depth of
 field (three spheres; and a lamp's bokeh, the aperture's own shape: a round, unturned or
 unsqueezed aperture, or six blades for five, misses Cycles' image by 0.15-0.73 in the filtered
-RMSE), clip start / end, Film > Transparent and panoramas (tests/blender/camera_scenes.py), each
+RMSE), clip start / end, Film > Transparent (and a Holdout in it) and panoramas (tests/blender/camera_scenes.py), each
 built once and rendered by Cycles and by OPAL_DIFFRACTION in this bpy session. The images must
 agree: mean Rec.709 luminance within 5 % and the 4x4-box-filtered relative RMSE below 0.10
 (tools/cycles_parity.py's metrics at a 4-pixel block); with Film > Transparent the alpha

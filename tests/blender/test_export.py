@@ -26,7 +26,7 @@ def _row(exported, name):
     i = list(m.name).index(name)
     return {"kind": int(m.kind[i]), "color": np.asarray(m.color[i]), "ior": float(m.ior[i]),
             "emission": np.asarray(m.emission[i]), "dispersion": int(m.dispersion[i]), "abbe": float(m.abbe[i]),
-            "metallic": float(m.metallic[i]), "metal_color": np.asarray(m.metal_color[i])}
+            "metallic": float(m.metallic[i]), "metal_color": np.asarray(m.metal_color[i]), "holdout": float(m.holdout[i])}
 
 
 def _basic_scene():
@@ -255,9 +255,11 @@ def test_unsupported_and_textured_nodes_fall_back_with_warnings():
     h = holdout.node_tree.nodes.new("ShaderNodeHoldout")
     holdout.node_tree.links.new(h.outputs[0], holdout.node_tree.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
     ex = _material_scene([mix, textured, noisy, hot, toon, holdout])
-    # Holdout: black (Cycles' combined colour), its alpha 0 named in one warning line
+    # Holdout: black (Cycles' combined colour) with holdout weight 1 (Film > Transparent: alpha 0,
+    # tests/render/test_holdout.py), no warning
     np.testing.assert_array_equal(_row(ex, "holdout")["color"], 0.0)
-    assert sum("material 'holdout'" in w and "alpha" in w for w in ex.warnings) == 1
+    assert _row(ex, "holdout")["holdout"] == 1.0
+    assert not any("material 'holdout'" in w for w in ex.warnings)
 
     # a Mix of unlike BSDFs is a lobe mixture (docs/physics.md section 14.8): the heavier layer's kind,
     # the Glossy's weight 0.3 as the metal layer, each with its own colour; nothing to warn

@@ -67,7 +67,7 @@ REQUIRED = {"format_version", "vertices", "triangles", "tri_material", "world_co
 # missing these falls back to a default (an older file): a clean render, not an error
 OPTIONAL = {"tri_tangent", "tri_period"} | {"material_" + f.name for f in fields(Materials) if f.name != "kind"} | {
     "camera_" + f.name for f in fields(Camera) if f.name != "matrix"} | {
-    "light_radius", "light_angle", "light_soft_falloff", "light_camera_visible"}  # light columns newer than format 1
+    "light_radius", "light_angle", "light_soft_falloff", "light_camera_visible"}  # light columns newer than format 1 (core/scene/npz.py _LIGHT_OPTIONAL)
 
 
 def malformed_files(folder) -> list[tuple[str, str, bool]]:

@@ -197,6 +197,7 @@ class MaterialTable:
             "thin_film_thickness": float(surf.thin_film_thickness) if surf.kind is not None else 0.0,
             "thin_film_ior": float(surf.thin_film_ior),
             "diffuse_roughness": float(np.clip(surf.diffuse_roughness, 0.0, 1.0)) if surf.kind is not None else 0.0,
+            "holdout": float(np.clip(surf.holdout, 0.0, 1.0)),
         }
         if surf.kind is not None:  # a shader mix of unlike BSDFs (docs/physics.md section 14.8)
             for name in ("metal_color", "glass_color"):

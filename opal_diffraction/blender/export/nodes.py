@@ -109,6 +109,7 @@ class Surface:
     layer_fac_from: int = 0
     layer_fac_to: int = 1
     diffuse_roughness: float = 0.0  # a Diffuse BSDF's Roughness: Oren-Nayar's sigma (0: Lambert)
+    holdout: float = 0.0  # a Holdout shader's weight (Film > Transparent: alpha 1 - holdout; docs/physics.md 14.8)
 
     def layers(self) -> tuple[float, float]:
         """(metallic, transmission), from the kind where not given."""
@@ -590,9 +591,8 @@ class NodeReader(TextureBindings):
             if node.inputs.get(name) is not None and getattr(node.inputs[name], "type", "") == "RGBA":
                 col = self.color(node, name)
                 break
-        if idn == "ShaderNodeHoldout":  # black, as Cycles' combined pass; its alpha 0 is not rendered
-            self.warn(f"{self.owner}: Holdout is rendered black and opaque (its alpha 0 is not rendered)")
-            return black
+        if idn == "ShaderNodeHoldout":  # black, and with Film > Transparent a hole: alpha 0 (Cycles)
+            return Surface(None, np.zeros(3), holdout=1.0)
         if idn == "ShaderNodeBsdfTransparent":  # straight through, tinted per crossing: glass of IOR 1
             return Surface("DIELECTRIC", self.color(node, "Color", (1, 1, 1)), 1.0, 0.0, metallic=0.0,
                            transmission=1.0, glass_tint="REFRACTION")
@@ -748,6 +748,7 @@ class NodeReader(TextureBindings):
 
     def _combine(self, a: Surface, b: Surface, wa: float, wb: float, node) -> Surface:
         out = self._combine_surfaces(a, b, wa, wb, node)
+        out.holdout = min(wa * a.holdout + wb * b.holdout, 1.0)  # Cycles sums the holdout closures' weights
         out.textures = self._combined_textures(a, b, wa, wb, node, out)
         first, second = (a, b) if wa >= wb else (b, a)
         for s in (first, second):  # the shader programs of the surface kept (the heavier first)
@@ -843,7 +844,7 @@ def _copy(s: Surface, emission) -> Surface:
                    thin_film_thickness=s.thin_film_thickness, thin_film_ior=s.thin_film_ior,
                    metal_color=s.metal_color, glass_color=s.glass_color, layer_fac=s.layer_fac,
                    layer_fac_value=s.layer_fac_value, layer_fac_from=s.layer_fac_from, layer_fac_to=s.layer_fac_to,
-                   diffuse_roughness=s.diffuse_roughness)
+                   diffuse_roughness=s.diffuse_roughness, holdout=s.holdout)
 
 
 def _is_mixture(s: Surface) -> bool:

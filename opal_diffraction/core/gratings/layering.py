@@ -21,9 +21,10 @@ The continuation of the zeroth order is a delta lobe where the real order is lam
 wide: the same energy, narrower. Approximations, named once in docs/physics.md section 3.3: the
 grating's strips reflect (or pass) with reflectance 1 whatever the base colour, so a tinted
 mirror tints only the zeroth order; the orders through a glass base are not reduced by its
-Fresnel reflection; the grating diffracts the scene's lights, its emissive meshes, the light
-pass's records and the world (reflection gratings, core/gratings/world.py), not other surfaces,
-which only the zeroth order (through the continuation) shows.
+Fresnel reflection. The grating diffracts the scene's lights, its emissive meshes and the light
+pass's records by next events, and everything else (the world on either side, lit surfaces,
+glass) by continuing the eye path along a sampled order (LINES gratings, core/gratings/lobe.py,
+docs/physics.md section 3.13).
 """
 
 from __future__ import annotations

@@ -839,7 +839,7 @@ def evaluate(params: SurfaceParams, wo, wi, ns, ng):
 
 # ---------------------------------------------------------------------------------- materials
 def params_from_materials(materials, mat, front, lam=None, base=None, roughness=None, u_layer=None,
-                          weights=None) -> SurfaceParams:
+                          weights=None, layer=None) -> SurfaceParams:
     """SurfaceParams of hits on materials (core/materials.PreparedMaterials) rows ``mat`` (B,).
 
     front (B,) bool: the hit is on the side the normal points to (entering a dielectric: eta =
@@ -854,14 +854,19 @@ def params_from_materials(materials, mat, front, lam=None, base=None, roughness=
     unlike BSDFs are the same layers as a lobe mixture (docs/physics.md section 14.8): the metal
     takes its own colour where the row has one (``metal_reflectance``), and ``weights``
     (metallic (B,), transmission (B,)) replace the table's per hit (a Fresnel / Layer Weight
-    Fac: core/materials/mixtures.py ``per_hit_layers``).
+    Fac: core/materials/mixtures.py ``per_hit_layers``). ``layer`` (B,) int (0 base, 1 metal,
+    2 glass) forces that layer's lobe instead (the mixture's every lobe for next events:
+    core/materials/mixtures.py ``LobeMixture``).
     """
     m = materials
     mat = np.asarray(mat, np.int64)
     front = np.asarray(front, bool)
     B = len(mat)
     metallic, transmission = (m.metallic[mat], m.transmission[mat]) if weights is None else weights
-    if u_layer is None:  # the heaviest layer (ties: metal, then glass)
+    if layer is not None:  # the layer asked for
+        layer = np.asarray(layer)
+        metal, glass = layer == 1, layer == 2
+    elif u_layer is None:  # the heaviest layer (ties: metal, then glass)
         w_glass, w_base = (1.0 - metallic) * transmission, (1.0 - metallic) * (1.0 - transmission)
         metal = (metallic >= w_glass) & (metallic >= w_base)
         glass = ~metal & (w_glass >= w_base)

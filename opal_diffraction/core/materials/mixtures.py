@@ -4,11 +4,14 @@ A material is a weighted set of lobes - the metal (Glossy / Metallic / Principle
 glass and the dielectric base (Diffuse, or Principled's diffuse under its specular layer) -
 with weights w_metal = metallic, w_glass = (1 - metallic) transmission and w_base the rest
 (core/materials/bsdf.py ``params_from_materials``). Its BSDF is the weighted sum
-f = sum_i w_i f_i. The eye pass draws one lobe per hit with probability w_i (u_layer), which
-makes f_i / (w_i-pdf) an unbiased one-sample estimate of the sum for next-event estimation
-and BSDF sampling alike (the drawn lobe's own pdf then serves MIS: the lobe choice is a
-discrete random variable independent of the direction, so f_i / p_i with p_i the lobe's pdf is
-an unbiased estimate of f for that hit; Veach 1997 section 9.2.2's one-sample model).
+f = sum_i w_i f_i. The eye pass's next events evaluate the whole mixture (``LobeMixture``):
+f = sum_i w_i f_i towards the light and, for MIS, the mixture's sampling density
+p = sum_i w_i p_i, as Cycles sums its closures (kernel/closure/bsdf.h ``bsdf_eval`` over
+``surface_shader_bsdf_eval``, the pdfs weighted by the closures' sample weights) and pbrt-v4's
+MixMaterial would without its stochastic choice. The bounce draws one lobe per hit with
+probability w_i (u_layer) and samples a direction from it - density sum_i w_i p_i over the
+lobe choice - then weighs it by f / p of the whole mixture at that direction (a delta event
+keeps its own lobe's f_i / p_i, the one-sample estimate of Veach 1997 section 9.2.2).
 
 Where a Mix Shader's Fac comes from Blender's Fresnel or Layer Weight node, the weights depend
 on the view direction; this module evaluates them per hit as Cycles' SVM does
@@ -33,8 +36,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..util.enums import LayerFac
+from . import bsdf
 
-__all__ = ["fresnel_dielectric_cos", "layer_fac", "layer_weights", "per_hit_layers"]
+__all__ = ["fresnel_dielectric_cos", "layer_fac", "layer_weights", "per_hit_layers", "LobeMixture"]
 
 _F32 = np.float32
 
@@ -122,3 +126,78 @@ def per_hit_layers(materials, mat, cos, front, program_fac=None):
     metallic[rows], transmission[rows] = layer_weights(fac, materials.layer_fac_from[mat[rows]],
                                                        materials.layer_fac_to[mat[rows]])
     return metallic, transmission
+
+
+class LobeMixture:
+    """Every lobe of the hits (rows ``rows`` (K,) of a batch of ``n``) whose material mixes layers:
+    per layer present its weight (K,) and its bsdf.SurfaceParams (K rows, with_outgoing done), so
+    that next events and the bounce's MIS see f = sum_i w_i f_i and p = sum_i w_i p_i (module
+    docstring). The batch's other rows keep their one lobe."""
+
+    def __init__(self, n: int, rows: np.ndarray, weights: list, layers: list):
+        self.n, self.rows, self.weights, self.layers = n, rows, weights, layers
+
+    @classmethod
+    def of(cls, materials, mat, front, mixed, metallic, transmission, wo, ns, lam=None, base=None,
+           roughness=None):
+        """The mixture of the hits ``mixed`` (B,) bool on materials rows ``mat`` with the layer
+        weights metallic, transmission (B,) (the table's or ``per_hit_layers``'), for the
+        outgoing directions wo and shading normals ns; None where no hit mixes layers.
+        lam, base, roughness as bsdf.params_from_materials takes them (B rows)."""
+        rows = np.flatnonzero(mixed)
+        if rows.size == 0:
+            return None
+        wm = np.clip(np.asarray(metallic, _F32)[rows], 0, 1)
+        wg = (_F32(1) - wm) * np.clip(np.asarray(transmission, _F32)[rows], 0, 1)
+        wb = np.maximum(_F32(1) - wm - wg, _F32(0))
+        sub = (lambda a: None if a is None else np.asarray(a)[rows])
+        weights, layers = [], []
+        for code, w in ((0, wb), (1, wm), (2, wg)):
+            if not (w > 0).any():
+                continue
+            p = bsdf.params_from_materials(materials, np.asarray(mat)[rows], np.asarray(front)[rows],
+                                           lam=sub(lam), base=sub(base), roughness=sub(roughness),
+                                           layer=np.full(len(rows), code))
+            weights.append(w.astype(_F32))
+            layers.append(bsdf.with_outgoing(p, np.asarray(wo)[rows], np.asarray(ns)[rows]))
+        return cls(len(mixed), rows, weights, layers)
+
+    def take(self, idx: np.ndarray) -> "LobeMixture | None":
+        """The mixture of the batch's rows ``idx`` (sorted, unique), renumbered; None where none mixes."""
+        pos = np.full(self.n, -1, np.int64)
+        pos[idx] = np.arange(len(idx))
+        keep = np.flatnonzero(pos[self.rows] >= 0)
+        if keep.size == 0:
+            return None
+        if keep.size == len(self.rows) and len(idx) == self.n:
+            return self
+        return LobeMixture(len(idx), pos[self.rows[keep]], [w[keep] for w in self.weights],
+                           [p.take(keep) for p in self.layers])
+
+    def evaluate(self, params, wo, wi, ns, ng, lambert_scale=None):
+        """f |cos| (B, k) and pdf (B,) as bsdf.evaluate, the mixture rows summed over their lobes
+        (weights w_i), the others their one lobe ``params``; ``lambert_scale`` (B,) (the bump
+        term) multiplies the Lambertian lobes."""
+        r = self.rows
+        whole = len(r) == self.n
+        if whole:
+            f = pdf = None
+        else:
+            f, pdf = bsdf.evaluate(params, wo, wi, ns, ng)
+            if lambert_scale is not None:
+                f = f * np.where(params.lobe == bsdf.LAMBERT, lambert_scale, _F32(1))[:, None]
+        args = (wo, wi, ns, ng) if whole else tuple(np.asarray(a)[r] for a in (wo, wi, ns, ng))
+        ls = None if lambert_scale is None else (np.broadcast_to(np.asarray(lambert_scale, _F32), (self.n,))[r])
+        fm = pm = None
+        for w, p in zip(self.weights, self.layers):
+            fl, pl = bsdf.evaluate(p, *args)
+            if ls is not None:
+                fl = fl * np.where(p.lobe == bsdf.LAMBERT, ls, _F32(1))[:, None]
+            fm = w[:, None] * fl if fm is None else fm + w[:, None] * fl
+            pm = w * pl if pm is None else pm + w * pl
+        if whole:
+            return fm.astype(_F32), pm.astype(_F32)
+        if fm.shape[1] != f.shape[1]:
+            f = np.broadcast_to(f, (len(f), fm.shape[1])).copy()
+        f[r], pdf[r] = fm, pm
+        return f, pdf

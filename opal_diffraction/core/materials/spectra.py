@@ -65,6 +65,7 @@ class PreparedMaterials:
     layer_fac_from: np.ndarray = None     # (M,) int the layer (0 base, 1 metal, 2 glass) weighted 1 - Fac
     layer_fac_to: np.ndarray = None       # (M,) int the layer weighted Fac
     diffuse_roughness: np.ndarray = None  # (M,) float32 Oren-Nayar's sigma of a rough Diffuse BSDF (0: Lambert)
+    holdout: np.ndarray = None            # (M,) float32 a Holdout's weight (Film > Transparent: alpha taken off)
 
 
 def glass_tint_spectra(color, glass_tint, conv: SpectralConverter) -> np.ndarray:
@@ -132,4 +133,5 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
                              metal_reflectance=metal_refl, own_metal=own_metal, layer_fac=layer_fac,
                              layer_fac_value=np.asarray(m.layer_fac_value, np.float32),
                              layer_fac_from=lf_from, layer_fac_to=lf_to,
-                             diffuse_roughness=np.asarray(m.diffuse_roughness, np.float32))
+                             diffuse_roughness=np.asarray(m.diffuse_roughness, np.float32),
+                             holdout=np.asarray(getattr(m, "holdout", np.zeros(len(m.metallic))), np.float32))

@@ -63,7 +63,8 @@ from ..spectral.spectrum import SpectralConverter
 from .tiles import LIGHT_PASS_SHARE, EyeWork, adaptive_of
 from .view_check import camera_sees_nothing
 
-__all__ = ["RenderResult", "LightPassResult", "render", "render_prepared", "compile_stage", "warm_up_scene"]
+__all__ = ["RenderResult", "LightPassResult", "render", "render_prepared", "reusable_light", "compile_stage",
+           "warm_up_scene"]
 
 
 def render(
@@ -75,6 +76,10 @@ def render(
     region: tuple[int, int, int, int] | None = None,
     client=None,
     spectral_film: bool | None = None,
+    reuse: PreparedScene | None = None,
+    light: LightPassResult | None = None,
+    on_prepared: Callable[[PreparedScene], None] | None = None,
+    on_light: Callable[[LightPassResult], None] | None = None,
 ) -> RenderResult:
     """Render ``scene``; raises SceneError (a readable message) for unrenderable input.
 
@@ -92,6 +97,14 @@ def render(
 
     ``spectral_film``: keep the spectral image (``RenderResult.spectral``, (H, W, n)); None: only
     when ``settings.spectral_exr`` is set. Otherwise the film is RGB only and ``spectral`` is None.
+
+    Between renders of one scene (the engine's persistent data, blender/persistent.py):
+    ``reuse``, an earlier PreparedScene, is handed to ``prepare`` (what depends only on unchanged
+    inputs is taken from it: the ray caster when the geometry is the same, and its ``key`` when
+    nothing the light pass reads changed); ``light``, that earlier render's light pass, is reused
+    where ``reusable_light`` allows (same key; where the plan splats, a splat made for this view).
+    ``on_prepared(prepared)`` and ``on_light(result)`` receive what this render prepared and the
+    light pass it ran, for the next render. The image is the one a render without them makes.
     """
     # before prepare's kernels run; a cluster's workers compile their own (the stage is this process's)
     try:
@@ -105,7 +118,7 @@ def render(
     limit = _time_limit_before_validation(settings or RenderSettings())
     try:
         with kernel_mode((settings or RenderSettings()).kernels):  # prepare's spectra take the render's path
-            prepared = prepare(scene, settings, should_cancel=should_cancel,
+            prepared = prepare(scene, settings, reuse=reuse, should_cancel=should_cancel,
                                deadline=t_start + limit if limit > 0 else None)
     except OutOfTime:
         return _cancelled_before_start(scene, settings or RenderSettings(), region, spectral_film,
@@ -120,10 +133,29 @@ def render(
         except RenderCancelled:
             return _cancelled_before_start(scene, prepared.settings, region, spectral_film,
                                            cancelled_in="while compiling the kernels")
+    if on_prepared is not None:
+        on_prepared(prepared)
     executor = None if client is None else DaskExecutor(client, scene)
     with one_blas_thread():  # the tile threads are the parallelism (core/util/blas_threads.py)
-        return _render_in_mode(prepared, None, progress, should_cancel, on_round, region, t_start, spectral_film,
-                               executor, time.perf_counter, compiled)
+        return _render_in_mode(prepared, reusable_light(prepared, light), progress, should_cancel, on_round, region,
+                               t_start, spectral_film, executor, time.perf_counter, compiled, on_light)
+
+
+def reusable_light(prepared: PreparedScene, light: LightPassResult | None) -> LightPassResult | None:
+    """``light`` (an earlier render's light pass) if the eye pass of ``prepared`` may read it as
+    the light pass ``prepared`` would run itself, else None (run it again): it belongs to the same
+    preparation (``key``: the geometry, materials, lights, world and light-pass settings are
+    unchanged), it ran to the end (not cancelled, not cut short by a time limit, whose share of
+    the paths depends on the clock), and where the plan splats light paths into the camera
+    (core/integrators/light/camera_splat.py) its splat was made for this view: the caustic map
+    and grating records do not depend on the camera, the splat does (``usable_splat``)."""
+    if light is None or light.key != prepared.key or light.cancelled:
+        return None
+    if any("time limit" in w for w in light.warnings):
+        return None
+    if plan_render(prepared).camera_splat and usable_splat(prepared, light) is None:
+        return None
+    return light
 
 
 def _time_limit_before_validation(settings: RenderSettings) -> float:
@@ -275,6 +307,7 @@ def render_prepared(
     spectral_film: bool | None = None,
     executor: Executor | None = None,
     clock: Callable[[], float] = time.perf_counter,
+    on_light: Callable[[LightPassResult], None] | None = None,
 ) -> RenderResult:
     """Render a prepared scene (see ``render`` for the callbacks, ``region`` and ``spectral_film``).
 
@@ -285,7 +318,10 @@ def render_prepared(
     distributed.DaskExecutor for a cluster). ``clock``: the scheduler's clock, in seconds. The
     passes run the compiled kernels or the NumPy reference as ``settings.kernels`` says
     (core/util/jit.py); the stats' ``kernels`` names which. The process's first render on the
-    kernels starts with the compile stage (``compile_stage``).
+    kernels starts with the compile stage (``compile_stage``). ``on_light(result)``: receives the
+    light pass's result when this render ran it (not when ``light`` was given), so a caller can
+    keep it for another render of the same prepared scene (the engine's persistent data between
+    animation frames: blender/persistent.py).
     """
     local = executor is None or isinstance(executor, LocalExecutor)
     limit = float(prepared.settings.time_limit or 0.0)
@@ -304,19 +340,19 @@ def render_prepared(
                                        f"time limit ({limit:g} s) reached while compiling the kernels: nothing rendered"
                                        if out_of_time else None, cancelled_in="while compiling the kernels")
     return _render_in_mode(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
-                           executor, clock, compiled)
+                           executor, clock, compiled, on_light)
 
 
 def _render_in_mode(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
-                    executor, clock, compiled) -> RenderResult:
+                    executor, clock, compiled, on_light=None) -> RenderResult:
     """render_prepared after its compile stage (``compiled``: that stage's stats, or None)."""
     with kernel_mode(prepared.settings.kernels) as kernels:
         return _render_prepared(prepared, light, progress, should_cancel, on_round, region, started_at,
-                                spectral_film, executor, clock, kernels, compiled)
+                                spectral_film, executor, clock, kernels, compiled, on_light)
 
 
 def _render_prepared(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
-                     executor, clock, kernels: str, compiled: dict | None = None) -> RenderResult:
+                     executor, clock, kernels: str, compiled: dict | None = None, on_light=None) -> RenderResult:
     """render_prepared's body, inside its kernel mode (``kernels``: the path taken, for the stats;
     ``compiled``: the compile stage's stats when this render ran it)."""
     settings = prepared.settings
@@ -347,6 +383,8 @@ def _render_prepared(prepared, light, progress, should_cancel, on_round, region,
         if plan.light_pass and light is None:
             eye_from = LIGHT_PASS_SHARE
             light = executor.light_pass(prepared, plan, control, control.stage(0.0, LIGHT_PASS_SHARE))
+            if on_light is not None:
+                on_light(light)
         elif not plan.light_pass:
             light = None
         if light is not None:

@@ -42,7 +42,7 @@ from ..materials.bsdf import microfacet_materials
 from ..lights.mesh_lights import MeshLights
 from ..opal.volume import VolumeDomains
 from ..scene.model import Camera, Scene
-from ..scene.validation import validate
+from ..scene.validation import _validate_camera, validate
 from ..scene.settings import AUTO_LIGHT_PATHS_RANGE, EYE_ONLY_SETTINGS, RenderSettings, auto_light_paths
 from ..spectral.spectrum import SpectralConverter, WavelengthGrid
 from ..materials.textures import PreparedTextures, prepare_textures
@@ -129,7 +129,9 @@ class PreparedScene:
         bad = set(eye_settings) - EYE_ONLY_SETTINGS
         if bad:
             raise ValueError(f"with_view changes only eye-pass settings, not {sorted(bad)}: prepare again")
-        scene = self.scene if camera is None else replace(self.scene, camera=camera)
+        # the camera is checked as validate() checks a whole scene's (and so made the same: a
+        # camera given here renders as a fresh preparation with it would)
+        scene = self.scene if camera is None else replace(self.scene, camera=_validate_camera(camera))
         settings = replace(self.settings, **eye_settings) if eye_settings else self.settings
         if eye_settings:
             settings.validate()

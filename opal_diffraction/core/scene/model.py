@@ -114,6 +114,9 @@ MATERIAL_COLUMNS = {
     "layer_fac_to": (np.int32, (), 1, None),
     # the Diffuse BSDF's Roughness: Oren-Nayar's sigma (docs/physics.md section 14.9; 0: Lambert)
     "diffuse_roughness": (np.float32, (), 0.0, None),
+    # a Holdout's weight in [0, 1] (docs/physics.md section 14.8): with Film > Transparent a camera
+    # ray meeting the surface takes it off the pixel's alpha (Cycles' holdout); 0: none
+    "holdout": (np.float32, (), 0.0, None),
     # the BRAGG (FCC opal) lattice (docs/physics.md section 5.7; core/materials/bragg_bsdf.py)
     "sphere_diameter": (np.float32, (), 250.0, None),
     "sphere_ior": (np.float32, (), 1.45, None),
@@ -186,7 +189,8 @@ class Materials:
     node's outputs of Blend layer_fac_value): layer layer_fac_to (0 base, 1 metal, 2 glass)
     gets the Fac, layer_fac_from the rest. diffuse_roughness in [0, 1]: a Diffuse BSDF's Roughness,
     its base rendered Oren-Nayar (docs/physics.md section 14.9) where it is above 0 and the base has
-    no specular layer.
+    no specular layer. holdout in [0, 1]: the weight of a Holdout shader in the surface (Film >
+    Transparent: a camera ray meeting it takes that much off the pixel's alpha).
 
     Grating layer (docs/physics.md section 3), on top of the base kind: grating (0/1), grating_type
     (GRATING_TYPES), lattice (LATTICES), period D (nm), slit_width a (nm), slit_count N,
@@ -251,6 +255,7 @@ class Materials:
     layer_fac_from: np.ndarray = field(default_factory=lambda: _material_column_default("layer_fac_from", 0))
     layer_fac_to: np.ndarray = field(default_factory=lambda: _material_column_default("layer_fac_to", 0))
     diffuse_roughness: np.ndarray = field(default_factory=lambda: _material_column_default("diffuse_roughness", 0))
+    holdout: np.ndarray = field(default_factory=lambda: _material_column_default("holdout", 0))
     sphere_diameter: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_diameter", 0))
     sphere_ior: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_ior", 0))
     void_ior: np.ndarray = field(default_factory=lambda: _material_column_default("void_ior", 0))

@@ -32,7 +32,7 @@ BRAGG_RANGES = {"sphere_diameter": (100.0, 500.0, " nm"), "sphere_ior": (1.0, 3.
                 "layers": (1, 10000, ""), "mosaic_spread": (0.0, 45.0, " degrees")}
 
 #: Unit-interval material columns (validated to [0, 1]).
-_UNIT_COLUMNS = ("roughness", "metallic", "transmission", "diffuse_roughness")
+_UNIT_COLUMNS = ("roughness", "metallic", "transmission", "diffuse_roughness", "holdout")
 
 _OBSERVER_NM = (360.0, 830.0)  # the wavelengths any grid may hold (spectrum.py)
 
@@ -536,7 +536,7 @@ def _validate_materials(m: Materials) -> Materials:
                  "normal_strength", "emission_strength", "roughness", "metallic", "transmission",
                  "specular_ior_level", "specular_tint", "sphere_diameter", "sphere_ior", "void_ior", "mosaic_spread",
                  "thin_film_thickness", "thin_film_ior", "metal_color", "glass_color", "layer_fac_value",
-                 "diffuse_roughness"):
+                 "diffuse_roughness", "holdout"):
         check_range(f64[name], label, name.replace("_", " "), "")
     for name in ("layer_fac_from", "layer_fac_to"):
         code = out[name].astype(np.int64)

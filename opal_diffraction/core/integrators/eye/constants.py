@@ -17,7 +17,7 @@ import numpy as np
 
 from ...gratings import layering as grating_layering
 from ...gratings.order_sampling import scattering_materials
-from ...gratings.world import diffracts_world
+from ...gratings.lobe import lobe_materials
 from ...lights.sources import AREA_DISK, AREA_RECT, POINT, SPOT, SUN, is_delta
 from ...materials.spectra import DIFFUSE
 from ..bragg_shading import BraggShading
@@ -48,7 +48,7 @@ class EyeConstants:
     # between 0 and 1); elsewhere the layer is fixed and no number is drawn for it
     mixed_layers: np.ndarray
     probe: int | None                 # the black-surface test's wavelength (``probe_wavelength``)
-    world_gratings: np.ndarray        # (M,) bool gratings that diffract the world (gratings/world.py)
+    lobe_gratings: np.ndarray         # (M,) bool gratings whose hits continue the path along an order (gratings/lobe.py)
     limits: tuple                     # (total, diffuse, glossy, transmission) bounce limits
     # the emitters' caustic paths (diffuse <- specular... <- emitter) the light pass has already
     # counted: the eye pass leaves those paths out (docs/physics.md section 4.5)
@@ -106,7 +106,7 @@ def eye_constants(prepared, light, plan) -> EyeConstants:
         mixed_layers=((mt > 0) & (mt < 1)) | ((tr > 0) & (tr < 1)) | (
             np.asarray(prepared.materials.layer_fac) != 0 if prepared.materials.layer_fac is not None else False),
         probe=probe_wavelength(prepared),
-        world_gratings=diffracts_world(prepared),
+        lobe_gratings=lobe_materials(prepared),
         limits=(s.max_bounces, s.diffuse_bounces, s.glossy_bounces, s.transmission_bounces),
         caustics_cover_lights=caustic_map is not None,
         delta=delta,

@@ -119,14 +119,22 @@ def lambert_bounce(c, rays: Rays, hit: Hit, sel: np.ndarray, can_bounce: np.ndar
     return out
 
 
-def microfacet_bounce(c, rays: Rays, hit: Hit, micro: np.ndarray, params, can_bounce, numbers) -> Rays | None:
+def microfacet_bounce(c, rays: Rays, hit: Hit, micro: np.ndarray, params, can_bounce, numbers,
+                      mixture=None) -> Rays | None:
     """The bounce at rough and layered surfaces (the hits ``micro`` (B,) bool, their lobes
     ``params``): a direction from core/materials/bsdf.py's sampler (``numbers(rays, slot)``: the
     vertices' sampler), counted as Cycles counts it (diffuse, glossy or transmission); a delta
-    event (a layer smoother than MIN_ROUGHNESS) continues like a mirror or glass bounce."""
+    event (a layer smoother than MIN_ROUGHNESS) continues like a mirror or glass bounce. At hits
+    whose material mixes layers (``mixture``, core/materials/mixtures.py LobeMixture) the drawn
+    lobe's direction is weighed by the whole mixture, f / p with p = sum_i w_i p_i, which is
+    also the pdf MIS sees (docs/physics.md section 14.8)."""
     idx = np.flatnonzero(micro)
     go = can_bounce[idx] | (rays.depth[idx] >= c.limits[0])
-    idx, params = idx[go], params.take(np.flatnonzero(go)) if not go.all() else params
+    if not go.all():
+        keep = np.flatnonzero(go)
+        params = params.take(keep)
+        mixture = None if mixture is None else mixture.take(keep)
+    idx = idx[go]
     if idx.size == 0:
         return None
     r, h = rays.take(idx), hit.take(idx)
@@ -137,6 +145,17 @@ def microfacet_bounce(c, rays: Rays, hit: Hit, micro: np.ndarray, params, can_bo
     if not chooses:
         u = np.concatenate([u, np.zeros((len(r), 1), np.float32)], axis=1)
     wi, weight, pdf, flags = bsdf.sample(params, -r.d, h.ns, h.ng, u)
+    if mixture is not None:  # the whole mixture at the sampled direction (not at delta events)
+        f_mix, p_mix = mixture.evaluate(params, -r.d, wi, h.ns, h.ng)
+        mixed = np.zeros(len(r), bool)
+        mixed[mixture.rows] = True
+        mixed &= (flags != 0) & ((flags & bsdf.SINGULAR) == 0) & (p_mix > 0)
+        if mixed.any():
+            w_mix = f_mix / np.where(mixed, p_mix, np.float32(1.0))[:, None]
+            if w_mix.shape[1] != weight.shape[1]:
+                weight = np.broadcast_to(weight, w_mix.shape)
+            weight = np.where(mixed[:, None], w_mix, weight).astype(np.float32)
+            pdf = np.where(mixed, p_mix, pdf).astype(np.float32)
     ok = flags != 0
     if not ok.all():
         r, h, wi, weight, pdf, flags = r.take(ok), h.take(ok), wi[ok], weight[ok], pdf[ok], flags[ok]

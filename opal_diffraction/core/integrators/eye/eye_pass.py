@@ -5,7 +5,8 @@ The source paper's eye pass (Kobayashi & Kawai; docs/physics.md section 4.2), gr
 tracer (section 4.5; pbrt-v4's PathIntegrator): at every diffuse (two-sided Lambertian) vertex,
 direct light by shadow rays plus the caustic irradiance of the light pass's illumination map,
 then a cosine-sampled bounce under Cycles' bounce limits and Russian roulette; at a grating, the
-diffraction of every light that reaches it (gratings.py); at an emitter and where a ray leaves
+diffraction of every light that reaches it (grating_hits.py) and, along one sampled order, the
+path continued to whatever it finds (``_GratingTrace``, docs/physics.md section 3.13); at an emitter and where a ray leaves
 the scene, the emitted radiance; at mirrors and glass the path goes on. Paths the light pass
 already counted (diffuse <- specular <- emitter) are left out. Every tile writes the films:
 Direct (one diffuse vertex), Indirect (more), Caustics, Diffraction and emitted light seen.
@@ -18,6 +19,7 @@ what a hit's shading leaves for its bounce travels in a ``surface_interaction.Hi
     on_hit (normal maps, BSDF parameters)    surface_interaction.py
     on_hit (lights, meshes, world; caustics) next_event.py        one next-event routine, MIS
     on_hit (gratings)                        grating_hits.py      diffracted light
+    (gratings: the order lobe)               _GratingTrace        the path continued along an order
     survives, after_delta, scatter           continuation.py      roulette, BSDF sampling, counts
     dielectric_bounce                        fresnel_split.py     both branches at the first glass
     every stage's film adds                  tile_output.py
@@ -25,11 +27,13 @@ what a hit's shading leaves for its bounce travels in a ``surface_interaction.Hi
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, fields
 
 import numpy as np
 
 from ...transport import wavelengths
+from ...sampling import footprint
 from ...sampling.sampler import SLOT_LIGHT, SLOT_PARAMS, SLOT_WIDTH, PixelSampler, vertex_pair
 from ...gratings import layering as grating_layering
 from ...materials.spectra import DIFFUSE
@@ -43,7 +47,7 @@ from .constants import EyeConstants, eye_constants
 from .continuation import count_delta, lambert_bounce, microfacet_bounce, russian_roulette
 from .grating_hits import grating_light
 from .next_event import BraggLobeEvents, MicrofacetLobe, caustic_light, lambert_next_events, next_events
-from .surface_interaction import HitShading, bend_normals, reflects, surface_params
+from .surface_interaction import HitShading, bend_normals, reflects, surface_lobes
 from .tile_output import TileOutput, TileResult
 
 __all__ = ["EyePass", "TileResult"]
@@ -135,6 +139,7 @@ class _TileTrace(SpecularWalker):
     def __init__(self, eye: EyePass, n_pixels: int, rng: np.random.Generator, sampler_seed: int | None = None,
                  record_escapes: bool = False):
         super().__init__(eye.prepared, rng)
+        self.eye = eye
         self.c = eye.constants
         self.sampler_seed = sampler_seed
         self.out = TileOutput(n_pixels, self.n)
@@ -143,6 +148,22 @@ class _TileTrace(SpecularWalker):
         self.transparent = bool(getattr(eye.prepared.settings, "film_transparent", False))
         self.transparent_glass = self.transparent and bool(getattr(eye.prepared.settings, "film_transparent_glass", False))
         self._camera_segment = False  # the next segment traced is the camera rays' (coverage: alpha)
+        self._lobe_rng = None  # the grating lobe's own stream (``lobe_rng``), made when first needed
+        # Film > Transparent: the materials' Holdout weights (None: no holdout), taken off the
+        # alpha of camera rays meeting them (Cycles' integrate_surface_holdout; docs/physics.md 14.8)
+        hold = getattr(eye.prepared.materials, "holdout", None)
+        self.holdout = hold if self.transparent and hold is not None and (hold > 0).any() else None
+        self._holdout_segment = False  # the hits on_hit shades next are the camera rays'
+
+    @property
+    def lobe_rng(self) -> np.random.Generator:
+        """The random stream of the paths continued along grating orders: spawned from the tile's
+        stream's seed (drawing nothing from it), so they leave the tile's other numbers as they were."""
+        if self._lobe_rng is None:
+            seq = getattr(self.rng.bit_generator, "seed_seq", None)
+            self._lobe_rng = (np.random.default_rng(seq.spawn(1)[0]) if isinstance(seq, np.random.SeedSequence)
+                              else np.random.default_rng(self.rng.integers(1 << 62)))
+        return self._lobe_rng
 
     def _new_state(self, b: int) -> PathState:
         """The path tracer's per-path state of ``b`` camera paths (core/transport/path_state.py),
@@ -192,6 +213,7 @@ class _TileTrace(SpecularWalker):
         if self._camera_segment:  # the camera rays: coverage, the film's alpha (Film > Transparent)
             self._camera_segment = False
             self.out.add_alpha(rays.pix, np.isfinite(t))
+            self._holdout_segment = self.holdout is not None
         emission.lights_passed(self.c, self.out, rays, t)
 
     def on_miss(self, rays: Rays) -> None:
@@ -222,6 +244,12 @@ class _TileTrace(SpecularWalker):
         c, out = self.c, self.out
         prepared = self.prepared
         st = rays.state
+        if self._holdout_segment:  # camera rays on a Holdout: its weight off the pixel's alpha
+            self._holdout_segment = False
+            h = self.holdout[hit.mat]
+            first = (h > 0) & (rays.depth == 0)
+            if first.any():
+                out.lower_alpha(rays.pix[first], h[first])
         if self.any_emissive:
             emits = prepared.materials.emissive.take(hit.mat)
             if np.count_nonzero(emits) and not emission.surface_emission_unit(c, out, rays, hit, emits):
@@ -245,9 +273,9 @@ class _TileTrace(SpecularWalker):
                 rm, hm = rays.take(micro), hit.take(micro)
                 if c.layers:
                     rm = grating_layering.scale_base(prepared, rm, hm)
-                params = surface_params(prepared, c.mixed_layers, rm, hm, self.numbers(rm, SLOT_PARAMS))
-                shading.micro = (micro, params)  # for scatter(): the same lobe for light and bounce
-                self._shade_microfacet(rm, hm, params, rng)
+                params, mixture = surface_lobes(prepared, c.mixed_layers, rm, hm, self.numbers(rm, SLOT_PARAMS))
+                shading.micro = (micro, params, mixture)  # for scatter(): the same lobes for light and bounce
+                self._shade_microfacet(rm, hm, params, mixture, rng)
             kind = np.where(micro, -1, kind)  # shaded: not Lambertian below
         full_live = live
         if n_live < len(live):
@@ -259,7 +287,9 @@ class _TileTrace(SpecularWalker):
             if c.scattering is not None:  # diffuse -> grating -> light: the light pass's caustic
                 on_grating &= ~(c.scattering[hit.mat] & (st.caustic == Caustic.RECEIVER))
             if on_grating.any():
-                grating_light(c, out, rays.take(on_grating), hit.take(on_grating), rng)
+                rg = rays.take(on_grating)
+                grating_light(c, out, rg, hit.take(on_grating), rng, follow=self._follow_grating,
+                              events=self._grating_events(rg), lobe_rng=self.lobe_rng)
         diffuse = kind == DIFFUSE
         if c.black is not None:  # emission-only surfaces: the denoising features, then nothing
             black = diffuse & c.black[hit.mat]
@@ -290,8 +320,8 @@ class _TileTrace(SpecularWalker):
         c = self.c
         micro_out = None
         if shaded is not None and shaded.micro is not None:
-            micro, params = shaded.micro
-            micro_out = microfacet_bounce(c, rays, hit, micro, params, can_bounce, self.numbers)
+            micro, params, mixture = shaded.micro
+            micro_out = microfacet_bounce(c, rays, hit, micro, params, can_bounce, self.numbers, mixture)
             kind = np.where(micro, -1, kind)
         out = micro_out
         sel = (kind == DIFFUSE) & ~rays.state.final
@@ -329,6 +359,49 @@ class _TileTrace(SpecularWalker):
             out = grating_layering.continue_specular(self.prepared, out, hit, transmitted)
         return out, transmitted
 
+    def _grating_events(self, rays: Rays):
+        """(B,) bool: the grating hits of ``rays`` that diffract the lights, meshes and records
+        (None: all of them; ``_GratingTrace`` leaves some to the records)."""
+        return None
+
+    def _follow_grating(self, rays: Rays, cont) -> None:
+        """Trace the paths that leave grating hits of ``rays`` along sampled orders (``cont``:
+        gratings.lobe.ContinuedPaths) to their ends in a ``_GratingTrace``, and add everything
+        they find to the Diffraction part (docs/physics.md section 3.13). The order is a
+        specular-like bounce: counted as glossy (reflected) or transmission, no BSDF pdf (no MIS
+        partner: the segment's emitters are left to the grating's next events), under the
+        bounce limits (the walker's ``survives`` rule without roulette: mono rays are not
+        rouletted)."""
+        c = self.c
+        src = rays.take(cont.rows)
+        st = src.state
+        tr = cont.transmitted
+        glossy, transmission = st.glossy + ~tr, st.transmission + tr
+        ok = (src.depth < c.limits[0]) & np.where(tr, transmission <= c.limits[3], glossy <= c.limits[2])
+        k = np.flatnonzero(ok)
+        if k.size == 0:
+            return
+        b = k.size
+        base = {f.name: getattr(st, f.name) for f in fields(PathState)}
+        base = {name: (None if v is None else v[k]) for name, v in base.items()}
+        state = LobeState(**base, lobe=np.ones(b, np.int8))
+        state.glossy, state.transmission = glossy[k], transmission[k]
+        state.pdf = np.zeros(b, np.float32)
+        state.final = np.zeros(b, bool)
+        if state.rd is not None:  # a point sample from here on (the order's footprint is not carried)
+            state.rd = footprint.zero_differentials(b)
+        mono = Rays(cont.origin[k], cont.direction[k], src.pix[k], cont.weight[k], cont.lam[k],
+                    (src.depth[k] + 1).astype(np.int32), src.u_lam[k], state)
+        child = _GratingTrace(self)
+        child.walk(child.empty_white(), mono)
+        out = child.out
+        diffraction = self.out.diffraction
+        diffraction += out.film
+        for part in out.parts.values():
+            diffraction += part
+        self.out.shadow_rays += out.shadow_rays
+        self.rays_cast += child.rays_cast
+
     # ----------------------------------------------------------------- on_hit's stages
     def _shade_opal(self, rays: Rays, hit: Hit, live: np.ndarray, rng):
         """The opal's Bragg lobe at its hits among ``live``: its next events, then the body's
@@ -352,8 +425,9 @@ class _TileTrace(SpecularWalker):
             next_events(c, self.out, rn, hn, BraggLobeEvents(c, rn, hn, lobe.take(k)), rng)
         return bragg.body_share(rays, r, h, sel, lobe)
 
-    def _shade_microfacet(self, rays: Rays, hit: Hit, params, rng):
-        """Next-event estimation at rough and layered surfaces: every light, the emissive meshes
+    def _shade_microfacet(self, rays: Rays, hit: Hit, params, mixture, rng):
+        """Next-event estimation at rough and layered surfaces (every lobe of a mixture: ``mixture``,
+        core/materials/mixtures.py): every light, the emissive meshes
         and the world map, each weighted against BSDF sampling by the power heuristic; and the
         caustic map on a diffuse base (its diffuse lobe, approximately: base colour / pi)."""
         c, out = self.c, self.out
@@ -363,8 +437,10 @@ class _TileTrace(SpecularWalker):
         for sel, direct in ((first, True), (~first, False)):
             if sel.any():
                 r, h = rays.take(sel), hit.take(sel)
-                p = params.take(np.flatnonzero(sel)) if not sel.all() else params
-                next_events(c, out, r, h, MicrofacetLobe(c, r, h, p), self.numbers(r, SLOT_LIGHT),
+                k = np.flatnonzero(sel)
+                p = params.take(k) if not sel.all() else params
+                mx = None if mixture is None else mixture.take(k)
+                next_events(c, out, r, h, MicrofacetLobe(c, r, h, p, mx), self.numbers(r, SLOT_LIGHT),
                             out.film if direct else out.indirect)
         if c.caustic_map is not None:
             base = self.prepared.materials.kind[hit.mat] == DIFFUSE
@@ -425,3 +501,91 @@ class _TileTrace(SpecularWalker):
                 if np.count_nonzero(seen):
                     r, h = r.take(~seen), h.take(~seen)
             caustic_light(c, out, r, h, rng)
+
+
+@dataclass
+class LobeState(PathState):
+    """The path state of a path continued along a grating's order (``_GratingTrace``): ``lobe``
+    (B,) int8, 1 on the segment leaving the grating, 2 after mirrors and glass only since the
+    grating, 0 after a diffuse or rough vertex."""
+    lobe: np.ndarray | None = None
+
+
+class _GratingTrace(_TileTrace):
+    """The paths continued along a grating's sampled orders (docs/physics.md section 3.13), traced
+    as the tile's paths are, into their own ``TileOutput`` that the parent adds to its Diffraction
+    part. The partition that keeps every light counted once:
+
+    - on the segment leaving the grating (``lobe`` 1) the lights, suns and emissive meshes are the
+      grating's next events' (grating_hits.grating_light's shadow rays): what the segment meets
+      of them is not added; the world it reaches is (the grating does not sample it);
+    - after mirrors and glass only (``lobe`` 2), emitters and the world are the light pass's
+      grating records' where the light pass ran (light -> mirrors / glass -> grating), else added;
+    - another grating met before any diffuse vertex (``lobe`` 1 or 2) diffracts the lights,
+      meshes and records only without a light pass: with one, light -> that grating -> ... ->
+      the first grating is in the first grating's records (made at every arrival after a
+      specular vertex, a diffraction included);
+    - after a diffuse or rough vertex (``lobe`` 0) the path is any path: MIS and caustic rules
+      as everywhere.
+    """
+
+    def __init__(self, parent: _TileTrace):
+        super().__init__(parent.eye, parent.out.n_pixels, parent.lobe_rng, sampler_seed=parent.sampler_seed)
+        self.transparent = self.transparent_glass = False  # a diffracted path: never the film's background
+        self.records = self.c.record_map is not None
+        self.emissive = self.any_emissive
+        self.any_emissive = False  # on_hit adds the emission itself, by the partition
+        self.world_only = dataclasses.replace(self.c, soft_suns=np.zeros(0, np.int64))
+
+    def _new_state(self, b: int) -> PathState:
+        st = PathState.new(b, differentials=self.c.footprints)
+        return LobeState(**{f.name: getattr(st, f.name) for f in fields(PathState)}, lobe=np.zeros(b, np.int8))
+
+    def empty_white(self) -> Rays:
+        return Rays(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32), np.zeros(0, np.int64), None, None,
+                    np.zeros(0, np.int32), np.zeros(0), self._new_state(0))
+
+    def _emits(self, rays: Rays) -> np.ndarray:
+        """(B,) bool: the rays whose emitters this trace adds (the partition above)."""
+        lobe = rays.state.lobe
+        return (lobe == 0) if self.records else (lobe != 1)
+
+    def _grating_events(self, rays: Rays):
+        # light -> (mirrors, glass, gratings) -> this grating -> ... -> the first grating: with a
+        # light pass, the first grating's records hold it (they record every arrival after a
+        # specular vertex, a diffraction included)
+        return (rays.state.lobe == 0) if self.records else None
+
+    def on_segment(self, rays: Rays, t: np.ndarray) -> None:
+        keep = self._emits(rays)
+        if keep.all():
+            emission.lights_passed(self.c, self.out, rays, t)
+        elif keep.any():
+            emission.lights_passed(self.c, self.out, rays.take(keep), t[keep])
+
+    def on_miss(self, rays: Rays) -> None:
+        full = self._emits(rays)
+        if full.any():
+            emission.escaped(self.c, self.out, rays.take(full), None)
+        world = rays.state.lobe == 1  # the world along the order: no suns (the grating's next events)
+        if world.any():
+            emission.escaped(self.world_only, self.out, rays.take(world), None)
+
+    def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> HitShading | None:
+        if self.emissive:
+            emits = self.prepared.materials.emissive.take(hit.mat) & self._emits(rays)
+            if np.count_nonzero(emits):
+                emission.surface_emitted(self.c, self.out, rays.take(emits), hit.take(emits))
+        return super().on_hit(rays, hit, kind, rng)
+
+    def after_delta(self, rays: Rays, transmitted: np.ndarray) -> Rays:
+        lobe = rays.state.lobe
+        rays.state.lobe = np.where(lobe == 1, np.int8(2), lobe)
+        return super().after_delta(rays, transmitted)
+
+    def scatter(self, rays: Rays, hit: Hit, kind: np.ndarray, can_bounce: np.ndarray, rng,
+                shaded: HitShading | None = None) -> Rays | None:
+        out = super().scatter(rays, hit, kind, can_bounce, rng, shaded)
+        if out is not None and len(out):
+            out.state.lobe = np.zeros(len(out), np.int8)
+        return out

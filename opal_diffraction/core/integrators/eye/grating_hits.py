@@ -5,10 +5,12 @@ incident direction by shadow ray (so no noise from the light side), and one poin
 emissive meshes (core/lights/mesh_lights.py's power-proportional sample, as the next events
 draw it; section 3.13), diffracted by
 core/gratings/radiance.py's kernel into the viewer's direction, over the pixel's footprint where
-the rays carry differentials (core/sampling/footprint.py, section 3.7); the world seen through
-the grating's orders (core/gratings/world.py); and every directional lobe of the light pass's
-grating records (light that reached the grating through mirrors and glass). All of it goes to
-the Diffraction part of the film.
+the rays carry differentials (core/sampling/footprint.py, section 3.7); every directional lobe
+of the light pass's grating records (light that reached the grating through mirrors and glass);
+and, at LINES gratings, the path continued along one order sampled from the viewer's side
+(core/gratings/lobe.py; the eye pass traces it, eye_pass._GratingTrace): the world, lit
+surfaces and glass seen through the orders (sections 3.11, 3.13). All of it goes to the
+Diffraction part of the film.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy as np
 
 from ...gratings.directions import tangents_at
 from ...gratings.radiance import diffracted_radiance, grating_frame
-from ...gratings.world import world_through_grating
+from ...gratings.lobe import continue_paths
 from ...lights.sources import sample_light
 from ...sampling import footprint
 from ...transport.walker import Hit, Rays
@@ -25,9 +27,15 @@ from ...transport.walker import Hit, Rays
 __all__ = ["grating_light"]
 
 
-def grating_light(c, out, rays: Rays, hit: Hit, rng):
+def grating_light(c, out, rays: Rays, hit: Hit, rng, follow=None, events=None, lobe_rng=None):
     """Light of every light diffracted by the grating layer towards the viewer (exact w_i by
-    shadow ray, so no noise from the light side), into the Diffraction part of ``out``."""
+    shadow ray, so no noise from the light side), into the Diffraction part of ``out``; and,
+    with ``follow(rays, gratings.lobe.ContinuedPaths)``, the paths that go on along a sampled
+    order (LINES gratings: whatever they find arrives diffracted, section 3.13). ``events`` (B,)
+    bool: the rays whose lights, meshes and records are diffracted here (None: all; a path
+    continued from another grating leaves them to the light pass's records, section 3.13).
+    ``lobe_rng``: the continuation's own random stream (None: ``rng``), so the paths it adds do
+    not shift the numbers of everything else."""
     prepared = c.prepared
     g, lights = prepared.gratings, prepared.lights
     edges = prepared.grid.bin_edges
@@ -35,17 +43,16 @@ def grating_light(c, out, rays: Rays, hit: Hit, rng):
         sel = hit.mat == m
         r, h = rays.take(sel), hit.take(sel)
         b = len(r)
+        ev = None if events is None else np.asarray(events, bool)[sel]
         t, s = grating_frame(tangents_at(prepared.corner_grating_tangent, prepared.tri_grating_tangent, h.prim,
                                          h.bu, h.bv, h.ng), h.ng, np.full(b, g.cos_rot[m]), np.full(b, g.sin_rot[m]))
         over = prepared.tri_period[h.prim] if len(prepared.tri_period) else np.zeros(b, np.float32)
         period = np.where(over > 0, over, g.period[m])
         w_o = -r.d
-        if c.world_gratings[m]:  # the world, orders sampled from the viewer (docs/physics.md section 3.11)
-            seen = world_through_grating(prepared, r, h, int(m), t, s, period, rng)
-            if seen is not None:
-                sub, contrib, casts = seen
-                out.shadow_rays += casts
-                out.accumulate(sub, contrib, out.diffraction)
+        if follow is not None and c.lobe_gratings[m]:  # the grating as a lobe: the path goes on along an order
+            cont = continue_paths(prepared, r, h, int(m), t, s, period, rng if lobe_rng is None else lobe_rng)  # (docs/physics.md sections 3.11, 3.13)
+            if cont is not None:
+                follow(r, cont)
         samples = [(li, *sample_light(lights, li, h.p, rng), 0.0) for li in range(len(lights))]  # (a handful)
         if prepared.mesh_lights is not None:  # the emissive meshes: one power-proportional point per hit
             wi, dist, gfac, prim, _ = prepared.mesh_lights.sample(h.p, rng)
@@ -54,6 +61,8 @@ def grating_light(c, out, rays: Rays, hit: Hit, rng):
             cos_l = np.einsum("ij,ij->i", wi, h.ng)
             valid = (cos_l < 0) if g.transmission[m] else (cos_l > 0)
             valid &= gfac > 0
+            if ev is not None:
+                valid &= ev
             idx = np.flatnonzero(valid)
             if idx.size == 0:
                 continue
@@ -85,6 +94,8 @@ def grating_light(c, out, rays: Rays, hit: Hit, rng):
             hit_of, irr, src = c.record_map.lobes(h.prim, h.bu, h.bv, rng, at=h.p)
             cos_l = np.einsum("ij,ij->i", src, h.ng[hit_of])
             keep = (cos_l < 0) if g.transmission[m] else (cos_l > 0)
+            if ev is not None:
+                keep &= ev[hit_of]
             hit_of, irr, src = hit_of[keep], irr[keep], src[keep]
             chunk = c.record_map.max_pairs
             for c0 in range(0, len(hit_of), chunk):  # (hit, lobe) pairs in bounded chunks

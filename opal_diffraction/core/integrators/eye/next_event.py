@@ -186,10 +186,13 @@ class _LobeAdd:
 class MicrofacetLobe:
     """core/materials/bsdf.py's lobes (``params``) at ``hit`` for ``next_events``, with Cycles'
     bump-terminator term on Lambertian lobes; shadow rays leave on the light's side (a light
-    behind a rough glass is seen through it)."""
+    behind a rough glass is seen through it). Hits whose material mixes layers (``mixture``, a
+    core/materials/mixtures.py LobeMixture) are evaluated over all their lobes: f = sum_i w_i f_i
+    and, for MIS, p = sum_i w_i p_i (docs/physics.md section 14.8)."""
 
-    def __init__(self, c, rays: Rays, hit: Hit, params):
+    def __init__(self, c, rays: Rays, hit: Hit, params, mixture=None):
         self.prepared, self.normal_maps, self.hit, self.params = c.prepared, c.normal_maps, hit, params
+        self.mixture = mixture
         self.wo = -rays.d
         self.lambert = params.lobe == bsdf.LAMBERT
 
@@ -197,9 +200,13 @@ class MicrofacetLobe:
         """(f cos (B, n') of the lobe, scale (B,): the sample's weight times the MIS weight and
         the bump term, the entries that reach the film) for light samples ``wi``."""
         hit = self.hit
-        f_cos, p_bsdf = bsdf.evaluate(self.params, self.wo, wi, hit.ns, hit.ng)
         scale = np.asarray(g, np.float32)
-        if self.normal_maps and self.lambert.any():
+        if self.mixture is not None:
+            b = bump(self.prepared, self.normal_maps, hit, wi) if self.normal_maps else None
+            f_cos, p_bsdf = self.mixture.evaluate(self.params, self.wo, wi, hit.ns, hit.ng, b)
+        else:
+            f_cos, p_bsdf = bsdf.evaluate(self.params, self.wo, wi, hit.ns, hit.ng)
+        if self.mixture is None and self.normal_maps and self.lambert.any():
             scale = scale * np.where(self.lambert, bump(self.prepared, self.normal_maps, hit, wi), np.float32(1.0))
         if p_light is not None:
             scale = scale * power_heuristic(p_light, p_bsdf, light_first=True)

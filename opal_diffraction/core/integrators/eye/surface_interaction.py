@@ -3,7 +3,8 @@
 Per hit of the tile tracer (core/integrators/eye/eye_pass.py): the shading normal bent by normal
 maps (core/materials/surface.py, docs/physics.md section 4.6), Cycles' bump-terminator term for
 normal-mapped diffuse lobes, the microfacet surfaces' BSDF parameters (core/materials/bsdf.py:
-textures, side, one Principled layer drawn per hit), and the black-surface test. What the
+textures, side, one Principled layer drawn per hit for the bounce and every layer with its weight
+for next events: core/materials/mixtures.py ``LobeMixture``), and the black-surface test. What the
 emission / next-event stage computed for a hit and the BSDF-sampling stage reuses (the lobe's
 parameters, the base colours) travels between them in a ``HitShading``, never as hidden state.
 """
@@ -15,18 +16,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...materials import bsdf
-from ...materials.mixtures import per_hit_layers
+from ...materials.mixtures import LobeMixture, per_hit_layers
 from ...materials.surface import shading_normal, surface_mix_fac, surface_reflectance, surface_roughness
 from ...transport.walker import Hit, Rays, shading_normals
 
-__all__ = ["HitShading", "bend_normals", "bump", "bump_shadowing", "surface_params", "reflects"]
+__all__ = ["HitShading", "bend_normals", "bump", "bump_shadowing", "surface_params", "surface_lobes", "reflects"]
 
 
 @dataclass
 class HitShading:
     """What the eye pass's on_hit shaded at one batch of hits, handed to its scatter (the walker
-    passes it on): the same lobe for light and bounce, and the base colours computed once."""
-    # (mask (B,) bool, bsdf.SurfaceParams of those hits): the microfacet hits, or None
+    passes it on): the lobes for light and bounce, and the base colours computed once."""
+    # (mask (B,) bool, bsdf.SurfaceParams of those hits, their LobeMixture or None): the microfacet hits, or None
     micro: tuple | None = None
     # (rows (K,) of the batch, base colours (K, n) or (K,)): the Lambertian hits, or None
     diffuse: tuple | None = None
@@ -88,22 +89,36 @@ def bump_shadowing(ni: np.ndarray, ns: np.ndarray, wi: np.ndarray) -> np.ndarray
 
 
 def surface_params(prepared, mixed_layers: np.ndarray, rays: Rays, hit: Hit, rng) -> "bsdf.SurfaceParams":
-    """core/materials/bsdf.py's parameters of these hits: base colour and roughness per hit (textures),
-    the side (entering or leaving glass), one Principled layer (or lobe of a shader mix, its
-    weights per hit where a Fresnel / Layer Weight node gives them) drawn per hit where the
-    material mixes layers (``mixed_layers`` (M,) bool; a pure metal, glass or base takes its
-    one layer: no number)."""
+    """core/materials/bsdf.py's parameters of these hits (``surface_lobes`` without the mixture)."""
+    return surface_lobes(prepared, mixed_layers, rays, hit, rng)[0]
+
+
+def surface_lobes(prepared, mixed_layers: np.ndarray, rays: Rays, hit: Hit, rng):
+    """(core/materials/bsdf.py's parameters of these hits, their LobeMixture or None): base colour
+    and roughness per hit (textures), the side (entering or leaving glass), one Principled layer
+    (or lobe of a shader mix, its weights per hit where a Fresnel / Layer Weight node gives them)
+    drawn per hit where the material mixes layers (``mixed_layers`` (M,) bool; a pure metal,
+    glass or base takes its one layer: no number) for the bounce, and every lobe of those hits
+    with its weight for next events and MIS (core/materials/mixtures.py, docs/physics.md 14.8)."""
     base = surface_reflectance(prepared, hit, rays.lam)
     if rays.lam is not None:
         base = base[:, None]
-    u_layer = rng.random(len(rays)) if mixed_layers[hit.mat].any() else None
+    mixed = mixed_layers[hit.mat]
+    u_layer = rng.random(len(rays)) if mixed.any() else None
     # a Fresnel / Layer Weight mix: its layer weights per hit from the view direction (section 14.8)
     weights = None if u_layer is None else per_hit_layers(
         prepared.materials, hit.mat, np.einsum("ij,ij->i", -rays.d, hit.ns), hit.front, surface_mix_fac(prepared, hit))
+    rough = surface_roughness(prepared, hit)
     params = bsdf.params_from_materials(prepared.materials, hit.mat, hit.front, rays.lam, base=base,
-                                        roughness=surface_roughness(prepared, hit), u_layer=u_layer,
-                                        weights=weights)
-    return bsdf.with_outgoing(params, -rays.d, hit.ns)  # the next events and the bounce share wo
+                                        roughness=rough, u_layer=u_layer, weights=weights)
+    wo = -rays.d
+    mixture = None
+    if u_layer is not None:
+        m = prepared.materials
+        metallic, transmission = (m.metallic[hit.mat], m.transmission[hit.mat]) if weights is None else weights
+        mixture = LobeMixture.of(m, hit.mat, hit.front, mixed, metallic, transmission, wo, hit.ns, lam=rays.lam,
+                                 base=base, roughness=rough)
+    return bsdf.with_outgoing(params, wo, hit.ns), mixture  # the next events and the bounce share wo
 
 
 def reflects(n: int, probe: int | None, albedo: np.ndarray) -> np.ndarray:
