@@ -274,7 +274,8 @@ class OpalRenderEngine(bpy.types.RenderEngine):
             self._status("Exporting camera (persistent data)")
             t_cam = time.perf_counter()
             cam_warn = Warnings()
-            camera = export_camera(depsgraph, width=width, height=height, camera=self.camera_override, warn=cam_warn)
+            camera = export_camera(depsgraph, width=width, height=height, camera=self.camera_override, warn=cam_warn,
+                                   frame_set=self.frame_set, objects_checked=True)
             old = kept.exported
             exported = ExportResult(
                 replace(old.scene, camera=camera),
@@ -290,10 +291,12 @@ class OpalRenderEngine(bpy.types.RenderEngine):
                 depsgraph, width=width, height=height, camera=self.camera_override,
                 test_break=self._should_stop, progress=lambda msg: self._status(msg.capitalize()),
                 mesh_cache=pd.mesh_cache if persistent else None,
+                frame_set=self.frame_set,  # motion blur: the camera and objects at sub-frames (export/)
             )
             cam_warn = Warnings()
             if persistent:  # which of its warnings the camera made (a camera-only frame replaces them)
-                export_camera(depsgraph, width=width, height=height, camera=self.camera_override, warn=cam_warn)
+                export_camera(depsgraph, width=width, height=height, camera=self.camera_override, warn=cam_warn,
+                              frame_set=self.frame_set, objects_checked=True)
             camera_warnings = tuple(cam_warn.items)
         warnings = [w for w in (opal.wavelength_warning(),) if w] + list(exported.warnings)
         last_render["export"] = dict(exported.stats)

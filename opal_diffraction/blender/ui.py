@@ -134,6 +134,37 @@ class OPAL_RENDER_PT_film(OpalButtonsPanel, Panel):
             sub.prop(cycles, "film_transparent_glass", text="Transparent Glass")
 
 
+class OPAL_RENDER_PT_motion_blur(OpalButtonsPanel, Panel):
+    """Render > Motion Blur (Blender's own settings, as Cycles' panel shows them): the camera's
+    motion over the shutter is rendered (docs/physics.md section 6.13)."""
+
+    bl_label = "Motion Blur"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.render, "use_motion_blur", text="")
+
+    def draw(self, context):
+        rd = context.scene.render
+        layout = _split(self.layout)
+        layout.active = rd.use_motion_blur
+        layout.prop(rd, "motion_blur_position", text="Position")
+        layout.prop(rd, "motion_blur_shutter")
+
+
+class OPAL_RENDER_PT_motion_blur_curve(OpalButtonsPanel, Panel):
+    bl_label = "Shutter Curve"
+    bl_context = "render"
+    bl_parent_id = "OPAL_RENDER_PT_motion_blur"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        rd = context.scene.render
+        self.layout.active = rd.use_motion_blur
+        self.layout.template_curve_mapping(rd, "motion_blur_shutter_curve")
+
+
 class OPAL_DATA_PT_panorama(OpalButtonsPanel, Panel):
     """A panoramic camera's type and its settings (Blender's Lens panel draws them for Cycles only)."""
     bl_label = "Panorama"
@@ -351,6 +382,8 @@ classes = (
     OPAL_RENDER_PT_spectrum,
     OPAL_RENDER_PT_light_paths,
     OPAL_RENDER_PT_film,
+    OPAL_RENDER_PT_motion_blur,
+    OPAL_RENDER_PT_motion_blur_curve,
     OPAL_DATA_PT_panorama,
     OPAL_RENDER_PT_output,
     OPAL_RENDER_PT_performance,

@@ -1,5 +1,5 @@
 """The camera and film scenes of the [camera-world] issue's "Must show" (issue 29): depth of
-field, clip start / end, Film > Transparent and panoramic cameras, each built in the bpy
+field, clip start / end, Film > Transparent, panoramic cameras and motion blur, each built in the bpy
 session and rendered by Cycles and by OPAL_DIFFRACTION from the same scene
 (tests/blender/test_camera_parity.py compares them).
 
@@ -25,7 +25,7 @@ except ImportError:  # loaded by file path from tools/
     bs = load_script(os.path.join("tests", "blender", "blender_scenes.py"))
     ps = load_script(os.path.join("tests", "blender", "parity_scenes.py"))
 
-__all__ = ["SCENES", "build"]
+__all__ = ["SCENES", "MOTION_SCENES", "build"]
 
 
 def _sun_and_world(sc, world=(0.25, 0.3, 0.4)):
@@ -176,9 +176,63 @@ def fisheye():
     return sc
 
 
+def _linear_keys(ob, path, values, frames=(0, 2)):
+    """Keyframes of ``ob``'s ``path`` (one value per frame), linear between them."""
+    for f, v in zip(frames, values):
+        setattr(ob, path, v)
+        ob.keyframe_insert(data_path=path, frame=f)
+    ad = ob.animation_data
+    fcurves = ad.action.fcurves if hasattr(ad.action, "fcurves") else [
+        fc for layer in ad.action.layers for strip in layer.strips for bag in strip.channelbags for fc in bag.fcurves]
+    for fc in fcurves:
+        for k in fc.keyframe_points:
+            k.interpolation = "LINEAR"
+
+
+def _motion_blur(sc, shutter=1.0, position="CENTER"):
+    sc.render.use_motion_blur = True
+    sc.render.motion_blur_shutter = shutter
+    sc.render.motion_blur_position = position
+    sc.frame_set(1)
+
+
+def motion_camera():
+    """The floor, cube and ball under a sun, seen by a camera that slides 1.8 m to its right and
+    turns 24 degrees to the right while the shutter is open (frames 0.5-1.5 of a move keyed linearly from
+    frame 0 to 2, shutter 1 frame centred on frame 1): everything smears sideways, the near
+    ball most."""
+    sc = ps._scene()
+    _sun_and_world(sc)
+    _floor_cube_sphere(floor_half=8.0)
+    cam = ps.look_at((2.5, -4.5, 2.6), (0.0, 0.2, 0.4))
+    rx, ry, rz = cam.rotation_euler
+    _linear_keys(cam, "location", [(0.9, -5.3, 2.6), (4.1, -3.7, 2.6)])
+    # sliding right and turning right (z rotation falling): both move the image left
+    _linear_keys(cam, "rotation_euler", [(rx, ry, rz + math.radians(24)), (rx, ry, rz - math.radians(24))])
+    _motion_blur(sc)
+    return sc
+
+
+def motion_cube():
+    """A 1.4 m cube flying 1.6 m across the view during the shutter (keyed linearly from frame 0 to
+    2, shutter 1 frame starting on frame 1) over the floor, a still ball beside it, under a
+    sun: the cube and its shadow smear, the ball stays sharp."""
+    sc = ps._scene()
+    _sun_and_world(sc)
+    bs.plane("floor", half=8.0, mat=bs.material("floor", "DIFFUSE", (0.5, 0.5, 0.5)))
+    cube = ps._cube("cube", 1.4, (0.0, 0.6, 0.7), bs.material("cube", "DIFFUSE", (0.8, 0.8, 0.8)))
+    _sphere("ball", 0.45, (-0.9, -0.9, 0.45), (0.8, 0.5, 0.2))
+    _linear_keys(cube, "location", [(-1.6, 0.6, 0.7), (1.6, 0.6, 0.7)])
+    ps.look_at((2.5, -4.5, 2.6), (0.0, 0.2, 0.4))
+    _motion_blur(sc, position="START")
+    return sc
+
+
 SCENES = {"dof": dof, "bokeh": bokeh, "clip": clip, "transparent": transparent, "transparent_glass": transparent_glass, "holdout": holdout, "equirect": equirect, "fisheye": fisheye}
+#: motion blur (tests/blender/test_motion_parity.py)
+MOTION_SCENES = {"motion_camera": motion_camera, "motion_cube": motion_cube}
 
 
 def build(name: str):
     """Build scene ``name`` (a key of SCENES) in the current bpy session."""
-    return SCENES[name]()
+    return {**SCENES, **MOTION_SCENES}[name]()

@@ -136,6 +136,8 @@ class _Layout:
         if name in ("label", "separator", "template_node_view", "template_ID", "template_list", "menu",
                     "prop_decorator"):
             return lambda *a, **k: self.log.append((name, a, k))
+        if name == "template_curve_mapping":  # a curve property: checked as prop is
+            return lambda data, prop, *a, **k: self.prop(data, prop)
         raise AttributeError(name)
 
     def __setattr__(self, name, value):

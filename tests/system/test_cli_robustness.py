@@ -57,7 +57,9 @@ def scene_arrays(s: Scene) -> dict:
     for f in fields(Lights):
         d["light_" + f.name] = getattr(s.lights, f.name)
     for f in fields(Camera):
-        d["camera_" + f.name] = np.asarray(getattr(s.camera, f.name))
+        val = np.asarray(getattr(s.camera, f.name))
+        if val.size or f.name not in ("motion", "shutter_table"):  # a still camera's are not written
+            d["camera_" + f.name] = val
     return d
 
 

@@ -34,7 +34,8 @@ One module per concept, as in BlendLuxCore's ``export`` package:
     meshes     meshes, tangents, periods, instances -> arrays; the MeshCache
     lights     the light table (export_lights)
     world      the world: a colour, or an environment map with its rotation (export_world_light)
-    camera     render size, border region, the camera (export_camera)
+    camera     render size, border region, the camera (export_camera), its motion over the shutter
+    motion     objects' motion: the vertices in the shutter's time bins (object_motion)
     messages   the warnings, once each
 
 :func:`export_scene` here puts them together. A rendered viewport passes a persistent
@@ -53,6 +54,7 @@ import numpy as np
 from ...core.scene.model import Lights, Scene
 from ..mesh_io import GRATING_ATTRIBUTE, PERIOD_ATTRIBUTE
 from .camera import export_camera, render_region, render_size
+from .motion import instance_id, object_motion
 from .colour import rec709_to_working_space, working_space_to_rec709
 from .domains import flatten_domains, instance_domains
 from .lights import LightRows, export_lights
@@ -97,7 +99,8 @@ class ExportResult:
 
 
 def export_scene(depsgraph, *, width: int | None = None, height: int | None = None, camera=None,
-                 test_break=None, progress=None, mesh_cache: MeshCache | None = None) -> ExportResult:
+                 test_break=None, progress=None, mesh_cache: MeshCache | None = None,
+                 frame_set=None) -> ExportResult:
     """Export the evaluated ``depsgraph`` to a core Scene.
 
     ``width``/``height`` default to the scene's resolution times its percentage; ``camera``
@@ -105,7 +108,9 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     instances (raise ExportCancelled when it returns True); ``progress(message)`` receives a
     status line now and then. ``mesh_cache``: a :class:`MeshCache` kept between exports of this
     depsgraph, so that only meshes it does not hold (or that :meth:`MeshCache.invalidate`
-    dropped) are read; None reads every mesh. Raises SceneError with a readable message for
+    dropped) are read; None reads every mesh. ``frame_set(frame, subframe)``: re-evaluates the
+    depsgraph at a sub-frame (a final render's RenderEngine.frame_set), for motion blur
+    (export/camera.py camera_motion); None: no motion blur. Raises SceneError with a readable message for
     input that cannot be rendered (NaN coordinates, a panoramic camera, ...).
     """
     t0 = time.perf_counter()
@@ -121,6 +126,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     lights = LightRows(warn, to709)
     skipped = Skipped()
     n_instances = 0
+    kept: list = []  # (group key, instance id) in export order: object motion reads them again
 
     for i, inst in enumerate(depsgraph.object_instances):
         if i % POLL_EVERY == 0:
@@ -147,6 +153,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
         if md is None or len(md.triangles) == 0:
             continue
         groups[(mkey, slots)].append(np.array(inst.matrix_world, np.float64))
+        kept.append(((mkey, slots), instance_id(inst)))
         domains[(mkey, slots)].append(instance_domains(ob))
         n_instances += 1
 
@@ -160,8 +167,12 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     domain_fields = flatten_domains(groups, domains, meshes, materials.hidden_rows())
 
     skipped.report(warn)
+    # object motion blur: the vertices in the shutter's time bins (export/motion.py)
+    motion_vertices = object_motion(depsgraph, frame_set, kept, groups, meshes, materials.grating,
+                                    materials.hidden_rows(), warn, n_triangles=len(triangles))
     core_materials = materials.finish()
-    cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn)
+    cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn, frame_set=frame_set,
+                        objects_checked=frame_set is not None)
     world = export_world_light(depsgraph, warn)
     core_scene = Scene(
         vertices=vertices, triangles=triangles, tri_material=tri_material,
@@ -170,6 +181,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
         world_image=world.image, world_rotation=world.rotation,
         corner_uvs=corner_uvs, corner_tangents=corner_tangents, **materials.textures.scene_fields(), **domain_fields,
         shader_programs=list(materials.programs), corner_generated=corner_generated, corner_object=corner_object,
+        **({} if motion_vertices is None else {"motion_vertices": motion_vertices}),
     )
     meshes.done()
     stats = {

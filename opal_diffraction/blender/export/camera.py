@@ -6,19 +6,26 @@ orthographic cameras keep their lens, sensor size and fit, orthographic scale an
 panoramic ones their type (equirectangular, fisheye equidistant or equisolid) and its ranges;
 every camera its clip start / end and depth of field (aperture from the f-number, blades,
 rotation, ratio, focus distance or object), as Cycles reads them (intern/cycles/blender/camera.cpp).
-What the core cannot do is named: other panorama types (an error), non-square pixels and
-motion blur (warnings).
+Motion blur (Render > Motion Blur, docs/physics.md section 6.13) as Cycles syncs it
+(intern/cycles/blender/sync.cpp sync_motion, object.cpp object_motion_steps): the camera's matrix
+at 2^(motion steps) + 1 evenly spaced times across the shutter (frames, placed by Position: start,
+centre or end on the frame), read by re-evaluating the render's depsgraph at each sub-frame
+(RenderEngine.frame_set, then back to the frame), and the Shutter Curve as an inverse CDF.
+Objects' motion: export/motion.py. What the core cannot do is named: other panorama types (an
+error), non-square pixels, motion blur outside final renders, a rolling shutter (warnings).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ...core.sampling.camera import shutter_table
 from ...core.scene.model import Camera
 from ...core.scene.checks import SceneError
 from .messages import Warnings
 
-__all__ = ["render_size", "render_region", "camera_from_object", "export_camera", "focus_distance", "PANORAMA_TYPES"]
+__all__ = ["render_size", "render_region", "camera_from_object", "export_camera", "focus_distance", "PANORAMA_TYPES",
+           "motion_times", "camera_motion", "SHUTTER_TABLE_SIZE"]
 
 
 def render_size(scene) -> tuple[int, int]:
@@ -63,10 +70,95 @@ def focus_distance(cam_ob, m: np.ndarray) -> float:
     return float(abs(view @ (m[:3, 3] - tm[:3, 3])))
 
 
-def camera_from_object(cam_ob, width: int, height: int, scene, warn) -> Camera:
+#: Points at which the shutter curve is read (Cycles' SHUTTER_TABLE_SIZE is 256)
+SHUTTER_TABLE_SIZE = 256
+
+
+def motion_times(scene, steps: int) -> list[float]:
+    """The scene times (frames, with sub-frames) of ``steps`` evenly spaced motion steps across
+    the shutter, as Cycles' sync_motion: the shutter of Shutter frames centred on the frame,
+    or starting / ending on it (Position), step i at centre + (2 i / (steps - 1) - 1) shutter / 2."""
+    r = scene.render
+    shutter = float(r.motion_blur_shutter)
+    centre = float(scene.frame_current) + float(getattr(scene, "frame_subframe", 0.0))
+    position = str(getattr(r, "motion_blur_position", "CENTER"))
+    centre += {"START": 0.5 * shutter, "END": -0.5 * shutter}.get(position, 0.0)
+    return [centre + (2.0 * i / (steps - 1) - 1.0) * 0.5 * shutter for i in range(steps)]
+
+
+def _moving_objects(depsgraph, camera_name: str) -> dict:
+    """{name: world matrix} of the depsgraph's objects other than the camera, for spotting object motion."""
+    out = {}
+    for ob in depsgraph.objects:
+        if ob.type in ("MESH", "CURVE", "SURFACE", "META", "FONT", "LIGHT") and ob.name != camera_name:
+            out[ob.name] = np.array(ob.matrix_world, np.float64)
+    return out
+
+
+def camera_motion(depsgraph, cam_ob, frame_set, warn, objects_checked: bool = False) -> dict:
+    """``cam_ob``: the camera object (original). Camera fields for motion blur (``motion``, ``shutter_table``), {} without: Render > Motion
+    Blur off, a zero shutter, the camera's own Motion Blur off (Object > Motion Blur, as Cycles),
+    or no ``frame_set(frame, subframe)`` to re-evaluate the depsgraph with (outside final renders:
+    a warning, as Cycles blurs final renders only). Objects whose transforms change across the
+    shutter are named in a warning: their motion is not rendered."""
+    scene = depsgraph.scene
+    r = scene.render
+    if not getattr(r, "use_motion_blur", False) or float(r.motion_blur_shutter) <= 0:
+        return {}
+    if frame_set is None:
+        warn("motion blur is rendered in final renders only: this image is at the frame's own time")
+        return {}
+    cyc = getattr(scene, "cycles", None)
+    if cyc is not None and str(getattr(cyc, "rolling_shutter_type", "NONE")) != "NONE":
+        warn("the rolling shutter is not rendered: the whole image is exposed over the shutter at once")
+    ob_cycles = getattr(cam_ob, "cycles", None)
+    use = bool(getattr(ob_cycles, "use_motion_blur", True)) if ob_cycles is not None else True
+    steps = max(1, int(getattr(ob_cycles, "motion_steps", 1))) if ob_cycles is not None else 1
+    n = (2 << (steps - 1)) + 1  # Cycles' object_motion_steps: 2^steps + 1, one step on the frame
+    frame, sub = int(scene.frame_current), float(getattr(scene, "frame_subframe", 0.0))
+    name = cam_ob.name
+    mats, objects = [], []
+    try:
+        for t in motion_times(scene, n):
+            f = int(np.floor(t))
+            frame_set(f, t - f)
+            mats.append(np.array(cam_ob.evaluated_get(depsgraph).matrix_world, np.float64))
+            objects.append(_moving_objects(depsgraph, name))
+    finally:
+        frame_set(frame, sub)
+    moving = [] if objects_checked else sorted(k for k in objects[0] if any(k in o and not np.allclose(o[k], objects[0][k], atol=1e-7)
+                                                 for o in objects[1:]))
+    if moving:
+        shown = ", ".join(f"'{k}'" for k in moving[:3]) + (f" and {len(moving) - 3} more" if len(moving) > 3 else "")
+        warn(f"object motion blur is not rendered (only the camera's): {shown} "
+             f"{'moves' if len(moving) == 1 else 'move'} during the shutter and {'is' if len(moving) == 1 else 'are'} "
+             "rendered at the frame's position")
+    out = {}
+    m = np.stack(mats)
+    if use and not np.allclose(m, m[0], atol=1e-9) and np.isfinite(m).all():
+        out["motion"] = m
+    curve = getattr(r, "motion_blur_shutter_curve", None)
+    if curve is not None:  # the shutter's curve times objects' motion too, the camera's or not
+        try:
+            curve.initialize()
+            w = [curve.evaluate(curve.curves[0], float(x)) for x in np.linspace(0.0, 1.0, SHUTTER_TABLE_SIZE)]
+        except (AttributeError, IndexError, RuntimeError, TypeError):
+            w = []
+        w = np.asarray(w, np.float64)
+        if w.size and not np.allclose(w, w[0]):  # a flat curve needs no table
+            table = shutter_table(w)
+            if table.size:
+                out["shutter_table"] = table
+            else:
+                warn("the shutter curve is zero everywhere: motion blur uses a flat shutter")
+    return out
+
+
+def camera_from_object(cam_ob, width: int, height: int, scene, warn, motion: dict | None = None) -> Camera:
     """The core camera of the evaluated camera object ``cam_ob`` for a ``width`` x ``height``
     image: perspective, orthographic or panoramic (equirectangular, fisheye equidistant or
-    equisolid), with depth of field and clip start / end read as Cycles reads them."""
+    equisolid), with depth of field and clip start / end read as Cycles reads them. ``motion``:
+    :func:`camera_motion`'s fields (motion blur)."""
     cam = cam_ob.data
     if cam_ob.type != "CAMERA":
         raise SceneError(f"the active camera '{cam_ob.name}' is not a camera object")
@@ -83,8 +175,6 @@ def camera_from_object(cam_ob, width: int, height: int, scene, warn) -> Camera:
     r = scene.render
     if abs(r.pixel_aspect_x - r.pixel_aspect_y) > 1e-6:
         warn("non-square pixel aspect is not supported: rendered with square pixels")
-    if getattr(r, "use_motion_blur", False):
-        warn("motion blur is not rendered: the frame is rendered at its own time, without blur")
     lens = {}
     dof = getattr(cam, "dof", None)
     if dof is not None and dof.use_dof:
@@ -102,20 +192,26 @@ def camera_from_object(cam_ob, width: int, height: int, scene, warn) -> Camera:
         matrix=m, kind=cam.type, lens=float(cam.lens), sensor_width=float(cam.sensor_width),
         sensor_height=float(cam.sensor_height), sensor_fit=cam.sensor_fit, ortho_scale=float(cam.ortho_scale),
         shift_x=float(cam.shift_x), shift_y=float(cam.shift_y), width=int(width), height=int(height),
-        clip_start=float(cam.clip_start), clip_end=float(cam.clip_end), **lens,
+        clip_start=float(cam.clip_start), clip_end=float(cam.clip_end), **lens, **(motion or {}),
     )
 
 
 def export_camera(depsgraph, *, width: int | None = None, height: int | None = None, camera=None,
-                  warn: Warnings | None = None) -> Camera | None:
+                  warn: Warnings | None = None, frame_set=None, objects_checked: bool = False) -> Camera | None:
     """The core camera alone, as :func:`export_scene` makes it: ``camera`` (an object) or the
     scene's, for ``width`` x ``height`` (default :func:`render_size`); None without a camera.
-    ``warn``: collects the warnings (default: dropped)."""
+    ``warn``: collects the warnings (default: dropped). ``frame_set(frame, subframe)``: re-evaluates
+    ``depsgraph`` at a sub-frame (a final render's RenderEngine.frame_set) for motion blur; None:
+    no motion blur (a warning when it is on). ``objects_checked``: the objects' motion is exported
+    (export/motion.py), so moving objects are not warned about here."""
     scene = depsgraph.scene
     if width is None or height is None:
         width, height = render_size(scene)
     cam_ob = camera if camera is not None else scene.camera
     if cam_ob is None:
         return None
-    cam_eval = cam_ob.evaluated_get(depsgraph) if not cam_ob.is_evaluated else cam_ob
-    return camera_from_object(cam_eval, width, height, scene, warn if warn is not None else Warnings())
+    original = cam_ob.original if cam_ob.is_evaluated else cam_ob
+    warn = warn if warn is not None else Warnings()
+    motion = camera_motion(depsgraph, original, frame_set, warn, objects_checked)
+    cam_eval = original.evaluated_get(depsgraph)  # (again: frame_set re-evaluates) at the frame's time
+    return camera_from_object(cam_eval, width, height, scene, warn, motion)

@@ -11,7 +11,8 @@ holds the acceleration structure, the spectra of materials, lights and world on 
 grid, per-triangle normals, offsets and grating frames, the shading normals per corner (None for
 a flat scene), and the light pass's targets (which
 objects bend light, which receive it, how much light each lamp sends their way), so the plan
-can decide without running anything.
+can decide without running anything. With object motion blur, a ray caster and triangle frames
+per time bin of the shutter (``motion_bins``, docs/physics.md section 6.13).
 
 The camera and the eye-only settings (samples, rounds, tiles, filter, time limit) do not change
 any of that: ``with_view`` swaps them and keeps the rest, which is what the rendered viewport
@@ -113,6 +114,9 @@ class PreparedScene:
     # (T, 3, 3) float32 smooth grating tangents per corner of grating triangles (core/gratings/directions.py;
     # other rows zero), or None
     corner_grating_tangent: np.ndarray | None = None
+    # object motion blur (docs/physics.md section 6.13): per time bin of scene.motion_vertices, its
+    # ray caster and triangle frames (MotionBin); empty: the geometry does not move
+    motion_bins: tuple = ()
 
     @property
     def grid(self) -> WavelengthGrid:
@@ -142,6 +146,27 @@ def scene_extent(v: np.ndarray) -> float:
         return 1.0
     extent = float(np.max(np.ptp(v, axis=0)))
     return extent if extent > 0 else max(float(np.max(np.abs(v))), 1e-30)
+
+
+@dataclass(frozen=True)
+class MotionBin:
+    """One time bin of object motion: the geometry at the bin's centre (docs/physics.md section 6.13)."""
+
+    accel: object            # accel.Accelerator over the bin's vertices (the same triangles)
+    tri_normal: np.ndarray   # (T, 3) float32
+    tri_offset: np.ndarray   # (T,) float32, as PreparedScene.tri_offset
+
+
+def motion_bins(scene: Scene, t: np.ndarray, base: float, backend: str, stopped=None) -> tuple:
+    """The MotionBin of each of ``scene.motion_vertices``' bins (empty: none)."""
+    mv = np.asarray(scene.motion_vertices, np.float32)
+    out = []
+    for vk in (mv if mv.size else ()):
+        check(stopped)
+        out.append(MotionBin(accel=build_accelerator(vk, t, backend, threads=1, stopped=stopped),
+                             tri_normal=triangle_normals(vk, t).astype(np.float32),
+                             tri_offset=triangle_offsets(vk, t, base)))
+    return tuple(out)
 
 
 def triangle_offsets(v: np.ndarray, t: np.ndarray, base: float) -> np.ndarray:
@@ -368,6 +393,7 @@ def _prepare(scene, settings, conv, reuse, stopped) -> PreparedScene:
         microfacet=microfacet,
         opal_domains=scene.volume_domains(),
         corner_grating_tangent=corner_grating_tangent,
+        motion_bins=motion_bins(scene, t, base, "numpy" if extent < EMBREE_MIN_EXTENT else settings.backend, stopped),
     )
     frozen = {f.name: _read_only(getattr(prepared, f.name)) for f in fields(prepared)}
     frozen["prepare_s"] = time.perf_counter() - t0

@@ -8,16 +8,20 @@ is the same whatever runs them: threads or Dask workers (the executors of schedu
 runs one unit. With adaptive sampling (core/render/adaptive.py) a unit may trace only some of its
 tile's pixels: which ones follows from the film after the tile's earlier rounds, so it is the
 same wherever the units run; the even rounds are the "A" half of the error estimate
-(``is_half_a``).
+(``is_half_a``). With motion blur each camera sample takes a time across the shutter, and with
+object motion (``PreparedScene.motion_bins``) each path is traced in its time bin's geometry
+(docs/physics.md section 6.13).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import copy
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from ..sampling.camera import FilterSampler, camera_rays, has_lens, lens_samples, pixel_samples
+from ..sampling.camera import (FilterSampler, camera_rays, has_lens, has_motion, lens_samples, pixel_samples,
+                               shutter_times, time_samples)
 from ..sampling.footprint import camera_differentials, filter_box_width
 from ..sampling.sampler import blue_noise_numbers
 from ..scene.settings import RenderSettings
@@ -148,8 +152,12 @@ def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: i
     sx, sy, sl, pidx = pixel_samples(xs.astype(np.float64), ys.astype(np.float64), spp, rng, filt,
                                      qmc=(ids, starts, work.seed))
     lens = lens_samples(len(xs), spp, rng, (ids, starts, work.seed)) if has_lens(cam) else None
-    # thin lens, clipping, panoramas (core/sampling/camera.py); tmax: clip end, None: unbounded
-    o, d, tmax, valid = camera_rays(cam, sx, sy, lens)
+    # motion blur: each sample's time across the shutter (docs/physics.md section 6.13)
+    bins = getattr(eye.prepared, "motion_bins", ())
+    moving = has_motion(cam) or len(bins) > 0
+    times = shutter_times(cam, time_samples(len(xs), spp, rng, (ids, starts, work.seed))) if moving else None
+    # thin lens, clipping, panoramas, motion (core/sampling/camera.py); tmax: clip end, None: unbounded
+    o, d, tmax, valid = camera_rays(cam, sx, sy, lens, times)
     rd = None
     if eye.wants_differentials:  # ray differentials for gratings (core/sampling/footprint.py)
         rd = camera_differentials(cam, d, (sx - xs[pidx] - 0.5, sy - ys[pidx] - 0.5), filter_box_width(filt.width))
@@ -158,4 +166,55 @@ def trace_tile(eye, filt: FilterSampler, work: EyeWork, r_index: int, t_index: i
         o, d, pidx, sl, tmax = o[valid], d[valid], pidx[valid], sl[valid], tmax[valid]
         sids = (sids[0][valid], sids[1][valid], sids[2])
         rd = None if rd is None else rd[valid]
+        times = None if times is None else times[valid]
+    if len(bins) and len(o):  # object motion: each ray in its time bin's geometry
+        return _trace_bins(eye, bins, times, o, d, pidx, len(xs), rng, sl, sids, rd, tmax)
     return eye.trace(o, d, pidx, len(xs), rng, u_lambda=sl, sampler_ids=sids, differentials=rd, tmax=tmax)
+
+
+def _bin_eye(eye, bins, k: int):
+    """``eye`` seeing time bin ``k``'s geometry (its ray caster and triangle frames; the rest of the
+    prepared scene, and the light pass's result, the frame's), made once per eye pass."""
+    cache = eye.__dict__.setdefault("_motion_eyes", {})
+    if k not in cache:
+        b = bins[k]
+        e = copy.copy(eye)
+        e.prepared = replace(eye.prepared, accel=b.accel, tri_normal=b.tri_normal, tri_offset=b.tri_offset)
+        e.constants = replace(eye.constants, prepared=e.prepared)  # next-event shadow rays read it there
+        cache[k] = e
+    return cache[k]
+
+
+def _trace_bins(eye, bins, times, o, d, pidx, n_pixels, rng, sl, sids, rd, tmax):
+    """Object motion (docs/physics.md section 6.13): the rays of time t traced by the eye of bin
+    floor(t K); the tile's sums are the bins' sums added."""
+    k_of = np.minimum((np.asarray(times) * len(bins)).astype(np.int64), len(bins) - 1)
+    parts = []
+    for k in np.unique(k_of):
+        sel = np.flatnonzero(k_of == k)
+        parts.append(_bin_eye(eye, bins, int(k)).trace(
+            o[sel], d[sel], pidx[sel], n_pixels, rng, u_lambda=sl[sel],
+            sampler_ids=(sids[0][sel], sids[1][sel], sids[2]),
+            differentials=None if rd is None else rd[sel], tmax=None if tmax is None else tmax[sel]))
+    return _add_results(parts)
+
+
+def _add_results(parts):
+    """One TileResult of several over the same pixels: every per-pixel sum and the ray counts added
+    (a part without a pass contributes nothing to it)."""
+    if len(parts) == 1:
+        return parts[0]
+    out = {}
+    for f in fields(parts[0]):
+        vals = [getattr(p, f.name) for p in parts]
+        have = [v for v in vals if v is not None]
+        if not have:
+            out[f.name] = None
+        elif isinstance(have[0], np.ndarray):
+            total = np.array(have[0], copy=True)
+            for v in have[1:]:
+                total = total + v
+            out[f.name] = total
+        else:
+            out[f.name] = sum(have)
+    return type(parts[0])(**out)

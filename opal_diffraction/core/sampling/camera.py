@@ -17,6 +17,13 @@ for depth of field (the aperture a disk or Cycles' regular polygon of blades, tu
 squeezed by the anamorphic ratio; every ray aimed at the pinhole ray's point on the plane of
 focus), and clip start / end (the near and far planes along the view axis; along the ray for
 panoramas).
+
+Motion blur (docs/physics.md section 6.13): a moving camera holds its matrices at N evenly spaced
+times across the shutter; each camera ray takes a time in [0, 1] (``time_samples``: its own
+stratified Sobol-Burley dimension, mapped through the shutter curve's inverse CDF) and the
+camera interpolated as Cycles' transform_motion_array_interpolate (intern/cycles/util/transform.h):
+the two steps around the time, the rotation by quaternion slerp along the shorter arc, the
+position linearly.
 """
 
 from __future__ import annotations
@@ -27,7 +34,9 @@ from ..scene.model import Camera
 from .sampler import sobol_owen_2d, sobol_owen_x
 
 __all__ = ["FilterSampler", "camera_frame", "pixel_samples", "generate_rays", "camera_rays", "aperture_points",
-           "panorama_directions", "panorama_sensor", "has_lens", "clips", "lens_samples", "LENS_KEY"]
+           "panorama_directions", "panorama_sensor", "has_lens", "clips", "lens_samples", "LENS_KEY",
+           "has_motion", "time_samples", "TIME_KEY", "shutter_times", "shutter_table", "motion_frames",
+           "rotation_to_quaternion", "quaternion_to_rotation"]
 
 
 class FilterSampler:
@@ -139,6 +148,128 @@ def lens_samples(p: int, spp: int, rng: np.random.Generator, qmc=None) -> np.nda
     return np.stack([np.asarray(ux, np.float64), np.asarray(uy, np.float64)], axis=1)
 
 
+#: The shutter times' numbers: Sobol-Burley pair 0's x under their own scramble (the seed xor this
+#: constant), stratified over a pixel's samples and independent of the pixel position, the
+#: wavelength, the aperture and the path's numbers (which use other keys)
+TIME_KEY = 0x54494D45  # "TIME"
+
+
+def has_motion(cam: Camera) -> bool:
+    """Whether the camera moves during the shutter (at least two motion steps)."""
+    m = getattr(cam, "motion", None)
+    return m is not None and len(m) >= 2
+
+
+def shutter_table(curve, size: int = 4096) -> np.ndarray:
+    """The inverse CDF (``size`` times in [0, 1]) of a shutter curve: ``curve`` (M,) non-negative
+    weights at M evenly spaced times from the shutter's opening to its closing (Blender's Shutter
+    Curve, linear between them), as Cycles' shutter table (intern/cycles/scene/camera.cpp,
+    util_cdf_inverted of shutter_curve_eval): a uniform number u -> the time whose CDF is u.
+    Cycles' table has 256 entries; 4096 here, so that linear interpolation between entries does
+    not over-expose the first and last instants of a curve that opens from zero (the inverse CDF
+    rises as a square root there: 256 entries put 1.9 times the exposure in the first 2.5 % of a
+    triangle shutter; tests/sampling/test_camera_motion.py)."""
+    w = np.maximum(np.asarray(curve, np.float64).ravel(), 0.0)
+    if w.size < 2 or not np.isfinite(w).all() or w.sum() <= 0:
+        return np.zeros(0)
+    x = np.linspace(0.0, 1.0, 4097)  # the curve, linear between its points, on a fine grid
+    dens = np.interp(x, np.linspace(0.0, 1.0, w.size), w)
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]))])
+    cdf /= cdf[-1]
+    rise = np.diff(cdf) > 0  # a flat stretch (zero weight) keeps only its two ends: never chosen inside
+    keep = np.concatenate([[True], rise]) | np.concatenate([rise, [True]])
+    return np.clip(np.interp(np.linspace(0.0, 1.0, int(size)), cdf[keep], x[keep]), 0.0, 1.0)
+
+
+def shutter_times(cam: Camera, u: np.ndarray) -> np.ndarray:
+    """Times in [0, 1] across the shutter for uniform numbers ``u``: through the camera's shutter
+    table (linear between its entries) or, without one (a flat curve), ``u`` itself."""
+    u = np.asarray(u, np.float64)
+    table = np.asarray(getattr(cam, "shutter_table", np.zeros(0)), np.float64)
+    if table.size < 2:
+        return u
+    return np.interp(u, np.linspace(0.0, 1.0, table.size), table)
+
+
+def time_samples(p: int, spp: int, rng: np.random.Generator, qmc=None) -> np.ndarray:
+    """(p * spp,) uniform numbers for the shutter times of ``spp`` samples of ``p`` pixels, in
+    pixel_samples' order: the pixels' Sobol-Burley points with ``qmc`` = (pixel ids, first sample
+    numbers, seed) as pixel_samples takes it (pair 0's x keyed by TIME_KEY), else stratified
+    (one per stratum of 1 / spp, in random order) from ``rng``."""
+    if qmc is None:
+        strata = rng.permuted(np.broadcast_to(np.arange(spp, dtype=np.float64), (p, spp)), axis=1)
+        return ((strata + rng.random((p, spp))) / spp).ravel()
+    ids, first, seed = qmc
+    pix = np.repeat(np.asarray(ids), spp)
+    num = (np.broadcast_to(np.asarray(first, np.int64), (p,))[:, None] + np.arange(spp)[None, :]).ravel()
+    return sobol_owen_x(pix, num, 0, (int(seed) ^ TIME_KEY) & 0xFFFFFFFFFFFFFFFF).astype(np.float64)
+
+
+def rotation_to_quaternion(r: np.ndarray) -> np.ndarray:
+    """Unit quaternions (..., 4) as (w, x, y, z) of rotation matrices (..., 3, 3) (Shepperd's
+    method: the largest of the four squared components first, for accuracy)."""
+    r = np.asarray(r, np.float64)
+    tr = np.trace(r, axis1=-2, axis2=-1)
+    cand = np.stack([tr, r[..., 0, 0], r[..., 1, 1], r[..., 2, 2]], axis=-1)
+    i = np.argmax(cand, axis=-1)
+    q = np.empty(r.shape[:-2] + (4,))
+    s = np.sqrt(np.maximum(1.0 + 2.0 * np.take_along_axis(cand, i[..., None], -1)[..., 0] - tr, 1e-300)) * 2.0
+    r21, r12, r02, r20, r10, r01 = r[..., 2, 1], r[..., 1, 2], r[..., 0, 2], r[..., 2, 0], r[..., 1, 0], r[..., 0, 1]
+    q0 = np.stack([s / 4, (r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s], -1)
+    q1 = np.stack([(r21 - r12) / s, s / 4, (r01 + r10) / s, (r02 + r20) / s], -1)
+    q2 = np.stack([(r02 - r20) / s, (r01 + r10) / s, s / 4, (r12 + r21) / s], -1)
+    q3 = np.stack([(r10 - r01) / s, (r02 + r20) / s, (r12 + r21) / s, s / 4], -1)
+    q = np.choose(i[..., None], [q0, q1, q2, q3])
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def quaternion_to_rotation(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of quaternions (..., 4) as (w, x, y, z) (normalised first)."""
+    q = np.asarray(q, np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], -2)
+
+
+def motion_frames(cam: Camera, time: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The moving camera's rotations (B, 3, 3) (unit axes as columns, scale dropped) and positions
+    (B, 3) at shutter times ``time`` (B,) in [0, 1], as Cycles' transform_motion_array_interpolate
+    (intern/cycles/util/transform.h): step = min(floor(t (N - 1)), N - 2), f = t (N - 1) - step,
+    the rotation slerped from step to step + 1 (each quaternion's sign following the previous one's,
+    transform_motion_decompose, so the arc is the shorter), the position lerped."""
+    m = np.asarray(cam.motion, np.float64)
+    n = len(m)
+    rot = m[:, :3, :3] / np.linalg.norm(m[:, :3, :3], axis=1, keepdims=True)
+    if np.linalg.det(rot[0]) < 0:  # a mirrored camera: interpolate its rotation, mirror after (x axis)
+        flip = np.diag([-1.0, 1.0, 1.0])
+        rot = rot @ flip
+    else:
+        flip = None
+    q = rotation_to_quaternion(rot)
+    for i in range(1, n):
+        if q[i] @ q[i - 1] < 0:
+            q[i] = -q[i]
+    t = np.clip(np.asarray(time, np.float64), 0.0, 1.0) * (n - 1)
+    step = np.minimum(t.astype(np.int64), n - 2)
+    f = (t - step)[:, None]
+    qa, qb = q[step], q[step + 1]
+    cos = np.clip(np.sum(qa * qb, axis=1), -1.0, 1.0)[:, None]
+    theta = np.arccos(cos)
+    sin = np.sin(theta)
+    near = sin < 1e-6  # (nearly) the same rotation: lerp, normalised below
+    safe = np.where(near, 1.0, sin)
+    wa = np.where(near, 1.0 - f, np.sin((1.0 - f) * theta) / safe)
+    wb = np.where(near, f, np.sin(f * theta) / safe)
+    r = quaternion_to_rotation(wa * qa + wb * qb)
+    if flip is not None:
+        r = r @ flip
+    pos = (1.0 - f) * m[step, :3, 3] + f * m[step + 1, :3, 3]
+    return r, pos
+
+
 def aperture_points(u: np.ndarray, v: np.ndarray, blades: int = 0, rotation: float = 0.0,
                     ratio: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Points on the unit aperture (radius 1) from uniform (u, v) in [0, 1)^2, uniform in area:
@@ -242,7 +373,8 @@ def clips(cam: Camera) -> bool:
     return float(getattr(cam, "clip_start", 0.0)) > 0.0 or np.isfinite(float(getattr(cam, "clip_end", np.inf)))
 
 
-def camera_rays(cam: Camera, x: np.ndarray, y: np.ndarray, lens_u: np.ndarray | None = None):
+def camera_rays(cam: Camera, x: np.ndarray, y: np.ndarray, lens_u: np.ndarray | None = None,
+                time: np.ndarray | None = None):
     """World-space camera rays through image points (x, y) (pixels, 0 at the left / top edge):
     (origins (B, 3) float32, unit directions (B, 3) float32, tmax (B,) float32 or None for
     unbounded rays, valid (B,) bool or None when every ray is valid (a fisheye's corners are not)).
@@ -252,8 +384,11 @@ def camera_rays(cam: Camera, x: np.ndarray, y: np.ndarray, lens_u: np.ndarray | 
     (intern/cycles/kernel/camera/camera.h, docs/physics.md sections 6.7-6.9): a thin lens aims every
     ray at the point the pinhole ray meets the plane of focus; clip start moves the origin
     forward to the near plane (perspective: clip_start / cos of the pinhole ray off the view
-    axis along the ray; panoramic: clip_start along it) and clip end bounds the ray there."""
-    if cam.kind != "PANO" and not has_lens(cam) and not clips(cam):
+    axis along the ray; panoramic: clip_start along it) and clip end bounds the ray there.
+    ``time`` (B,) shutter times in [0, 1] for a moving camera (``has_motion``): each ray leaves
+    the camera interpolated at its time (``motion_frames``); None, or a still camera: ``matrix``."""
+    moving = time is not None and has_motion(cam)
+    if cam.kind != "PANO" and not has_lens(cam) and not clips(cam) and not moving:
         o, d = _pinhole_rays(cam, x, y)
         return o, d, None, None
     x = np.asarray(x, np.float64)
@@ -319,9 +454,15 @@ def camera_rays(cam: Camera, x: np.ndarray, y: np.ndarray, lens_u: np.ndarray | 
                 local_d /= np.linalg.norm(local_d, axis=1, keepdims=True)
             start = near / cos_c
             tmax = length / cos_c
-    d = local_d @ rot.T
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    o = local_p @ rot.T + eye + start[:, None] * d
+    if moving:  # each ray's own camera frame (docs/physics.md section 6.13)
+        rot, eye = motion_frames(cam, np.asarray(time, np.float64).reshape(b))
+        d = np.einsum("bij,bj->bi", rot, local_d)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        o = np.einsum("bij,bj->bi", rot, local_p) + eye + start[:, None] * d
+    else:
+        d = local_d @ rot.T
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        o = local_p @ rot.T + eye + start[:, None] * d
     if valid is not None and not valid.all():
         d[~valid] = (0.0, 0.0, -1.0)  # traced nowhere (tmax 0): the caller drops them
         tmax = np.where(valid, tmax, 0.0)

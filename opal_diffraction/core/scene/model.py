@@ -496,6 +496,12 @@ class Camera:
     latitude_max: float = float(np.pi / 2)
     longitude_min: float = float(-np.pi)
     longitude_max: float = float(np.pi)
+    # motion blur (docs/physics.md section 6.13): the camera-to-world matrices (N, 4, 4) at N >= 2
+    # evenly spaced times across the shutter, first to last (empty: no camera motion, ``matrix``
+    # throughout), and the shutter curve as an inverse CDF over [0, 1] (a ray's uniform number ->
+    # its time in the shutter, 0 first, 1 last; empty: a flat curve, time = the number)
+    motion: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
+    shutter_table: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @staticmethod
     def look_at(eye, target, up=(0.0, 0.0, 1.0), **kw) -> "Camera":
@@ -573,6 +579,10 @@ class Scene:
     shader_programs: list = field(default_factory=list)
     corner_generated: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3), np.float32))
     corner_object: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3), np.float32))
+    # object motion blur (docs/physics.md section 6.13): the vertices (K, V, 3) at the centres of K
+    # equal time bins of the shutter (bin k: shutter times [k / K, (k + 1) / K)); a camera ray of
+    # time t sees bin floor(t K)'s geometry; empty (0, 0, 3): the geometry does not move
+    motion_vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3), np.float32))
     # opal volume domains (core/opal/volume.py; docs/physics.md section 5.4), world space; empty: none
     domain_seeds: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float64))
     domain_weight: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))

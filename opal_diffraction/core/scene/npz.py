@@ -67,9 +67,15 @@ def save_scene(scene: Scene, path) -> None:
         d["material_" + f.name] = getattr(scene.materials, f.name)
     for f in fields(Lights):
         d["light_" + f.name] = getattr(scene.lights, f.name)
+    mv = np.asarray(getattr(scene, "motion_vertices", np.zeros((0, 0, 3))), np.float32)
+    if mv.size:  # object motion blur: the vertices of each time bin
+        d["motion_vertices"] = mv
     if scene.camera is not None:
         for f in fields(Camera):
-            d["camera_" + f.name] = np.asarray(getattr(scene.camera, f.name))
+            val = np.asarray(getattr(scene.camera, f.name))
+            if f.name in ("motion", "shutter_table") and val.size == 0:
+                continue  # a still camera, a flat shutter: nothing to save (the defaults on load)
+            d["camera_" + f.name] = val
     np.savez_compressed(path, **d)
 
 
@@ -150,6 +156,7 @@ def load_scene(path) -> Scene:
             world_rotation=read("world_rotation") if "world_rotation" in names else np.eye(3),
             **_read_textures(read, names, shown),
             **{name: read(name) for name in _DOMAIN_FIELDS if name in names},
+            **({"motion_vertices": read("motion_vertices")} if "motion_vertices" in names else {}),
         )
 
 

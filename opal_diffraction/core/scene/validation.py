@@ -157,7 +157,8 @@ def _validate(scene: Scene) -> ValidatedScene:
     world_lit = bool(np.any(np.asarray(wc) > 0)) and (world_image.size == 0 or bool(np.any(world_image > 0)))
     if len(lights) == 0 and not world_lit and not emitting:
         warns.append("the scene has no lights: only the background is lit")
-    clean = replace(scene, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
+    mv = _validate_motion_vertices(scene, len(v))
+    clean = replace(scene, motion_vertices=mv, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
                     materials=materials, lights=lights, camera=camera, world_color=wc, corner_normals=cn,
                     world_image=world_image, world_rotation=world_rotation, **tex, **dom)
     # prepare's normals are these products normalised
@@ -321,6 +322,7 @@ def _validate_camera(c: Camera) -> Camera:
         raise SceneError(f"camera ortho_scale {number_text(vals['ortho_scale'])} m is beyond the renderable limit "
                          f"{COORD_LIMIT:g} m")
     lens = _validate_lens(c)
+    _validate_motion(c)
     same = (w == c.width and type(c.width) is int and h == c.height and type(c.height) is int
             and type(c.kind) is str and type(c.sensor_fit) is str
             and all(type(getattr(c, k)) is type(v) and getattr(c, k) == v for k, v in lens.items()))
@@ -328,6 +330,50 @@ def _validate_camera(c: Camera) -> Camera:
 
 
 PANORAMA_TYPES = ("EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT", "FISHEYE_EQUISOLID")
+
+
+#: time bins of object motion a scene may hold
+MAX_MOTION_BINS = 64
+
+
+def _validate_motion_vertices(scene, n_vertices: int) -> np.ndarray:
+    """The object-motion vertices (K, V, 3) float32 (docs/physics.md section 6.13): empty, or 2 to
+    MAX_MOTION_BINS bins of as many finite vertices as the scene has."""
+    mv = np.asarray(getattr(scene, "motion_vertices", np.zeros((0, 0, 3))))
+    if mv.size == 0:
+        return np.zeros((0, 0, 3), np.float32)
+    if mv.dtype.kind not in "iuf":
+        raise SceneError(f"motion_vertices must hold real numbers, got {mv.dtype}")
+    if mv.ndim != 3 or mv.shape[1:] != (n_vertices, 3) or not 2 <= mv.shape[0] <= MAX_MOTION_BINS:
+        raise SceneError(f"motion_vertices must be (2 to {MAX_MOTION_BINS} bins, {n_vertices} vertices, 3), "
+                         f"got shape {mv.shape}")
+    mv = mv.astype(np.float32)
+    if not np.isfinite(mv).all():
+        raise SceneError("motion_vertices: a vertex is NaN or infinite (or beyond float32)")
+    return mv
+
+
+def _validate_motion(c: Camera) -> None:
+    """The camera's motion blur (docs/physics.md section 6.13): no steps or at least two finite,
+    invertible 4x4 matrices; the shutter table empty or finite, non-decreasing, within [0, 1]."""
+    m = np.asarray(getattr(c, "motion", np.zeros((0, 4, 4))))
+    t = np.asarray(getattr(c, "shutter_table", np.zeros(0)))
+    for name, a in (("motion", m), ("shutter_table", t)):
+        if a.size and a.dtype.kind not in "iuf":
+            raise SceneError(f"camera {name} must hold real numbers, got {a.dtype}")
+    m = m.astype(np.float64)
+    if m.size:
+        if m.ndim != 3 or m.shape[1:] != (4, 4) or m.shape[0] < 2 or m.shape[0] > 1024:
+            raise SceneError(f"camera motion must be 2 to 1024 4x4 matrices, got shape {m.shape}")
+        if not np.isfinite(m).all():
+            raise SceneError("camera motion: a step's matrix is NaN or infinite")
+        if (np.abs(np.linalg.det(m[:, :3, :3].astype(np.float64))) < 1e-12).any():
+            raise SceneError("camera motion: a step's matrix is singular (zero scale?)")
+    t = t.astype(np.float64)
+    if t.size:
+        if t.ndim != 1 or t.size < 2 or not np.isfinite(t).all() or (t < 0).any() or (t > 1).any() \
+                or (np.diff(t) < 0).any():
+            raise SceneError("camera shutter_table must be a non-decreasing list of at least 2 times in [0, 1]")
 
 
 def _validate_lens(c: Camera) -> dict:

@@ -90,8 +90,15 @@ def view_key(camera, filter_width: float) -> tuple:
     from dataclasses import fields
 
     m = tuple(float(x) for x in np.asarray(camera.matrix, np.float64).ravel())
-    rest = tuple((f.name, getattr(camera, f.name)) for f in fields(camera) if f.name != "matrix")
+    rest = tuple((f.name, _hashable(getattr(camera, f.name))) for f in fields(camera) if f.name != "matrix")
     return (m,) + rest + (float(filter_width),)
+
+
+def _hashable(value):
+    """An array field (the camera's motion steps, shutter table) as a tuple of its shape and numbers."""
+    if isinstance(value, np.ndarray):
+        return (value.shape,) + tuple(float(x) for x in value.ravel())
+    return value
 
 
 def direct_materials(prepared) -> np.ndarray:
@@ -114,13 +121,15 @@ def applies(prepared) -> bool:
     the setting is on, the filter has a width (a zero width point-samples pixel centres, which a
     splat cannot estimate), the camera is a pinhole (perspective or orthographic, no depth of
     field: the connection is to its one eye point) and some material takes the splat (``direct_materials``)."""
-    from ...sampling.camera import has_lens
+    from ...sampling.camera import has_lens, has_motion
 
     s = prepared.settings
     if not s.caustic_splat or float(s.filter_width) <= 0:
         return False
     cam = prepared.scene.camera
     if cam is None or cam.kind == "PANO" or has_lens(cam):  # a pinhole's connection only (docs/physics.md section 6.10)
+        return False
+    if has_motion(cam):  # a moving camera has no one eye point: the eye pass looks the caustics up (section 6.13)
         return False
     return bool(direct_materials(prepared).any())
 
