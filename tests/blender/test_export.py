@@ -398,11 +398,14 @@ def test_camera_export():
         _export()
 
 
-def test_motion_blur_is_named_not_silently_ignored():
+def test_motion_blur_outside_final_renders_is_named_not_silently_ignored():
+    """An export without the engine's frame_set (the .npz export, the viewport) cannot evaluate
+    sub-frames: it renders the frame's own time and says so (final renders blur:
+    tests/blender/test_motion_parity.py)."""
     sc = _basic_scene()
     assert not [w for w in _export().warnings if "motion blur" in w]
     sc.render.use_motion_blur = True
-    assert [w for w in _export().warnings if "motion blur is not rendered" in w]
+    assert [w for w in _export().warnings if "motion blur is rendered in final renders only" in w]
 
 
 def test_camera_depth_of_field_export_follows_cycles():
