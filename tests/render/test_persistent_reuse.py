@@ -13,25 +13,11 @@ import numpy as np
 import pytest
 
 from opal_diffraction.core.render.frame import render, reusable_light
-from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.scene.checks import SceneError
-from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
-from opal_diffraction.core.scene.settings import RenderSettings
+from opal_diffraction.core.scene.model import Camera
+from test_pipeline import SETTINGS, glass_scene  # a dispersive glass box on a floor under a point light
 
 
-def glass_scene(width=24, height=16):
-    """A dispersive glass box on a diffuse floor under a point light (tests/render/test_pipeline.py's)."""
-    mats = Materials.from_list([{"kind": "DIFFUSE", "color": (0.5, 0.5, 0.5)},
-                                {"kind": "DIELECTRIC", "ior": 1.5, "dispersion": "BK7", "color": (1, 1, 1)}])
-    s = Scene(materials=mats, world_color=np.array([0.05, 0.05, 0.05], np.float32))
-    s.add_mesh(*primitives.quad((0, 0, 0), (8, 0, 0), (0, 8, 0)), material=0)
-    s.add_mesh(*primitives.box((0, 0, 1.0), (1.0, 1.0, 0.5)), material=1)
-    s.lights = Lights.from_list([{"kind": "POINT", "position": (0.5, -0.5, 4.0), "power": 800.0}])
-    s.camera = Camera.look_at((0, -5, 3), (0, 0, 0.5), width=width, height=height)
-    return s
-
-
-SETTINGS = RenderSettings(samples=2, round_samples=1, light_paths=20_000, seed=5, threads=2, tile_size=8)
 MOVED = Camera.look_at((1, -5, 3), (0, 0, 0.5), width=24, height=16)
 
 
