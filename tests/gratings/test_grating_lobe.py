@@ -28,6 +28,7 @@ from opal_diffraction.core.sampling.camera import generate_rays
 from opal_diffraction.core.scene import primitives
 from opal_diffraction.core.scene.model import Camera, Lights, Materials, Scene
 from opal_diffraction.core.scene.settings import RenderSettings
+from test_grating_radiometry import order_sum  # the plain loop over propagating orders
 
 D, A, N = 740.0, 370.0, 300
 HEIGHT, HALF = 0.5, 50.0  # the panel: 100 m square, 0.5 m above the grating
@@ -66,15 +67,6 @@ def orders_reference(directions, at, edges, lit: bool, sub=6):
     shadow = SUN_UP[:2] / SUN_UP[2] * HEIGHT
     rho = A / D
 
-    def order_sum(alpha, beta, lam):
-        total = 0.0
-        for m in range(-200, 201):
-            ao = m * lam / D - alpha
-            if ao * ao + beta * beta <= 1.0:
-                x = np.pi * m * rho
-                total += rho * rho * (1.0 if m == 0 else (np.sin(x) / x) ** 2)
-        return total
-
     w_o = -np.asarray(directions, np.float64)
     out = np.zeros((len(w_o), len(edges) - 1))
     for k in range(len(edges) - 1):
@@ -94,7 +86,7 @@ def orders_reference(directions, at, edges, lit: bool, sub=6):
                         continue
                     x = np.pi * m * rho
                     e = rho * rho * (1.0 if m == 0 else (np.sin(x) / x) ** 2)
-                    total += e * rho / order_sum(u, v, lam)
+                    total += e * rho / order_sum(D, A, u, v, lam)
             out[i, k] = total / sub
     return out
 
