@@ -16,20 +16,11 @@ go in docs/benchmarks.md.
 from __future__ import annotations
 
 import argparse
-import importlib.util
-import os
 import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def _example(name):
-    spec = importlib.util.spec_from_file_location(name, os.path.join(ROOT, "examples", f"{name}.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from opal_diffraction._scripts import load_example
 
 
 def _frame(bpy, last_render, sc, frame, persistent):
@@ -72,7 +63,7 @@ def main(argv=None) -> int:
     opal_diffraction.register()
     rows = []
     for splat in (False, True):
-        sc = _example("render_example").build_scene(*args.resolution, spp=args.spp, light_paths=args.light_paths)
+        sc = load_example("render_example").build_scene(*args.resolution, spp=args.spp, light_paths=args.light_paths)
         sc.opal.light_paths_auto = False
         if args.sphere:
             _sphere(bpy, args.sphere)
