@@ -18,7 +18,8 @@ from opal_diffraction.core.scene.settings import RenderSettings
 from opal_diffraction.core.integrators.eye import eye_pass as ep
 from opal_diffraction.core.transport.walker import Rays
 from opal_diffraction.core.transport import wavelengths as wl
-import opal_diffraction.core.render.scheduler as sch
+from opal_diffraction.core.integrators.light.light_pass import run_light_pass
+from opal_diffraction.core.render.plan import plan_render
 
 MODE = {"mono": 0}
 CDF = {}
@@ -51,19 +52,20 @@ def run(self, origins, directions, pix, u_lambda, wavelength_index=None, ids=Non
     return self.out.result(self.rays_cast)
 ep._TileTrace.run = run
 
+def light_of(prepared):
+    """The prepared scene's light pass (None where its plan runs none), for eye-only timings."""
+    plan = plan_render(prepared)
+    return run_light_pass(prepared, plan=plan) if plan.light_pass else None
+
+
 args = sys.argv[1:] or ["prism", "320", "200", "256"]
 name = args[0]; W, H = int(args[1]), int(args[2]); ref_spp = int(args[3])
 render(validate(load_example("prism").build_scene(32, 20)).scene, RenderSettings(samples=1, threads=1))
 sc = validate(load_example(name).build_scene(W, H)).scene
-box = {}
-o = sch.run_light_pass
-def cap(*a, **k):
-    r = o(*a, **k); box["r"] = r; return r
-sch.run_light_pass = cap
 def go(spp, k, seed):
     MODE["mono"] = k
     p = prepare(sc, RenderSettings(samples=spp, threads=1, seed=seed))
-    box.clear(); render_prepared(p); light = box.get("r")
+    light = light_of(p)
     c0 = time.process_time(); r = render_prepared(p, light=light); t = time.process_time() - c0
     return r.rgb.astype(np.float64), t
 ref, tref = go(ref_spp, 0, 99)
