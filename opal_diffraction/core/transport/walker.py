@@ -647,9 +647,10 @@ class SpecularWalker:
         else:
             parent, lam = np.nonzero(rays.w > 0)
             w = rays.w[parent, lam]
+        state = None if rays.state is None else rays.state.take(parent)
+        wavelengths.child_split(state, w, parent, rays.w)  # Russian roulette's throughput of a mono child
         children = Rays(rays.o[parent], rays.d[parent], rays.pix[parent], w.astype(np.float32),
-                         lam.astype(np.int64), rays.depth[parent], rays.u_lam[parent],
-                         None if rays.state is None else rays.state.take(parent))
+                         lam.astype(np.int64), rays.depth[parent], rays.u_lam[parent], state)
         return children, hit.take(parent)
 
 

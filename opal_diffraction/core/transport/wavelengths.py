@@ -46,7 +46,7 @@ import numpy as np
 
 from ..util.jit import kernels_enabled, njit
 
-__all__ = ["DEFENSIVE", "sensitivity", "importance", "sample_indices", "rotated", "draw"]
+__all__ = ["DEFENSIVE", "sensitivity", "importance", "sample_indices", "rotated", "draw", "child_split"]
 
 #: The uniform share of the importance pdf.
 DEFENSIVE = 0.1
@@ -139,6 +139,20 @@ def draw(grid, w: np.ndarray | None, u: np.ndarray, k: int, by_sensitivity: bool
     return parent, lam, weight
 
 
+def child_split(state, w_child, parent, parent_w) -> None:
+    """Set the mono children's ``PathState.split`` (rows of ``state``, children of the white rows
+    ``parent``) so that Russian roulette judges a child by its white parent's throughput times what
+    it lost since (core/integrators/eye/continuation.py): split times the child's weight over the
+    parent's largest spectral weight (``parent_w`` (B, n) or None: unit weights). The pick's
+    1 / (K p_k) factor is thereby divided out; any survival probability keeps the estimate
+    unbiased, this one only keeps it from rouletting bright dispersed paths. ``state`` None (the
+    light pass): nothing."""
+    if state is None or len(parent) == 0:
+        return
+    wmax = np.float32(1.0) if parent_w is None else np.maximum(parent_w.max(axis=1)[parent], np.float32(1e-30))
+    state.split = (state.split * (np.asarray(w_child, np.float32) / wmax)).astype(np.float32, copy=False)
+
+
 def split_at_glass(walker, rays, hit, rng, u=None):
     """White ``rays`` at dispersive hits ``hit`` (smooth or rough glass) -> (mono children at the
     hit or None, their hits, white rays reflected by smooth glass or None).
@@ -226,6 +240,7 @@ def split_at_glass(walker, rays, hit, rng, u=None):
         side = np.where(np.einsum("ij,ij->i", t_dir, hp.ng) > 0, 1.0, -1.0).astype(np.float32)
         o = hp.p + (hp.eps * side)[:, None] * hp.ng
         state = None if r.state is None else r.state.take(parent)
+        child_split(state, w, parent, None if wt is None else wt[tr])
         # type(r): transport.Rays, without importing the module that imports this one
         mono = type(r)(o.astype(np.float32), t_dir.astype(np.float32), r.pix[parent], w.astype(np.float32),
                     lam.astype(np.int64), r.depth[parent] + 1, r.u_lam[parent], state)
@@ -277,6 +292,7 @@ def _split_smooth_by_kernel(walker, rays, hit, ns, wt, u):
     if m:
         parent, t_dir, side = parent[:m], t_dir[:m], side[:m]
         state = None if rays.state is None else rays.state.take(parent)
+        child_split(state, w[:m], parent, wt)
         mono = type(rays)(o[:m], t_dir, rays.pix.take(parent), w[:m], lam[:m], rays.depth.take(parent) + 1,
                           rays.u_lam.take(parent), state)
         if mono.differentials is not None:

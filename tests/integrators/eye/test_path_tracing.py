@@ -11,6 +11,8 @@ share one sequence, is checked against the same furnace with independent renders
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -99,6 +101,35 @@ def test_glass_in_the_furnace_neither_adds_nor_loses_energy():
     rgb = render(s, _settings(diffuse_bounces=200, glossy_bounces=200, transmission_bounces=200,
                               max_bounces=200, samples=128)).rgb
     _assert_close(rgb, E / (1 - RHO) * (1 - RHO**202), "glass in the furnace")
+
+
+def test_dispersive_glass_in_the_furnace_is_unbiased_under_mono_roulette():
+    """A dispersive (Abbe 30) glass ball in the furnace: the rays it refracts become mono rays,
+    which bounce on the walls until Russian roulette ends them (judged by their white parent's
+    throughput times their own losses: core/transport/wavelengths.py ``child_split``). Every pixel
+    still sees E / (1 - rho); and the roulette did end mono paths (fewer rays than with mono rays
+    kept to the bounce limit, the rule before)."""
+    from opal_diffraction.core.integrators.eye import eye_pass
+
+    s = furnace(glass=True)
+    s.materials = Materials.from_list([
+        {"kind": "DIFFUSE", "color": (RHO,) * 3, "emission": (E,) * 3},
+        {"kind": "DIELECTRIC", "color": (1.0, 1.0, 1.0), "ior": 1.6, "dispersion": "ABBE", "abbe": 30.0}])
+    st = _settings(diffuse_bounces=200, glossy_bounces=200, transmission_bounces=200, max_bounces=200, samples=128)
+    res = render(s, st)
+    _assert_close(res.rgb, E / (1 - RHO) * (1 - RHO**202), "dispersive glass in the furnace")
+    rule = eye_pass.russian_roulette
+
+    def bounce_limit_for_mono(c, rays, rng):
+        return (rays.depth < c.limits[0]) & ~rays.state.final if rays.lam is not None else rule(c, rays, rng)
+
+    eye_pass.russian_roulette = bounce_limit_for_mono
+    try:
+        kept = render(s, dataclasses.replace(st, samples=8))
+    finally:
+        eye_pass.russian_roulette = rule
+    rouletted = render(s, dataclasses.replace(st, samples=8))
+    assert rouletted.stats["rays"] < 0.8 * kept.stats["rays"], (rouletted.stats["rays"], kept.stats["rays"])
 
 
 def test_max_bounces_zero_is_direct_light_only():

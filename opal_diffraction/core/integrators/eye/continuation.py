@@ -31,23 +31,26 @@ __all__ = ["russian_roulette", "count_delta", "lambert_bounce", "microfacet_boun
 def russian_roulette(c, rays: Rays, rng) -> np.ndarray:
     """Specular bounces go on below the total limit and past Russian roulette (after three
     bounces, survival probability = the largest spectral throughput, at most 1, survivors
-    reweighted by 1 / that: unbiased; pbrt-v4's rule). Mono rays are not rouletted. The
-    reweighted weights are a new array (subsets taken earlier may still gather the old one:
-    core/transport/rows.py)."""
+    reweighted by 1 / that: unbiased; pbrt-v4's rule). A mono (dispersed) ray's throughput is
+    its weight over ``PathState.split``, which its split set to the wavelength pick's factor
+    times the white parent's (core/transport/wavelengths.py ``child_split``): it is judged by
+    what its white parent would have been, times what it lost since. The reweighted weights are
+    a new array (subsets taken earlier may still gather the old one: core/transport/rows.py)."""
     depth = rays.depth
     ok = (depth < c.limits[0]) & ~rays.state.final
-    if rays.w is not None and rays.w.ndim == 2:  # white rays (mono ones: w (B,))
+    if rays.w is not None:  # camera rays (unit weights, None) are not deep
         deep = ok & (depth >= 3)
         if np.count_nonzero(deep):
             # a Fresnel-split child (core/integrators/eye/fresnel_split.py) is rouletted as its unsplit path
-            q = np.minimum(rays.w.max(axis=1) / rays.state.split, np.float32(1.0))
+            wmax = rays.w.max(axis=1) if rays.w.ndim == 2 else rays.w
+            q = np.minimum(wmax / rays.state.split, np.float32(1.0))
             roulette = deep & (q < 1)
             if np.count_nonzero(roulette):
                 alive = rng.random(len(rays), np.float32) < q
                 ok &= ~roulette | alive
                 kept = roulette & alive
                 w = rays.w.copy()
-                w[kept] /= q[kept, None]
+                w[kept] = w[kept] / (q[kept, None] if w.ndim == 2 else q[kept])
                 rays.w = w
     return ok
 
