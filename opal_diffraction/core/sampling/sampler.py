@@ -39,6 +39,7 @@ integer operations: integer arithmetic, so the same bits.
 from __future__ import annotations
 
 import itertools
+from functools import lru_cache
 
 import numpy as np
 
@@ -115,13 +116,20 @@ def _sobol_y(index: np.ndarray) -> np.ndarray:
 
 
 def _seed_word(seed: int) -> np.ndarray:
-    """(1,) uint32: every 32-bit word of the seed (a render seed can exceed 2^32), each hashed in turn."""
+    """(1,) uint32: every 32-bit word of the seed (a render seed can exceed 2^32), each hashed in
+    turn. Read-only and kept per seed: every sampler call of a render asks for it."""
+    return _seed_word_cached(int(seed))
+
+
+@lru_cache(maxsize=64)
+def _seed_word_cached(seed: int) -> np.ndarray:
     with np.errstate(over="ignore"):
         s = _hash(np.full(1, seed & 0xFFFFFFFF, _U32))
         rest = (int(seed) % (1 << 128)) >> 32  # non-negative: the loop ends
         while rest:
             s = _hash(s ^ np.full(1, rest & 0xFFFFFFFF, _U32))
             rest >>= 32
+    s.flags.writeable = False
     return s
 
 
@@ -233,7 +241,8 @@ def _points_by_kernel(pixel, sample, pair, seed: int, with_y: bool):
         return None
     x = np.empty(len(pixel))
     y = np.empty(len(pixel) if with_y else 0)
-    _sobol_owen_kernel(pixel, sample, np.broadcast_to(pair, pixel.shape), np.uint64(_seed_word(seed)[0]), with_y, x, y)
+    # a scalar pair as one element (the kernel reads pair[0] for every row): no broadcast view per call
+    _sobol_owen_kernel(pixel, sample, pair.reshape(-1), np.uint64(_seed_word(seed)[0]), with_y, x, y)
     return x, (y if with_y else None)
 
 
@@ -278,9 +287,10 @@ def _sobol_owen_kernel(pixel, sample, pair, seed_word, with_y, x_out, y_out):
     and (``with_y``) y's Owen scramble, as multiples of 2^-24. The integer inputs (any integer
     type) are cut to their low 32 bits, as the reference's conversions to uint32 cut them."""
     scale = 1.0 / (1 << 24)
+    one_pair = pair.shape[0] == 1 and pixel.shape[0] != 1  # one pair for every row
     for b in range(pixel.shape[0]):
         k = _hash_word((np.uint64(pixel[b]) & _M32) ^ seed_word)
-        key = _hash_word(k ^ _hash_word((np.uint64(pair[b]) * np.uint64(0x9E3779B9)) & _M32))
+        key = _hash_word(k ^ _hash_word((np.uint64(pair[0 if one_pair else b]) * np.uint64(0x9E3779B9)) & _M32))
         index = _reverse_word(_laine_karras_word(_reverse_word(np.uint64(sample[b]) & _M32), key))
         x = _reverse_word(_laine_karras_word(index, _hash_word(key ^ np.uint64(0x68BC21EB))))
         x_out[b] = np.float64(x >> np.uint64(8)) * scale
