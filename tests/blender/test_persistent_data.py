@@ -90,6 +90,21 @@ def test_camera_splat_is_resplatted_into_the_new_view():
     np.testing.assert_array_equal(again, fresh)
 
 
+def test_camera_and_samples_changed_reexports_and_still_resplats():
+    """Frame 2 changes the samples too (a scene edit: everything is exported again): the
+    preparation's ray caster and the light pass are found unchanged by comparing the arrays, and
+    the kept splat vertices are splatted into the moved camera; frame 2 is the fresh render's."""
+    sc, _, _ = _scene(splat=True)
+    _render(sc, 1, True)
+    sc.opal.samples = sc.opal.samples + 2
+    f2, p2, line = _render(sc, 2, True)
+    assert p2["exported_geometry"] and not p2["light_pass_ran"], p2
+    assert "ray caster" in p2["reused"] and "light pass" in p2["reused"] and p2["resplat"] is not None, p2
+    assert "camera splat re-splatted" in line
+    fresh, _, _ = _render(sc, 2, False)
+    np.testing.assert_array_equal(f2, fresh)
+
+
 def test_over_the_cap_the_light_pass_runs_again(monkeypatch):
     """Splat vertices over SPLAT_VERTEX_CAP are not kept (said on frame 1); frame 2 runs the light
     pass again for the new camera and says why; the image is still the fresh render's."""
