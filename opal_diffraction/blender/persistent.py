@@ -43,7 +43,7 @@ __all__ = ["Kept", "PersistentData", "Update", "camera_only_updates", "settings_
 #: Bytes of camera-splat vertices a final render's light pass keeps for the next frame's camera
 #: (core/integrators/light/splat_vertices.py): 256 MB, the most the caustic map's two lanes may
 #: take (light_pass.element_layout). The prism example keeps 0.56 M vertices, 35 MB, at its 1 M
-#: light paths (65 bytes each: 40 for a path split by the prism, 28 + 4 x 61 for a white one;
+#: light paths (65 bytes each: 44 for a path split by the prism, 32 + 4 x 61 for a white one;
 #: docs/benchmarks.md, "Persistent data"), so the cap holds about 7 M of its paths; past it the
 #: light pass keeps none and a camera-only frame runs it again (said in the stats line).
 SPLAT_VERTEX_CAP = 256 * 2**20

@@ -25,7 +25,7 @@ film, and adds the lanes in lane order, as the light pass does: the film is the 
 run for the new camera makes, bit for bit (the same landings, the same arithmetic, the same
 order; tests/integrators/light/test_splat_vertices.py).
 
-Memory: about 40 bytes per mono landing (a path split by a dispersive glass), 28 + 4 k per white
+Memory: 44 bytes per mono landing (a path split by a dispersive glass), 32 + 4 k per white
 one (k spectral samples or basis coefficients); ``VertexKeeper`` stops keeping past its cap
 (bytes) and says so (``SplatVertexStore.over_cap``): a later view then runs the light pass again.
 Measured on the prism example: docs/benchmarks.md, "Persistent data".
