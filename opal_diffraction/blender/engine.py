@@ -24,9 +24,11 @@ With Persistent Data on (``scene.render.use_persistent_data``) Blender keeps the
 frames and calls ``update`` before each render: the engine notes the depsgraph's updates and
 keeps, per view layer, the exported scene, the preparation and the light pass (persistent.py);
 a frame whose only change is the camera exports the camera alone and renders the kept
-preparation through it, keeping the light pass unless the camera splat needs it again for the
-new view (core/render/frame.py ``reusable_light``); other changes re-export and prepare with
-the kept preparation as ``reuse``. The stats line ends with what was reused.
+preparation through it, keeping the light pass and splatting its kept camera-splat vertices
+into the new view (core/render/frame.py ``light_reuse``, core/integrators/light/splat_vertices.py;
+the light pass runs again only where none were kept, e.g. over their memory cap); other changes
+re-export and prepare with the kept preparation as ``reuse``. The stats line ends with what was
+reused.
 
 The rendered viewport (``view_update`` / ``view_draw``) is viewport.ViewportSession: a
 progressive preview in a background thread, drawn through the ``gpu`` module.
@@ -48,12 +50,13 @@ import numpy as np
 from ..core.render import denoise as _denoise
 from ..core.render.distributed import connect
 from ..core.render.output import write_spectral_exr
-from ..core.render.frame import render as core_render, render_prepared, reusable_light
+from ..core.render.frame import light_reuse, render as core_render, render_prepared, reusable_light
 from ..core.scene.checks import SceneError
 from ..core.scene.npz import save_scene
 from ..core.scene.validation import validate
 from .export import (ExportCancelled, ExportResult, Warnings, export_camera, export_scene, rec709_to_working_space,
                      render_region)
+from . import persistent as _persistent
 from .persistent import Kept, PersistentData, settings_key
 from .settings import render_settings
 from . import viewport
@@ -334,7 +337,16 @@ class OpalRenderEngine(bpy.types.RenderEngine):
             self.update_result(result)
 
         previous = pd.kept
-        keep = {"prepared": None, "light": None, "ran": False}
+        keep = {"prepared": None, "light": None, "ran": False, "resplat": None}
+        # the camera splat's light-path vertices kept with the light pass, for the next frame's camera
+        cap = int(_persistent.SPLAT_VERTEX_CAP) if persistent else 0
+
+        def on_light(lp):  # the light pass this frame ran, or the kept one splatted into this view
+            if lp.resplatted:
+                keep.update(light=lp, resplat=dict(lp.resplat))
+            else:
+                keep.update(light=lp, ran=True)
+
         try:
             if kept is not None:  # the kept preparation through the new camera: nothing rebuilt
                 prepared = kept.prepared.with_view(camera, spectral_exr=settings.spectral_exr)
@@ -342,8 +354,7 @@ class OpalRenderEngine(bpy.types.RenderEngine):
                 keep.update(prepared=prepared, light=light)
                 reused.append("preparation")
                 rr = render_prepared(prepared, light, progress=progress, should_cancel=self._should_stop,
-                                     on_round=on_round, region=region,
-                                     on_light=lambda lp: keep.update(light=lp, ran=True))
+                                     on_round=on_round, region=region, on_light=on_light, keep_splat=cap)
             else:
                 with connect(opal.scheduler) if opal.scheduler.strip() else nullcontext() as client:
                     rr = core_render(exported.scene, settings, progress=progress, should_cancel=self._should_stop,
@@ -351,12 +362,12 @@ class OpalRenderEngine(bpy.types.RenderEngine):
                                      reuse=previous.prepared if persistent and previous is not None else None,
                                      light=previous.light if persistent and previous is not None else None,
                                      on_prepared=(lambda p: keep.update(prepared=p)) if persistent else None,
-                                     on_light=(lambda lp: keep.update(light=lp, ran=True)) if persistent else None)
+                                     on_light=on_light if persistent else None, keep_splat=cap)
                 prepared = keep["prepared"]
                 if persistent and previous is not None and prepared is not None:
                     if prepared.accel is previous.prepared.accel:
                         reused.append("ray caster")
-                    if not keep["ran"]:  # the core reused the kept light pass, or the plan has none
+                    if not keep["ran"] and keep["resplat"] is None:  # the core reused the kept light pass, or the plan has none
                         keep["light"] = reusable_light(prepared, previous.light)
         except BaseException:
             pd.kept = None  # a failed or interrupted frame keeps nothing
@@ -379,8 +390,13 @@ class OpalRenderEngine(bpy.types.RenderEngine):
 
         light_ran = bool(keep["ran"]) if persistent else "light_pass_s" in rr.stats
         if persistent and not light_ran and keep["light"] is not None and previous is not None \
-                and keep["light"] is previous.light and "light_pass_s" in rr.stats:
+                and (keep["light"] is previous.light or keep["resplat"] is not None) and "light_pass_s" in rr.stats:
             reused.append("light pass")
+        # why the kept light pass could not serve this frame (its scene unchanged), for the stats line
+        rerun_note = ""
+        if persistent and light_ran and previous is not None and keep["prepared"] is not None:
+            rerun_note = light_reuse(keep["prepared"], previous.light)[1]
+        kept_vertices = getattr(keep["light"], "vertices", None) if persistent else None
         if persistent and keep["prepared"] is not None and not rr.cancelled:
             pd.kept = Kept(settings_key(settings), frame_setup, exported, camera_warnings, keep["prepared"],
                            keep["light"])
@@ -413,6 +429,15 @@ class OpalRenderEngine(bpy.types.RenderEngine):
                    f"{stats.get('kernels', 'numpy')} kernels")
         if persistent:  # Persistent Data: what this frame took from the one before
             summary += " | persistent data: " + ("reused " + ", ".join(reused) if reused else "nothing reused")
+            rs = keep["resplat"]
+            if rs is not None:
+                summary += (f"; camera splat re-splatted from {rs['resplat_vertices'] / 1e6:.2f} M light-path vertices "
+                            f"({rs['resplat_bytes'] / 2**20:.0f} MB, {rs['resplat_s']:.2f} s), no light paths traced")
+            if rerun_note:
+                summary += f"; light pass ran again: {rerun_note}"
+            if keep["ran"] and kept_vertices is not None and kept_vertices.over_cap:
+                summary += (f"; camera-splat vertices not kept ({kept_vertices.nbytes / 2**20:.0f} MB over the "
+                            f"{kept_vertices.cap / 2**20:.0f} MB cap): a camera move runs the light pass again")
         if rr.cancelled:
             summary = "Cancelled | " + summary
         summary += warning_summary(warnings)
@@ -424,7 +449,11 @@ class OpalRenderEngine(bpy.types.RenderEngine):
             spectral_exr=stats.get("spectral_exr", ""), partial_updates=state["round"],
             plan_gratings=bool(getattr(rr.plan, "gratings", False)),
             persistent={"on": persistent, "reused": tuple(reused), "exported_geometry": "export" not in reused,
-                        "light_pass_ran": light_ran, "renders": pd.renders, "kept": pd.kept is not None},
+                        "light_pass_ran": light_ran, "renders": pd.renders, "kept": pd.kept is not None,
+                        "resplat": keep["resplat"], "light_pass_note": rerun_note,
+                        "splat_vertices": None if kept_vertices is None else {
+                            "vertices": kept_vertices.vertices, "bytes": kept_vertices.nbytes,
+                            "over_cap": kept_vertices.over_cap, "cap": kept_vertices.cap}},
         )
 
     @staticmethod

@@ -14,8 +14,12 @@ pass's result, and takes from them what nothing it depends on changed
   (``export_camera``); the prepared scene is the kept one seen through it
   (``PreparedScene.with_view``: nothing rebuilt) and the light pass's caustic map and grating
   records are kept. Its camera splat (light paths joined to the camera, docs/physics.md section
-  4.9) is made for one view: where the plan splats, the light pass runs again
-  (core/render/frame.py ``reusable_light``), so the image is the one a fresh render makes;
+  4.9) is made for one view, so the light pass keeps the splat's light-path vertices (up to
+  ``SPLAT_VERTEX_CAP`` bytes) and the new view's splat is made from them: shadow rays to the new
+  camera, no light paths traced (core/integrators/light/splat_vertices.py ``resplat``,
+  core/render/frame.py ``light_reuse``), the image the one a fresh render makes, bit for bit.
+  Where none were kept (over the cap, or the kept frame did not splat: its camera moved
+  during the motion-blur shutter) the light pass runs again, and the stats line says why;
 - **anything else** (an object moved, a material, light, world or setting changed, or no
   updates were seen): the scene is exported again, reading only the meshes whose geometry an
   update changed (``MeshCache``), and prepared with the kept preparation as ``reuse``
@@ -34,7 +38,15 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from types import SimpleNamespace
 
-__all__ = ["Kept", "PersistentData", "Update", "camera_only_updates", "settings_key"]
+__all__ = ["Kept", "PersistentData", "Update", "camera_only_updates", "settings_key", "SPLAT_VERTEX_CAP"]
+
+#: Bytes of camera-splat vertices a final render's light pass keeps for the next frame's camera
+#: (core/integrators/light/splat_vertices.py): 256 MB, the most the caustic map's two lanes may
+#: take (light_pass.element_layout). The prism example keeps 0.56 M vertices, 35 MB, at its 1 M
+#: light paths (65 bytes each: 44 for a path split by the prism, 32 + 4 x 61 for a white one;
+#: docs/benchmarks.md, "Persistent data"), so the cap holds about 7 M of its paths; past it the
+#: light pass keeps none and a camera-only frame runs it again (said in the stats line).
+SPLAT_VERTEX_CAP = 256 * 2**20
 
 #: ID types whose updates alone change nothing the render reads besides what is checked
 #: elsewhere: an action's own update (the IDs it animates report their own updates).

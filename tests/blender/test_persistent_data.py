@@ -65,14 +65,101 @@ def test_camera_move_reuses_export_preparation_and_light_pass():
     np.testing.assert_array_equal(f2, fresh)  # bit for bit: same seed, same light pass, same camera
 
 
-def test_camera_splat_reruns_the_light_pass_for_the_new_view():
-    """The camera splat (light paths joined to the camera) is made for one view: the light pass
-    runs again; the export and the preparation are still kept."""
+def test_camera_splat_is_resplatted_into_the_new_view():
+    """The camera splat (light paths joined to the camera) is made for one view; the light pass
+    keeps the splat's light-path vertices and frame 2's splat is made from them for the new
+    camera: neither the export nor the light paths run again, and frame 2 is a fresh render of
+    frame 2, bit for bit (the same landings joined to the same camera)."""
     sc, _, _ = _scene(splat=True)
+    f1, p1, line1 = _render(sc, 1, True)
+    assert p1["splat_vertices"]["vertices"] > 0 and not p1["splat_vertices"]["over_cap"], p1
+    f2, p2, line = _render(sc, 2, True)
+    assert not p2["exported_geometry"] and not p2["light_pass_ran"], p2
+    assert p2["reused"] == ("export", "preparation", "light pass")
+    rs = p2["resplat"]
+    assert rs["resplat_vertices"] == p1["splat_vertices"]["vertices"] and rs["resplat_rays"] > 0
+    assert "persistent data: reused export, preparation, light pass; camera splat re-splatted from" in line
+    assert "no light paths traced" in line and "ran again" not in line
+    assert np.abs(f2 - f1).max() > 0.05  # the camera did move
+    # F12 again on frame 2: the re-splatted pass fits its own view, nothing is re-splatted
+    again, p3, line3 = _render(sc, 2, True)
+    assert p3["reused"] == ("export", "preparation", "light pass") and p3["resplat"] is None, p3
+    assert "re-splatted" not in line3
+    fresh, _, _ = _render(sc, 2, False)
+    np.testing.assert_array_equal(f2, fresh)
+    np.testing.assert_array_equal(again, fresh)
+
+
+def test_camera_and_samples_changed_reexports_and_still_resplats():
+    """Frame 2 changes the samples too (a scene edit: everything is exported again): the
+    preparation's ray caster and the light pass are found unchanged by comparing the arrays, and
+    the kept splat vertices are splatted into the moved camera; frame 2 is the fresh render's."""
+    sc, _, _ = _scene(splat=True)
+    _render(sc, 1, True)
+    sc.opal.samples = sc.opal.samples + 2
+    f2, p2, line = _render(sc, 2, True)
+    assert p2["exported_geometry"] and not p2["light_pass_ran"], p2
+    assert "ray caster" in p2["reused"] and "light pass" in p2["reused"] and p2["resplat"] is not None, p2
+    assert "camera splat re-splatted" in line
+    fresh, _, _ = _render(sc, 2, False)
+    np.testing.assert_array_equal(f2, fresh)
+
+
+def test_over_the_cap_the_light_pass_runs_again(monkeypatch):
+    """Splat vertices over SPLAT_VERTEX_CAP are not kept (said on frame 1); frame 2 runs the light
+    pass again for the new camera and says why; the image is still the fresh render's."""
+    from opal_diffraction.blender import persistent
+
+    monkeypatch.setattr(persistent, "SPLAT_VERTEX_CAP", 1000)
+    sc, _, _ = _scene(splat=True)
+    _, p1, line1 = _render(sc, 1, True)
+    assert p1["splat_vertices"]["over_cap"] and p1["splat_vertices"]["bytes"] > 1000, p1
+    assert "camera-splat vertices not kept" in line1 and "a camera move runs the light pass again" in line1
+    f2, p2, line = _render(sc, 2, True)
+    assert not p2["exported_geometry"] and p2["light_pass_ran"] and p2["resplat"] is None, p2
+    assert p2["reused"] == ("export", "preparation")
+    assert "light pass ran again: the camera splat's vertices" in line and "cap" in p2["light_pass_note"]
+    fresh, _, _ = _render(sc, 2, False)
+    np.testing.assert_array_equal(f2, fresh)
+
+
+def _blurred_scene(keys):
+    """_scene with the camera splat and Render > Motion Blur on, the camera keyframed at ``keys``
+    ((frame, location), ...) instead."""
+    sc, cam, box = _scene(splat=True)
+    cam.animation_data_clear()
+    for frame, loc in keys:
+        cam.location = loc
+        cam.keyframe_insert("location", frame=frame)
+    sc.render.use_motion_blur = True
+    sc.render.motion_blur_shutter = 0.5
+    return sc
+
+
+def test_motion_blur_moving_camera_reuses_the_light_pass_without_a_splat():
+    """A camera moving through both frames' shutters has no splat (the eye pass reads the caustic
+    map: docs/physics.md section 6.13), so frame 2 takes the camera-only path and the light pass as
+    it is, and is the fresh render of frame 2."""
+    sc = _blurred_scene([(1, (0.0, -4.0, 3.0)), (2, (0.4, -3.8, 3.1)), (3, (0.8, -3.6, 3.2))])
+    _, p1, _ = _render(sc, 1, True)
+    assert p1["splat_vertices"] is None  # no splat, nothing to keep
+    f2, p2, line = _render(sc, 2, True)
+    assert p2["reused"] == ("export", "preparation", "light pass") and not p2["light_pass_ran"], p2
+    assert p2["resplat"] is None and "ran again" not in line
+    fresh, _, _ = _render(sc, 2, False)
+    np.testing.assert_array_equal(f2, fresh)
+
+
+def test_motion_blur_still_camera_after_a_moving_one_runs_the_light_pass_again():
+    """The camera moves during frame 1's shutter (no splat, so no vertices kept) and stands still
+    through frame 2's (a splat is needed): the light pass runs again, the stats line says why,
+    and frame 2 is the fresh render's. Frame 3 (still again) then re-splats frame 2's vertices."""
+    sc = _blurred_scene([(1, (0.0, -4.0, 3.0)), (1.5, (0.4, -3.8, 3.1)), (3, (0.4, -3.8, 3.1))])
+    sc.frame_end = 3
     _render(sc, 1, True)
     f2, p2, line = _render(sc, 2, True)
     assert not p2["exported_geometry"] and p2["light_pass_ran"], p2
-    assert p2["reused"] == ("export", "preparation")
+    assert "light pass ran again: the kept light pass kept no camera-splat vertices" in line
     fresh, _, _ = _render(sc, 2, False)
     np.testing.assert_array_equal(f2, fresh)
 

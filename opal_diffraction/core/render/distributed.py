@@ -491,7 +491,9 @@ class DaskExecutor:
         self._scattered.add(self._job_f)
         return True
 
-    def light_pass(self, prepared, plan, control, progress) -> LightPassResult:
+    def light_pass(self, prepared, plan, control, progress, keep_vertices: int = 0) -> LightPassResult:
+        """The light pass on the cluster; it keeps no camera-splat vertices (``keep_vertices`` is
+        ignored: the engine keeps nothing between frames rendered on a cluster)."""
         return _light_pass(self.client, self._job_f, prepared, plan, progress, control, self._uid, self.threads,
                            self._scattered)
 

@@ -42,12 +42,14 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 from typing import Callable
 
 import numpy as np
 
 from ..util.blas_threads import one_blas_thread
 from ..integrators.light.camera_splat import usable_splat
+from ..integrators.light.splat_vertices import resplat, resplat_note
 from ..util.cancel import OutOfTime, RenderCancelled
 from .distributed import DaskExecutor
 from ..util.jit import kernel_mode, warm_up
@@ -63,8 +65,8 @@ from ..spectral.spectrum import SpectralConverter
 from .tiles import LIGHT_PASS_SHARE, EyeWork, adaptive_of
 from .view_check import camera_sees_nothing
 
-__all__ = ["RenderResult", "LightPassResult", "render", "render_prepared", "reusable_light", "compile_stage",
-           "warm_up_scene"]
+__all__ = ["RenderResult", "LightPassResult", "render", "render_prepared", "reusable_light", "light_reuse",
+           "compile_stage", "warm_up_scene"]
 
 
 def render(
@@ -80,6 +82,7 @@ def render(
     light: LightPassResult | None = None,
     on_prepared: Callable[[PreparedScene], None] | None = None,
     on_light: Callable[[LightPassResult], None] | None = None,
+    keep_splat: int = 0,
 ) -> RenderResult:
     """Render ``scene``; raises SceneError (a readable message) for unrenderable input.
 
@@ -102,9 +105,12 @@ def render(
     ``reuse``, an earlier PreparedScene, is handed to ``prepare`` (what depends only on unchanged
     inputs is taken from it: the ray caster when the geometry is the same, and its ``key`` when
     nothing the light pass reads changed); ``light``, that earlier render's light pass, is reused
-    where ``reusable_light`` allows (same key; where the plan splats, a splat made for this view).
+    where ``reusable_light`` allows (same key; where the plan splats, a splat made for this view
+    or the splat's kept vertices, splatted again into this view: ``render_prepared``).
     ``on_prepared(prepared)`` and ``on_light(result)`` receive what this render prepared and the
-    light pass it ran, for the next render. The image is the one a render without them makes.
+    light pass it ran (or re-splatted), for the next render. ``keep_splat``: bytes of camera-splat
+    vertices the light pass may keep for another view (run_light_pass's ``keep_vertices``; 0:
+    none). The image is the one a render without them makes.
     """
     # before prepare's kernels run; a cluster's workers compile their own (the stage is this process's)
     try:
@@ -138,24 +144,37 @@ def render(
     executor = None if client is None else DaskExecutor(client, scene)
     with one_blas_thread():  # the tile threads are the parallelism (core/util/blas_threads.py)
         return _render_in_mode(prepared, reusable_light(prepared, light), progress, should_cancel, on_round, region,
-                               t_start, spectral_film, executor, time.perf_counter, compiled, on_light)
+                               t_start, spectral_film, executor, time.perf_counter, compiled, on_light, keep_splat)
 
 
 def reusable_light(prepared: PreparedScene, light: LightPassResult | None) -> LightPassResult | None:
     """``light`` (an earlier render's light pass) if the eye pass of ``prepared`` may read it as
-    the light pass ``prepared`` would run itself, else None (run it again): it belongs to the same
-    preparation (``key``: the geometry, materials, lights, world and light-pass settings are
-    unchanged), it ran to the end (not cancelled, not cut short by a time limit, whose share of
-    the paths depends on the clock), and where the plan splats light paths into the camera
-    (core/integrators/light/camera_splat.py) its splat was made for this view: the caustic map
-    and grating records do not depend on the camera, the splat does (``usable_splat``)."""
-    if light is None or light.key != prepared.key or light.cancelled:
-        return None
+    the light pass ``prepared`` would run itself, else None (run it again): ``light_reuse``."""
+    return light_reuse(prepared, light)[0]
+
+
+def light_reuse(prepared: PreparedScene, light: LightPassResult | None) -> tuple[LightPassResult | None, str]:
+    """(``light`` or None, why not): ``light`` (an earlier render's light pass) is reusable by
+    ``prepared``'s render if it belongs to the same preparation (``key``: the geometry,
+    materials, lights, world and light-pass settings are unchanged), it ran to the end (not
+    cancelled, not cut short by a time limit, whose share of the paths depends on the clock),
+    and where the plan splats light paths into the camera (core/integrators/light/camera_splat.py)
+    its splat was made for this view (``usable_splat``) or it kept the splat's vertices, which
+    ``render_prepared`` splats again into this view (core/integrators/light/splat_vertices.py):
+    the caustic map, the grating records and the vertices do not depend on the camera, the splat
+    does. The reason is "" when it is reusable or belongs to another preparation (nothing to say:
+    the scene changed), else a phrase for the stats ("the kept light pass was cancelled", ...)."""
+    if light is None or light.key != prepared.key:
+        return None, ""
+    if light.cancelled:
+        return None, "the kept light pass was cancelled"
     if any("time limit" in w for w in light.warnings):
-        return None
+        return None, "the kept light pass was cut short by the time limit"
     if plan_render(prepared).camera_splat and usable_splat(prepared, light) is None:
-        return None
-    return light
+        why = resplat_note(light.vertices)
+        if why:
+            return None, why
+    return light, ""
 
 
 def _time_limit_before_validation(settings: RenderSettings) -> float:
@@ -308,18 +327,26 @@ def render_prepared(
     executor: Executor | None = None,
     clock: Callable[[], float] = time.perf_counter,
     on_light: Callable[[LightPassResult], None] | None = None,
+    keep_splat: int = 0,
 ) -> RenderResult:
-    """Render a prepared scene (see ``render`` for the callbacks, ``region`` and ``spectral_film``).
+    """Render a prepared scene (see ``render`` for the callbacks, ``region``, ``spectral_film``
+    and ``keep_splat``).
 
     ``light``: a finished light pass of the same prepared scene (``prepared.with_view`` keeps it
-    valid) to reuse; None runs the light pass when the plan asks for it. ``started_at``: the
+    valid) to reuse; None runs the light pass when the plan asks for it. Where the plan splats
+    and ``light``'s splat was made for another view, its kept splat vertices are splatted into
+    this view (core/integrators/light/splat_vertices.py ``resplat``: shadow rays, no light paths;
+    ``on_light`` receives the result, whose ``resplat`` holds the re-splat's stats, also in this
+    render's: ``resplat_s``, ``resplat_vertices``, ``resplat_bytes``, ``resplat_rays``); without kept vertices the
+    eye pass looks the caustic map up everywhere instead (``frame.light_reuse`` says when a
+    caller should rather run the light pass again). ``started_at``: the
     ``clock()`` time the time limit counts from (default: now). ``executor``: where the units
     run (core/render/scheduler.py; default: a LocalExecutor on ``prepared.threads``;
     distributed.DaskExecutor for a cluster). ``clock``: the scheduler's clock, in seconds. The
     passes run the compiled kernels or the NumPy reference as ``settings.kernels`` says
     (core/util/jit.py); the stats' ``kernels`` names which. The process's first render on the
     kernels starts with the compile stage (``compile_stage``). ``on_light(result)``: receives the
-    light pass's result when this render ran it (not when ``light`` was given), so a caller can
+    light pass's result when this render ran it (or re-splatted a given ``light``), so a caller can
     keep it for another render of the same prepared scene (the engine's persistent data between
     animation frames: blender/persistent.py).
     """
@@ -340,19 +367,20 @@ def render_prepared(
                                        f"time limit ({limit:g} s) reached while compiling the kernels: nothing rendered"
                                        if out_of_time else None, cancelled_in="while compiling the kernels")
     return _render_in_mode(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
-                           executor, clock, compiled, on_light)
+                           executor, clock, compiled, on_light, keep_splat)
 
 
 def _render_in_mode(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
-                    executor, clock, compiled, on_light=None) -> RenderResult:
+                    executor, clock, compiled, on_light=None, keep_splat: int = 0) -> RenderResult:
     """render_prepared after its compile stage (``compiled``: that stage's stats, or None)."""
     with kernel_mode(prepared.settings.kernels) as kernels:
         return _render_prepared(prepared, light, progress, should_cancel, on_round, region, started_at,
-                                spectral_film, executor, clock, kernels, compiled, on_light)
+                                spectral_film, executor, clock, kernels, compiled, on_light, keep_splat)
 
 
 def _render_prepared(prepared, light, progress, should_cancel, on_round, region, started_at, spectral_film,
-                     executor, clock, kernels: str, compiled: dict | None = None, on_light=None) -> RenderResult:
+                     executor, clock, kernels: str, compiled: dict | None = None, on_light=None,
+                     keep_splat: int = 0) -> RenderResult:
     """render_prepared's body, inside its kernel mode (``kernels``: the path taken, for the stats;
     ``compiled``: the compile stage's stats when this render ran it)."""
     settings = prepared.settings
@@ -382,11 +410,25 @@ def _render_prepared(prepared, light, progress, should_cancel, on_round, region,
         eye_from = 0.0  # where the eye pass's share of the progress starts
         if plan.light_pass and light is None:
             eye_from = LIGHT_PASS_SHARE
-            light = executor.light_pass(prepared, plan, control, control.stage(0.0, LIGHT_PASS_SHARE))
+            light = executor.light_pass(prepared, plan, control, control.stage(0.0, LIGHT_PASS_SHARE),
+                                        keep_vertices=keep_splat)
             if on_light is not None:
                 on_light(light)
         elif not plan.light_pass:
             light = None
+        elif (plan.camera_splat and not light.cancelled and usable_splat(prepared, light) is None
+              and light.vertices is not None and light.vertices.usable):
+            # a kept light pass seen through another camera: its splat vertices splatted into this view
+            control.report(0.0, f"re-splatting {light.vertices.vertices / 1e6:.2f} M light-path vertices to the camera")
+            again = resplat(prepared, light, should_cancel=control.cancelled)
+            if again is None:  # cancelled: as a light pass cancelled midway, a black image
+                light = replace(light, cancelled=True)
+            else:
+                light = again
+                stats.update(light.resplat)
+                stats["rays"] += light.resplat["resplat_rays"]
+                if on_light is not None:
+                    on_light(light)
         if light is not None:
             warnings += light.warnings
             stats.update(light.stats)

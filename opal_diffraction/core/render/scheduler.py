@@ -140,9 +140,10 @@ class Executor(Protocol):
     def start(self, prepared, region, spectral: bool, control: RenderControl) -> bool:
         """Get ready to render ``region`` of ``prepared``; False when cancelled meanwhile."""
 
-    def light_pass(self, prepared, plan, control: RenderControl, progress) -> LightPassResult:
+    def light_pass(self, prepared, plan, control: RenderControl, progress, keep_vertices: int = 0) -> LightPassResult:
         """Run the light pass as ``plan`` (plan.RenderPlan) says (``progress``: its stage of the
-        control's progress, or None)."""
+        control's progress, or None; ``keep_vertices``: run_light_pass's, bytes of camera-splat
+        vertices to keep for another view, 0: none; an executor may keep none)."""
 
     def start_eye(self, prepared, plan, light: LightPassResult | None, work: EyeWork) -> None:
         """Get ready to trace ``work``'s units with this light pass, as ``plan`` says."""
@@ -298,14 +299,15 @@ class LocalExecutor:
         self._pollable = control.can_stop()
         return True
 
-    def light_pass(self, prepared, plan, control: RenderControl, progress) -> LightPassResult:
-        """The light pass; with a cancel check it runs in a worker thread polled from here every
+    def light_pass(self, prepared, plan, control: RenderControl, progress, keep_vertices: int = 0) -> LightPassResult:
+        """The light pass (``keep_vertices``: run_light_pass's); with a cancel check it runs in a worker thread polled from here every
         POLL_S, so a cancel returns at once (a cancelled, empty result) while its lanes stop at
         their next batch in the background (a batch can take seconds on a big scene). The
         worker gets plain flags, and the progress is passed on from this thread: the callbacks
         are only ever called from the calling thread (Blender's must)."""
         if not control.has_cancel_check():
-            return run_light_pass(prepared, None, progress, control.cancelled, control.perf_deadline(), plan=plan)
+            return run_light_pass(prepared, None, progress, control.cancelled, control.perf_deadline(), plan=plan,
+                                  keep_vertices=keep_vertices)
         asked = threading.Event()
         latest: list = []  # the worker's last progress report (list appends are atomic)
         out: dict = {}
@@ -313,7 +315,8 @@ class LocalExecutor:
         def work():
             try:
                 out["value"] = run_light_pass(prepared, None, (lambda f, m: latest.append((f, m))) if progress else None,
-                                              asked.is_set, control.perf_deadline(), plan=plan)
+                                              asked.is_set, control.perf_deadline(), plan=plan,
+                                              keep_vertices=keep_vertices)
             except BaseException as e:  # handed to the calling thread
                 out["error"] = e
 

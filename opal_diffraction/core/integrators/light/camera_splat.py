@@ -26,7 +26,8 @@ The path-space split (docs/physics.md section 4.9): the splat covers caustic lig
 caustic map out exactly there and still looks it up behind mirrors and glass and after
 diffuse or glossy bounces. The split holds only for the camera the splat was made for
 (``view_key``: the camera and the filter width); another view (``PreparedScene.with_view``)
-falls back to the map everywhere.
+falls back to the map everywhere, unless the light pass kept the splat's vertices, which
+core/integrators/light/splat_vertices.py connects to the new camera (``resplat``).
 
 Accumulation is deterministic: a batch's splats are summed per pixel (a bincount per channel, float64)
 into a sparse (pixels, values) pair, and a lane's film adds the batches' pairs in lane order, on

@@ -37,6 +37,7 @@ import numpy as np
 
 from ...util.blas_threads import one_blas_thread
 from .camera_splat import CameraConnection, CameraSplat, SplatLog
+from .splat_vertices import SplatVertexStore, VertexKeeper
 from ...transport.elements import ElementLayout, IlluminationMap
 from ...gratings.records import PILOT_STREAM, GratingRecords, record_layout
 from ...util.geometry import triangle_areas
@@ -61,6 +62,18 @@ class LightPassResult:
     cancelled: bool
     key: int
     splat: CameraSplat | None = None  # the paths' camera connection (core/integrators/light/camera_splat.py), or None: off
+    # the splat's light-path vertices, kept to splat into another view (core/integrators/light/splat_vertices.py),
+    # or None: not asked for (run_light_pass's keep_vertices), no splat, or a pass cut short
+    vertices: SplatVertexStore | None = None
+    # a kept light pass whose splat was made again for another view from ``vertices``
+    # (splat_vertices.resplat): that re-splat's stats (resplat_s, resplat_vertices, resplat_bytes,
+    # resplat_rays); None: the splat is the light pass's own
+    resplat: Mapping[str, float] | None = None
+
+    @property
+    def resplatted(self) -> bool:
+        """Whether the splat was made again from kept vertices (not traced with the light paths)."""
+        return self.resplat is not None
 
     @classmethod
     def skipped(cls, prepared) -> "LightPassResult":
@@ -180,17 +193,20 @@ class DepositLog:
 
 
 def trace_logged(prepared, work: LightWork, j: int, bounce: bool, splat: bool,
-                 connection: CameraConnection | None = None) -> dict:
+                 connection: CameraConnection | None = None, keep: bool = False) -> dict:
     """Trace batch ``j`` of ``work`` into logs instead of maps: {'illum', 'records' (DepositLog
-    calls or None), 'splat' (SplatLog calls or None), 'counts', 'elements'}, what
+    calls or None), 'splat' (SplatLog calls or None), 'counts', 'elements', 'vertices' (with
+    ``keep`` and a splat: the batch's splat vertices per SPLIT piece, else None)}, what
     ``LaneAssembler.add`` replays (a local worker thread's or a Dask task's result)."""
     illum = DepositLog(work.layout)
     records = DepositLog(work.record_layout) if work.record_layout is not None else None
     splat_log = SplatLog() if splat else None
+    vertices = [] if keep and splat else None
     counts = trace_batch(prepared, work.batches[j], illum, records, splat=splat_log, bounce=bounce,
-                         connection=connection)
+                         connection=connection, keep=vertices)
     return {"illum": illum.calls, "records": None if records is None else records.calls, "counts": counts,
-            "elements": work.layout.total, "splat": None if splat_log is None else splat_log.calls}
+            "elements": work.layout.total, "splat": None if splat_log is None else splat_log.calls,
+            "vertices": vertices}
 
 
 class LaneAssembler:
@@ -200,8 +216,10 @@ class LaneAssembler:
     ``add`` keeps a finished batch; ``drain`` replays what can be replayed and returns the
     paths now in the maps."""
 
-    def __init__(self, prepared, work: LightWork, connection: CameraConnection | None):
+    def __init__(self, prepared, work: LightWork, connection: CameraConnection | None,
+                 keeper: VertexKeeper | None = None):
         self.work = work
+        self.keeper = keeper  # the splat vertices kept, lane by lane in order, or None
         self.maps = [work.empty_maps(prepared.grid.n) for _ in range(LANES)]
         self.counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
         self.splats = [connection.empty() for _ in range(LANES)] if connection is not None else None
@@ -228,6 +246,8 @@ class LaneAssembler:
                         self.splats[k].add(pixels, values)
                 for name, value in out["counts"].items():
                     self.counts[k][name] += value
+                if self.keeper is not None:
+                    self.keeper.add(k, out.get("vertices"), out["counts"]["paths"])
                 self.position[k] += 1
         return sum(c["paths"] for c in self.counts)
 
@@ -236,10 +256,11 @@ class LaneAssembler:
 
 
 def finish_light_pass(prepared, work: LightWork, maps, counts, t0: float, timed_out: bool = False,
-                      cancelled: bool = False, splats=None) -> LightPassResult:
+                      cancelled: bool = False, splats=None, keeper: VertexKeeper | None = None) -> LightPassResult:
     """The LightPassResult of lanes' ``maps`` [(illum, records)], ``counts`` [dict] and camera
     ``splats`` [CameraSplat] (None: off): the lanes summed in lane order, rescaled by planned /
-    traced paths after a time limit."""
+    traced paths after a time limit. ``keeper``: the splat vertices kept (None: none); a pass
+    cut short (cancelled, time limit) keeps none."""
     illum, records = maps[0]
     for extra_illum, extra_records in maps[1:]:
         illum += extra_illum
@@ -271,14 +292,23 @@ def finish_light_pass(prepared, work: LightWork, maps, counts, t0: float, timed_
         stats.update(work.record_info)
     if cancelled:
         stats["cancelled"] = True
-    return LightPassResult(illum, records, MappingProxyType(stats), tuple(warnings), cancelled, prepared.key, splat)
+    vertices = None
+    if keeper is not None and not cancelled and not timed_out:
+        vertices = keeper.store()
+        stats["splat_vertices"] = vertices.vertices
+        stats["splat_vertex_bytes"] = vertices.nbytes
+    return LightPassResult(illum, records, MappingProxyType(stats), tuple(warnings), cancelled, prepared.key, splat,
+                           vertices)
 
 
 @one_blas_thread()  # the lanes are the parallelism (core/util/blas_threads.py)
 def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_cancel=None,
-                   deadline: float | None = None, *, plan) -> LightPassResult:
+                   deadline: float | None = None, *, plan, keep_vertices: int = 0) -> LightPassResult:
     """Run the light pass over ``prepared`` (``n_paths``: default the settings' light paths) as
     ``plan`` (render/plan.RenderPlan of ``prepared``: its ``camera_splat`` and ``splat_bounce``).
+    ``keep_vertices``: where the plan splats, keep the splat's light-path vertices up to that
+    many bytes (``LightPassResult.vertices``, for splat_vertices.resplat into another view); 0:
+    keep none.
 
     The batches are dealt to LANES fixed lanes (LightWork: batch j to lane j % LANES), each with
     its own maps, and summed in lane order at the end, so the result does not depend on the
@@ -293,8 +323,9 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
     t0 = time.perf_counter()
     work = LightWork.of(prepared, n_paths)
     total = work.total
+    keeper = (VertexKeeper(keep_vertices, LANES, total) if plan.camera_splat and keep_vertices > 0 else None)
     if prepared.threads > LANES and len(work.batches) > LANES:
-        return _run_logged(prepared, work, plan, progress, should_cancel, deadline, t0)
+        return _run_logged(prepared, work, plan, progress, should_cancel, deadline, t0, keeper)
     maps = [work.empty_maps(prepared.grid.n) for _ in range(LANES)]
     counts = [dict(paths=0, deposits=0, rays=0) for _ in range(LANES)]
     # the camera splat (core/integrators/light/camera_splat.py), or None: off
@@ -308,11 +339,14 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
         for j in work.lane(k):  # bounded memory: fixed batches
             if stop.is_set():
                 return
+            kept = [] if keeper is not None and keeper.keeping else None
             done = trace_batch(prepared, work.batches[j], illum, records,
                                splat=None if splats is None else splats[k], bounce=plan.splat_bounce,
-                               connection=connection)
+                               connection=connection, keep=kept)
             for name, value in done.items():
                 counts[k][name] += value
+            if keeper is not None:
+                keeper.add(k, kept, done["paths"])
 
     threads = max(1, min(LANES, prepared.threads))
     timed_out = False
@@ -333,10 +367,11 @@ def run_light_pass(prepared, n_paths: int | None = None, progress=None, should_c
                 timed_out = True
         for f in futures:
             f.result()  # re-raise a worker's exception here
-    return finish_light_pass(prepared, work, maps, counts, t0, timed_out, cancelled, splats)
+    return finish_light_pass(prepared, work, maps, counts, t0, timed_out, cancelled, splats, keeper)
 
 
-def _run_logged(prepared, work: LightWork, plan, progress, should_cancel, deadline, t0: float) -> LightPassResult:
+def _run_logged(prepared, work: LightWork, plan, progress, should_cancel, deadline, t0: float,
+                keeper: VertexKeeper | None = None) -> LightPassResult:
     """run_light_pass on ``prepared.threads`` > LANES threads: every thread traces whole batches
     into logs (``trace_logged``), submitted in batch order with a bounded number in flight (the
     logs of finished batches wait only for their lane's earlier ones), and the calling thread
@@ -344,7 +379,7 @@ def _run_logged(prepared, work: LightWork, plan, progress, should_cancel, deadli
     bit. A cancel or the time limit stops submitting; each lane keeps the prefix it added, as a
     direct lane stops at its next batch."""
     connection = CameraConnection.of(prepared) if plan.camera_splat else None
-    lanes = LaneAssembler(prepared, work, connection)
+    lanes = LaneAssembler(prepared, work, connection, keeper)
     threads = int(prepared.threads)
     ahead = 2 * threads  # batches traced or waiting for their lane at once (bounds the logs' memory)
     total = work.total
@@ -355,7 +390,8 @@ def _run_logged(prepared, work: LightWork, plan, progress, should_cancel, deadli
             while True:
                 while submitted < len(work.batches) and len(pending) + len(lanes.ready) < ahead:
                     pending[pool.submit(trace_logged, prepared, work, submitted, plan.splat_bounce,
-                                        connection is not None, connection)] = submitted
+                                        connection is not None, connection,
+                                        keeper is not None and keeper.keeping)] = submitted
                     submitted += 1
                 done_set, _ = wait(pending, timeout=POLL_S)
                 for f in done_set:
@@ -374,4 +410,4 @@ def _run_logged(prepared, work: LightWork, plan, progress, should_cancel, deadli
         finally:
             for f in pending:
                 f.cancel()  # the batches not started; running ones finish and are dropped
-    return finish_light_pass(prepared, work, lanes.maps, lanes.counts, t0, timed_out, cancelled, lanes.splats)
+    return finish_light_pass(prepared, work, lanes.maps, lanes.counts, t0, timed_out, cancelled, lanes.splats, keeper)

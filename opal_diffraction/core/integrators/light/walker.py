@@ -35,6 +35,7 @@ import numpy as np
 
 from ...transport import wavelengths
 from .camera_splat import CameraConnection, CameraSplat, SplatBatch
+from .splat_vertices import RecordingSplatBatch
 from . import splat_bounce
 from .adjoint_shading import adjoint_factor, dielectric_normal_used
 from ...transport.elements import IlluminationMap
@@ -205,7 +206,7 @@ class LightBatch:
 
 
 def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_PASS_STREAM, splat=None,
-                bounce: bool = False, connection: CameraConnection | None = None) -> dict:
+                bounce: bool = False, connection: CameraConnection | None = None, keep: list | None = None) -> dict:
     """Trace one batch of light paths, depositing into ``illum`` and ``records`` (objects with a
     ``layout`` and IlluminationMap's ``deposit``: maps, or DepositLogs; ``records`` None
     without gratings). ``stream``: the random stream id (the records' pilot pass has its own).
@@ -213,7 +214,10 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
     lane's film or a camera_splat.SplatLog), or None: no camera connection (the plan's
     ``camera_splat`` off). ``bounce``: with a ``splat``, continue the landings by a diffuse
     bounce (the plan's ``splat_bounce``). ``connection``: ``CameraConnection.of(prepared)`` if the
-    caller has it (made once per pass, not per batch). Returns its counts: paths, deposits, rays."""
+    caller has it (made once per pass, not per batch). ``keep``: with a ``splat``, a list that
+    receives the batch's splat vertices (core/integrators/light/splat_vertices.py), a list of
+    SplatVertices per SPLIT piece in the order they were connected; None: none kept. Returns its
+    counts: paths, deposits, rays."""
     seed = int(prepared.settings.seed)
     b = job.paths
     rng = np.random.default_rng(np.random.SeedSequence([seed, stream, job.light, job.batch]))
@@ -231,7 +235,12 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
         connection = None
     elif connection is None:
         connection = CameraConnection.of(prepared)
-    batch = SplatBatch(connection) if connection is not None else None
+    textured = keep is not None and prepared.textures.uses("color")
+
+    def new_batch():  # a piece's splats (and, asked to keep them, its vertices)
+        return SplatBatch(connection) if keep is None else RecordingSplatBatch(connection, textured)
+
+    batch = new_batch() if connection is not None else None
     tr = LightWalker(prepared, rng, illum, records, batch)
     bounce_rng = None
     if batch is not None and bounce:
@@ -256,5 +265,7 @@ def trace_batch(prepared, job: LightBatch, illum, records, stream: int = LIGHT_P
             else:  # a SplatLog: the (pixels, values) a Dask worker sends back
                 splat.add(*tr.splat.finish())
             shadow += tr.splat.shadow_rays
-            tr.splat = SplatBatch(connection)
+            if keep is not None:
+                keep.append(tr.splat.kept)
+            tr.splat = new_batch()
     return {"paths": b, "deposits": tr.deposited, "rays": tr.rays_cast + shadow}
