@@ -83,11 +83,11 @@ class ShaderCompiler:
         sock = node.inputs.get(name)
         if sock is None:
             return None
-        src = self.reader.source(sock)
+        src = self.reader.source(sock, groups=False)
         if src is None or not self._compilable(src[0]):
             return None
         try:
-            return self._socket(sock, (), kind)
+            return self._socket(sock, self.reader.group_path(node), kind)
         except _Unread:
             return None
 
@@ -136,7 +136,7 @@ class ShaderCompiler:
 
     def _socket(self, sock, path: tuple, kind: str, default_generated: bool = False) -> int:
         """Register of input socket ``sock`` (in the group ``path``) as ``kind``."""
-        src = self.reader.source(sock)
+        src = self.reader.source(sock, groups=False)
         if src is None:
             if default_generated and sock.name == "Vector" and getattr(sock, "type", "") == "VECTOR":
                 return self.builder.op("coord", kind="generated")[0]  # a texture's default coordinates
@@ -386,7 +386,7 @@ class ShaderCompiler:
         if idx is None:  # no pixels (warned by the table): Cycles' magenta
             return b.const([1.0, 0.0, 1.0]) if oname == "Color" else b.const(1.0)
         sock = node.inputs.get("Vector")
-        if sock is not None and self.reader.source(sock) is not None:
+        if sock is not None and self.reader.source(sock, groups=False) is not None:
             vec = self._socket(sock, path, "v")
         else:
             self.uv_maps.add("")
