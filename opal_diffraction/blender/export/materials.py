@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...core.scene.model import Materials
+from ...core.scene.shader_programs import BUMP_SLOTS
 from ...core.scene.checks import SceneError
 from .colour import in_rec709, rgb, working_space_to_rec709
 from .images import TextureTable
@@ -89,7 +90,10 @@ class MaterialTable:
         ('TANGENT', map) items (map '': the active render UV map)."""
         needs = set()
         for r in slots:
-            for kind in self.program_reads[r]:  # a shader program's coordinates
+            for kind in self.program_reads[r]:  # a shader program's coordinates and attributes
+                if kind.startswith("attribute:"):
+                    needs.add(("ATTRIBUTE", kind.split(":", 1)[1]))
+                    continue
                 needs.add(("GENERATED" if kind == "generated" else "OBJECT", "") if kind != "uv" else ("UV", ""))
             spec = self.corners[r]
             if spec is None:
@@ -132,13 +136,15 @@ class MaterialTable:
         ``surf.programs``; keys '_program_reads' (taken off by :meth:`lookup`) and '_corners'
         (a program reading UVs on a material without image textures: the UV map, unmapped)."""
         compiler, self._compiler = self._compiler, None
-        progs = {k: v for k, v in surf.programs.items() if k in ("color", "roughness", "metallic", "emission", "mix")}
+        progs = {k: v for k, v in surf.programs.items() if k in ("color", "roughness", "metallic", "emission", "mix")
+                 + BUMP_SLOTS}
         if surf.kind is None:
             progs = {k: v for k, v in progs.items() if k == "emission"}
         if not progs or compiler is None:
             return {}
         program = compiler.finish(progs)
-        out = {"shader_program": len(self.programs), "_program_reads": program.reads()}
+        out = {"shader_program": len(self.programs),
+               "_program_reads": program.reads() | {"attribute:" + a for a in program.attributes()}}
         self.programs.append(program)
         if "emission" in progs:
             strength = float(surf.programs.get("emission_strength", 1.0))

@@ -307,13 +307,63 @@ class TextureBindings:
                     ref.strength = self.strength(node, s.name, 1.0) if s is not None else 1.0
                 surf.textures[slot] = ref
         if surf.kind is not None and node.inputs.get("Normal") is not None:
+            src = self.source(node.inputs["Normal"])
+            if src is not None and src[0].bl_idname == "ShaderNodeBump" and not getattr(src[0], "mute", False):
+                self._bump(src[0], surf)
+                return self._alpha_warning(node)
             ref = self._normal_map(node)
             if ref is not None:
                 surf.textures["normal"] = ref
+        self._alpha_warning(node)
+
+    def _alpha_warning(self, node) -> None:
         if node.bl_idname == "ShaderNodeBsdfPrincipled" and node.inputs.get("Alpha") is not None:
             alpha = self.source(node.inputs["Alpha"])
             if alpha is not None and alpha[0].bl_idname == "ShaderNodeTexImage":
                 self.warn(f"{self.owner}: image texture '{alpha[0].name}' on Alpha is not supported: rendered opaque")
+
+    def _bump(self, bump, surf: Surface) -> None:
+        """A Bump node on a BSDF's Normal: its Height (and Strength, Distance; Invert negates the
+        distance) compiled into the material's shader program (slots BUMP_SLOTS), from which the
+        core perturbs the shading normal per hit as Cycles' ``svm_node_set_bump`` does
+        (core/materials/surface.py; docs/physics.md section 13.7)."""
+        from .shader_compiler import ShaderCompiler
+
+        if self.textures is None:
+            return
+        hs = bump.inputs.get("Height")
+        if hs is None or self.source(hs) is None:
+            return  # a constant height: no slope, the normal is unchanged (as in Cycles)
+        if self.compiler is None:
+            self.compiler = ShaderCompiler(self)
+        c = self.compiler
+        height = c.compile_input(bump, "Height", "f")
+        if height is None:
+            self.warn(f"{self.owner}: the Height of Bump node '{bump.name}' comes from '{self.source(hs)[0].name}', "
+                      "which is not read: the normal is not perturbed")
+            return
+        regs = {}
+        for name, default in (("Strength", 1.0), ("Distance", 1.0)):
+            sock = bump.inputs.get(name)
+            reg = None
+            if sock is not None and self.source(sock) is not None:
+                reg = c.compile_input(bump, name, "f")
+            if reg is None:
+                v = self.value(bump, name, default) if sock is not None else default
+                if not np.isfinite(v):
+                    raise SceneError(f"{self.owner}: '{name}' of '{bump.name}' is not finite")
+                reg = c.builder.const(float(v))
+            regs[name] = reg
+        if getattr(bump, "invert", False):
+            regs["Distance"] = c.builder.op("math", [regs["Distance"], c.builder.const(-1.0), c.builder.const(0.0)],
+                                            operation="MULTIPLY", clamp=False)[0]
+        ns = bump.inputs.get("Normal")
+        if ns is not None and self.source(ns) is not None:
+            self.warn(f"{self.owner}: the Normal input of Bump node '{bump.name}' is not read: the bump perturbs the "
+                      "shading normal")
+        for slot, reg in (("bump_height", height), ("bump_strength", regs["Strength"]),
+                          ("bump_distance", regs["Distance"])):
+            surf.programs.setdefault(slot, reg)
 
     def _combined_textures(self, a: Surface, b: Surface, wa: float, wb: float, node, out: Surface) -> dict:
         """The textures of a Mix/Add of ``a`` and ``b``: each slot from the surface ``out`` kept

@@ -14,7 +14,8 @@ is read. It reads:
   Separate / Combine XYZ and Color (RGB) (and the legacy RGB nodes),
   Mapping, Value, RGB;
 - inputs: Texture Coordinate (Generated, Object, UV), UV Map; a texture's unlinked Vector is
-  Generated, as in Cycles;
+  Generated, as in Cycles; Color Attribute and Attribute (geometry: a mesh attribute per corner,
+  export/meshes.py ``corner_attribute``; Fac the components' average, as ``svm_node_attr``);
 - structure: node groups are inlined (Group Input / Group Output followed through the group
   node's sockets, nested groups too), reroutes and muted nodes followed (a muted node passes
   its first matching input through, as Blender's internal links do), a cycle refused with a
@@ -24,7 +25,7 @@ Image Texture nodes inside the program (behind a ColorRamp, a Mix, ...) sample t
 image per hit at their Vector (unlinked: the UV map), flat projection; in a world's graph
 (``world``) an Environment Texture samples its image at the equirectangular (u, v) of its Vector
 (unlinked: the ray direction). Anything else on the way
-(Hue/Saturation, Curves, Attribute, a Texture
+(Curves, an object / instancer / view-layer Attribute, a Texture
 Coordinate output other than the three above, a colour mode other than RGB) is named in one
 warning and replaced by the socket's own value, as before. Colours typed into sockets are the
 blend file's working space converted to linear Rec.709 (export/colour.py).
@@ -52,7 +53,8 @@ COMPILED_NODES = frozenset({
     "ShaderNodeCombineRGB", "ShaderNodeMapping", "ShaderNodeValue", "ShaderNodeRGB", "ShaderNodeTexCoord",
     "ShaderNodeUVMap", "ShaderNodeGroup", "NodeGroupInput", "ShaderNodeTexImage", "ShaderNodeTexWave",
     "ShaderNodeTexMagic", "ShaderNodeTexBrick", "ShaderNodeGamma", "ShaderNodeBrightContrast",
-    "ShaderNodeHueSaturation", "ShaderNodeRGBToBW", "ShaderNodeTexSky", "ShaderNodeTexEnvironment"})
+    "ShaderNodeHueSaturation", "ShaderNodeRGBToBW", "ShaderNodeTexSky", "ShaderNodeTexEnvironment",
+    "ShaderNodeVertexColor", "ShaderNodeAttribute"})
 
 _KIND = {"VALUE": "f", "INT": "f", "BOOLEAN": "f", "RGBA": "v", "VECTOR": "v"}
 _DIMS = {"1D": 1, "2D": 2, "3D": 3, "4D": 4}
@@ -214,6 +216,18 @@ class ShaderCompiler:
                 return b.op("coord", kind=oname.lower())[0]
             what = "Object output of another object" if oname == "Object" else f"{oname} output"
             raise self._fail(node, f"the Texture Coordinate {what} ('{node.name}')")
+        if idn == "ShaderNodeVertexColor":  # Color Attribute: '' the mesh's default colour attribute
+            col, alpha = b.op("attribute", attribute=str(getattr(node, "layer_name", "") or ""))
+            return alpha if oname == "Alpha" else col
+        if idn == "ShaderNodeAttribute":
+            if getattr(node, "attribute_type", "GEOMETRY") != "GEOMETRY":
+                raise self._fail(node, f"the {node.attribute_type.lower()} attribute of '{node.name}'")
+            col, alpha = b.op("attribute", attribute=str(node.attribute_name))
+            if oname == "Alpha":
+                return alpha
+            if oname in ("Fac", "Factor"):  # svm_node_attr: the average of the components
+                return b.op("to_float", [col], **{"from": "vector"})[0]
+            return col
         if idn == "ShaderNodeUVMap":
             self.uv_maps.add(getattr(node, "uv_map", ""))
             return b.op("coord", kind="uv")[0]

@@ -20,6 +20,9 @@ the textured rows are looked up (:meth:`textures.PreparedTextures.lookup`).
   on the triangle's outward side (flipped for back faces), then the strength s blends
   N'' = normalize(N + s (N' - N)) (s clamped at 0); finally N'' is kept on the geometric
   normal's side.
+- A Bump node's Height (a shader program's ``bump_height``, with ``bump_strength`` and
+  ``bump_distance``) bends the normal as Cycles' ``svm_node_set_bump`` (:func:`_bump`;
+  docs/physics.md section 13.7), after any normal map.
 """
 
 from __future__ import annotations
@@ -141,8 +144,15 @@ def shading_normal(prepared, hit) -> np.ndarray:
     side. ``ns`` is taken to face the ray like ``ng``."""
     n = np.asarray(getattr(hit, "ns", None) if getattr(hit, "ns", None) is not None else hit.ng, np.float32)
     tx = prepared.textures
-    if not tx.uses("normal") or not len(tx.corner_tangents):
-        return n
+    if tx.normal_mapped():
+        n = _normal_map(tx, hit, n)
+    if tx.uses("bump_height"):
+        n = _bump(prepared, hit, n)
+    return n
+
+
+def _normal_map(tx, hit, n: np.ndarray) -> np.ndarray:
+    """The tangent-space normal map of the hits' materials applied to ``n`` (module docstring)."""
     rows, rgba = tx.lookup("normal", hit.mat, hit.prim, hit.bu, hit.bv)
     if rows.size == 0:
         return n
@@ -184,3 +194,103 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
     b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)
+
+
+#: The Bump node's finite-difference step, as a fraction of the pixel footprint at the hit (Cycles'
+#: default Filter Width: the heights are sampled at P + 0.1 dPdx and P + 0.1 dPdy).
+BUMP_FILTER_WIDTH = 0.1
+#: The smallest step, relative to 1 + |P| (float32 coordinates keep about 7 digits).
+BUMP_MIN_STEP = 1e-5
+
+
+def _footprint(prepared, p: np.ndarray) -> np.ndarray:
+    """(b,) metres: the width of a camera pixel at the points ``p`` (b, 3), Cycles' ray
+    differential of a camera ray at that distance (perspective: distance x the pixel's angle;
+    orthographic: the pixel's width); other cameras: 1e-3 (1 + |p|)."""
+    cam = getattr(prepared.scene, "camera", None)
+    far = np.float64(1e-3) * (1.0 + np.abs(p).max(axis=1))
+    if cam is None:
+        return far
+    size = max(int(cam.width), int(cam.height), 1)
+    if cam.kind == "ORTHO":
+        return np.full(len(p), float(cam.ortho_scale) / size)
+    if cam.kind != "PERSP":
+        return far
+    sensor = cam.sensor_width if cam.sensor_fit != "VERTICAL" else cam.sensor_height
+    if cam.sensor_fit == "AUTO":
+        sensor = cam.sensor_width
+    origin = np.asarray(cam.matrix, np.float64)[:3, 3]
+    dist = np.sqrt(((p - origin) ** 2).sum(axis=1))
+    return dist * (float(sensor) / float(cam.lens)) / size
+
+
+def _bump(prepared, hit, n: np.ndarray) -> np.ndarray:
+    """The Bump node (docs/physics.md section 13.7), as Cycles' ``svm_node_set_bump``
+    (kernel/svm/displace.h, Apache-2.0, ported): the height h of the material's program at the hit
+    and at P + dPdx, P + dPdy, where dPdx, dPdy are orthogonal steps in the triangle's plane (Cycles:
+    ``differential_from_compact(Ng, dP)``; here the camera pixel's footprint at the hit times the
+    filter width 0.1, as an eye ray's differential); Rx = dPdy x N, Ry = N x dPdx, det = dPdx . Rx,
+    N' = normalize(|det| N - distance sign(det) ((h_x - h_c) Rx + (h_y - h_c) Ry)) (N itself when
+    that is zero), then normalize(s N' + (1 - s) N) with s = max(strength, 0). To first order N' is
+    N - distance grad h, whatever the step. The points P + dP are reached by their barycentric
+    offsets on the hit's triangle, so every per-corner input (Generated, Object, UV, attributes)
+    is read there exactly as at the hit. The result is kept on the geometric normal's side."""
+    tx = prepared.textures
+    pid = tx.program_slots["bump_height"][hit.mat]
+    rows = np.flatnonzero(pid >= 0)
+    if rows.size == 0:
+        return n
+    every = rows.size == len(n)
+    pick = (lambda a: np.asarray(a)) if every else (lambda a: np.asarray(a)[rows])  # noqa: E731
+    prim, bu, bv, k = pick(hit.prim), pick(hit.bu), pick(hit.bv), pid[rows]
+    nin = pick(n).astype(np.float64)
+    ng = pick(hit.ng).astype(np.float64)
+    v = np.asarray(prepared.scene.vertices, np.float64)
+    tri = np.asarray(prepared.scene.triangles)[prim]
+    v0 = v[tri[:, 0]]
+    e1, e2 = v[tri[:, 1]] - v0, v[tri[:, 2]] - v0
+    p = v0 + bu[:, None].astype(np.float64) * e1 + bv[:, None].astype(np.float64) * e2
+    # an orthonormal pair in the triangle's plane, right-handed about ng (make_orthonormals(Ng))
+    t = e1 - np.einsum("ij,ij->i", e1, ng)[:, None] * ng
+    t /= np.maximum(np.sqrt(np.einsum("ij,ij->i", t, t)), 1e-300)[:, None]
+    b = np.cross(ng, t)
+    step = np.maximum(BUMP_FILTER_WIDTH * _footprint(prepared, p), BUMP_MIN_STEP * (1.0 + np.abs(p).max(axis=1)))
+    dpdx, dpdy = t * step[:, None], b * step[:, None]
+    g11, g12, g22 = (np.einsum("ij,ij->i", e1, e1), np.einsum("ij,ij->i", e1, e2), np.einsum("ij,ij->i", e2, e2))
+    gdet = g11 * g22 - g12 * g12
+    gdet = np.where(gdet > 0, gdet, 1.0)
+
+    def bary(d):  # (du, dv) with du e1 + dv e2 = d (d in the triangle's plane)
+        r1, r2 = np.einsum("ij,ij->i", e1, d), np.einsum("ij,ij->i", e2, d)
+        return (g22 * r1 - g12 * r2) / gdet, (g11 * r2 - g12 * r1) / gdet
+
+    def height(du, dv):
+        return tx._program_lookup("bump_height", k, prim, bu + du, bv + dv)[:, 3].astype(np.float64)
+
+    h_c = height(0.0, 0.0)
+    h_x = height(*bary(dpdx))
+    h_y = height(*bary(dpdy))
+    strength = np.maximum(tx._program_lookup("bump_strength", k, prim, bu, bv)[:, 3].astype(np.float64), 0.0)
+    distance = tx._program_lookup("bump_distance", k, prim, bu, bv)[:, 3].astype(np.float64)
+    rx, ry = np.cross(dpdy, nin), np.cross(nin, dpdx)
+    det = np.einsum("ij,ij->i", dpdx, rx)
+    surfgrad = (h_x - h_c)[:, None] * rx + (h_y - h_c)[:, None] * ry
+    out = np.abs(det)[:, None] * nin - (distance * np.sign(det))[:, None] * surfgrad
+    length = np.sqrt(np.einsum("ij,ij->i", out, out))
+    ok = length > 0
+    out = np.where(ok[:, None], out / np.where(ok, length, 1.0)[:, None], nin)
+    mixed = strength[:, None] * out + (1.0 - strength)[:, None] * nin
+    mixed /= np.maximum(np.sqrt(np.einsum("ij,ij->i", mixed, mixed)), 1e-300)[:, None]
+    out = np.where(ok[:, None], mixed, nin)
+    # below the surface: lifted to NORMAL_MIN_COS above the tangent plane (Cycles: ensure_valid_reflection)
+    d = np.einsum("ij,ij->i", out, ng)
+    low = d < NORMAL_MIN_COS
+    if low.any():
+        lifted = out[low] + (NORMAL_MIN_COS - d[low])[:, None] * ng[low]
+        out[low] = lifted / np.sqrt(np.einsum("ij,ij->i", lifted, lifted))[:, None]
+    out = np.nan_to_num(out).astype(np.float32)
+    if every:
+        return out
+    res = n.copy()
+    res[rows] = out
+    return res

@@ -1,0 +1,269 @@
+"""Color Attribute / Attribute nodes, the Bump node and shader node groups (issue 28;
+docs/physics.md sections 13.6 and 13.7), in this bpy session.
+
+- Attributes: an Emission plane (a 4 x 4 grid turned 0.3 rad) whose colour comes from a mesh
+  attribute, seen by Cycles with one sample at the pixel centres; the expected value is the
+  exported program evaluated at the exported hits (tests/blender/test_shader_nodes.py
+  ``compare``), for byte face-corner colours, float point colours, a face-domain float through
+  the Attribute's Fac and a missing attribute (black, as in Cycles, with a warning).
+- Bump: a linear height h = a . x (Object coordinates through a Dot Product) has the same
+  finite differences at any step, so the perturbed normal equals the closed form
+  normalize(s normalize(N - d grad h) + (1 - s) N) exactly (to float32 rounding), with grad h
+  the world-space gradient of a . x_object on the plane.
+- Groups: a red Diffuse inside two levels of node groups (a reroute inside, the colour a group
+  input left at its default) renders red, not the 0.8 grey of an unread node; one group used
+  twice in a Mix Shader with different inputs gives each its own colour.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+
+import blender_scenes as bs
+from test_export_textures import pixel_hits
+from test_shader_nodes import P, compare
+
+from opal_diffraction.blender.export import export_scene
+from opal_diffraction.core.materials.surface import shading_normal
+from opal_diffraction.core.render.prepare import prepare
+
+
+def attribute_plane(build, attribute):
+    """A 4 x 4 grid (3 x 3 m, turned 0.3 rad) whose Emission colour is ``build(nt)``, with the
+    attribute(s) ``attribute(mesh)`` adds."""
+    sc = bs.empty_scene(P, P, "CYCLES")
+    bs.camera(location=(0, 0, 5), ortho_scale=2.0)
+    sc.cycles.filter_width = 0.01
+    mat = bpy.data.materials.new("attr")
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    em = nt.nodes.new("ShaderNodeEmission")
+    nt.links.new(em.outputs[0], out.inputs["Surface"])
+    nt.links.new(build(nt), em.inputs["Color"])
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=4, y_subdivisions=4, size=3.0)
+    ob = bpy.context.object
+    ob.rotation_euler = (0.0, 0.0, 0.3)
+    ob.data.materials.append(mat)
+    attribute(ob.data)
+    return ob
+
+
+def _random(n, width, seed):
+    return np.random.default_rng(seed).uniform(0.05, 0.95, (n, width)).astype(np.float32)
+
+
+def test_byte_colour_attribute_on_corners_as_cycles(tmp_path):
+    """A byte face-corner colour attribute (sRGB bytes, which Cycles decodes to linear) through
+    the Color Attribute node: equal to Cycles within 2e-6."""
+    def attr(me):
+        a = me.color_attributes.new("paint", "BYTE_COLOR", "CORNER")
+        a.data.foreach_set("color", np.concatenate([_random(len(a.data), 3, 1), np.ones((len(a.data), 1),
+                                                                                       np.float32)], 1).ravel())
+
+    def build(nt):
+        vc = nt.nodes.new("ShaderNodeVertexColor")
+        vc.layer_name = "paint"
+        return vc.outputs["Color"]
+
+    attribute_plane(build, attr)
+    compare(tmp_path, atol=2e-6)
+
+
+def test_default_float_point_colour_through_a_mix_as_cycles(tmp_path):
+    """A float point-domain colour attribute, the mesh's render colour, read by a Color
+    Attribute node with no name, its Alpha mixing it with a constant."""
+    def attr(me):
+        a = me.color_attributes.new("heat", "FLOAT_COLOR", "POINT")
+        a.data.foreach_set("color", _random(len(a.data), 4, 2).ravel())
+        me.color_attributes.render_color_index = 0
+
+    def build(nt):
+        vc = nt.nodes.new("ShaderNodeVertexColor")
+        mix = nt.nodes.new("ShaderNodeMix")
+        mix.data_type = "RGBA"
+        mix.inputs[6].default_value = (0.2, 0.9, 0.4, 1)
+        nt.links.new(vc.outputs["Alpha"], mix.inputs["Factor"])
+        nt.links.new(vc.outputs["Color"], mix.inputs[7])
+        return mix.outputs[2]
+
+    attribute_plane(build, attr)
+    compare(tmp_path, atol=2e-6)
+
+
+def test_attribute_fac_of_a_face_float_and_a_vector_as_cycles(tmp_path):
+    """An Attribute node's Fac of a face-domain float (constant per face) added to its Vector of a
+    point-domain vector attribute (Vector Math)."""
+    def attr(me):
+        f = me.attributes.new("rough", "FLOAT", "FACE")
+        f.data.foreach_set("value", _random(len(f.data), 1, 3).ravel())
+        v = me.attributes.new("wind", "FLOAT_VECTOR", "POINT")
+        v.data.foreach_set("vector", _random(len(v.data), 3, 4).ravel())
+
+    def build(nt):
+        a = nt.nodes.new("ShaderNodeAttribute")
+        a.attribute_name = "rough"
+        b = nt.nodes.new("ShaderNodeAttribute")
+        b.attribute_name = "wind"
+        vm = nt.nodes.new("ShaderNodeVectorMath")
+        vm.operation = "SCALE"
+        nt.links.new(b.outputs["Vector"], vm.inputs[0])
+        nt.links.new(a.outputs["Fac"], vm.inputs["Scale"])
+        return vm.outputs[0]
+
+    attribute_plane(build, attr)
+    compare(tmp_path, atol=2e-6)
+
+
+def test_a_missing_attribute_reads_black_with_a_warning(tmp_path):
+    def build(nt):
+        a = nt.nodes.new("ShaderNodeAttribute")
+        a.attribute_name = "nowhere"
+        mix = nt.nodes.new("ShaderNodeMix")
+        mix.data_type = "RGBA"
+        mix.inputs[6].default_value = (0.5, 0.5, 0.5, 1)
+        nt.links.new(a.outputs["Color"], mix.inputs[7])
+        mix.inputs["Factor"].default_value = 1.0
+        return mix.outputs[2]
+
+    attribute_plane(build, lambda me: None)
+    ex = export_scene(bpy.context.evaluated_depsgraph_get())
+    named = [w for w in ex.warnings if "'nowhere'" in w]
+    assert len(named) == 1 and "(0, 0, 0)" in named[0], ex.warnings
+    p = prepare(ex.scene)
+    hits = pixel_hits(p, pixels=P)
+    rows, rgba = p.textures.lookup("emission", hits.mat, hits.prim, hits.bu, hits.bv)
+    assert len(rows) == P * P and np.all(rgba[:, :3] == 0)
+    got = bs.render_to_array(str(tmp_path / "cycles.exr"), "CYCLES", samples=1)
+    assert np.all(got == 0)
+
+
+# ------------------------------------------------------------------------------------ bump
+@pytest.mark.parametrize("strength, invert", [(1.0, False), (0.5, False), (0.7, True)])
+def test_bump_of_a_linear_height_is_the_closed_form(strength, invert):
+    """h = a . x_object on a plane turned by 0.3 rad about z: grad h (world) = R a projected on
+    the plane; N' = normalize(N - d grad h) (d negated by Invert), then the strength blend."""
+    a = np.array([0.8, -0.5, 0.3])
+    d = 0.4
+    sc = bs.empty_scene(P, P, "CYCLES")
+    bs.camera(location=(0, 0, 5), ortho_scale=2.0)
+    mat = bpy.data.materials.new("bumpy")
+    nt = mat.node_tree
+    bsdf = nt.nodes["Principled BSDF"]
+    tc = nt.nodes.new("ShaderNodeTexCoord")
+    dot = nt.nodes.new("ShaderNodeVectorMath")
+    dot.operation = "DOT_PRODUCT"
+    dot.inputs[1].default_value = tuple(a)
+    bump = nt.nodes.new("ShaderNodeBump")
+    bump.inputs["Distance"].default_value = d
+    bump.inputs["Strength"].default_value = strength
+    bump.invert = invert
+    nt.links.new(tc.outputs["Object"], dot.inputs[0])
+    nt.links.new(dot.outputs["Value"], bump.inputs["Height"])
+    nt.links.new(bump.outputs["Normal"], bsdf.inputs["Normal"])
+    ob = bs.plane("plane", half=1.5, mat=mat)
+    ob.rotation_euler = (0.0, 0.0, 0.3)
+    ex = export_scene(bpy.context.evaluated_depsgraph_get())
+    assert not ex.warnings, ex.warnings
+    p = prepare(ex.scene)
+    assert p.textures.uses("normal") and p.textures.bound("normal")[0]
+    hits = pixel_hits(p, pixels=8)
+    got = shading_normal(p, hits)
+    c, s = np.cos(0.3), np.sin(0.3)
+    grad = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) @ a
+    grad[2] = 0.0  # the surface gradient: in the plane
+    n = np.array([0.0, 0.0, 1.0])
+    n1 = n - (-d if invert else d) * grad
+    n1 /= np.linalg.norm(n1)
+    n2 = strength * n1 + (1 - strength) * n
+    n2 /= np.linalg.norm(n2)
+    np.testing.assert_allclose(got, np.broadcast_to(n2, got.shape), atol=2e-4)
+    assert np.degrees(np.arccos(n2[2])) > 5  # a real tilt
+
+
+def test_a_bump_with_a_constant_height_leaves_the_normal():
+    sc = bs.empty_scene(P, P, "CYCLES")
+    bs.camera(location=(0, 0, 5), ortho_scale=2.0)
+    mat = bpy.data.materials.new("flat bump")
+    nt = mat.node_tree
+    v = nt.nodes.new("ShaderNodeValue")
+    v.outputs[0].default_value = 0.7
+    bump = nt.nodes.new("ShaderNodeBump")
+    nt.links.new(v.outputs[0], bump.inputs["Height"])
+    nt.links.new(bump.outputs["Normal"], nt.nodes["Principled BSDF"].inputs["Normal"])
+    bs.plane("plane", half=1.5, mat=mat)
+    p = prepare(export_scene(bpy.context.evaluated_depsgraph_get()).scene)
+    hits = pixel_hits(p, pixels=4)
+    np.testing.assert_allclose(shading_normal(p, hits), hits.ng, atol=1e-6)
+
+
+# ------------------------------------------------------------------------------------ groups
+def _diffuse_group(name, default):
+    g = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    s = g.interface.new_socket("Tint", in_out="INPUT", socket_type="NodeSocketColor")
+    s.default_value = default
+    g.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+    gi, go = g.nodes.new("NodeGroupInput"), g.nodes.new("NodeGroupOutput")
+    d = g.nodes.new("ShaderNodeBsdfDiffuse")
+    rr = g.nodes.new("NodeReroute")
+    g.links.new(gi.outputs[0], rr.inputs[0])
+    g.links.new(rr.outputs[0], d.inputs["Color"])
+    g.links.new(d.outputs[0], go.inputs[0])
+    return g
+
+
+def _group_scene(build):
+    bs.empty_scene(8, 8, "CYCLES")
+    bs.camera(location=(0, 0, 5), ortho_scale=2.0)
+    mat = bpy.data.materials.new("grouped")
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(build(nt), out.inputs["Surface"])
+    bs.plane("plane", half=1.5, mat=mat)
+    ex = export_scene(bpy.context.evaluated_depsgraph_get())
+    return ex
+
+
+def test_a_diffuse_inside_nested_groups_keeps_its_group_default_colour():
+    """The issue's 'a node group renders grey 0.8': a Diffuse inside a group inside a group, its
+    colour the inner group's input, linked to the outer group's input left at (0.9, 0.1, 0.1)."""
+    def build(nt):
+        inner = _diffuse_group("inner", (0.3, 0.3, 0.3, 1))
+        outer = bpy.data.node_groups.new("outer", "ShaderNodeTree")
+        s = outer.interface.new_socket("Col", in_out="INPUT", socket_type="NodeSocketColor")
+        s.default_value = (0.9, 0.1, 0.1, 1)
+        outer.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+        gi, go = outer.nodes.new("NodeGroupInput"), outer.nodes.new("NodeGroupOutput")
+        g = outer.nodes.new("ShaderNodeGroup")
+        g.node_tree = inner
+        outer.links.new(gi.outputs[0], g.inputs[0])
+        outer.links.new(g.outputs[0], go.inputs[0])
+        top = nt.nodes.new("ShaderNodeGroup")
+        top.node_tree = outer
+        return top.outputs[0]
+
+    ex = _group_scene(build)
+    assert not ex.warnings, ex.warnings
+    np.testing.assert_allclose(ex.scene.materials.color[0], (0.9, 0.1, 0.1), atol=1e-6)
+
+
+def test_one_group_twice_in_a_mix_reads_each_instance_inputs():
+    """The same group twice under a Mix Shader (Fac 0.25): red and a Checker's average (the
+    Checker outside the group compiled per hit) are each read through their own instance."""
+    def build(nt):
+        grp = _diffuse_group("tinted", (0.5, 0.5, 0.5, 1))
+        a, b = nt.nodes.new("ShaderNodeGroup"), nt.nodes.new("ShaderNodeGroup")
+        a.node_tree = b.node_tree = grp
+        a.inputs[0].default_value = (1.0, 0.0, 0.0, 1)
+        b.inputs[0].default_value = (0.0, 0.0, 1.0, 1)
+        mix = nt.nodes.new("ShaderNodeMixShader")
+        mix.inputs["Fac"].default_value = 0.25
+        nt.links.new(a.outputs[0], mix.inputs[1])
+        nt.links.new(b.outputs[0], mix.inputs[2])
+        return mix.outputs[0]
+
+    ex = _group_scene(build)
+    np.testing.assert_allclose(ex.scene.materials.color[0], (0.75, 0.0, 0.25), atol=1e-6)
