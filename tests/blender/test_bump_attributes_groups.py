@@ -267,3 +267,101 @@ def test_one_group_twice_in_a_mix_reads_each_instance_inputs():
 
     ex = _group_scene(build)
     np.testing.assert_allclose(ex.scene.materials.color[0], (0.75, 0.0, 0.25), atol=1e-6)
+
+
+# ------------------------------------------------------------------------------------ sunlit planes vs Cycles
+def _sunlit(build, scale=(1.5, 1.5, 1.0), tmp_path=None):
+    """A white Diffuse plane (turned 35 degrees about z, scaled) whose Normal is ``build(nt)``,
+    under a sun, seen top-down at the pixel centres: Cycles' radiance is E cos(N', L) / pi with
+    its shading normal N'; ours: the same with core.surface.shading_normal at the exported hits."""
+    import math
+
+    from test_export_textures import top_down_scene, uv_plane
+
+    top_down_scene()
+    mat = bpy.data.materials.new("lit")
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    bsdf = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    bsdf.inputs["Color"].default_value = (1, 1, 1, 1)
+    nt.links.new(build(nt), bsdf.inputs["Normal"])
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    ob = uv_plane(mat)
+    ob.rotation_euler.z = math.radians(35)
+    ob.scale = scale
+    sun = bs.light("SUN", (0, 0, 3), 3.0, rotation=(math.radians(30), 0, math.radians(20)))
+    bpy.context.view_layer.update()
+    ex = export_scene(bpy.context.evaluated_depsgraph_get())
+    assert not [w for w in ex.warnings if "not read" in w or "not supported" in w or "not perturbed" in w], \
+        ex.warnings
+    p = prepare(ex.scene)
+    hits = pixel_hits(p, pixels=48)
+    n = shading_normal(p, hits)
+    to_sun = np.array(sun.matrix_world)[:3, :3] @ [0.0, 0.0, 1.0]
+    to_sun /= np.linalg.norm(to_sun)
+    want = 3.0 / np.pi * np.clip(n @ to_sun, 0, None)
+    got = bs.render_to_array(str(tmp_path / "cycles.exr"), "CYCLES", samples=16).reshape(-1, 3) @ [0.2126, 0.7152,
+                                                                                                   0.0722]
+    tilt = np.degrees(np.arccos(np.clip(n[:, 2], -1, 1)))
+    return got, want, tilt
+
+
+def _procedural_colour(nt, z=0.85):
+    """A colour varying over the plane, near the normal-map blue: Combine XYZ of a Gradient and a
+    Noise (UV coordinates), z as given."""
+    tc = nt.nodes.new("ShaderNodeTexCoord")
+    gr = nt.nodes.new("ShaderNodeTexGradient")
+    nz = nt.nodes.new("ShaderNodeTexNoise")
+    nz.inputs["Scale"].default_value = 3.0
+    nt.links.new(tc.outputs["UV"], gr.inputs["Vector"])
+    nt.links.new(tc.outputs["UV"], nz.inputs["Vector"])
+    mx = nt.nodes.new("ShaderNodeMapRange")
+    mx.inputs["To Min"].default_value, mx.inputs["To Max"].default_value = 0.2, 0.8
+    nt.links.new(gr.outputs["Fac"], mx.inputs["Value"])
+    cb = nt.nodes.new("ShaderNodeCombineXYZ")
+    cb.inputs["Z"].default_value = z
+    nt.links.new(mx.outputs[0], cb.inputs["X"])
+    nt.links.new(nz.outputs["Fac"], cb.inputs["Y"])
+    return cb.outputs[0]
+
+
+@pytest.mark.parametrize("space, strength", [("TANGENT", 1.0), ("TANGENT", 0.6), ("OBJECT", 1.0), ("WORLD", 1.0),
+                                             ("BLENDER_OBJECT", 0.8), ("BLENDER_WORLD", 0.7)])
+def test_a_normal_map_of_a_procedural_colour_matches_cycles(space, strength, tmp_path):
+    """The Normal Map node with a procedural Color (read through the shader program) in each
+    space, on a plane scaled uniformly by 1.5 (where the object transform taken from the
+    triangle's corners is exact). Blender's object / world spaces negate y and z, so their colour
+    has z 0.15 (the normal points up)."""
+    def build(nt):
+        nm = nt.nodes.new("ShaderNodeNormalMap")
+        nm.space = space
+        nm.inputs["Strength"].default_value = strength
+        nt.links.new(_procedural_colour(nt, 0.15 if space.startswith("BLENDER") else 0.85), nm.inputs["Color"])
+        return nm.outputs["Normal"]
+
+    got, want, tilt = _sunlit(build, scale=(1.5, 1.5, 1.0) if space == "TANGENT" else (1.5, 1.5, 1.5), tmp_path=tmp_path)
+    assert tilt.max() > 10  # the map bends the normal
+    print(f"max |difference| {np.abs(got - want).max():.2e}, mean {want.mean():.3f}, Cycles mean {got.mean():.3f}")
+    np.testing.assert_allclose(got, want, rtol=0.01, atol=0.003)
+
+
+def test_a_bumped_plane_matches_cycles_pixel_by_pixel(tmp_path):
+    """A Bump node (Distance 0.3, Noise of the Object coordinates at scale 2) on the sunlit plane:
+    Cycles' shading normal, from its pixel-footprint differences, and ours agree per pixel."""
+    def build(nt):
+        tc = nt.nodes.new("ShaderNodeTexCoord")
+        nz = nt.nodes.new("ShaderNodeTexNoise")
+        nz.inputs["Scale"].default_value = 2.0
+        nz.inputs["Detail"].default_value = 1.0
+        nt.links.new(tc.outputs["Object"], nz.inputs["Vector"])
+        b = nt.nodes.new("ShaderNodeBump")
+        b.inputs["Distance"].default_value = 0.3
+        nt.links.new(nz.outputs["Fac"], b.inputs["Height"])
+        return b.outputs["Normal"]
+
+    got, want, tilt = _sunlit(build, tmp_path=tmp_path)
+    assert tilt.max() > 10
+    err = np.abs(got - want)
+    print(f"max |difference| {err.max():.2e}, mean {err.mean():.2e}, radiance mean {want.mean():.3f}")
+    np.testing.assert_allclose(got, want, rtol=0.02, atol=0.005)

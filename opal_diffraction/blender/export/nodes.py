@@ -311,6 +311,9 @@ class TextureBindings:
             if src is not None and src[0].bl_idname == "ShaderNodeBump" and not getattr(src[0], "mute", False):
                 self._bump(src[0], surf)
                 return self._alpha_warning(node)
+            if src is not None and src[0].bl_idname == "ShaderNodeNormalMap" and not getattr(src[0], "mute", False) \
+                    and self._program_normal_map(src[0], surf):
+                return self._alpha_warning(node)
             ref = self._normal_map(node)
             if ref is not None:
                 surf.textures["normal"] = ref
@@ -321,6 +324,45 @@ class TextureBindings:
             alpha = self.source(node.inputs["Alpha"])
             if alpha is not None and alpha[0].bl_idname == "ShaderNodeTexImage":
                 self.warn(f"{self.owner}: image texture '{alpha[0].name}' on Alpha is not supported: rendered opaque")
+
+    def _program_normal_map(self, n, surf: Surface) -> bool:
+        """A Normal Map node read through the shader program (docs/physics.md section 13.5): in
+        object or world space (any colour the compiler reads), or in tangent space when its Color
+        is not a plain Image Texture (an image behind a Mix, a procedural colour). True when it
+        was compiled (its slots set in ``surf.programs``); False: the image binding (or its
+        warning) takes it."""
+        from .shader_compiler import ShaderCompiler
+
+        col = self.source(n.inputs.get("Color"))
+        if col is None or self.textures is None:
+            return False
+        if n.space == "TANGENT" and col[0].bl_idname == "ShaderNodeTexImage":
+            return False  # the image binding (TextureRef) reads it
+        if self.compiler is None:
+            self.compiler = ShaderCompiler(self)
+        c = self.compiler
+        reg = c.compile_input(n, "Color", "v")
+        if reg is None:
+            return False  # _normal_map warns
+        b = c.builder
+        if n.space in ("BLENDER_OBJECT", "BLENDER_WORLD"):  # Blender's convention: y and z negated
+            reg = b.op("vector_math", [reg, b.const([1.0, -1.0, -1.0]), b.const([0.0, 1.0, 1.0]), b.const(1.0)],
+                       operation="MULTIPLY_ADD")[0]
+        space = {"TANGENT": "tangent", "OBJECT": "object", "BLENDER_OBJECT": "object"}.get(n.space, "world")
+        if space == "object":
+            b.op("coord", kind="object")  # the object-space corners give the object's normal transform per hit
+        sock = n.inputs.get("Strength")
+        strength = c.compile_input(n, "Strength", "f") if sock is not None and self.source(sock) is not None else None
+        if strength is None:
+            v = self.value(n, "Strength", 1.0)
+            if not np.isfinite(v):
+                raise SceneError(f"{self.owner}: 'Strength' of '{n.name}' is not finite")
+            strength = b.const(float(v))
+        surf.programs.setdefault("normalmap_" + space, reg)
+        surf.programs.setdefault("normalmap_strength", strength)
+        if space == "tangent":
+            surf.programs.setdefault("_tangent_map", n.uv_map)
+        return True
 
     def _bump(self, bump, surf: Surface) -> None:
         """A Bump node on a BSDF's Normal: its Height (and Strength, Distance; Invert negates the

@@ -20,6 +20,11 @@ the textured rows are looked up (:meth:`textures.PreparedTextures.lookup`).
   on the triangle's outward side (flipped for back faces), then the strength s blends
   N'' = normalize(N + s (N' - N)) (s clamped at 0); finally N'' is kept on the geometric
   normal's side.
+- A Normal Map node whose colour a shader program computes (``normalmap_tangent`` / ``_object`` /
+  ``_world`` and ``normalmap_strength``): the same in tangent space; in world space
+  N' = normalize(c), in object space N' = normalize(M^-T c) with M the object's linear map (from
+  the triangle's world and object-space corners; Blender's object / world spaces negate c_y and
+  c_z at export); flipped on a back face, then the strength blend (Cycles' ``svm_node_normal_map``).
 - A Bump node's Height (a shader program's ``bump_height``, with ``bump_strength`` and
   ``bump_distance``) bends the normal as Cycles' ``svm_node_set_bump`` (:func:`_bump`;
   docs/physics.md section 13.7), after any normal map.
@@ -146,6 +151,9 @@ def shading_normal(prepared, hit) -> np.ndarray:
     tx = prepared.textures
     if tx.normal_mapped():
         n = _normal_map(tx, hit, n)
+    for space in ("tangent", "object", "world"):
+        if tx.uses("normalmap_" + space):
+            n = _program_normal_map(prepared, hit, n, space)
     if tx.uses("bump_height"):
         n = _bump(prepared, hit, n)
     return n
@@ -167,12 +175,13 @@ def _normal_map(tx, hit, n: np.ndarray) -> np.ndarray:
     n_out = ns * side
     b = sign * _cross(n_out, t)
     c = np.float32(2) * (rgba[:, :3] - np.float32(0.5))
-    mapped, ok = _normalize(c[:, 0:1] * t + c[:, 1:2] * b + c[:, 2:3] * n_out)
+    raw = c[:, 0:1] * t + c[:, 1:2] * b + c[:, 2:3] * n_out
+    mapped, ok = _normalize(raw)
     mapped = mapped * side
     s = np.maximum(tx.normal_strength[hit.mat[rows]], np.float32(0))[:, None]
     blend = s[:, 0] != 1
-    if blend.any():
-        mixed, ok_mix = _normalize(ns + (mapped - ns) * s)
+    if blend.any():  # the strength blends the sum before it is normalised, as Cycles 5.0 (measured)
+        mixed, ok_mix = _normalize(ns + (raw * side - ns) * s)
         mapped = np.where(blend[:, None], mixed, mapped)
         ok = np.where(blend, ok_mix, ok)
     mapped = np.where(ok[:, None], mapped, ns)  # a zero result keeps the unmapped normal, as Cycles
@@ -294,3 +303,76 @@ def _bump(prepared, hit, n: np.ndarray) -> np.ndarray:
     res = n.copy()
     res[rows] = out
     return res
+
+
+def _object_normals(prepared, prim, c: np.ndarray) -> np.ndarray:
+    """M^-T c (b, 3) float64, M the object-to-world linear map of each hit's triangle: M takes the
+    object-space edges to the world edges and the object normal n_o to k |n_o| / |n_w| n_w with
+    k^2 the area ratio (exact for rotation and uniform scale; under non-uniform scale the
+    in-plane part is exact). M^-T c = W^-T A^T c with A = [e1_o e2_o n_o], W = [e1_w e2_w M n_o]."""
+    v = np.asarray(prepared.scene.vertices, np.float64)
+    tri = np.asarray(prepared.scene.triangles)[prim]
+    o = np.asarray(prepared.textures.corner_object, np.float64)[prim]
+    e1w, e2w = v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]]
+    e1o, e2o = o[:, 1] - o[:, 0], o[:, 2] - o[:, 0]
+    nw, no = np.cross(e1w, e2w), np.cross(e1o, e2o)
+    lw, lo = np.linalg.norm(nw, axis=1), np.linalg.norm(no, axis=1)
+    ok = (lw > 0) & (lo > 0)
+    k = np.sqrt(np.where(ok, lw / np.where(ok, lo, 1.0), 1.0))
+    mn = nw * (k * lo / np.where(ok, lw, 1.0))[:, None]
+    a = np.stack([e1o, e2o, no], axis=2)
+    w = np.stack([e1w, e2w, mn], axis=2)
+    good = ok & (np.abs(np.linalg.det(w)) > 0)
+    out = c.astype(np.float64).copy()
+    if good.any():
+        atc = np.einsum("bji,bj->bi", a[good], c[good].astype(np.float64))
+        out[good] = np.linalg.solve(np.transpose(w[good], (0, 2, 1)), atc[..., None])[..., 0]
+    return out
+
+
+def _program_normal_map(prepared, hit, n: np.ndarray, space: str) -> np.ndarray:
+    """The Normal Map nodes read through shader programs in ``space`` (module docstring;
+    docs/physics.md section 13.5), applied to ``n`` at the hits whose material has one."""
+    tx = prepared.textures
+    pid = tx.program_slots["normalmap_" + space][hit.mat]
+    rows = np.flatnonzero(pid >= 0)
+    if rows.size == 0 or (space == "tangent" and not len(tx.corner_tangents)) \
+            or (space == "object" and not len(tx.corner_object)):
+        return n
+    prim, bu, bv, k = hit.prim[rows], hit.bu[rows], hit.bv[rows], pid[rows]
+    c = np.float64(2) * (tx._program_lookup("normalmap_" + space, k, prim, bu, bv)[:, :3].astype(np.float64) - 0.5)
+    ns = n[rows].astype(np.float64)
+    ng = np.asarray(hit.ng, np.float64)[rows]
+    side = np.where(np.asarray(hit.front)[rows], 1.0, -1.0)[:, None]
+    if space == "tangent":
+        frame = interpolate_corners(tx.corner_tangents, prim, bu, bv).astype(np.float64)
+        t, sign = frame[:, :3], frame[:, 3:4]
+        n_out = ns * side
+        mapped = c[:, 0:1] * t + c[:, 1:2] * (sign * np.cross(n_out, t)) + c[:, 2:3] * n_out
+    elif space == "object":
+        mapped = _object_normals(prepared, prim, c)
+    else:
+        mapped = c
+    length = np.sqrt(np.einsum("ij,ij->i", mapped, mapped))
+    ok = length > 0
+    # the strength blends the tangent-space sum before it is normalised (measured: Cycles 5.0 with
+    # |c| != 1 and strength 0.6 agrees within 8e-4 so, 1.8e-2 otherwise); world / object: unit
+    raw = mapped * side if space == "tangent" else None
+    mapped = mapped / np.where(ok, length, 1.0)[:, None] * side  # turned to face the ray on a back face
+    raw = mapped if raw is None else raw
+    s = np.maximum(tx._program_lookup("normalmap_strength", k, prim, bu, bv)[:, 3].astype(np.float64), 0.0)
+    blend = s != 1
+    if blend.any():
+        mixed = ns + (raw - ns) * s[:, None]
+        ml = np.sqrt(np.einsum("ij,ij->i", mixed, mixed))
+        mapped = np.where(blend[:, None], mixed / np.where(ml > 0, ml, 1.0)[:, None], mapped)
+        ok = np.where(blend, ml > 0, ok)
+    mapped = np.where(ok[:, None], mapped, ns)  # a zero result keeps the normal, as Cycles
+    d = np.einsum("ij,ij->i", mapped, ng)
+    low = d < NORMAL_MIN_COS
+    if low.any():
+        lifted = mapped[low] + (NORMAL_MIN_COS - d[low])[:, None] * ng[low]
+        mapped[low] = lifted / np.sqrt(np.einsum("ij,ij->i", lifted, lifted))[:, None]
+    out = n.copy()
+    out[rows] = np.nan_to_num(mapped).astype(np.float32)
+    return out

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..util.enums import TextureEncoding, TextureExtension, TextureInterpolation
 from ..util.geometry import interpolate_corners
-from ..scene.shader_programs import BUMP_SLOTS
+from ..scene.shader_programs import BUMP_SLOTS, NORMAL_MAP_SLOTS
 from .shader_eval import evaluate
 
 __all__ = [
@@ -185,7 +185,10 @@ class PreparedTextures:
         out = np.asarray(col) >= 0 if col is not None else np.zeros(len(self.color), bool)
         prog = self._program_column(slot)
         out = out | (prog >= 0) if prog is not None else out
-        return out | self.bound("bump_height") if slot == "normal" else out
+        if slot == "normal":
+            for other in ("bump_height",) + NORMAL_MAP_SLOTS[:3]:
+                out = out | self.bound(other)
+        return out
 
     def uses(self, slot: str) -> bool:
         """Whether any material binds a texture or a shader program in ``slot`` ('color', 'roughness', ...;
@@ -196,7 +199,7 @@ class PreparedTextures:
         prog = self._program_column(slot)
         if prog is not None and bool(len(prog)) and bool(prog.max() >= 0):
             return True
-        return slot == "normal" and self.uses("bump_height")
+        return slot == "normal" and any(self.uses(other) for other in ("bump_height",) + NORMAL_MAP_SLOTS[:3])
 
     def normal_mapped(self) -> bool:
         """Whether any material binds a tangent-space normal-map image."""
@@ -340,7 +343,7 @@ def _programs(scene, m) -> dict:
     programs = tuple(getattr(scene, "shader_programs", None) or ())
     idx = np.asarray(getattr(m, "shader_program", np.full(len(m), -1)), np.int32).reshape(-1)
     slots = {}
-    for slot in ("color", "roughness", "metallic", "emission", "mix") + BUMP_SLOTS:
+    for slot in ("color", "roughness", "metallic", "emission", "mix") + BUMP_SLOTS + NORMAL_MAP_SLOTS:
         has = np.array([i >= 0 and slot in programs[i].outputs for i in idx], bool) if len(idx) else np.zeros(0, bool)
         slots[slot] = _frozen(np.where(has, idx, -1).astype(np.int32))
 

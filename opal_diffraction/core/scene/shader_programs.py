@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Op", "ShaderProgram", "ProgramBuilder", "program_problems", "OPS", "SLOTS", "BUMP_SLOTS", "COORDINATES",
+__all__ = ["Op", "ShaderProgram", "ProgramBuilder", "program_problems", "OPS", "SLOTS", "BUMP_SLOTS", "NORMAL_MAP_SLOTS", "COORDINATES",
            "MATH_OPERATIONS", "VECTOR_MATH_OPERATIONS", "MIX_BLEND_TYPES", "NOISE_TYPES", "VORONOI_FEATURES",
            "VORONOI_METRICS", "GRADIENT_TYPES", "MAP_RANGE_TYPES", "MAPPING_TYPES", "RAMP_TABLE_SIZE", "SKY_PARAMS"]
 
@@ -30,7 +30,12 @@ __all__ = ["Op", "ShaderProgram", "ProgramBuilder", "program_problems", "OPS", "
 SLOTS = {"color": "v", "roughness": "f", "metallic": "f", "emission": "v", "mix": "f",
          # a Bump node on a BSDF's Normal (docs/physics.md section 13.7): its Height, Strength and
          # Distance (negated for Invert), evaluated at the hit and at two nearby points
-         "bump_height": "f", "bump_strength": "f", "bump_distance": "f"}
+         "bump_height": "f", "bump_strength": "f", "bump_distance": "f",
+         # a Normal Map node on a BSDF's Normal whose Color a program computes (docs/physics.md
+         # section 13.5): the colour in the node's space (one of the three) and its Strength
+         "normalmap_tangent": "v", "normalmap_object": "v", "normalmap_world": "v", "normalmap_strength": "f"}
+#: The slots of a Normal Map node read through a program.
+NORMAL_MAP_SLOTS = ("normalmap_tangent", "normalmap_object", "normalmap_world", "normalmap_strength")
 #: The slots of a Bump node.
 BUMP_SLOTS = ("bump_height", "bump_strength", "bump_distance")
 #: Texture Coordinate outputs a program may read (per hit, interpolated from the triangle's corners).
