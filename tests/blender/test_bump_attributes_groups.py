@@ -10,6 +10,9 @@ docs/physics.md sections 13.6 and 13.7), in this bpy session.
   finite differences at any step, so the perturbed normal equals the closed form
   normalize(s normalize(N - d grad h) + (1 - s) N) exactly (to float32 rounding), with grad h
   the world-space gradient of a . x_object on the plane.
+- Sunlit planes against Cycles pixel by pixel (radiance E cos(N', L) / pi with our shading
+  normal at the exported hits): a Bump of a Noise height, and a Normal Map node of a procedural
+  colour in every space (tangent at strength 1 and 0.6, object, world, Blender object / world).
 - Groups: a red Diffuse inside two levels of node groups (a reroute inside, the colour a group
   input left at its default) renders red, not the 0.8 grey of an unread node; one group used
   twice in a Mix Shader with different inputs gives each its own colour.

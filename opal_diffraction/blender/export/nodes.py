@@ -12,7 +12,10 @@ node, on its normal are bound as textures sampled per hit (:class:`TextureRef`,
 Generated) and any Mapping node folded in. Procedural textures and converters on those inputs
 (Noise, Voronoi, Checker, ColorRamp, Math, Mix, node groups, ...) are compiled into the
 material's shader program (export/shader_compiler.py, ``Surface.programs``; docs/physics.md
-section 13.6), evaluated per hit. What the core cannot represent is approximated and
+section 13.6), evaluated per hit; so are a Bump node's Height on a BSDF's Normal (section 13.7)
+and a Normal Map node's Color in object or world space or from anything but a plain image
+(section 13.5). Node groups are inlined on the shader path too (a BSDF or Mix Shader inside a
+group): :meth:`NodeReader.source` follows a Group Input out to the group node's input. What the core cannot represent is approximated and
 named in the warnings: other textures and procedural nodes are averaged
 (:func:`images.image_mean`) or use the socket's own value, anisotropy is dropped, a
 physical-conductor Metallic BSDF is fitted with the F82-tint model.
@@ -257,9 +260,9 @@ class TextureBindings:
             self.warn(f"{self.owner}: '{n.name}' on the Normal of '{node.name}' is not supported (a Normal Map node with "
                       "an image texture is): the normal is not perturbed")
             return None
-        if n.space != "TANGENT":
-            self.warn(f"{self.owner}: Normal Map node '{n.name}' in {n.space.lower()} space is not supported (tangent "
-                      "space is): the normal is not perturbed")
+        if n.space != "TANGENT":  # its colour was not read by the shader program (_program_normal_map)
+            self.warn(f"{self.owner}: the Color of Normal Map node '{n.name}' ({n.space.lower()} space) is not read: "
+                      "the normal is not perturbed")
             return None
         col = self.source(n.inputs.get("Color"))
         if col is None or col[0].bl_idname != "ShaderNodeTexImage":

@@ -18,7 +18,8 @@ the textured rows are looked up (:meth:`textures.PreparedTextures.lookup`).
 - Normal maps follow Cycles' Normal Map node in tangent space (``svm_node_normal_map``,
   kernel/svm/tex_coord.h): c = 2 rgb - 1, B = sign (N x T), N' = normalize(c_x T + c_y B + c_z N)
   on the triangle's outward side (flipped for back faces), then the strength s blends
-  N'' = normalize(N + s (N' - N)) (s clamped at 0); finally N'' is kept on the geometric
+  N'' = normalize(N + s (S - N)) (s clamped at 0), S the sum c_x T + c_y B + c_z N before its
+  normalisation, as Cycles 5.0 blends it (measured); finally N'' is kept on the geometric
   normal's side.
 - A Normal Map node whose colour a shader program computes (``normalmap_tangent`` / ``_object`` /
   ``_world`` and ``normalmap_strength``): the same in tangent space; in world space
