@@ -368,3 +368,36 @@ def test_a_bumped_plane_matches_cycles_pixel_by_pixel(tmp_path):
     err = np.abs(got - want)
     print(f"max |difference| {err.max():.2e}, mean {err.mean():.2e}, radiance mean {want.mean():.3f}")
     np.testing.assert_allclose(got, want, rtol=0.02, atol=0.005)
+
+
+@pytest.mark.parametrize("name", ["heat", "generated", "uv"])
+def test_attribute_names_cycles_takes_for_its_own(name, tmp_path):
+    """Cycles resolves some names to its standard attributes (measured, Blender 5.0): 'heat' (a
+    volume grid) reads zeros on a mesh even when the mesh has a 'heat' attribute, 'generated' and
+    'uv' are those coordinates; ours the same, pixel by pixel."""
+    def attr(me):
+        a = me.attributes.new(name, "FLOAT_COLOR", "POINT")
+        a.data.foreach_set("color", _random(len(a.data), 4, 5).ravel())
+        me.uv_layers.new(name="UVMap")
+
+    def build(nt):
+        a = nt.nodes.new("ShaderNodeAttribute")
+        a.attribute_name = name
+        mix = nt.nodes.new("ShaderNodeMix")
+        mix.data_type = "RGBA"
+        mix.inputs["Factor"].default_value = 0.7
+        mix.inputs[6].default_value = (0.3, 0.6, 0.2, 1)
+        nt.links.new(a.outputs["Color"], mix.inputs[7])
+        return mix.outputs[2]
+
+    attribute_plane(build, attr)
+    ex = compare(tmp_path, atol=2e-6) if name != "heat" else None
+    if name == "heat":
+        ex = export_scene(bpy.context.evaluated_depsgraph_get())
+        assert any("volume grid" in w for w in ex.warnings), ex.warnings
+        got = bs.render_to_array(str(tmp_path / "cycles.exr"), "CYCLES", samples=1).reshape(-1, 3)
+        np.testing.assert_allclose(got, np.broadcast_to(np.float32([0.3, 0.6, 0.2]) * 0.3, got.shape), atol=2e-6)
+        p = prepare(ex.scene)
+        hits = pixel_hits(p, pixels=P)
+        rows, rgba = p.textures.lookup("emission", hits.mat, hits.prim, hits.bu, hits.bv)
+        np.testing.assert_allclose(rgba[:, :3], got, atol=2e-6)

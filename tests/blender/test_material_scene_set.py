@@ -7,7 +7,7 @@ The scenes (one material idea each, under a sun and a dim world, 64 x 64 pixels)
 
 - ``noise_ramp``: a Principled floor whose Base Color is a Noise through a ColorRamp;
 - ``image_ramp``: an 8 x 8 sRGB image behind a ColorRamp (its luminance as the Fac), on a
-  Diffuse floor's colour;
+  Diffuse floor's colour, repeated twice across the floor's UV map;
 - ``diffuse_glossy``: a Mix Shader (Fac 0.5) of a red Diffuse and a rough Glossy on a sphere;
 - ``bump``: a Noise through a Bump node (Distance 0.15) on a Principled floor, under a low sun
   (core/materials/surface.py ``_bump``, Cycles' svm_node_set_bump);
@@ -92,7 +92,7 @@ def noise_ramp(sc, tmp):
 
 
 def image_ramp(sc, tmp):
-    from test_export_textures import checker_pixels, image
+    from test_export_textures import checker_pixels, image, uv_plane
 
     mat, nt, d, _ = _material("image floor")
     img = image("behind", checker_pixels(seed=3), path=tmp / "behind.png")
@@ -103,7 +103,7 @@ def image_ramp(sc, tmp):
     r.color_ramp.elements[1].color = (0.2, 0.8, 0.9, 1)
     nt.links.new(tex.outputs["Color"], r.inputs["Fac"])
     nt.links.new(r.outputs["Color"], d.inputs["Color"])
-    bs.plane("floor", half=4.0, mat=mat)
+    uv_plane(mat, half=4.0, uvs=((0, 0), (2, 0), (2, 2), (0, 2)), name="floor")  # the image twice across
 
 
 def diffuse_glossy(sc, tmp):

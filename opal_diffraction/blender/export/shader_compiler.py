@@ -56,6 +56,9 @@ COMPILED_NODES = frozenset({
     "ShaderNodeHueSaturation", "ShaderNodeRGBToBW", "ShaderNodeTexSky", "ShaderNodeTexEnvironment",
     "ShaderNodeVertexColor", "ShaderNodeAttribute"})
 
+#: Attribute names Cycles resolves to its volume grids' standard attributes: zeros on a mesh.
+CYCLES_VOLUME_ATTRIBUTES = frozenset({"density", "color", "flame", "heat", "temperature", "velocity"})
+
 _KIND = {"VALUE": "f", "INT": "f", "BOOLEAN": "f", "RGBA": "v", "VECTOR": "v"}
 _DIMS = {"1D": 1, "2D": 2, "3D": 3, "4D": 4}
 
@@ -217,12 +220,12 @@ class ShaderCompiler:
             what = "Object output of another object" if oname == "Object" else f"{oname} output"
             raise self._fail(node, f"the Texture Coordinate {what} ('{node.name}')")
         if idn == "ShaderNodeVertexColor":  # Color Attribute: '' the mesh's default colour attribute
-            col, alpha = b.op("attribute", attribute=str(getattr(node, "layer_name", "") or ""))
+            col, alpha = self._attribute(node, str(getattr(node, "layer_name", "") or ""))
             return alpha if oname == "Alpha" else col
         if idn == "ShaderNodeAttribute":
             if getattr(node, "attribute_type", "GEOMETRY") != "GEOMETRY":
                 raise self._fail(node, f"the {node.attribute_type.lower()} attribute of '{node.name}'")
-            col, alpha = b.op("attribute", attribute=str(node.attribute_name))
+            col, alpha = self._attribute(node, str(node.attribute_name))
             if oname == "Alpha":
                 return alpha
             if oname in ("Fac", "Factor"):  # svm_node_attr: the average of the components
@@ -384,6 +387,23 @@ class ShaderCompiler:
                             depth=int(node.turbulence_depth))
             return fac if oname == "Fac" else col
         raise self._fail(node, f"node '{node.name}' ({idn})")
+
+    def _attribute(self, node, name: str) -> tuple:
+        """(colour, alpha) registers of the mesh attribute ``name``. Names Cycles takes for its own
+        standard attributes are read as Cycles reads them (measured in Blender 5.0): 'generated'
+        and 'uv' are those coordinates (alpha 1), and the volume grids' names ('density', 'color',
+        'flame', 'heat', 'temperature', 'velocity') read zeros on a mesh, whatever attribute of
+        that name the mesh has (with a warning)."""
+        b = self.builder
+        if name in ("generated", "uv"):
+            if name == "uv":
+                self.uv_maps.add("")
+            return b.op("coord", kind=name)[0], b.const(1.0)
+        if name in CYCLES_VOLUME_ATTRIBUTES:
+            self.reader.warn(f"{self.reader.owner}: '{node.name}' reads the attribute '{name}', which Cycles takes "
+                             "for a volume grid: black on a mesh, as in Cycles (rename the attribute)")
+            return b.const([0.0, 0.0, 0.0]), b.const(0.0)
+        return b.op("attribute", attribute=name)
 
     def _image(self, node, oname: str, path: tuple) -> int:
         """An Image Texture inside the program (e.g. behind a ColorRamp): the scene texture at its
