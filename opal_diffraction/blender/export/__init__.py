@@ -60,7 +60,7 @@ from .domains import flatten_domains, instance_domains
 from .lights import LightRows, export_lights
 from .materials import MaterialTable, export_materials
 from .meshes import (GEOMETRY_TYPES, UNSUPPORTED_GEOMETRY, MeshCache, SceneMeshes, element_count, flatten,
-                     flatten_corners, flatten_program_corners, hair_systems, strand_count)
+                     flatten_attribute_corners, flatten_corners, flatten_program_corners, hair_systems, strand_count)
 from .messages import Skipped, Warnings
 from .world import export_world, export_world_light
 
@@ -164,6 +164,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     corner_uvs, corner_tangents = flatten_corners(groups, meshes, materials.corners, materials.hidden_rows())
     corner_generated, corner_object = flatten_program_corners(groups, meshes, materials.program_reads,
                                                               materials.hidden_rows())
+    corner_attributes = flatten_attribute_corners(groups, meshes, materials.program_reads, materials.hidden_rows())
     domain_fields = flatten_domains(groups, domains, meshes, materials.hidden_rows())
 
     skipped.report(warn)
@@ -181,6 +182,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
         world_image=world.image, world_rotation=world.rotation,
         corner_uvs=corner_uvs, corner_tangents=corner_tangents, **materials.textures.scene_fields(), **domain_fields,
         shader_programs=list(materials.programs), corner_generated=corner_generated, corner_object=corner_object,
+        corner_attributes=corner_attributes,
         **({} if motion_vertices is None else {"motion_vertices": motion_vertices}),
     )
     meshes.done()

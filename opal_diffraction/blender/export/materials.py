@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...core.scene.model import Materials
+from ...core.scene.shader_programs import BUMP_SLOTS, NORMAL_MAP_SLOTS
 from ...core.scene.checks import SceneError
 from .colour import in_rec709, rgb, working_space_to_rec709
 from .images import TextureTable
@@ -89,7 +90,10 @@ class MaterialTable:
         ('TANGENT', map) items (map '': the active render UV map)."""
         needs = set()
         for r in slots:
-            for kind in self.program_reads[r]:  # a shader program's coordinates
+            for kind in self.program_reads[r]:  # a shader program's coordinates and attributes
+                if kind.startswith("attribute:"):
+                    needs.add(("ATTRIBUTE", kind.split(":", 1)[1]))
+                    continue
                 needs.add(("GENERATED" if kind == "generated" else "OBJECT", "") if kind != "uv" else ("UV", ""))
             spec = self.corners[r]
             if spec is None:
@@ -132,27 +136,37 @@ class MaterialTable:
         ``surf.programs``; keys '_program_reads' (taken off by :meth:`lookup`) and '_corners'
         (a program reading UVs on a material without image textures: the UV map, unmapped)."""
         compiler, self._compiler = self._compiler, None
-        progs = {k: v for k, v in surf.programs.items() if k in ("color", "roughness", "metallic", "emission", "mix")}
+        progs = {k: v for k, v in surf.programs.items() if k in ("color", "roughness", "metallic", "emission", "mix")
+                 + BUMP_SLOTS + NORMAL_MAP_SLOTS}
         if surf.kind is None:
             progs = {k: v for k, v in progs.items() if k == "emission"}
         if not progs or compiler is None:
             return {}
         program = compiler.finish(progs)
-        out = {"shader_program": len(self.programs), "_program_reads": program.reads()}
+        out = {"shader_program": len(self.programs),
+               "_program_reads": program.reads() | {"attribute:" + a for a in program.attributes()}}
         self.programs.append(program)
         if "emission" in progs:
             strength = float(surf.programs.get("emission_strength", 1.0))
             out["emission_strength"] = strength
             if not any(row["emission"]):  # emissive however dark its average: the program decides per hit
                 out["emission"] = (1e-6 * strength,) * 3
+        tangent_map = surf.programs.get("_tangent_map") if "normalmap_tangent" in progs else None
+        if tangent_map is not None:  # a tangent-space normal map's colour from the program: its UV map's tangents
+            spec = row.get("_corners")
+            if spec is None:
+                out["_corners"] = CornerSpec("UV", tangent_map, tuple(np.eye(4).reshape(-1).tolist()), tangent_map)
+            elif spec.tangent_map is None:
+                out["_corners"] = CornerSpec(spec.coords, spec.uv_map, spec.matrix, tangent_map)
         if "uv" in program.reads():
             maps = compiler.uv_maps - {""}
             if len(maps) > 1:
                 self.warn(f"{owner}: its shader program reads several UV maps: all read '{sorted(maps)[0]}'")
             uv_map = sorted(maps)[0] if maps else ""
-            if "_corners" not in row:
+            have = out.get("_corners", row.get("_corners"))
+            if have is None:
                 out["_corners"] = CornerSpec("UV", uv_map, tuple(np.eye(4).reshape(-1).tolist()), None)
-            elif row["_corners"].coords != "UV" or not np.allclose(row["_corners"].affine(), np.eye(4)):
+            elif have.coords != "UV" or not np.allclose(have.affine(), np.eye(4)):
                 self.warn(f"{owner}: its shader program reads UVs and its image textures other coordinates: the "
                           "program reads those of the image textures")
         return out

@@ -527,10 +527,58 @@ def read_corners(me, md: MeshData, needs: frozenset, warn=None) -> None:
             out[(kind, name)] = gen[md.triangles].astype(np.float32)
         elif kind == "OBJECT":  # a shader program's Object coordinates: the object-space position
             out[(kind, name)] = md.vertices[md.triangles].astype(np.float32)
+        elif kind == "ATTRIBUTE":  # an Attribute / Color Attribute node's mesh attribute
+            out[(kind, name)] = corner_attribute(me, name, lt, loops, md.name, say)
     for kind, name in sorted(needs):
         if kind == "TANGENT":
             out[(kind, name)] = _corner_tangents(me, name, loops, md, out, say)
     md.corners, md.needs = out, needs
+
+
+#: Attribute data types read, with their ``foreach_get`` property and width.
+_ATTRIBUTE_TYPES = {"FLOAT_COLOR": ("color", 4), "BYTE_COLOR": ("color", 4), "FLOAT": ("value", 1),
+                    "INT": ("value", 1), "BOOLEAN": ("value", 1), "FLOAT_VECTOR": ("vector", 3),
+                    "FLOAT2": ("vector", 2), "INT8": ("value", 1)}
+
+
+def corner_attribute(me, name: str, lt, loops: np.ndarray, obname: str, say) -> np.ndarray:
+    """(T, 3, 4) float32 RGBA per triangle corner of the mesh attribute ``name`` ('' the default
+    colour attribute, as a Color Attribute node with no name reads), as Cycles reads it: colours
+    in scene linear (a byte colour's ``color`` is its sRGB bytes decoded, as Cycles decodes them),
+    a float f as (f, f, f, 1), a vector as (x, y, z, 1); point, face-corner and face domains. A
+    mesh without it reads zeros (Cycles' missing attribute), with a warning naming it."""
+    nt = len(loops)
+    attr = None
+    if name:
+        attr = me.attributes.get(name)
+    else:
+        cols = getattr(me, "color_attributes", None)
+        if cols is not None and len(cols):
+            idx = getattr(cols, "render_color_index", -1)
+            attr = cols[idx] if 0 <= idx < len(cols) else cols[0]
+    what = f"attribute {name!r}" if name else "colour attribute"
+    if attr is None or attr.data_type not in _ATTRIBUTE_TYPES or attr.domain not in ("POINT", "CORNER", "FACE"):
+        why = "has no" if attr is None else f"has a {attr.data_type.lower()} {attr.domain.lower()}-domain"
+        say(f"object '{obname}' {why} {what}: its Attribute / Color Attribute nodes read (0, 0, 0), as in Cycles")
+        return np.zeros((nt, 3, 4), np.float32)
+    prop, width = _ATTRIBUTE_TYPES[attr.data_type]
+    count = len(attr.data)
+    raw = foreach(attr.data, prop, count, np.float32, width) if width > 1 else \
+        foreach(attr.data, prop, count, np.float32 if attr.data_type == "FLOAT" else np.int32).astype(np.float32)
+    raw = np.asarray(raw, np.float32).reshape(count, width)
+    rgba = np.ones((count, 4), np.float32)
+    if width == 1:
+        rgba[:, :3] = raw
+    else:
+        rgba[:, :width] = raw
+        if width == 2:
+            rgba[:, 2] = 0.0
+    if attr.domain == "CORNER":
+        return rgba[loops]
+    if attr.domain == "POINT":
+        return rgba[foreach(lt, "vertices", nt, np.int32, 3)]
+    face = foreach(me.loop_triangle_polygons, "value", nt, np.int32)
+    return np.repeat(rgba[face][:, None, :], 3, axis=1)
 
 
 def _corner_uvs(me, name: str, loops: np.ndarray, obname: str, say) -> np.ndarray:
@@ -656,3 +704,26 @@ def flatten_program_corners(groups: dict, meshes: SceneMeshes, reads: list, hidd
             chunks.append(data_k.reshape(k * nt, 3, 3))
         out.append(np.concatenate(chunks) if chunks else np.zeros((0, 3, 3), np.float32))
     return out[0], out[1]
+
+
+def flatten_attribute_corners(groups: dict, meshes: SceneMeshes, reads: list, hidden: np.ndarray | None = None) -> dict:
+    """The mesh attributes shader programs read (Attribute / Color Attribute nodes), in
+    :func:`flatten`'s triangle order: ``reads`` is the material table's per-row set of what its
+    program reads ('attribute:NAME' items). Returns name -> (T, 3, 4) float32 (zeros on meshes
+    without it), a mirrored instance's corners 1 and 2 swapped as flatten swaps them."""
+    names = sorted({r.split(":", 1)[1] for rr in reads for r in rr if r.startswith("attribute:")})
+    out = {}
+    for name in names:
+        chunks = []
+        for md, mats, tri_mat_local in instance_groups(groups, meshes, hidden):
+            nt, k = len(md.triangles), len(mats)
+            src = (md.corners or {}).get(("ATTRIBUTE", name))
+            data = np.zeros((nt, 3, 4), np.float32) if src is None else np.asarray(src, np.float32)
+            data_k = np.broadcast_to(data, (k,) + data.shape)
+            mirrored = np.linalg.det(mats[:, :3, :3]) < 0
+            if mirrored.any():
+                data_k = data_k.copy()
+                data_k[mirrored] = data_k[mirrored][:, :, [0, 2, 1]]
+            chunks.append(data_k.reshape(k * nt, 3, 4))
+        out[name] = np.concatenate(chunks) if chunks else np.zeros((0, 3, 4), np.float32)
+    return out

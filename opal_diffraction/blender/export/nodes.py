@@ -12,7 +12,10 @@ node, on its normal are bound as textures sampled per hit (:class:`TextureRef`,
 Generated) and any Mapping node folded in. Procedural textures and converters on those inputs
 (Noise, Voronoi, Checker, ColorRamp, Math, Mix, node groups, ...) are compiled into the
 material's shader program (export/shader_compiler.py, ``Surface.programs``; docs/physics.md
-section 13.6), evaluated per hit. What the core cannot represent is approximated and
+section 13.6), evaluated per hit; so are a Bump node's Height on a BSDF's Normal (section 13.7)
+and a Normal Map node's Color in object or world space or from anything but a plain image
+(section 13.5). Node groups are inlined on the shader path too (a BSDF or Mix Shader inside a
+group): :meth:`NodeReader.source` follows a Group Input out to the group node's input. What the core cannot represent is approximated and
 named in the warnings: other textures and procedural nodes are averaged
 (:func:`images.image_mean`) or use the socket's own value, anisotropy is dropped, a
 physical-conductor Metallic BSDF is fitted with the F82-tint model.
@@ -242,7 +245,7 @@ class TextureBindings:
         if idx is None:  # no pixels (warned, naming the image and the material)
             return np.array(_MISSING_RGB + (1.0,), np.float64)
         kind, uv_map, matrix = coords
-        self._bound[(node.name, name)] = TextureRef(idx, kind, uv_map, matrix, tex_node.name, channel=channel)
+        self._bound[self._key(node, name)] = TextureRef(idx, kind, uv_map, matrix, tex_node.name, channel=channel)
         return self.textures.mean_rgba(idx)
 
     def _normal_map(self, node) -> TextureRef | None:
@@ -257,9 +260,9 @@ class TextureBindings:
             self.warn(f"{self.owner}: '{n.name}' on the Normal of '{node.name}' is not supported (a Normal Map node with "
                       "an image texture is): the normal is not perturbed")
             return None
-        if n.space != "TANGENT":
-            self.warn(f"{self.owner}: Normal Map node '{n.name}' in {n.space.lower()} space is not supported (tangent "
-                      "space is): the normal is not perturbed")
+        if n.space != "TANGENT":  # its colour was not read by the shader program (_program_normal_map)
+            self.warn(f"{self.owner}: the Color of Normal Map node '{n.name}' ({n.space.lower()} space) is not read: "
+                      "the normal is not perturbed")
             return None
         col = self.source(n.inputs.get("Color"))
         if col is None or col[0].bl_idname != "ShaderNodeTexImage":
@@ -291,7 +294,7 @@ class TextureBindings:
         if self.textures is None:
             return
         for sock_name, slot in TEXTURE_SOCKETS[node.bl_idname].items():
-            reg = self._programmed.get((node.name, sock_name))
+            reg = self._programmed.get(self._key(node, sock_name))
             if reg is not None and slot not in surf.programs and slot not in surf.textures:
                 surf.programs[slot] = reg
                 if slot == "emission":
@@ -299,7 +302,7 @@ class TextureBindings:
                     s = node.inputs.get("Strength") if s is None else s
                     surf.programs["emission_strength"] = self.strength(node, s.name, 1.0) if s is not None else 1.0
                 continue
-            ref = self._bound.get((node.name, sock_name))
+            ref = self._bound.get(self._key(node, sock_name))
             if ref is not None and slot not in surf.textures:
                 if slot == "emission":
                     s = node.inputs.get("Emission Strength")
@@ -307,13 +310,105 @@ class TextureBindings:
                     ref.strength = self.strength(node, s.name, 1.0) if s is not None else 1.0
                 surf.textures[slot] = ref
         if surf.kind is not None and node.inputs.get("Normal") is not None:
+            src = self.source(node.inputs["Normal"])
+            if src is not None and src[0].bl_idname == "ShaderNodeBump" and not getattr(src[0], "mute", False):
+                self._bump(src[0], surf)
+                return self._alpha_warning(node)
+            if src is not None and src[0].bl_idname == "ShaderNodeNormalMap" and not getattr(src[0], "mute", False) \
+                    and self._program_normal_map(src[0], surf):
+                return self._alpha_warning(node)
             ref = self._normal_map(node)
             if ref is not None:
                 surf.textures["normal"] = ref
+        self._alpha_warning(node)
+
+    def _alpha_warning(self, node) -> None:
         if node.bl_idname == "ShaderNodeBsdfPrincipled" and node.inputs.get("Alpha") is not None:
             alpha = self.source(node.inputs["Alpha"])
             if alpha is not None and alpha[0].bl_idname == "ShaderNodeTexImage":
                 self.warn(f"{self.owner}: image texture '{alpha[0].name}' on Alpha is not supported: rendered opaque")
+
+    def _program_normal_map(self, n, surf: Surface) -> bool:
+        """A Normal Map node read through the shader program (docs/physics.md section 13.5): in
+        object or world space (any colour the compiler reads), or in tangent space when its Color
+        is not a plain Image Texture (an image behind a Mix, a procedural colour). True when it
+        was compiled (its slots set in ``surf.programs``); False: the image binding (or its
+        warning) takes it."""
+        from .shader_compiler import ShaderCompiler
+
+        col = self.source(n.inputs.get("Color"))
+        if col is None or self.textures is None:
+            return False
+        if n.space == "TANGENT" and col[0].bl_idname == "ShaderNodeTexImage":
+            return False  # the image binding (TextureRef) reads it
+        if self.compiler is None:
+            self.compiler = ShaderCompiler(self)
+        c = self.compiler
+        reg = c.compile_input(n, "Color", "v")
+        if reg is None:
+            return False  # _normal_map warns
+        b = c.builder
+        if n.space in ("BLENDER_OBJECT", "BLENDER_WORLD"):  # Blender's convention: y and z negated
+            reg = b.op("vector_math", [reg, b.const([1.0, -1.0, -1.0]), b.const([0.0, 1.0, 1.0]), b.const(1.0)],
+                       operation="MULTIPLY_ADD")[0]
+        space = {"TANGENT": "tangent", "OBJECT": "object", "BLENDER_OBJECT": "object"}.get(n.space, "world")
+        if space == "object":
+            b.op("coord", kind="object")  # the object-space corners give the object's normal transform per hit
+        sock = n.inputs.get("Strength")
+        strength = c.compile_input(n, "Strength", "f") if sock is not None and self.source(sock) is not None else None
+        if strength is None:
+            v = self.value(n, "Strength", 1.0)
+            if not np.isfinite(v):
+                raise SceneError(f"{self.owner}: 'Strength' of '{n.name}' is not finite")
+            strength = b.const(float(v))
+        surf.programs.setdefault("normalmap_" + space, reg)
+        surf.programs.setdefault("normalmap_strength", strength)
+        if space == "tangent":
+            surf.programs.setdefault("_tangent_map", n.uv_map)
+        return True
+
+    def _bump(self, bump, surf: Surface) -> None:
+        """A Bump node on a BSDF's Normal: its Height (and Strength, Distance; Invert negates the
+        distance) compiled into the material's shader program (slots BUMP_SLOTS), from which the
+        core perturbs the shading normal per hit as Cycles' ``svm_node_set_bump`` does
+        (core/materials/surface.py; docs/physics.md section 13.7)."""
+        from .shader_compiler import ShaderCompiler
+
+        if self.textures is None:
+            return
+        hs = bump.inputs.get("Height")
+        if hs is None or self.source(hs) is None:
+            return  # a constant height: no slope, the normal is unchanged (as in Cycles)
+        if self.compiler is None:
+            self.compiler = ShaderCompiler(self)
+        c = self.compiler
+        height = c.compile_input(bump, "Height", "f")
+        if height is None:
+            self.warn(f"{self.owner}: the Height of Bump node '{bump.name}' comes from '{self.source(hs)[0].name}', "
+                      "which is not read: the normal is not perturbed")
+            return
+        regs = {}
+        for name, default in (("Strength", 1.0), ("Distance", 1.0)):
+            sock = bump.inputs.get(name)
+            reg = None
+            if sock is not None and self.source(sock) is not None:
+                reg = c.compile_input(bump, name, "f")
+            if reg is None:
+                v = self.value(bump, name, default) if sock is not None else default
+                if not np.isfinite(v):
+                    raise SceneError(f"{self.owner}: '{name}' of '{bump.name}' is not finite")
+                reg = c.builder.const(float(v))
+            regs[name] = reg
+        if getattr(bump, "invert", False):
+            regs["Distance"] = c.builder.op("math", [regs["Distance"], c.builder.const(-1.0), c.builder.const(0.0)],
+                                            operation="MULTIPLY", clamp=False)[0]
+        ns = bump.inputs.get("Normal")
+        if ns is not None and self.source(ns) is not None:
+            self.warn(f"{self.owner}: the Normal input of Bump node '{bump.name}' is not read: the bump perturbs the "
+                      "shading normal")
+        for slot, reg in (("bump_height", height), ("bump_strength", regs["Strength"]),
+                          ("bump_distance", regs["Distance"])):
+            surf.programs.setdefault(slot, reg)
 
     def _combined_textures(self, a: Surface, b: Surface, wa: float, wb: float, node, out: Surface) -> dict:
         """The textures of a Mix/Add of ``a`` and ``b``: each slot from the surface ``out`` kept
@@ -358,34 +453,62 @@ class NodeReader(TextureBindings):
         #: The export's images.TextureTable: Image Texture nodes on TEXTURE_SOCKETS are bound
         #: (None: every texture is averaged, as before).
         self.textures = textures
-        self._bound: dict[tuple[str, str], TextureRef] = {}  # (node name, socket) -> binding
+        self._bound: dict[tuple, TextureRef] = {}  # (group path, node name, socket) -> binding
         #: The material's shader-program compiler (export/shader_compiler.py), made when a
         #: procedural node drives a BSDF input; None: nothing compiled.
         self.compiler = None
-        self._programmed: dict[tuple[str, str], int] = {}  # (node name, socket) -> register
+        self._programmed: dict[tuple, int] = {}  # (group path, node name, socket) -> register
+        self._paths: dict[int, tuple] = {}  # node pointer -> the group nodes it was reached through
 
     # ---------------------------------------------------------------- sockets
-    def source(self, socket):
-        """(node, output socket) feeding ``socket``, following reroutes; None when unlinked, muted
-        or linked through an invalid link (a cycle is recorded in :attr:`cycle`)."""
+    def source(self, socket, groups: bool = True):
+        """(node, output socket) feeding ``socket``, following reroutes and, with ``groups``, a
+        node group's Group Input out to the group node's own input (the group path each node was
+        reached through is kept: :meth:`group_path`); None when unlinked, muted or linked through
+        an invalid link (a cycle is recorded in :attr:`cycle`)."""
+        return self._walk(socket, groups)[0]
+
+    def effective_socket(self, socket):
+        """The socket whose own value an unlinked ``socket`` takes: itself, or, inside a node
+        group, the group node's input its Group Input link leads to (a group input's default)."""
+        return self._walk(socket, True)[1]
+
+    def group_path(self, node) -> tuple:
+        """The group nodes (outermost first) through which ``node`` was reached: () at the top."""
+        return self._paths.get(node.as_pointer(), ()) if node is not None else ()
+
+    def _walk(self, socket, groups: bool):
+        path = self.group_path(socket.node) if groups and socket is not None else ()
         visited = set()
         while socket is not None and socket.is_linked:
             link = socket.links[0]
             if getattr(link, "is_muted", False):
-                return None
+                return None, socket
             if not getattr(link, "is_valid", True):
                 self._invalid_link(link)
-                return None
+                return None, socket
             node = link.from_node
             if node.bl_idname == "NodeReroute":
-                if node.name in visited:  # a loop of reroutes that Blender did not flag
+                if (path, node.name) in visited:  # a loop of reroutes that Blender did not flag
                     self.cycle = self.cycle or f"'{node.name}' -> '{link.to_node.name}'"
-                    return None
-                visited.add(node.name)
+                    return None, socket
+                visited.add((path, node.name))
                 socket = node.inputs[0] if node.inputs else None
                 continue
-            return node, link.from_socket
-        return None
+            if groups and node.bl_idname == "NodeGroupInput" and path:  # one level out of the group
+                outer = next((s for s in path[-1].inputs if s.identifier == link.from_socket.identifier), None)
+                if outer is None:
+                    return None, socket
+                socket, path = outer, path[:-1]
+                continue
+            if groups:
+                self._paths[node.as_pointer()] = path
+            return (node, link.from_socket), socket
+        return None, socket
+
+    def _key(self, node, name: str) -> tuple:
+        """The key of input ``name`` of ``node`` in the bindings: its group path, node and socket."""
+        return tuple(g.name for g in self.group_path(node)), node.name, name
 
     def _invalid_link(self, link) -> None:
         """A link Blender drew red: part of a cycle (recorded) or between incompatible sockets
@@ -409,7 +532,7 @@ class NodeReader(TextureBindings):
             return np.array(default, np.float64)
         src = self.source(sock)
         if src is None:
-            return self._to709(rgb(sock.default_value))
+            return self._to709(rgb(self.effective_socket(sock).default_value))
         n, out = src
         if n.bl_idname == "ShaderNodeRGB":
             return self._to709(rgb(out.default_value))
@@ -443,7 +566,7 @@ class NodeReader(TextureBindings):
         reg = self.compiler.compile_input(node, name, kind)
         if reg is None:
             return None
-        self._programmed[(node.name, name)] = reg
+        self._programmed[self._key(node, name)] = reg
         mean = self.compiler.average(reg, "color" if kind == "v" else "roughness")
         return np.asarray(mean, np.float64) if kind == "v" else float(mean)
 
@@ -470,7 +593,7 @@ class NodeReader(TextureBindings):
             return float(default)
         src = self.source(sock)
         if src is None:
-            return float(sock.default_value)
+            return float(self.effective_socket(sock).default_value)
         n, out = src
         if n.bl_idname == "ShaderNodeValue":
             return float(out.default_value)
@@ -542,6 +665,8 @@ class NodeReader(TextureBindings):
         if getattr(node, "mute", False):
             self.warn(f"{self.owner}: muted shader node '{node.name}' renders black")
             return black
+        if idn == "ShaderNodeGroup":  # inlined: the shader behind the group's output socket
+            return self._group_shader(node, out, depth)
         if idn == "ShaderNodeBsdfPrincipled":
             return self._principled(node)
         if idn == "ShaderNodeBsdfDiffuse":  # Roughness > 0: Oren-Nayar (docs/physics.md section 14.9)
@@ -600,6 +725,21 @@ class NodeReader(TextureBindings):
                   f"surface{' of its colour' if col is not None else ''}")
         return Surface("DIFFUSE", col if col is not None else np.full(3, 0.8))
 
+    def _group_shader(self, node, out, depth: int) -> Surface:
+        """A node group's shader output: the shader its Group Output receives, read inside the
+        group (its Group Input links lead back to this group node's inputs: :meth:`source`)."""
+        tree = node.node_tree
+        path = self.group_path(node)
+        gout = None if tree is None else next(
+            (n for n in tree.nodes if n.bl_idname == "NodeGroupOutput" and getattr(n, "is_active_output", True)), None)
+        inner = None if gout is None else next((s for s in gout.inputs if s.identifier == out.identifier), None)
+        if inner is None or any(g.node_tree == tree for g in path):
+            self.warn(f"{self.owner}: node group '{node.name}' has no {'output' if inner is None else 'finite nesting'}"
+                      ": renders black")
+            return Surface(None, np.zeros(3))
+        self._paths[gout.as_pointer()] = path + (node,)
+        return self._shader(self.source(inner), depth + 1)
+
     def _view_fac(self, node) -> tuple[str, float] | None:
         """(LayerFac name, its IOR or Blend) where a Mix Shader's Fac is a Fresnel or Layer Weight
         node's output (docs/physics.md section 14.8), else None."""
@@ -626,7 +766,7 @@ class NodeReader(TextureBindings):
         mean = self._compile(node, "Fac", "f")
         if mean is None:
             return None
-        return self._programmed[(node.name, "Fac")], float(np.clip(mean, 0.0, 1.0))
+        return self._programmed[self._key(node, "Fac")], float(np.clip(mean, 0.0, 1.0))
 
     def _per_hit_fac(self, out: Surface, a: Surface, b: Surface, view, node, register: int | None = None) -> None:
         """Give ``out`` (a Mix of ``a`` and ``b``) its Fac per hit where a and b are one layer each

@@ -14,7 +14,8 @@ is read. It reads:
   Separate / Combine XYZ and Color (RGB) (and the legacy RGB nodes),
   Mapping, Value, RGB;
 - inputs: Texture Coordinate (Generated, Object, UV), UV Map; a texture's unlinked Vector is
-  Generated, as in Cycles;
+  Generated, as in Cycles; Color Attribute and Attribute (geometry: a mesh attribute per corner,
+  export/meshes.py ``corner_attribute``; Fac the components' average, as ``svm_node_attr``);
 - structure: node groups are inlined (Group Input / Group Output followed through the group
   node's sockets, nested groups too), reroutes and muted nodes followed (a muted node passes
   its first matching input through, as Blender's internal links do), a cycle refused with a
@@ -24,7 +25,7 @@ Image Texture nodes inside the program (behind a ColorRamp, a Mix, ...) sample t
 image per hit at their Vector (unlinked: the UV map), flat projection; in a world's graph
 (``world``) an Environment Texture samples its image at the equirectangular (u, v) of its Vector
 (unlinked: the ray direction). Anything else on the way
-(Hue/Saturation, Curves, Attribute, a Texture
+(Curves, an object / instancer / view-layer Attribute, a Texture
 Coordinate output other than the three above, a colour mode other than RGB) is named in one
 warning and replaced by the socket's own value, as before. Colours typed into sockets are the
 blend file's working space converted to linear Rec.709 (export/colour.py).
@@ -52,7 +53,11 @@ COMPILED_NODES = frozenset({
     "ShaderNodeCombineRGB", "ShaderNodeMapping", "ShaderNodeValue", "ShaderNodeRGB", "ShaderNodeTexCoord",
     "ShaderNodeUVMap", "ShaderNodeGroup", "NodeGroupInput", "ShaderNodeTexImage", "ShaderNodeTexWave",
     "ShaderNodeTexMagic", "ShaderNodeTexBrick", "ShaderNodeGamma", "ShaderNodeBrightContrast",
-    "ShaderNodeHueSaturation", "ShaderNodeRGBToBW", "ShaderNodeTexSky", "ShaderNodeTexEnvironment"})
+    "ShaderNodeHueSaturation", "ShaderNodeRGBToBW", "ShaderNodeTexSky", "ShaderNodeTexEnvironment",
+    "ShaderNodeVertexColor", "ShaderNodeAttribute"})
+
+#: Attribute names Cycles resolves to its volume grids' standard attributes: zeros on a mesh.
+CYCLES_VOLUME_ATTRIBUTES = frozenset({"density", "color", "flame", "heat", "temperature", "velocity"})
 
 _KIND = {"VALUE": "f", "INT": "f", "BOOLEAN": "f", "RGBA": "v", "VECTOR": "v"}
 _DIMS = {"1D": 1, "2D": 2, "3D": 3, "4D": 4}
@@ -83,11 +88,11 @@ class ShaderCompiler:
         sock = node.inputs.get(name)
         if sock is None:
             return None
-        src = self.reader.source(sock)
+        src = self.reader.source(sock, groups=False)
         if src is None or not self._compilable(src[0]):
             return None
         try:
-            return self._socket(sock, (), kind)
+            return self._socket(sock, self.reader.group_path(node), kind)
         except _Unread:
             return None
 
@@ -136,7 +141,7 @@ class ShaderCompiler:
 
     def _socket(self, sock, path: tuple, kind: str, default_generated: bool = False) -> int:
         """Register of input socket ``sock`` (in the group ``path``) as ``kind``."""
-        src = self.reader.source(sock)
+        src = self.reader.source(sock, groups=False)
         if src is None:
             if default_generated and sock.name == "Vector" and getattr(sock, "type", "") == "VECTOR":
                 return self.builder.op("coord", kind="generated")[0]  # a texture's default coordinates
@@ -214,6 +219,18 @@ class ShaderCompiler:
                 return b.op("coord", kind=oname.lower())[0]
             what = "Object output of another object" if oname == "Object" else f"{oname} output"
             raise self._fail(node, f"the Texture Coordinate {what} ('{node.name}')")
+        if idn == "ShaderNodeVertexColor":  # Color Attribute: '' the mesh's default colour attribute
+            col, alpha = self._attribute(node, str(getattr(node, "layer_name", "") or ""))
+            return alpha if oname == "Alpha" else col
+        if idn == "ShaderNodeAttribute":
+            if getattr(node, "attribute_type", "GEOMETRY") != "GEOMETRY":
+                raise self._fail(node, f"the {node.attribute_type.lower()} attribute of '{node.name}'")
+            col, alpha = self._attribute(node, str(node.attribute_name))
+            if oname == "Alpha":
+                return alpha
+            if oname in ("Fac", "Factor"):  # svm_node_attr: the average of the components
+                return b.op("to_float", [col], **{"from": "vector"})[0]
+            return col
         if idn == "ShaderNodeUVMap":
             self.uv_maps.add(getattr(node, "uv_map", ""))
             return b.op("coord", kind="uv")[0]
@@ -371,6 +388,23 @@ class ShaderCompiler:
             return fac if oname == "Fac" else col
         raise self._fail(node, f"node '{node.name}' ({idn})")
 
+    def _attribute(self, node, name: str) -> tuple:
+        """(colour, alpha) registers of the mesh attribute ``name``. Names Cycles takes for its own
+        standard attributes are read as Cycles reads them (measured in Blender 5.0): 'generated'
+        and 'uv' are those coordinates (alpha 1), and the volume grids' names ('density', 'color',
+        'flame', 'heat', 'temperature', 'velocity') read zeros on a mesh, whatever attribute of
+        that name the mesh has (with a warning)."""
+        b = self.builder
+        if name in ("generated", "uv"):
+            if name == "uv":
+                self.uv_maps.add("")
+            return b.op("coord", kind=name)[0], b.const(1.0)
+        if name in CYCLES_VOLUME_ATTRIBUTES:
+            self.reader.warn(f"{self.reader.owner}: '{node.name}' reads the attribute '{name}', which Cycles takes "
+                             "for a volume grid: black on a mesh, as in Cycles (rename the attribute)")
+            return b.const([0.0, 0.0, 0.0]), b.const(0.0)
+        return b.op("attribute", attribute=name)
+
     def _image(self, node, oname: str, path: tuple) -> int:
         """An Image Texture inside the program (e.g. behind a ColorRamp): the scene texture at its
         Vector's (x, y) (unlinked: the UV map); flat projection only."""
@@ -386,7 +420,7 @@ class ShaderCompiler:
         if idx is None:  # no pixels (warned by the table): Cycles' magenta
             return b.const([1.0, 0.0, 1.0]) if oname == "Color" else b.const(1.0)
         sock = node.inputs.get("Vector")
-        if sock is not None and self.reader.source(sock) is not None:
+        if sock is not None and self.reader.source(sock, groups=False) is not None:
             vec = self._socket(sock, path, "v")
         else:
             self.uv_maps.add("")

@@ -2,7 +2,9 @@
 the operations of core/scene/shader_programs.py as Cycles' SVM computes them
 (``intern/cycles/kernel/svm/``, Apache-2.0, ported):
 
-- ``const`` (a float or a colour), ``coord`` (Texture Coordinate: Generated, Object, UV);
+- ``const`` (a float or a colour), ``coord`` (Texture Coordinate: Generated, Object, UV),
+  ``attribute`` (Attribute / Color Attribute: a mesh attribute interpolated at the hit, RGBA;
+  a mesh without it reads zeros, as Cycles' ``svm_node_attr`` does);
 - ``math`` (the Math node: every operation of ``svm_math`` in math_util.h with its safe_ variants,
   and the Clamp option), ``vector_math`` (``svm_vector_math``), ``mix_float``, ``mix_vector``,
   ``mix_color`` (svm/color_util.h ``svm_mix`` blend modes), ``map_range`` (svm/map_range.h, float),
@@ -21,7 +23,8 @@ the operations of core/scene/shader_programs.py as Cycles' SVM computes them
   (u, v) of a direction (then read by ``image``).
 
 :func:`evaluate` runs only the ops a slot needs (``ShaderProgram.needed``); its inputs are the hits'
-texture coordinates ('generated', 'object', 'uv', each (B, 3) float32).
+texture coordinates ('generated', 'object', 'uv', each (B, 3) float32) and attributes
+('attribute:NAME', (B, 4) float32).
 """
 
 from __future__ import annotations
@@ -346,6 +349,12 @@ def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset(), i
     if name == "coord":
         c = inputs.get(p["kind"])
         return (np.zeros((n, 3), F) if c is None else np.asarray(c, F).reshape(n, 3),)
+    if name == "attribute":  # a mesh attribute interpolated at the hit: (B, 4) RGBA, missing: zeros (Cycles)
+        c = inputs.get("attribute:" + str(p.get("attribute", "")))
+        if c is None:
+            return np.zeros((n, 3), F), np.zeros(n, F)
+        c = np.asarray(c, F).reshape(n, 4)
+        return np.ascontiguousarray(c[:, :3]), np.ascontiguousarray(c[:, 3])
     if name == "math":
         with np.errstate(all="ignore"):
             r = np.asarray(MATH_FUNCTIONS[p["operation"]](*a), F)

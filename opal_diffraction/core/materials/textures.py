@@ -28,6 +28,7 @@ import numpy as np
 
 from ..util.enums import TextureEncoding, TextureExtension, TextureInterpolation
 from ..util.geometry import interpolate_corners
+from ..scene.shader_programs import BUMP_SLOTS, NORMAL_MAP_SLOTS
 from .shader_eval import evaluate
 
 __all__ = [
@@ -172,23 +173,37 @@ class PreparedTextures:
     corner_generated: np.ndarray = None  # (T, 3, 3) float32 or (0, 3, 3)
     corner_object: np.ndarray = None     # (T, 3, 3) float32 or (0, 3, 3)
     mix: np.ndarray = None               # (M,) int32 -1: no image texture on a mix's Fac (programs only)
+    corner_attributes: dict = None       # name -> (T, 3, 4) float32: mesh attributes programs read
 
     def _program_column(self, slot: str):
         return None if not self.program_slots else self.program_slots.get(slot)
 
     def bound(self, slot: str) -> np.ndarray:
-        """(M,) bool: the materials whose ``slot`` varies per hit (a texture or a shader program)."""
-        out = np.asarray(getattr(self, slot)) >= 0
-        col = self._program_column(slot)
-        return out | (col >= 0) if col is not None else out
+        """(M,) bool: the materials whose ``slot`` varies per hit (a texture or a shader program;
+        'normal': a normal map or a Bump node's program)."""
+        col = getattr(self, slot, None)
+        out = np.asarray(col) >= 0 if col is not None else np.zeros(len(self.color), bool)
+        prog = self._program_column(slot)
+        out = out | (prog >= 0) if prog is not None else out
+        if slot == "normal":
+            for other in ("bump_height",) + NORMAL_MAP_SLOTS[:3]:
+                out = out | self.bound(other)
+        return out
 
     def uses(self, slot: str) -> bool:
-        """Whether any material binds a texture or a shader program in ``slot`` ('color', 'roughness', ...)."""
-        col = getattr(self, slot)
-        if bool(len(col)) and bool(col.max() >= 0):
+        """Whether any material binds a texture or a shader program in ``slot`` ('color', 'roughness', ...;
+        'normal': a normal map or a Bump node's program)."""
+        col = getattr(self, slot, None)
+        if col is not None and bool(len(col)) and bool(col.max() >= 0):
             return True
         prog = self._program_column(slot)
-        return prog is not None and bool(len(prog)) and bool(prog.max() >= 0)
+        if prog is not None and bool(len(prog)) and bool(prog.max() >= 0):
+            return True
+        return slot == "normal" and any(self.uses(other) for other in ("bump_height",) + NORMAL_MAP_SLOTS[:3])
+
+    def normal_mapped(self) -> bool:
+        """Whether any material binds a tangent-space normal-map image."""
+        return bool(len(self.normal)) and bool(self.normal.max() >= 0) and bool(len(self.corner_tangents))
 
     def lookup(self, slot: str, mat, prim, bu, bv):
         """(rows, rgba): the hits (indices into the batch) whose material has a texture or a
@@ -229,6 +244,11 @@ class PreparedTextures:
                         inputs[name] = np.concatenate([uv, np.zeros((len(sel), 1), np.float32)], axis=1)
                 elif corners is not None and len(corners):
                     inputs[name] = interpolate_corners(corners, prim[sel], bu[sel], bv[sel]).astype(np.float32)
+            for name in program.attributes():
+                corners = (self.corner_attributes or {}).get(name)
+                if corners is not None and len(corners):
+                    inputs["attribute:" + name] = interpolate_corners(corners, prim[sel], bu[sel],
+                                                                      bv[sel]).astype(np.float32)
             value = evaluate(program, slot, inputs, len(sel), self._image)
             if value.ndim == 1:
                 out[sel] = value[:, None]
@@ -323,12 +343,14 @@ def _programs(scene, m) -> dict:
     programs = tuple(getattr(scene, "shader_programs", None) or ())
     idx = np.asarray(getattr(m, "shader_program", np.full(len(m), -1)), np.int32).reshape(-1)
     slots = {}
-    for slot in ("color", "roughness", "metallic", "emission", "mix"):
+    for slot in ("color", "roughness", "metallic", "emission", "mix") + BUMP_SLOTS + NORMAL_MAP_SLOTS:
         has = np.array([i >= 0 and slot in programs[i].outputs for i in idx], bool) if len(idx) else np.zeros(0, bool)
         slots[slot] = _frozen(np.where(has, idx, -1).astype(np.int32))
 
     def corners(name):
         return _frozen(np.asarray(getattr(scene, name, np.zeros((0, 3, 3))), np.float32).reshape(-1, 3, 3))
 
+    attrs = {str(k): _frozen(np.asarray(a, np.float32).reshape(-1, 3, 4))
+             for k, a in (getattr(scene, "corner_attributes", None) or {}).items()}
     return {"programs": programs, "program_slots": slots, "corner_generated": corners("corner_generated"),
-            "corner_object": corners("corner_object")}
+            "corner_object": corners("corner_object"), "corner_attributes": attrs}

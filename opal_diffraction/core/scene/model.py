@@ -549,7 +549,8 @@ class Scene:
     core/scene/shader_programs.ShaderProgram, bound by ``Materials.shader_program``; the texture
     coordinates they read per triangle corner, ``corner_generated`` (T, 3, 3) (Generated: object
     space over the mesh's texture space) and ``corner_object`` (T, 3, 3) (object space); empty
-    (0, 3, 3): none (a program reading them gets (0, 0, 0), with a validation warning).
+    (0, 3, 3): none (a program reading them gets (0, 0, 0), with a validation warning);
+    ``corner_attributes`` name -> (T, 3, 4) the mesh attributes they read (RGBA per corner).
     Opal volume domains (docs/physics.md section 5.4; empty: none), world space:
     ``domain_seeds`` (S, 3) m, ``domain_weight`` (S,) m (additive Voronoi weights),
     ``domain_axis`` (S, 3) unit (111) normals, ``domain_diameter`` (S,) nm, ``domain_group``
@@ -579,6 +580,9 @@ class Scene:
     shader_programs: list = field(default_factory=list)
     corner_generated: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3), np.float32))
     corner_object: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3), np.float32))
+    # mesh attributes shader programs read (Attribute / Color Attribute nodes; docs/physics.md
+    # section 13.6): name -> (T, 3, 4) float32 RGBA per triangle corner (zeros where a mesh lacks it)
+    corner_attributes: dict = field(default_factory=dict)
     # object motion blur (docs/physics.md section 6.13): the vertices (K, V, 3) at the centres of K
     # equal time bins of the shutter (bin k: shutter times [k / K, (k + 1) / K)); a camera ray of
     # time t sees bin floor(t K)'s geometry; empty (0, 0, 3): the geometry does not move

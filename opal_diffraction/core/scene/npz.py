@@ -63,6 +63,11 @@ def save_scene(scene: Scene, path) -> None:
     for name in ("corner_generated", "corner_object"):
         if len(getattr(scene, name)):
             d[name] = np.asarray(getattr(scene, name), np.float32)
+    attrs = getattr(scene, "corner_attributes", None) or {}
+    if attrs:  # names as a text list, arrays by position
+        d["corner_attribute_names"] = np.array([str(k) for k in attrs])
+        for i, a in enumerate(attrs.values()):
+            d[f"corner_attribute_{i}"] = np.asarray(a, np.float32)
     for f in fields(Materials):
         d["material_" + f.name] = getattr(scene.materials, f.name)
     for f in fields(Lights):
@@ -166,6 +171,11 @@ def _read_textures(read, names: set, shown) -> dict:
     for name in ("corner_uvs", "corner_tangents", "corner_generated", "corner_object"):
         if name in names:
             out[name] = read(name)
+    if "corner_attribute_names" in names:
+        keys = read("corner_attribute_names")
+        if keys.ndim != 1 or keys.dtype.kind != "U":
+            raise SceneError(f"{shown}: corner_attribute_names must be a list of names, got {keys.dtype}")
+        out["corner_attributes"] = {str(k): read(f"corner_attribute_{i}") for i, k in enumerate(keys)}
     if "shader_programs" in names:
         text = read("shader_programs")
         if text.ndim != 1 or text.dtype.kind != "U":

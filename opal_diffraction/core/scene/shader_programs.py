@@ -21,13 +21,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Op", "ShaderProgram", "ProgramBuilder", "program_problems", "OPS", "SLOTS", "COORDINATES",
+__all__ = ["Op", "ShaderProgram", "ProgramBuilder", "program_problems", "OPS", "SLOTS", "BUMP_SLOTS", "NORMAL_MAP_SLOTS", "COORDINATES",
            "MATH_OPERATIONS", "VECTOR_MATH_OPERATIONS", "MIX_BLEND_TYPES", "NOISE_TYPES", "VORONOI_FEATURES",
            "VORONOI_METRICS", "GRADIENT_TYPES", "MAP_RANGE_TYPES", "MAPPING_TYPES", "RAMP_TABLE_SIZE", "SKY_PARAMS"]
 
 #: The material slots a program may feed, and the kind of register each reads ('mix': a Mix Shader's
 #: Fac, the weight of a lobe mixture's second layer; docs/physics.md section 14.8).
-SLOTS = {"color": "v", "roughness": "f", "metallic": "f", "emission": "v", "mix": "f"}
+SLOTS = {"color": "v", "roughness": "f", "metallic": "f", "emission": "v", "mix": "f",
+         # a Bump node on a BSDF's Normal (docs/physics.md section 13.7): its Height, Strength and
+         # Distance (negated for Invert), evaluated at the hit and at two nearby points
+         "bump_height": "f", "bump_strength": "f", "bump_distance": "f",
+         # a Normal Map node on a BSDF's Normal whose Color a program computes (docs/physics.md
+         # section 13.5): the colour in the node's space (one of the three) and its Strength
+         "normalmap_tangent": "v", "normalmap_object": "v", "normalmap_world": "v", "normalmap_strength": "f"}
+#: The slots of a Normal Map node read through a program.
+NORMAL_MAP_SLOTS = ("normalmap_tangent", "normalmap_object", "normalmap_world", "normalmap_strength")
+#: The slots of a Bump node.
+BUMP_SLOTS = ("bump_height", "bump_strength", "bump_distance")
 #: Texture Coordinate outputs a program may read (per hit, interpolated from the triangle's corners).
 COORDINATES = ("generated", "object", "uv")
 #: Entries of a ColorRamp's table (Cycles' RAMP_TABLE_SIZE: 257 in Blender 5.0, measured against its renders).
@@ -91,6 +101,11 @@ class ShaderProgram:
         """The texture coordinates the program reads ('generated', 'object', 'uv')."""
         return frozenset(op.params.get("kind") for op in self.ops if op.name == "coord")
 
+    def attributes(self) -> frozenset:
+        """The mesh attributes the program reads (Attribute / Color Attribute nodes; '' the mesh's
+        default colour attribute)."""
+        return frozenset(str(op.params.get("attribute", "")) for op in self.ops if op.name == "attribute")
+
     def needed(self, slot: str) -> list:
         """Indices of the ops the slot's register depends on, in order."""
         if slot not in self.outputs:
@@ -125,6 +140,7 @@ class ShaderProgram:
 OPS = {
     "const": ((), ("?",)),
     "coord": ((), ("v",)),
+    "attribute": ((), ("v", "f")),
     "math": (("f", "f", "f"), ("f",)),
     "vector_math": (("v", "v", "v", "f"), ("?",)),
     "mix_float": (("f", "f", "f"), ("f",)),
@@ -212,6 +228,8 @@ def program_problems(program: ShaderProgram) -> str | None:
             v = np.asarray(op.params.get("value", np.nan), np.float64)
             if v.shape not in ((), (3,)) or not np.isfinite(v).all():
                 return f"{where}: the value must be a finite number or three"
+        if op.name == "attribute" and not isinstance(op.params.get("attribute"), str):
+            return f"{where}: attribute must be an attribute name"
         if op.name == "magic" and op.params.get("depth") not in range(11):
             return f"{where}: depth must be 0 to 10"
         if op.name == "image" and (not isinstance(op.params.get("texture"), int) or op.params["texture"] < 0):

@@ -150,6 +150,7 @@ def _validate(scene: Scene) -> ValidatedScene:
                 dom["tri_domain_group"]
             for name in ("corner_uvs", "corner_tangents", "corner_generated", "corner_object"):  # one row per triangle
                 tex[name] = tex[name][keep] if len(tex[name]) else tex[name]
+            tex["corner_attributes"] = {k: a[keep] for k, a in tex["corner_attributes"].items()}
     if len(t) == 0:
         warns.append("the scene has no geometry: the image shows only the background")
     # a coloured or mapped world lights the scene, and so does a mesh whose material emits
@@ -721,6 +722,19 @@ def _validate_textures(scene: Scene, n_tri: int, materials: Materials, tri_mater
                 raise SceneError(f"{name}: triangle {first_row(bad)} has a NaN or infinite value")
             check_range(a.astype(np.float64), lambda i: f"triangle {i}", name.replace("_", " ")[:-1], "")
         out[name] = a if a.dtype == np.float32 else a.astype(np.float32)
+    attrs = getattr(scene, "corner_attributes", None) or {}
+    if not isinstance(attrs, dict):
+        raise SceneError(f"corner_attributes must be a dict of name -> (T, 3, 4) arrays, got {type(attrs).__name__}")
+    out["corner_attributes"] = {}
+    for key, arr in attrs.items():
+        what = f"corner attribute {key!r}"
+        a = as_column(arr, what, (3, 4), allow_empty=True)
+        if len(a) != n_tri:
+            raise SceneError(f"{what} must have one row of 3 corners per triangle ({n_tri}), got {len(a)}")
+        if a.size and not np.isfinite(a.astype(np.float64)).all():
+            bad = ~np.isfinite(a.astype(np.float64))
+            raise SceneError(f"{what}: triangle {first_row(bad)} has a NaN or infinite value")
+        out["corner_attributes"][str(key)] = a if a.dtype == np.float32 else a.astype(np.float32)
     label = _material_label(materials.name)
     used = np.zeros(len(materials), bool)
     if len(tri_material):  # validated: 0 <= tri_material < len(materials)
@@ -774,6 +788,10 @@ def _validate_programs(scene: Scene, materials: Materials, used: np.ndarray, cor
         if missing:
             warns.append(f"{label(int(m))}: its shader program reads {', '.join(missing)} coordinates the scene does "
                          "not have: they read (0, 0, 0)")
+        absent = sorted(a for a in raw[idx[m]].attributes() if a not in corners["corner_attributes"])
+        if absent:
+            warns.append(f"{label(int(m))}: its shader program reads the attribute(s) {', '.join(map(repr, absent))} "
+                         "the scene does not have: they read (0, 0, 0), as in Cycles")
     return list(raw)
 
 

@@ -63,7 +63,7 @@ def bump(prepared, normal_maps: bool, hit: Hit, wi: np.ndarray) -> np.ndarray | 
     to diffuse closures; measured against Cycles in tests/blender/test_cycles_parity.py."""
     if not normal_maps:
         return np.float32(1.0)
-    bent = prepared.textures.normal[hit.mat] >= 0
+    bent = prepared.textures.bound("normal")[hit.mat]
     if not bent.any():
         return np.float32(1.0)
     ni = hit.ng if prepared.corner_normals is None else shading_normals(
