@@ -76,9 +76,12 @@ class MediumStage:
         prepared, media = self.prepared, self.media
         prim = np.asarray(h.prim)
         missed = prim < 0
-        p0 = np.where(missed, 0, prim)
-        mat = prepared.tri_material[p0]
-        front = np.einsum("ij,ij->i", rays.d, prepared.tri_normal[p0]) < 0
+        if len(prepared.tri_material):
+            p0 = np.where(missed, 0, prim)
+            mat = prepared.tri_material[p0]
+            front = np.einsum("ij,ij->i", rays.d, prepared.tri_normal[p0]) < 0
+        else:  # no geometry: every segment leaves the scene
+            mat, front = np.zeros(len(prim), np.int64), np.zeros(len(prim), bool)
         med = media.segment_medium(mat, front, missed)
         sel = med >= 0
         if not sel.any():
