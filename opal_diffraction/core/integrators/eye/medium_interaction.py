@@ -30,13 +30,15 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ...lights.sources import POINT, SPOT, is_delta, sample_light_pdf
 from ...sampling import footprint
 from ...sampling.sampler import SLOT_BOUNCE, SLOT_LIGHT
 from ...transport.path_state import MAX_DIFFUSE_VERTICES, Caustic
 from ...transport.walker import Rays, light_spectrum_of
 from ...volumes.media import PreparedMedia
 from ...volumes.phase import hg, sample_hg
-from ...volumes.tracking import free_flight, segment_emission, transmittance
+from ...volumes.tracking import (equiangular, equiangular_pdf, free_flight, free_flight_pdf, segment_emission,
+                                 transmittance)
 from .next_event import light_samples, power_heuristic
 
 __all__ = ["MediumStage"]
@@ -56,6 +58,9 @@ class MediumStage:
         self.scatters = media.scatters
         self.emits = media.emits
         self.any_emits = bool(self.emits.any())
+        pl = prepared.lights
+        # point and spot lights of radius 0: their next events also take equiangular points (MIS)
+        self.equi = [li for li in range(len(pl)) if int(pl.kind[li]) in (POINT, SPOT) and is_delta(pl, li)]
 
     # ------------------------------------------------------------------ shadow rays from surfaces
     def surface_shadow(self, dist) -> np.ndarray | None:
@@ -111,6 +116,8 @@ class MediumStage:
         if scat.any():
             k = np.flatnonzero(scat)
             rng = trace.rng
+            if self.equi:  # the point lights' next events at equiangular points of the segments
+                self._equiangular_events(trace, r.take(k), m[k], t_end[k])
             ok, t, f = free_flight(st[k], self.sigma_s[m[k]], t_end[k], rng.random(len(k)), rng.random(len(k)),
                                    r.lam[k] if mono else None)
             factor[k] = f
@@ -120,7 +127,7 @@ class MediumStage:
                 rs = r.take(ks)
                 w = rs.w * f[ok].astype(_F32) if mono else rs.weighted(f[ok].astype(_F32))
                 x = (rs.o.astype(np.float64) + t[ok][:, None] * rs.d).astype(_F32)
-                scattered = self._scatter(trace, rs, m[ks], x, w)
+                scattered = self._scatter(trace, rs, m[ks], x, w, t[ok], t_end[ks])
         # the rays going on to their hits, weights times their factors
         if mono:
             w_all = np.array(rays.w, _F32, copy=True)
@@ -139,9 +146,54 @@ class MediumStage:
         return going, h, scattered
 
     # ------------------------------------------------------------------ a scattering vertex
-    def _scatter(self, trace, rays: Rays, m: np.ndarray, x: np.ndarray, w: np.ndarray) -> Rays | None:
+    def _equiangular_events(self, trace, rays: Rays, m: np.ndarray, t_end: np.ndarray) -> None:
+        """The point and spot lights' next events from points of the segments drawn towards each
+        light (``tracking.equiangular``), weighted against the free-flight points' by the balance
+        heuristic: W sigma_s T(t) p(theta) g T_shadow L / p_e(t) x p_e / (p_e + p_d)."""
+        prepared, out = self.prepared, trace.out
+        pl = prepared.lights
+        b = len(rays)
+        mono = rays.lam is not None
+        n = self.sigma_t.shape[1]
+        o, d = rays.o.astype(np.float64), rays.d.astype(np.float64)
+        st, ss, g = self.sigma_t[m], self.sigma_s[m], self.media.g[m]
+        w = rays.w if mono else rays.dense_w(n)
+        nd = rays.state.nd
+        for li in self.equi:
+            t, p_e = equiangular(o, d, np.broadcast_to(pl.position[li], (b, 3)), t_end, trace.rng.random(b))
+            x = (o + t[:, None] * d).astype(_F32)
+            wi, dist, gl, _ = sample_light_pdf(pl, li, x, trace.rng)
+            p_d = free_flight_pdf(st, t, rays.lam if mono else None)
+            ph = hg(np.einsum("ij,ij->i", d, np.asarray(wi, np.float64)), g)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                scale = np.asarray(gl, np.float64) * ph / (p_e + p_d)  # (1 / p_e) x p_e / (p_e + p_d)
+            live = np.flatnonzero((scale > 0) & np.isfinite(scale))
+            if live.size == 0:
+                continue
+            dd = np.asarray(dist, np.float64)[live]
+            occ = prepared.accel.occluded(x[live], np.ascontiguousarray(np.asarray(wi, _F32)[live]), dd.astype(_F32))
+            out.shadow_rays += len(occ)
+            live = live[~occ]
+            if live.size == 0:
+                continue
+            # sigma_s T along the camera side and T along the shadow ray, per wavelength
+            tr = ss[live] * transmittance(st[live], t[live] + np.asarray(dist, np.float64)[live])
+            spec = pl.spectrum[li]
+            if mono:
+                lam = rays.lam[live]
+                val = w[live] * (scale[live] * tr[np.arange(live.size), lam] * spec[lam]).astype(_F32)
+            else:
+                val = w[live] * (scale[live, None] * tr * spec).astype(_F32)
+            rl = rays.take(live)
+            k_nd = nd[live]
+            for k in np.unique(k_nd):
+                part = k_nd == k
+                out.accumulate(rl.take(part), val[part], out.light_film(min(int(k) + 1, 2)))
+
+    def _scatter(self, trace, rays: Rays, m: np.ndarray, x: np.ndarray, w: np.ndarray, t, t_end) -> Rays | None:
         """Next events and the phase-sampled continuation of ``rays`` scattering at ``x`` (B, 3)
-        in media ``m`` (B,), with throughput ``w`` there ((B, n) white, (B,) mono)."""
+        (distance ``t`` along segments of length ``t_end``) in media ``m`` (B,), with throughput
+        ``w`` there ((B, n) white, (B,) mono)."""
         prepared, out = self.prepared, trace.out
         b = len(rays)
         mono = rays.lam is not None
@@ -150,10 +202,16 @@ class MediumStage:
         st = self.sigma_t[m]
         nd = rays.state.nd
         at = SimpleNamespace(p=x)
-        for wi, dist, gl, spectrum, p_light, pad in light_samples(prepared, at, trace.numbers(rays, SLOT_LIGHT)):
+        p_d = free_flight_pdf(st, t, rays.lam if mono else None) if self.equi else None
+        for li, (wi, dist, gl, spectrum, p_light, pad) in enumerate(light_samples(prepared, at,
+                                                                               trace.numbers(rays, SLOT_LIGHT))):
             wi64 = np.asarray(wi, np.float64)
             ph = hg(np.einsum("ij,ij->i", d, wi64), g)
             scale = np.asarray(gl, np.float64) * ph
+            if li < len(prepared.lights) and li in self.equi:  # against the equiangular points (balance)
+                p_e = equiangular_pdf(rays.o, d, np.broadcast_to(prepared.lights.position[li], (b, 3)), t_end, t)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    scale = scale * np.where(p_d > 0, p_d / (p_d + p_e), 0.0)
             if p_light is not None:  # phase sampling can find this light too: the power heuristic
                 scale = scale * power_heuristic(p_light, ph.astype(_F32), light_first=True)
             live = np.flatnonzero((scale > 0) & np.isfinite(scale))
