@@ -22,6 +22,7 @@ what a hit's shading leaves for its bounce travels in a ``surface_interaction.Hi
     (gratings: the order lobe)               _GratingTrace        the path continued along an order
     survives, after_delta, scatter           continuation.py      roulette, BSDF sampling, counts
     dielectric_bounce                        fresnel_split.py     both branches at the first glass
+    through_media (every segment)            medium_interaction.py  media: emission, transmittance, scattering
     every stage's film adds                  tile_output.py
 """
 

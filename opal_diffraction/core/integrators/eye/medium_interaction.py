@@ -11,6 +11,9 @@ face it ends on, else the world's volume). In a medium:
   there (it never reaches the surface) with weight sigma_s T / p(t); the rest reach the end with
   T / P; a medium that only absorbs multiplies the weight by T (Beer-Lambert). Paths past a
   bounce limit (``final``) only gather emission: no scattering, T;
+- point and spot lights of radius 0 are also reached from a point of each scattering segment
+  drawn towards them by equiangular sampling (core/volumes/tracking.py), its next event weighted
+  against the free-flight point's by the balance heuristic;
 - at a scattering vertex: one next event per emitter (core/integrators/eye/next_event.py's
   ``light_samples``) weighted by the Henyey-Greenstein phase function and, where phase sampling
   can also find the light, by the power heuristic against it (Veach 1997 section 9.2), its shadow
