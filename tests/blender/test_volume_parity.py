@@ -7,8 +7,9 @@ half-sample renders, their half difference the noise; the noise floor must be be
 mean ratio's standard error below 0.01 for the verdict to be about the renderer).
 
 Measured (2-core machine, 64 x 64, Cycles at 512 spp): fog_spot at 256 spp mean ratio
-0.994 +- 0.004, filtered RMSE 0.024 (noise floor 0.029; 4x4: 0.052, floor 0.054), so 384 spp
-for margin on the floor (~60 s); glass_absorption at 32 spp mean ratio 0.997, filtered RMSE
+0.994 +- 0.004, filtered RMSE 0.024 (noise floor 0.029; 4x4: 0.052, floor 0.054); at 384 spp
+(the margin on the floor) 0.997 +- 0.003, RMSE 0.022 (floor 0.026; 4x4: 0.053, floor 0.052);
+glass_absorption at 32 spp mean ratio 0.997, filtered RMSE
 0.010 (noise floor 0.003; 4x4: 0.011).
 """
 

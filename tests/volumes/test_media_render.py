@@ -105,6 +105,7 @@ def _single_scattering(prepared, media, x, y):
     return out * prepared.lights.spectrum[0]
 
 
+@pytest.mark.slow
 def test_single_scattering_of_a_point_light_in_fog_matches_the_transfer_integral():
     scene = _fog_scene()
     runs = []
