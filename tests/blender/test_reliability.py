@@ -1,5 +1,5 @@
 """Nothing a user builds in Blender crashes, hangs or blackens a render without a word: node
-cycles, volume-only materials, EEVEE-only outputs, FLT_MAX / inf / NaN / negative values, hair and
+cycles, volume-only materials (null boundaries), EEVEE-only outputs, FLT_MAX / inf / NaN / negative values, hair and
 other skipped geometry each end with a named warning (and finite pixels) or a one-line error; every
 warning reaches the user once; an error's text once; cancel is consistent. Also the property
 contract that backs it: minimums, units and one-line tooltips."""
@@ -117,24 +117,40 @@ def test_invalid_link_without_cycle_is_ignored_as_in_cycles():
     np.testing.assert_allclose(m.color[list(m.name).index("redlink")], (0.2, 0.3, 0.4), rtol=1e-5)
 
 
-def test_volume_only_material_is_left_out_with_a_warning(last_render):
+def _row(ex, name):
+    m = ex.scene.materials
+    return list(m.name).index(name), m
+
+
+def test_volume_only_material_is_a_null_boundary_holding_its_medium(last_render):
     _scene()
     mat, nt = _empty_material("smoke")
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     vol = nt.nodes.new("ShaderNodeVolumePrincipled")
     nt.links.new(vol.outputs[0], out.inputs["Volume"])
     _cube_material(mat)
-    w = _render_finishes(last_render, "material 'smoke'", "volume shaders are not rendered", "'smoke' renders as")
-    assert "empty space" in w
-    assert last_render["export"]["triangles"] == 2  # the floor only: the cube's 12 faces are left out
-    # a material with a surface and a volume keeps its surface
+    bpy.ops.render.render()
+    assert last_render["status"] == "FINISHED", last_render.get("message")
+    assert np.isfinite(last_render["rgb"]).all() and (last_render["rgb"] >= 0).all()
+    assert last_render["export"]["triangles"] == 2 + 12  # the cube's faces: its medium's boundary
+    ex = _export()
+    assert not any("volume" in w for w in ex.warnings), ex.warnings
+    i, m = _row(ex, "smoke")
+    # a null boundary: smooth glass of index 1, clear
+    assert m.kind[i] == 2 and m.ior[i] == 1.0 and np.all(m.color[i] == 1.0)
+    # Principled Volume's defaults (Color 0.5, Density 1, Absorption Color black), as Cycles' SVM:
+    # sigma_s = 0.5, sigma_a = 0.5 x (1 - sqrt(0)) = 0.5, white
+    np.testing.assert_allclose([m.volume_scatter_density[i], m.volume_absorption_density[i]], [0.5, 0.5], rtol=1e-5)
+    np.testing.assert_allclose(m.volume_scatter_color[i], 1.0, rtol=1e-5)
+    np.testing.assert_allclose(m.volume_absorption_color[i], 1.0, rtol=1e-5)
+    # a material with a surface and a volume keeps its surface, and the medium inside it
     nt.links.new(nt.nodes.new("ShaderNodeBsdfDiffuse").outputs[0], out.inputs["Surface"])
     ex = _export()
-    assert len(ex.scene.triangles) == 2 + 12
-    assert any("material 'smoke'" in w and "only its surface" in w for w in ex.warnings)
+    i, m = _row(ex, "smoke")
+    assert m.kind[i] == 0 and m.volume_scatter_density[i] == pytest.approx(0.5)
 
 
-def test_volume_only_slot_hides_only_its_faces():
+def test_volume_only_slot_makes_only_its_faces_null():
     _scene()
     cube = bpy.data.objects["Cube"]
     mat, nt = _empty_material("fog")
@@ -143,7 +159,12 @@ def test_volume_only_slot_hides_only_its_faces():
     cube.data.materials.append(bs.material("solid"))
     cube.data.materials.append(mat)
     cube.data.polygons[0].material_index = 1  # one face (2 triangles) of six is fog
-    assert len(_export().scene.triangles) == 2 + 10
+    ex = _export()
+    assert len(ex.scene.triangles) == 2 + 12
+    i, m = _row(ex, "fog")
+    assert np.count_nonzero(ex.scene.tri_material == i) == 2
+    # Volume Absorption's defaults: sigma_a = Density x (1 - Color) = 1 x (1 - 0.8)
+    assert m.volume_absorption_density[i] == pytest.approx(0.2, rel=1e-5) and m.volume_scatter_density[i] == 0
 
 
 @pytest.mark.parametrize("outputs", [("EEVEE",), ("EEVEE", "EEVEE")])

@@ -28,11 +28,13 @@ MAY_IMPORT = {
     "lights": {"util", "spectral", "accel", "scene", "sampling", "materials"},
     "transport": _BELOW_TRANSPORT,
     "gratings": _BELOW_TRANSPORT | {"transport"},
+    "volumes": {"util", "spectral", "scene"},
     "integrators": _BELOW_TRANSPORT | {"lights", "transport", "gratings"},
     "integrators.light": _BELOW_TRANSPORT | {"lights", "transport", "gratings", "integrators"},
-    "integrators.eye": _BELOW_TRANSPORT | {"lights", "transport", "gratings", "integrators", "integrators.light"},
+    "integrators.eye": _BELOW_TRANSPORT | {"lights", "transport", "gratings", "integrators", "integrators.light",
+                                           "volumes"},
     "render": _BELOW_TRANSPORT | {"lights", "transport", "gratings", "integrators", "integrators.light",
-                                  "integrators.eye"},
+                                  "integrators.eye", "volumes"},
 }
 
 

@@ -15,8 +15,8 @@ once), per-material bindings and per-corner UVs and tangents, sampled per hit by
 Principled's metallic / transmission layers) for the core's GGX microfacets (core/materials/bsdf.py),
 a world's equirectangular Environment Texture as a map. What the core cannot render is
 approximated and named in the warnings rather than failing: other textures and procedural nodes
-(averaged), volume shaders (a volume-only material's faces are left out, as Cycles draws no
-surface for it); hair (curves objects and hair particle systems), point clouds and volume
+(averaged); volume shaders become homogeneous media (a material's interior, the world's volume:
+export/volumes.py; a volume-only material's surface is a null boundary); hair (curves objects and hair particle systems), point clouds and volume
 objects are skipped with counts. Values that would overflow the tracer's float32 (an emission or
 light power up to Blender's FLT_MAX) are clamped with a warning, NaN is an error naming the
 material or light, and a node cycle renders as the default surface with a warning. Grating
@@ -62,7 +62,7 @@ from .materials import MaterialTable, export_materials
 from .meshes import (GEOMETRY_TYPES, UNSUPPORTED_GEOMETRY, MeshCache, SceneMeshes, element_count, flatten,
                      flatten_attribute_corners, flatten_corners, flatten_program_corners, hair_systems, strand_count)
 from .messages import Skipped, Warnings
-from .world import export_world, export_world_light
+from .world import export_world, export_world_light, export_world_volume
 
 __all__ = [
     "ExportCancelled",
@@ -171,6 +171,8 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
     # object motion blur: the vertices in the shutter's time bins (export/motion.py)
     motion_vertices = object_motion(depsgraph, frame_set, kept, groups, meshes, materials.grating,
                                     materials.hidden_rows(), warn, n_triangles=len(triangles))
+    world_medium = export_world_volume(depsgraph, warn)  # the world's Volume (docs/physics.md section 15)
+    world_row = -1 if world_medium is None else materials.world_medium(world_medium)
     core_materials = materials.finish()
     cam = export_camera(depsgraph, width=width, height=height, camera=camera, warn=warn, frame_set=frame_set,
                         objects_checked=frame_set is not None)
@@ -184,6 +186,7 @@ def export_scene(depsgraph, *, width: int | None = None, height: int | None = No
         shader_programs=list(materials.programs), corner_generated=corner_generated, corner_object=corner_object,
         corner_attributes=corner_attributes,
         **({} if motion_vertices is None else {"motion_vertices": motion_vertices}),
+        world_volume=world_row,
     )
     meshes.done()
     stats = {

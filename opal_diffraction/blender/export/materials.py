@@ -7,9 +7,11 @@ are an error naming the material. Blender's default surface (no material, or an 
 grey diffuse, as in Cycles.
 
 What Cycles would not render either is black, as in Cycles, with a warning saying why (no output
-node for Cycles, e.g. one that targets EEVEE only; nothing on Surface). A volume-only material
-is left out of the scene (its faces skipped: Cycles draws no surface for it), a node cycle
-renders as the default surface, and NaN values are an error naming the material.
+node for Cycles, e.g. one that targets EEVEE only; nothing on Surface). A material's Volume
+output becomes the homogeneous medium inside its surface (:mod:`.volumes`; docs/physics.md
+section 15); a volume-only material's surface is a null boundary (a smooth dielectric of index 1:
+Cycles draws no surface for it). A node cycle renders as the default surface, and NaN values are
+an error naming the material.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from .images import TextureTable
 from .messages import Warnings
 from .meshes import is_surface_instance
 from .nodes import MAX_INTENSITY, NodeReader, Surface, missing_output, node_tree, output_node
+from .volumes import read_volume
 
 __all__ = ["DEFAULT_MATERIAL", "MaterialTable", "CornerSpec", "export_materials"]
 
@@ -72,6 +75,7 @@ class MaterialTable:
         self.programs: list = []  # the shader programs the rows' shader_program column numbers
         self.program_reads: list[frozenset] = []  # per row: the coordinates its program reads
         self._compiler = None
+        self._volume = None  # the medium columns _surface read for the row _convert makes (export/volumes.py)
 
     def lookup(self, material) -> int:
         key = "\0default" if material is None else material.name_full  # unique across linked libraries
@@ -175,6 +179,14 @@ class MaterialTable:
         """Row of each of ``ob``'s material slots (the default surface for no slot or an empty one)."""
         return tuple(self.lookup(s.material) for s in ob.material_slots) or (self.lookup(None),)
 
+    def world_medium(self, columns: dict) -> int:
+        """A row holding the world's medium (``Scene.world_volume``; no face uses it)."""
+        self.rows.append({"name": "(world volume)", "kind": "DIFFUSE", **columns})
+        self.corners.append(None)
+        self.program_reads.append(frozenset())
+        self.grating.append(None)
+        return len(self.rows) - 1
+
     def finish(self) -> Materials:
         """The core's material table (the default surface alone when no material is used)."""
         if not self.rows:
@@ -192,6 +204,7 @@ class MaterialTable:
             surf = Surface("MIRROR" if metallic >= 0.5 else "DIFFUSE", np.minimum(col, MAX_INTENSITY),
                            roughness=min(max(float(mat.roughness), 0.0), 1.0), metallic=metallic, transmission=0.0,
                            conductor_fresnel="F82_TINT")
+        volume, self._volume = self._volume, None
         kind = surf.kind or "DIFFUSE"
         color = surf.color if surf.kind is not None else np.zeros(3)
         metallic, transmission = surf.layers() if surf.kind is not None else (0.0, 0.0)
@@ -221,6 +234,8 @@ class MaterialTable:
             if surf.layer_fac != "CONSTANT":
                 row.update(layer_fac=surf.layer_fac, layer_fac_value=float(surf.layer_fac_value),
                            layer_fac_from=int(surf.layer_fac_from), layer_fac_to=int(surf.layer_fac_to))
+        if volume is not None:  # the medium inside (docs/physics.md section 15)
+            row.update(volume)
         row.update(self._texture_columns(surf, owner))
         row.update(self._program_columns(surf, owner, row))
         opal = getattr(mat, "opal", None)
@@ -265,7 +280,8 @@ class MaterialTable:
     def _surface(self, mat, owner: str) -> Surface | None:
         """The Surface of ``mat``'s node tree (None: it has none, use the viewport colour). A tree
         Cycles cannot render either (no output node for Cycles, nothing on Surface) is black, as
-        in Cycles, with a warning saying why; a volume-only material is hidden; a node cycle gives
+        in Cycles, with a warning saying why; a volume-only material is a null boundary (its medium is
+        kept for _convert); a node cycle gives
         the default surface."""
         nt = node_tree(mat)
         if nt is None:
@@ -283,22 +299,19 @@ class MaterialTable:
                       "editor): rendered as the default surface (grey diffuse)")
             return Surface("DIFFUSE", np.array(DEFAULT_MATERIAL["color"], np.float64))
         vol = out.inputs.get("Volume")
-        # a cycle in the volume's nodes only: the volume is not rendered anyway
-        has_volume = vol is not None and NodeReader(owner, self.warn, self.to709).source(vol) is not None
         has_surface = sock is not None and reader.source(sock) is not None
-        if has_volume and not has_surface:
+        # the medium inside the surface (docs/physics.md section 15; export/volumes.py)
+        vreader = NodeReader(owner, self.warn, self.to709)
+        self._volume = read_volume(vreader, vol) if vol is not None and vreader.source(vol) is not None else None
+        if vreader.cycle is not None:
+            self.warn(f"{owner}: its volume's nodes have a cycle (through the link {vreader.cycle}): no volume")
+            self._volume = None
+        if self._volume is not None and not has_surface:
             # Cycles draws no surface for a material with only a Volume shader: rays cross the
-            # boundary unchanged and only the volume inside scatters or absorbs. The tracer has
-            # no volumes, so the closest image is empty space: the material's faces are left out
-            # of the scene (an opaque black or clear-glass stand-in would block or bend light
-            # where Cycles shows the volume's background through it).
-            self.warn(f"{owner}: volume shaders are not rendered: '{mat.name}' renders as empty space (its faces "
-                      "are left out, as Cycles draws no surface for a volume-only material)")
-            self.hidden.add(len(self.rows))
-        elif has_volume:
-            self.warn(f"{owner}: volume shaders are not rendered: only its surface is")
-        elif not has_surface:
-            self.warn(f"{owner}: nothing is connected to the Surface of '{out.name}': rendered black, as in Cycles")
+            # boundary unchanged and only the medium inside scatters, absorbs or emits. The
+            # tracer's null boundary is a smooth dielectric of index 1 (no reflection, no bending)
+            return Surface("DIELECTRIC", np.ones(3), ior=1.0)
+        if not has_surface:            self.warn(f"{owner}: nothing is connected to the Surface of '{out.name}': rendered black, as in Cycles")
         return surf
 
     def hidden_rows(self) -> np.ndarray:

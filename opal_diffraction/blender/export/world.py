@@ -41,10 +41,11 @@ from ...core.scene.model import TEXTURE_EXTENSIONS, TEXTURE_INTERPOLATIONS
 from .colour import in_rec709, rgb, working_space_to_rec709
 from .images import TextureTable, read_image
 from .messages import Warnings
-from .nodes import MAX_INTENSITY, NodeReader, missing_output, node_tree, surface_socket
+from .nodes import MAX_INTENSITY, NodeReader, missing_output, node_tree, output_node, surface_socket
+from .volumes import read_volume
 from .shader_compiler import ShaderCompiler
 
-__all__ = ["WorldLight", "world_light", "world_color", "export_world", "export_world_light", "mapping_rotation",
+__all__ = ["WorldLight", "world_light", "world_volume", "export_world_volume", "world_color", "export_world", "export_world_light", "mapping_rotation",
            "MISSING_IMAGE_RGB", "bake_program", "BAKE_HEIGHT", "BAKE_WIDTH"]
 
 #: What Cycles shows for an image texture without pixels (kernel/svm/image.h: IMAGE_TEXTURE_MISSING_RGBA).
@@ -61,6 +62,22 @@ class WorldLight:
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
     #: Light-table rows (Lights.from_list dicts) the world adds: a Sky Texture's sun disc as a sun.
     lights: list = field(default_factory=list)
+
+
+def world_volume(world, warn, to709) -> dict | None:
+    """The medium columns of the World Output's Volume (docs/physics.md section 15; export/volumes.py):
+    the whole scene outside closed meshes in that medium; None: none."""
+    if world is None:
+        return None
+    nt = node_tree(world)
+    out = output_node(nt) if nt is not None else None
+    sock = out.inputs.get("Volume") if out is not None else None
+    if sock is None:
+        return None
+    reader = NodeReader(f"world '{world.name}'", warn, to709)
+    if reader.source(sock) is None:
+        return None
+    return read_volume(reader, sock)
 
 
 def world_color(world, warn, to709) -> np.ndarray:
@@ -331,6 +348,11 @@ def export_world_light(depsgraph, warn: Warnings | None = None) -> WorldLight:
     light = world_light(depsgraph.scene.world, warn if warn is not None else Warnings(), working_space_to_rec709())
     light.color = np.clip(light.color, 0.0, None).astype(np.float32)
     return light
+
+
+def export_world_volume(depsgraph, warn: Warnings | None = None) -> dict | None:
+    """The world's medium columns (``world_volume``) as :func:`export_scene` reads them."""
+    return world_volume(depsgraph.scene.world, warn if warn is not None else Warnings(), working_space_to_rec709())
 
 
 def export_world(depsgraph, warn: Warnings | None = None) -> np.ndarray:

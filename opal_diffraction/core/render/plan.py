@@ -19,6 +19,7 @@ from ..integrators.bragg_shading import bragg_materials
 from ..integrators.light import camera_splat as camera_splat_rules
 from ..integrators.light import splat_bounce as splat_bounce_rules
 from ..materials.spectra import DIELECTRIC, MIRROR
+from ..volumes.media import has_media
 
 __all__ = ["RenderPlan", "plan_render"]
 
@@ -85,11 +86,19 @@ def plan_render(prepared) -> RenderPlan:
     layered = grating_layering.active(prepared)  # gratings take their power from the base (section 3.3)
     m = prepared.scene.materials
     bragg = bool(len(m) and bragg_materials(m).any())  # FCC opal lobes
+    warnings = []
+    media = has_media(prepared.scene)  # [volumes] homogeneous media: the eye pass only (docs/physics.md section 15)
+    if media:
+        notes.append("volumes: homogeneous media in the eye pass")
+        camera_splat = False  # the splat's light paths would cross the media unattenuated
+        if light_pass:
+            warnings.append("volumes: the light pass ignores media: caustics through mirrors and glass are "
+                            "neither attenuated nor scattered by the media on their way to a surface")
     return RenderPlan(eye_pass=True, light_pass=light_pass, gratings=n_gratings > 0, dispersion=dispersion,
-                      camera_splat=camera_splat,
+                      camera_splat=camera_splat, warnings=tuple(warnings),
                       splat_bounce=camera_splat and bool(settings.splat_bounce) and splat_bounce_rules.applies(prepared),
                       fresnel_split=bool(settings.fresnel_split) and not layered,
                       # gratings, their layers and the opal's lobes read spectral weights
-                      grey_paths=not (prepared.gratings.any or layered or bragg),
+                      grey_paths=not (prepared.gratings.any or layered or bragg or media),
                       ray_differentials=bool(prepared.gratings.any and settings.grating_footprint),
                       notes=tuple(notes))

@@ -126,6 +126,16 @@ MATERIAL_COLUMNS = {
     # a thin film over the surface's Fresnel (Principled's Thin Film; docs/physics.md section 2.8)
     "thin_film_thickness": (np.float32, (), 0.0, None),
     "thin_film_ior": (np.float32, (), 1.33, None),
+    # the homogeneous medium inside the surface (a Volume output; docs/physics.md section 15):
+    # sigma_s = volume_scatter_density * colour, sigma_a = volume_absorption_density * colour
+    # (1/m; each colour uplifted per wavelength), the Henyey-Greenstein anisotropy and the emission
+    # coefficient (linear RGB radiance per metre, Cycles' volume emission); zero: no medium
+    "volume_scatter_density": (np.float32, (), 0.0, None),
+    "volume_scatter_color": (np.float32, (3,), (1.0, 1.0, 1.0), None),
+    "volume_absorption_density": (np.float32, (), 0.0, None),
+    "volume_absorption_color": (np.float32, (3,), (1.0, 1.0, 1.0), None),
+    "volume_anisotropy": (np.float32, (), 0.0, None),
+    "volume_emission": (np.float32, (3,), (0.0, 0.0, 0.0), None),
 }
 
 #: The material columns that name a texture.
@@ -201,6 +211,13 @@ class Materials:
     and void_ior (1-3), layers (ordered (111) periods, 1-10000) and mosaic_spread (degrees, 0-45:
     the spread of the plane normals about the domain's axis); the base kind is the body tone.
 
+    Interior medium (docs/physics.md section 15; core/volumes/): a homogeneous medium inside the
+    closed surface, from the material's Volume output: volume_scatter_density and
+    volume_absorption_density (1/m, >= 0) times volume_scatter_color / volume_absorption_color
+    (linear RGB in [0, 1], uplifted per wavelength) are sigma_s and sigma_a, volume_anisotropy
+    (-1..1) the Henyey-Greenstein g, volume_emission (linear RGB, >= 0) the emitted radiance per
+    metre. A volume-only material is a DIELECTRIC of index 1 (a null boundary).
+
     Thin film (docs/physics.md section 2.8; core/spectral/thin_film.py): thin_film_thickness d
     (nm, >= 0; 0: none) and thin_film_ior (>= 1) of a film over the surface, whose Airy
     interference replaces the Fresnel reflectance of smooth glass, mirrors and metals (and of the
@@ -263,6 +280,12 @@ class Materials:
     mosaic_spread: np.ndarray = field(default_factory=lambda: _material_column_default("mosaic_spread", 0))
     thin_film_thickness: np.ndarray = field(default_factory=lambda: _material_column_default("thin_film_thickness", 0))
     thin_film_ior: np.ndarray = field(default_factory=lambda: _material_column_default("thin_film_ior", 0))
+    volume_scatter_density: np.ndarray = field(default_factory=lambda: _material_column_default("volume_scatter_density", 0))
+    volume_scatter_color: np.ndarray = field(default_factory=lambda: _material_column_default("volume_scatter_color", 0))
+    volume_absorption_density: np.ndarray = field(default_factory=lambda: _material_column_default("volume_absorption_density", 0))
+    volume_absorption_color: np.ndarray = field(default_factory=lambda: _material_column_default("volume_absorption_color", 0))
+    volume_anisotropy: np.ndarray = field(default_factory=lambda: _material_column_default("volume_anisotropy", 0))
+    volume_emission: np.ndarray = field(default_factory=lambda: _material_column_default("volume_emission", 0))
 
     def __len__(self):
         return _rows(self.kind)
@@ -594,6 +617,9 @@ class Scene:
     domain_diameter: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     domain_group: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     tri_domain_group: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    # the world's volume (docs/physics.md section 15): the material row whose volume columns fill
+    # the space outside every closed mesh with a medium of its own; -1: none (a vacuum)
+    world_volume: int = -1
 
     # ------------------------------------------------------------------ building
     def add_domains(self, seeds, weight, axis, diameter, triangles=None) -> int:

@@ -44,6 +44,8 @@ def save_scene(scene: Scene, path) -> None:
         "world_image": np.asarray(scene.world_image, np.float32),
         "world_rotation": np.asarray(scene.world_rotation, np.float64),
     }
+    if int(scene.world_volume) >= 0:
+        d["world_volume"] = np.array(int(scene.world_volume), np.int32)
     if len(scene.domain_seeds):
         for name in _DOMAIN_FIELDS:
             d[name] = np.asarray(getattr(scene, name))
@@ -162,6 +164,8 @@ def load_scene(path) -> Scene:
             **_read_textures(read, names, shown),
             **{name: read(name) for name in _DOMAIN_FIELDS if name in names},
             **({"motion_vertices": read("motion_vertices")} if "motion_vertices" in names else {}),
+            # older files have no world volume: none
+            **({"world_volume": int(read("world_volume"))} if "world_volume" in names else {}),
         )
 
 

@@ -28,7 +28,7 @@ BACKENDS = ("auto", "embree", "numpy", "brute")
 
 #: Settings only the eye pass reads: changing them keeps a prepared scene and its light pass.
 EYE_ONLY_SETTINGS = frozenset({"samples", "round_samples", "tile_size", "filter_width", "time_limit", "spectral_exr",
-                               "diffuse_bounces", "glossy_bounces", "transmission_bounces", "adaptive_threshold",
+                               "diffuse_bounces", "glossy_bounces", "transmission_bounces", "volume_bounces", "adaptive_threshold",
                                "adaptive_min_samples", "grating_footprint", "blue_noise", "fresnel_split",
                                "film_transparent", "film_transparent_glass"})
 
@@ -44,6 +44,7 @@ _INT_RANGES = {
     "diffuse_bounces": (0, 1024),
     "glossy_bounces": (0, 1024),
     "transmission_bounces": (0, 1024),
+    "volume_bounces": (0, 1024),
     "seed": (0, 2**64 - 1),
     "threads": (0, 1024),
     "tile_size": (1, 65536),
@@ -55,7 +56,7 @@ _FLOAT_FIELDS = ("element_size", "wavelength_min", "wavelength_max", "wavelength
                  "adaptive_threshold")
 _WORDS = {"samples": "samples", "light_paths": "light paths", "max_bounces": "max bounces", "seed": "seed",
           "diffuse_bounces": "diffuse bounces", "glossy_bounces": "glossy bounces",
-          "transmission_bounces": "transmission bounces",
+          "transmission_bounces": "transmission bounces", "volume_bounces": "volume bounces",
           "threads": "threads", "tile_size": "tile size", "round_samples": "round samples",
           "element_size": "element size", "wavelength_min": "wavelength min", "wavelength_max": "wavelength max",
           "wavelength_step": "wavelength step", "time_limit": "time limit", "filter_width": "filter width",
@@ -125,6 +126,9 @@ class RenderSettings:
     diffuse_bounces: int = 4
     glossy_bounces: int = 4
     transmission_bounces: int = 12
+    # scatterings in participating media (Cycles' Volume bounces, default 0: single scattering,
+    # the scattered path only gathers emission; docs/physics.md section 15)
+    volume_bounces: int = 0
     seed: int = 0
     dispersion_sampling: str = "SAMPLE"  # 'SPLIT': one ray per wavelength; 'SAMPLE': one stochastic wavelength
     spectral_exr: str = ""            # path of a spectral EXR to write; empty: off

@@ -158,12 +158,30 @@ def _validate(scene: Scene) -> ValidatedScene:
     world_lit = bool(np.any(np.asarray(wc) > 0)) and (world_image.size == 0 or bool(np.any(world_image > 0)))
     if len(lights) == 0 and not world_lit and not emitting:
         warns.append("the scene has no lights: only the background is lit")
+    wv = scene.world_volume
+    if not isinstance(wv, (int, np.integer)) or isinstance(wv, bool) or not -1 <= int(wv) < nm:
+        raise SceneError(f"world_volume must be -1 (none) or a material index below {nm}, got {wv!r}")
     mv = _validate_motion_vertices(scene, len(v))
-    clean = replace(scene, motion_vertices=mv, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
+    clean = replace(scene, world_volume=int(wv), motion_vertices=mv, vertices=v, triangles=t, tri_material=tm.astype(np.int32), tri_tangent=tt, tri_period=tp,
                     materials=materials, lights=lights, camera=camera, world_color=wc, corner_normals=cn,
                     world_image=world_image, world_rotation=world_rotation, **tex, **dom)
     # prepare's normals are these products normalised
     return ValidatedScene(clean, warns, cross, area2 if cross is not None else None)
+
+
+def _check_volume(f64: dict, label) -> None:
+    """The interior medium's columns (docs/physics.md section 15): densities and emission >= 0,
+    colours in [0, 1], the anisotropy in [-1, 1]."""
+    for name, lo, hi in (("volume_scatter_density", 0.0, np.inf), ("volume_absorption_density", 0.0, np.inf),
+                         ("volume_scatter_color", 0.0, 1.0), ("volume_absorption_color", 0.0, 1.0),
+                         ("volume_emission", 0.0, np.inf), ("volume_anisotropy", -1.0, 1.0)):
+        v = f64[name].reshape(len(f64[name]), -1)
+        bad = ((v < lo) | (v > hi)).any(axis=1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            words = f">= {lo:g}" if hi == np.inf else f"between {lo:g} and {hi:g}"
+            raise SceneError(f"{label(i)}: {name.replace('_', ' ')} must be {words}, got "
+                             f"{', '.join(number_text(x) for x in v[i])}")
 
 
 def _check_bragg(f64: dict, layers, label) -> None:
@@ -537,8 +555,10 @@ def _validate_materials(m: Materials) -> Materials:
                  "normal_strength", "emission_strength", "roughness", "metallic", "transmission",
                  "specular_ior_level", "specular_tint", "sphere_diameter", "sphere_ior", "void_ior", "mosaic_spread",
                  "thin_film_thickness", "thin_film_ior", "metal_color", "glass_color", "layer_fac_value",
-                 "diffuse_roughness", "holdout"):
+                 "diffuse_roughness", "holdout", "volume_scatter_density", "volume_scatter_color",
+                 "volume_absorption_density", "volume_absorption_color", "volume_anisotropy", "volume_emission"):
         check_range(f64[name], label, name.replace("_", " "), "")
+    _check_volume(f64, label)
     for name in ("layer_fac_from", "layer_fac_to"):
         code = out[name].astype(np.int64)
         bad = (code < 0) | (code > 2)

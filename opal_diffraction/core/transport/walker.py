@@ -364,6 +364,7 @@ class SpecularWalker:
         # hooks a subclass leaves as they are (the light pass's misses and segments) cost nothing
         self._hooks_segment = type(self).on_segment is not SpecularWalker.on_segment
         self._hooks_miss = type(self).on_miss is not SpecularWalker.on_miss
+        self._hooks_media = False  # a subclass that traces media sets it (``through_media``)
 
     # hooks ----------------------------------------------------------------------------------
     def on_segment(self, rays: Rays, t: np.ndarray) -> None:
@@ -372,6 +373,12 @@ class SpecularWalker:
 
     def on_miss(self, rays: Rays) -> None:
         """Rays that left the scene."""
+
+    def through_media(self, rays: Rays, h):
+        """Every traced segment (after ``on_segment``) where ``_hooks_media`` is set: the media the
+        segments cross (core/integrators/eye/medium_interaction.py). Returns (the rays going on to
+        their hits, those hits, rays that scattered in a medium and go on from there, or None)."""
+        return rays, h, None
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng):
         """Every surface hit, before the specular bounce (kind: material kind per ray). What it
@@ -431,12 +438,16 @@ class SpecularWalker:
         returns (continuing rays, mono children, their hits)."""
         prepared = self.prepared
         hit = None
+        in_medium = None  # rays scattered in a medium on this step's segments
         if len(rays):
             h = prepared.accel.intersect(rays.o, rays.d) if tmax is None else prepared.accel.intersect(rays.o, rays.d, tmax)
             self.rays_cast += len(rays)
             missed = h.prim < 0
             if self._hooks_segment:
                 self.on_segment(rays, np.where(missed, np.float32(np.inf), h.t))
+            if self._hooks_media:  # [volumes] participating media along the segments
+                rays, h, in_medium = self.through_media(rays, h)
+                missed = h.prim < 0
             keep = _indices(~missed)
             if self._hooks_miss and keep is not None:
                 self.on_miss(rays.take(missed))
@@ -451,6 +462,8 @@ class SpecularWalker:
             else:
                 rays, hit = Rays.concat(rays, pending[0]), Hit.concat(hit, pending[1])
         if hit is None or len(rays) == 0:
+            if in_medium is not None and len(in_medium):
+                return in_medium, None, None
             return rays.take(np.zeros(len(rays), bool)), None, None
 
         kind = prepared.materials.kind.take(hit.mat)
@@ -494,6 +507,8 @@ class SpecularWalker:
                 out.append(scattered)
             else:  # a white population's mono rays: traced with the mono population
                 self.spawn(scattered)
+        if in_medium is not None:
+            out.append(in_medium)
         out = [r for r in out if len(r)]
         if not out:
             return rays.take(np.zeros(len(rays), bool)), children, child_hits

@@ -23,7 +23,9 @@ from ...materials.spectra import DIFFUSE
 from ..bragg_shading import BraggShading
 from ..light import splat_bounce
 from ..light.camera_splat import direct_materials, usable_splat
+from ...volumes.media import prepare_media
 from .grey_paths import GreyPaths
+from .medium_interaction import MediumStage
 
 __all__ = ["EyeConstants", "eye_constants"]
 
@@ -74,6 +76,8 @@ class EyeConstants:
     # grey path weights (grey_paths.py) where the plan allows them (the plain path tracer: gratings,
     # their layers and the opal's lobes read spectral weights)
     greys: GreyPaths
+    # [volumes] the media stage (medium_interaction.MediumStage; docs/physics.md section 15), None: no media
+    media: MediumStage | None = None
 
 
 def eye_constants(prepared, light, plan) -> EyeConstants:
@@ -120,7 +124,18 @@ def eye_constants(prepared, light, plan) -> EyeConstants:
         scattering=(scattering_materials(prepared.gratings, prepared.materials.kind, prepared.microfacet)
                     if caustic_map is not None and prepared.gratings.any else None),
         fresnel_split=plan.fresnel_split,
-        greys=GreyPaths(prepared, enabled=plan.grey_paths))
+        greys=GreyPaths(prepared, enabled=plan.grey_paths),
+        media=_media_stage(prepared))
+
+
+def _media_stage(prepared) -> MediumStage | None:
+    """The eye pass's media stage, or None without media (core/volumes/media.py)."""
+    media = prepare_media(prepared.scene, prepared.conv)
+    if media is None:
+        return None
+    s = prepared.settings
+    return MediumStage(prepared, media, (s.max_bounces, s.diffuse_bounces, s.glossy_bounces, s.transmission_bounces),
+                       getattr(s, "volume_bounces", 0))
 
 
 def probe_wavelength(prepared) -> int | None:

@@ -22,6 +22,7 @@ what a hit's shading leaves for its bounce travels in a ``surface_interaction.Hi
     (gratings: the order lobe)               _GratingTrace        the path continued along an order
     survives, after_delta, scatter           continuation.py      roulette, BSDF sampling, counts
     dielectric_bounce                        fresnel_split.py     both branches at the first glass
+    through_media (every segment)            medium_interaction.py  media: emission, transmittance, scattering
     every stage's film adds                  tile_output.py
 """
 
@@ -154,6 +155,7 @@ class _TileTrace(SpecularWalker):
         hold = getattr(eye.prepared.materials, "holdout", None)
         self.holdout = hold if self.transparent and hold is not None and (hold > 0).any() else None
         self._holdout_segment = False  # the hits on_hit shades next are the camera rays'
+        self._hooks_media = self.c.media is not None  # [volumes] the walker calls through_media
 
     @property
     def lobe_rng(self) -> np.random.Generator:
@@ -215,6 +217,10 @@ class _TileTrace(SpecularWalker):
             self.out.add_alpha(rays.pix, np.isfinite(t))
             self._holdout_segment = self.holdout is not None
         emission.lights_passed(self.c, self.out, rays, t)
+
+    def through_media(self, rays: Rays, h):
+        """[volumes] the media along the segments (core/integrators/eye/medium_interaction.py)."""
+        return self.c.media.segment(self, rays, h)
 
     def on_miss(self, rays: Rays) -> None:
         if self.transparent:  # Film > Transparent: the world seen directly is alpha 0, black (Cycles)

@@ -77,6 +77,15 @@ class _RowsOf:
         return out if dtype is None else out.astype(dtype)
 
 
+def _through_medium(media, r: Rays, contrib, dist):
+    """[volumes] ``contrib`` of next events from surfaces times the world medium's transmittance
+    along their shadow rays of lengths ``dist`` (medium_interaction.MediumStage.surface_shadow)."""
+    tr = media.surface_shadow(dist)
+    if tr is None:
+        return contrib
+    return contrib * (tr if r.lam is None else tr[np.arange(len(r)), r.lam])
+
+
 def light_samples(prepared, hit: Hit, rng, analytic: bool = True) -> list:
     """One next-event sample per emitter at the hits: every light (``analytic``), the emissive
     meshes (core/lights/mesh_lights.py: power-proportional points) and the world map (its luminance
@@ -125,7 +134,9 @@ def next_events(c, out, rays: Rays, hit: Hit, lobe, rng, film=None, analytic: bo
     ``film``, or (None) to the film part of each path's vertex count + 1."""
     prepared = c.prepared
     nd = None if film is not None else rays.state.nd
-    fused = (kernels_enabled() and film is not None and isinstance(lobe, MicrofacetLobe)) and _LobeAdd.of(rays)
+    media = getattr(c, "media", None)  # [volumes] shadow rays through the world's medium (medium_interaction.py)
+    fused = (kernels_enabled() and media is None and film is not None and isinstance(lobe, MicrofacetLobe)) \
+        and _LobeAdd.of(rays)
     for wi, dist, g, spectrum, p_light, pad in light_samples(prepared, hit, rng, analytic):
         value, scale, live = lobe.weigh(wi, g, p_light)
         if live.size == 0:
@@ -138,6 +149,8 @@ def next_events(c, out, rays: Rays, hit: Hit, lobe, rng, film=None, analytic: bo
         r = rays.take(live)
         spec = light_spectrum_of(spectrum, live, r)
         contrib = lobe.contribution(r, live, value, scale, spec)
+        if media is not None:
+            contrib = _through_medium(media, r, contrib, np.asarray(dist)[live])
         if film is not None:
             out.accumulate(r, contrib, film)
             continue
@@ -288,7 +301,7 @@ def lambert_next_events(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
     the vertices' SLOT_LIGHT numbers."""
     direct_light(c, out, rays, hit, rng, film, albedo)
     if c.mesh_lights is not None or c.prepared.environment is not None:
-        if kernels_enabled() and _lambert_fused(c, out, rays, hit, rng, film, albedo):
+        if kernels_enabled() and getattr(c, "media", None) is None and _lambert_fused(c, out, rays, hit, rng, film, albedo):
             return
         if albedo is None:
             albedo = surface_reflectance(c.prepared, hit, rays.lam)
@@ -305,12 +318,13 @@ def direct_light(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
     nl, b = len(lights), len(rays)
     if nl == 0 or b == 0:
         return
-    if kernels_enabled() and _direct_fused(c, out, rays, hit, rng, film, albedo):
+    media = getattr(c, "media", None)  # [volumes] shadow rays through the world's medium
+    if kernels_enabled() and media is None and _direct_fused(c, out, rays, hit, rng, film, albedo):
         return
     # One sample per light per ray; all shadow rays in a single any-hit call.
     flat = not c.bent
     factors = np.zeros((b, nl), np.float32)
-    origins, dirs, tmax, idx = [], [], [], []
+    origins, dirs, tmax, idx, dists = [], [], [], [], []
     for li in range(nl):  # loop over lights (a handful), not rays
         wi, dist, g, p_light = sample_light_pdf(lights, li, hit.p, rng)
         # shaded with ns; light from below the geometric surface does not reach it (no leaks)
@@ -327,6 +341,7 @@ def direct_light(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
         dirs.append(wi[live])
         tmax.append(np.where(np.isinf(dist[live]), np.inf, dist[live] - 2 * eps))
         idx.append(live * nl + li)
+        dists.append(np.asarray(dist, np.float64)[live])
         factors.reshape(-1)[live * nl + li] = f[live]
     if not idx:
         return
@@ -335,6 +350,15 @@ def direct_light(c, out, rays: Rays, hit: Hit, rng, film, albedo=None):
                                   np.concatenate(tmax).astype(np.float32))
     out.shadow_rays += len(occ)
     factors.reshape(-1)[np.concatenate(idx)[occ]] = 0.0
+    if media is not None and media.media.world >= 0:  # [volumes] per shadow ray, per wavelength
+        flat = np.concatenate(idx)
+        tr = media.surface_shadow(np.concatenate(dists))  # (S, n)
+        spec = np.zeros((b, prepared.grid.n), np.float32)
+        np.add.at(spec, flat // nl, factors.reshape(-1)[flat, None] * tr * lights.spectrum[flat % nl])
+        brdf = (surface_reflectance(prepared, hit, rays.lam) if albedo is None else albedo) * np.float32(1 / np.pi)
+        irradiance = spec if rays.lam is None else spec[np.arange(b), rays.lam]
+        out.accumulate(rays, rays.weighted(brdf * irradiance), film)
+        return
     if (rays.lam is None and rays.w is None and not prepared.textures.uses("color")
             and out.accumulate_factored(prepared, rays.pix, hit.mat, factors, film)):
         return

@@ -1,0 +1,1 @@
+"""Participating media (docs/physics.md section 15): homogeneous spectral media inside closed meshes and in the world, the Henyey-Greenstein phase function, free-flight distance sampling with spectral MIS and closed-form transmittance. Imports util/, spectral/ and scene/."""
