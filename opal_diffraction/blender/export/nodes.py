@@ -725,6 +725,9 @@ class NodeReader(TextureBindings):
         if node.inputs.get("Subsurface Weight") is not None and self.value(node, "Subsurface Weight", 0.0) > 0.0:
             self.warn(f"{self.owner}: the Principled BSDF's subsurface layer is not rendered")
         coat = self._coat_sheen(node)
+        if coat and np.asarray(emission).max() > 0:
+            self.warn(f"{self.owner}: the emission of '{node.name}' is rendered without the coat's and sheen's "
+                      "attenuation (Cycles dims it by what they reflect)")
         if node.inputs.get("Diffuse Roughness") is not None and self.value(node, "Diffuse Roughness", 0.0) > 0.0:
             self.warn(f"{self.owner}: the Principled BSDF's diffuse roughness (Oren-Nayar) is rendered Lambertian")
         self._microfacet_options(node, "Anisotropic")
