@@ -36,6 +36,12 @@ CASES = {
     "COAT_005": {"Base Color": (0.8, 0.06, 0.04, 1.0), "Roughness": 0.5, "Coat Weight": 1.0, "Coat Roughness": 0.05},
     "COAT_03": {"Base Color": (0.8, 0.06, 0.04, 1.0), "Roughness": 0.5, "Coat Weight": 1.0, "Coat Roughness": 0.3},
     "SHEEN": {"Base Color": (0.05, 0.08, 0.35, 1.0), "Roughness": 0.5, "Sheen Weight": 1.0, "Sheen Roughness": 0.5},
+    # a tinted coat (its absorption per wavelength here, per RGB channel in Cycles) over a grey base,
+    # and a coloured sheen of low roughness over a dark one
+    "COAT_TINT": {"Base Color": (0.6, 0.6, 0.6, 1.0), "Roughness": 0.4, "Coat Weight": 1.0, "Coat Roughness": 0.1,
+                  "Coat IOR": 1.6, "Coat Tint": (0.9, 0.5, 0.2, 1.0)},
+    "SHEEN_TINT": {"Base Color": (0.1, 0.1, 0.1, 1.0), "Roughness": 0.5, "Sheen Weight": 0.8, "Sheen Roughness": 0.2,
+                   "Sheen Tint": (1.0, 0.5, 0.7, 1.0)},
 }
 
 
