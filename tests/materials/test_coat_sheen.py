@@ -243,3 +243,33 @@ def test_coat_lobe_kernels_are_the_reference():
             out.append(B.evaluate(coat, wo, wi, ns, ns))
     np.testing.assert_array_equal(out[0][0], out[1][0])
     np.testing.assert_array_equal(out[0][1], out[1][1])
+
+
+@pytest.mark.parametrize("base", ["glass", "metal"])
+@pytest.mark.parametrize("theta_deg", [0.0, 45.0, 80.0])
+def test_coat_over_a_smooth_layer_furnace(base, theta_deg):
+    """A rough coat over smooth white glass or a smooth white metal (delta lobes, weighted by their
+    layer's W / P: LobeMixture.scale_singular): every bit of energy the coat leaves goes through
+    (the furnace 1 within the tables' accuracy)."""
+    row = dict(name=base, kind="DIELECTRIC" if base == "glass" else "MIRROR", color=(1.0, 1.0, 1.0),
+               transmission=1.0 if base == "glass" else 0.0, metallic=1.0 if base == "metal" else 0.0,
+               roughness=0.0, coat_weight=1.0, coat_roughness=0.2, conductor_fresnel="F82_TINT")
+    pm = prepare_materials(Materials.from_list([row]), SpectralConverter())
+    n = 100_000
+    rng = np.random.default_rng(23)
+    wo, ns = _wo(theta_deg, n)
+    mat = np.zeros(n, np.int64)
+    front = np.ones(n, bool)
+    mix = LobeMixture.of(pm, mat, front, np.ones(n, bool), pm.metallic[mat], pm.transmission[mat], wo, ns)
+    u, top = mix.draw(rng.random(n))
+    p = B.with_outgoing(mix.put_top(B.params_from_materials(pm, mat, front, u_layer=u), top), wo, ns)
+    wi, w, _, flags = B.sample(p, wo, ns, ns, rng.random((n, 3), dtype=np.float32))
+    f, pdf = mix.evaluate(p, wo, wi, ns, ns)
+    singular = (flags & B.SINGULAR) != 0
+    assert singular.mean() > 0.5  # mostly the delta layer under the coat
+    rough = (flags != 0) & ~singular & (pdf > 0)
+    x = np.where(rough[:, None], f / np.where(rough, pdf, 1)[:, None], w)
+    x = np.where((flags != 0)[:, None], mix.scale_singular(x, flags), 0.0).astype(np.float64).mean(axis=1)
+    se = x.std() / math.sqrt(n)
+    print(f"{base} theta {theta_deg}: albedo {x.mean():.5f} +- {se:.5f}")
+    assert abs(x.mean() - 1.0) < Z * se + 0.005
