@@ -273,3 +273,32 @@ def test_coat_over_a_smooth_layer_furnace(base, theta_deg):
     se = x.std() / math.sqrt(n)
     print(f"{base} theta {theta_deg}: albedo {x.mean():.5f} +- {se:.5f}")
     assert abs(x.mean() - 1.0) < Z * se + 0.005
+
+
+@pytest.mark.skipif(not jit.AVAILABLE, reason=f"no JIT: {jit.UNAVAILABLE_REASON}")
+def test_a_batch_mixing_sheen_and_kernel_lobes_is_the_reference():
+    """The bounce's parameters after put_top mix SHEEN rows (NumPy lines) with kernel lobes: with the
+    kernels on, bsdf.evaluate gives the reference's bits and bsdf.sample its flags, and weights
+    and pdfs within the kernels' sine / cosine ulps (test_bsdf_kernels' tolerance)."""
+    conv = SpectralConverter()
+    pm = _table(conv)
+    n = 4000
+    rng = np.random.default_rng(9)
+    wo, ns = _wo(40.0, n)
+    wi = rng.normal(size=(n, 3))
+    wi[:, 2] = np.abs(wi[:, 2])
+    wi = (wi / np.linalg.norm(wi, axis=1, keepdims=True)).astype(np.float32)
+    u_layer, u = rng.random(n), rng.random((n, 3), dtype=np.float32)
+    out = []
+    for mode in ("auto", "numpy"):
+        with jit.kernel_mode(mode):
+            p, _ = _layered(pm, "both", wo, ns, u_layer)
+            assert (p.lobe == B.SHEEN).any() and (p.lobe == B.PLASTIC).any()
+            assert (B._sheen_split(p) is not None) == (mode == "auto")  # the split path is the one tested
+            out.append((B.evaluate(p, wo, wi, ns, ns), B.sample(p, wo, ns, ns, u)))
+    (e1, s1), (e2, s2) = out
+    np.testing.assert_array_equal(e1[0], e2[0])
+    np.testing.assert_array_equal(e1[1], e2[1])
+    np.testing.assert_array_equal(s1[3], s2[3])
+    np.testing.assert_allclose(s1[0], s2[0], atol=1e-4)
+    np.testing.assert_allclose(s1[1], s2[1], rtol=1e-2, atol=1e-7)

@@ -796,6 +796,10 @@ def sample(params: SurfaceParams, wo, ns, ng, u):
     (inf for SINGULAR events), flags (B,) (0: absorbed; weight and pdf are 0 then)."""
     if _kernel_fits(params) and np.shape(u) == (len(params.lobe), 3):
         return _sample_with_kernel(params, wo, ns, ng, u)
+    split = _sheen_split(params)
+    if split is not None:  # the sheen rows on these lines, the others through the kernels
+        parts = [sample(params.take(i), *(np.asarray(a)[i] for a in (wo, ns, ng, u))) for i in split]
+        return _merged(split, parts, len(params.lobe))
     wo, ns, fu, fv, wl = _prepare(params, wo, ns)
     ng = np.asarray(ng, _F32)
     u = np.asarray(u, _F32)
@@ -835,6 +839,10 @@ def evaluate(params: SurfaceParams, wo, wi, ns, ng):
     for its kind of event."""
     if _kernel_fits(params):
         return _evaluate_with_kernel(params, wo, wi, ns, ng)
+    split = _sheen_split(params)
+    if split is not None:  # the sheen rows on these lines, the others through the kernels
+        parts = [evaluate(params.take(i), *(np.asarray(a)[i] for a in (wo, wi, ns, ng))) for i in split]
+        return _merged(split, parts, len(params.lobe))
     wo, ns, fu, fv, wl = _prepare(params, wo, ns)
     wi = np.asarray(wi, _F32)
     ng = np.asarray(ng, _F32)
@@ -1612,6 +1620,33 @@ def _kernel_fits(p: SurfaceParams) -> bool:
     if p.ms is not None and p.f82 is None and (p.lobe == CONDUCTOR).any():
         return False
     return p.wo_local is None or all(_is32(a, 2) and a.shape == (B, 3) for a in (p.frame_u, p.frame_v, p.wo_local))
+
+
+def _sheen_split(p: SurfaceParams):
+    """(the sheen rows, the others) where the kernels are on and would take the others (a batch
+    mixing the SHEEN lobe, which has no compiled twin, with kernel lobes); None otherwise."""
+    if not kernels_enabled() or not len(p.lobe):
+        return None
+    sheen = p.lobe == SHEEN
+    if sheen.all() or not sheen.any() or (p.lobe == OREN_NAYAR).any():
+        return None
+    rest = np.flatnonzero(~sheen)
+    if not _kernel_fits(p.take(rest)):
+        return None
+    return np.flatnonzero(sheen), rest
+
+
+def _merged(split, parts, n):
+    """The per-row results of ``parts`` (one tuple of arrays per index set of ``split``) in one batch of n."""
+    out = []
+    for j in range(len(parts[0])):
+        arrs = [np.asarray(part[j]) for part in parts]
+        shape = (n,) + max((a.shape[1:] for a in arrs), key=lambda t: (len(t), int(np.prod(t))))
+        full = np.zeros(shape, arrs[0].dtype)
+        for idx, a in zip(split, arrs):
+            full[idx] = a
+        out.append(full)
+    return tuple(out)
 
 
 def _rows(a):

@@ -338,6 +338,7 @@ def coat_sheen_layers(materials, mat, cos_o, lam, k: int) -> dict:
         return table[mat] if lam is None else table[mat, np.asarray(lam, np.int64)][:, None]
 
     ones = np.ones((K, k), _F32)
+    one = np.ones((K, 1), _F32)  # the colourless lobes' columns (broadcast against the others' k)
     out = {}
     sw = m.sheen_weight[mat].astype(_F32)
     a_s = np.ones(K, _F32)
@@ -350,8 +351,8 @@ def coat_sheen_layers(materials, mat, cos_o, lam, k: int) -> dict:
         a_s = np.clip(_F32(1) - sw * m.sheen_tint_max[mat] * albedo, _F32(0), _F32(1))
         w = (sw * albedo)[:, None] * tint
         e_sheen = w.mean(axis=1)
-        p = bsdf.SurfaceParams(np.full(K, bsdf.SHEEN, np.int32), ones.copy(), ones.copy(),
-                               m.sheen_roughness[mat].astype(_F32), np.ones(K, _F32), np.zeros(K, _F32), ones.copy())
+        p = bsdf.SurfaceParams(np.full(K, bsdf.SHEEN, np.int32), one, one, m.sheen_roughness[mat].astype(_F32),
+                               np.ones(K, _F32), np.zeros(K, _F32), one)
         out["sheen"] = [p, w.astype(_F32), e_sheen]
     cw = m.coat_weight[mat].astype(_F32)
     a_c = np.ones(K, _F32)
@@ -361,14 +362,19 @@ def coat_sheen_layers(materials, mat, cos_o, lam, k: int) -> dict:
         ior = np.maximum(m.coat_ior[mat].astype(_F32), _F32(1))
         f0 = ((ior - 1) / (ior + 1)) ** 2
         rough = np.clip(m.coat_roughness[mat], 0, 1).astype(_F32)
-        p = bsdf.SurfaceParams(np.full(K, bsdf.PLASTIC, np.int32), np.zeros((K, k), _F32), ones.copy(),
-                               rough * rough, np.ones(K, _F32), f0.astype(_F32), ones.copy())
+        p = bsdf.SurfaceParams(np.full(K, bsdf.PLASTIC, np.int32), np.zeros((K, 1), _F32), one,
+                               rough * rough, np.ones(K, _F32), f0.astype(_F32), one)
         e_c = bsdf.coat_albedo(p, mu)
         a_c = np.clip(_F32(1) - cw * e_c, _F32(0), _F32(1))
-        cos_t = np.sqrt(np.maximum(_F32(1) - (_F32(1) - mu * mu) / (ior * ior), _F32(1e-12)))
-        tint = np.broadcast_to(spectral(m.coat_tint), (K, k)).astype(np.float64)
-        through = np.power(tint, (1.0 / cos_t)[:, None])
-        absorb = (1.0 + cw[:, None] * (through - 1.0)).astype(_F32)
+        tint = spectral(m.coat_tint)
+        tinted = np.flatnonzero((cw > 0) & (tint != 1).any(axis=1))
+        if len(tinted):  # Beer's law through the coat along the refracted view direction
+            cos_t = np.sqrt(np.maximum(1.0 - (1.0 - np.float64(mu[tinted]) ** 2) / np.float64(ior[tinted]) ** 2,
+                                       1e-12))
+            through = np.power(np.broadcast_to(tint[tinted], (len(tinted), k)).astype(np.float64),
+                               (1.0 / cos_t)[:, None])
+            absorb = ones.copy()
+            absorb[tinted] = 1.0 + cw[tinted, None] * (through - 1.0)
         w = a_s * cw
         e_coat = w * e_c
         out["coat"] = [p, w.astype(_F32), e_coat]
