@@ -29,6 +29,15 @@ B = (c (g + c) - 1) / (c (g - c) + 1) (1 where eta² - 1 + c² <= 0: total refle
 the cosine between the view direction and the shading normal. A Fac from a texture or a
 converter chain is the material's shader program's 'mix' output at the hit (LayerFac.PROGRAM,
 core/materials/surface.py ``surface_mix_fac``), clamped to [0, 1] as the Mix Shader clamps it.
+
+Principled's sheen and coat (docs/physics.md section 14.10) are two more lobes over those layers,
+as Cycles' principled closure stacks them (``closure_layering_weight``): the sheen (Zeltner et
+al.'s microfiber LTC, core/materials/sheen.py) of weight s t R(mu_o), the coat (a GGX dielectric
+reflection: bsdf's PLASTIC lobe of zero base) of weight A_s c, and the layers below scaled by
+A_s A_c mix(1, T^(1/cos_t), c) (``coat_sheen_layers``). Their weights W_i are spectral and differ
+from the probabilities P_i with which the bounce draws them (the layers' estimated albedos), so
+the mixture carries both: f = sum_i W_i f_i, p = sum_i P_i p_i, and a delta event is weighed by
+its layer's W_i / P_i.
 """
 
 from __future__ import annotations
@@ -159,7 +168,7 @@ class LobeMixture:
     def of(cls, materials, mat, front, mixed, metallic, transmission, wo, ns, lam=None, base=None,
            roughness=None):
         """The mixture of the hits ``mixed`` (B,) bool on materials rows ``mat`` with the layer
-        weights metallic, transmission (B,) (the table's or ``per_hit_layers'``), for the
+        weights metallic, transmission (B,) (the table's or ``per_hit_layers``'), for the
         outgoing directions wo and shading normals ns; None where no hit mixes layers.
         lam, base, roughness as bsdf.params_from_materials takes them (B rows). Rows with a
         coat or a sheen get those layers over the rest (``coat_sheen_layers``)."""
