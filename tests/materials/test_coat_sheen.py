@@ -206,14 +206,16 @@ def test_coat_tint_absorbs_the_base_by_its_optical_depth():
     the base's factor mix(1, T^(1 / cos_t), c), cos_t = sqrt(1 - sin^2(theta_o) / eta^2) (Snell)."""
     conv = SpectralConverter()
     pm = _table(conv)
-    n = 4
     theta = 50.0
-    wo, ns = _wo(theta, n)
-    wi = np.tile([-0.3, 0.5, math.sqrt(1 - 0.34)], (n, 1)).astype(np.float32)  # far from the mirror direction
     got = []
-    for name in ("tinted", "clear"):
-        p, mix = _layered(pm, name, wo, ns, np.full(n, 0.999))
-        got.append(mix.evaluate(p, wo, wi, ns, ns)[0][0].astype(np.float64))
+    for n in (1, 4):  # one tinted hit too (a batch of one)
+        wo, ns = _wo(theta, n)
+        wi = np.tile([-0.3, 0.5, math.sqrt(1 - 0.34)], (n, 1)).astype(np.float32)  # far from the mirror direction
+        for name in ("tinted", "clear"):
+            p, mix = _layered(pm, name, wo, ns, np.full(n, 0.999))
+            got.append(mix.evaluate(p, wo, wi, ns, ns)[0][-1].astype(np.float64))
+    np.testing.assert_array_equal(got[0], got[2])
+    got = got[2:]
     s = math.sin(math.radians(theta))
     cos_t = math.sqrt(1 - s * s / 1.6 ** 2)
     tint = conv.reflectance_from_rgb(np.array([0.3, 0.6, 0.9]))

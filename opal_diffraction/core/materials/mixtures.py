@@ -378,8 +378,8 @@ def coat_sheen_layers(materials, mat, cos_o, lam, k: int) -> dict:
         tint = spectral(m.coat_tint)
         tinted = np.flatnonzero((cw > 0) & (tint != 1).any(axis=1))
         if len(tinted):  # Beer's law through the coat along the refracted view direction
-            cos_t = np.sqrt(np.maximum(1.0 - (1.0 - np.float64(mu[tinted]) ** 2) / np.float64(ior[tinted]) ** 2,
-                                       1e-12))
+            mu_t, ior_t = mu[tinted].astype(np.float64), ior[tinted].astype(np.float64)
+            cos_t = np.sqrt(np.maximum(1.0 - (1.0 - mu_t * mu_t) / (ior_t * ior_t), 1e-12))
             through = np.power(np.broadcast_to(tint[tinted], (len(tinted), k)).astype(np.float64),
                                (1.0 / cos_t)[:, None])
             absorb = ones.copy()
