@@ -104,3 +104,26 @@ def test_principled_exports_coat_and_sheen():
             assert float(getattr(m, k)[row]) == pytest.approx(v, abs=1e-6), k
         np.testing.assert_allclose(m.coat_tint[row], (1, 1, 1))
         np.testing.assert_allclose(m.sheen_tint[row], (1, 1, 1))
+
+
+def test_a_coat_on_one_side_of_a_mix_is_warned():
+    """Mix(coated Principled, Glossy): the coat is rendered over the whole mix (weight Fac-mixed), warned."""
+    from opal_diffraction.blender.export import export_scene
+
+    build("COAT_03")
+    mat = bpy.data.materials["layered"]
+    nt = mat.node_tree
+    principled = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+    out = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    mix.inputs["Fac"].default_value = 0.25
+    nt.links.new(principled.outputs[0], mix.inputs[1])
+    nt.links.new(glossy.outputs[0], mix.inputs[2])
+    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+    ex = export_scene(bpy.context.evaluated_depsgraph_get())
+    assert [w for w in ex.warnings if "coat is rendered over the whole mix" in w], ex.warnings
+    m = ex.scene.materials
+    row = [i for i, n in enumerate(m.name) if n == "layered"][0]
+    assert float(m.coat_weight[row]) == pytest.approx(0.75)
+    assert float(m.coat_roughness[row]) == pytest.approx(0.3)

@@ -866,6 +866,11 @@ class NodeReader(TextureBindings):
             self.warn(f"{self.owner}: '{node.name}' mixes glass of IOR {glass_s.ior:g} with a specular layer of IOR "
                       f"{base_s.ior:g}: both rendered with {glass_s.ior:g}")
         first = a if wa >= wb else b
+        top = _top_layers(a, b, wb / max(wa + wb, 1e-12))
+        for layer in ("coat", "sheen"):
+            if (getattr(a, f"{layer}_weight") > 0) != (getattr(b, f"{layer}_weight") > 0):
+                self.warn(f"{self.owner}: '{node.name}' mixes a surface with a Principled {layer} and one without: "
+                          f"the {layer} is rendered over the whole mix with weight {top[layer + '_weight']:.3g}")
         color = cols[0] if cols[0] is not None else cols[int(np.argmax(wn))]
         return Surface(kind, color, (glass_s or base_s or first).ior, roughness, emission,
                        metallic=metallic, transmission=transmission,
@@ -875,8 +880,7 @@ class NodeReader(TextureBindings):
                        glass_tint=glass_s.glass_tint if glass_s is not None else "REFRACTION",
                        thin_film_thickness=first.thin_film_thickness, thin_film_ior=first.thin_film_ior,
                        metal_color=cols[1], glass_color=cols[2],
-                       diffuse_roughness=base_s.diffuse_roughness if base_s is not None else 0.0,
-                       **_top_layers(a, b, wb / max(wa + wb, 1e-12)))
+                       diffuse_roughness=base_s.diffuse_roughness if base_s is not None else 0.0, **top)
 
 
 def _copy(s: Surface, emission) -> Surface:
