@@ -177,6 +177,7 @@ def test_layered_white_furnace(name, theta_deg):
         assert a.mean() > 1.0 - Z * se - 0.01
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("theta_deg", [20.0, 70.0])
 def test_layered_mixture_sampling_has_the_mixture_pdf(theta_deg):
     """Directions drawn as the bounce draws them (sheen, coat or base by their probabilities, then
