@@ -226,6 +226,13 @@ class MaterialTable:
             "diffuse_roughness": float(np.clip(surf.diffuse_roughness, 0.0, 1.0)) if surf.kind is not None else 0.0,
             "holdout": float(np.clip(surf.holdout, 0.0, 1.0)),
         }
+        if surf.kind is not None and (surf.coat_weight > 0 or surf.sheen_weight > 0):  # section 14.10
+            row.update(coat_weight=float(np.clip(surf.coat_weight, 0.0, 1.0)),
+                       coat_roughness=float(np.clip(surf.coat_roughness, 0.0, 1.0)), coat_ior=float(surf.coat_ior),
+                       coat_tint=tuple(float(c) for c in np.clip(surf.coat_tint, 0.0, MAX_INTENSITY)),
+                       sheen_weight=float(np.clip(surf.sheen_weight, 0.0, 1.0)),
+                       sheen_roughness=float(np.clip(surf.sheen_roughness, 0.0, 1.0)),
+                       sheen_tint=tuple(float(c) for c in np.clip(surf.sheen_tint, 0.0, MAX_INTENSITY)))
         if surf.kind is not None:  # a shader mix of unlike BSDFs (docs/physics.md section 14.8)
             for name in ("metal_color", "glass_color"):
                 col = getattr(surf, name)

@@ -113,6 +113,14 @@ class Surface:
     layer_fac_to: int = 1
     diffuse_roughness: float = 0.0  # a Diffuse BSDF's Roughness: Oren-Nayar's sigma (0: Lambert)
     holdout: float = 0.0  # a Holdout shader's weight (Film > Transparent: alpha 1 - holdout; docs/physics.md 14.8)
+    # Principled's coat and sheen over the rest (docs/physics.md section 14.10); weight 0: none
+    coat_weight: float = 0.0
+    coat_roughness: float = 0.03
+    coat_ior: float = 1.5
+    coat_tint: np.ndarray = field(default_factory=lambda: np.ones(3))
+    sheen_weight: float = 0.0
+    sheen_roughness: float = 0.5
+    sheen_tint: np.ndarray = field(default_factory=lambda: np.ones(3))
 
     def layers(self) -> tuple[float, float]:
         """(metallic, transmission), from the kind where not given."""
@@ -854,9 +862,12 @@ class NodeReader(TextureBindings):
         emission = self.emission(emission, strength, node)
         if node.inputs.get("Alpha") is not None and self.value(node, "Alpha", 1.0) < 1.0:
             self.warn(f"{self.owner}: alpha below 1 is not supported: rendered opaque")
-        for layer in ("Subsurface Weight", "Coat Weight", "Sheen Weight"):
-            if node.inputs.get(layer) is not None and self.value(node, layer, 0.0) > 0.0:
-                self.warn(f"{self.owner}: the Principled BSDF's {layer.split()[0].lower()} layer is not rendered")
+        if node.inputs.get("Subsurface Weight") is not None and self.value(node, "Subsurface Weight", 0.0) > 0.0:
+            self.warn(f"{self.owner}: the Principled BSDF's subsurface layer is not rendered")
+        coat = self._coat_sheen(node)
+        if coat and np.asarray(emission).max() > 0:
+            self.warn(f"{self.owner}: the emission of '{node.name}' is rendered without the coat's and sheen's "
+                      "attenuation (Cycles dims it by what they reflect)")
         if node.inputs.get("Diffuse Roughness") is not None and self.value(node, "Diffuse Roughness", 0.0) > 0.0:
             self.warn(f"{self.owner}: the Principled BSDF's diffuse roughness (Oren-Nayar) is rendered Lambertian")
         self._microfacet_options(node, "Anisotropic")
@@ -865,7 +876,36 @@ class NodeReader(TextureBindings):
         kind = max(weights, key=weights.get)  # ties: metal, then glass
         return Surface(kind, base, ior, rough, emission, metallic=metallic, transmission=trans,
                        specular_ior_level=level, specular_tint=np.clip(tint, 0.0, None), conductor_fresnel="F82_TINT",
-                       glass_tint="PASS", thin_film_thickness=film_d, thin_film_ior=film_n)
+                       glass_tint="PASS", thin_film_thickness=film_d, thin_film_ior=film_n, **coat)
+
+    def _coat_sheen(self, node) -> dict:
+        """Principled's coat (Weight, Roughness, IOR, Tint) and sheen (Weight, Roughness, Tint) as
+        Surface fields (docs/physics.md section 14.10): weights clamped to [0, 1] (above 1: warned),
+        roughness to [0, 1] and the coat IOR to at least 1, as Cycles clamps them; a linked Coat
+        Normal is not read (warned: the shading normal is used)."""
+        out = {}
+        for layer, names in (("coat", ("Coat Weight", "Coat Roughness", "Coat IOR", "Coat Tint")),
+                             ("sheen", ("Sheen Weight", "Sheen Roughness", None, "Sheen Tint"))):
+            if node.inputs.get(names[0]) is None:
+                continue
+            w = self.value(node, names[0], 0.0)
+            if not w > 0.0:
+                continue
+            if w > 1.0:
+                self.warn(f"{self.owner}: the Principled BSDF's {layer} weight {w:g} is rendered as 1")
+            out[f"{layer}_weight"] = min(w, 1.0)
+            out[f"{layer}_roughness"] = self._roughness(node, 0.03 if layer == "coat" else 0.5, names[1])
+            if names[2] is not None:
+                ior = self.value(node, names[2], 1.5)
+                if not 1.0 <= ior <= MAX_IOR:
+                    self.warn(f"{self.owner}: the coat IOR {ior:g} of '{node.name}' is outside 1-{MAX_IOR:g}: "
+                              f"rendered as {min(max(ior, 1.0), MAX_IOR):g}")
+                out["coat_ior"] = min(max(ior, 1.0), MAX_IOR)
+            out[f"{layer}_tint"] = np.clip(self.color(node, names[3], (1, 1, 1)), 0.0, None)
+        if out.get("coat_weight") and node.inputs.get("Coat Normal") is not None \
+                and self.source(node.inputs["Coat Normal"]) is not None:
+            self.warn(f"{self.owner}: the Coat Normal of '{node.name}' is not read: the shading normal is used")
+        return out
 
     def _thin_film(self, node) -> tuple[float, float]:
         """Principled's Thin Film Thickness (nm) and Thin Film IOR (Blender 4.2+; 0 and 1.33 where
@@ -923,7 +963,8 @@ class NodeReader(TextureBindings):
                            glass_tint=(a if t < 0.5 else b).glass_tint,
                            thin_film_thickness=(a if t < 0.5 else b).thin_film_thickness,
                            thin_film_ior=(a if t < 0.5 else b).thin_film_ior,
-                           diffuse_roughness=(1 - t) * a.diffuse_roughness + t * b.diffuse_roughness)
+                           diffuse_roughness=(1 - t) * a.diffuse_roughness + t * b.diffuse_roughness,
+                           **_top_layers(a, b, t))
         return self._mixture(a, b, wa, wb, node, emission)
 
     def _mixture(self, a: Surface, b: Surface, wa: float, wb: float, node, emission) -> Surface:
@@ -965,6 +1006,11 @@ class NodeReader(TextureBindings):
             self.warn(f"{self.owner}: '{node.name}' mixes glass of IOR {glass_s.ior:g} with a specular layer of IOR "
                       f"{base_s.ior:g}: both rendered with {glass_s.ior:g}")
         first = a if wa >= wb else b
+        top = _top_layers(a, b, wb / max(wa + wb, 1e-12))
+        for layer in ("coat", "sheen"):
+            if (getattr(a, f"{layer}_weight") > 0) != (getattr(b, f"{layer}_weight") > 0):
+                self.warn(f"{self.owner}: '{node.name}' mixes a surface with a Principled {layer} and one without: "
+                          f"the {layer} is rendered over the whole mix with weight {top[layer + '_weight']:.3g}")
         color = cols[0] if cols[0] is not None else cols[int(np.argmax(wn))]
         return Surface(kind, color, (glass_s or base_s or first).ior, roughness, emission,
                        metallic=metallic, transmission=transmission,
@@ -974,7 +1020,7 @@ class NodeReader(TextureBindings):
                        glass_tint=glass_s.glass_tint if glass_s is not None else "REFRACTION",
                        thin_film_thickness=first.thin_film_thickness, thin_film_ior=first.thin_film_ior,
                        metal_color=cols[1], glass_color=cols[2],
-                       diffuse_roughness=base_s.diffuse_roughness if base_s is not None else 0.0)
+                       diffuse_roughness=base_s.diffuse_roughness if base_s is not None else 0.0, **top)
 
 
 def _copy(s: Surface, emission) -> Surface:
@@ -984,7 +1030,24 @@ def _copy(s: Surface, emission) -> Surface:
                    thin_film_thickness=s.thin_film_thickness, thin_film_ior=s.thin_film_ior,
                    metal_color=s.metal_color, glass_color=s.glass_color, layer_fac=s.layer_fac,
                    layer_fac_value=s.layer_fac_value, layer_fac_from=s.layer_fac_from, layer_fac_to=s.layer_fac_to,
-                   diffuse_roughness=s.diffuse_roughness, holdout=s.holdout)
+                   diffuse_roughness=s.diffuse_roughness, holdout=s.holdout, **_top_layers(s, s, 0.0))
+
+
+_TOP_FIELDS = ("coat_roughness", "coat_ior", "coat_tint", "sheen_roughness", "sheen_tint")
+
+
+def _top_layers(a: Surface, b: Surface, t: float) -> dict:
+    """The coat and sheen of a mix of ``a`` (weight 1 - t) and ``b`` (t): their weights mixed, the
+    other inputs of the surface whose layer weighs more (docs/physics.md section 14.10: a coat over
+    part of a mix is rendered over all of it, with the mixed weight)."""
+    out = {"coat_weight": (1 - t) * a.coat_weight + t * b.coat_weight,
+           "sheen_weight": (1 - t) * a.sheen_weight + t * b.sheen_weight}
+    for layer in ("coat", "sheen"):
+        src = a if (1 - t) * getattr(a, f"{layer}_weight") >= t * getattr(b, f"{layer}_weight") else b
+        for f in _TOP_FIELDS:
+            if f.startswith(layer):
+                out[f] = getattr(src, f)
+    return out
 
 
 def _is_mixture(s: Surface) -> bool:

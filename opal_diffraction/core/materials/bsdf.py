@@ -64,14 +64,15 @@ import numpy as np
 
 from ..spectral.optics import fresnel_dielectric
 from ..util.jit import kernels_enabled, njit
+from . import sheen as _sheen
 from .ggx import (ggx_d as _ggx_d, ggx_d_1, reflection_1, reflection_terms as _eval_reflection_common, sample_vndf_1,
                   smith_lambda as _lambda, smith_lambda_1)
 
 __all__ = [
-    "LAMBERT", "CONDUCTOR", "DIELECTRIC", "PLASTIC", "GLOSSY", "OREN_NAYAR",
+    "LAMBERT", "CONDUCTOR", "DIELECTRIC", "PLASTIC", "GLOSSY", "OREN_NAYAR", "SHEEN",
     "DIFFUSE_REFLECTION", "GLOSSY_REFLECTION", "TRANSMISSION", "SINGULAR",
     "MIN_ROUGHNESS", "SurfaceParams", "params_from_materials", "sample", "evaluate", "microfacet_materials",
-    "energy_compensation", "fresnel_f82", "f82_b", "with_outgoing", "cosine_hemisphere",
+    "energy_compensation", "coat_albedo", "fresnel_f82", "f82_b", "with_outgoing", "cosine_hemisphere",
 ]
 
 #: Lobe codes per hit. GLOSSY is Blender's Glossy BSDF: GGX with a constant Fresnel (its colour).
@@ -79,7 +80,11 @@ LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY = 0, 1, 2, 3, 4
 #: The Diffuse BSDF with Roughness > 0: Cycles' Oren-Nayar (Fujii's improved model with OpenPBR's
 #: energy-preserving multiple-scattering term; its ``alpha`` column holds the roughness sigma).
 OREN_NAYAR = 5
-_LOBES = (LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY, OREN_NAYAR)
+#: Principled's sheen: Zeltner et al.'s microfiber sheen (core/materials/sheen.py), of unit albedo
+#: here (its ``alpha`` column holds the sheen roughness; the lobe mixture weighs it by its albedo:
+#: core/materials/mixtures.py). Principled's coat is a PLASTIC lobe of zero base.
+SHEEN = 6
+_LOBES = (LAMBERT, CONDUCTOR, DIELECTRIC, PLASTIC, GLOSSY, OREN_NAYAR, SHEEN)
 #: Flags of a sampled event (0: absorbed / invalid). SINGULAR marks a delta event (pdf = inf).
 DIFFUSE_REFLECTION, GLOSSY_REFLECTION, TRANSMISSION, SINGULAR = 1, 2, 4, 8
 
@@ -368,6 +373,13 @@ def _plastic_terms(p, mu):
     return f0t.astype(_F32), eta.astype(_F32), fac, e_spec.astype(_F32)
 
 
+def coat_albedo(p, mu) -> np.ndarray:
+    """(B,) the directional albedo E_spec(mu) of PLASTIC lobes' specular layer of unit tint (Principled's
+    coat: the share of light it reflects, which Cycles' ``closure_layering_weight`` keeps from the
+    layers under it; docs/physics.md section 14.10)."""
+    return _plastic_terms(p, np.asarray(mu, _F32))[3][:, 0]
+
+
 def _plastic_fresnel(cos, f0t, eta, spec_f0):
     f0 = np.clip(spec_f0, 0.0, 0.99)
     s = _principled_s(cos, eta, f0)[:, None]
@@ -530,6 +542,9 @@ def _eval_lobe(p, code, wo, wi, terms=None):
         return (p.base * c[:, None]).astype(_F32), c.astype(_F32)
     if code == OREN_NAYAR:
         return _oren_nayar(p, wo, wi)
+    if code == SHEEN:
+        fc, pd = _sheen.sheen_eval(wo, wi, p.alpha)
+        return (p.base * fc[:, None]).astype(_F32), pd
     rough = p.alpha >= _MIN_ALPHA
     if code in (CONDUCTOR, GLOSSY) and p.ms is not None:  # wo's factors known: all rows, the rest zeroed
         ok = up & rough
@@ -658,6 +673,13 @@ def _sample_lobe(p, code, wo, u):
         pdf[ok] = pd[ok]
         flags[ok] = DIFFUSE_REFLECTION
         return wi, weight, pdf, flags
+    if code == SHEEN:  # the LTC's own density: weight = base (Cycles labels it diffuse)
+        wi, pd = _sheen.sheen_sample(wo, p.alpha, u[:, 0], u[:, 1])
+        ok = (wi[:, 2] > 0) & (pd > 0)
+        weight[ok] = p.base[ok]
+        pdf[ok] = pd[ok]
+        flags[ok] = DIFFUSE_REFLECTION
+        return wi, weight, pdf, flags
     rough = p.alpha >= _MIN_ALPHA
     h = np.zeros((B, 3), _F32)
     h[:, 2] = 1.0
@@ -774,6 +796,10 @@ def sample(params: SurfaceParams, wo, ns, ng, u):
     (inf for SINGULAR events), flags (B,) (0: absorbed; weight and pdf are 0 then)."""
     if _kernel_fits(params) and np.shape(u) == (len(params.lobe), 3):
         return _sample_with_kernel(params, wo, ns, ng, u)
+    split = _sheen_split(params)
+    if split is not None:  # the sheen rows on these lines, the others through the kernels
+        parts = [sample(params.take(i), *(np.asarray(a)[i] for a in (wo, ns, ng, u))) for i in split]
+        return _merged(split, parts, len(params.lobe))
     wo, ns, fu, fv, wl = _prepare(params, wo, ns)
     ng = np.asarray(ng, _F32)
     u = np.asarray(u, _F32)
@@ -784,7 +810,7 @@ def sample(params: SurfaceParams, wo, ns, ng, u):
     pdf = np.zeros(B, _F32)
     flags = np.zeros(B, np.int32)
     valid = wl[:, 2] > 0
-    for code in _LOBES:  # a loop over the 6 lobes
+    for code in _LOBES:  # a loop over the 7 lobes
         mine = params.lobe == code
         idx = np.flatnonzero(mine & valid)
         if len(idx) and mine.all():  # one lobe everywhere: all rows, the invalid ones zeroed (no take)
@@ -813,6 +839,10 @@ def evaluate(params: SurfaceParams, wo, wi, ns, ng):
     for its kind of event."""
     if _kernel_fits(params):
         return _evaluate_with_kernel(params, wo, wi, ns, ng)
+    split = _sheen_split(params)
+    if split is not None:  # the sheen rows on these lines, the others through the kernels
+        parts = [evaluate(params.take(i), *(np.asarray(a)[i] for a in (wo, wi, ns, ng))) for i in split]
+        return _merged(split, parts, len(params.lobe))
     wo, ns, fu, fv, wl = _prepare(params, wo, ns)
     wi = np.asarray(wi, _F32)
     ng = np.asarray(ng, _F32)
@@ -964,6 +994,8 @@ def microfacet_materials(materials, textures=None) -> np.ndarray:
     dr = getattr(m, "diffuse_roughness", None)
     if dr is not None:  # a rough Diffuse BSDF (Oren-Nayar)
         per_hit = per_hit | ((kind == K_DIFFUSE) & (np.asarray(dr) > 0))
+    if getattr(m, "layered", None) is not None:  # Principled's coat or sheen (a lobe mixture)
+        per_hit = per_hit | np.asarray(m.layered)
     return (per_hit | ((kind == K_MIRROR) & (rough | (metallic < 1)))
             | ((kind == K_DIELECTRIC) & (rough | (transmission < 1) | (metallic > 0)))
             | ((kind == K_DIFFUSE) & ((np.asarray(m.spec_f0) > 0) | (metallic > 0) | (transmission > 0))))
@@ -1576,7 +1608,7 @@ def _kernel_fits(p: SurfaceParams) -> bool:
         return False
     if p.film_d is not None:  # thin films: the reference (core/materials/thin_film.py's Airy sum)
         return False
-    if (p.lobe == OREN_NAYAR).any():  # Oren-Nayar has no compiled twin yet: the reference
+    if ((p.lobe == OREN_NAYAR) | (p.lobe == SHEEN)).any():  # Oren-Nayar and sheen have no compiled twin yet
         return False
     B = len(p.lobe)
     if not (all(_is32(a, 2) and a.shape == p.base.shape for a in (p.base, p.edge, p.spec_tint))
@@ -1588,6 +1620,33 @@ def _kernel_fits(p: SurfaceParams) -> bool:
     if p.ms is not None and p.f82 is None and (p.lobe == CONDUCTOR).any():
         return False
     return p.wo_local is None or all(_is32(a, 2) and a.shape == (B, 3) for a in (p.frame_u, p.frame_v, p.wo_local))
+
+
+def _sheen_split(p: SurfaceParams):
+    """(the sheen rows, the others) where the kernels are on and would take the others (a batch
+    mixing the SHEEN lobe, which has no compiled twin, with kernel lobes); None otherwise."""
+    if not kernels_enabled() or not len(p.lobe):
+        return None
+    sheen = p.lobe == SHEEN
+    if sheen.all() or not sheen.any() or (p.lobe == OREN_NAYAR).any():
+        return None
+    rest = np.flatnonzero(~sheen)
+    if not _kernel_fits(p.take(rest)):
+        return None
+    return np.flatnonzero(sheen), rest
+
+
+def _merged(split, parts, n):
+    """The per-row results of ``parts`` (one tuple of arrays per index set of ``split``) in one batch of n."""
+    out = []
+    for j in range(len(parts[0])):
+        arrs = [np.asarray(part[j]) for part in parts]
+        shape = (n,) + max((a.shape[1:] for a in arrs), key=lambda t: (len(t), int(np.prod(t))))
+        full = np.zeros(shape, arrs[0].dtype)
+        for idx, a in zip(split, arrs):
+            full[idx] = a
+        out.append(full)
+    return tuple(out)
 
 
 def _rows(a):

@@ -66,6 +66,16 @@ class PreparedMaterials:
     layer_fac_to: np.ndarray = None       # (M,) int the layer weighted Fac
     diffuse_roughness: np.ndarray = None  # (M,) float32 Oren-Nayar's sigma of a rough Diffuse BSDF (0: Lambert)
     holdout: np.ndarray = None            # (M,) float32 a Holdout's weight (Film > Transparent: alpha taken off)
+    # Principled's coat and sheen over the rest (docs/physics.md section 14.10; core/materials/mixtures.py)
+    layered: np.ndarray = None            # (M,) bool: the row has a coat or a sheen (None: no row has one)
+    coat_weight: np.ndarray = None        # (M,) float32
+    coat_roughness: np.ndarray = None     # (M,) float32
+    coat_ior: np.ndarray = None           # (M,) float32
+    coat_tint: np.ndarray = None          # (M, n) float32 the coat's tint spectrum (through unit thickness)
+    sheen_weight: np.ndarray = None       # (M,) float32
+    sheen_roughness: np.ndarray = None    # (M,) float32
+    sheen_tint: np.ndarray = None         # (M, n) float32 the sheen's tint spectrum
+    sheen_tint_max: np.ndarray = None     # (M,) float32 the tint's largest RGB channel (Cycles' layering weight)
 
 
 def glass_tint_spectra(color, glass_tint, conv: SpectralConverter) -> np.ndarray:
@@ -118,6 +128,19 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
     own_metal = (metal_rgb >= 0).all(axis=1)
     metal_refl = conv.reflectance_from_rgb(np.where(own_metal[:, None], metal_rgb, 0.0)).astype(np.float32) \
         if own_metal.any() else None
+    coat_w = np.asarray(getattr(m, "coat_weight", np.zeros(len(kind))), np.float32)
+    sheen_w = np.asarray(getattr(m, "sheen_weight", np.zeros(len(kind))), np.float32)
+    layered = (coat_w > 0) | (sheen_w > 0)
+    coat = {}
+    if layered.any():
+        coat_rgb = np.asarray(m.coat_tint, np.float64).reshape(-1, 3)
+        sheen_rgb = np.asarray(m.sheen_tint, np.float64).reshape(-1, 3)
+        coat = dict(layered=layered, coat_weight=coat_w, coat_roughness=np.asarray(m.coat_roughness, np.float32),
+                    coat_ior=np.asarray(m.coat_ior, np.float32),
+                    coat_tint=conv.reflectance_from_rgb(coat_rgb).astype(np.float32), sheen_weight=sheen_w,
+                    sheen_roughness=np.asarray(m.sheen_roughness, np.float32),
+                    sheen_tint=conv.reflectance_from_rgb(sheen_rgb).astype(np.float32),
+                    sheen_tint_max=sheen_rgb.max(axis=1).astype(np.float32))
     return PreparedMaterials(kind, refl32, ior.astype(np.float32), dispersive,
                              emission, emission.any(axis=1), clear,
                              roughness=np.asarray(m.roughness, np.float32),
@@ -134,4 +157,5 @@ def prepare_materials(m: Materials, conv: SpectralConverter) -> PreparedMaterial
                              layer_fac_value=np.asarray(m.layer_fac_value, np.float32),
                              layer_fac_from=lf_from, layer_fac_to=lf_to,
                              diffuse_roughness=np.asarray(m.diffuse_roughness, np.float32),
-                             holdout=np.asarray(getattr(m, "holdout", np.zeros(len(m.metallic))), np.float32))
+                             holdout=np.asarray(getattr(m, "holdout", np.zeros(len(m.metallic))), np.float32),
+                             **coat)

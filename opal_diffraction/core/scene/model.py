@@ -117,6 +117,16 @@ MATERIAL_COLUMNS = {
     # a Holdout's weight in [0, 1] (docs/physics.md section 14.8): with Film > Transparent a camera
     # ray meeting the surface takes it off the pixel's alpha (Cycles' holdout); 0: none
     "holdout": (np.float32, (), 0.0, None),
+    # Principled's coat and sheen layers over the rest (docs/physics.md section 14.10): weights and
+    # roughness in [0, 1], the coat's index and tint (linear RGB, the colour at normal incidence
+    # through the coat's unit thickness), the sheen's tint (linear RGB)
+    "coat_weight": (np.float32, (), 0.0, None),
+    "coat_roughness": (np.float32, (), 0.03, None),
+    "coat_ior": (np.float32, (), 1.5, None),
+    "coat_tint": (np.float32, (3,), (1.0, 1.0, 1.0), None),
+    "sheen_weight": (np.float32, (), 0.0, None),
+    "sheen_roughness": (np.float32, (), 0.5, None),
+    "sheen_tint": (np.float32, (3,), (1.0, 1.0, 1.0), None),
     # the BRAGG (FCC opal) lattice (docs/physics.md section 5.7; core/materials/bragg_bsdf.py)
     "sphere_diameter": (np.float32, (), 250.0, None),
     "sphere_ior": (np.float32, (), 1.45, None),
@@ -200,7 +210,10 @@ class Materials:
     gets the Fac, layer_fac_from the rest. diffuse_roughness in [0, 1]: a Diffuse BSDF's Roughness,
     its base rendered Oren-Nayar (docs/physics.md section 14.9) where it is above 0 and the base has
     no specular layer. holdout in [0, 1]: the weight of a Holdout shader in the surface (Film >
-    Transparent: a camera ray meeting it takes that much off the pixel's alpha).
+    Transparent: a camera ray meeting it takes that much off the pixel's alpha). coat_weight,
+    coat_roughness, coat_ior (>= 1), coat_tint, sheen_weight, sheen_roughness, sheen_tint:
+    Principled's coat and sheen layered over the rest as Cycles layers them (docs/physics.md
+    section 14.10; weights and roughness in [0, 1], tints linear RGB >= 0).
 
     Grating layer (docs/physics.md section 3), on top of the base kind: grating (0/1), grating_type
     (GRATING_TYPES), lattice (LATTICES), period D (nm), slit_width a (nm), slit_count N,
@@ -273,6 +286,13 @@ class Materials:
     layer_fac_to: np.ndarray = field(default_factory=lambda: _material_column_default("layer_fac_to", 0))
     diffuse_roughness: np.ndarray = field(default_factory=lambda: _material_column_default("diffuse_roughness", 0))
     holdout: np.ndarray = field(default_factory=lambda: _material_column_default("holdout", 0))
+    coat_weight: np.ndarray = field(default_factory=lambda: _material_column_default("coat_weight", 0))
+    coat_roughness: np.ndarray = field(default_factory=lambda: _material_column_default("coat_roughness", 0))
+    coat_ior: np.ndarray = field(default_factory=lambda: _material_column_default("coat_ior", 0))
+    coat_tint: np.ndarray = field(default_factory=lambda: _material_column_default("coat_tint", 0))
+    sheen_weight: np.ndarray = field(default_factory=lambda: _material_column_default("sheen_weight", 0))
+    sheen_roughness: np.ndarray = field(default_factory=lambda: _material_column_default("sheen_roughness", 0))
+    sheen_tint: np.ndarray = field(default_factory=lambda: _material_column_default("sheen_tint", 0))
     sphere_diameter: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_diameter", 0))
     sphere_ior: np.ndarray = field(default_factory=lambda: _material_column_default("sphere_ior", 0))
     void_ior: np.ndarray = field(default_factory=lambda: _material_column_default("void_ior", 0))

@@ -32,7 +32,8 @@ BRAGG_RANGES = {"sphere_diameter": (100.0, 500.0, " nm"), "sphere_ior": (1.0, 3.
                 "layers": (1, 10000, ""), "mosaic_spread": (0.0, 45.0, " degrees")}
 
 #: Unit-interval material columns (validated to [0, 1]).
-_UNIT_COLUMNS = ("roughness", "metallic", "transmission", "diffuse_roughness", "holdout")
+_UNIT_COLUMNS = ("roughness", "metallic", "transmission", "diffuse_roughness", "holdout", "coat_weight",
+                 "coat_roughness", "sheen_weight", "sheen_roughness")
 
 _OBSERVER_NM = (360.0, 830.0)  # the wavelengths any grid may hold (spectrum.py)
 
@@ -556,7 +557,9 @@ def _validate_materials(m: Materials) -> Materials:
                  "specular_ior_level", "specular_tint", "sphere_diameter", "sphere_ior", "void_ior", "mosaic_spread",
                  "thin_film_thickness", "thin_film_ior", "metal_color", "glass_color", "layer_fac_value",
                  "diffuse_roughness", "holdout", "volume_scatter_density", "volume_scatter_color",
-                 "volume_absorption_density", "volume_absorption_color", "volume_anisotropy", "volume_emission"):
+                 "volume_absorption_density", "volume_absorption_color", "volume_anisotropy", "volume_emission",
+                 "coat_weight", "coat_roughness", "coat_ior", "coat_tint", "sheen_weight", "sheen_roughness",
+                 "sheen_tint"):
         check_range(f64[name], label, name.replace("_", " "), "")
     _check_volume(f64, label)
     for name in ("layer_fac_from", "layer_fac_to"):
@@ -606,8 +609,13 @@ def _validate_materials(m: Materials) -> Materials:
         if bad.any():
             i = int(np.argmax(bad))
             raise SceneError(f"{label(i)}: {name} must be between 0 and 1, got {number_text(f64[name][i])}")
-    for name in ("specular_ior_level", "specular_tint"):
+    for name in ("specular_ior_level", "specular_tint", "coat_tint", "sheen_tint"):
         check_range(f64[name], label, name.replace("_", " "), "", nonneg=True)
+    coat_ior = f64["coat_ior"]
+    bad = (f64["coat_weight"] > 0) & ~((coat_ior >= 1.0) & (coat_ior <= IOR_MAX))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(f"{label(i)}: coat IOR must be between 1 and {IOR_MAX:g}, got {number_text(coat_ior[i])}")
     em = f64["emission"]
     if (em < 0).any():
         i = first_row(em < 0)

@@ -108,7 +108,8 @@ def eye_constants(prepared, light, plan) -> EyeConstants:
                       and plan.splat_bounce else None),
         footprints=plan.ray_differentials,
         mixed_layers=((mt > 0) & (mt < 1)) | ((tr > 0) & (tr < 1)) | (
-            np.asarray(prepared.materials.layer_fac) != 0 if prepared.materials.layer_fac is not None else False),
+            np.asarray(prepared.materials.layer_fac) != 0 if prepared.materials.layer_fac is not None else False) | (
+            prepared.materials.layered if prepared.materials.layered is not None else False),
         probe=probe_wavelength(prepared),
         lobe_gratings=lobe_materials(prepared),
         limits=(s.max_bounces, s.diffuse_bounces, s.glossy_bounces, s.transmission_bounces),

@@ -159,6 +159,7 @@ def microfacet_bounce(c, rays: Rays, hit: Hit, micro: np.ndarray, params, can_bo
                 weight = np.broadcast_to(weight, w_mix.shape)
             weight = np.where(mixed[:, None], w_mix, weight).astype(np.float32)
             pdf = np.where(mixed, p_mix, pdf).astype(np.float32)
+        weight = mixture.scale_singular(weight, flags)  # a delta lobe under a coat: its layer's W / P
     ok = flags != 0
     if not ok.all():
         r, h, wi, weight, pdf, flags = r.take(ok), h.take(ok), wi[ok], weight[ok], pdf[ok], flags[ok]

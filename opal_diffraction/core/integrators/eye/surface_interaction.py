@@ -109,15 +109,19 @@ def surface_lobes(prepared, mixed_layers: np.ndarray, rays: Rays, hit: Hit, rng)
     weights = None if u_layer is None else per_hit_layers(
         prepared.materials, hit.mat, np.einsum("ij,ij->i", -rays.d, hit.ns), hit.front, surface_mix_fac(prepared, hit))
     rough = surface_roughness(prepared, hit)
-    params = bsdf.params_from_materials(prepared.materials, hit.mat, hit.front, rays.lam, base=base,
-                                        roughness=rough, u_layer=u_layer, weights=weights)
     wo = -rays.d
-    mixture = None
+    mixture, top = None, None
     if u_layer is not None:
         m = prepared.materials
         metallic, transmission = (m.metallic[hit.mat], m.transmission[hit.mat]) if weights is None else weights
         mixture = LobeMixture.of(m, hit.mat, hit.front, mixed, metallic, transmission, wo, hit.ns, lam=rays.lam,
                                  base=base, roughness=rough)
+        if mixture is not None and mixture.layered:  # Principled's sheen and coat drawn first (section 14.10)
+            u_layer, top = mixture.draw(u_layer)
+    params = bsdf.params_from_materials(prepared.materials, hit.mat, hit.front, rays.lam, base=base,
+                                        roughness=rough, u_layer=u_layer, weights=weights)
+    if top is not None:
+        params = mixture.put_top(params, top)
     return bsdf.with_outgoing(params, wo, hit.ns), mixture  # the next events and the bounce share wo
 
 
