@@ -96,3 +96,32 @@ def test_tilt_statistics_follow_the_closed_form():
     ok = vd.cell(vd.seeds[keep] + 2 * r * u[keep], prim[keep]) == np.flatnonzero(keep)
     np.testing.assert_allclose(np.linalg.norm(ax2, axis=1), 1.0, atol=1e-12)
     np.testing.assert_allclose(np.sqrt((1 - c2[ok] ** 2) / c2[ok] ** 2), 2 * np.sqrt(tan2[ok]), rtol=1e-6)
+
+
+def test_the_opal_shading_takes_the_bent_axis():
+    """BraggShading.lobe's (111) axis at a hit is lattice_axis(p, prim, DOMAIN_BEND_DEG), turned to
+    the shading normal's side (an axis: m and -m are the same planes), not the cell's flat one."""
+    from types import SimpleNamespace
+
+    from opal_diffraction.core.integrators.bragg_shading import BraggShading
+    from opal_diffraction.core.opal.volume import DOMAIN_BEND_DEG
+    from opal_diffraction.core.scene.model import Materials
+
+    rng = np.random.default_rng(9)
+    vd = _domains(200, rng)
+    mats = Materials.from_list([{"kind": "DIFFUSE", "grating": 1, "lattice": "BRAGG", "void_ior": 1.33}])
+    prepared = SimpleNamespace(scene=SimpleNamespace(materials=mats), opal_domains=vd,
+                               grid=SimpleNamespace(bin_edges=np.linspace(380.0, 780.0, 41)))
+    shading = BraggShading(prepared)
+    n = 500
+    ns = rng.normal(size=(n, 3))
+    ns /= np.linalg.norm(ns, axis=1, keepdims=True)
+    hit = SimpleNamespace(mat=np.zeros(n, np.int64), ns=ns, p=rng.random((n, 3)), prim=np.zeros(n, np.int64))
+    lobe = shading.lobe(hit)
+    want, dia, found = vd.lattice_axis(hit.p, hit.prim, DOMAIN_BEND_DEG)
+    assert found.all() and DOMAIN_BEND_DEG > 0
+    want[np.sum(want * ns, axis=1) < 0] *= -1
+    np.testing.assert_allclose(lobe.axis, want, atol=1e-12)
+    np.testing.assert_array_equal(lobe.diameter, dia)
+    flat, _, _ = vd.lookup(hit.p, hit.prim)
+    assert np.median(np.abs(np.sum(flat * lobe.axis, axis=1))) < 1 - 1e-5  # bent: not the cell's own normal
