@@ -59,6 +59,9 @@ SOFT_BOXES = {
 LIGHTINGS = ("studio", "sky", "lamp")
 #: View exposure per light set (Standard view transform).
 EXPOSURE = {"lamp": -1.0, "studio": 0.0, "sky": -2.0}
+#: Under the sky a light body (White) is exposed this many stops darker (a photographer exposes
+#: for the subject; the sun's irradiance, about 43 W/m^2, would clip a 0.55 white body).
+SKY_LIGHT_BODY_STOPS = 1.5
 #: The orbit: the camera's elevation moved by these many degrees (two extra frames).
 ORBIT = (-5.0, 5.0)
 
@@ -125,6 +128,8 @@ def build_scene(width: int = 512, height: int = 512, spp: int = 16, seed: int = 
                                     preset=preset.upper(), seed=seed, show_preview=False)
     opal = bpy.context.active_object
     opal.rotation_euler = (0.0, 0.0, math.radians(8.0))
+    if lighting == "sky" and max(opal.data.materials[0].opal.body_color) > 0.3:
+        sc.view_settings.exposure -= SKY_LIGHT_BODY_STOPS  # a light body in the sun: exposed for the body
 
     cam_data = bpy.data.cameras.new("camera")
     cam_data.lens = 100.0
