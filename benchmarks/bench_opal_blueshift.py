@@ -57,7 +57,7 @@ def main(argv=None) -> int:
     opal_diffraction.register()
     work = tempfile.mkdtemp()
     try:
-        sc, _opal, _light = ex.build_scene(*args.resolution, spp=args.spp)
+        sc, _opal, _lights = ex.build_scene(*args.resolution, spp=args.spp, lighting="lamp")  # the lamp geometry below
         out = {}
         for elev in (ex.CAMERA_ELEVATION - 5, ex.CAMERA_ELEVATION + 5):
             ex.place_camera(sc.camera, elev)

@@ -47,6 +47,21 @@ CAMERA_ELEVATION = 40.0   # degrees above the cloth, seen from -Y
 LAMP_DISTANCE = 0.35
 LAMP_ELEVATION = 50.0     # degrees above the cloth, from +Y
 LAMP_POWER = 20.0         # W (Blender's point-light power)
+#: The studio's soft boxes: name -> (azimuth from +X deg, elevation deg, distance m, width m,
+#: height m, power W). A large key above and behind the stone (the mirror side of planes lying
+#: near the dome, so layered domains flash towards the camera), two strip boxes to the sides.
+SOFT_BOXES = {
+    "key": (90.0, 65.0, 0.45, 0.40, 0.40, 4.0),
+    "strip_left": (225.0, 40.0, 0.40, 0.12, 0.40, 1.5),
+    "strip_right": (20.0, 35.0, 0.40, 0.12, 0.40, 1.5),
+}
+#: Light sets: a small lamp (the old example), three soft boxes, the daylight sky alone.
+LIGHTINGS = ("studio", "sky", "lamp")
+#: View exposure per light set (Standard view transform).
+EXPOSURE = {"lamp": -1.0, "studio": 0.0, "sky": -2.0}
+#: Under the sky a light body (White) is exposed this many stops darker (a photographer exposes
+#: for the subject; the sun's irradiance, about 43 W/m^2, would clip a 0.55 white body).
+SKY_LIGHT_BODY_STOPS = 1.5
 #: The orbit: the camera's elevation moved by these many degrees (two extra frames).
 ORBIT = (-5.0, 5.0)
 
@@ -77,8 +92,10 @@ def place_camera(cam, elevation_deg: float = CAMERA_ELEVATION) -> None:
     cam.rotation_euler = (Vector(TARGET) - Vector(cam.location)).to_track_quat("-Z", "Y").to_euler()
 
 
-def build_scene(width: int = 512, height: int = 512, spp: int = 16, seed: int = 7, preset: str = "BLACK"):
-    """Build the opal scene in the current (emptied) Blender file; return (scene, opal, light)."""
+def build_scene(width: int = 512, height: int = 512, spp: int = 16, seed: int = 7, preset: str = "BLACK",
+                lighting: str = "studio"):
+    """Build the opal scene in the current (emptied) Blender file under ``lighting`` (LIGHTINGS);
+    return (scene, opal, lights)."""
     import bpy
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -93,11 +110,14 @@ def build_scene(width: int = 512, height: int = 512, spp: int = 16, seed: int = 
     sc.opal.round_samples = spp
     sc.opal.wavelength_step = 10.0
     sc.opal.seed = 1
-    # a dark room with a window: a dim daylight sky (examples/environments.py) beside the lamp
+    # the world: a dark room with a window (a dim daylight sky, examples/environments.py) around
+    # the lamp or the soft boxes; or the open daylight sky alone
     from opal_diffraction._scripts import load_example
 
     environments = load_example("environments")
-    sc.world = environments.blender_world(bpy, environments.sky(256, 128), SKY_STRENGTH)
+    strength = SKY_STRENGTH if lighting != "sky" else 1.0
+    sc.world = environments.blender_world(bpy, environments.sky(256, 128), strength)
+    sc.view_settings.exposure = EXPOSURE[lighting]
 
     # the cloth: a dark blue-black velvet
     bpy.ops.mesh.primitive_plane_add(size=0.4)
@@ -108,6 +128,8 @@ def build_scene(width: int = 512, height: int = 512, spp: int = 16, seed: int = 
                                     preset=preset.upper(), seed=seed, show_preview=False)
     opal = bpy.context.active_object
     opal.rotation_euler = (0.0, 0.0, math.radians(8.0))
+    if lighting == "sky" and max(opal.data.materials[0].opal.body_color) > 0.3:
+        sc.view_settings.exposure -= SKY_LIGHT_BODY_STOPS  # a light body in the sun: exposed for the body
 
     cam_data = bpy.data.cameras.new("camera")
     cam_data.lens = 100.0
@@ -117,14 +139,38 @@ def build_scene(width: int = 512, height: int = 512, spp: int = 16, seed: int = 
     place_camera(cam)
     sc.camera = cam
 
-    light_data = bpy.data.lights.new("lamp", "POINT")
-    light_data.energy = LAMP_POWER
-    light_data.shadow_soft_size = 0.0
-    light = bpy.data.objects.new("lamp", light_data)
-    sc.collection.objects.link(light)
-    e = math.radians(LAMP_ELEVATION)
-    light.location = (TARGET[0], TARGET[1] + LAMP_DISTANCE * math.cos(e), TARGET[2] + LAMP_DISTANCE * math.sin(e))
-    return sc, opal, light
+    lights = []
+    if lighting == "lamp":
+        light_data = bpy.data.lights.new("lamp", "POINT")
+        light_data.energy = LAMP_POWER
+        light_data.shadow_soft_size = 0.0
+        light = bpy.data.objects.new("lamp", light_data)
+        sc.collection.objects.link(light)
+        e = math.radians(LAMP_ELEVATION)
+        light.location = (TARGET[0], TARGET[1] + LAMP_DISTANCE * math.cos(e), TARGET[2] + LAMP_DISTANCE * math.sin(e))
+        lights.append(light)
+    elif lighting == "studio":
+        for name, (azimuth, elevation, distance, sx, sy, power) in SOFT_BOXES.items():
+            lights.append(_soft_box(bpy, sc, name, azimuth, elevation, distance, sx, sy, power))
+    return sc, opal, lights
+
+
+def _soft_box(bpy, sc, name, azimuth_deg, elevation_deg, distance, size_x, size_y, power):
+    """A rectangular area light ``size_x`` x ``size_y`` m of ``power`` W, ``distance`` m from TARGET
+    at ``azimuth_deg`` (from +X, counter-clockwise) and ``elevation_deg``, facing TARGET."""
+    from mathutils import Vector
+
+    data = bpy.data.lights.new(name, "AREA")
+    data.shape = "RECTANGLE"
+    data.size, data.size_y = size_x, size_y
+    data.energy = power
+    ob = bpy.data.objects.new(name, data)
+    sc.collection.objects.link(ob)
+    a, e = math.radians(azimuth_deg), math.radians(elevation_deg)
+    ob.location = (TARGET[0] + distance * math.cos(e) * math.cos(a), TARGET[1] + distance * math.cos(e) * math.sin(a),
+                   TARGET[2] + distance * math.sin(e))
+    ob.rotation_euler = (Vector(TARGET) - Vector(ob.location)).to_track_quat("-Z", "Y").to_euler()
+    return ob
 
 
 def render(path: str) -> float:
@@ -176,15 +222,56 @@ def _report(path: str, t: float, args) -> bool:
     return True
 
 
+def render_cycles(path: str, spp: int) -> float:
+    """Render the current scene with Cycles (CPU, ``spp`` samples) to ``path``: the same stone,
+    cloth, lights and world, the body only (Cycles has no Bragg lattice). Returns the wall time."""
+    import bpy
+
+    sc = bpy.context.scene
+    engine = sc.render.engine
+    sc.render.engine = "CYCLES"
+    sc.cycles.device = "CPU"
+    sc.cycles.samples = int(spp)
+    sc.cycles.use_denoising = False
+    try:
+        return render(path)
+    finally:
+        sc.render.engine = engine
+
+
+def side_by_side(ours: str, cycles: str, out: str, caption: str) -> None:
+    """``ours`` beside ``cycles`` with a caption strip below (PIL)."""
+    from PIL import Image, ImageDraw
+
+    a, b = Image.open(ours).convert("RGB"), Image.open(cycles).convert("RGB")
+    strip = 22
+    img = Image.new("RGB", (a.width + b.width, max(a.height, b.height) + strip), (255, 255, 255))
+    img.paste(a, (0, 0))
+    img.paste(b, (a.width, 0))
+    ImageDraw.Draw(img).text((6, max(a.height, b.height) + 5), caption, fill=(0, 0, 0))
+    img.save(out)
+
+
 def _render_preset(preset: str, stem: str, args, orbit: bool) -> bool:
     import bpy
 
-    sc, _opal, _light = build_scene(*args.resolution, spp=args.spp, seed=args.seed, preset=preset)
+    sc, _opal, _lights = build_scene(*args.resolution, spp=args.spp, seed=args.seed, preset=preset,
+                                     lighting=args.lighting)
+    if args.lighting != "studio":
+        stem = f"{stem}_{args.lighting}"
     if args.blend:
         bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(args.blend))
     path = os.path.join(args.out, f"{stem}.png")
-    if not _report(path, render(path), args):
+    t_ours = render(path)
+    if not _report(path, t_ours, args):
         return False
+    if args.cycles > 0:
+        cpath = os.path.join(args.out, f"{stem}_cycles.png")
+        t_cycles = render_cycles(cpath, args.cycles)
+        print(f"{cpath}: Cycles {args.cycles} spp, {t_cycles:.1f} s")
+        side_by_side(path, cpath, os.path.join(args.out, f"{stem}_vs_cycles.png"),
+                     f"{preset.title()}, {args.lighting}: ours {args.spp} spp {t_ours:.0f} s | "
+                     f"Cycles {args.cycles} spp {t_cycles:.0f} s (body only, no Bragg)")
     if orbit:
         for step in ORBIT:
             place_camera(sc.camera, CAMERA_ELEVATION + step)
@@ -206,6 +293,10 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=7, help="domain layout seed")
     ap.add_argument("--out", default=os.path.join(ROOT, "docs"))
     ap.add_argument("--blend", default="", help="also save the scene as this .blend file")
+    ap.add_argument("--lighting", default="studio", choices=LIGHTINGS, help="three soft boxes (studio), the "
+                    "daylight sky alone (sky: files end in _sky), or the old small lamp (lamp: _lamp)")
+    ap.add_argument("--cycles", type=int, default=0, metavar="SPP", help="also render the scene with Cycles at "
+                    "SPP samples (the body only) and write <stem>_cycles.png and <stem>_vs_cycles.png")
     ap.add_argument("--no-viewport", action="store_true", help="skip timing the viewport's first image")
     args = ap.parse_args(argv)
 

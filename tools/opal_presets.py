@@ -48,19 +48,19 @@ class BraggPreset:
 
 BRAGG_PRESETS = (
     BraggPreset("Black", "black opal: a dark potch body under the play of colour, the most saturated flashes",
-                235.0, 40.0, 1.33, "water", 60, 3.0, 300, 0.5, 25.0, (0.01, 0.01, 0.012), 0.05),
+                245.0, 45.0, 1.33, "water", 60, 6.0, 800, 0.6, 35.0, (0.008, 0.008, 0.01), 0.03),
     BraggPreset("Boulder", "boulder opal: a thin seam on brown ironstone, silica-filled voids (low contrast), "
                 "planes parallel to the seam",
-                225.0, 30.0, 1.4, "silica cement", 30, 4.0, 200, 0.5, 10.0, (0.06, 0.035, 0.02), 0.1),
+                225.0, 30.0, 1.4, "silica cement", 30, 6.0, 400, 0.5, 15.0, (0.06, 0.035, 0.02), 0.1),
     BraggPreset("Crystal", "crystal opal: a clear body, the flashes seen through the stone",
-                235.0, 40.0, 1.33, "water", 60, 3.0, 300, 0.5, 25.0, (0.95, 0.95, 0.95), 0.0, 1.0),
+                245.0, 45.0, 1.33, "water", 60, 6.0, 800, 0.6, 35.0, (1.0, 1.0, 1.0), 0.0, 1.0),
     BraggPreset("Harlequin", "harlequin: few large angular domains of well-ordered spheres on a dark body",
-                240.0, 45.0, 1.33, "water", 80, 5.0, 25, 0.3, 20.0, (0.01, 0.01, 0.012), 0.05),
+                245.0, 50.0, 1.33, "water", 80, 4.0, 60, 0.3, 30.0, (0.008, 0.008, 0.01), 0.03),
     BraggPreset("Pinfire", "pinfire: many small domains, pin-point flashes, on a dark grey body",
-                235.0, 40.0, 1.33, "water", 30, 6.0, 4000, 0.8, 30.0, (0.03, 0.03, 0.035), 0.05),
+                240.0, 45.0, 1.33, "water", 30, 8.0, 5000, 0.8, 40.0, (0.03, 0.03, 0.035), 0.05),
     BraggPreset("White", "white (light) opal: a milky body (diffuse base, the scattering approximated) under "
                 "the flashes",
-                235.0, 40.0, 1.33, "water", 40, 5.0, 300, 0.5, 30.0, (0.75, 0.75, 0.72), 0.05),
+                240.0, 45.0, 1.33, "water", 30, 8.0, 800, 0.6, 40.0, (0.55, 0.56, 0.58), 0.1, 0.3),
 )
 
 #: The source paper's surface-grating opal (Kobayashi & Kawai; docs/physics.md section 5.1).

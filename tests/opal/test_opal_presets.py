@@ -29,10 +29,11 @@ def test_a_changed_row_or_file_is_reported(tmp_path):
 
 
 def test_the_header_states_the_bragg_range_of_the_row():
-    """Black: D_s 235 +- 40 nm in water, n_eff 1.4198, 452-638 nm (docs/opal.md's table); another
-    diameter moves the stated range."""
+    """Black: D_s 245 +- 45 nm in water, n_eff = sqrt(0.74 1.45^2 + 0.26 1.33^2) = 1.4198, lambda =
+    2 sqrt(2/3) D_s n_eff = 464-672 nm (docs/opal.md's table); another diameter moves the stated
+    range (250 +- 45: 475-684 nm)."""
     black = next(p for p in tool.BRAGG_PRESETS if p.name == "Black")
     text = tool.bragg_text(black)
-    assert "n_eff 1.4198, Bragg colour at normal incidence 452-638 nm" in text
-    assert "n_eff 1.4198, Bragg colour at normal incidence 464-649 nm" in tool.bragg_text(
-        dataclasses.replace(black, sphere_diameter=240.0))
+    assert "n_eff 1.4198, Bragg colour at normal incidence 464-672 nm" in text
+    assert "n_eff 1.4198, Bragg colour at normal incidence 475-684 nm" in tool.bragg_text(
+        dataclasses.replace(black, sphere_diameter=250.0))

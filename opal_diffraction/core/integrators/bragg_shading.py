@@ -20,7 +20,8 @@ estimates the lobe's next events with its one next-event routine
 (:meth:`BraggShading.body_share`) in ``on_hit``, before the body is shaded, and calls
 :meth:`BraggShading.continue_paths` from ``scatter`` with what ``body_share`` returned. The domains (``prepared.opal_domains``,
 core/opal/ volume domains; absent: one domain whose planes are parallel to each face) give each
-hit its (111) axis and sphere diameter.
+hit its (111) axis and sphere diameter; the axis bends across its domain by
+``core.opal.volume.DOMAIN_BEND_DEG`` per mean domain spacing (docs/opal.md "Domain curvature").
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from ..util.enums import Lattice
 from ..transport.path_state import MAX_DIFFUSE_VERTICES, Caustic
 from ..transport.walker import Rays
 from ..opal.bragg import effective_index
+from ..opal.volume import DOMAIN_BEND_DEG
 from ..materials.bragg_bsdf import BraggLobe, kappa_from_spread
 from ..materials.bragg_multilayer import band_table
 
@@ -83,13 +85,14 @@ class BraggShading:
 
     # ------------------------------------------------------------------ parameters at hits
     def lobe(self, hit) -> BraggLobe:
-        """The lobe at these hits (all BRAGG materials): the domain's axis (oriented to the
-        shading normal's side) and diameter, or the face's normal and the material's D_s."""
+        """The lobe at these hits (all BRAGG materials): the domain's axis, bent across the domain
+        (VolumeDomains.lattice_axis) and oriented to the shading normal's side, and its diameter, or the face's normal and the material's D_s."""
         mat = hit.mat
         axis = np.asarray(hit.ns, np.float64).copy()
         diameter = self.diameter[mat].copy()
         if self.domains is not None:
-            d_axis, d_diam, found = self.domains.lookup(np.asarray(hit.p, np.float64), np.asarray(hit.prim))
+            d_axis, d_diam, found = self.domains.lattice_axis(np.asarray(hit.p, np.float64), np.asarray(hit.prim),
+                                                              DOMAIN_BEND_DEG)
             found = np.asarray(found, bool)
             if found.any():
                 a = np.asarray(d_axis, np.float64)[found]

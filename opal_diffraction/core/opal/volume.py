@@ -19,6 +19,19 @@ the true one when the k-th distance minus the group's largest weight is not belo
 found (no farther seed can do better), and the points where that fails are queried again with
 k doubled (the last round is the whole group).
 
+Lattice bending (:meth:`VolumeDomains.lattice_axis`; docs/opal.md "Domain curvature"). A
+natural domain is not a perfect crystal: its (111) planes bend across it (a "rolling flash"
+sweeps over a patch as the stone turns a few degrees; Sanders 1964, Gaillou et al. 2008). Each
+domain s gets a constant gradient of its normal, drawn once per scene from a fixed stream:
+
+    a(p) = normalize(a_s + (beta / h) P_s B_s (p - seed_s)),   P_s = I - a_s a_s^T,
+
+B_s a 3 x 3 matrix of independent N(0, 1/3) entries, h the group's mean seed spacing (estimated
+from the mean nearest-neighbour distance of its seeds: for uniform seeds E[d_nn] =
+Gamma(4/3) (3 / (4 pi))^(1/3) h = 0.5540 h), beta the bend in radians per spacing. For p at
+distance r from the seed along any direction, E[tan^2 of the tilt] = (2/3) (beta r / h)^2 (P_s
+keeps two of B_s u's three N(0, 1/3) components); at the seed the normal is the cell's own.
+
 Orientations: 'RANDOM' draws the (111) normal uniformly on the sphere; 'LAYERED' uniformly in
 the spherical cap of half-angle ``axis_spread_deg`` about ``preferred_axis`` (cos theta uniform
 in [cos spread, 1]) - opal grows in layers, so its domains lean towards one axis. Positions,
@@ -36,6 +49,8 @@ from ..util.enums import DomainOrientation
 
 __all__ = [
     "VolumeDomains",
+    "DOMAIN_BEND_DEG",
+    "NN_PER_SPACING",
     "bragg_domains",
     "inside_mesh",
     "generate_volume_domains",
@@ -50,6 +65,14 @@ ORIENTATIONS = tuple(m.name for m in DomainOrientation)
 #: they do not decide; measured: 4 is 20-30 % faster than 2 or 8 on the presets' layouts);
 #: unweighted cells need the nearest seed only.
 _K_START = 4
+#: Uniform seeds' mean nearest-neighbour distance in units of the mean spacing (density^(-1/3)):
+#: Gamma(4/3) (3 / (4 pi))^(1/3) (Chandrasekhar 1943, Rev. Mod. Phys. 15, eq. 34 in 3-D).
+NN_PER_SPACING = 0.5539602785
+#: The bend of a domain's (111) planes, degrees per mean domain spacing, that the opal shading
+#: uses (docs/opal.md "Domain curvature": a flash rolls across a patch over a few degrees of tilt).
+DOMAIN_BEND_DEG = 10.0
+#: The fixed stream of the per-domain bending matrices (docs/physics.md section 9.3).
+_BEND_STREAM = 0x0BA1
 
 
 class _Group:
@@ -141,6 +164,53 @@ class VolumeDomains:
             sel = np.flatnonzero(g == gi)
             out[sel] = members[grp.argmin(p[sel])]
         return out
+
+    def spacing(self, g: int) -> float:
+        """Mean seed spacing h of group ``g`` from its mean nearest-neighbour distance (module);
+        0 for a group of fewer than two seeds."""
+        key = ("h", g)
+        if key not in self._members:
+            members, grp = self._of_group(g)
+            if len(members) < 2:
+                self._members[key] = 0.0
+            else:
+                d, _ = grp.tree.query(grp.seeds, k=2)
+                self._members[key] = float(np.mean(d[:, 1])) / NN_PER_SPACING
+        return self._members[key]
+
+    def bend_matrices(self) -> np.ndarray:
+        """(S, 3, 3) float64: each domain's B_s, independent N(0, 1/3) entries from a fixed stream."""
+        b = self._members.get("B")
+        if b is None or len(b) != len(self):
+            b = self._members["B"] = np.random.default_rng(_BEND_STREAM).normal(0.0, np.sqrt(1.0 / 3.0),
+                                                                                (len(self), 3, 3))
+        return b
+
+    def lattice_axis(self, points, prim, bend_deg: float):
+        """(axis (B, 3) float64 unit, diameter (B,) float32, found (B,) bool): as :meth:`lookup`,
+        with each cell's (111) normal bent across the cell by ``bend_deg`` degrees per mean seed
+        spacing (module: a(p) = normalize(a_s + (beta / h) P_s B_s (p - seed_s)))."""
+        p = np.asarray(points, np.float64).reshape(-1, 3)
+        c = self.cell(p, prim)
+        found = c >= 0
+        axis = np.zeros((len(c), 3), np.float64)
+        diameter = np.zeros(len(c), np.float32)
+        if not found.any():
+            return axis, diameter, found
+        cs = c[found]
+        a = np.asarray(self.axis, np.float64)[cs]
+        a /= np.maximum(np.linalg.norm(a, axis=1), 1e-30)[:, None]
+        beta = np.radians(max(float(bend_deg), 0.0))
+        if beta > 0:
+            h = np.array([self.spacing(int(g)) for g in range(self.groups)])[np.asarray(self.group)[cs]]
+            scale = np.where(h > 0, beta / np.where(h > 0, h, 1.0), 0.0)
+            t = np.einsum("bij,bj->bi", self.bend_matrices()[cs], p[found] - np.asarray(self.seeds)[cs])
+            t -= np.einsum("ij,ij->i", t, a)[:, None] * a  # P_s: tilt only, across the normal
+            a = a + scale[:, None] * t
+            a /= np.linalg.norm(a, axis=1)[:, None]
+        axis[found] = a
+        diameter[found] = np.asarray(self.diameter)[cs]
+        return axis, diameter, found
 
     def lookup(self, points, prim):
         """(axis (B, 3) float32, diameter (B,) float32, found (B,) bool) of the cells the points

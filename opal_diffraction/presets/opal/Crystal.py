@@ -1,8 +1,8 @@
 # Crystal opal preset (crystal opal: a clear body, the flashes seen through the stone).
-# Spheres D_s = 235 +- 40 nm of silica (n_s 1.45), voids n_void 1.33 (water):
-# n_eff 1.4198, Bragg colour at normal incidence 452-638 nm (lambda = 2 d111 n_eff,
-# d111 = sqrt(2/3) D_s; docs/physics.md section 5.2); 60 ordered layers, mosaic spread 3 deg;
-# 300 volume domains, layered (111) normals within 25 deg of the object's Z axis.
+# Spheres D_s = 245 +- 45 nm of silica (n_s 1.45), voids n_void 1.33 (water):
+# n_eff 1.4198, Bragg colour at normal incidence 464-672 nm (lambda = 2 d111 n_eff,
+# d111 = sqrt(2/3) D_s; docs/physics.md section 5.2); 60 ordered layers, mosaic spread 6 deg;
+# 800 volume domains, layered (111) normals within 35 deg of the object's Z axis.
 import bpy
 opal = bpy.context.material.opal
 
@@ -13,17 +13,17 @@ opal.grating_direction = 'ATTRIBUTE'
 opal.rotation = 0.0
 opal.period = 550.0
 opal.slit_width = 275.0
-opal.sphere_diameter = 235.0
+opal.sphere_diameter = 245.0
 opal.sphere_ior = 1.45
 opal.void_ior = 1.33
 opal.layers = 60
-opal.mosaic_spread = 3.0
-opal.domain_count = 300
-opal.domain_size_spread = 0.5
+opal.mosaic_spread = 6.0
+opal.domain_count = 800
+opal.domain_size_spread = 0.6
 opal.domain_orientation = 'LAYERED'
-opal.domain_axis_spread = 25.0
-opal.diameter_spread = 40.0
-opal.body_color = [0.95, 0.95, 0.95]
+opal.domain_axis_spread = 35.0
+opal.diameter_spread = 45.0
+opal.body_color = [1.0, 1.0, 1.0]
 opal.body_roughness = 0.0
 opal.body_transmission = 1.0
 opal.node_ior = 1.45

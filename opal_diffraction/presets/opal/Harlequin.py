@@ -1,8 +1,8 @@
 # Harlequin opal preset (harlequin: few large angular domains of well-ordered spheres on a dark body).
-# Spheres D_s = 240 +- 45 nm of silica (n_s 1.45), voids n_void 1.33 (water):
-# n_eff 1.4198, Bragg colour at normal incidence 452-661 nm (lambda = 2 d111 n_eff,
-# d111 = sqrt(2/3) D_s; docs/physics.md section 5.2); 80 ordered layers, mosaic spread 5 deg;
-# 25 volume domains, layered (111) normals within 20 deg of the object's Z axis.
+# Spheres D_s = 245 +- 50 nm of silica (n_s 1.45), voids n_void 1.33 (water):
+# n_eff 1.4198, Bragg colour at normal incidence 452-684 nm (lambda = 2 d111 n_eff,
+# d111 = sqrt(2/3) D_s; docs/physics.md section 5.2); 80 ordered layers, mosaic spread 4 deg;
+# 60 volume domains, layered (111) normals within 30 deg of the object's Z axis.
 import bpy
 opal = bpy.context.material.opal
 
@@ -13,18 +13,18 @@ opal.grating_direction = 'ATTRIBUTE'
 opal.rotation = 0.0
 opal.period = 550.0
 opal.slit_width = 275.0
-opal.sphere_diameter = 240.0
+opal.sphere_diameter = 245.0
 opal.sphere_ior = 1.45
 opal.void_ior = 1.33
 opal.layers = 80
-opal.mosaic_spread = 5.0
-opal.domain_count = 25
+opal.mosaic_spread = 4.0
+opal.domain_count = 60
 opal.domain_size_spread = 0.3
 opal.domain_orientation = 'LAYERED'
-opal.domain_axis_spread = 20.0
-opal.diameter_spread = 45.0
-opal.body_color = [0.01, 0.01, 0.012]
-opal.body_roughness = 0.05
+opal.domain_axis_spread = 30.0
+opal.diameter_spread = 50.0
+opal.body_color = [0.008, 0.008, 0.01]
+opal.body_roughness = 0.03
 opal.body_transmission = 0.0
 opal.node_ior = 1.45
 opal.dispersion = 'NONE'

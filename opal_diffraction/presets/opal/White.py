@@ -1,8 +1,8 @@
 # White opal preset (white (light) opal: a milky body (diffuse base, the scattering approximated) under the flashes).
-# Spheres D_s = 235 +- 40 nm of silica (n_s 1.45), voids n_void 1.33 (water):
-# n_eff 1.4198, Bragg colour at normal incidence 452-638 nm (lambda = 2 d111 n_eff,
-# d111 = sqrt(2/3) D_s; docs/physics.md section 5.2); 40 ordered layers, mosaic spread 5 deg;
-# 300 volume domains, layered (111) normals within 30 deg of the object's Z axis.
+# Spheres D_s = 240 +- 45 nm of silica (n_s 1.45), voids n_void 1.33 (water):
+# n_eff 1.4198, Bragg colour at normal incidence 452-661 nm (lambda = 2 d111 n_eff,
+# d111 = sqrt(2/3) D_s; docs/physics.md section 5.2); 30 ordered layers, mosaic spread 8 deg;
+# 800 volume domains, layered (111) normals within 40 deg of the object's Z axis.
 import bpy
 opal = bpy.context.material.opal
 
@@ -13,18 +13,18 @@ opal.grating_direction = 'ATTRIBUTE'
 opal.rotation = 0.0
 opal.period = 550.0
 opal.slit_width = 275.0
-opal.sphere_diameter = 235.0
+opal.sphere_diameter = 240.0
 opal.sphere_ior = 1.45
 opal.void_ior = 1.33
-opal.layers = 40
-opal.mosaic_spread = 5.0
-opal.domain_count = 300
-opal.domain_size_spread = 0.5
+opal.layers = 30
+opal.mosaic_spread = 8.0
+opal.domain_count = 800
+opal.domain_size_spread = 0.6
 opal.domain_orientation = 'LAYERED'
-opal.domain_axis_spread = 30.0
-opal.diameter_spread = 40.0
-opal.body_color = [0.75, 0.75, 0.72]
-opal.body_roughness = 0.05
-opal.body_transmission = 0.0
+opal.domain_axis_spread = 40.0
+opal.diameter_spread = 45.0
+opal.body_color = [0.55, 0.56, 0.58]
+opal.body_roughness = 0.1
+opal.body_transmission = 0.3
 opal.node_ior = 1.45
 opal.dispersion = 'NONE'
