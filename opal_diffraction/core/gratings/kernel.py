@@ -60,6 +60,7 @@ __all__ = [
     "propagating_power",
     "harvey_shack_factor",
     "finite_propagating_power",
+    "finite_pattern_table",
     "hexagonal_harvey_shack_factor",
     "box_mean_product",
     "fraunhofer_pattern_footprint",
@@ -366,6 +367,14 @@ def _finite_tables(ratio: float, n: int, periods: int):
 def _finite_table_for(ratio: float, n: int, eta_max: float):
     periods = 1 << max(0, int(np.ceil(np.log2(max(eta_max / np.pi + 1.0, 1.0)))))  # few distinct tables
     return _finite_tables(float(ratio), int(n), periods)
+
+
+def finite_pattern_table(ratio: float, n: int, eta_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """(eta nodes, W): the cumulative finite-N power W(eta) of ``finite_propagating_power`` on a
+    table covering |eta| <= eta_max (``_finite_tables``; the eye path's order lobe samples eta
+    from it, core/gratings/lobe.py)."""
+    nodes, w, _ = _finite_table_for(float(ratio), int(n), float(eta_max))
+    return nodes, w
 
 
 def finite_propagating_power(alpha_i, beta_i, wavelength, ratio, d, n, bin_width=None) -> np.ndarray:
