@@ -276,14 +276,27 @@ def _sinc2_cumsum_table(ratio: float, m_max: int) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(sinc2(np.pi * m * ratio))])
 
 
+#: how far past the unit circle alpha^2 + beta^2 may lie from rounding alone: float32 unit vectors
+#: and frames are unit and orthogonal to ~1e-7, so 1e-4 only passes rounding
+DISK_ROUNDING = 1e-4
+
+
 def _in_unit_disk(alpha: np.ndarray, beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(alpha, beta) scaled onto the unit disk where rounding puts them just outside it.
+    """(alpha, beta) scaled onto the unit disk where rounding puts them just outside it; a
+    ValueError where they lie further out or are not finite (not the tangential components of
+    a unit vector: a caller's bug, never clamped silently).
 
     They are the tangential components of a unit vector, so alpha^2 + beta^2 <= 1 exactly; for
-    grazing light (a light on the surface) float rounding can give 1 + 1e-16, which would make
-    even the specular (zeroth) order evanescent and the Harvey-Shack factor 1 / 0. On the disk
-    the zeroth order always propagates, which bounds K (docs/physics.md section 3.2)."""
+    grazing light (a light on the surface) float rounding can give 1 + 1e-16 (float32 vectors and
+    frames: ~1e-7), which would make even the specular (zeroth) order evanescent and the
+    Harvey-Shack factor 1 / 0. On the disk the zeroth order always propagates, which bounds K
+    (docs/physics.md section 3.2). Beyond ``DISK_ROUNDING`` the input is an error."""
     rho2 = alpha * alpha + beta * beta
+    bad = ~(rho2 <= 1.0 + DISK_ROUNDING)  # (NaN included)
+    if np.any(bad):
+        worst = np.asarray(rho2)[bad].ravel()[0]
+        raise ValueError(f"grating direction cosines outside the unit disk (alpha^2 + beta^2 = {worst:.6g} > 1): "
+                         "not the tangential components of a unit vector")
     shrink = np.where(rho2 > 1.0, 1.0 / np.sqrt(np.maximum(rho2, 1.0)), 1.0)
     return alpha * shrink, beta * shrink
 

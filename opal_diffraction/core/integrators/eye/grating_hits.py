@@ -25,7 +25,12 @@ from ...lights.sources import sample_light
 from ...sampling import footprint
 from ...transport.walker import Hit, Rays
 
-__all__ = ["grating_light"]
+__all__ = ["grating_light", "MIS"]
+
+#: the emissive meshes' next event and the order lobe weighted by the power heuristic (section
+#: 3.13); False: the partition that came before (each mesh by the next event alone, the lobe's
+#: first segment adding none), kept so the tests can measure what the weighting gains
+MIS = True
 
 
 def grating_light(c, out, rays: Rays, hit: Hit, rng, follow=None, events=None, lobe_rng=None, allowed=None):
@@ -57,7 +62,7 @@ def grating_light(c, out, rays: Rays, hit: Hit, rng, follow=None, events=None, l
         # MIS of the emissive meshes between the next event and the lobe (section 3.13): where the
         # lobe continues in air and the next event runs (else each keeps its partition)
         mis = None
-        if lobe and prepared.mesh_lights is not None and prepared.materials.kind[m] != DIELECTRIC:
+        if MIS and lobe and prepared.mesh_lights is not None and prepared.materials.kind[m] != DIELECTRIC:
             mis = np.ones(b, bool) if allowed is None else np.asarray(allowed(r, bool(g.transmission[m])), bool)
             if ev is not None:
                 mis &= ev
