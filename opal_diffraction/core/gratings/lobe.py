@@ -13,11 +13,17 @@ orders that propagate
     L_o(w_o, lambda) = sum_m e_m K(w_src,m) L_i(w_src,m, lambda),
 
 with e_m = (a/D)^2 sinc^2(pi m a / D) (section 3.2) and K the Harvey-Shack factor of the
-incident direction w_src,m. Read backwards the grating equation gives w_src,m from w_o with the
-same sampler the light pass uses (order_sampling.sample_orders with w_o as its "incident"
-direction: the propagating set and e_m are the same), so one sample draws m with probability
-e_m / sum_prop e and carries the weight sum_prop e * K(w_src,m): the estimator of the sum, a
-path that continues along w_src,m (``continue_paths``). A white camera ray first takes
+incident direction w_src,m. Read backwards the grating equation gives w_src,m from w_o. In air the
+path samples the finite-N pattern itself (``sample_finite_pattern``, section 3.13): a point
+wavelength in its bin, eta = pi D (w_o + w_src) . t / lambda from the pattern's cumulative power
+over the propagating range (kernel.finite_pattern_table: the orders with their finite widths
+lambda / (N D), the evanescent ones' tails inside the disk included) and the slit-length spread,
+with weight f / p times the finite-N K of w_src: the same integrand as the grating's next
+events, so the two can be weighted against each other (``lobe_pdf``: the lobe's solid-angle
+density for the power heuristic, docs/physics.md section 3.13). Over glass the infinite-N
+sampler of the light pass runs (order_sampling.sample_orders with w_o as its "incident"
+direction and refraction: m with probability e_m / sum_prop e, weight sum_prop e * K), with no
+MIS. A white camera ray first takes
 WAVELENGTHS wavelength bins, evenly spaced from its stratified number (each uniform: weight
 n / WAVELENGTHS), so each continued path is mono.
 

@@ -529,9 +529,11 @@ class _GratingTrace(_TileTrace):
     as the tile's paths are, into their own ``TileOutput`` that the parent adds to its Diffraction
     part. The partition that keeps every light counted once:
 
-    - on the segment leaving the grating (``lobe`` 1) the lights, suns and emissive meshes are the
-      grating's next events' (grating_hits.grating_light's shadow rays): what the segment meets
-      of them is not added; the world it reaches is (the grating does not sample it);
+    - on the segment leaving the grating (``lobe`` 1) the lights and suns are the grating's next
+      events' (grating_hits.grating_light's shadow rays): what the segment meets of them is not
+      added; the emissive meshes it meets are, weighted against the grating's next event by the
+      power heuristic where its ``PathState.pdf`` (the lobe's, gratings.lobe.lobe_pdf) is > 0;
+      the world it reaches is added with weight 1 (the grating does not sample it);
     - after mirrors and glass only (``lobe`` 2), emitters and the world are the light pass's
       grating records' where the light pass ran (light -> mirrors / glass -> grating), else added;
     - another grating met before any diffuse vertex (``lobe`` 1 or 2) diffracts the lights,

@@ -9,8 +9,11 @@ the rays carry differentials (core/sampling/footprint.py, section 3.7); every di
 of the light pass's grating records (light that reached the grating through mirrors and glass);
 and, at LINES gratings, the path continued along one order sampled from the viewer's side
 (core/gratings/lobe.py; the eye pass traces it, eye_pass._GratingTrace): the world, lit
-surfaces and glass seen through the orders (sections 3.11, 3.13). All of it goes to the
-Diffraction part of the film.
+surfaces, glass and emissive meshes seen through the orders (sections 3.11, 3.13). The
+emissive meshes' next event and the continued path that meets a mesh are weighted by Veach's
+power heuristic (the mesh sampler's solid-angle pdf against the lobe's, gratings.lobe.lobe_pdf;
+the weighted next event takes point samples of the pattern, as the lobe does). All of it goes
+to the Diffraction part of the film.
 """
 
 from __future__ import annotations
