@@ -10,8 +10,12 @@
   and the per-facet radial directions are smoothed across the 256 segments (section 3.1).
 - ``cd_studio``: the same disc lit only by a photo studio's environment map (four soft boxes, no
   lamps): the world seen in the grating (docs/physics.md section 3.11).
+- ``cd_room``: the disc on a desk in a room: a white ceiling lit by the lamp and a monitor-like
+  emissive panel behind the disc. The disc diffracts both: the panel by the grating's next event
+  and its order lobe weighted by the power heuristic, the ceiling through the lobe
+  (docs/physics.md section 3.13).
 
-    python examples/gratings.py [--which fig5 cd cd_studio] [--spp 16] [--out docs]
+    python examples/gratings.py [--which fig5 cd cd_studio cd_room] [--spp 16] [--out docs]
 """
 
 from __future__ import annotations
@@ -58,13 +62,16 @@ def annulus(r_in, r_out, segments=256, rings=24):
     return v, tris, tangent
 
 
-def cd_scene(width=480, height=360, slit_count=1000) -> Scene:
-    mats = Materials.from_list([
+def _cd_materials(slit_count):
+    return [
         {"name": "table", "kind": "DIFFUSE", "color": (0.08, 0.08, 0.09)},
         {"name": "CD", "kind": "DIFFUSE", "color": (0.25, 0.25, 0.27), "grating": 1, "grating_type": "REFLECTION",
          "period": 1600.0, "slit_width": 800.0, "slit_count": slit_count, "coherence_length": 1000.0},
-    ])
-    s = Scene(materials=mats)
+    ]
+
+
+def cd_scene(width=480, height=360, slit_count=1000) -> Scene:
+    s = Scene(materials=Materials.from_list(_cd_materials(slit_count)))
     s.add_mesh(*primitives.quad((0, 0, -0.002), (1.0, 0, 0), (0, 1.0, 0)), material=0)
     v, t, tangent = annulus(0.0075, 0.06)
     s.add_mesh(v, t, material=1, tangent=tangent)
@@ -83,7 +90,20 @@ def cd_studio_scene(width=480, height=360, slit_count=1000) -> Scene:
     return s
 
 
-SCENES = {"fig5": fig5_scene, "cd": cd_scene, "cd_studio": cd_studio_scene}
+def cd_room_scene(width=480, height=360, slit_count=1000) -> Scene:
+    s = cd_scene(width, height, slit_count)
+    ceiling, monitor = 2, 3
+    s.materials = Materials.from_list(_cd_materials(slit_count) + [
+        {"name": "ceiling", "kind": "DIFFUSE", "color": (0.8, 0.8, 0.78)},
+        {"name": "monitor", "kind": "DIFFUSE", "color": (0, 0, 0), "emission": (2.7, 2.85, 3.0)},
+    ])
+    s.add_mesh(*primitives.quad((0, 0, 0.8), (3.0, 0, 0), (0, -3.0, 0)), material=ceiling)
+    # a 40 x 25 cm screen behind the disc, facing it and the camera
+    s.add_mesh(*primitives.quad((-0.35, 0.0, 0.205), (0, 0.4, 0), (0, 0, 0.25)), material=monitor)
+    return s
+
+
+SCENES = {"fig5": fig5_scene, "cd": cd_scene, "cd_studio": cd_studio_scene, "cd_room": cd_room_scene}
 
 
 def main(argv=None) -> int:

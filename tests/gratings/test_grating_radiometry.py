@@ -511,3 +511,26 @@ def test_exclude_zeroth_removes_only_the_zeroth_order_period():
     assert full[inner].max() > 0.5 and np.abs(cut[inner]).max() < 1e-12
     np.testing.assert_allclose(cut[outer], full[outer], rtol=1e-9, atol=1e-15)
     assert (cut <= full + 1e-12).all() and (cut >= 0).all()
+
+
+def test_harvey_shack_factor_clamps_rounding_only_and_rejects_other_cosines():
+    """Direction cosines just past the unit circle from float rounding are put on it (the zeroth
+    order then propagates, K is finite: the value on the circle, computed here from the order
+    loop at the grazing direction itself); further out, or not finite, is an error, never a
+    silent clamp (issue 26)."""
+    from opal_diffraction.core.gratings.kernel import DISK_ROUNDING
+
+    lam, ratio, d = 550.0, 0.5, 1600.0
+    # grazing along t: the orders m with |m lam / d - 1| <= 1 propagate (m = 0 .. 5 here)
+    expected = ratio / sum(ratio * ratio * (np.sinc(m * ratio) ** 2) for m in range(0, 6))
+    for excess in (1e-16, 1e-7, 0.5 * DISK_ROUNDING):
+        alpha = np.sqrt(1.0 + excess)
+        k = harvey_shack_factor(np.array([alpha]), np.array([0.0]), lam, ratio, d)
+        assert np.isfinite(k).all() and abs(k[0] - expected) < 1e-9 * expected
+        k_n = harvey_shack_factor(np.array([alpha]), np.array([0.0]), lam, ratio, d, n=300)
+        assert np.isfinite(k_n).all() and k_n[0] >= 1.0
+    for alpha, beta in ((1.01, 0.0), (0.8, 0.8), (np.nan, 0.0), (np.inf, 0.0)):
+        with pytest.raises(ValueError, match="unit disk"):
+            harvey_shack_factor(np.array([alpha]), np.array([beta]), lam, ratio, d)
+        with pytest.raises(ValueError, match="unit disk"):
+            harvey_shack_factor(np.array([alpha]), np.array([beta]), lam, ratio, d, n=300)

@@ -60,6 +60,7 @@ __all__ = [
     "propagating_power",
     "harvey_shack_factor",
     "finite_propagating_power",
+    "finite_pattern_table",
     "hexagonal_harvey_shack_factor",
     "box_mean_product",
     "fraunhofer_pattern_footprint",
@@ -275,14 +276,27 @@ def _sinc2_cumsum_table(ratio: float, m_max: int) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(sinc2(np.pi * m * ratio))])
 
 
+#: how far past the unit circle alpha^2 + beta^2 may lie from rounding alone: float32 unit vectors
+#: and frames are unit and orthogonal to ~1e-7, so 1e-4 only passes rounding
+DISK_ROUNDING = 1e-4
+
+
 def _in_unit_disk(alpha: np.ndarray, beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(alpha, beta) scaled onto the unit disk where rounding puts them just outside it.
+    """(alpha, beta) scaled onto the unit disk where rounding puts them just outside it; a
+    ValueError where they lie further out or are not finite (not the tangential components of
+    a unit vector: a caller's bug, never clamped silently).
 
     They are the tangential components of a unit vector, so alpha^2 + beta^2 <= 1 exactly; for
-    grazing light (a light on the surface) float rounding can give 1 + 1e-16, which would make
-    even the specular (zeroth) order evanescent and the Harvey-Shack factor 1 / 0. On the disk
-    the zeroth order always propagates, which bounds K (docs/physics.md section 3.2)."""
+    grazing light (a light on the surface) float rounding can give 1 + 1e-16 (float32 vectors and
+    frames: ~1e-7), which would make even the specular (zeroth) order evanescent and the
+    Harvey-Shack factor 1 / 0. On the disk the zeroth order always propagates, which bounds K
+    (docs/physics.md section 3.2). Beyond ``DISK_ROUNDING`` the input is an error."""
     rho2 = alpha * alpha + beta * beta
+    bad = ~(rho2 <= 1.0 + DISK_ROUNDING)  # (NaN included)
+    if np.any(bad):
+        worst = np.asarray(rho2)[bad].ravel()[0]
+        raise ValueError(f"grating direction cosines outside the unit disk (alpha^2 + beta^2 = {worst:.6g} > 1): "
+                         "not the tangential components of a unit vector")
     shrink = np.where(rho2 > 1.0, 1.0 / np.sqrt(np.maximum(rho2, 1.0)), 1.0)
     return alpha * shrink, beta * shrink
 
@@ -366,6 +380,14 @@ def _finite_tables(ratio: float, n: int, periods: int):
 def _finite_table_for(ratio: float, n: int, eta_max: float):
     periods = 1 << max(0, int(np.ceil(np.log2(max(eta_max / np.pi + 1.0, 1.0)))))  # few distinct tables
     return _finite_tables(float(ratio), int(n), periods)
+
+
+def finite_pattern_table(ratio: float, n: int, eta_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """(eta nodes, W): the cumulative finite-N power W(eta) of ``finite_propagating_power`` on a
+    table covering |eta| <= eta_max (``_finite_tables``; the eye path's order lobe samples eta
+    from it, core/gratings/lobe.py)."""
+    nodes, w, _ = _finite_table_for(float(ratio), int(n), float(eta_max))
+    return nodes, w
 
 
 def finite_propagating_power(alpha_i, beta_i, wavelength, ratio, d, n, bin_width=None) -> np.ndarray:

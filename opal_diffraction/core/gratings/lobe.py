@@ -13,11 +13,17 @@ orders that propagate
     L_o(w_o, lambda) = sum_m e_m K(w_src,m) L_i(w_src,m, lambda),
 
 with e_m = (a/D)^2 sinc^2(pi m a / D) (section 3.2) and K the Harvey-Shack factor of the
-incident direction w_src,m. Read backwards the grating equation gives w_src,m from w_o with the
-same sampler the light pass uses (order_sampling.sample_orders with w_o as its "incident"
-direction: the propagating set and e_m are the same), so one sample draws m with probability
-e_m / sum_prop e and carries the weight sum_prop e * K(w_src,m): the estimator of the sum, a
-path that continues along w_src,m (``continue_paths``). A white camera ray first takes
+incident direction w_src,m. Read backwards the grating equation gives w_src,m from w_o. In air the
+path samples the finite-N pattern itself (``sample_finite_pattern``, section 3.13): a point
+wavelength in its bin, eta = pi D (w_o + w_src) . t / lambda from the pattern's cumulative power
+over the propagating range (kernel.finite_pattern_table: the orders with their finite widths
+lambda / (N D), the evanescent ones' tails inside the disk included) and the slit-length spread,
+with weight f / p times the finite-N K of w_src: the same integrand as the grating's next
+events, so the two can be weighted against each other (``lobe_pdf``: the lobe's solid-angle
+density for the power heuristic, docs/physics.md section 3.13). Over glass the infinite-N
+sampler of the light pass runs (order_sampling.sample_orders with w_o as its "incident"
+direction and refraction: m with probability e_m / sum_prop e, weight sum_prop e * K), with no
+MIS. A white camera ray first takes
 WAVELENGTHS wavelength bins, evenly spaced from its stratified number (each uniform: weight
 n / WAVELENGTHS), so each continued path is mono.
 
@@ -39,11 +45,16 @@ import dataclasses
 
 import numpy as np
 
-from .kernel import harvey_shack_factor
-from .order_sampling import sample_orders
+from .kernel import finite_pattern_table, finite_propagating_power, harvey_shack_factor, multislit, sinc2, sinc2_integral
+from .order_sampling import SPREAD_LOBES, sample_orders, sample_sinc2
 from ..materials.spectra import DIELECTRIC
 
-__all__ = ["lobe_materials", "continue_paths", "ContinuedPaths", "WAVELENGTHS"]
+__all__ = ["lobe_materials", "continue_paths", "ContinuedPaths", "WAVELENGTHS", "sample_finite_pattern",
+           "lobe_pdf"]
+
+#: the share of sinc^2(pi x) that ``sample_sinc2``'s table covers (|x| <= SPREAD_LOBES): its density
+#: is sinc^2(pi x) / _SPREAD_MASS
+_SPREAD_MASS = float(2.0 * sinc2_integral(np.pi * SPREAD_LOBES) / np.pi)
 
 #: wavelength bins a white camera ray takes at a grating, evenly spaced from its stratified
 #: number (each with its own order and path): 4 cut the colour noise of one by about 2x
@@ -71,6 +82,7 @@ class ContinuedPaths:
     lam: np.ndarray          # (B',) int64 wavelength bins
     weight: np.ndarray       # (B',) float32 the ray's weight in that bin times sum_prop e * K (and n / WAVELENGTHS)
     transmitted: np.ndarray  # (B',) bool the order crossed the surface
+    pdf: np.ndarray | None = None  # (B',) float32 the lobe's solid-angle pdf for MIS (``lobe_pdf``; 0: none)
 
 
 def continue_paths(prepared, rays, hit, mat: int, t, s, period, rng, renormalise: bool = True):
@@ -114,14 +126,21 @@ def continue_paths(prepared, rays, hit, mat: int, t, s, period, rng, renormalise
     # for light going the other way, sample_orders' renormalise): K of a source inside the glass
     # would count only the few orders that reach the air and grows without bound (4.9 at
     # |n u| = 1.2, D = 740 nm, a = D/2) where the rest is reflected back into the glass
-    smp = sample_orders(-rays.d[rows].astype(np.float64), ng, tt, ss, d, d * ratio, lam_nm, trans, rng,
-                        eta_i=eta_view, eta_o=eta_src, length=g.length[mat], exclude_zeroth=zeroth,
-                        renormalise=renormalise and glass)
-    weight = smp.weight
-    src = smp.direction
-    if renormalise and not glass:
-        k = harvey_shack_factor(np.sum(src * tt, axis=1), np.sum(src * ss, axis=1), lam_nm, ratio, d)
-        weight = np.where(weight > 0, weight * k, 0.0)
+    if not glass:  # in air: the finite-N pattern itself (its finite-N K as the next events take it)
+        n_slits = int(g.slit_count[mat])
+        src, weight = sample_finite_pattern(-rays.d[rows].astype(np.float64), ng, tt, ss, d, ratio, n_slits,
+                                            float(g.length[mat]), lam_nm, trans, rng, exclude_zeroth=zeroth)
+        if renormalise:
+            centre = 0.5 * (edges[lam] + edges[lam + 1])
+            k = harvey_shack_factor(np.sum(src * tt, axis=1), np.sum(src * ss, axis=1), centre, ratio, d,
+                                    n=n_slits, bin_width=edges[lam + 1] - edges[lam])
+            weight = np.where(weight > 0, weight * k, 0.0)
+    else:
+        smp = sample_orders(-rays.d[rows].astype(np.float64), ng, tt, ss, d, d * ratio, lam_nm, trans, rng,
+                            eta_i=eta_view, eta_o=eta_src, length=g.length[mat], exclude_zeroth=zeroth,
+                            renormalise=renormalise)
+        weight = smp.weight
+        src = smp.direction
     live = np.flatnonzero(weight > 0)
     if live.size == 0:
         return None
@@ -131,3 +150,78 @@ def continue_paths(prepared, rays, hit, mat: int, t, s, period, rng, renormalise
     out_w = (w[live] * weight[live]).astype(np.float32)
     return ContinuedPaths(r, o, np.ascontiguousarray(src[live], np.float32), lam[live], out_w,
                           np.full(live.size, trans))
+
+
+def sample_finite_pattern(w_o, n, t, s, period, ratio: float, slits: int, length: float, lam_nm, transmission: bool,
+                          rng, exclude_zeroth: bool = False):
+    """Source directions for viewer directions ``w_o`` (B, 3) at a LINES grating in air, drawn
+    from its finite-N pattern (docs/physics.md section 3.13): eta = pi D (w_o + w_src) . t / lambda
+    from the cumulative power W(eta) of ``kernel.finite_pattern_table`` over the propagating
+    range (u in [alpha_o - r, alpha_o + r], r = sqrt(1 - beta_o^2); the |eta| < pi/2 period left
+    out with ``exclude_zeroth``), linear between the table's nodes; the spread along s from
+    sinc^2 (``sample_sinc2``). ``n`` (B, 3) the normal on the viewer's side, ``period``,
+    ``lam_nm`` (B,) nm, ``length`` nm. Returns (directions (B, 3) float64, zero where nothing
+    propagates; weights (B,) float64 = f / p, the plain (not renormalised) pattern's kernel
+    ratio^2 (N D / lambda) (L / lambda) sinc^2(ratio eta) F_N(eta) sinc^2(pi L v / lambda)
+    over the sample's density in (u, v): the propagating power P_N times the point's N-slit
+    power over its table interval's mean, ~P_N(w_o))."""
+    w_o = np.asarray(w_o, np.float64)
+    b = len(w_o)
+    d = np.asarray(period, np.float64)
+    lam = np.asarray(lam_nm, np.float64)
+    alpha, beta = np.einsum("ij,ij->i", w_o, t), np.einsum("ij,ij->i", w_o, s)
+    r = np.sqrt(np.maximum(1.0 - beta * beta, 0.0)) * (1 - 1e-12)
+    scale = np.pi * d / lam  # eta per unit u
+    e_lo, e_hi = (alpha - r) * scale, (alpha + r) * scale
+    eta_max = float(np.max(np.maximum(np.abs(e_lo), np.abs(e_hi)))) if b else 1.0
+    nodes, w = finite_pattern_table(ratio, slits, eta_max)
+    w_lo, w_hi = np.interp(e_lo, nodes, w), np.interp(e_hi, nodes, w)
+    if exclude_zeroth:
+        z_lo = np.interp(np.clip(-0.5 * np.pi, e_lo, e_hi), nodes, w)
+        gap = np.interp(np.clip(0.5 * np.pi, e_lo, e_hi), nodes, w) - z_lo
+    else:
+        z_lo, gap = w_hi, np.zeros(b)
+    mass = w_hi - w_lo - gap
+    target = w_lo + rng.random(b) * mass
+    target = np.where(target >= z_lo, target + gap, target)  # past the zeroth period
+    k = np.clip(np.searchsorted(w, target, side="right") - 1, 0, len(w) - 2)
+    dw, de = w[k + 1] - w[k], nodes[k + 1] - nodes[k]
+    eta = nodes[k] + np.where(dw > 0, (target - w[k]) / np.where(dw > 0, dw, 1.0), 0.5) * de
+    u_src = eta / scale - alpha
+    x = sample_sinc2(rng.random(b)) if length > 0 else np.zeros(b)
+    v_src = -beta + x * lam / max(length, 1e-300)
+    nz2 = 1.0 - u_src * u_src - v_src * v_src
+    ok = (mass > 0) & (dw > 0) & (nz2 > 0)
+    nz = np.sqrt(np.maximum(nz2, 0.0)) * (-1.0 if transmission else 1.0)
+    direction = np.where(ok[:, None], u_src[:, None] * t + v_src[:, None] * s + nz[:, None] * n, 0.0)
+    # f / p: the pattern's density dW/deta = ratio^2 (N / pi) sinc^2(ratio eta) F_N(eta) at the point
+    # over the sampled density (dW_k / deta_k) / mass; the spread's sinc^2 cancels up to its table's share
+    point = ratio * ratio * (slits / np.pi) * sinc2(ratio * eta) * multislit(eta, slits)
+    weight = np.where(ok, point * mass * (_SPREAD_MASS if length > 0 else 1.0) * de / np.where(dw > 0, dw, 1.0), 0.0)
+    return direction, weight
+
+
+def lobe_pdf(g, mat: int, w_o, w_src, t, s, normal, period, edges_nm, footprint=None) -> np.ndarray:
+    """(B, K) the solid-angle density, per wavelength bin, with which the order lobe (one sample
+    per bin) draws w_src (B, 3) from the viewer's direction w_o, for the power heuristic against
+    the grating's next events (docs/physics.md section 3.13): the plain pattern's bin mean
+    (``radiance.diffracted_radiance(renormalise=False)``, over the pixel's footprint where given,
+    centred on the pixel: the same for every sample of a pixel) over the finite-N propagating
+    power of w_o's side, P_N(w_o) (less the zeroth order's e_0 where the base carries it), times
+    |cos theta_src|. Both sides of the weight (the next event at w_i, the lobe at its sample)
+    call this, so their weights sum to one."""
+    from .radiance import diffracted_radiance  # (radiance imports nothing of this module)
+
+    edges = np.asarray(edges_nm, np.float64)
+    f = diffracted_radiance(g, mat, w_o, w_src, t, s, normal, period, edges, None, renormalise=False,
+                            footprint=footprint).astype(np.float64)
+    ratio = float(g.slit_width[mat] / g.period[mat])
+    d = np.asarray(period, np.float64)[:, None]
+    w_o = np.asarray(w_o, np.float64)
+    centre = 0.5 * (edges[1:] + edges[:-1])[None, :]
+    p_n = finite_propagating_power(np.sum(w_o * t, axis=1)[:, None], np.sum(w_o * s, axis=1)[:, None], centre, ratio,
+                                   d, int(g.slit_count[mat]), np.diff(edges)[None, :])
+    if g.zeroth_in_base is not None and bool(g.zeroth_in_base[mat]):
+        p_n = p_n - ratio * ratio
+    cos = np.abs(np.sum(np.asarray(w_src, np.float64) * np.asarray(normal, np.float64), axis=1))[:, None]
+    return np.where(p_n > 1e-12, f * cos / np.maximum(p_n, 1e-12), 0.0)

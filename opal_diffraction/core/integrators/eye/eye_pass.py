@@ -295,7 +295,7 @@ class _TileTrace(SpecularWalker):
             if on_grating.any():
                 rg = rays.take(on_grating)
                 grating_light(c, out, rg, hit.take(on_grating), rng, follow=self._follow_grating,
-                              events=self._grating_events(rg), lobe_rng=self.lobe_rng)
+                              events=self._grating_events(rg), lobe_rng=self.lobe_rng, allowed=self._lobe_allowed)
         diffuse = kind == DIFFUSE
         if c.black is not None:  # emission-only surfaces: the denoising features, then nothing
             black = diffuse & c.black[hit.mat]
@@ -370,29 +370,34 @@ class _TileTrace(SpecularWalker):
         (None: all of them; ``_GratingTrace`` leaves some to the records)."""
         return None
 
+    def _lobe_allowed(self, rays: Rays, transmitted) -> np.ndarray:
+        """(B,) bool: the rays whose order (``transmitted``: crossing the surface, (B,) or scalar)
+        the bounce limits let go on: counted as glossy (reflected) or transmission, the walker's
+        ``survives`` rule without roulette (mono rays are not rouletted)."""
+        c = self.c
+        st = rays.state
+        tr = np.broadcast_to(np.asarray(transmitted, bool), (len(rays),))
+        glossy, transmission = st.glossy + ~tr, st.transmission + tr
+        return (rays.depth < c.limits[0]) & np.where(tr, transmission <= c.limits[3], glossy <= c.limits[2])
+
     def _follow_grating(self, rays: Rays, cont) -> None:
         """Trace the paths that leave grating hits of ``rays`` along sampled orders (``cont``:
         gratings.lobe.ContinuedPaths) to their ends in a ``_GratingTrace``, and add everything
         they find to the Diffraction part (docs/physics.md section 3.13). The order is a
-        specular-like bounce: counted as glossy (reflected) or transmission, no BSDF pdf (no MIS
-        partner: the segment's emitters are left to the grating's next events), under the
-        bounce limits (the walker's ``survives`` rule without roulette: mono rays are not
-        rouletted)."""
-        c = self.c
+        specular-like bounce under the bounce limits (``_lobe_allowed``); its pdf (``cont.pdf``,
+        0: none) weighs the emissive meshes the segment meets against the grating's next event."""
         src = rays.take(cont.rows)
         st = src.state
         tr = cont.transmitted
-        glossy, transmission = st.glossy + ~tr, st.transmission + tr
-        ok = (src.depth < c.limits[0]) & np.where(tr, transmission <= c.limits[3], glossy <= c.limits[2])
-        k = np.flatnonzero(ok)
+        k = np.flatnonzero(self._lobe_allowed(src, tr))
         if k.size == 0:
             return
         b = k.size
         base = {f.name: getattr(st, f.name) for f in fields(PathState)}
         base = {name: (None if v is None else v[k]) for name, v in base.items()}
         state = LobeState(**base, lobe=np.ones(b, np.int8))
-        state.glossy, state.transmission = glossy[k], transmission[k]
-        state.pdf = np.zeros(b, np.float32)
+        state.glossy, state.transmission = (st.glossy + ~tr)[k], (st.transmission + tr)[k]
+        state.pdf = np.zeros(b, np.float32) if cont.pdf is None else np.asarray(cont.pdf[k], np.float32)
         state.final = np.zeros(b, bool)
         if state.rd is not None:  # a point sample from here on (the order's footprint is not carried)
             state.rd = footprint.zero_differentials(b)
@@ -530,9 +535,11 @@ class _GratingTrace(_TileTrace):
     as the tile's paths are, into their own ``TileOutput`` that the parent adds to its Diffraction
     part. The partition that keeps every light counted once:
 
-    - on the segment leaving the grating (``lobe`` 1) the lights, suns and emissive meshes are the
-      grating's next events' (grating_hits.grating_light's shadow rays): what the segment meets
-      of them is not added; the world it reaches is (the grating does not sample it);
+    - on the segment leaving the grating (``lobe`` 1) the lights and suns are the grating's next
+      events' (grating_hits.grating_light's shadow rays): what the segment meets of them is not
+      added; the emissive meshes it meets are, weighted against the grating's next event by the
+      power heuristic where its ``PathState.pdf`` (the lobe's, gratings.lobe.lobe_pdf) is > 0;
+      the world it reaches is added with weight 1 (the grating does not sample it);
     - after mirrors and glass only (``lobe`` 2), emitters and the world are the light pass's
       grating records' where the light pass ran (light -> mirrors / glass -> grating), else added;
     - another grating met before any diffuse vertex (``lobe`` 1 or 2) diffracts the lights,
@@ -584,11 +591,16 @@ class _GratingTrace(_TileTrace):
             emission.escaped(self.c, self.out, rays.take(full), None)
         world = rays.state.lobe == 1  # the world along the order: no suns (the grating's next events)
         if world.any():
-            emission.escaped(self.world_only, self.out, rays.take(world), None)
+            wr = rays.take(world)
+            wr.state.pdf = np.zeros(len(wr), np.float32)  # the grating does not sample the world: weight 1
+            emission.escaped(self.world_only, self.out, wr, None)
 
     def on_hit(self, rays: Rays, hit: Hit, kind: np.ndarray, rng) -> HitShading | None:
         if self.emissive:
-            emits = self.prepared.materials.emissive.take(hit.mat) & self._emits(rays)
+            # the meshes met on the segment leaving the grating, where its lobe has a pdf: weighted
+            # against the grating's next event by the power heuristic (surface_emitted, section 3.13)
+            own = self._emits(rays) | ((rays.state.lobe == 1) & (rays.state.pdf > 0))
+            emits = self.prepared.materials.emissive.take(hit.mat) & own
             if np.count_nonzero(emits):
                 emission.surface_emitted(self.c, self.out, rays.take(emits), hit.take(emits))
         return super().on_hit(rays, hit, kind, rng)
