@@ -97,3 +97,26 @@ def test_blackbody_matches_cycles(tmp_path):
 
     emission_plane(build)
     compare(tmp_path, atol=2e-3)
+
+
+def test_a_curve_without_an_x_range_is_one_warning(tmp_path):
+    """Every point at one x: Cycles would divide by a zero range; the node is named in one
+    warning and its input keeps the socket's value."""
+    import bpy
+
+    from opal_diffraction.blender.export import export_scene
+
+    def build(nt, vec):
+        x, _ = gradient(nt, vec, 0.0, 1.0)
+        fc = nt.nodes.new("ShaderNodeFloatCurve")
+        fc.name = "Flat Curve"
+        for p in fc.mapping.curves[0].points:
+            p.location = (0.5, p.location[1])
+        fc.mapping.update()
+        link(nt, x, fc.inputs["Value"])
+        return fc.outputs["Value"]
+
+    emission_plane(build)
+    ex = export_scene(bpy.context.evaluated_depsgraph_get())
+    named = [w for w in ex.warnings if "Flat Curve" in w]
+    assert len(named) == 1 and "not read" in named[0], ex.warnings

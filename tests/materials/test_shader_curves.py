@@ -112,3 +112,24 @@ def test_blackbody_is_plancks_colour():
         np.testing.assert_allclose(g / (g @ luma), np.maximum(want, 0), rtol=0.02, atol=0.01, err_msg=f"{t} K")
     hot, cold = E.blackbody_rgb(F([12000.0, 30000.0])), E.blackbody_rgb(F([799.0, 10.0]))
     assert np.array_equal(hot[0], hot[1]) and np.array_equal(cold[0], cold[1]) and (cold >= 0).all()
+
+
+@pytest.mark.parametrize("params,why", [
+    (dict(table=[0.0], min_x=0.0, max_x=1.0, extrapolate=True), "one entry"),
+    (dict(table=[0.0, float("nan")], min_x=0.0, max_x=1.0, extrapolate=True), "NaN entry"),
+    (dict(table=[0.0, 1.0], min_x=1.0, max_x=1.0, extrapolate=True), "empty x range"),
+    (dict(table=[0.0, 1.0], min_x=0.0, max_x=1.0, extrapolate=1), "extrapolate not a boolean"),
+    (dict(table=[[0.0, 1.0], [1.0, 0.0]], min_x=0.0, max_x=1.0, extrapolate=False), "two columns")])
+def test_bad_curve_parameters_are_one_line(params, why):
+    from opal_diffraction.core.scene.shader_programs import ProgramBuilder, program_problems
+    b = ProgramBuilder("t")
+    fac = b.const(1.0)
+    b.outputs["roughness"] = b.op("float_curve", [fac, b.const(0.5)], **params)[0]
+    msg = program_problems(b.finish())
+    assert msg is not None and "\n" not in msg and "curve" in msg, why
+    b = ProgramBuilder("t")
+    b.outputs["color"] = b.op("curves", [b.const(1.0), b.const([0.5, 0.5, 0.5])], **{**params, "table": [[0.0] * 3] * 3
+                                                                                      if why == "two columns" else
+                                                                                      [[v] * 3 for v in params["table"]]})[0]
+    msg = program_problems(b.finish())
+    assert (msg is None) == (why in ("two columns",)), why
