@@ -251,9 +251,9 @@ def test_colour_adjustments(hue, sat, val, fac, tmp_path):
 def test_unread_nodes_keep_one_warning_and_the_socket_value(tmp_path):
     def build(nt, vec):
         n = nt.nodes.new("ShaderNodeTexNoise")
-        hs = nt.nodes.new("ShaderNodeRGBCurve")
+        hs = nt.nodes.new("ShaderNodeVectorCurve")  # Vector Curves: not read
         hs.name = "My Hue"
-        link(nt, n.outputs["Color"], hs.inputs["Color"])
+        link(nt, n.outputs["Color"], hs.inputs["Vector"])
         mix = nt.nodes.new("ShaderNodeMix")
         mix.data_type = "RGBA"
         link(nt, hs.outputs[0], mix.inputs[6])

@@ -544,8 +544,9 @@ class NodeReader(TextureBindings):
         n, out = src
         if n.bl_idname == "ShaderNodeRGB":
             return self._to709(rgb(out.default_value))
-        if n.bl_idname == "ShaderNodeBlackbody":
-            return blackbody_rgb(self.temperature(n))
+        if n.bl_idname == "ShaderNodeBlackbody" and (n.inputs.get("Temperature") is None
+                                                     or self.source(n.inputs["Temperature"]) is None):
+            return blackbody_rgb(self.temperature(n))  # a fixed temperature (a linked one compiles)
         if n.bl_idname == "ShaderNodeTexImage" and self._bindable(node, name):
             col = self._bind_image(node, name, n, out)
             if col is not None:

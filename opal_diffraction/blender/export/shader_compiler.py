@@ -12,7 +12,9 @@ is read. It reads:
   bakes it), Math, Vector Math, Mix (float, vector, colour; and the legacy MixRGB), Map Range
   (float), Clamp, Invert, Gamma, Bright/Contrast, Hue/Saturation/Value, RGB to BW,
   Separate / Combine XYZ and Color (RGB) (and the legacy RGB nodes),
-  Mapping, Value, RGB;
+  Mapping, Value, RGB; RGB Curves and Float Curves (a RAMP_TABLE_SIZE table of Blender's own
+  curve evaluation over the curves' x range, as Cycles bakes it, read with Cycles' extrapolation);
+  Wavelength and Blackbody (Cycles' RGB of them, core/materials/shader_eval.py);
 - inputs: Texture Coordinate (Generated, Object, UV), UV Map; a texture's unlinked Vector is
   Generated, as in Cycles; Color Attribute and Attribute (geometry: a mesh attribute per corner,
   export/meshes.py ``corner_attribute``; Fac the components' average, as ``svm_node_attr``);
@@ -25,7 +27,7 @@ Image Texture nodes inside the program (behind a ColorRamp, a Mix, ...) sample t
 image per hit at their Vector (unlinked: the UV map), flat projection; in a world's graph
 (``world``) an Environment Texture samples its image at the equirectangular (u, v) of its Vector
 (unlinked: the ray direction). Anything else on the way
-(Curves, an object / instancer / view-layer Attribute, a Texture
+(Vector Curves, an object / instancer / view-layer Attribute, a Texture
 Coordinate output other than the three above, a colour mode other than RGB) is named in one
 warning and replaced by the socket's own value, as before. Colours typed into sockets are the
 blend file's working space converted to linear Rec.709 (export/colour.py).
@@ -54,7 +56,8 @@ COMPILED_NODES = frozenset({
     "ShaderNodeUVMap", "ShaderNodeGroup", "NodeGroupInput", "ShaderNodeTexImage", "ShaderNodeTexWave",
     "ShaderNodeTexMagic", "ShaderNodeTexBrick", "ShaderNodeGamma", "ShaderNodeBrightContrast",
     "ShaderNodeHueSaturation", "ShaderNodeRGBToBW", "ShaderNodeTexSky", "ShaderNodeTexEnvironment",
-    "ShaderNodeVertexColor", "ShaderNodeAttribute"})
+    "ShaderNodeVertexColor", "ShaderNodeAttribute", "ShaderNodeRGBCurve", "ShaderNodeFloatCurve",
+    "ShaderNodeWavelength", "ShaderNodeBlackbody"})
 
 #: Attribute names Cycles resolves to its volume grids' standard attributes: zeros on a mesh.
 CYCLES_VOLUME_ATTRIBUTES = frozenset({"density", "color", "flame", "heat", "temperature", "velocity"})
@@ -321,6 +324,19 @@ class ShaderCompiler:
             col, alpha = b.op("ramp", [self._in(node, "Fac", path, "f")], table=table,
                               constant=ramp.interpolation == "CONSTANT")
             return col if oname == "Color" else alpha
+        if idn in ("ShaderNodeRGBCurve", "ShaderNodeFloatCurve"):
+            rgb_curves = idn == "ShaderNodeRGBCurve"
+            table, lo, hi = self._curve_table(node, rgb_curves)
+            params = dict(table=table, min_x=lo, max_x=hi, extrapolate=node.mapping.extend == "EXTRAPOLATED")
+            if rgb_curves:
+                return b.op("curves", [self._in(node, "Fac", path, "f"), self._in(node, "Color", path, "v")],
+                            **params)[0]
+            return b.op("float_curve", [self._in(node, "Factor", path, "f"), self._in(node, "Value", path, "f")],
+                        **params)[0]
+        if idn == "ShaderNodeWavelength":
+            return b.op("wavelength", [self._in(node, "Wavelength", path, "f")])[0]
+        if idn == "ShaderNodeBlackbody":
+            return b.op("blackbody", [self._in(node, "Temperature", path, "f")])[0]
         if idn == "ShaderNodeTexImage":
             return self._image(node, oname, path)
         if idn == "ShaderNodeTexEnvironment":
@@ -450,6 +466,31 @@ class ShaderCompiler:
             b.op("coord", kind="generated")[0]
         col, alpha = b.op("image", [b.op("equirect", [vec])[0]], texture=int(idx))
         return col if oname == "Color" else alpha
+
+    def _curve_table(self, node, rgb_curves: bool) -> tuple:
+        """(table, min_x, max_x) of an RGB / Float Curves node as Cycles bakes it
+        (intern/cycles/blender/util.h ``curvemapping_color_to_array`` / ``curvemapping_float_to_array``):
+        RAMP_TABLE_SIZE samples over the curves' own x range (the first to the last point, over
+        the R, G, B and combined curves, or the one float curve), each the channel's curve of the
+        combined curve's value (R(C(x)), ...) as Blender itself evaluates them."""
+        mapping = node.mapping
+        mapping.initialize()
+        mapping.update()
+        curves = list(mapping.curves)[:4 if rgb_curves else 1]
+        lo = min(float(c.points[0].location[0]) for c in curves)
+        hi = max(float(c.points[len(c.points) - 1].location[0]) for c in curves)
+        if not (np.isfinite(lo) and np.isfinite(hi) and hi > lo):
+            raise self._fail(node, f"the curve of '{node.name}' (its points share one x)")
+        xs = [np.float32(lo + np.float32(i) / np.float32(RAMP_TABLE_SIZE - 1) * np.float32(hi - lo))
+              for i in range(RAMP_TABLE_SIZE)]
+        if not rgb_curves:
+            return [float(mapping.evaluate(curves[0], float(x))) for x in xs], lo, hi
+        combined = curves[3]
+        table = []
+        for x in xs:
+            c = float(mapping.evaluate(combined, float(x)))
+            table.append([float(mapping.evaluate(curves[k], c)) for k in range(3)])
+        return table, lo, hi
 
     def _ramp_colour(self, rgba) -> list:
         col = self.reader._to709(np.asarray(rgba[:3], np.float64))

@@ -12,7 +12,12 @@ the operations of core/scene/shader_programs.py as Cycles' SVM computes them
   (svm/brightness.h), ``hue_saturation`` (svm/hsv.h), ``separate`` / ``combine`` (XYZ or RGB), ``mapping``
   (svm/mapping_util.h, Euler XYZ as ``euler_to_transform``), ``ramp`` (svm/ramp.h
   ``rgb_ramp_lookup``: Cycles' table of 257 entries of Blender's own ColorRamp evaluation, read
-  linearly or as a step, so every interpolation mode renders as in Cycles), the implicit
+  linearly or as a step, so every interpolation mode renders as in Cycles), ``curves`` /
+  ``float_curve`` (RGB / Float Curves: ramp.h ``svm_node_curves`` / ``svm_node_curve``, a table
+  of Blender's own curve evaluation over the curves' x range, read with Cycles' extrapolation
+  and mixed by Fac; the lookup's compiled twin is shader_kernels.py ``curve_lookup_kernel``),
+  ``wavelength`` (svm/wavelength.h) and ``blackbody`` (svm/blackbody.h, Cycles' fitted
+  colour), the implicit
   conversions (svm/convert.h: colour -> float is the Rec.709 luminance, vector -> float the
   average, float -> colour grey);
 - the textures of :mod:`.shader_textures`: ``noise``, ``voronoi``, ``checker``, ``gradient``,
@@ -33,9 +38,12 @@ import numpy as np
 
 from ..scene.shader_programs import Op, ShaderProgram
 from . import shader_textures as T
+from ..util.jit import kernels_enabled
+from .shader_kernels import curve_lookup_kernel
 from .sky_texture import SkyParams, preetham_radiance, sky_radiance
 
-__all__ = ["evaluate", "MATH_FUNCTIONS", "VECTOR_MATH_FUNCTIONS", "MIX_FUNCTIONS"]
+__all__ = ["evaluate", "MATH_FUNCTIONS", "VECTOR_MATH_FUNCTIONS", "MIX_FUNCTIONS", "curve_lookup",
+           "curve_lookup_reference", "wavelength_rgb", "blackbody_rgb"]
 
 F = np.float32
 _LUMA = np.array([0.2126729, 0.7151522, 0.0721750], np.float32)
@@ -340,6 +348,135 @@ def _ramp(table, fac, constant):
     return np.where((t > 0)[:, None], (F(1) - t)[:, None] * a + t[:, None] * b, a).astype(F)
 
 
+def curve_lookup_reference(table, rel, extrapolate: bool) -> np.ndarray:
+    """RGB / Float Curves' table lookup, Cycles svm/ramp.h ``rgb_ramp_lookup`` /
+    ``float_ramp_lookup`` (interpolated; Apache-2.0, ported): column c of ``table`` (n, C) at
+    ``rel[:, c]`` (the input relative to the table's x range, (B, C) float32). Past [0, 1] with
+    ``extrapolate`` the end segment continues (t0 + (t0 - t1) |f'| (n - 1)), else the end value
+    holds; NaN reads the first entry. float32 in Cycles' order of operations."""
+    table = np.asarray(table, F)
+    rel = np.asarray(rel, F)
+    n = len(table)
+    cols = np.arange(rel.shape[1])[None, :]
+    scale = F(n - 1)
+    with np.errstate(invalid="ignore"):
+        f = np.clip(np.where(np.isnan(rel), F(0), rel), F(0), F(1)) * scale
+        i = np.clip(f.astype(np.int32), 0, n - 1)
+        t = (f - i.astype(F)).astype(F)
+        a = table[i, cols]
+        b = table[np.minimum(i + 1, n - 1), cols]
+        out = np.where(t > 0, (F(1) - t) * a + t * b, a).astype(F)
+        if extrapolate:
+            lo, hi = rel < 0, rel > 1
+            below = table[0][None, :] + (table[0] - table[1])[None, :] * (-rel) * scale
+            above = table[-1][None, :] + (table[-1] - table[-2])[None, :] * (rel - F(1)) * scale
+            out = np.where(lo, below, np.where(hi, above, out)).astype(F)
+    return out
+
+
+def curve_lookup(table, rel, extrapolate: bool) -> np.ndarray:
+    """:func:`curve_lookup_reference`, through the compiled kernel (core/materials/shader_kernels.py
+    ``curve_lookup_kernel``) when kernels are enabled (core/util/jit.py)."""
+    if not kernels_enabled():
+        return curve_lookup_reference(table, rel, extrapolate)
+    rel = np.ascontiguousarray(rel, F)
+    out = np.empty_like(rel)
+    curve_lookup_kernel(np.ascontiguousarray(table, F), rel, bool(extrapolate), out)
+    return out
+
+
+def _curve(table, minmax, fac, value, extrapolate):
+    """svm/ramp.h ``svm_node_curves`` / ``svm_node_curve``: the input relative to the table's
+    x range, looked up per channel, mixed with the input by Fac: (B, C)."""
+    lo, hi = F(minmax[0]), F(minmax[1])
+    rel = ((value - lo) / (hi - lo)).astype(F)
+    looked = curve_lookup(table, rel, extrapolate)
+    return ((F(1) - fac)[:, None] * value + fac[:, None] * looked).astype(F)
+
+
+#: CIE 1931 colour matching functions x, y, z from 380 to 780 nm in 5 nm steps (81 rows) as
+#: Cycles tabulates them for the Wavelength node (intern/cycles/kernel/tables.h
+#: ``cie_color_match``, 4 decimals).
+_CIE_XYZ = np.array([
+    0.0014, 0.0000, 0.0065, 0.0022, 0.0001, 0.0105, 0.0042, 0.0001, 0.0201, 0.0076, 0.0002, 0.0362,
+    0.0143, 0.0004, 0.0679, 0.0232, 0.0006, 0.1102, 0.0435, 0.0012, 0.2074, 0.0776, 0.0022, 0.3713,
+    0.1344, 0.0040, 0.6456, 0.2148, 0.0073, 1.0391, 0.2839, 0.0116, 1.3856, 0.3285, 0.0168, 1.6230,
+    0.3483, 0.0230, 1.7471, 0.3481, 0.0298, 1.7826, 0.3362, 0.0380, 1.7721, 0.3187, 0.0480, 1.7441,
+    0.2908, 0.0600, 1.6692, 0.2511, 0.0739, 1.5281, 0.1954, 0.0910, 1.2876, 0.1421, 0.1126, 1.0419,
+    0.0956, 0.1390, 0.8130, 0.0580, 0.1693, 0.6162, 0.0320, 0.2080, 0.4652, 0.0147, 0.2586, 0.3533,
+    0.0049, 0.3230, 0.2720, 0.0024, 0.4073, 0.2123, 0.0093, 0.5030, 0.1582, 0.0291, 0.6082, 0.1117,
+    0.0633, 0.7100, 0.0782, 0.1096, 0.7932, 0.0573, 0.1655, 0.8620, 0.0422, 0.2257, 0.9149, 0.0298,
+    0.2904, 0.9540, 0.0203, 0.3597, 0.9803, 0.0134, 0.4334, 0.9950, 0.0087, 0.5121, 1.0000, 0.0057,
+    0.5945, 0.9950, 0.0039, 0.6784, 0.9786, 0.0027, 0.7621, 0.9520, 0.0021, 0.8425, 0.9154, 0.0018,
+    0.9163, 0.8700, 0.0017, 0.9786, 0.8163, 0.0014, 1.0263, 0.7570, 0.0011, 1.0567, 0.6949, 0.0010,
+    1.0622, 0.6310, 0.0008, 1.0456, 0.5668, 0.0006, 1.0026, 0.5030, 0.0003, 0.9384, 0.4412, 0.0002,
+    0.8544, 0.3810, 0.0002, 0.7514, 0.3210, 0.0001, 0.6424, 0.2650, 0.0000, 0.5419, 0.2170, 0.0000,
+    0.4479, 0.1750, 0.0000, 0.3608, 0.1382, 0.0000, 0.2835, 0.1070, 0.0000, 0.2187, 0.0816, 0.0000,
+    0.1649, 0.0610, 0.0000, 0.1212, 0.0446, 0.0000, 0.0874, 0.0320, 0.0000, 0.0636, 0.0232, 0.0000,
+    0.0468, 0.0170, 0.0000, 0.0329, 0.0119, 0.0000, 0.0227, 0.0082, 0.0000, 0.0158, 0.0057, 0.0000,
+    0.0114, 0.0041, 0.0000, 0.0081, 0.0029, 0.0000, 0.0058, 0.0021, 0.0000, 0.0041, 0.0015, 0.0000,
+    0.0029, 0.0010, 0.0000, 0.0020, 0.0007, 0.0000, 0.0014, 0.0005, 0.0000, 0.0010, 0.0004, 0.0000,
+    0.0007, 0.0002, 0.0000, 0.0005, 0.0002, 0.0000, 0.0003, 0.0001, 0.0000, 0.0002, 0.0001, 0.0000,
+    0.0002, 0.0001, 0.0000, 0.0001, 0.0000, 0.0000, 0.0001, 0.0000, 0.0000, 0.0001, 0.0000, 0.0000,
+    0.0000, 0.0000, 0.0000], np.float32).reshape(81, 3)
+#: CIE XYZ (D65 white) -> linear Rec.709: Cycles' xyz_to_rgb for a Rec.709 scene-linear space
+#: (intern/cycles/scene/shader.cpp ``init_xyz_transforms``, its Rec.709 default).
+_XYZ_TO_709 = np.array([[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560],
+                        [0.0556434, -0.2040259, 1.0572252]], np.float32)
+
+
+def wavelength_rgb(nm) -> np.ndarray:
+    """svm/wavelength.h ``svm_node_wavelength`` (BSD-3, from OSL; ported): the CIE matching
+    functions linearly interpolated at ``nm`` (0 outside [380, 780) nm), to linear Rec.709,
+    divided by 2.52 and clamped at 0: (B, 3) float32."""
+    nm = np.asarray(nm, F)
+    with np.errstate(invalid="ignore"):
+        ii = (nm - F(380)) * F(1 / 5)
+        i = np.where(np.isfinite(ii), np.trunc(ii), F(-1)).astype(np.int64)
+    ok = (i >= 0) & (i < 80)
+    j = np.clip(i, 0, 79)
+    t = (ii - j.astype(F)).astype(F)[:, None]
+    xyz = np.where(ok[:, None], (F(1) - t) * _CIE_XYZ[j] + t * _CIE_XYZ[j + 1], F(0)).astype(F)
+    return np.maximum(xyz @ _XYZ_TO_709.T * F(1 / 2.52), F(0)).astype(F)
+
+
+#: svm/math_util.h ``svm_math_blackbody_color_rec709``'s fit (intern/cycles/kernel/tables.h
+#: ``blackbody_table_r/g/b``): per temperature band, R and G as a/T + bT + c, B as ((aT + b)T + c)T + d.
+_BB_EDGES = np.array([965.0, 1167.0, 1449.0, 1902.0, 3315.0, 6365.0], np.float32)
+_BB_R = np.array([[1.61919106e+03, -2.05010916e-03, 5.02995757e+00], [2.48845471e+03, -1.11330907e-03, 3.22621544e+00],
+                  [3.34143193e+03, -4.86551192e-04, 1.76486769e+00], [4.09461742e+03, -1.27446582e-04, 7.25731635e-01],
+                  [4.67028036e+03, 2.91258199e-05, 1.26703442e-01], [4.59509185e+03, 2.87495649e-05, 1.50345020e-01],
+                  [3.78717450e+03, 9.35907826e-06, 3.99075871e-01]], np.float32)
+_BB_G = np.array([[-4.88999748e+02, 6.04330754e-04, -7.55807526e-02], [-7.55994277e+02, 3.16730098e-04, 4.78306139e-01],
+                  [-1.02363977e+03, 1.20223470e-04, 9.36662319e-01], [-1.26571316e+03, 4.87340896e-06, 1.27054498e+00],
+                  [-1.42529332e+03, -4.01150431e-05, 1.43972784e+00], [-1.17554822e+03, -2.16378048e-05, 1.30408023e+00],
+                  [-5.00799571e+02, -4.59832026e-06, 1.09098763e+00]], np.float32)
+_BB_B = np.array([[5.96945309e-11, -4.85742887e-08, -9.70622247e-05, -4.07936148e-03],
+                  [2.40430366e-11, 5.55021075e-08, -1.98503712e-04, 2.89312858e-02],
+                  [-1.40949732e-11, 1.89878968e-07, -3.56632824e-04, 9.10767778e-02],
+                  [-3.61460868e-11, 2.84822009e-07, -4.93211319e-04, 1.56723440e-01],
+                  [-1.97075738e-11, 1.75359352e-07, -2.50542825e-04, -2.22783266e-02],
+                  [-1.61997957e-13, -1.64216008e-08, 3.86216271e-04, -7.38077418e-01],
+                  [6.72650283e-13, -2.73078809e-08, 4.24098264e-04, -7.52335691e-01]], np.float32)
+_BB_HOT = np.array([0.8262954810464208, 0.9945080501520986, 1.566307710274283], np.float32)    # T >= 12000 K
+_BB_COLD = np.array([5.413294490189271, -0.20319390035873933, -0.0822535242887164], np.float32)  # T < 800 K
+
+
+def blackbody_rgb(temperature) -> np.ndarray:
+    """svm/blackbody.h ``svm_node_blackbody`` (BSD-3, from OSL; ported): Cycles' fitted linear
+    Rec.709 colour of a black body at ``temperature`` K (800 to 12000 K fitted per band, constant
+    outside), clamped at 0: (B, 3) float32."""
+    t = np.asarray(temperature, F)
+    band = np.searchsorted(_BB_EDGES, np.nan_to_num(t, nan=0.0), side="right")
+    r, g, b = _BB_R[band], _BB_G[band], _BB_B[band]
+    with np.errstate(all="ignore"):
+        ti = F(1) / t
+        col = np.stack([r[:, 0] * ti + r[:, 1] * t + r[:, 2], g[:, 0] * ti + g[:, 1] * t + g[:, 2],
+                        ((b[:, 0] * t + b[:, 1]) * t + b[:, 2]) * t + b[:, 3]], axis=1).astype(F)
+    col = np.where((t >= 12000)[:, None], _BB_HOT, np.where((t < 800)[:, None], _BB_COLD, col))
+    return np.maximum(col, F(0)).astype(F)
+
+
 def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset(), images=None) -> tuple:
     p = op.params
     name = op.name
@@ -406,6 +543,17 @@ def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset(), i
     if name == "ramp":
         rgba = _ramp(np.asarray(p["table"], F), a[0], bool(p.get("constant")))
         return np.ascontiguousarray(rgba[:, :3]), np.ascontiguousarray(rgba[:, 3])
+    if name == "curves":  # RGB Curves: each channel through its own column
+        fac, col = a
+        return (_curve(p["table"], (p["min_x"], p["max_x"]), fac, col, bool(p["extrapolate"])),)
+    if name == "float_curve":
+        fac, v = a
+        return (_curve(np.asarray(p["table"], F)[:, None], (p["min_x"], p["max_x"]), fac, v[:, None],
+                       bool(p["extrapolate"]))[:, 0],)
+    if name == "wavelength":
+        return (wavelength_rgb(a[0]),)
+    if name == "blackbody":
+        return (blackbody_rgb(a[0]),)
     if name == "to_float":
         v = a[0]
         if p["from"] == "color":

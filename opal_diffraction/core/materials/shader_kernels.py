@@ -11,7 +11,9 @@ and rounded once to float32 (as the reference does), and the corner blends x, y,
 contracted and the kernels equal the reference bit for bit (tests/materials/test_shader_kernels.py).
 The Voronoi kernels hash cells with the PCG hashes in 64-bit integers masked to 32 bits, the
 signed shift emulated, and sum squared components in the reference's order.
-``shader_textures`` chooses them through core/util/jit.py.
+``shader_textures`` chooses them through core/util/jit.py. ``curve_lookup_kernel`` is the RGB /
+Float Curves' table lookup with Cycles' extrapolation (shader_eval.py ``curve_lookup_reference``,
+tests/materials/test_shader_curves.py), chosen by ``shader_eval.curve_lookup``.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ import numpy as np
 
 from ..util.jit import njit
 
-__all__ = ["perlin2_kernel", "perlin3_kernel", "voronoi_octave_kernel", "voronoi_edge_kernel"]
+__all__ = ["perlin2_kernel", "perlin3_kernel", "voronoi_octave_kernel", "voronoi_edge_kernel", "curve_lookup_kernel"]
 
 _M = np.uint64(0xFFFFFFFF)
 _F0, _F1, _F2 = np.float32(0.0), np.float32(1.0), np.float32(2.0)
@@ -319,3 +321,38 @@ def voronoi_edge_kernel(coord, randomness, out):
                     e = np.float32(e + np.float32(np.float32(np.float32(bz + vz[q]) / _F2) * nz))
                 res = min(res, e)
         out[r] = res
+
+
+# ------------------------------------------------------------------------------------ curves
+@njit
+def curve_lookup_kernel(table, rel, extrapolate, out):
+    """RGB / Float Curves' table lookup (Cycles svm/ramp.h ``rgb_ramp_lookup`` /
+    ``float_ramp_lookup`` with interpolation, as shader_eval.curve_lookup_reference): column c
+    of ``table`` (n, C) float32 read at ``rel[i, c]`` (the input relative to the table's x
+    range, float32) into ``out[i, c]``; past [0, 1] with ``extrapolate`` the end segment's
+    slope continues, else the end value holds."""
+    n = table.shape[0]
+    scale = np.float32(n - 1)
+    for r in range(rel.shape[0]):
+        for c in range(rel.shape[1]):
+            f = rel[r, c]
+            if extrapolate and (f < _F0 or f > _F1):
+                if f < _F0:
+                    t0 = table[0, c]
+                    dy = np.float32(t0 - table[1, c])
+                    f = np.float32(-f)
+                else:
+                    t0 = table[n - 1, c]
+                    dy = np.float32(t0 - table[n - 2, c])
+                    f = np.float32(f - _F1)
+                out[r, c] = np.float32(t0 + np.float32(np.float32(dy * f) * scale))
+                continue
+            if f != f:
+                f = _F0
+            f = np.float32(min(max(f, _F0), _F1) * scale)
+            i = min(max(int(f), 0), n - 1)
+            t = np.float32(f - np.float32(i))
+            a = table[i, c]
+            if t > _F0:
+                a = np.float32(np.float32((_F1 - t) * a) + np.float32(t * table[i + 1, c]))
+            out[r, c] = a

@@ -171,6 +171,10 @@ OPS = {
     "sky": (("v",), ("v",)),
     "sky_preetham": (("v",), ("v",)),
     "equirect": (("v",), ("v",)),
+    "curves": (("f", "v"), ("v",)),
+    "float_curve": (("f", "f"), ("f",)),
+    "wavelength": (("f",), ("v",)),
+    "blackbody": (("f",), ("v",)),
 }
 #: The Sky Texture op's parameters (core/materials/sky_texture.py ``SkyParams``, plus ``with_sun``).
 SKY_PARAMS = ("multiple", "sun_disc", "sun_size", "sun_intensity", "elevation", "rotation", "altitude", "air",
@@ -248,6 +252,15 @@ def program_problems(program: ShaderProgram) -> str | None:
             table = np.asarray(op.params.get("table", []), np.float64)
             if table.ndim != 2 or table.shape[1] != 4 or len(table) < 2 or not np.isfinite(table).all():
                 return f"{where}: the table must be (n >= 2, 4) finite numbers"
+        if op.name in ("curves", "float_curve"):
+            table = np.asarray(op.params.get("table", []), np.float64)
+            shape_ok = table.ndim == 2 and table.shape[1] == 3 if op.name == "curves" else table.ndim == 1
+            lo, hi = (np.asarray(op.params.get(k, np.nan), np.float64) for k in ("min_x", "max_x"))
+            if not shape_ok or len(table) < 2 or not np.isfinite(table).all() or lo.shape != () or hi.shape != () \
+                    or not np.isfinite(lo) or not np.isfinite(hi) or not hi > lo \
+                    or not isinstance(op.params.get("extrapolate"), bool):
+                return f"{where}: the curve needs a table of n >= 2 finite {'(r, g, b) ' if op.name == 'curves' else ''}" \
+                       "values, finite min_x < max_x and a boolean extrapolate"
         for a, want in zip(op.args, arg_kinds):
             if a not in written:
                 return f"{where}: register {a} is read before it is written"
