@@ -373,7 +373,8 @@ class _TileTrace(SpecularWalker):
     def _lobe_allowed(self, rays: Rays, transmitted) -> np.ndarray:
         """(B,) bool: the rays whose order (``transmitted``: crossing the surface, (B,) or scalar)
         the bounce limits let go on: counted as glossy (reflected) or transmission, the walker's
-        ``survives`` rule without roulette (mono rays are not rouletted)."""
+        ``survives`` rule without roulette at the order itself (the continued mono paths are rouletted
+        at their later vertices, continuation.russian_roulette)."""
         c = self.c
         st = rays.state
         tr = np.broadcast_to(np.asarray(transmitted, bool), (len(rays),))
