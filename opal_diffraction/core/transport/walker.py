@@ -64,7 +64,7 @@ from ..materials import thin_film
 from ..spectral.optics import fresnel_dielectric, reflect, refract
 from ..util.jit import kernels_enabled, njit
 
-__all__ = ["Rays", "Hit", "SpecularWalker", "shading_normals", "hit_shading_normals", "smooth_triangles", "light_spectrum_of", "valid_specular_normal", "MICROFACET", "GRATING"]
+__all__ = ["Rays", "Hit", "SpecularWalker", "dense_weights", "shading_normals", "hit_shading_normals", "smooth_triangles", "light_spectrum_of", "valid_specular_normal", "MICROFACET", "GRATING"]
 
 #: The kind a hit on a rough (or layered) mirror or glass gets in the walk: not a delta bounce;
 #: the eye pass shades it with core/materials/bsdf.py, the light pass ends its path there.
@@ -87,6 +87,16 @@ def _indices(mask):
 #: The fields of Rays gathered when first read (state and basis are not rows). The weights too:
 #: the stages that scale them (Russian roulette) assign a new array (core/transport/rows.py's rule).
 _RAY_ROWS = ("o", "d", "pix", "w", "lam", "depth", "u_lam")
+
+
+def dense_weights(w, basis, b: int, n: int) -> np.ndarray:
+    """(b, n) float32 spectral weights of white rows: ``w`` (b, n), or coefficients (b, k) over
+    ``basis`` (k, n), or None (all ones)."""
+    if w is None:
+        return np.ones((b, n), np.float32)
+    if basis is not None:
+        return (w @ basis).astype(np.float32, copy=False)
+    return w
 
 
 @dataclass
@@ -151,11 +161,7 @@ class Rays(RowView):
 
     def dense_w(self, n: int) -> np.ndarray:
         """The spectral weight (B, n) (white rays)."""
-        if self.w is None:
-            return np.ones((len(self), n), np.float32)
-        if self.basis is not None:
-            return (self.w @ self.basis).astype(np.float32, copy=False)
-        return self.w
+        return dense_weights(self.w, self.basis, len(self), n)
 
     def dense(self) -> "Rays":
         """These rays with spectral weights (B, n) instead of coefficients over a basis."""

@@ -42,6 +42,7 @@ from types import MappingProxyType
 import numpy as np
 
 from ...util.blas_threads import one_blas_thread
+from ...transport.walker import dense_weights
 from .camera_splat import CameraConnection, SplatBatch
 
 __all__ = ["SplatVertices", "RecordingSplatBatch", "VertexKeeper", "SplatVertexStore", "resplat", "resplat_note"]
@@ -96,11 +97,7 @@ class SplatVertices:
 
     def dense_w(self, n: int) -> np.ndarray:
         """transport.Rays.dense_w of the landings: (K, n) spectral weights (white paths)."""
-        if self.w is None:
-            return np.ones((len(self), n), np.float32)
-        if self.basis is not None:
-            return (self.w @ self.basis).astype(np.float32, copy=False)
-        return self.w
+        return dense_weights(self.w, self.basis, len(self), n)
 
     @property
     def nbytes(self) -> int:
