@@ -224,7 +224,8 @@ def test_coat_tint_absorbs_the_base_by_its_optical_depth():
     np.testing.assert_allclose(got[0] / got[1], want, rtol=1e-4)
 
 
-@pytest.mark.skipif(not jit.AVAILABLE, reason=f"no JIT: {jit.UNAVAILABLE_REASON}")
+@pytest.mark.skipif(jit.kernels_path() != "numba",  # no JIT, or OPAL_KERNELS=numpy (tests/conftest.py)
+                    reason=f"no compiled kernels to compare: {jit.UNAVAILABLE_REASON or jit.KERNELS_ENV + '=numpy'}")
 def test_coat_lobe_kernels_are_the_reference():
     """The coat's PLASTIC lobe of zero base: bsdf.evaluate with the compiled kernels gives the
     NumPy reference's bits."""
@@ -278,7 +279,8 @@ def test_coat_over_a_smooth_layer_furnace(base, theta_deg):
     assert abs(x.mean() - 1.0) < Z * se + 0.005
 
 
-@pytest.mark.skipif(not jit.AVAILABLE, reason=f"no JIT: {jit.UNAVAILABLE_REASON}")
+@pytest.mark.skipif(jit.kernels_path() != "numba",  # no JIT, or OPAL_KERNELS=numpy (tests/conftest.py)
+                    reason=f"no compiled kernels to compare: {jit.UNAVAILABLE_REASON or jit.KERNELS_ENV + '=numpy'}")
 def test_a_batch_mixing_sheen_and_kernel_lobes_is_the_reference():
     """The bounce's parameters after put_top mix SHEEN rows (NumPy lines) with kernel lobes: with the
     kernels on, bsdf.evaluate gives the reference's bits and bsdf.sample its flags, and weights
