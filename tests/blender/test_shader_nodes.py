@@ -248,6 +248,26 @@ def test_colour_adjustments(hue, sat, val, fac, tmp_path):
     compare(tmp_path, atol=1e-4)
 
 
+@pytest.mark.parametrize("mode", ["RGB", "HSV", "HSL"])
+def test_separate_and_combine_colour(mode, tmp_path):
+    """Noise colour -> Separate Color -> Combine Color in the same mode with the channels turned
+    round (second, third, first): the conversions to and from HSV / HSL are Cycles' own."""
+    def build(nt, vec):
+        n = nt.nodes.new("ShaderNodeTexNoise")
+        link(nt, vec, n.inputs["Vector"])
+        sep = nt.nodes.new("ShaderNodeSeparateColor")
+        sep.mode = mode
+        link(nt, n.outputs["Color"], sep.inputs["Color"])
+        comb = nt.nodes.new("ShaderNodeCombineColor")
+        comb.mode = mode
+        for i, j in ((0, 1), (1, 2), (2, 0)):
+            link(nt, sep.outputs[j], comb.inputs[i])
+        return comb.outputs[0]
+
+    emission_plane(build)
+    compare(tmp_path, atol=1e-4)
+
+
 def test_unread_nodes_keep_one_warning_and_the_socket_value(tmp_path):
     def build(nt, vec):
         n = nt.nodes.new("ShaderNodeTexNoise")

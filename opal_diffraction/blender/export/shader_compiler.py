@@ -308,15 +308,14 @@ class ShaderCompiler:
         if idn == "ShaderNodeInvert":
             return b.op("invert", [self._in(node, "Fac", path, "f"), self._in(node, "Color", path, "v")])[0]
         if idn in ("ShaderNodeSeparateXYZ", "ShaderNodeSeparateColor", "ShaderNodeSeparateRGB"):
-            if getattr(node, "mode", "RGB") != "RGB":
-                raise self._fail(node, f"the {node.mode} mode of '{node.name}'")
-            regs = b.op("separate", [self._socket(node.inputs[0], path, "v")])
+            mode = getattr(node, "mode", "RGB")  # Separate Color: RGB, HSV or HSL
+            regs = b.op("separate", [self._socket(node.inputs[0], path, "v")], **({} if mode == "RGB" else {"mode": mode}))
             index = {"X": 0, "Y": 1, "Z": 2, "Red": 0, "Green": 1, "Blue": 2, "R": 0, "G": 1, "B": 2}[oname]
             return regs[index]
         if idn in ("ShaderNodeCombineXYZ", "ShaderNodeCombineColor", "ShaderNodeCombineRGB"):
-            if getattr(node, "mode", "RGB") != "RGB":
-                raise self._fail(node, f"the {node.mode} mode of '{node.name}'")
-            return b.op("combine", [self._socket(node.inputs[i], path, "f") for i in range(3)])[0]
+            mode = getattr(node, "mode", "RGB")
+            return b.op("combine", [self._socket(node.inputs[i], path, "f") for i in range(3)],
+                        **({} if mode == "RGB" else {"mode": mode}))[0]
         if idn == "ShaderNodeValToRGB":
             ramp = node.color_ramp
             table = [list(ramp.evaluate(i / (RAMP_TABLE_SIZE - 1))) for i in range(RAMP_TABLE_SIZE)]

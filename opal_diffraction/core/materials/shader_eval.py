@@ -9,7 +9,7 @@ the operations of core/scene/shader_programs.py as Cycles' SVM computes them
   and the Clamp option), ``vector_math`` (``svm_vector_math``), ``mix_float``, ``mix_vector``,
   ``mix_color`` (svm/color_util.h ``svm_mix`` blend modes), ``map_range`` (svm/map_range.h, float),
   ``clamp`` (MINMAX / RANGE), ``invert``, ``gamma`` (svm_math_gamma_color), ``bright_contrast``
-  (svm/brightness.h), ``hue_saturation`` (svm/hsv.h), ``separate`` / ``combine`` (XYZ or RGB), ``mapping``
+  (svm/brightness.h), ``hue_saturation`` (svm/hsv.h), ``separate`` / ``combine`` (XYZ, RGB, HSV or HSL), ``mapping``
   (svm/mapping_util.h, Euler XYZ as ``euler_to_transform``), ``ramp`` (svm/ramp.h
   ``rgb_ramp_lookup``: Cycles' table of 257 entries of Blender's own ColorRamp evaluation, read
   linearly or as a step, so every interpolation mode renders as in Cycles), ``curves`` /
@@ -533,11 +533,11 @@ def _run(op: Op, a: list, n: int, inputs: dict, need: frozenset = frozenset(), i
     if name == "invert":
         fac, col = a
         return ((fac[:, None] * (F(1) - col) + (F(1) - fac[:, None]) * col).astype(F),)
-    if name == "separate":
-        v = a[0]
+    if name == "separate":  # Separate Color's HSV / HSL modes: util/color.h's conversions first
+        v = _FROM_RGB.get(p.get("mode", "RGB"), _same)(a[0])
         return tuple(np.ascontiguousarray(v[:, i]) for i in range(3))
     if name == "combine":
-        return (np.stack(a, axis=1).astype(F),)
+        return (_TO_RGB.get(p.get("mode", "RGB"), _same)(np.stack(a, axis=1).astype(F)).astype(F),)
     if name == "mapping":
         return (_mapping(p["type"], *a).astype(F),)
     if name == "ramp":
@@ -663,6 +663,42 @@ def _hsv_to_rgb(hsv):
     rgb = np.choose(idx[:, None], choices)
     rgb = np.where((i > 5)[:, None], choices[5], rgb)
     return np.where((s != 0)[:, None], rgb, np.stack([v, v, v], axis=1)).astype(F)
+
+
+def _rgb_to_hsl(rgb):
+    """util/color.h ``rgb_to_hsl``, float32: lightness min(1, (max + min) / 2), the hue of the
+    largest channel, the saturation over 2 - max - min above lightness 1/2."""
+    r, g, b = rgb[:, 0], rgb[:, 1], rgb[:, 2]
+    cmax = np.maximum(r, np.maximum(g, b))
+    cmin = np.minimum(r, np.minimum(g, b))
+    lum = np.minimum(F(1), (cmax + cmin) / F(2))
+    chromatic = cmax != cmin
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.where(chromatic, cmax - cmin, F(1))
+        s = np.where(lum > F(0.5), d / (F(2) - cmax - cmin), d / (cmax + cmin))
+        h = np.where(r == cmax, (g - b) / d + np.where(g < b, F(6), F(0)),
+                     np.where(g == cmax, (b - r) / d + F(2), (r - g) / d + F(4)))
+    h, s = np.where(chromatic, h, F(0)), np.where(chromatic, s, F(0))
+    return np.stack([h / F(6), s, lum], axis=1).astype(F)
+
+
+def _hsl_to_rgb(hsl):
+    """util/color.h ``hsl_to_rgb``, float32."""
+    h, s, lum = hsl[:, 0], hsl[:, 1], hsl[:, 2]
+    nr = np.clip(np.abs(h * F(6) - F(3)) - F(1), F(0), F(1))
+    ng = np.clip(F(2) - np.abs(h * F(6) - F(2)), F(0), F(1))
+    nb = np.clip(F(2) - np.abs(h * F(6) - F(4)), F(0), F(1))
+    chroma = (F(1) - np.abs(F(2) * lum - F(1))) * s
+    return np.stack([(n - F(0.5)) * chroma + lum for n in (nr, ng, nb)], axis=1).astype(F)
+
+
+def _same(v):
+    return v
+
+
+#: Separate / Combine Color's modes: to and from RGB (Cycles' svm_node_separate_color / combine_color)
+_FROM_RGB = {"HSV": _rgb_to_hsv, "HSL": _rgb_to_hsl}
+_TO_RGB = {"HSV": _hsv_to_rgb, "HSL": _hsl_to_rgb}
 
 
 def evaluate(program: ShaderProgram, slot: str, inputs: dict, n: int, images=None) -> np.ndarray:

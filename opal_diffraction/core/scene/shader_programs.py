@@ -232,6 +232,8 @@ def program_problems(program: ShaderProgram) -> str | None:
             v = np.asarray(op.params.get("value", np.nan), np.float64)
             if v.shape not in ((), (3,)) or not np.isfinite(v).all():
                 return f"{where}: the value must be a finite number or three"
+        if op.name in ("separate", "combine") and op.params.get("mode", "RGB") not in ("RGB", "HSV", "HSL"):
+            return f"{where}: mode {op.params.get('mode')!r} is not one of RGB, HSV, HSL"
         if op.name == "attribute" and not isinstance(op.params.get("attribute"), str):
             return f"{where}: attribute must be an attribute name"
         if op.name == "magic" and op.params.get("depth") not in range(11):
