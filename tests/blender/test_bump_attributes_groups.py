@@ -60,7 +60,9 @@ def _random(n, width, seed):
 
 def test_byte_colour_attribute_on_corners_as_cycles(tmp_path):
     """A byte face-corner colour attribute (sRGB bytes, which Cycles decodes to linear) through
-    the Color Attribute node: equal to Cycles within 2e-6."""
+    the Color Attribute node: equal to Cycles within 2e-6 on Blender 5.0; Blender 5.2's Cycles
+    decodes the bytes by another route, up to 2.2e-4 away (1/18 of a byte step; measured), so the
+    tolerance there is 3e-4 (an undecoded sRGB byte would be ~0.2 off)."""
     def attr(me):
         a = me.color_attributes.new("paint", "BYTE_COLOR", "CORNER")
         a.data.foreach_set("color", np.concatenate([_random(len(a.data), 3, 1), np.ones((len(a.data), 1),
@@ -72,7 +74,7 @@ def test_byte_colour_attribute_on_corners_as_cycles(tmp_path):
         return vc.outputs["Color"]
 
     attribute_plane(build, attr)
-    compare(tmp_path, atol=2e-6)
+    compare(tmp_path, atol=2e-6 if bpy.app.version < (5, 1, 0) else 3e-4)
 
 
 def test_default_float_point_colour_through_a_mix_as_cycles(tmp_path):
