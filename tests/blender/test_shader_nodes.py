@@ -265,7 +265,9 @@ def test_separate_and_combine_colour(mode, tmp_path):
         return comb.outputs[0]
 
     emission_plane(build)
-    compare(tmp_path, atol=1e-4)
+    # 8e-5 on Blender 5.0; on 5.2 a handful of pixels near a hue's wrap-around reach 2.7e-4 (a wrong
+    # conversion or mode is ~0.1 off)
+    compare(tmp_path, atol=5e-4)
 
 
 def test_unread_nodes_keep_one_warning_and_the_socket_value(tmp_path):
