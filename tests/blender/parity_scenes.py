@@ -300,14 +300,9 @@ def rough_metal(image_dir):
     return sc
 
 
-def glass_sphere(image_dir):
-    """A smooth-shaded clear glass sphere (Glass BSDF, IOR 1.45, roughness 0) in front of a bright
-    emissive checker (a 10 x 10 grid of faces alternating between two Emission materials: the
-    pattern is geometry, so this scene needs no image textures)."""
-    sc = _scene()
-    bright = bs.material("bright", "EMISSION", (1.0, 0.9, 0.7), Strength=3.0)
-    dim = bs.material("dim", "EMISSION", (0.2, 0.4, 1.0), Strength=0.6)
-    n, half, y0 = 10, 2.5, 1.5
+def emissive_checker(bright, dim, n: int, half: float = 2.5, y0: float = 1.5):
+    """An n x n grid of faces at y = y0 (x in [-half, half], z in [-half, half] + 0.8) alternating
+    between the materials ``bright`` and ``dim``: a pattern made of geometry, no image needed."""
     xs = np.linspace(-half, half, n + 1)
     zs = np.linspace(-half + 0.8, half + 0.8, n + 1)
     verts = [(x, y0, z) for z in zs for x in xs]
@@ -322,6 +317,16 @@ def glass_sphere(image_dir):
     ob.data.materials.append(dim)
     ob.data.polygons.foreach_set("material_index", mats)
     ob.data.update()
+    return ob
+
+
+def glass_sphere(image_dir):
+    """A smooth-shaded clear glass sphere (Glass BSDF, IOR 1.45, roughness 0) in front of a bright
+    emissive checker (a 10 x 10 grid of faces alternating between two Emission materials: the
+    pattern is geometry, so this scene needs no image textures)."""
+    sc = _scene()
+    emissive_checker(bs.material("bright", "EMISSION", (1.0, 0.9, 0.7), Strength=3.0),
+                     bs.material("dim", "EMISSION", (0.2, 0.4, 1.0), Strength=0.6), 10)
     glass = bs.material("glass", "GLASS", (1.0, 1.0, 1.0), IOR=1.45, Roughness=0.0)
     _smooth_sphere("sphere", 0.7, (0.0, 0.0, 0.8), glass)
     look_at((0.0, -2.6, 0.9), (0.0, 0.0, 0.8))

@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 
 import bpy
-import numpy as np
 
 import blender_scenes as bs
 import parity_scenes as ps
@@ -57,23 +56,8 @@ def glass_absorption(image_dir):
     (0.2, 0.5, 0.9), density 1.5) before a white-and-grey emissive checker: Beer-Lambert deepens
     with the path length through the sphere."""
     sc = ps._scene()
-    bright = bs.material("bright", "EMISSION", (1.0, 1.0, 1.0), Strength=2.0)
-    dim = bs.material("dim", "EMISSION", (0.5, 0.5, 0.5), Strength=1.0)
-    n, half, y0 = 8, 2.5, 1.5
-    xs = np.linspace(-half, half, n + 1)
-    zs = np.linspace(-half + 0.8, half + 0.8, n + 1)
-    verts = [(x, y0, z) for z in zs for x in xs]
-    faces, mats = [], []
-    for j in range(n):
-        for i in range(n):
-            a = j * (n + 1) + i
-            faces.append((a, a + 1, a + n + 2, a + n + 1))
-            mats.append((i + j) % 2)
-    ob = bs.mesh_object("pattern", verts, faces)
-    ob.data.materials.append(bright)
-    ob.data.materials.append(dim)
-    ob.data.polygons.foreach_set("material_index", mats)
-    ob.data.update()
+    ps.emissive_checker(bs.material("bright", "EMISSION", (1.0, 1.0, 1.0), Strength=2.0),
+                        bs.material("dim", "EMISSION", (0.5, 0.5, 0.5), Strength=1.0), 8)
     glass = bs.material("glass", "GLASS", (1.0, 1.0, 1.0), IOR=1.45, Roughness=0.0)
     nt = glass.node_tree
     ab = nt.nodes.new("ShaderNodeVolumeAbsorption")
